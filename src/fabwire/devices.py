@@ -1,0 +1,23 @@
+"""The device kinds fabwire speaks to, with the link defaults each one implies."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceKind:
+    name: str
+    title: str
+    default_port: int | None
+    """TCP port used when a bare host is given; None when the device has no network link."""
+    baudrate: int
+    sim_module: str
+    """Module whose import registers the in-process simulator for `sim://<name>`."""
+
+
+XYZ = DeviceKind("xyz", "XYZprinting da Vinci", 9100, 115200, "fabwire.xyz.sim")
+LINEUS = DeviceKind("lineus", "Line-us", 1337, 115200, "fabwire.lineus.sim")
+MMU = DeviceKind("mmu", "Prusa MMU3", None, 115200, "fabwire.mmu.sim")
+
+KINDS: dict[str, DeviceKind] = {kind.name: kind for kind in (XYZ, LINEUS, MMU)}

@@ -1,0 +1,71 @@
+"""The one error tree every layer raises, so the CLI can map each kind to its own exit code."""
+
+from __future__ import annotations
+
+
+class FabwireError(Exception):
+    """Base of everything fabwire raises on purpose."""
+
+    exit_code = 1
+
+
+class ConfigError(FabwireError):
+    """The named-device configuration file (or a device name) is wrong."""
+
+    exit_code = 3
+
+
+class InputError(FabwireError):
+    """A file or argument given by the user cannot be used (malformed, empty, out of range)."""
+
+    exit_code = 4
+
+
+class ProtocolError(FabwireError):
+    """Bytes that break a protocol's grammar."""
+
+
+class LocalProtocolError(ProtocolError):
+    """We were asked to send something the protocol cannot carry."""
+
+    exit_code = 5
+
+
+class RemoteProtocolError(ProtocolError):
+    """The peer sent something the protocol does not allow."""
+
+    exit_code = 6
+
+
+class DeviceError(FabwireError):
+    """The machine reported an error code; `meaning` says it in words."""
+
+    exit_code = 7
+
+    def __init__(self, code: int | str, meaning: str, *, action: str = "") -> None:
+        self.code = code
+        self.meaning = meaning
+        self.action = action
+        text = f"device error {code}: {meaning}"
+        if action:
+            text += f" — {action}"
+        super().__init__(text)
+
+
+class LinkError(FabwireError, ConnectionError):
+    """The link to the device could not be opened or was lost."""
+
+    exit_code = 8
+
+
+class LinkClosed(LinkError):
+    """The peer closed the link (EOF) or it was closed locally."""
+
+
+class LinkTimeout(FabwireError, TimeoutError):
+    """The device did not answer in time."""
+
+    exit_code = 9
+
+
+EXIT_INTERRUPTED = 130

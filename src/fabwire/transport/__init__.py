@@ -1,0 +1,48 @@
+"""Links to devices: one small interface over TCP, serial, pty, memory and in-process simulators."""
+
+from __future__ import annotations
+
+from fabwire.devices import DeviceKind
+from fabwire.errors import InputError
+from fabwire.transport.base import StreamTransport, Transport
+from fabwire.transport.faults import FaultPlan, FaultyTransport
+from fabwire.transport.memory import memory_pair
+from fabwire.transport.pty import PtyDevice, open_pty
+from fabwire.transport.registry import register_simulator, spawn_in_process
+from fabwire.transport.serial import open_serial
+from fabwire.transport.tap import TapTransport
+from fabwire.transport.tcp import open_tcp, serve_tcp
+from fabwire.transport.urls import Endpoint, parse_url
+
+__all__ = [
+    "Endpoint",
+    "FaultPlan",
+    "FaultyTransport",
+    "PtyDevice",
+    "StreamTransport",
+    "TapTransport",
+    "Transport",
+    "memory_pair",
+    "open_pty",
+    "open_transport",
+    "parse_url",
+    "register_simulator",
+    "serve_tcp",
+    "spawn_in_process",
+]
+
+
+async def open_transport(
+    address: str | Endpoint, kind: DeviceKind | None = None, *, connect_timeout: float = 5.0
+) -> Transport:
+    """Open the link an address names; `kind` supplies default port and baud rate."""
+    from fabwire.transport.registry import open_simulator
+
+    endpoint = address if isinstance(address, Endpoint) else parse_url(address, kind)
+    if endpoint.scheme == "tcp":
+        return await open_tcp(endpoint.host, endpoint.port, timeout=connect_timeout)
+    if endpoint.scheme == "serial":
+        return await open_serial(endpoint.path, kind.baudrate if kind else 115200)
+    if endpoint.scheme == "sim":
+        return await open_simulator(endpoint.host, endpoint.options)
+    raise InputError(f"cannot open {endpoint.url}")

@@ -1,0 +1,164 @@
+"""The trace tap: every chunk both ways, timestamped, as replayable JSONL.
+
+File format, one JSON object per line:
+  {"trace": "fabwire", "version": 1, "url": ..., "peer": ..., "started": ISO-8601}   (first line)
+  {"t": seconds since start, "dir": ">" (to the device) or "<" (from it), "data": bytes as latin-1 text}
+  {"t": ..., "event": "eof" | "close" | "error", "detail": ...}
+Latin-1 maps every byte to one code point, so JSON string escapes keep captures lossless and text stays readable.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import IO, Literal
+
+from fabwire.errors import InputError, LinkClosed
+from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
+
+Direction = Literal[">", "<"]
+TO_DEVICE: Direction = ">"
+FROM_DEVICE: Direction = "<"
+
+wire_log = logging.getLogger("fabwire.wire")
+
+
+@dataclass(frozen=True, slots=True)
+class TraceRecord:
+    t: float
+    direction: Direction | None
+    data: bytes = b""
+    event: str = ""
+    detail: str = ""
+
+
+class TraceWriter:
+    """Appends records to a JSONL file; flushes each line so a crash keeps everything before it."""
+
+    def __init__(self, stream: IO[str], *, url: str, peer: str) -> None:
+        self._stream = stream
+        self._start = time.monotonic()
+        header = {
+            "trace": "fabwire",
+            "version": 1,
+            "url": url,
+            "peer": peer,
+            "started": datetime.now(UTC).isoformat(timespec="milliseconds"),
+        }
+        self._emit(header)
+
+    @classmethod
+    def to_file(cls, path: str | Path, *, url: str, peer: str) -> TraceWriter:
+        try:
+            stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by close()
+        except OSError as exc:
+            raise InputError(f"cannot write trace file {path}: {exc.strerror}") from exc
+        return cls(stream, url=url, peer=peer)
+
+    def _emit(self, obj: dict[str, object]) -> None:
+        self._stream.write(json.dumps(obj, ensure_ascii=True) + "\n")
+        self._stream.flush()
+
+    def _now(self) -> float:
+        return round(time.monotonic() - self._start, 6)
+
+    def chunk(self, direction: Direction, data: bytes) -> None:
+        self._emit({"t": self._now(), "dir": direction, "data": data.decode("latin-1")})
+
+    def event(self, event: str, detail: str = "") -> None:
+        self._emit({"t": self._now(), "event": event, "detail": detail})
+
+    def close(self) -> None:
+        if not self._stream.closed:
+            self._stream.close()
+
+
+def read_trace(path: str | Path) -> Iterator[TraceRecord]:
+    """Yield the records of a capture; a malformed line is an InputError naming the line."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise InputError(f"cannot read trace file {path}: {exc.strerror}") from exc
+    except UnicodeDecodeError:
+        raise InputError(f"{path} is not a fabwire trace (not UTF-8 text)") from None
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            obj = json.loads(line)
+            if number == 1:
+                if obj.get("trace") != "fabwire":
+                    raise ValueError("missing the fabwire trace header")
+                continue
+            if "event" in obj:
+                yield TraceRecord(float(obj["t"]), None, event=str(obj["event"]), detail=str(obj.get("detail", "")))
+                continue
+            direction = obj["dir"]
+            if direction not in (TO_DEVICE, FROM_DEVICE):
+                raise ValueError(f"unknown direction {direction!r}")
+            yield TraceRecord(float(obj["t"]), direction, obj["data"].encode("latin-1"))
+        except (ValueError, KeyError, TypeError, AttributeError, UnicodeEncodeError) as exc:
+            raise InputError(f"{path}, line {number}: not a fabwire trace record ({exc})") from None
+
+
+def replay_bytes(path: str | Path, direction: Direction) -> bytes:
+    """All bytes that went one way, in order, exactly as they crossed the wire."""
+    return b"".join(r.data for r in read_trace(path) if r.direction == direction)
+
+
+class TapTransport(Transport):
+    """Wraps a transport, recording every chunk to a `TraceWriter` and/or the `fabwire.wire` logger."""
+
+    def __init__(self, inner: Transport, writer: TraceWriter | None = None, *, log: bool = True) -> None:
+        self._inner = inner
+        self._writer = writer
+        self._log = log
+        self.url = inner.url
+        self.peer = inner.peer
+
+    @property
+    def closed(self) -> bool:
+        return self._inner.closed
+
+    def _record(self, direction: Direction, data: bytes) -> None:
+        if self._writer is not None:
+            self._writer.chunk(direction, data)
+        if self._log and wire_log.isEnabledFor(logging.DEBUG):
+            wire_log.debug("%s %s", direction, escape_text(data))
+
+    async def read(self, max_bytes: int = DEFAULT_READ_SIZE) -> bytes:
+        try:
+            data = await self._inner.read(max_bytes)
+        except LinkClosed as exc:
+            if self._writer is not None:
+                self._writer.event("eof", str(exc))
+            raise
+        self._record(FROM_DEVICE, data)
+        return data
+
+    async def write(self, data: bytes) -> None:
+        self._record(TO_DEVICE, data)
+        await self._inner.write(data)
+
+    async def close(self) -> None:
+        try:
+            await self._inner.close()
+        finally:
+            if self._writer is not None:
+                self._writer.event("close")
+                self._writer.close()
+
+
+_ESCAPES = {0x0D: "\\r", 0x0A: "\\n", 0x00: "\\0", 0x09: "\\t", 0x5C: "\\\\"}
+
+
+def escape_text(data: bytes) -> str:
+    """Printable ASCII as is, the usual control characters as \\r \\n \\0 \\t, everything else as \\xNN."""
+    return "".join(
+        _ESCAPES.get(b) or (chr(b) if 0x20 <= b < 0x7F else f"\\x{b:02x}") for b in data
+    )

@@ -1,0 +1,77 @@
+"""TCP links: the client connection and the listener simulators serve on."""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import socket
+from collections.abc import Awaitable, Callable
+
+from fabwire.errors import LinkError, LinkTimeout
+from fabwire.transport.base import StreamTransport, Transport
+
+ConnectionHandler = Callable[[Transport], Awaitable[None]]
+
+DEFAULT_CONNECT_TIMEOUT = 5.0
+
+
+def _nodelay(writer: asyncio.StreamWriter) -> None:
+    sock = writer.get_extra_info("socket")
+    if sock is not None and sock.family in (socket.AF_INET, socket.AF_INET6):
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+
+def _describe(writer: asyncio.StreamWriter) -> str:
+    peer = writer.get_extra_info("peername")
+    if isinstance(peer, tuple) and len(peer) >= 2:
+        host = f"[{peer[0]}]" if ":" in str(peer[0]) else peer[0]
+        return f"{host}:{peer[1]}"
+    return str(peer)
+
+
+async def open_tcp(host: str, port: int, *, timeout: float = DEFAULT_CONNECT_TIMEOUT) -> StreamTransport:
+    """Connect, turning every way a connection fails into a message that says what to check."""
+    where = f"{host}:{port}"
+    try:
+        async with asyncio.timeout(timeout):
+            reader, writer = await asyncio.open_connection(host, port)
+    except TimeoutError:
+        raise LinkTimeout(
+            f"no answer from {where} within {timeout:g} s: check the device is powered on and on this network"
+        ) from None
+    except socket.gaierror as exc:
+        raise LinkError(f"cannot resolve host {host!r}: {exc.strerror}; check the name or use the IP address") from exc
+    except ConnectionRefusedError:
+        raise LinkError(
+            f"connection refused by {where}: the host is up but nothing listens on port {port}; "
+            "check the address and port"
+        ) from None
+    except OSError as exc:
+        if exc.errno in (errno.EHOSTUNREACH, errno.ENETUNREACH):
+            raise LinkError(f"{where} is unreachable: check the network and the device's IP address") from exc
+        raise LinkError(f"cannot connect to {where}: {exc.strerror or exc}") from exc
+    _nodelay(writer)
+    return StreamTransport(reader, writer, url=f"tcp://{where}", peer=where)
+
+
+async def serve_tcp(handler: ConnectionHandler, host: str, port: int) -> asyncio.Server:
+    """Listen on host:port and run `handler` for each connection; the transport is closed after it."""
+
+    async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        _nodelay(writer)
+        link = StreamTransport(reader, writer, url=f"tcp://{host}:{port}", peer=_describe(writer))
+        try:
+            await handler(link)
+        finally:
+            await link.close()
+
+    try:
+        return await asyncio.start_server(on_connect, host, port, reuse_address=True)
+    except OSError as exc:
+        if exc.errno == errno.EADDRINUSE:
+            raise LinkError(f"cannot listen on {host}:{port}: the address is already in use") from exc
+        if exc.errno == errno.EADDRNOTAVAIL:
+            raise LinkError(f"cannot listen on {host}:{port}: no such local address") from exc
+        if exc.errno == errno.EACCES:
+            raise LinkError(f"cannot listen on {host}:{port}: permission denied (ports below 1024 need root)") from exc
+        raise LinkError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
