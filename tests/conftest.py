@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import os
+import selectors
 import subprocess
 import sys
-import selectors
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
