@@ -42,7 +42,7 @@ def config_path() -> Path:
 
 
 def _line_of(text: str, name: str) -> int:
-    pattern = re.compile(rf"^\s*\[\s*devices\s*\.\s*\"?{re.escape(name)}\"?\s*\]", re.MULTILINE)
+    pattern = re.compile(rf"^[ \t]*\[[ \t]*devices[ \t]*\.[ \t]*\"?{re.escape(name)}\"?\s*\]", re.MULTILINE)
     match = pattern.search(text)
     return text.count("\n", 0, match.start()) + 1 if match else 0
 

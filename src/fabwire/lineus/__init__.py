@@ -1,0 +1,1 @@
+"""Line-us drawing robot: protocol, client, simulator, drawing pipeline and CLI."""

@@ -1,0 +1,310 @@
+"""Line-us geometry: machine units, the exact reachable area, the two-link arm and the motion-time model.
+
+One module shared by the simulator (where the pen can go, how long a move takes) and the drawing planner
+(what to fit into, what a plan will cost), so both agree to the unit.
+
+Machine units: origin at the servo shafts, 20 units per millimetre, +X away from the body. The reachable area is
+the closed form of the published drawing-area outline: radius <= 1950, both joints within their +/-35 degree
+limits, and body clearance x >= 500 (y >= 0) / x >= 700 (y < 0).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+UNITS_PER_MM = 20.0
+HOME = (1000.0, 1000.0)
+Z_UP = 1000.0
+Z_DOWN = 0.0
+PEN_DOWN_BELOW = 500.0
+"""A Z below this counts as pen-down (for speed and for drawing)."""
+
+LINK = 1000.0
+"""Both arm links (shoulder to elbow, elbow to pen), in units."""
+R_MAX = 1950.0
+JOINT_LIMIT_DEG = 35.0
+X_MIN_UPPER = 500.0
+"""Body clearance for y >= 0."""
+X_MIN_LOWER = 700.0
+"""Body clearance for y < 0."""
+
+_EPS = 1e-6
+_LIMIT = math.radians(JOINT_LIMIT_DEG)
+_CENTRE_UP = (LINK * math.cos(_LIMIT), LINK * math.sin(_LIMIT))
+"""Centre of the upper boundary arc (second joint at +35 degrees)."""
+_CENTRE_DOWN = (LINK * math.cos(_LIMIT), -LINK * math.sin(_LIMIT))
+"""Centre of the lower boundary arc (first joint at -35 degrees)."""
+
+Y_EXTENT = _CENTRE_UP[1] + LINK
+BOUNDS = (X_MIN_UPPER, -Y_EXTENT, R_MAX, Y_EXTENT)
+"""Bounding box of the reachable area: (x_min, y_min, x_max, y_max)."""
+
+Point = tuple[float, float]
+FloatArray = npt.NDArray[np.float64]
+
+
+def is_reachable(x: float, y: float) -> bool:
+    """True if the pen can reach (x, y): the closed form of the documented drawing area."""
+    return bool(reachable_mask(np.asarray([x], dtype=float), np.asarray([y], dtype=float))[0])
+
+
+def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """`is_reachable` for whole arrays of points at once."""
+    x = np.asarray(xs, dtype=float)
+    y = np.asarray(ys, dtype=float)
+    r = np.hypot(x, y)
+    with np.errstate(invalid="ignore"):
+        alpha = np.arccos(np.clip(r / (2 * LINK), -1.0, 1.0))
+    phi = np.arctan2(y, x)
+    ok = r <= R_MAX + _EPS
+    ok &= phi - alpha <= _LIMIT + 1e-9
+    ok &= phi + alpha >= -_LIMIT - 1e-9
+    ok &= np.where(y >= 0, x >= X_MIN_UPPER - _EPS, x >= X_MIN_LOWER - _EPS)
+    ok &= np.isfinite(x) & np.isfinite(y)
+    return np.asarray(ok, dtype=bool)
+
+
+def outside_length(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> float:
+    """Length of a polyline that lies outside the reachable area, sampled every `step` units.
+
+    Sampling matters: the body-clearance step makes the area non-convex, so a segment between two reachable
+    ends can still cross x < 700 below y = 0.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(pts) == 0:
+        return 0.0
+    if len(pts) == 1:
+        return 0.0
+    total = 0.0
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
+        length = float(np.hypot(*(b - a)))
+        n = max(1, math.ceil(length / step))
+        t = (np.arange(n) + 0.5) / n
+        xs = a[0] + (b[0] - a[0]) * t
+        ys = a[1] + (b[1] - a[1]) * t
+        total += length * float(np.count_nonzero(~reachable_mask(xs, ys))) / n
+    return total
+
+
+def polyline_reachable(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> bool:
+    """True if every vertex and every sampled point of every segment is reachable."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if not bool(np.all(reachable_mask(pts[:, 0], pts[:, 1]))):
+        return False
+    return outside_length(pts, step=step) == 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Joints:
+    """Arm angles in degrees: `shoulder` is the upper arm, `elbow` the forearm's absolute direction."""
+
+    shoulder: float
+    elbow: float
+
+
+def inverse(x: float, y: float) -> Joints:
+    """Joint angles that put the pen at (x, y); ValueError beyond the arm's length or at the shaft centre."""
+    r = math.hypot(x, y)
+    if not 0.0 < r <= 2 * LINK:
+        raise ValueError(f"({x:g}, {y:g}) is {r:g} units from the shafts: the arm spans 0 < r <= {2 * LINK:g}")
+    alpha = math.acos(r / (2 * LINK))
+    phi = math.atan2(y, x)
+    return Joints(math.degrees(phi + alpha), math.degrees(phi - alpha))
+
+
+def forward(joints: Joints) -> Point:
+    """Pen position for the given joint angles."""
+    t1 = math.radians(joints.shoulder)
+    t2 = math.radians(joints.elbow)
+    return (LINK * (math.cos(t1) + math.cos(t2)), LINK * (math.sin(t1) + math.sin(t2)))
+
+
+def servo_angles(x: float, y: float) -> tuple[float, float]:
+    """The (S, E) servo readings `M114 S` would report: S = shoulder + 45, E = 45 - elbow (home = 135, 45)."""
+    j = inverse(x, y)
+    return (j.shoulder + 45.0, 45.0 - j.elbow)
+
+
+@dataclass(frozen=True, slots=True)
+class Clamped:
+    """Where an out-of-area target really goes: the firmware moves as close as it can and lifts the pen."""
+
+    x: float
+    y: float
+    clamped: bool
+
+    @property
+    def lift_pen(self) -> bool:
+        return self.clamped
+
+
+def _circle_candidates(px: float, py: float, cx: float, cy: float, radius: float) -> list[Point]:
+    dx, dy = px - cx, py - cy
+    d = math.hypot(dx, dy)
+    if d == 0.0:
+        return [(cx + radius, cy)]
+    return [(cx + dx / d * radius, cy + dy / d * radius)]
+
+
+def _boundary_vertices() -> list[Point]:
+    """Corners of the area, where two boundary pieces meet."""
+    out: list[Point] = [(X_MIN_UPPER, 0.0), (X_MIN_LOWER, 0.0)]
+    for xl, (cx, cy) in ((X_MIN_UPPER, _CENTRE_UP), (X_MIN_LOWER, _CENTRE_DOWN)):
+        h = math.sqrt(LINK**2 - (xl - cx) ** 2)
+        out.extend([(xl, cy + h), (xl, cy - h)])
+    for cx, cy in (_CENTRE_UP, _CENTRE_DOWN):
+        d = math.hypot(cx, cy)
+        a = (R_MAX**2 - LINK**2 + d**2) / (2 * d)
+        h = math.sqrt(R_MAX**2 - a**2)
+        mx, my = a * cx / d, a * cy / d
+        out.extend([(mx + h * cy / d, my - h * cx / d), (mx - h * cy / d, my + h * cx / d)])
+    return out
+
+
+_VERTICES = _boundary_vertices()
+
+
+def nearest_reachable(x: float, y: float) -> Point:
+    """The reachable point closest to (x, y) (itself when already reachable)."""
+    if is_reachable(x, y):
+        return (x, y)
+    cands: list[Point] = list(_VERTICES)
+    cands += _circle_candidates(x, y, 0.0, 0.0, R_MAX)
+    cands += _circle_candidates(x, y, *_CENTRE_UP, LINK)
+    cands += _circle_candidates(x, y, *_CENTRE_DOWN, LINK)
+    cands += [(X_MIN_UPPER, max(y, 0.0)), (X_MIN_LOWER, min(y, 0.0)), (min(max(x, X_MIN_UPPER), X_MIN_LOWER), 0.0)]
+    best: Point | None = None
+    best_d = math.inf
+    for cx, cy in cands:
+        if not is_reachable(cx, cy):
+            continue
+        d = math.hypot(cx - x, cy - y)
+        if d < best_d:
+            best, best_d = (cx, cy), d
+    assert best is not None  # the vertex (500, 0) is always a candidate and always reachable
+    return best
+
+
+def clamp_target(x: float, y: float) -> Clamped:
+    """Out-of-area handling: radially toward the origin beyond the outer radius, else to the nearest point.
+
+    `clamped` (and so `lift_pen`) is True whenever the target was moved: the firmware then lifts the pen.
+    """
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"target ({x}, {y}) is not a finite point")
+    if is_reachable(x, y):
+        return Clamped(x, y, False)
+    r = math.hypot(x, y)
+    if r > R_MAX:
+        rx, ry = x * R_MAX / r, y * R_MAX / r
+        if is_reachable(rx, ry):
+            return Clamped(rx, ry, True)
+    nx, ny = nearest_reachable(x, y)
+    return Clamped(nx, ny, True)
+
+
+def _outer_meet(cx: float, cy: float) -> Point:
+    """Where a joint-limit arc meets the outer radius, on the area's side."""
+    d = math.hypot(cx, cy)
+    a = (R_MAX**2 - LINK**2 + d**2) / (2 * d)
+    h = math.sqrt(R_MAX**2 - a**2)
+    mx, my = a * cx / d, a * cy / d
+    first = (mx + h * cy / d, my - h * cx / d)
+    second = (mx - h * cy / d, my + h * cx / d)
+    return first if is_reachable(*first) else second
+
+
+def area_outline(step_deg: float = 1.0) -> list[Point]:
+    """The closed boundary of the reachable area, counter-clockwise from (700, 0), first point repeated last."""
+    pts: list[Point] = [(X_MIN_LOWER, 0.0)]
+
+    def arc(cx: float, cy: float, radius: float, p0: Point, p1: Point) -> None:
+        a0 = math.atan2(p0[1] - cy, p0[0] - cx)
+        a1 = math.atan2(p1[1] - cy, p1[0] - cx)
+        n = max(2, math.ceil(abs(a1 - a0) / math.radians(step_deg)))
+        pts.extend((cx + radius * math.cos(a0 + (a1 - a0) * k / n), cy + radius * math.sin(a0 + (a1 - a0) * k / n))
+                   for k in range(n + 1))
+
+    dcx, dcy = _CENTRE_DOWN
+    ucx, ucy = _CENTRE_UP
+    low_body = (X_MIN_LOWER, dcy - math.sqrt(LINK**2 - (X_MIN_LOWER - dcx) ** 2))
+    up_body = (X_MIN_UPPER, ucy + math.sqrt(LINK**2 - (X_MIN_UPPER - ucx) ** 2))
+    low_outer = _outer_meet(dcx, dcy)
+    up_outer = _outer_meet(ucx, ucy)
+    arc(dcx, dcy, LINK, low_body, low_outer)
+    arc(0.0, 0.0, R_MAX, low_outer, up_outer)
+    arc(ucx, ucy, LINK, up_outer, up_body)
+    pts.extend([(X_MIN_UPPER, 0.0), (X_MIN_LOWER, 0.0)])
+    return pts
+
+
+@dataclass(frozen=True, slots=True)
+class MotionModel:
+    """How long moves take: Cartesian interpolation in steps of at most `draw_step` (G94 S, pen down) or
+    `travel_step` (G94 P, pen up), `step_time` seconds per step, `pen_time` per pen lift or drop.
+
+    The step period is not published; 10 ms per step fits the measured pen-up hop timings.
+    """
+
+    draw_step: float = 5.0
+    travel_step: float = 15.0
+    step_time: float = 0.010
+    pen_time: float = 0.1
+    command_time: float = 0.0
+    """Fixed cost per command (reply round trip)."""
+
+    def __post_init__(self) -> None:
+        for name in ("draw_step", "travel_step"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        for name in ("step_time", "pen_time", "command_time"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
+
+    def steps(self, start: Point, end: Point, *, pen_down: bool) -> int:
+        """Interpolation steps of an XY move: ceil(max(|dx|, |dy|) / step)."""
+        span = max(abs(end[0] - start[0]), abs(end[1] - start[1]))
+        if span <= 0:
+            return 0
+        return math.ceil(span / (self.draw_step if pen_down else self.travel_step) - 1e-9)
+
+    def interpolate(self, start: Point, end: Point, *, pen_down: bool) -> list[Point]:
+        """The intermediate targets the firmware steps through (excluding `start`, ending at `end`)."""
+        n = self.steps(start, end, pen_down=pen_down)
+        return [
+            (start[0] + (end[0] - start[0]) * k / n, start[1] + (end[1] - start[1]) * k / n) for k in range(1, n + 1)
+        ]
+
+    def move_time(self, start: Sequence[float], end: Sequence[float], *, pen_down: bool = False) -> float:
+        """Seconds for one G01 from `start` to `end`.
+
+        With (x, y, z) positions the pen state comes from z: a lift happens before the XY motion and a drop after
+        it, so XY runs at the drawing step only when the pen is down at both ends. With (x, y) positions the
+        pen stays as `pen_down` says.
+        """
+        if len(start) >= 3 and len(end) >= 3:
+            down0 = start[2] < PEN_DOWN_BELOW
+            down1 = end[2] < PEN_DOWN_BELOW
+            xy_down = down0 and down1
+            pen = self.pen_time if down0 != down1 else 0.0
+        else:
+            xy_down = pen_down
+            pen = 0.0
+        n = self.steps((start[0], start[1]), (end[0], end[1]), pen_down=xy_down)
+        return self.command_time + pen + n * self.step_time
+
+    def polyline_time(self, points: Sequence[Point] | FloatArray, *, pen_down: bool = True) -> float:
+        """Seconds to run through a polyline's vertices with the pen in one state (one command per vertex)."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if len(pts) < 2:
+            return 0.0
+        span = np.max(np.abs(np.diff(pts, axis=0)), axis=1)
+        step = self.draw_step if pen_down else self.travel_step
+        n = np.ceil(span / step - 1e-9)
+        n[span <= 0] = 0
+        return float(n.sum()) * self.step_time + (len(pts) - 1) * self.command_time

@@ -1,0 +1,1 @@
+"""XYZprinting da Vinci printers over the XYZv3 protocol: codec, status, client, simulator and CLI."""

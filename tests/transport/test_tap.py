@@ -1,0 +1,91 @@
+"""The trace tap records both directions losslessly, and `trace show` renders captures readably."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+from conftest import run_cli
+
+from fabwire.errors import InputError
+from fabwire.transport import TapTransport, memory_pair
+from fabwire.transport.tap import FROM_DEVICE, TO_DEVICE, TraceWriter, read_trace, replay_bytes
+from fabwire.transport.trace_show import render_trace
+
+ALL_BYTES = bytes(range(256))
+
+
+async def record(path: Path, to_device: list[bytes], from_device: list[bytes]) -> None:
+    host, device = memory_pair("traced")
+    tap = TapTransport(host, TraceWriter.to_file(path, url=host.url, peer=host.peer))
+    async with asyncio.timeout(5):
+        for out, back in zip(to_device, from_device, strict=True):
+            await tap.write(out)
+            assert await device.read() == out
+            await device.write(back)
+            assert await tap.read() == back
+    await tap.close()
+
+
+async def test_capture_replays_to_the_identical_bytes(tmp_path: Path) -> None:
+    path = tmp_path / "cap.jsonl"
+    sent = [b"XYZv3/query=a", ALL_BYTES, b"S0*c6\n"]
+    received = [b"j:9511,0\n$\n", ALL_BYTES[::-1], b"ok\r\n\x00"]
+    await record(path, sent, received)
+    assert replay_bytes(path, TO_DEVICE) == b"".join(sent)
+    assert replay_bytes(path, FROM_DEVICE) == b"".join(received)
+    records = list(read_trace(path))
+    assert [r.direction for r in records[:6]] == [">", "<", ">", "<", ">", "<"]
+    assert records[-1].event == "close"
+    times = [r.t for r in records]
+    assert times == sorted(times)
+
+
+async def test_capture_header_names_the_link(tmp_path: Path) -> None:
+    path = tmp_path / "cap.jsonl"
+    await record(path, [b"a"], [b"b"])
+    header = json.loads(path.read_text().splitlines()[0])
+    assert header["trace"] == "fabwire"
+    assert header["url"] == "memory://traced"
+
+
+def test_render_shows_text_with_escapes_and_binary_as_hexdump(tmp_path: Path) -> None:
+    from fabwire.transport.tap import TraceRecord
+
+    records = [
+        TraceRecord(0.0, ">", b"XYZv3/query=a\r\n"),
+        TraceRecord(0.01, "<", b"b:20\nj:9511,0\n$\n"),
+        TraceRecord(0.02, "<", b"ok X:1000 Y:1000 Z:1000\r\n\x00"),
+        TraceRecord(0.03, ">", bytes(range(0x80, 0xA0))),
+        TraceRecord(0.04, None, event="close"),
+    ]
+    lines = list(render_trace(records, timestamps=False))
+    assert lines[0] == ">XYZv3/query=a\\r\\n"
+    assert lines[1:4] == ["<b:20\\n", "<j:9511,0\\n", "<$\\n"]
+    assert lines[4] == "<ok X:1000 Y:1000 Z:1000\\r\\n\\0"
+    assert lines[5] == "> [32 bytes]"
+    assert lines[6].strip().startswith("00000000  80 81 82")
+    assert lines[-1] == "-- close"
+
+
+async def test_trace_show_cli(tmp_path: Path) -> None:
+    path = tmp_path / "cap.jsonl"
+    await record(path, [b"S0*c6\n"], [b"S0 A3*22\n"])
+    result = run_cli("trace", "show", "--no-time", str(path))
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[:2] == [">S0*c6\\n", "<S0 A3*22\\n"]
+    as_json = run_cli("--json", "trace", "show", str(path))
+    assert json.loads(as_json.stdout)[0]["data"] == "S0*c6\n"
+
+
+def test_a_file_that_is_not_a_trace_is_a_clear_error(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text('{"trace": "fabwire", "version": 1}\n{"t": 0, "dir": "?", "data": ""}\n')
+    with pytest.raises(InputError, match="line 2"):
+        list(read_trace(bad))
+    result = run_cli("trace", "show", str(bad))
+    assert result.returncode == InputError.exit_code
+    assert "line 2" in result.stderr
+    assert "Traceback" not in result.stderr
