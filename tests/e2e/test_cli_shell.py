@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from conftest import run_cli
-
 from fabwire import __version__
 from fabwire.errors import InputError
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 import pytest
 
@@ -40,10 +41,8 @@ async def send_through(plan: FaultPlan) -> tuple[bytes, list[int], FaultyTranspo
             pass
 
     task = asyncio.create_task(reader())
-    try:
+    with contextlib.suppress(LinkClosed):
         await faulty.write(DATA)
-    except LinkClosed:
-        pass
     await asyncio.sleep(0.01)
     await faulty.close()
     await task

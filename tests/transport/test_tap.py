@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import run_cli
 
+from conftest import run_cli
 from fabwire.errors import InputError
 from fabwire.transport import TapTransport, memory_pair
 from fabwire.transport.tap import FROM_DEVICE, TO_DEVICE, TraceWriter, read_trace, replay_bytes

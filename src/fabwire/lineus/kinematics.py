@@ -80,15 +80,16 @@ def outside_length(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -
         return 0.0
     if len(pts) == 1:
         return 0.0
-    total = 0.0
-    for a, b in zip(pts[:-1], pts[1:], strict=True):
-        length = float(np.hypot(*(b - a)))
-        n = max(1, math.ceil(length / step))
-        t = (np.arange(n) + 0.5) / n
-        xs = a[0] + (b[0] - a[0]) * t
-        ys = a[1] + (b[1] - a[1]) * t
-        total += length * float(np.count_nonzero(~reachable_mask(xs, ys))) / n
-    return total
+    d = np.diff(pts, axis=0)
+    lengths = np.hypot(d[:, 0], d[:, 1])
+    n = np.maximum(1, np.ceil(lengths / step)).astype(np.int64)
+    seg = np.repeat(np.arange(len(d)), n)
+    starts = np.cumsum(n) - n
+    t = (np.arange(int(n.sum())) - starts[seg] + 0.5) / n[seg]
+    xs = pts[seg, 0] + d[seg, 0] * t
+    ys = pts[seg, 1] + d[seg, 1] * t
+    bad = ~reachable_mask(xs, ys)
+    return float(np.sum(lengths[seg] / n[seg] * bad))
 
 
 def polyline_reachable(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> bool:
@@ -209,14 +210,17 @@ def clamp_target(x: float, y: float) -> Clamped:
 
 
 def _outer_meet(cx: float, cy: float) -> Point:
-    """Where a joint-limit arc meets the outer radius, on the area's side."""
+    """Where a joint-limit arc leaves the outer radius (the meeting point farther from the X axis).
+
+    The limit circles cross the outer circle twice; between the two crossings they bulge beyond it.
+    """
     d = math.hypot(cx, cy)
     a = (R_MAX**2 - LINK**2 + d**2) / (2 * d)
     h = math.sqrt(R_MAX**2 - a**2)
     mx, my = a * cx / d, a * cy / d
     first = (mx + h * cy / d, my - h * cx / d)
     second = (mx - h * cy / d, my + h * cx / d)
-    return first if is_reachable(*first) else second
+    return first if abs(first[1]) > abs(second[1]) else second
 
 
 def area_outline(step_deg: float = 1.0) -> list[Point]:

@@ -48,8 +48,7 @@ def format_coordinate(value: float, decimals: bool) -> str:
     if decimals:
         text = f"{value:.2f}"
         return "0.00" if text == "-0.00" else text
-    rounded = int(round(value))
-    return str(rounded)
+    return str(round(value))
 
 
 _NUMBER_RE = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)")
@@ -570,13 +569,12 @@ def _parse(line: str) -> Command:
             raise RemoteProtocolError(f"{code}: bad parameter {token!r}")
         if letter in p.values or letter in flags:
             raise RemoteProtocolError(f"{code}: parameter {letter} given twice")
-        if value == "" and not (code == "M114" and letter == "S"):
-            if token.startswith(letter) or token[0] == letter.lower():
-                raise RemoteProtocolError(f"{code}: parameter {letter} has no value")
-        if value == "":
+        if value:
+            p.values[letter] = value
+        elif code == "M114" and letter == "S":
             flags.add(letter)
         else:
-            p.values[letter] = value
+            raise RemoteProtocolError(f"{code}: parameter {letter} has no value")
     command = _build(code, p, flags)
     p.finish()
     return command
@@ -587,7 +585,7 @@ def _lower_values(p: _Params, letter: str) -> str | None:
     return None if raw is None else raw.lower()
 
 
-def _build(code: str, p: _Params, flags: set[str]) -> Command:  # noqa: C901 - one branch per code
+def _build(code: str, p: _Params, flags: set[str]) -> Command:
     if code in ("G00", "G01"):
         return Move(p.number("X"), p.number("Y"), p.number("Z"), rapid=code == "G00")
     if code == "G28":
@@ -827,11 +825,14 @@ def parse_message(text: str) -> Message:
         if any(ch in key for ch in '"\r\n\0') or any(ch in value for ch in '"\r\n\0'):
             raise RemoteProtocolError(f"reply field {token!r} holds a forbidden character")
         pairs.append((key, value))
-    if status == "hello":
-        found = dict(pairs)
-        rest = tuple((k, v) for k, v in pairs if k not in ("VERSION", "NAME", "SERIAL"))
-        return Hello(found.get("VERSION", ""), found.get("NAME", ""), found.get("SERIAL", ""), rest)
-    return Reply(status == "ok", tuple(pairs))
+    try:
+        if status == "hello":
+            found = dict(pairs)
+            rest = tuple((k, v) for k, v in pairs if k not in ("VERSION", "NAME", "SERIAL"))
+            return Hello(found.get("VERSION", ""), found.get("NAME", ""), found.get("SERIAL", ""), rest)
+        return Reply(status == "ok", tuple(pairs))
+    except LocalProtocolError as exc:
+        raise RemoteProtocolError(str(exc)) from None
 
 
 class ReplyReader:
@@ -845,24 +846,23 @@ class ReplyReader:
     def pending(self) -> bytes:
         return bytes(self._buffer)
 
-    def feed(self, data: bytes) -> list[Message]:
-        """Every complete message in `data` plus what was buffered; RemoteProtocolError on a bad one
-        (the rest of the buffer is kept, so the caller may go on reading)."""
+    def feed(self, data: bytes) -> None:
         self._buffer += data
-        out: list[Message] = []
-        while True:
-            end = self._buffer.find(REPLY_TERMINATOR)
-            if end < 0:
-                break
-            raw = bytes(self._buffer[:end])
-            del self._buffer[: end + len(REPLY_TERMINATOR)]
-            try:
-                text = raw.decode("ascii")
-            except UnicodeDecodeError:
-                raise RemoteProtocolError(f"reply is not ASCII text: {raw[:40]!r}") from None
-            out.append(parse_message(text))
-        if len(self._buffer) > self._max:
-            size = len(self._buffer)
-            self._buffer.clear()
-            raise RemoteProtocolError(f"{size} bytes without a reply terminator: the peer is not a Line-us")
-        return out
+
+    def next_message(self) -> Message | None:
+        """The next complete message, or None until more bytes arrive; RemoteProtocolError for a bad one
+        (which is consumed, so reading can go on) or for a buffer that grew past any reply's size."""
+        end = self._buffer.find(REPLY_TERMINATOR)
+        if end < 0:
+            if len(self._buffer) > self._max:
+                size = len(self._buffer)
+                self._buffer.clear()
+                raise RemoteProtocolError(f"{size} bytes without a reply terminator: the peer is not a Line-us")
+            return None
+        raw = bytes(self._buffer[:end])
+        del self._buffer[: end + len(REPLY_TERMINATOR)]
+        try:
+            text = raw.decode("ascii")
+        except UnicodeDecodeError:
+            raise RemoteProtocolError(f"reply is not ASCII text: {raw[:40]!r}") from None
+        return parse_message(text)
