@@ -638,10 +638,10 @@ def _build(code: str, p: _Params, flags: set[str]) -> Command:
     if code in ("M170", "M172"):
         return Reserved(int(code[1:]))
     if code == "M171":
-        mode = p.take("S")
-        if mode not in ("CONFIRM", "SPIFFS"):
+        reset = p.take("S")
+        if reset not in ("CONFIRM", "SPIFFS"):
             raise RemoteProtocolError("M171 needs SCONFIRM or SSPIFFS")
-        return FactoryReset(wipe_files=mode == "SPIFFS")
+        return FactoryReset(wipe_files=reset == "SPIFFS")
     if code == "M280":
         return ReverseServos()
     if code == "M291":
