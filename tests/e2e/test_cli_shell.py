@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from conftest import run_cli
+from clitools import run_cli
 from fabwire import __version__
 from fabwire.errors import InputError
 

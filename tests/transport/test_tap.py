@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import run_cli
+from clitools import run_cli
 from fabwire.errors import InputError
 from fabwire.transport import TapTransport, memory_pair
 from fabwire.transport.tap import FROM_DEVICE, TO_DEVICE, TraceWriter, read_trace, replay_bytes
@@ -89,3 +89,12 @@ def test_a_file_that_is_not_a_trace_is_a_clear_error(tmp_path: Path) -> None:
     assert result.returncode == InputError.exit_code
     assert "line 2" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+async def test_closing_a_tap_twice_records_one_close(tmp_path: Path) -> None:
+    path = tmp_path / "cap.jsonl"
+    host, _device = memory_pair()
+    tap = TapTransport(host, TraceWriter.to_file(path, url=host.url, peer=host.peer))
+    await tap.close()
+    await tap.close()
+    assert [r.event for r in read_trace(path)] == ["close"]

@@ -76,20 +76,36 @@ def outside_length(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -
     ends can still cross x < 700 below y = 0.
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    if len(pts) == 0:
+    if len(pts) < 2:
         return 0.0
-    if len(pts) == 1:
+    return segments_outside(pts[:-1], pts[1:], step=step)
+
+
+def segments_outside(starts: FloatArray, ends: FloatArray, *, step: float = 2.0) -> float:
+    """Total length of the straight segments starts[i] → ends[i] that lies outside the reachable area."""
+    a = np.asarray(starts, dtype=float).reshape(-1, 2)
+    d = np.asarray(ends, dtype=float).reshape(-1, 2) - a
+    if len(a) == 0:
         return 0.0
-    d = np.diff(pts, axis=0)
     lengths = np.hypot(d[:, 0], d[:, 1])
     n = np.maximum(1, np.ceil(lengths / step)).astype(np.int64)
     seg = np.repeat(np.arange(len(d)), n)
-    starts = np.cumsum(n) - n
-    t = (np.arange(int(n.sum())) - starts[seg] + 0.5) / n[seg]
-    xs = pts[seg, 0] + d[seg, 0] * t
-    ys = pts[seg, 1] + d[seg, 1] * t
+    first = np.cumsum(n) - n
+    t = (np.arange(int(n.sum())) - first[seg] + 0.5) / n[seg]
+    xs = a[seg, 0] + d[seg, 0] * t
+    ys = a[seg, 1] + d[seg, 1] * t
     bad = ~reachable_mask(xs, ys)
     return float(np.sum(lengths[seg] / n[seg] * bad))
+
+
+def lines_outside(lines: Sequence[FloatArray], *, step: float = 2.0) -> float:
+    """`outside_length` summed over many polylines in one vectorised pass."""
+    multi = [line for line in lines if len(line) > 1]
+    if not multi:
+        return 0.0
+    starts = np.concatenate([line[:-1] for line in multi])
+    ends = np.concatenate([line[1:] for line in multi])
+    return segments_outside(starts, ends, step=step)
 
 
 def polyline_reachable(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> bool:

@@ -73,8 +73,15 @@ def _check_number(value: float | None, what: str, low: float = -COORD_LIMIT, hig
         raise LocalProtocolError(f"{what} must be between {format_number(low)} and {format_number(high)}, got {value}")
 
 
-def _quote(value: str) -> str:
-    if value == "" or any(ch in value for ch in ' \t"'):
+ALWAYS_QUOTED = frozenset({"FS", "INFO", "ZMap"})
+"""Reply keys the firmware quotes whatever the value (file lists, messages)."""
+
+
+_NEEDS_QUOTES = re.compile(r'[ \t"]')
+
+
+def _quote(value: str, always: bool = False) -> str:
+    if always or value == "" or _NEEDS_QUOTES.search(value):
         if '"' in value:
             raise LocalProtocolError(f"a value cannot contain a double quote: {value!r}")
         return f'"{value}"'
@@ -484,6 +491,8 @@ class FirmwareUpdate(Command):
 
 def split_fields(text: str) -> list[str]:
     """Whitespace-separated tokens; a double-quoted run keeps its spaces (quotes removed)."""
+    if '"' not in text:
+        return text.split()
     tokens: list[str] = []
     current: list[str] = []
     in_token = False
@@ -688,6 +697,10 @@ class BadLine:
     reason: str
 
 
+_TERMINATOR_RUN = re.compile(rb"[\r\n\x00]")
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")
+
+
 class CommandReader:
     """Splits the host's byte stream into command lines: any run of `\\r`, `\\n`, `\\0` ends one line,
     and blank lines vanish, so every client's terminator habit gets exactly one reply per command."""
@@ -700,11 +713,10 @@ class CommandReader:
     def feed(self, data: bytes) -> list[Line | BadLine]:
         out: list[Line | BadLine] = []
         start = 0
-        for index, byte in enumerate(data):
-            if byte in TERMINATOR_BYTES:
-                self._take(data[start:index], out)
-                self._end_line(out)
-                start = index + 1
+        for match in _TERMINATOR_RUN.finditer(data):
+            self._take(data[start : match.start()], out)
+            self._end_line(out)
+            start = match.end()
         self._take(data[start:], out)
         return out
 
@@ -730,7 +742,7 @@ class CommandReader:
             return
         if not text:
             return
-        if any(ord(ch) < 32 and ch != "\t" for ch in text) or "\x7f" in text:
+        if _CONTROL.search(text):
             out.append(BadLine("command holds control characters"))
             return
         out.append(Line(text))
@@ -740,18 +752,24 @@ class CommandReader:
 # replies (device → host)
 
 
+_BAD_KEY = re.compile(r'[:"\r\n\x00]')
+_BAD_VALUE = re.compile(r'["\r\n\x00]')
+
+
 @dataclass(frozen=True, slots=True)
 class Reply:
     """`ok`/`error` and its KEY:value pairs, in order."""
 
     ok: bool
     fields: tuple[tuple[str, str], ...] = ()
+    quoted: frozenset[str] = field(default=ALWAYS_QUOTED, compare=False)
+    """Keys written in double quotes even without spaces (M122 writes ZMap bare, G31 quoted)."""
 
     def __post_init__(self) -> None:
         for key, value in self.fields:
-            if not key or any(ch in key for ch in ' :"') or not key.isascii():
+            if not key or not key.isascii() or _BAD_KEY.search(key):
                 raise LocalProtocolError(f"bad reply key {key!r}")
-            if not value.isascii() or '"' in value or "\r" in value or "\n" in value or "\0" in value:
+            if not value.isascii() or _BAD_VALUE.search(value):
                 raise LocalProtocolError(f"bad reply value {value!r}")
 
     def get(self, key: str, default: str | None = None) -> str | None:
@@ -768,7 +786,8 @@ class Reply:
         return self.get("INFO") or ""
 
     def text(self) -> str:
-        return " ".join(["ok" if self.ok else "error", *(f"{k}:{_quote(v)}" for k, v in self.fields)])
+        pairs = (f"{_quote(k) if ' ' in k else k}:{_quote(v, k in self.quoted)}" for k, v in self.fields)
+        return " ".join(["ok" if self.ok else "error", *pairs])
 
     def encode(self) -> bytes:
         return self.text().encode("ascii") + REPLY_TERMINATOR

@@ -146,12 +146,13 @@ class TapTransport(Transport):
         await self._inner.write(data)
 
     async def close(self) -> None:
+        writer, self._writer = self._writer, None
         try:
             await self._inner.close()
         finally:
-            if self._writer is not None:
-                self._writer.event("close")
-                self._writer.close()
+            if writer is not None:
+                writer.event("close")
+                writer.close()
 
 
 _ESCAPES = {0x0D: "\\r", 0x0A: "\\n", 0x00: "\\0", 0x09: "\\t", 0x5C: "\\\\"}

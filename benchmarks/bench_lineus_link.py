@@ -1,0 +1,107 @@
+"""Line-us link: client ↔ simulator command round trips on loopback TCP with motion delays off."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+from common import Figure
+from fabwire.lineus import protocol as p
+from fabwire.lineus.client import LineUs
+from fabwire.lineus.sim import LineUsSim, SimOptions
+from fabwire.transport import open_tcp, serve_tcp
+
+MOVES = 6_000
+OFFICIAL_MOVES = 2_000
+TRIALS = 5
+"""Best of several runs: the machine is shared, and the least-disturbed run is the link's own speed."""
+TARGET = 5_000.0
+
+
+def _targets(count: int) -> list[tuple[float, float]]:
+    return [(1000.0 + (i % 50) * 4, -200.0 + (i % 37) * 8) for i in range(count)]
+
+
+async def _client_rate(lookahead: bool) -> float:
+    sim = LineUsSim(SimOptions(speed=float("inf")))
+    server = await serve_tcp(sim.serve, "127.0.0.1", 0)
+    try:
+        port = server.sockets[0].getsockname()[1]
+        arm = await LineUs.connect(await open_tcp("127.0.0.1", port), lookahead=lookahead)
+        try:
+            targets = _targets(MOVES)
+            start = time.perf_counter()
+            if lookahead:
+                await arm.run(p.Move(x, y, 0) for x, y in targets)
+            else:
+                for x, y in targets:
+                    await arm.move(x, y, 0)
+            elapsed = time.perf_counter() - start
+        finally:
+            await arm.close()
+        assert len(sim.arm.moves) >= MOVES
+        async with asyncio.timeout(5):
+            await sim.wait_idle()
+        return MOVES / elapsed
+    finally:
+        server.close()
+        await server.wait_closed()
+        await sim.close()
+
+
+def _official_rate() -> float | None:
+    """The official `lineus` module (one recv per byte) against the same simulator, for comparison."""
+    try:
+        import lineus
+    except ImportError:
+        return None
+    loop = asyncio.new_event_loop()
+    sim = LineUsSim(SimOptions(speed=float("inf")))
+    server = loop.run_until_complete(serve_tcp(sim.serve, "127.0.0.1", 0))
+    port = server.sockets[0].getsockname()[1]
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    try:
+        arm = lineus.LineUs()
+        arm._default_port = port
+        if not arm.connect("127.0.0.1"):
+            return None
+        start = time.perf_counter()
+        for x, y in _targets(OFFICIAL_MOVES):
+            arm.g01(x, y, 0)
+        elapsed = time.perf_counter() - start
+        arm.disconnect()
+        arm.zeroconf.close()
+        return OFFICIAL_MOVES / elapsed
+    finally:
+
+        async def shut() -> None:
+            server.close()
+            await sim.close()
+
+        asyncio.run_coroutine_threadsafe(shut(), loop).result(5)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(5)
+        loop.close()
+
+
+def run() -> list[Figure]:
+    official = max((rate for _ in range(TRIALS) if (rate := _official_rate()) is not None), default=None)
+    serial = max(asyncio.run(_client_rate(lookahead=False)) for _ in range(TRIALS))
+    pipelined = max(asyncio.run(_client_rate(lookahead=True)) for _ in range(TRIALS))
+    target = f"> {TARGET:,.0f}"
+    return [
+        Figure(f"lineus G01 round trips, one in flight (loopback TCP, speed inf, best of {TRIALS})", serial,
+               "moves/s", target, serial > TARGET, official, "official lineus module"),
+        # Look-ahead hides Wi-Fi latency on a real robot; with both ends on one event loop there is none to hide,
+        # so this figure is for comparison only.
+        Figure(f"lineus G01 moves, look-ahead window 3 (best of {TRIALS})", pipelined, "moves/s", "", None,
+               serial, "one in flight"),
+    ]
+
+
+if __name__ == "__main__":
+    for figure in run():
+        extra = f" (baseline {figure.baseline:,.0f} {figure.baseline_name})" if figure.baseline else ""
+        print(f"{figure.name}: {figure.value:,.0f} {figure.unit}  target {figure.target}{extra}")

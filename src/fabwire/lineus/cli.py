@@ -1,0 +1,352 @@
+"""`fabwire lineus …` (talk to a Line-us) and `fabwire sim lineus` (be one)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import socket
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
+from fabwire.devices import LINEUS
+from fabwire.errors import InputError, LocalProtocolError
+from fabwire.lineus import protocol as p
+from fabwire.lineus.client import LineUs, Position
+from fabwire.lineus.draw_cli import draw, preview, text
+
+T = TypeVar("T")
+
+
+@device_group(LINEUS, "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery.")
+def lineus() -> None:
+    """Line-us drawing robot."""
+
+
+def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
+    async def main() -> T:
+        async with dctx.link() as transport:
+            arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
+            try:
+                return await action(arm)
+            finally:
+                await arm.detach()  # the link's context closes the transport (and its trace)
+
+    return asyncio.run(main())
+
+
+def _pos(position: Position) -> dict[str, Any]:
+    return {"x": position.x, "y": position.y, "z": position.z, "pen": "down" if position.pen_down else "up"}
+
+
+def _pos_text(position: Position) -> str:
+    return f"X {position.x:g}  Y {position.y:g}  Z {position.z:g}  (pen {'down' if position.pen_down else 'up'})"
+
+
+@lineus.command()
+@pass_device
+def info(dctx: DeviceContext) -> None:
+    """Firmware, name, serial, connection mode and diagnostics."""
+
+    async def action(arm: LineUs) -> dict[str, Any]:
+        caps = await arm.capabilities()
+        diag = await arm.diagnostics()
+        hello = arm.hello
+        return {"version": hello.version, "firmware_major": hello.firmware_major, "name": hello.name,
+                "serial": hello.serial, "capabilities": caps, "diagnostics": diag}
+
+    data = _with_arm(dctx, action)
+
+    def human() -> None:
+        out = dctx.output.out
+        out.print(f"Line-us {data['name']}  firmware {data['version']}  serial {data['serial']}")
+        out.print(f"connect mode {data['capabilities'].get('CONNECTMODE', '?')}")
+        for key, value in data["diagnostics"].items():
+            out.print(f"  {key}: {value}")
+
+    dctx.output.result(data, human)
+
+
+@lineus.command()
+@click.option("--servos", is_flag=True, help="Report servo angles (M114 S) instead of coordinates.")
+@pass_device
+def position(dctx: DeviceContext, servos: bool) -> None:
+    """Where the arm is (M114)."""
+    if servos:
+        angles = _with_arm(dctx, lambda arm: arm.servo_angles())
+        dctx.output.result(angles, "  ".join(f"{k} {v:.2f}" for k, v in angles.items()))
+        return
+    where = _with_arm(dctx, lambda arm: arm.position())
+    dctx.output.result(_pos(where), _pos_text(where))
+
+
+@lineus.command()
+@pass_device
+def home(dctx: DeviceContext) -> None:
+    """Send the arm home (1000, 1000), pen up."""
+    where = _with_arm(dctx, lambda arm: arm.home())
+    dctx.output.result(_pos(where), _pos_text(where))
+
+
+@lineus.command(context_settings={"ignore_unknown_options": True})
+@click.argument("x", type=float)
+@click.argument("y", type=float)
+@click.option("--pen", type=click.Choice(["up", "down"]), help="Pen state for the move (default: unchanged).")
+@click.option("--z", "z", type=float, help="Explicit pen height 0 (down) … 1000 (up).")
+@pass_device
+def move(dctx: DeviceContext, x: float, y: float, pen: str | None, z: float | None) -> None:
+    """Move the pen to machine coordinates X Y (G01); a target outside the area is clamped and the pen lifted.
+
+    Negative coordinates work as they are (`move 1200 -300`)."""
+    if pen is not None and z is not None:
+        raise InputError("give --pen or --z, not both")
+    height = z if z is not None else (1000.0 if pen == "up" else 0.0 if pen == "down" else None)
+    try:
+        p.Move(x, y, height)
+    except LocalProtocolError as exc:
+        raise InputError(str(exc)) from None
+    from fabwire.lineus import kinematics as kin
+
+    where = _with_arm(dctx, lambda arm: arm.move(x, y, height))
+    clamped = abs(where.x - x) > 0.01 or abs(where.y - y) > 0.01
+    if clamped and not kin.is_reachable(x, y):
+        dctx.output.note(f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
+    dctx.output.result({**_pos(where), "clamped": clamped}, _pos_text(where))
+
+
+@lineus.command()
+@click.argument("words", nargs=-1, required=True)
+@pass_device
+def send(dctx: DeviceContext, words: tuple[str, ...]) -> None:
+    """Send one G-code command (checked against the protocol first) and print the reply."""
+    try:
+        command = p.parse_command(" ".join(words))
+    except Exception as exc:
+        raise InputError(f"not a Line-us command: {exc}") from None
+    reply = _with_arm(dctx, lambda arm: arm.send(command))
+    dctx.output.result({"ok": reply.ok, "fields": reply.as_dict()}, reply.text())
+
+
+@lineus.group()
+def files() -> None:
+    """Drawings stored on the machine (slots 1-32)."""
+
+
+@files.command("list")
+@pass_device
+def files_list(dctx: DeviceContext) -> None:
+    """List stored drawings (M20)."""
+    drawings = _with_arm(dctx, lambda arm: arm.list_drawings())
+    rows = [{"slot": d.slot, "bytes": d.size, "path": d.path} for d in drawings]
+    text = "\n".join(f"{d.slot:>3}  {d.size:>8} bytes  {d.path}" for d in drawings) or "no stored drawings"
+    dctx.output.result(rows, text)
+
+
+@files.command("save")
+@click.argument("gcode", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("slot", type=click.IntRange(1, 32))
+@pass_device
+def files_save(dctx: DeviceContext, gcode: Path, slot: int) -> None:
+    """Store a G-code FILE as drawing SLOT (M28 … M29); every line is checked first."""
+    try:
+        text = gcode.read_text(encoding="ascii")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise InputError(f"{gcode}: cannot read as ASCII G-code: {exc}") from None
+    lines = [line.split(";", 1)[0].strip() for line in text.splitlines()]
+    lines = [line for line in lines if line]
+    if not lines:
+        raise InputError(f"{gcode}: no G-code lines")
+    for number, line in enumerate(lines, 1):
+        try:
+            p.parse_command(line)
+        except Exception as exc:
+            raise InputError(f"{gcode}: line {number}: {exc}") from None
+    count = _with_arm(dctx, lambda arm: arm.save_drawing(slot, lines))
+    dctx.output.result({"slot": slot, "lines": count}, f"stored {count} lines as drawing {slot}")
+
+
+@files.command("delete")
+@click.argument("slot", type=click.IntRange(1, 32))
+@pass_device
+def files_delete(dctx: DeviceContext, slot: int) -> None:
+    """Delete stored drawing SLOT (M30)."""
+    _with_arm(dctx, lambda arm: arm.delete_drawing(slot))
+    dctx.output.result({"slot": slot, "deleted": True}, f"deleted drawing {slot}")
+
+
+@lineus.command()
+@click.argument("new", required=False)
+@pass_device
+def name(dctx: DeviceContext, new: str | None) -> None:
+    """Show the machine name, or set it to NEW (letters, digits, '-'; reached as NEW.local afterwards)."""
+    if new is not None:
+        try:
+            p.MachineName(new)
+        except LocalProtocolError as exc:
+            raise InputError(str(exc)) from None
+
+        async def rename(arm: LineUs) -> str:
+            await arm.set_name(new)
+            return await arm.name()
+
+        current = _with_arm(dctx, rename)
+    else:
+        current = _with_arm(dctx, lambda arm: arm.name())
+    dctx.output.result({"name": current}, current)
+
+
+@lineus.group()
+def wifi() -> None:
+    """Wi-Fi networks the machine knows (refused over websockets, fine over TCP)."""
+
+
+@wifi.command("list")
+@pass_device
+def wifi_list(dctx: DeviceContext) -> None:
+    """Networks in range and networks with a stored password (M587)."""
+    networks = _with_arm(dctx, lambda arm: arm.wifi_networks())
+    rows = [{"ssid": n.ssid, "visible": n.visible, "known": n.known} for n in networks]
+
+    def state(visible: bool, known: bool) -> str:
+        return "known, in range" if visible and known else "in range" if visible else "known, not in range"
+
+    text = "\n".join(f"{n.ssid}  ({state(n.visible, n.known)})" for n in networks) or "no networks"
+    dctx.output.result(rows, text)
+
+
+@wifi.command("add")
+@click.argument("ssid")
+@click.option("--password", help="The network's password (omit for an open network).")
+@pass_device
+def wifi_add(dctx: DeviceContext, ssid: str, password: str | None) -> None:
+    """Store network SSID (M587)."""
+    try:
+        p.Wifi(ssid, password)
+    except LocalProtocolError as exc:
+        raise InputError(str(exc)) from None
+    _with_arm(dctx, lambda arm: arm.add_wifi(ssid, password))
+    dctx.output.result({"ssid": ssid, "stored": True}, f"stored network {ssid}")
+
+
+@wifi.command("forget")
+@click.argument("ssid", required=False)
+@click.option("--all", "forget_all", is_flag=True, help="Forget every stored network.")
+@pass_device
+def wifi_forget(dctx: DeviceContext, ssid: str | None, forget_all: bool) -> None:
+    """Forget network SSID, or --all (M588)."""
+    if forget_all == (ssid is not None):
+        raise InputError("give an SSID or --all")
+    target = "*" if forget_all else str(ssid)
+    _with_arm(dctx, lambda arm: arm.forget_wifi(target))
+    dctx.output.result({"forgotten": target}, "forgot every network" if forget_all else f"forgot {target}")
+
+
+@lineus.command()
+@click.option("--yes", is_flag=True, help="Really overwrite the stored calibration.")
+@click.option("--clear", is_flag=True, help="Clear the XY calibration instead of saving it.")
+@pass_device
+def calibrate(dctx: DeviceContext, yes: bool, clear: bool) -> None:
+    """Save the arm's current point as the XY calibration point (M374), or --clear it. Needs --yes."""
+    if not yes:
+        raise InputError("calibration overwrites the stored XY calibration: add --yes to go ahead")
+    _with_arm(dctx, lambda arm: arm.calibrate(clear=clear, confirm=True))
+    dctx.output.result({"calibration": "cleared" if clear else "saved"},
+                       "calibration cleared" if clear else "calibration saved")
+
+
+@lineus.command()
+@click.option("--wait", type=click.FloatRange(min=0.1, max=60), default=3.0, show_default=True,
+              help="Seconds to listen for answers.")
+@click.option("--interface", "interfaces", multiple=True, help="Only browse on this local address (repeatable).")
+@pass_app
+def discover(app: App, wait: float, interfaces: tuple[str, ...]) -> None:
+    """Find Line-us machines on the network by mDNS (_lineus._tcp.local.)."""
+    from fabwire.lineus.discovery import discover as browse
+
+    found = asyncio.run(browse(wait, interfaces=interfaces or None))
+    rows = [{"name": f.name, "host": f.host, "address": f.address, "port": f.port} for f in found]
+    text = "\n".join(f"{f.name}  {f.host}  {f.address}:{f.port}" for f in found) or "no Line-us found"
+    app.output.result(rows, text)
+
+
+lineus.add_command(draw)
+lineus.add_command(text)
+lineus.add_command(preview)
+
+
+# -- the simulator ---------------------------------------------------------------------------------------------------
+
+
+def _free_port(host: str) -> int:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])
+
+
+@click.command("lineus")
+@click.option("--listen", "listen", multiple=True, metavar="HOST:PORT",
+              help="Serve on TCP (default 127.0.0.1:1337); repeat for several addresses.")
+@click.option("--speed", type=float, default=1.0, show_default=True,
+              help="Motion speed-up factor; inf or 0 = no motion delay.")
+@click.option("--version", "version", default="3.x", show_default=True,
+              help="Firmware personality: 1.0.1 (integer replies, one command at a time) "
+                   "or 3.x (decimals, look-ahead).")
+@click.option("--name", default="line-us", show_default=True, help="Machine name (hello NAME, M550).")
+@click.option("--serial", default="123456", show_default=True, help="Serial number in the hello.")
+@click.option("--reply", type=click.Choice(["complete", "accept"]), default="complete", show_default=True,
+              help="Answer a move when it has finished, or when the motion queue took it.")
+@click.option("--record", type=click.Path(dir_okay=False, path_type=Path),
+              help="On exit, write what the pen drew to FILE (.svg or .png).")
+@click.option("--advertise", is_flag=True, help="Advertise _lineus._tcp.local. by mDNS.")
+@pass_app
+def sim_lineus(app: App, listen: tuple[str, ...], speed: float, version: str, name: str, serial: str, reply: str,
+               record: Path | None, advertise: bool) -> None:
+    """A Line-us on TCP that the official clients cannot tell from the robot."""
+    from fabwire.lineus.discovery import Advertiser
+    from fabwire.lineus.sim import LineUsSim, SimOptions, resolve_version
+    from fabwire.simserve import parse_listen, serve
+
+    if record is not None and record.suffix.lower() not in (".svg", ".png"):
+        raise InputError(f"--record {record}: the file must end in .svg or .png")
+    try:
+        options = SimOptions(version=resolve_version(version), name=name, serial=serial,
+                             speed=math.inf if speed == 0 else speed,
+                             reply="accept" if reply == "accept" else "complete")
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    sim = LineUsSim(options)
+    addresses = list(listen) or [f"127.0.0.1:{LINEUS.default_port}"]
+    advertised: list[tuple[str, int]] = []
+    if advertise:
+        fixed = []
+        for text in addresses:
+            where = parse_listen(text, LINEUS.default_port or 1337)
+            port = where.port or _free_port(where.host)
+            advertised.append((where.host, port))
+            fixed.append(f"[{where.host}]:{port}" if ":" in where.host else f"{where.host}:{port}")
+        addresses = fixed
+
+    async def main() -> None:
+        advertisers = [Advertiser(name, host, port) for host, port in advertised]
+        try:
+            for adv in advertisers:
+                await adv.start()
+            await serve("lineus", sim.serve, listen=tuple(addresses), use_pty=False, link=None,
+                        default_port=LINEUS.default_port, json_mode=app.json)
+        finally:
+            for adv in advertisers:
+                with contextlib.suppress(Exception):
+                    await adv.stop()
+            await sim.close()
+
+    try:
+        asyncio.run(main())
+    finally:
+        if record is not None:
+            written = sim.write_record(record)
+            app.output.note(f"recorded {len(sim.arm.strokes)} stroke(s) to {written}")

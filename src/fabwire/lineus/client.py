@@ -1,0 +1,519 @@
+"""Talking to a Line-us: read the hello first, then one command in flight with its reply awaited.
+
+The firmware holds a move's reply until the move is done, so every wait is sized to the move it covers
+(`reply_timeout` plus the modelled move time). Firmware 3 can buffer a few commands; `lookahead=True` keeps
+up to `window` in flight for smooth motion. Calibration, factory reset and firmware update need `confirm=True`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import dataclasses
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Self, TypeVar
+
+from fabwire.devices import LINEUS
+from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
+from fabwire.lineus import kinematics as kin
+from fabwire.lineus import protocol as p
+from fabwire.sync import LoopThread
+from fabwire.transport import Transport, open_transport
+
+T = TypeVar("T")
+
+HELLO_TIMEOUT = 10.0
+"""The hello can take a few seconds while the arm waves."""
+REPLY_TIMEOUT = 5.0
+LOOKAHEAD_WINDOW = 3
+
+
+@dataclass(frozen=True, slots=True)
+class Position:
+    x: float
+    y: float
+    z: float
+
+    @property
+    def pen_down(self) -> bool:
+        return self.z < kin.PEN_DOWN_BELOW
+
+    @classmethod
+    def from_reply(cls, reply: p.Reply) -> Position:
+        fields = dict(reply.fields)
+        try:
+            return cls(float(fields["X"]), float(fields["Y"]), float(fields["Z"]))
+        except (KeyError, ValueError):
+            raise RemoteProtocolError(f"reply {reply.text()!r} does not carry X, Y and Z") from None
+
+
+@dataclass(frozen=True, slots=True)
+class StoredDrawing:
+    slot: int
+    size: int
+    path: str
+
+
+@dataclass(frozen=True, slots=True)
+class Network:
+    ssid: str
+    visible: bool
+    known: bool
+
+
+def parse_file_list(text: str) -> list[StoredDrawing]:
+    """`/0000001.txt-9496;/0000002.txt-11323;` → drawings (system files such as /cal are left out)."""
+    out = []
+    for entry in filter(None, (part.strip() for part in text.split(";"))):
+        path, sep, size = entry.rpartition("-")
+        name = path.removeprefix("/").removesuffix(".txt")
+        if not sep or not size.isdigit():
+            raise RemoteProtocolError(f"file entry {entry!r} is not /NNNNNNN.txt-SIZE")
+        if name.isdigit() and path.endswith(".txt"):
+            out.append(StoredDrawing(int(name), int(size), path))
+    return out
+
+
+class LineUs:
+    """An open connection to one Line-us (or its simulator)."""
+
+    def __init__(self, transport: Transport, hello: p.Hello, reader: p.ReplyReader, *, lookahead: bool,
+                 window: int = LOOKAHEAD_WINDOW, reply_timeout: float = REPLY_TIMEOUT) -> None:
+        self.transport = transport
+        self.hello = hello
+        self.lookahead = lookahead
+        self.reply_timeout = reply_timeout
+        self.model = kin.MotionModel()
+        self._reader = reader
+        self._window = window if lookahead else 1
+        self._slots = asyncio.Semaphore(self._window)
+        self._waiting: collections.deque[tuple[str, asyncio.Future[p.Reply]]] = collections.deque()
+        self._planned: Position | None = None
+        self._failure: BaseException | None = None
+        self._read_task = asyncio.create_task(self._read_loop(), name="lineus-replies") if lookahead else None
+        """With one command in flight the waiting caller reads its own reply (no task hop per command)."""
+
+    # -- connecting -----------------------------------------------------------------------------------------------
+
+    @classmethod
+    async def connect(cls, transport: Transport, *, lookahead: bool = False, hello_timeout: float = HELLO_TIMEOUT,
+                      reply_timeout: float = REPLY_TIMEOUT, window: int = LOOKAHEAD_WINDOW) -> LineUs:
+        """Read the hello (firmware 1 needs it read before anything is sent), then return the connection."""
+        reader = p.ReplyReader(max_size=4096)
+        where = transport.peer or transport.url
+        try:
+            async with asyncio.timeout(hello_timeout):
+                while True:
+                    reader.feed(await transport.read())
+                    pending = reader.pending
+                    if pending and not (pending[:5] == b"hello"[: len(pending[:5])]):
+                        raise RemoteProtocolError(
+                            f"{where} is not a Line-us: it greeted with {pending[:40]!r} instead of 'hello …'")
+                    message = reader.next_message()
+                    if message is None:
+                        continue
+                    if not isinstance(message, p.Hello):
+                        raise RemoteProtocolError(f"{where} is not a Line-us: first message {message.text()!r}")
+                    break
+        except TimeoutError:
+            await transport.close()
+            raise LinkTimeout(
+                f"no hello from {where} within {hello_timeout:g} s: either not a Line-us, or a wedged one "
+                "(accepts TCP but sends no greeting: power-cycle it)") from None
+        except LinkClosed:
+            await transport.close()
+            raise LinkClosed(f"{where} closed the connection before greeting: not a Line-us?") from None
+        except BaseException:
+            await transport.close()
+            raise
+        # Firmware before 3.0 cannot buffer a second command: look-ahead is only used where it is safe.
+        lookahead = lookahead and message.firmware_major >= 3
+        return cls(transport, message, reader, lookahead=lookahead, window=window, reply_timeout=reply_timeout)
+
+    @classmethod
+    async def open(cls, address: str, *, lookahead: bool = False, connect_timeout: float = 5.0,
+                   hello_timeout: float = HELLO_TIMEOUT) -> LineUs:
+        """Connect to `host[:port]`, `tcp://…` or `sim://lineus`."""
+        transport = await open_transport(address, LINEUS, connect_timeout=connect_timeout)
+        return await cls.connect(transport, lookahead=lookahead, hello_timeout=hello_timeout)
+
+    @classmethod
+    def open_sync(cls, address: str, *, lookahead: bool = False, connect_timeout: float = 5.0) -> LineUsSync:
+        """`with LineUs.open_sync("line-us.local") as arm: arm.move(1000, 0)` for plain scripts."""
+        return LineUsSync(address, lookahead=lookahead, connect_timeout=connect_timeout)
+
+    async def close(self) -> None:
+        await self.detach()
+        await self.transport.close()
+
+    async def detach(self) -> None:
+        """Stop using the transport but leave it open (for a caller that owns and closes it)."""
+        if self._read_task is not None:
+            self._read_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self._read_task
+        self._fail(LinkClosed("the connection to the Line-us is closed"))
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                        tb: TracebackType | None) -> None:
+        await self.close()
+
+    # -- the one exchange -------------------------------------------------------------------------------------------
+
+    async def _read_loop(self) -> None:
+        while self._failure is None:
+            await self._pump()
+
+    async def _pump(self) -> None:
+        """Read once and hand each complete reply to the command waiting for it; a failure ends the link."""
+        try:
+            data = await self.transport.read()
+            self._reader.feed(data)
+            while (message := self._reader.next_message()) is not None:
+                if not self._waiting:
+                    raise RemoteProtocolError(f"unexpected message from the Line-us: {message.text()!r}")
+                _, future = self._waiting.popleft()
+                if not future.done():
+                    if isinstance(message, p.Hello):
+                        future.set_exception(RemoteProtocolError("a second hello arrived instead of a reply"))
+                    else:
+                        future.set_result(message)
+        except LinkClosed:
+            pending = [text for text, _ in self._waiting]
+            if pending:
+                self._fail(LinkClosed(
+                    f"the Line-us closed the connection with {len(pending)} command(s) unanswered "
+                    f"(first: {pending[0]!r}); the drawing was interrupted"))
+            else:
+                self._fail(LinkClosed("the Line-us closed the connection"))
+        except RemoteProtocolError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        if self._failure is None:
+            self._failure = exc
+        while self._waiting:
+            _, future = self._waiting.popleft()
+            if not future.done():
+                future.set_exception(exc)
+
+    async def send(self, command: p.Command, *, timeout: float | None = None) -> p.Reply:
+        """Send one command and wait for its reply (ok or error: the reply is returned either way)."""
+        future = await self._submit(command)
+        return await self._await_reply(command, future, timeout)
+
+    async def request(self, command: p.Command, *, timeout: float | None = None) -> p.Reply:
+        """Like `send`, but an `error` reply raises DeviceError with the device's INFO text."""
+        return _checked(command, await self.send(command, timeout=timeout))
+
+    async def _submit(self, command: p.Command) -> asyncio.Future[p.Reply]:
+        if self._failure is not None:
+            raise self._failure
+        await self._slots.acquire()
+        future: asyncio.Future[p.Reply] = asyncio.get_running_loop().create_future()
+        future.add_done_callback(lambda _: self._slots.release())
+        text = command.text()
+        self._waiting.append((text, future))
+        try:
+            await self.transport.write(text.encode("ascii") + p.COMMAND_TERMINATOR)
+        except LinkClosed as exc:
+            self._fail(LinkClosed(f"lost the Line-us while sending {text!r}: {exc}"))
+        return future
+
+    async def _await_reply(self, command: p.Command, future: asyncio.Future[p.Reply], timeout: float | None) -> p.Reply:
+        limit = timeout if timeout is not None else self._timeout_for(command)
+        try:
+            async with asyncio.timeout(limit):
+                if self._read_task is None:
+                    while not future.done():
+                        await self._pump()
+                reply = await asyncio.shield(future)
+        except TimeoutError:
+            exc = LinkTimeout(f"no reply to {command.text()!r} within {limit:.1f} s: the Line-us may be wedged")
+            self._fail(exc)
+            raise exc from None
+        if command.moves and reply.ok:
+            with contextlib.suppress(RemoteProtocolError):
+                self._planned = Position.from_reply(reply)
+        return reply
+
+    def _timeout_for(self, command: p.Command) -> float:
+        """Room for the move itself (and the one ahead of it with look-ahead) on top of the link's slack."""
+        if not command.moves:
+            return self.reply_timeout
+        start = self._planned or Position(kin.HOME[0], kin.HOME[1], kin.Z_UP)
+        if isinstance(command, p.Move | p.RawMove):
+            end = (start.x if command.x is None else command.x, start.y if command.y is None else command.y,
+                   start.z if command.z is None else command.z)
+        else:
+            end = (kin.HOME[0], kin.HOME[1], kin.Z_UP)
+        if not all(math.isfinite(v) for v in end):
+            return self.reply_timeout
+        # Bound the move by the smallest step the firmware allows (1 unit), in case G94 was set elsewhere,
+        # and double it: the step period is modelled, not measured. With look-ahead the move ahead counts too.
+        span = max(abs(end[0] - start.x), abs(end[1] - start.y))
+        worst = math.ceil(span) * self.model.step_time + 2 * self.model.pen_time
+        return self.reply_timeout + (2 if self.lookahead else 1) * 2 * worst
+
+    async def run(self, commands: Iterable[p.Command]) -> list[p.Reply]:
+        """Send many commands, keeping as many in flight as the mode allows; the first `error` raises."""
+        futures: list[tuple[p.Command, asyncio.Future[p.Reply]]] = []
+        replies = []
+        window = self._window
+        try:
+            for command in commands:
+                futures.append((command, await self._submit(command)))
+                while futures and (futures[0][1].done() or len(futures) >= window):
+                    done_cmd, done_future = futures.pop(0)
+                    replies.append(_checked(done_cmd, await self._await_reply(done_cmd, done_future, None)))
+            for done_cmd, done_future in futures:
+                replies.append(_checked(done_cmd, await self._await_reply(done_cmd, done_future, None)))
+        finally:
+            for _, future in futures:
+                if not future.done():
+                    future.cancel()
+        return replies
+
+    # -- motion ---------------------------------------------------------------------------------------------------
+
+    async def move(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
+        """G01 to (x, y, z); omitted axes stay. Returns where the arm reports it ended (clamped if outside)."""
+        return Position.from_reply(await self.request(p.Move(x, y, z)))
+
+    async def rapid(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
+        """G00: every servo at full speed; the path is a curve and may clip the body."""
+        return Position.from_reply(await self.request(p.Move(x, y, z, rapid=True)))
+
+    async def move_uncalibrated(self, x: float | None = None, y: float | None = None, z: float | None = None,
+                                keep: str | None = None) -> Position:
+        """G40: ignore G54 and calibration (`keep` = "xy" or "z" re-applies that part)."""
+        if keep not in (None, "xy", "z"):
+            raise InputError("keep is 'xy' or 'z'")
+        return Position.from_reply(await self.request(p.RawMove(x, y, z, keep)))  # type: ignore[arg-type]
+
+    async def pen_up(self) -> Position:
+        return await self.move(z=kin.Z_UP)
+
+    async def pen_down(self, z: float = kin.Z_DOWN) -> Position:
+        return await self.move(z=z)
+
+    async def home(self) -> Position:
+        return Position.from_reply(await self.request(p.Home()))
+
+    async def position(self) -> Position:
+        return Position.from_reply(await self.request(p.GetPosition()))
+
+    async def servo_angles(self) -> dict[str, float]:
+        reply = await self.request(p.GetPosition(servos=True))
+        try:
+            return {key: float(value) for key, value in reply.fields}
+        except ValueError:
+            raise RemoteProtocolError(f"servo angles {reply.text()!r} are not numbers") from None
+
+    async def set_origin(self, x: float = 0.0, y: float = 0.0, scale: float = 1.0) -> None:
+        """G54 for this connection: machine = drawing × scale + (x, y)."""
+        await self.request(p.SetOrigin(x, y, scale))
+
+    async def set_speed(self, draw: float | None = None, travel: float | None = None) -> None:
+        """G94: the largest interpolation step while drawing (S) and travelling (P); smaller is slower."""
+        await self.request(p.SetSpeed(draw, travel))
+        self.model = dataclasses.replace(
+            self.model, draw_step=draw if draw is not None else self.model.draw_step,
+            travel_step=travel if travel is not None else self.model.travel_step)
+
+    # -- machine information ----------------------------------------------------------------------------------------
+
+    async def capabilities(self) -> dict[str, str]:
+        return (await self.request(p.Capabilities())).as_dict()
+
+    async def diagnostics(self) -> dict[str, str]:
+        return (await self.request(p.Diagnostics())).as_dict()
+
+    async def name(self) -> str:
+        reply = await self.request(p.MachineName())
+        return reply.get("MACHINENAME") or ""
+
+    async def set_name(self, name: str) -> None:
+        """M550: takes effect for mDNS (<name>.local) and the next hello."""
+        await self.request(p.MachineName(name))
+
+    async def storage(self) -> dict[str, int]:
+        reply = await self.request(p.StorageUsage())
+        try:
+            return {key: int(value) for key, value in reply.fields}
+        except ValueError:
+            raise RemoteProtocolError(f"storage figures {reply.text()!r} are not numbers") from None
+
+    async def zmap(self) -> tuple[float, ...]:
+        reply = await self.request(p.ZMap())
+        try:
+            return tuple(float(v) for v in (reply.get("ZMap") or "").split(";"))
+        except ValueError:
+            raise RemoteProtocolError(f"Z map {reply.text()!r} is not four numbers") from None
+
+    async def set_zmap(self, corners: tuple[float, float, float, float] | None) -> None:
+        """G31 with four corner offsets (TL, TR, BR, BL), or None to clear the map."""
+        await self.request(p.ZMap(corners) if corners is not None else p.ZMap(clear=True))
+
+    async def gestures(self, on: bool) -> None:
+        await self.request(p.Gestures(on))
+
+    # -- Wi-Fi ------------------------------------------------------------------------------------------------------
+
+    async def wifi_networks(self) -> list[Network]:
+        """M587: K=1 visible with a known password, 2 visible, 3 known but not in range."""
+        reply = await self.request(p.Wifi())
+        out = []
+        for ssid, kind in reply.fields:
+            if kind not in ("1", "2", "3"):
+                raise RemoteProtocolError(f"Wi-Fi entry {ssid}:{kind} has an unknown state")
+            out.append(Network(ssid, visible=kind in ("1", "2"), known=kind in ("1", "3")))
+        return out
+
+    async def add_wifi(self, ssid: str, password: str | None = None) -> None:
+        """M587 S P: store a network (in setup mode the machine then leaves to join it)."""
+        await self.request(p.Wifi(ssid, password))
+
+    async def forget_wifi(self, ssid: str = "*") -> None:
+        await self.request(p.ForgetWifi(ssid))
+
+    # -- stored drawings ------------------------------------------------------------------------------------------
+
+    async def list_drawings(self) -> list[StoredDrawing]:
+        reply = await self.request(p.ListFiles())
+        return parse_file_list(reply.get("FS") or "")
+
+    async def save_drawing(self, slot: int, gcode: Sequence[str]) -> int:
+        """Store G-code lines as drawing `slot` (M28 … M29); returns the lines stored."""
+        lines = [line.strip() for line in gcode if line.strip()]
+        for line in lines:
+            if any(ch in line for ch in "\r\n\x00") or not line.isascii() or len(line) >= p.MAX_LINE:
+                raise InputError(f"line {line[:40]!r} cannot be stored: ASCII text under {p.MAX_LINE} characters")
+        await self.request(p.StartSave(slot))
+        try:
+            for line in lines:
+                reply = await self.send(_RawLine(line))
+                if not reply.ok:
+                    raise DeviceError("error", f"storing {line!r}: {reply.info or 'refused'}")
+        finally:
+            if self._failure is None:
+                await self.request(p.EndSave())
+        return len(lines)
+
+    async def delete_drawing(self, slot: int) -> None:
+        await self.request(p.DeleteFile(slot))
+
+    async def memory_drawing(self, mode: int, channel: str | None = None) -> None:
+        """M23: 0 default, 1 draw from memory (Blue mode button), 2 follow, 3 unfollow."""
+        await self.request(p.MemoryDrawing(mode, channel))
+
+    async def timed_demo(self, seconds: float, period: float, drawing: int | None = None) -> None:
+        """M85: every `period` s draw the first `seconds` s of the last (or the given) stored drawing."""
+        await self.request(p.TimedDemo(seconds, period, drawing))
+
+    # -- guarded ----------------------------------------------------------------------------------------------------
+
+    async def calibrate(self, *, clear: bool = False, confirm: bool = False) -> None:
+        """M374: store the arm's current point as the XY calibration point (or clear it)."""
+        _guard(confirm, "calibration overwrites the stored XY calibration")
+        await self.request(p.SaveCalibration(clear))
+
+    async def factory_reset(self, *, wipe_files: bool = False, confirm: bool = False) -> None:
+        what = "a factory reset forgets the name and Wi-Fi networks" + (" and wipes drawings" if wipe_files else "")
+        _guard(confirm, what)
+        await self.request(p.FactoryReset(wipe_files))
+
+    async def firmware_update(self, *, confirm: bool = False) -> None:
+        _guard(confirm, "a firmware update downloads new firmware and restarts the machine")
+        await self.request(p.FirmwareUpdate(), timeout=120.0)
+
+
+@dataclass(frozen=True, slots=True)
+class _RawLine(p.Command):
+    """A stored-drawing line, sent verbatim (the device records it instead of running it)."""
+
+    line: str = ""
+
+    def text(self) -> str:
+        return self.line
+
+
+def _guard(confirm: bool, what: str) -> None:
+    if not confirm:
+        raise InputError(f"{what}; pass confirm=True (--yes) to go ahead")
+
+
+def _checked(command: p.Command, reply: p.Reply) -> p.Reply:
+    if not reply.ok:
+        raise DeviceError("error", f"{command.text()}: {reply.info or 'refused by the Line-us'}")
+    return reply
+
+
+class LineUsSync:
+    """The same client for plain scripts: every call runs on a private event-loop thread."""
+
+    def __init__(self, address: str, *, lookahead: bool = False, connect_timeout: float = 5.0) -> None:
+        self._loop = LoopThread("lineus")
+        try:
+            self._arm = self._loop.call(LineUs.open(address, lookahead=lookahead, connect_timeout=connect_timeout))
+        except BaseException:
+            self._loop.close()
+            raise
+
+    @property
+    def hello(self) -> p.Hello:
+        return self._arm.hello
+
+    @property
+    def arm(self) -> LineUs:
+        return self._arm
+
+    def move(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
+        return self._loop.call(self._arm.move(x, y, z))
+
+    def pen_up(self) -> Position:
+        return self._loop.call(self._arm.pen_up())
+
+    def pen_down(self, z: float = kin.Z_DOWN) -> Position:
+        return self._loop.call(self._arm.pen_down(z))
+
+    def home(self) -> Position:
+        return self._loop.call(self._arm.home())
+
+    def position(self) -> Position:
+        return self._loop.call(self._arm.position())
+
+    def set_speed(self, draw: float | None = None, travel: float | None = None) -> None:
+        self._loop.call(self._arm.set_speed(draw, travel))
+
+    def set_origin(self, x: float = 0.0, y: float = 0.0, scale: float = 1.0) -> None:
+        self._loop.call(self._arm.set_origin(x, y, scale))
+
+    def send(self, command: p.Command) -> p.Reply:
+        return self._loop.call(self._arm.send(command))
+
+    def list_drawings(self) -> list[StoredDrawing]:
+        return self._loop.call(self._arm.list_drawings())
+
+    def diagnostics(self) -> dict[str, str]:
+        return self._loop.call(self._arm.diagnostics())
+
+    def close(self) -> None:
+        try:
+            self._loop.call(self._arm.close())
+        finally:
+            self._loop.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()

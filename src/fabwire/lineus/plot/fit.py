@@ -1,0 +1,166 @@
+"""Placing a drawing inside the reachable area: the largest box of the drawing's shape, or a check of the
+drawing as given."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from fabwire.errors import InputError
+from fabwire.lineus.kinematics import UNITS_PER_MM, lines_outside, outside_length, reachable_mask
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, bbox, compose, drawn_length, scale_translate
+
+
+@dataclass(frozen=True, slots=True)
+class Box:
+    """An axis-aligned rectangle in machine units, by centre and size."""
+
+    cx: float
+    cy: float
+    width: float
+    height: float
+
+    def corners(self) -> tuple[float, float, float, float]:
+        hw, hh = self.width / 2, self.height / 2
+        return (self.cx - hw, self.cy - hh, self.cx + hw, self.cy + hh)
+
+
+def _box_inside(cx: float, cy: float, w: float, h: float, margin: float) -> bool:
+    x0, y0 = cx - w / 2 - margin, cy - h / 2 - margin
+    x1, y1 = cx + w / 2 + margin, cy + h / 2 + margin
+    n = 48
+    t = np.linspace(0.0, 1.0, n)
+    xs = np.concatenate([x0 + (x1 - x0) * t, np.full(n, x1), x1 - (x1 - x0) * t, np.full(n, x0)])
+    ys = np.concatenate([np.full(n, y0), y0 + (y1 - y0) * t, np.full(n, y1), y1 - (y1 - y0) * t])
+    if not bool(reachable_mask(xs, ys).all()):
+        return False
+    return outside_length([(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)], step=5.0) == 0.0
+
+
+@functools.lru_cache(maxsize=64)
+def largest_box(aspect: float, margin: float = 0.0) -> Box:
+    """The largest rectangle of width/height `aspect` that lies, with `margin` units around it, in the area."""
+    if not aspect > 0:
+        raise ValueError("aspect must be positive")
+    best = Box(1200.0, 0.0, 0.0, 0.0)
+    for cy in np.linspace(-500.0, 500.0, 21):
+        for cx in np.linspace(850.0, 1500.0, 27):
+            lo, hi = best.height, 3400.0
+            if not _box_inside(float(cx), float(cy), lo * aspect + 1e-3, lo + 1e-3, margin):
+                continue
+            for _ in range(18):
+                mid = (lo + hi) / 2
+                if _box_inside(float(cx), float(cy), mid * aspect, mid, margin):
+                    lo = mid
+                else:
+                    hi = mid
+            if lo > best.height:
+                best = Box(float(cx), float(cy), lo * aspect, lo)
+    if best.height <= 0:
+        raise InputError(f"a margin of {margin / UNITS_PER_MM:g} mm leaves no room in the drawing area")
+    return best
+
+
+@dataclass(frozen=True, slots=True)
+class Placement:
+    """How the drawing was put on the machine: the input-to-machine matrix and what did not fit."""
+
+    matrix: FloatArray
+    scale: float
+    box: Box | None
+    outside: float
+    """Pen-down length outside the reachable area, in machine units (0 after fitting)."""
+
+
+def fit_into_area(lines: Polylines, *, margin: float = 0.0) -> tuple[Polylines, Placement]:
+    """Scale (keeping the aspect ratio) and centre `lines`, already in machine orientation, into the area."""
+    x0, y0, x1, y1 = bbox(lines)
+    w, h = x1 - x0, y1 - y0
+    aspect = max(w, 1e-9) / max(h, 1e-9)
+    aspect = min(max(aspect, 1e-3), 1e3)
+    box = largest_box(round(aspect, 4), margin)
+    if w <= 1e-9 and h <= 1e-9:
+        scale = 1.0
+    else:
+        scale = min(box.width / w if w > 1e-9 else np.inf, box.height / h if h > 1e-9 else np.inf)
+    m = scale_translate(float(scale), box.cx - (x0 + x1) / 2 * scale, box.cy - (y0 + y1) / 2 * scale)
+    placed = affine(lines, m)
+    # The box was checked on a sampled outline: shrink a little in the rare case a corner still grazes out.
+    for _ in range(8):
+        out = lines_outside(placed) + _dots_outside(placed)
+        if out == 0:
+            break
+        shrink = np.array([[0.99, 0.0, box.cx * 0.01], [0.0, 0.99, box.cy * 0.01]])
+        m = compose(shrink, m)
+        scale *= 0.99
+        placed = affine(lines, m)
+    return placed, Placement(m, float(scale), box, 0.0)
+
+
+def _dots_outside(lines: Polylines) -> int:
+    pts = np.concatenate(lines)
+    return int(np.count_nonzero(~reachable_mask(pts[:, 0], pts[:, 1])))
+
+
+def check_placed(lines: Polylines, *, clip: bool) -> tuple[Polylines, float]:
+    """Refuse (or with `clip`, cut away) pen-down lines outside the area; returns the kept lines and the length
+    outside."""
+    outside = lines_outside(lines)
+    dots = [p for p in lines if len(p) == 1 and not reachable_mask(p[:, 0], p[:, 1])[0]]
+    if outside == 0 and not dots:
+        return lines, 0.0
+    total = drawn_length(lines)
+    if not clip:
+        share = 100.0 * outside / total if total else 100.0
+        raise InputError(
+            f"{outside / UNITS_PER_MM:.1f} mm of the {total / UNITS_PER_MM:.1f} mm drawing ({share:.1f} %)"
+            f"{f' and {len(dots)} dots' if dots else ''} lie outside the reachable area; use --fit to scale it "
+            "into the area, or --clip to leave those parts out"
+        )
+    return clip_to_area(lines), outside
+
+
+def clip_to_area(lines: Polylines, *, step: float = 2.0) -> Polylines:
+    """Cut polylines where they leave the area, keeping only the reachable pieces (densified at the cuts)."""
+    out: Polylines = []
+    for line in lines:
+        if len(line) == 1:
+            if reachable_mask(line[:, 0], line[:, 1])[0]:
+                out.append(line)
+            continue
+        ok = reachable_mask(line[:, 0], line[:, 1])
+        d = np.diff(line, axis=0)
+        if bool(ok.all()) and outside_length(line, step=step) == 0:
+            out.append(line)
+            continue
+        current: list[FloatArray] = []
+        for i in range(len(d)):
+            a, b = line[i], line[i + 1]
+            n = max(1, int(np.ceil(np.hypot(*d[i]) / step)))
+            t = np.linspace(0.0, 1.0, n + 1)
+            pts = a + np.outer(t, b - a)
+            inside = reachable_mask(pts[:, 0], pts[:, 1])
+            for k in range(len(pts)):
+                if inside[k]:
+                    if not current or not np.array_equal(current[-1], pts[k]):
+                        current.append(pts[k])
+                elif current:
+                    if len(current) > 1:
+                        out.append(np.array(current))
+                    current = []
+        if len(current) > 1:
+            out.append(np.array(current))
+    return [_simplify_collinear(p) for p in out]
+
+
+def _simplify_collinear(line: FloatArray) -> FloatArray:
+    if len(line) < 3:
+        return line
+    d1 = line[1:-1] - line[:-2]
+    d2 = line[2:] - line[1:-1]
+    cross = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    keep = np.concatenate([[True], cross > 1e-6 * (np.hypot(*d1.T) * np.hypot(*d2.T) + 1e-12), [True]])
+    kept: FloatArray = line[keep]
+    return kept

@@ -1,0 +1,75 @@
+"""Polylines as numpy arrays, and the transforms that place a drawing on the machine."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+Polylines = list[FloatArray]
+"""Each polyline an (n, 2) float array, n >= 1 (a single point is a dot)."""
+
+
+def as_polylines(lines: Iterable[Sequence[tuple[float, float]] | FloatArray]) -> Polylines:
+    """Normalise any sequences of points to (n, 2) float arrays, dropping empty ones."""
+    out: Polylines = []
+    for line in lines:
+        arr = np.asarray(line, dtype=float).reshape(-1, 2)
+        if len(arr):
+            out.append(arr)
+    return out
+
+
+def bbox(lines: Sequence[FloatArray]) -> tuple[float, float, float, float]:
+    """(x_min, y_min, x_max, y_max) of all points; ValueError when there are none."""
+    if not lines:
+        raise ValueError("no points")
+    allp = np.concatenate(lines)
+    lo = allp.min(axis=0)
+    hi = allp.max(axis=0)
+    return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
+def segment_count(lines: Sequence[FloatArray]) -> int:
+    """Pen-down straight segments (a dot counts as none)."""
+    return sum(max(0, len(line) - 1) for line in lines)
+
+
+def drawn_length(lines: Sequence[FloatArray]) -> float:
+    """Total pen-down length."""
+    total = 0.0
+    for line in lines:
+        if len(line) > 1:
+            d = np.diff(line, axis=0)
+            total += float(np.hypot(d[:, 0], d[:, 1]).sum())
+    return total
+
+
+def affine(lines: Sequence[FloatArray], matrix: FloatArray) -> Polylines:
+    """Apply a 2x3 affine matrix [[a, b, tx], [c, d, ty]] to every point."""
+    lin = matrix[:, :2].T
+    off = matrix[:, 2]
+    return [line @ lin + off for line in lines]
+
+
+def rotation(degrees: float) -> FloatArray:
+    """Counter-clockwise rotation about the origin, as a 2x3 matrix."""
+    a = math.radians(degrees)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0]])
+
+
+def scale_translate(scale: float, dx: float, dy: float, *, flip_y: bool = False) -> FloatArray:
+    """x' = s·x + dx, y' = ±s·y + dy as a 2x3 matrix."""
+    return np.array([[scale, 0.0, dx], [0.0, -scale if flip_y else scale, dy]])
+
+
+def compose(second: FloatArray, first: FloatArray) -> FloatArray:
+    """The 2x3 matrix doing `first` then `second`."""
+    a = np.vstack([second, [0.0, 0.0, 1.0]])
+    b = np.vstack([first, [0.0, 0.0, 1.0]])
+    out: FloatArray = (a @ b)[:2]
+    return out

@@ -1,0 +1,468 @@
+"""Less pen-up travel and fewer pen lifts: drop sub-resolution points, join touching lines, then order and
+orient the lines (greedy nearest neighbour over a grid index, improved by 2-opt and or-opt moves on
+neighbour lists within a time budget).
+
+The tour is open: it starts at the pen's position (home) and ends wherever the last line ends. Lines may be
+drawn in either direction; every line is drawn exactly once.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import time
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from fabwire.lineus.kinematics import HOME
+from fabwire.lineus.plot.geometry import FloatArray, Polylines
+
+RESOLUTION = 1.0
+"""Smallest step worth sending, in machine units (0.05 mm): finer points are dropped."""
+NEIGHBOURS = 10
+MAX_REVERSAL = 1000
+"""Longest run a 2-opt move may reverse: long reversals cost more time than they usually save."""
+
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+def drop_fine_points(lines: Polylines, resolution: float = RESOLUTION) -> Polylines:
+    """Remove vertices closer than `resolution` to the last kept one (the last vertex always stays)."""
+    out: Polylines = []
+    for line in lines:
+        if len(line) < 2:
+            out.append(line)
+            continue
+        d = np.hypot(*np.diff(line, axis=0).T)
+        if bool((d >= resolution).all()):
+            out.append(line)
+            continue
+        kept = [0]
+        lx, ly = float(line[0, 0]), float(line[0, 1])
+        for k in range(1, len(line)):
+            x, y = float(line[k, 0]), float(line[k, 1])
+            if math.hypot(x - lx, y - ly) >= resolution:
+                kept.append(k)
+                lx, ly = x, y
+        last = len(line) - 1
+        if kept[-1] != last:
+            if len(kept) > 1:
+                kept[-1] = last
+            elif math.hypot(*(line[last] - line[0])) > 0:
+                kept.append(last)
+        out.append(line[kept])
+    return out
+
+
+def join_touching(lines: Polylines, resolution: float = RESOLUTION) -> Polylines:
+    """Chain lines whose ends meet (within `resolution`), reversing lines where that lets them join."""
+    n = len(lines)
+    if n < 2:
+        return list(lines)
+    q = 1.0 / max(resolution, 1e-9)
+
+    def key(p: FloatArray) -> tuple[int, int]:
+        return (round(float(p[0]) * q), round(float(p[1]) * q))
+
+    ends: dict[tuple[int, int], list[int]] = {}
+    for i, line in enumerate(lines):
+        ends.setdefault(key(line[0]), []).append(2 * i)
+        ends.setdefault(key(line[-1]), []).append(2 * i + 1)
+    used = bytearray(n)
+
+    def take(at: tuple[int, int]) -> tuple[int, bool] | None:
+        bucket = ends.get(at)
+        while bucket:
+            e = bucket.pop()
+            i = e >> 1
+            if not used[i]:
+                used[i] = 1
+                return (i, bool(e & 1))
+        return None
+
+    out: Polylines = []
+    for seed in range(n):
+        if used[seed]:
+            continue
+        used[seed] = 1
+        if len(lines[seed]) < 2:
+            out.append(lines[seed])
+            continue
+        parts: deque[FloatArray] = deque([lines[seed]])
+        while True:  # extend forward from the tail
+            found = take(key(parts[-1][-1]))
+            if found is None:
+                break
+            i, at_end = found
+            nxt = lines[i][::-1] if at_end else lines[i]
+            parts.append(nxt[1:] if len(nxt) > 1 else nxt[:0])
+            if len(nxt) == 1:
+                break
+        while True:  # extend backward from the head
+            found = take(key(parts[0][0]))
+            if found is None:
+                break
+            i, at_end = found
+            prev = lines[i] if at_end else lines[i][::-1]
+            parts.appendleft(prev[:-1] if len(prev) > 1 else prev[:0])
+            if len(prev) == 1:
+                break
+        out.append(np.concatenate(list(parts)) if len(parts) > 1 else parts[0])
+    return out
+
+
+def travel_length(lines: Sequence[FloatArray], origin: tuple[float, float] = HOME) -> float:
+    """Pen-up distance to draw `lines` in the given order and direction, starting at `origin`."""
+    if not lines:
+        return 0.0
+    starts = np.array([line[0] for line in lines])
+    ends = np.array([line[-1] for line in lines])
+    prev = np.vstack([np.asarray(origin, dtype=float), ends[:-1]])
+    return float(np.hypot(*(starts - prev).T).sum())
+
+
+def greedy_order(
+    starts: FloatArray, ends: FloatArray, origin: tuple[float, float] = HOME
+) -> tuple[IntArray, BoolArray]:
+    """Nearest-neighbour tour over line ends (either end may come first), using a uniform grid index.
+
+    Returns the line order and, per position, whether that line is drawn reversed.
+    """
+    n = len(starts)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+    pts = np.vstack([starts, ends])
+    lo = pts.min(axis=0)
+    span = np.maximum(pts.max(axis=0) - lo, 1e-9)
+    cell = max(float(math.sqrt(span[0] * span[1] / (2 * n))) * 1.5, float(span.max()) / 4096, 1e-6)
+    cols = np.floor((pts - lo) / cell).astype(np.int64)
+    width = int(cols[:, 1].max()) + 1
+    cells: dict[int, set[int]] = {}
+    for e, c in enumerate((cols[:, 0] * width + cols[:, 1]).tolist()):
+        cells.setdefault(c, set()).add(e)
+    xs = pts[:, 0].tolist()
+    ys = pts[:, 1].tolist()
+    alive = np.ones(2 * n, dtype=bool)
+    max_ring = max(3, int(math.sqrt(n) / 8))
+    ncx = int(cols[:, 0].max()) + 1
+    order: list[int] = []
+    flips: list[bool] = []
+    cx, cy = float(origin[0]), float(origin[1])
+
+    def remove(e: int) -> None:
+        c = int(cols[e, 0]) * width + int(cols[e, 1])
+        bucket = cells[c]
+        bucket.discard(e)
+        if not bucket:
+            del cells[c]
+        alive[e] = False
+
+    for _ in range(n):
+        gx = math.floor((cx - lo[0]) / cell)
+        gy = math.floor((cy - lo[1]) / cell)
+        best = -1
+        best_d = math.inf
+        for r in range(max_ring + 1):
+            for dx in range(-r, r + 1):
+                xcol = gx + dx
+                if xcol < 0 or xcol >= ncx:
+                    continue
+                step = 1 if abs(dx) == r else 2 * r
+                for dy in range(-r, r + 1, max(step, 1)):
+                    ycol = gy + dy
+                    if ycol < 0 or ycol >= width:
+                        continue
+                    bucket = cells.get(xcol * width + ycol)
+                    if bucket:
+                        for e in bucket:
+                            d = (xs[e] - cx) ** 2 + (ys[e] - cy) ** 2
+                            if d < best_d:
+                                best_d, best = d, e
+            if best >= 0 and math.sqrt(best_d) <= r * cell:
+                break
+        if best < 0 or math.sqrt(best_d) > max_ring * cell:
+            idx = np.flatnonzero(alive)
+            dd = (pts[idx, 0] - cx) ** 2 + (pts[idx, 1] - cy) ** 2
+            best = int(idx[int(np.argmin(dd))])
+        node = best % n
+        rev = best >= n
+        order.append(node)
+        flips.append(rev)
+        remove(node)
+        remove(node + n)
+        exit_e = node if rev else node + n
+        cx, cy = xs[exit_e], ys[exit_e]
+    return np.asarray(order, dtype=np.int64), np.asarray(flips, dtype=bool)
+
+
+def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[int]]:
+    """For each line, the lines with an end among the k nearest to either of its ends (grid-bucketed)."""
+    n = len(starts)
+    pts = np.vstack([starts, ends])
+    m = len(pts)
+    lo = pts.min(axis=0)
+    span = np.maximum(pts.max(axis=0) - lo, 1e-9)
+    cell = max(float(math.sqrt(span[0] * span[1] / m)) * 1.6, float(span.max()) / 2048, 1e-6)
+    g = np.floor((pts - lo) / cell).astype(np.int64)
+    w = int(g[:, 1].max()) + 3
+    cid = (g[:, 0] + 1) * w + (g[:, 1] + 1)
+    sort = np.argsort(cid, kind="stable")
+    sorted_c = cid[sort]
+    cap = 6
+    uniq, first, counts = np.unique(sorted_c, return_index=True, return_counts=True)
+    cand_cols = []
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            target = cid + dx * w + dy
+            at = np.searchsorted(uniq, target)
+            at = np.minimum(at, len(uniq) - 1)
+            hit = uniq[at] == target
+            base = np.where(hit, first[at], 0)
+            cnt = np.where(hit, np.minimum(counts[at], cap), 0)
+            for s in range(cap):
+                col = np.where(s < cnt, sort[np.minimum(base + s, m - 1)], -1)
+                cand_cols.append(col)
+    cand = np.stack(cand_cols, axis=1)
+    valid = cand >= 0
+    safe = np.where(valid, cand, 0)
+    d = np.hypot(pts[safe, 0] - pts[:, None, 0], pts[safe, 1] - pts[:, None, 1])
+    d[~valid] = np.inf
+    node_of = safe % n
+    d[node_of == (np.arange(m) % n)[:, None]] = np.inf
+    kk = min(k, d.shape[1])
+    nearest = np.argpartition(d, kk - 1, axis=1)[:, :kk] if d.shape[1] > kk else np.argsort(d, axis=1)
+    picked = np.take_along_axis(node_of, nearest, axis=1)
+    ok = np.isfinite(np.take_along_axis(d, nearest, axis=1))
+    out: list[list[int]] = []
+    for i in range(n):
+        row = set(picked[i][ok[i]].tolist()) | set(picked[i + n][ok[i + n]].tolist())
+        out.append(list(row))
+    return out
+
+
+def improve(
+    starts: FloatArray,
+    ends: FloatArray,
+    order: IntArray,
+    flips: BoolArray,
+    origin: tuple[float, float] = HOME,
+    *,
+    time_budget: float = 1.0,
+) -> tuple[IntArray, BoolArray]:
+    """2-opt (segment reversal) and or-opt (move up to three lines, either way round) until no move on the
+    neighbour lists helps or `time_budget` seconds have passed. Never makes the tour longer."""
+    n = len(starts)
+    if n < 3 or time_budget <= 0:
+        return order, flips
+    deadline = time.perf_counter() + time_budget
+    neigh = _neighbour_lists(starts, ends, NEIGHBOURS)
+    # Node n is the fixed starting point; per node: the point where drawing enters (i) and leaves (o).
+    ix = [*starts[:, 0].tolist(), float(origin[0])]
+    iy = [*starts[:, 1].tolist(), float(origin[1])]
+    ox = [*ends[:, 0].tolist(), float(origin[0])]
+    oy = [*ends[:, 1].tolist(), float(origin[1])]
+    for node, rev in zip(order.tolist(), flips.tolist(), strict=True):
+        if rev:
+            ix[node], ox[node] = ox[node], ix[node]
+            iy[node], oy[node] = oy[node], iy[node]
+    tour = [n, *order.tolist()]
+    pos = [0] * (n + 1)
+    for p, v in enumerate(tour):
+        pos[v] = p
+    last = n
+    hyp = math.hypot
+
+    def link(a: int, b: int) -> float:
+        """Travel from the end of the line at position a to the start of the one at position b."""
+        if b > last or a < 0:
+            return 0.0
+        u, v = tour[a], tour[b]
+        return hyp(ox[u] - ix[v], oy[u] - iy[v])
+
+    def flip_block(a: int, b: int) -> None:
+        block = tour[a : b + 1]
+        block.reverse()
+        tour[a : b + 1] = block
+        for p in range(a, b + 1):
+            v = tour[p]
+            pos[v] = p
+            ix[v], ox[v] = ox[v], ix[v]
+            iy[v], oy[v] = oy[v], iy[v]
+
+    queue: deque[int] = deque(order.tolist())
+    queued = bytearray(n + 1)
+    for v in queue:
+        queued[v] = 1
+    eps = 1e-7
+
+    def push(*nodes: int) -> None:
+        for v in nodes:
+            if v != n and not queued[v]:
+                queued[v] = 1
+                queue.append(v)
+
+    def local_search() -> bool:
+        """Apply improving moves until none is left (True) or time is up (False)."""
+        counter = 0
+        while queue:
+            counter += 1
+            if counter & 63 == 0 and time.perf_counter() > deadline:
+                return False
+            a = queue.popleft()
+            queued[a] = 0
+            i = pos[a]
+            improved = False
+            # 2-opt, new edge from the end of a to the end of c (c later): reverse i+1..j.
+            for c in neigh[a]:
+                j = pos[c]
+                if i < j <= i + MAX_REVERSAL:
+                    u, v = tour[i], tour[j]
+                    new = hyp(ox[u] - ox[v], oy[u] - oy[v])
+                    old = link(i, i + 1) + link(j, j + 1)
+                    if j + 1 <= last:
+                        w, z = tour[i + 1], tour[j + 1]
+                        new += hyp(ix[w] - ix[z], iy[w] - iy[z])
+                    if old - new > eps:
+                        flip_block(i + 1, j)
+                        push(a, c, tour[i + 1], *(tour[j + 1 : j + 2]))
+                        improved = True
+                        break
+                elif max(1, i - MAX_REVERSAL) <= j < i:
+                    # new edge between the starts of a and c (c earlier): reverse j..i-1.
+                    u, v = tour[j - 1], tour[i - 1]
+                    new = hyp(ix[a] - ix[c], iy[a] - iy[c]) + hyp(ox[u] - ox[v], oy[u] - oy[v])
+                    old = link(j - 1, j) + link(i - 1, i)
+                    if old - new > eps:
+                        flip_block(j, i - 1)
+                        push(a, c, u, v)
+                        improved = True
+                        break
+            if improved:
+                push(a)
+                continue
+            # or-opt: move the run of 1..3 lines starting at a to sit next to a neighbour, either way round.
+            if i < 1:
+                continue
+            for size in (1, 2, 3):
+                end = i + size - 1
+                if end > last:
+                    break
+                first_v, last_v = tour[i], tour[end]
+                removed = link(i - 1, i) + link(end, end + 1)
+                bridge = 0.0
+                if end + 1 <= last:
+                    u, w = tour[i - 1], tour[end + 1]
+                    bridge = hyp(ox[u] - ix[w], oy[u] - iy[w])
+                gain_out = removed - bridge
+                if gain_out <= eps:
+                    continue
+                best = (eps, -1, False)
+                for c in set(neigh[first_v]) | set(neigh[last_v]):
+                    for q in (pos[c] - 1, pos[c]):
+                        if q < 0 or i - 1 <= q <= end:
+                            continue
+                        u = tour[q]
+                        has_next = q + 1 <= last
+                        base = link(q, q + 1)
+                        fwd = hyp(ox[u] - ix[first_v], oy[u] - iy[first_v])
+                        rev = hyp(ox[u] - ox[last_v], oy[u] - oy[last_v])
+                        if has_next:
+                            w = tour[q + 1]
+                            fwd += hyp(ox[last_v] - ix[w], oy[last_v] - iy[w])
+                            rev += hyp(ix[first_v] - ix[w], iy[first_v] - iy[w])
+                        for cost, reverse in ((fwd, False), (rev, True)):
+                            gain = gain_out - (cost - base)
+                            if gain > best[0]:
+                                best = (gain, q, reverse)
+                if best[1] >= 0:
+                    _, q, reverse = best
+                    block = tour[i : end + 1]
+                    if reverse:
+                        block.reverse()
+                        for v in block:
+                            ix[v], ox[v] = ox[v], ix[v]
+                            iy[v], oy[v] = oy[v], iy[v]
+                    del tour[i : end + 1]
+                    at = q + 1 if q < i else q + 1 - size
+                    tour[at:at] = block
+                    lo_p, hi_p = min(i, at), max(end, at + size - 1)
+                    for p in range(lo_p, min(hi_p, last) + 1):
+                        pos[tour[p]] = p
+                    push(*block, tour[at - 1], *(tour[at + size : at + size + 1]), *(tour[i - 1 : i]))
+                    improved = True
+                    break
+        return True
+
+    def length() -> float:
+        return sum(hyp(ox[tour[p]] - ix[tour[p + 1]], oy[tour[p]] - iy[tour[p + 1]]) for p in range(last))
+
+    if not local_search():
+        return _result(tour, ix, iy, starts, ends)
+    # Iterated local search: a local double-bridge kick, re-optimise around it, keep it only if shorter.
+    rng = random.Random(n)
+    best_len = length()
+    span = max(4, min(60, n // 4))
+    while time.perf_counter() < deadline and n >= 8:
+        saved = (tour[:], ix[:], iy[:], ox[:], oy[:])
+        p1 = rng.randrange(1, last - 2)
+        p2 = min(last - 1, p1 + rng.randrange(1, span))
+        p3 = min(last, p2 + rng.randrange(1, span))
+        if not p1 < p2 < p3:
+            continue
+        tour[p1:p3] = tour[p2:p3] + tour[p1:p2]
+        for p in range(p1, p3):
+            pos[tour[p]] = p
+        push(*tour[max(1, p1 - 1) : min(last, p3 + 1) + 1])
+        finished = local_search()
+        now_len = length()
+        if now_len < best_len - eps:
+            best_len = now_len
+        else:
+            tour[:], ix[:], iy[:], ox[:], oy[:] = saved
+            for p, v in enumerate(tour):
+                pos[v] = p
+            queue.clear()
+            for v in range(n + 1):
+                queued[v] = 0
+        if not finished:
+            break
+    return _result(tour, ix, iy, starts, ends)
+
+
+def _result(
+    tour: list[int], ix: list[float], iy: list[float], starts: FloatArray, ends: FloatArray
+) -> tuple[IntArray, BoolArray]:
+    new_order = np.asarray(tour[1:], dtype=np.int64)
+    new_flips = np.asarray([ix[v] != float(starts[v, 0]) or iy[v] != float(starts[v, 1]) for v in tour[1:]],
+                           dtype=bool)
+    # A line whose two ends coincide is the same either way round; keep its original direction.
+    closed = np.all(starts[new_order] == ends[new_order], axis=1)
+    new_flips[closed] = False
+    return new_order, new_flips
+
+
+def arrange(lines: Sequence[FloatArray], order: IntArray, flips: BoolArray) -> Polylines:
+    """The lines in `order`, each reversed where `flips` says."""
+    return [lines[i][::-1] if f else lines[i] for i, f in zip(order.tolist(), flips.tolist(), strict=True)]
+
+
+def optimise(
+    lines: Polylines,
+    *,
+    origin: tuple[float, float] = HOME,
+    resolution: float = RESOLUTION,
+    time_budget: float = 1.0,
+) -> Polylines:
+    """The whole pass: fine points out, touching lines joined, then ordered for least pen-up travel."""
+    cleaned = join_touching(drop_fine_points(lines, resolution), resolution)
+    if len(cleaned) < 2:
+        return cleaned
+    starts = np.array([line[0] for line in cleaned], dtype=float)
+    ends = np.array([line[-1] for line in cleaned], dtype=float)
+    order, flips = greedy_order(starts, ends, origin)
+    order, flips = improve(starts, ends, order, flips, origin, time_budget=time_budget)
+    return arrange(cleaned, order, flips)

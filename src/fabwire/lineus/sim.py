@@ -1,0 +1,807 @@
+"""A Line-us the official clients cannot tell from the robot.
+
+One `LineUsSim` is one machine: an arm with a single motion queue (depth 1 behind the executing move) shared by
+every connection, stored drawings, name and Wi-Fi lists. Each connection keeps its own G54 transform and M28
+recording. Moves take the time `kinematics.MotionModel` gives them (divided by the speed factor), and by default
+a move's reply is held until the move has finished, as the firmware does.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from fabwire.errors import LinkClosed, RemoteProtocolError
+from fabwire.lineus import kinematics as kin
+from fabwire.lineus import protocol as p
+from fabwire.transport import Transport, register_simulator, spawn_in_process
+
+log = logging.getLogger("fabwire.lineus.sim")
+
+VERSIONS = {
+    "1": "1.0.1 Feb 11 2018 15:47:35",
+    "3": "3.2.0 Nov 17 2019 17:54:57",
+}
+DEFAULT_NAME = "line-us"
+DEFAULT_SERIAL = "123456"
+DEFAULT_ZMAP = (0.0, 100.0, 300.0, 200.0)
+FS_TOTAL = 1_953_282
+SYSTEM_FILES = (("/cal", 29), ("/key", 344))
+SAVE_BLOCKED = ("M30", "M171", "M374", "M997")
+"""Codes the firmware refuses while an M28 recording is open."""
+
+HISTORY = 100_000
+"""Recent moves and messages kept for instrumentation (bounded, so a long-running simulator stays small)."""
+
+ReplyPolicy = Literal["complete", "accept"]
+Point3 = tuple[float, float, float]
+Point2 = tuple[float, float]
+
+
+def resolve_version(text: str) -> str:
+    """`1`, `1.0.1`, `3`, `3.x`, `3.2.0` → a full version string; anything else starting with a digit as given."""
+    short = text.strip()
+    if short in ("1", "1.x", "1.0.1"):
+        return VERSIONS["1"]
+    if short in ("3", "3.x", "3.2.0"):
+        return VERSIONS["3"]
+    if not short[:1].isdigit() or '"' in short or not short.isascii():
+        raise ValueError(f"a firmware version starts with its number (1.0.1, 3.2.0 …), got {text!r}")
+    return short
+
+
+def sample_drawing() -> str:
+    """The drawing a factory machine carries in slot 1: a small square with a diagonal."""
+    points = [(1100, -200), (1500, -200), (1500, 200), (1100, 200), (1100, -200), (1500, 200)]
+    lines = ["G54 X0 Y0 S1", f"G01 X{points[0][0]} Y{points[0][1]} Z1000"]
+    lines += [f"G01 X{x} Y{y} Z0" for x, y in points]
+    lines.append("G01 Z1000")
+    return "".join(line + "\n" for line in lines)
+
+
+@dataclass
+class SimOptions:
+    version: str = VERSIONS["3"]
+    name: str = DEFAULT_NAME
+    serial: str = DEFAULT_SERIAL
+    speed: float = 1.0
+    """Speed-up factor for motion; inf (or 0) runs moves with no delay."""
+    reply: ReplyPolicy = "complete"
+    step_time: float = 0.010
+    pen_time: float = 0.1
+    lookahead: bool | None = None
+    """Accept the next command while a move runs (firmware 3); None = from the version."""
+    decimals: bool | None = None
+    """Two-decimal coordinates in replies (firmware 3); None = from the version."""
+
+    def __post_init__(self) -> None:
+        if self.speed == 0:
+            self.speed = math.inf
+        if not self.speed > 0:
+            raise ValueError(f"speed factor must be positive (or 0/inf for no delay), got {self.speed}")
+        if self.reply not in ("complete", "accept"):
+            raise ValueError("reply policy is 'complete' or 'accept'")
+        if not p.NAME_RE.fullmatch(self.name):
+            raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {self.name!r}")
+        if not self.serial.isascii() or not self.serial or any(c in self.serial for c in ' "'):
+            raise ValueError(f"bad serial {self.serial!r}")
+
+    @property
+    def major(self) -> int:
+        return p.Hello(self.version, self.name, self.serial).firmware_major
+
+
+@dataclass(frozen=True, slots=True)
+class MoveRecord:
+    """One executed move, in model seconds since the simulator started."""
+
+    command: str
+    start: Point3
+    end: Point3
+    started: float
+    finished: float
+    clamped: bool
+
+
+@dataclass
+class _Job:
+    command: str
+    target: Point3
+    clamped: bool
+    rapid: bool
+    done: asyncio.Future[MoveRecord]
+    queued: float = 0.0
+
+
+@dataclass
+class _Session:
+    """What the firmware keeps per connection."""
+
+    origin: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    saving: int | None = None
+    saved: list[str] = field(default_factory=list)
+    backlog: int = 0
+    """Replies handed to the writer and not yet sent."""
+
+
+class Clock:
+    """Model time: wall time × speed, or (at infinite speed) time advanced only by the moves themselves."""
+
+    def __init__(self, speed: float) -> None:
+        self.speed = speed
+        self._t0 = time.monotonic()
+        self._virtual = 0.0
+
+    @property
+    def instant(self) -> bool:
+        return math.isinf(self.speed)
+
+    def now(self) -> float:
+        if self.instant:
+            return self._virtual
+        return (time.monotonic() - self._t0) * self.speed
+
+    def advance(self, moment: float) -> None:
+        """At infinite speed, move model time on without waiting."""
+        self._virtual = max(self._virtual, moment)
+
+    async def sleep(self, seconds: float) -> None:
+        """Wait `seconds` of model time. Timers (unlike motion) still pass in real time at infinite speed,
+        so a periodic job cannot spin."""
+        await asyncio.sleep(seconds if self.instant else seconds / self.speed)
+
+    async def run_until(self, moment: float) -> None:
+        if self.instant:
+            self._virtual = max(self._virtual, moment)
+            await asyncio.sleep(0)
+            return
+        remaining = (moment - self.now()) / self.speed
+        if remaining > 0:
+            await asyncio.sleep(remaining)
+
+
+class Arm:
+    """The physical arm: one executing move and at most one waiting behind it."""
+
+    def __init__(self, clock: Clock, model: kin.MotionModel) -> None:
+        self.clock = clock
+        self.model = model
+        self.position: Point3 = (kin.HOME[0], kin.HOME[1], kin.Z_UP)
+        self.planned: Point3 = self.position
+        self.strokes: list[list[tuple[float, float]]] = []
+        self.travel: list[list[tuple[float, float]]] = []
+        self.moves: collections.deque[MoveRecord] = collections.deque(maxlen=HISTORY)
+        self._queue: asyncio.Queue[_Job] = asyncio.Queue(maxsize=1)
+        self._task: asyncio.Task[None] | None = None
+        self._busy_until = 0.0
+        self._moving = False
+
+    @property
+    def busy(self) -> bool:
+        return self._queue.qsize() > 0 or self.planned != self.position
+
+    async def submit(self, command: str, target: Point3, *, clamped: bool, rapid: bool) -> _Job:
+        """Queue a move once there is room; the job's `done` resolves when the arm has finished it."""
+        job = _Job(command, target, clamped, rapid, asyncio.get_running_loop().create_future(), self.clock.now())
+        if self.clock.instant and not self._moving and self._queue.empty():
+            # No motion delay and nothing ahead of it: the move is over as soon as it starts.
+            self.planned = target
+            began = max(self.clock.now(), self._busy_until)
+            finished = began + self.model.move_time(self.position, target)
+            self.clock.advance(finished)
+            self._complete(job, began, finished)
+            return job
+        if self._task is None or self._task.done():
+            self._task = asyncio.create_task(self._run(), name="lineus-arm")
+        await self._queue.put(job)
+        self.planned = target
+        return job
+
+    async def _run(self) -> None:
+        while True:
+            job = await self._queue.get()
+            self._moving = True
+            try:
+                duration = self.model.move_time(self.position, job.target)
+                # A move that was waiting behind the previous one starts the instant it ends (look-ahead).
+                began = self._busy_until if job.queued <= self._busy_until else self.clock.now()
+                finished = began + duration
+                await self.clock.run_until(finished)
+                self._complete(job, began, finished)
+            finally:
+                self._moving = False
+
+    def _complete(self, job: _Job, began: float, finished: float) -> None:
+        start = self.position
+        self._busy_until = finished
+        self._ink(start, job.target, job.rapid)
+        self.position = job.target
+        record = MoveRecord(job.command, start, job.target, began, finished, job.clamped)
+        self.moves.append(record)
+        if not job.done.done():
+            job.done.set_result(record)
+
+    def _ink(self, start: Point3, end: Point3, rapid: bool) -> None:
+        """Pen-up transitions happen before the XY motion and pen-down after it, so only a move that is
+        pen-down at both ends leaves ink."""
+        a, b = (start[0], start[1]), (end[0], end[1])
+        if a == b:
+            return
+        path = _joint_path(a, b) if rapid else [a, b]
+        if not (start[2] < kin.PEN_DOWN_BELOW and end[2] < kin.PEN_DOWN_BELOW):
+            self.travel.append(path)
+            return
+        if not rapid and min(a[0], b[0]) < kin.X_MIN_LOWER and min(a[1], b[1]) < 0:
+            # Both ends are reachable, but the line may cut the body notch (x < 700 below y = 0): the pen is
+            # lifted over the part it cannot reach.
+            pieces = _reachable_pieces(a, b)
+            if pieces != [[a, b]]:
+                log.info("lineus line (%g, %g)-(%g, %g) crosses the body clearance: pen lifted there", *a, *b)
+                self.strokes.extend(pieces)
+                return
+        if self.strokes and self.strokes[-1][-1] == a:
+            self.strokes[-1].extend(path[1:])
+        else:
+            self.strokes.append(path)
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+
+def _reachable_pieces(a: Point2, b: Point2, step: float = 2.0) -> list[list[Point2]]:
+    """The parts of the segment a-b inside the drawing area, sampled every `step` units."""
+    n = max(1, math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / step))
+    points = [(a[0] + (b[0] - a[0]) * k / n, a[1] + (b[1] - a[1]) * k / n) for k in range(n + 1)]
+    inside = kin.reachable_mask([x for x, _ in points], [y for _, y in points])
+    pieces: list[list[Point2]] = []
+    run: list[Point2] = []
+    for point, ok in zip(points, inside, strict=True):
+        if ok:
+            run.append(point)
+        elif run:
+            pieces.append([run[0], run[-1]])
+            run = []
+    if run:
+        pieces.append([run[0], run[-1]])
+    pieces = [piece for piece in pieces if piece[0] != piece[1]]
+    if len(pieces) == 1 and pieces[0][0] == a and pieces[0][1] == b:
+        return [[a, b]]
+    return pieces
+
+
+def _joint_path(a: tuple[float, float], b: tuple[float, float], samples: int = 16) -> list[tuple[float, float]]:
+    """G00 runs each servo at full speed, so the pen sweeps a curve between the joint angles, not a line."""
+    try:
+        ja, jb = kin.inverse(*a), kin.inverse(*b)
+    except ValueError:
+        return [a, b]
+    out = []
+    for k in range(samples + 1):
+        t = k / samples
+        out.append(kin.forward(kin.Joints(ja.shoulder + (jb.shoulder - ja.shoulder) * t,
+                                          ja.elbow + (jb.elbow - ja.elbow) * t)))
+    out[0], out[-1] = a, b
+    return out
+
+
+def _error(text: str) -> p.Reply:
+    clean = "".join(ch if 32 <= ord(ch) < 127 and ch != '"' else "'" for ch in text)[:200]
+    return p.Reply(False, (("INFO", clean),))
+
+
+ReplySource = p.Reply | Callable[[], p.Reply] | _Job
+"""A reply now, one computed when its turn comes (M114), or a move's, due when the move ends."""
+
+
+class LineUsSim:
+    """The machine. `serve(transport)` runs one connection; call it once per client."""
+
+    def __init__(self, options: SimOptions | None = None, *, files: dict[int, str] | None = None) -> None:
+        self.options = options or SimOptions()
+        self.name = self.options.name
+        self.clock = Clock(self.options.speed)
+        self.arm = Arm(self.clock, kin.MotionModel(step_time=self.options.step_time, pen_time=self.options.pen_time))
+        self.files: dict[int, str] = {1: sample_drawing()} if files is None else dict(files)
+        self.known_wifi: dict[str, str] = {"fabwire-lab": "lab-password"}
+        self.visible_wifi: list[str] = ["fabwire-lab", "neighbours-wifi"]
+        self.zmap = DEFAULT_ZMAP
+        self.gestures = True
+        self.memory_mode = 0
+        self.demo: tuple[float, float, int | None] | None = None
+        """M85: (seconds, period, drawing): every `period` s, draw the first `seconds` s of a stored drawing."""
+        self.last_saved = 1
+        self._demo_task: asyncio.Task[None] | None = None
+        self.startup = (1, 1)
+        self.servo_reverse = [0, 0, 1]
+        self.calibration = (10.79735, -1.902405, 9.900639)
+        self.connections = 0
+        self._idle = asyncio.Event()
+        self._idle.set()
+        self.sent: collections.deque[tuple[float, bytes]] = collections.deque(maxlen=HISTORY)
+        """Every message written, with the model time it went out (for tests and instrumentation)."""
+        self.received: collections.deque[str] = collections.deque(maxlen=HISTORY)
+        self._started = time.monotonic()
+        self.decimals = self.options.decimals if self.options.decimals is not None else self.options.major >= 3
+        self.lookahead = self.options.lookahead if self.options.lookahead is not None else self.options.major >= 3
+
+    # -- connection -------------------------------------------------------------------------------------------------
+
+    async def wait_idle(self) -> None:
+        """Until no client is connected (a client's close reaches the simulator a little later)."""
+        await self._idle.wait()
+
+    def hello(self) -> p.Hello:
+        return p.Hello(self.options.version, self.name, self.options.serial)
+
+    async def serve(self, transport: Transport) -> None:
+        """Run one connection until the client goes away; replies already owed are still sent."""
+        first = self.connections == 0 and not self.arm.busy
+        self.connections += 1
+        self._idle.clear()
+        session = _Session()
+        queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None] = asyncio.Queue()
+        writer = asyncio.create_task(self._write_replies(transport, queue, session), name="lineus-replies")
+        reader = p.CommandReader()
+        try:
+            if first and self.arm.position != (kin.HOME[0], kin.HOME[1], kin.Z_UP):
+                # A fresh connection homes the arm (pen up) before the greeting, as the firmware does.
+                job = await self.arm.submit("connect", (kin.HOME[0], kin.HOME[1], kin.Z_UP), clamped=False,
+                                            rapid=False)
+                await job.done
+            await self._send(transport, self.hello().encode())
+            while not writer.done():
+                try:
+                    data = await transport.read()
+                except LinkClosed:
+                    break
+                for item in reader.feed(data):
+                    action = self._dispatch(item, session) if isinstance(item, p.Line) else _error(item.reason)
+                    source = await self._start_move(action) if isinstance(action, _PendingMove) else action
+                    if session.backlog == 0 and (ready := self._ready(source)) is not None:
+                        await self._send(transport, ready.encode())  # nothing owed before it: answer now
+                        continue
+                    session.backlog += 1
+                    written: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+                    await queue.put((source, written))
+                    if not self.lookahead:
+                        await asyncio.wait([written, writer], return_when=asyncio.FIRST_COMPLETED)
+            await queue.put(None)
+            with contextlib.suppress(LinkClosed):
+                await writer
+        finally:
+            self.connections -= 1
+            if self.connections == 0:
+                self._idle.set()
+            if not writer.done():
+                writer.cancel()
+                with contextlib.suppress(asyncio.CancelledError, LinkClosed):
+                    await writer
+            if session.saving is not None:
+                self._close_file(session)
+            log.info("lineus client %s disconnected", transport.peer)
+
+    async def _send(self, transport: Transport, data: bytes) -> None:
+        self.sent.append((self.clock.now(), data))
+        await transport.write(data)
+
+    def _ready(self, source: ReplySource) -> p.Reply | None:
+        if isinstance(source, _Job):
+            return self.position_reply(source.done.result().end) if source.done.done() else None
+        return source if isinstance(source, p.Reply) else source()
+
+    async def _write_replies(
+        self, transport: Transport, queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None],
+        session: _Session,
+    ) -> None:
+        """Writes each reply whole, in command order, as soon as it is due."""
+        while (entry := await queue.get()) is not None:
+            source, written = entry
+            if isinstance(source, _Job):
+                reply = self.position_reply((await source.done).end)
+            else:
+                reply = source if isinstance(source, p.Reply) else source()
+            await self._send(transport, reply.encode())
+            session.backlog -= 1
+            if not written.done():
+                written.set_result(None)
+
+    # -- commands -----------------------------------------------------------------------------------------------
+
+    def _dispatch(self, line: p.Line, session: _Session) -> ReplySource | _PendingMove:
+        self.received.append(line.text)
+        if session.saving is not None:
+            return self._record(line.text, session)
+        try:
+            command = p.parse_command(line.text)
+        except RemoteProtocolError as exc:
+            return _error(str(exc))
+        if isinstance(command, p.Move | p.Home | p.RawMove):
+            return self._plan_move(command, session, line.text)
+        handler = _HANDLERS.get(type(command))
+        if handler is None:
+            return _error(f"{command.text()} is not supported")
+        try:
+            return handler(self, command, session)
+        except Exception as exc:  # a simulator bug must cost one reply, never the connection
+            log.exception("lineus simulator failed on %r", line.text)
+            return _error(f"internal error: {exc}")
+
+    def _record(self, text: str, session: _Session) -> p.Reply:
+        code = text.split(maxsplit=1)[0].upper() if text.split() else ""
+        if code in ("M29",):
+            self._close_file(session)
+            return p.Reply(True)
+        if code in SAVE_BLOCKED:
+            return _error(f"{code} is not allowed while saving a drawing")
+        if code == "M28":
+            return _error("already saving a drawing; send M29 first")
+        session.saved.append(text)
+        return p.Reply(True)
+
+    def _close_file(self, session: _Session) -> None:
+        assert session.saving is not None
+        self.files[session.saving] = "".join(line + "\n" for line in session.saved)
+        self.last_saved = session.saving
+        session.saving, session.saved = None, []
+
+    def position_reply(self, where: Point3) -> p.Reply:
+        dec = self.decimals
+        return p.Reply(True, tuple((axis, p.format_coordinate(v, dec)) for axis, v in zip("XYZ", where, strict=True)))
+
+    def _plan_move(self, command: p.Move | p.Home | p.RawMove, session: _Session, text: str) -> _PendingMove:
+        x0, y0, z0 = self.arm.planned
+        if isinstance(command, p.Home):
+            x, y, z = kin.HOME[0], kin.HOME[1], kin.Z_UP
+        else:
+            ox, oy, scale = session.origin if isinstance(command, p.Move) else (0.0, 0.0, 1.0)
+            x = x0 if command.x is None else command.x * scale + ox
+            y = y0 if command.y is None else command.y * scale + oy
+            z = z0 if command.z is None else command.z
+        if z < 0 or z > kin.Z_UP:
+            z = kin.Z_UP
+        clamp = kin.clamp_target(x, y)
+        if clamp.clamped:
+            log.info("lineus target (%g, %g) is outside the drawing area: moved to (%g, %g), pen lifted",
+                     x, y, clamp.x, clamp.y)
+            z = kin.Z_UP
+        rapid = isinstance(command, p.Move) and command.rapid
+        return _PendingMove(text, (clamp.x, clamp.y, z), clamp.clamped, rapid)
+
+    async def _start_move(self, pending: _PendingMove) -> ReplySource:
+        job = await self.arm.submit(pending.command, pending.target, clamped=pending.clamped, rapid=pending.rapid)
+        if self.options.reply == "accept":
+            return self.position_reply(job.target)
+        return job
+
+    # -- state reports ---------------------------------------------------------------------------------------------
+
+    def file_listing(self) -> str:
+        return "".join(f"/{slot:07d}.txt-{len(text.encode())};" for slot, text in sorted(self.files.items()))
+
+    def fs_used(self) -> int:
+        return sum(len(t.encode()) for t in self.files.values()) + sum(size for _, size in SYSTEM_FILES)
+
+    def diagnostics(self) -> p.Reply:
+        used = self.fs_used()
+        up = int(time.monotonic() - self._started)
+        days, rest = divmod(up, 86400)
+        hours, rest = divmod(rest, 3600)
+        fs = self.file_listing() + "".join(f"{path}-{size};" for path, size in SYSTEM_FILES) + " "
+        fields = (
+            ("ChipID", self.options.serial), ("WifiMode", "1"), ("WifiModeSet", "0"),
+            ("WifisConfigured", str(len(self.known_wifi))), ("MemDraw", "1" if self.memory_mode == 1 else "0"),
+            ("Gestures", "1" if self.gestures else "0"), ("ContinuousDrawing", "0"),
+            ("DrawingCount", str(len(self.files))), ("name", self.name), ("mac", "5C:3A:E8:18:0A:60"),
+            ("FlashChipID", "0x1640ef"), ("FlashChipMode", "0"), ("FlashChipSpeed", "40000000"),
+            ("FreeHeap", "25728"), ("ResetReason", "External System"),
+            ("Uptime", f"{days}d{hours}h{rest // 60}m{rest % 60}s"),
+            ("Time", time.strftime("%a %b %d %H:%M:%S %Y", time.gmtime())),
+            ("FSUsed", str(used)), ("FSTotal", str(FS_TOTAL)), ("FSFree", str(FS_TOTAL - used)),
+            ("FSPercent", str(used * 100 // FS_TOTAL)), ("FS", fs), ("Serial", "ikdBW+"),
+            ("Cal", ",".join(str(v) for v in self.calibration)),
+            ("ZMap", ";".join(p.format_number(v) for v in self.zmap)),
+            ("ServoReverse", ",".join(str(v) for v in self.servo_reverse)),
+        )
+        return p.Reply(True, fields, quoted=frozenset({"FS"}))
+
+    def wifi_list(self) -> p.Reply:
+        pairs = [(ssid, "1" if ssid in self.known_wifi else "2") for ssid in self.visible_wifi]
+        pairs += [(ssid, "3") for ssid in self.known_wifi if ssid not in self.visible_wifi]
+        return p.Reply(True, tuple(pairs))
+
+    def factory_reset(self, wipe_files: bool) -> None:
+        self.name = self.options.name
+        self.known_wifi.clear()
+        self.zmap = DEFAULT_ZMAP
+        self.gestures = True
+        self.memory_mode = 0
+        self.set_demo(None)
+        self.arm.model = dataclasses.replace(self.arm.model, draw_step=5.0, travel_step=15.0)
+        if wipe_files:
+            self.files.clear()
+            self.calibration = (0.0, 0.0, 0.0)
+
+    def write_record(self, path: str | Path) -> Path:
+        """Save what the arm drew (pen-down strokes, pen-up travel) as SVG or PNG."""
+        from fabwire.lineus.render import write_drawing
+
+        return write_drawing(path, self.arm.strokes, self.arm.travel, title=f"{self.name} (simulated)")
+
+    def set_demo(self, demo: tuple[float, float, int | None] | None) -> None:
+        self.demo = demo
+        if self._demo_task is not None:
+            self._demo_task.cancel()
+            self._demo_task = None
+        if demo is not None:
+            self._demo_task = asyncio.create_task(self._run_demo(*demo), name="lineus-demo")
+
+    async def _run_demo(self, seconds: float, period: float, slot: int | None) -> None:
+        """The timed demo runs while nobody is connected, so it never moves the arm under a client."""
+        while True:
+            await self.clock.sleep(period)
+            if self.connections or self.arm.busy:
+                continue
+            text = self.files.get(slot if slot is not None else self.last_saved)
+            if text:
+                await self.play(text, limit=seconds)
+
+    async def play(self, text: str, *, limit: float = math.inf) -> float:
+        """Run a stored drawing's moves (with its own G54) for up to `limit` model seconds, then lift the pen.
+
+        Returns the modelled time spent; lines that are not moves or G54 are skipped, as the firmware's
+        memory drawing only replays motion."""
+        session = _Session()
+        spent = 0.0
+        for raw in text.splitlines():
+            if spent >= limit or not raw.strip():
+                continue
+            try:
+                command = p.parse_command(raw.strip())
+            except RemoteProtocolError:
+                continue
+            if isinstance(command, p.SetOrigin):
+                session.origin = (command.x, command.y, command.scale)
+            elif isinstance(command, p.Move | p.Home | p.RawMove):
+                move = self._plan_move(command, session, raw.strip())
+                job = await self.arm.submit(move.command, move.target, clamped=move.clamped, rapid=move.rapid)
+                record = await job.done
+                spent += record.finished - record.started
+        x, y, z = self.arm.position
+        if z < kin.PEN_DOWN_BELOW:
+            await (await self.arm.submit("M85 lift", (x, y, kin.Z_UP), clamped=False, rapid=False)).done
+        return spent
+
+    async def close(self) -> None:
+        task = self._demo_task
+        self.set_demo(None)
+        if task is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        await self.arm.close()
+
+
+@dataclass(frozen=True, slots=True)
+class _PendingMove:
+    command: str
+    target: Point3
+    clamped: bool
+    rapid: bool
+
+
+# -- non-movement commands -----------------------------------------------------------------------------------------
+
+Handler = Callable[[LineUsSim, p.Command, _Session], ReplySource]
+
+
+def _zmap(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.ZMap)
+    if c.clear:
+        sim.zmap = (0.0, 0.0, 0.0, 0.0)
+    elif c.corners is not None:
+        sim.zmap = c.corners
+    else:
+        return p.Reply(True, (("ZMap", ";".join(p.format_number(v) for v in sim.zmap)),))
+    return p.Reply(True)
+
+
+def _origin(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.SetOrigin)
+    s.origin = (c.x, c.y, c.scale)
+    return p.Reply(True)
+
+
+def _speed(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.SetSpeed)
+    model = sim.arm.model
+    sim.arm.model = dataclasses.replace(
+        model,
+        draw_step=c.draw if c.draw is not None else model.draw_step,
+        travel_step=c.travel if c.travel is not None else model.travel_step,
+    )
+    return p.Reply(True)
+
+
+def _list_files(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    return p.Reply(True, (("FS", sim.file_listing()),))
+
+
+def _memory(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.MemoryDrawing)
+    sim.memory_mode = c.mode
+    return p.Reply(True)
+
+
+def _start_save(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.StartSave)
+    s.saving, s.saved = c.slot, []
+    sim.files[c.slot] = ""
+    return p.Reply(True)
+
+
+def _end_save(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    return _error("M29 without M28: not saving a drawing")
+
+
+def _delete(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.DeleteFile)
+    if sim.files.pop(c.slot, None) is None:
+        return _error(f"no drawing {c.slot}")
+    return p.Reply(True)
+
+
+def _usage(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    used = sim.fs_used()
+    return p.Reply(True, (("FSUsed", str(used)), ("FSTotal", str(FS_TOTAL)), ("FSFree", str(FS_TOTAL - used)),
+                          ("FSPercent", str(used * 100 // FS_TOTAL))))
+
+
+def _demo(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.TimedDemo)
+    if c.drawing is not None and c.drawing not in sim.files:
+        return _error(f"no drawing {c.drawing}")
+    sim.set_demo((c.seconds, c.period, c.drawing) if c.period > 0 and c.seconds > 0 else None)
+    return p.Reply(True)
+
+
+def _position(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.GetPosition)
+
+    def report() -> p.Reply:
+        x, y, z = sim.arm.position
+        if not c.servos:
+            return sim.position_reply(sim.arm.position)
+        shoulder, elbow = kin.servo_angles(x, y)
+        pen = 45.0 + 90.0 * z / kin.Z_UP
+        return p.Reply(True, (("S", f"{shoulder:.2f}"), ("E", f"{elbow:.2f}"), ("P", f"{pen:.2f}")))
+
+    return report
+
+
+def _capabilities(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    return p.Reply(True, (("CONNECTMODE", "ST"), ("MACHINENAME", sim.name)))
+
+
+def _diagnostics(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    return sim.diagnostics()
+
+
+def _reserved(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    return _error(f"{c.text()} is reserved for the factory")
+
+
+def _reset(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.FactoryReset)
+    sim.factory_reset(c.wipe_files)
+    return p.Reply(True)
+
+
+def _reverse(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    sim.servo_reverse = [1 - v for v in sim.servo_reverse]
+    return p.Reply(True)
+
+
+def _gestures(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.Gestures)
+    sim.gestures = c.on
+    return p.Reply(True)
+
+
+def _calibrate(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.SaveCalibration)
+    if c.clear:
+        sim.calibration = (0.0, 0.0, 0.0)
+    else:
+        x, y, _ = sim.arm.position
+        sim.calibration = (round((x - kin.HOME[0]) / 20, 5), round((y - kin.HOME[1]) / 20, 5), 0.0)
+    return p.Reply(True)
+
+
+def _name(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.MachineName)
+    if c.name is None:
+        return p.Reply(True, (("MACHINENAME", sim.name),))
+    sim.name = c.name
+    return p.Reply(True, (("MACHINENAME", sim.name),))
+
+
+def _startup(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.StartupMode)
+    sim.startup = (c.mode or sim.startup[0], c.ap_name or sim.startup[1])
+    return p.Reply(True)
+
+
+def _wifi(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.Wifi)
+    if c.ssid is None:
+        return sim.wifi_list()
+    if ":" in c.ssid:
+        return _error("an SSID with ':' cannot be listed")
+    sim.known_wifi[c.ssid] = c.password or ""
+    return p.Reply(True)
+
+
+def _forget(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    assert isinstance(c, p.ForgetWifi)
+    if c.ssid == "*":
+        sim.known_wifi.clear()
+    elif sim.known_wifi.pop(c.ssid, None) is None:
+        return _error(f"no stored network {c.ssid}")
+    return p.Reply(True)
+
+
+def _update(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
+    return _error("firmware update server unreachable")
+
+
+_HANDLERS: dict[type[p.Command], Handler] = {
+    p.ZMap: _zmap, p.SetOrigin: _origin, p.SetSpeed: _speed, p.ListFiles: _list_files, p.MemoryDrawing: _memory,
+    p.StartSave: _start_save, p.EndSave: _end_save, p.DeleteFile: _delete, p.StorageUsage: _usage,
+    p.TimedDemo: _demo, p.GetPosition: _position, p.Capabilities: _capabilities, p.Diagnostics: _diagnostics,
+    p.Reserved: _reserved, p.FactoryReset: _reset, p.ReverseServos: _reverse, p.Gestures: _gestures,
+    p.SaveCalibration: _calibrate, p.MachineName: _name, p.StartupMode: _startup, p.Wifi: _wifi,
+    p.ForgetWifi: _forget, p.FirmwareUpdate: _update,
+}
+
+
+# -- in-process registration --------------------------------------------------------------------------------
+
+
+def options_from(values: dict[str, str]) -> SimOptions:
+    """`sim://lineus?speed=inf&version=1.0.1&name=bot&serial=42&reply=accept` options."""
+    known = {"speed", "version", "name", "serial", "reply", "step_time"}
+    unknown = set(values) - known
+    if unknown:
+        raise ValueError(f"unknown lineus simulator option(s): {', '.join(sorted(unknown))}")
+    return SimOptions(
+        version=resolve_version(values.get("version", "3")),
+        name=values.get("name", DEFAULT_NAME),
+        serial=values.get("serial", DEFAULT_SERIAL),
+        speed=float(values.get("speed", "inf")),
+        reply="accept" if values.get("reply") == "accept" else "complete",
+        step_time=float(values.get("step_time", "0.010")),
+    )
+
+
+async def _factory(values: dict[str, str]) -> Transport:
+    from fabwire.errors import InputError
+
+    try:
+        options = options_from(values)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    return await spawn_in_process("lineus", LineUsSim(options).serve)
+
+
+register_simulator("lineus", _factory)

@@ -1,0 +1,400 @@
+"""`fabwire mmu …` (talk to an MMU3 as a printer would) and `fabwire sim mmu` (be one)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+from collections.abc import Awaitable, Callable
+from functools import update_wrapper
+from typing import Any, TypeVar
+
+import click
+
+from fabwire.cli_support import DeviceContext, device_group, pass_app, pass_device
+from fabwire.devices import MMU as MMU_KIND
+from fabwire.errors import InputError
+from fabwire.mmu import codes
+from fabwire.mmu.client import MMU, check_slot, resolve_register
+from fabwire.mmu.host import (
+    ButtonPushed,
+    ButtonSent,
+    CommandFinished,
+    CommandInterrupted,
+    CommandRejected,
+    ErrorRaised,
+    HostEvent,
+    LinkFailed,
+    LinkLost,
+    LinkUp,
+    ProgressChanged,
+    RegisterRead,
+    RegisterWritten,
+    Status,
+    StatusUpdated,
+)
+from fabwire.mmu.model import FAULT_NAMES, parse_fault
+from fabwire.simserve import serve, server_options
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def describe(event: HostEvent) -> tuple[dict[str, Any], str]:
+    """An event as a JSON-able dict and as one line of words."""
+    if isinstance(event, ProgressChanged):
+        return ({"event": "progress", "command": event.command, "code": event.code, "name": event.name,
+                 "text": event.words}, f"{event.command}: {event.words}")
+    if isinstance(event, ErrorRaised):
+        info = event.info
+        tail = " (retrying automatically)" if event.auto_retry else ""
+        return ({"event": "error", "command": event.command, "code": f"{event.code:04x}", "name": info.name,
+                 "text": info.meaning, "action": info.action, "printer_code": info.printer_code,
+                 "auto_retry": event.auto_retry},
+                f"{event.command}: {info.meaning} — {info.action}{tail}")
+    if isinstance(event, CommandFinished):
+        words = "finished" if event.result == 0 else "cancelled"
+        return ({"event": "finished", "command": event.command, "result": event.result}, f"{event.command}: {words}")
+    if isinstance(event, StatusUpdated):
+        return {"event": "status", **status_dict(event.status)}, f"status: {status_line(event.status)}"
+    if isinstance(event, LinkUp):
+        return {"event": "link-up", "version": str(event.version)}, f"link up: MMU firmware {event.version}"
+    if isinstance(event, LinkLost):
+        return ({"event": "link-lost", "reason": event.reason, "drop_outs": event.drop_outs},
+                f"link lost ({event.reason}); restarting")
+    if isinstance(event, LinkFailed):
+        return ({"event": "link-failed", "code": f"{event.code:04x}", "text": event.info.meaning,
+                 "detail": event.detail}, f"link failed: {event.info.meaning} — {event.info.action}")
+    if isinstance(event, ButtonPushed):
+        name = codes.BUTTON_WORDS.get(event.button, str(event.button))
+        return ({"event": "button", "command": event.command, "button": event.button},
+                f"{event.command}: {name} button pressed on the MMU")
+    if isinstance(event, ButtonSent):
+        return {"event": "button-sent", "button": event.button}, f"pressed {codes.BUTTON_WORDS[event.button]}"
+    if isinstance(event, CommandRejected):
+        return ({"event": "rejected", "command": event.command, "attempts": event.attempts},
+                f"{event.command}: rejected by the MMU")
+    if isinstance(event, CommandInterrupted):
+        return ({"event": "interrupted", "command": event.command, "reported": event.reported},
+                f"{event.command}: interrupted (MMU reported {event.reported})")
+    if isinstance(event, RegisterRead):
+        return {"event": "read", "address": event.address, "value": event.value}, f"R{event.address:x} = {event.value}"
+    assert isinstance(event, RegisterWritten)
+    return ({"event": "write", "address": event.address, "value": event.value, "accepted": event.accepted},
+            f"W{event.address:x} {event.value} {'accepted' if event.accepted else 'refused'}")
+
+
+def _slot_words(value: int | None, park: str) -> str:
+    if value is None:
+        return "unknown"
+    if value == 0xFF:
+        return "homing"
+    return park if value == 5 else f"slot {value}"
+
+
+def status_line(status: Status) -> str:
+    return (f"{status.command} {status.words}, FINDA {'on' if status.finda else 'off'}, "
+            f"selector {_slot_words(status.selector, 'parked')}, idler {_slot_words(status.idler, 'disengaged')}")
+
+
+def status_dict(status: Status) -> dict[str, Any]:
+    data = dataclasses.asdict(status)
+    data["text"] = status.words
+    return data
+
+
+def host_options(func: F) -> F:
+    """Options every command that talks to the MMU takes."""
+    func = click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+                        envvar="FABWIRE_MMU_SPEED",
+                        help="The MMU runs this many times faster than real time (a simulator's --speed); "
+                             "the heartbeat and timeouts shrink to match.")(func)
+    return click.option("--accept", "accept", multiple=True, metavar="X.Y.Z",
+                        help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4).")(func)
+
+
+def _versions(accept: tuple[str, ...]) -> frozenset[tuple[int, int, int]]:
+    if not accept:
+        return frozenset(v.triple for v in codes.FIRMWARES.values())
+    out = set()
+    for text in accept:
+        parts = text.split(".")
+        if len(parts) != 3 or not all(p.isdigit() for p in parts):
+            raise InputError(f"--accept takes versions like 3.0.3, not {text!r}")
+        out.add((int(parts[0]), int(parts[1]), int(parts[2])))
+    return frozenset(out)
+
+
+def with_mmu(check: Callable[[dict[str, Any]], None] | None = None) -> Callable[[Callable[..., Any]], Any]:
+    """Open the link and the host logic around an `async def cmd(dctx, mmu, **options)`.
+
+    `check` validates the arguments first, so bad input fails before any byte is sent.
+    """
+
+    def decorate(func: Callable[..., Awaitable[None]]) -> Callable[..., None]:
+        @pass_device
+        def wrapper(dctx: DeviceContext, /, *args: Any, speed: float, accept: tuple[str, ...], **kwargs: Any) -> None:
+            versions = _versions(accept)
+            if check is not None:
+                check(kwargs)
+
+            async def main() -> None:
+                async with dctx.link() as transport:
+                    mmu = MMU(transport, accepted=versions, time_scale=speed,
+                              connect_timeout=max(dctx.timeout, 30.0 / speed))
+                    async with mmu:
+                        await func(dctx, mmu, *args, **kwargs)
+
+            asyncio.run(main())
+
+        return update_wrapper(wrapper, func)
+
+    return decorate
+
+
+def _slot_arg(kwargs: dict[str, Any]) -> None:
+    check_slot(kwargs["slot"])
+
+
+def _register_arg(kwargs: dict[str, Any]) -> None:
+    resolve_register(kwargs["register"])
+
+
+def _write_args(kwargs: dict[str, Any]) -> None:
+    resolve_register(kwargs["register"], for_write=True)
+    _parse_value(kwargs["value"])
+
+
+@device_group(MMU_KIND, "Drive a Prusa MMU3 over its serial protocol, as the printer does.")
+def mmu() -> None:
+    pass
+
+
+async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[CommandFinished]],
+                   max_time: float) -> None:
+    seen: list[dict[str, Any]] = []
+
+    def show(event: HostEvent) -> None:
+        if isinstance(event, ProgressChanged | ErrorRaised | ButtonPushed | LinkLost):
+            data, text = describe(event)
+            seen.append(data)
+            dctx.output.note(text)
+
+    finished = await run(on_event=show, timeout=max_time)
+    words = "finished" if finished.result == 0 else "cancelled"
+    dctx.output.result({"command": finished.command, "result": finished.result, "text": words, "events": seen},
+                       f"{finished.command} {words}")
+
+
+def _command_options(func: F) -> F:
+    func = click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+                        help="Give up if the command has not ended after this many seconds.")(func)
+    return host_options(func)
+
+
+@mmu.command("tool-change")
+@click.argument("slot", type=int)
+@_command_options
+@with_mmu(_slot_arg)
+async def tool_change(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
+    """Change to filament SLOT (0-4): unload what is loaded, feed SLOT to the nozzle."""
+    await _command(dctx, mmu_, lambda **kw: mmu_.tool_change(slot, **kw), max_time)
+
+
+@mmu.command("load")
+@click.argument("slot", type=int)
+@_command_options
+@with_mmu(_slot_arg)
+async def load(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
+    """Load filament SLOT (0-4) into the MMU (to FINDA and back)."""
+    await _command(dctx, mmu_, lambda **kw: mmu_.load(slot, **kw), max_time)
+
+
+@mmu.command("unload")
+@_command_options
+@with_mmu()
+async def unload(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
+    """Unload the filament from the printer back to the MMU."""
+    await _command(dctx, mmu_, mmu_.unload, max_time)
+
+
+@mmu.command("eject")
+@click.argument("slot", type=int)
+@_command_options
+@with_mmu(_slot_arg)
+async def eject(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
+    """Eject filament SLOT (0-4) out of the MMU, then continue."""
+    await _command(dctx, mmu_, lambda **kw: mmu_.eject(slot, **kw), max_time)
+
+
+@mmu.command("cut")
+@click.argument("slot", type=int)
+@_command_options
+@with_mmu(_slot_arg)
+async def cut(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
+    """Cut the tip of filament SLOT (0-4)."""
+    await _command(dctx, mmu_, lambda **kw: mmu_.cut(slot, **kw), max_time)
+
+
+@mmu.command("home")
+@_command_options
+@with_mmu()
+async def home(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
+    """Re-home the idler and the selector."""
+    await _command(dctx, mmu_, mmu_.home, max_time)
+
+
+@mmu.command("version")
+@host_options
+@with_mmu()
+async def version(dctx: DeviceContext, mmu_: MMU) -> None:
+    """Show the MMU firmware version and build."""
+    v = mmu_.version
+    assert v is not None
+    dctx.output.result({"major": v.major, "minor": v.minor, "revision": v.revision, "build": v.build,
+                        "version": str(v)}, f"MMU firmware {v}")
+
+
+@mmu.command("status")
+@host_options
+@with_mmu()
+async def status(dctx: DeviceContext, mmu_: MMU) -> None:
+    """Show FINDA, filament sensor, slot, selector/idler, drive errors and the current command."""
+    st = mmu_.status
+    fsensor = await mmu_.read_register(0x09)
+    filament = await mmu_.read_register(0x07)
+    progress = await mmu_.read_register(0x05)
+    error = await mmu_.read_register(0x06)
+    slot = st.selector if st.selector is not None and st.selector < 5 else None
+    data = {**status_dict(st), "fsensor": bool(fsensor), "filament": filament,
+            "filament_text": codes.FILAMENT_WORDS.get(filament, str(filament)), "slot": slot,
+            "progress": progress, "progress_text": codes.progress_words(progress), "error": f"{error:04x}",
+            "version": str(mmu_.version)}
+
+    def human() -> None:
+        out = dctx.output.out
+        rows = [
+            ("firmware", str(mmu_.version)),
+            ("command", f"{st.command} {st.words}"),
+            ("progress", codes.progress_words(progress)),
+            ("FINDA", "on" if st.finda else "off"),
+            ("fsensor", "on" if fsensor else "off"),
+            ("filament", codes.FILAMENT_WORDS.get(filament, str(filament))),
+            ("active slot", "none" if slot is None else str(slot)),
+            ("selector", _slot_words(st.selector, "parked")),
+            ("idler", _slot_words(st.idler, "disengaged")),
+            ("drive errors", str(st.drive_errors)),
+            ("pulley", f"{st.pulley} mm"),
+        ]
+        if st.kind == "E":
+            info = codes.describe_error(st.value)
+            rows.append(("error", f"{info.meaning} — {info.action}"))
+        for key, value in rows:
+            out.print(f"{key:<13} {value}")
+
+    dctx.output.result(data, human)
+
+
+@mmu.command("button")
+@click.argument("button", type=click.Choice(["retry", "continue", "stop", "left", "middle", "right"]))
+@host_options
+@with_mmu()
+async def button(dctx: DeviceContext, mmu_: MMU, button: str) -> None:
+    """Press an MMU button from the printer (retry/continue = Middle, stop = Right)."""
+    await mmu_.press(button)
+    number = codes.BUTTON_ALIASES[button]
+    dctx.output.result({"button": button, "sent": number}, f"pressed {codes.BUTTON_WORDS[number]} ({button})")
+
+
+@mmu.command("reset")
+@host_options
+@with_mmu()
+async def reset(dctx: DeviceContext, mmu_: MMU) -> None:
+    """Reboot the MMU (X0) and wait until it answers again."""
+    v = await mmu_.reset()
+    dctx.output.result({"version": str(v)}, f"MMU reset; firmware {v} answering")
+
+
+@mmu.command("read")
+@click.argument("register")
+@host_options
+@with_mmu(_register_arg)
+async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
+    """Read REGISTER (a name such as bowden_length, or an address like 0x22)."""
+    reg = resolve_register(register)
+    value = await mmu_.read_register(reg.address)
+    dctx.output.result({"address": reg.address, "name": reg.name, "value": value},
+                       f"0x{reg.address:02x} {reg.name} = {value}")
+
+
+@mmu.command("write")
+@click.argument("register")
+@click.argument("value")
+@host_options
+@with_mmu(_write_args)
+async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> None:
+    """Write VALUE to REGISTER (by name or address)."""
+    reg = resolve_register(register, for_write=True)
+    number = _parse_value(value)
+    await mmu_.write_register(reg.address, number)
+    dctx.output.result({"address": reg.address, "name": reg.name, "value": number},
+                       f"0x{reg.address:02x} {reg.name} := {number}")
+
+
+def _parse_value(text: str) -> int:
+    try:
+        number = int(text, 0)
+    except ValueError:
+        raise InputError(f"register value must be a number, not {text!r}") from None
+    if not 0 <= number <= 0xFFFF:
+        raise InputError(f"register value must be 0 to 65535, not {number}")
+    return number
+
+
+@mmu.command("monitor")
+@click.option("--count", type=click.IntRange(min=1), help="Stop after this many events.")
+@click.option("--duration", type=click.FloatRange(min=0.0), help="Stop after this many seconds.")
+@click.option("--changes", is_flag=True, help="Show a status poll only when something changed.")
+@host_options
+@with_mmu()
+async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: float | None,
+                  changes: bool) -> None:
+    """Show live events (status polls, progress, errors, buttons, link) until Ctrl-C, --count or --duration."""
+    shown = 0
+    last_status: Status | None = None
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(duration):
+            async for event in mmu_.events():
+                if isinstance(event, StatusUpdated):
+                    if changes and event.status == last_status:
+                        continue
+                    last_status = event.status
+                if isinstance(event, RegisterRead):
+                    continue
+                data, text = describe(event)
+                dctx.output.event(data, text)
+                shown += 1
+                if count is not None and shown >= count:
+                    break
+
+
+@click.command("mmu")
+@server_options(None)
+@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+              help="Run the machine this many times faster than real time.")
+@click.option("--fault", "faults", multiple=True, metavar="NAME[:N|:always]",
+              help="Inject a fault (repeatable): " + ", ".join(sorted(n for n in FAULT_NAMES if
+                                                                       not n.startswith("tmc-"))) +
+                   ", tmc-KIND[-AXIS].")
+@click.option("--version", "fw_version", type=click.Choice(sorted(codes.FIRMWARES)), default="3.0.4",
+              show_default=True, help="Firmware personality.")
+@pass_app
+def sim_mmu(app: Any, listen: tuple[str, ...], use_pty: bool, link: Any, speed: float, faults: tuple[str, ...],
+            fw_version: str) -> None:
+    """Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."""
+    from fabwire.mmu.sim import MMUSimulator
+
+    for fault in faults:
+        parse_fault(fault)
+    simulator = MMUSimulator(fw_version, speed=speed, faults=faults)
+    asyncio.run(serve("mmu", simulator.serve, listen=listen, use_pty=use_pty, link=link, default_port=None,
+                      json_mode=app.json))

@@ -1,0 +1,487 @@
+"""`MMU`: the host logic on a real link, as awaitable operations; `SyncMMU` for plain scripts.
+
+    async with MMU(transport) as mmu:
+        await mmu.tool_change(1, on_event=print)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import AsyncIterator, Callable, Iterable
+from types import TracebackType
+from typing import Any, Self, TypeVar
+
+from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
+from fabwire.mmu import codes
+from fabwire.mmu.host import (
+    INIT_REGISTERS,
+    SUPPORTED,
+    ButtonSent,
+    CommandFinished,
+    CommandInterrupted,
+    CommandRejected,
+    ErrorRaised,
+    FSensorMode,
+    HostEvent,
+    HostLogic,
+    Link,
+    LinkFailed,
+    LinkUp,
+    RegisterRead,
+    RegisterWritten,
+    Status,
+    StatusUpdated,
+)
+from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload
+from fabwire.sync import LoopThread
+from fabwire.transport import Transport, open_transport
+
+T = TypeVar("T")
+EventCallback = Callable[[HostEvent], None]
+
+
+def check_slot(slot: int) -> int:
+    if not isinstance(slot, int) or isinstance(slot, bool) or not 0 <= slot <= 4:
+        raise InputError(f"filament slot must be 0 to 4, not {slot!r}")
+    return slot
+
+
+def resolve_register(register: int | str, *, for_write: bool = False,
+                     version: tuple[int, int, int] = (3, 0, 4)) -> codes.Register:
+    found = codes.find_register(str(register)) if not isinstance(register, int) else (
+        codes.REGISTERS[register] if 0 <= register < codes.REGISTER_COUNT else None)
+    if found is None:
+        raise InputError(f"unknown MMU register {register!r}: use a name such as 'bowden_length' or an address "
+                         f"from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
+    if for_write and not found.writable(version):
+        raise InputError(f"register 0x{found.address:02x} ({found.name}) is read-only"
+                         + (" on this firmware" if found.access is codes.Access.RW_304 else ""))
+    return found
+
+
+def error_for(event: ErrorRaised | LinkFailed) -> DeviceError:
+    info = event.info
+    return DeviceError(f"{info.code:04x}", f"{info.meaning}" + (f" ({info.printer_code})" if info.printer_code
+                                                                else ""), action=info.action)
+
+
+class MMU:
+    """An MMU3 on `transport`, driven the way a Prusa printer drives it (heartbeat, retries, restarts)."""
+
+    def __init__(self, transport: Transport, *, accepted: Iterable[tuple[int, int, int]] = SUPPORTED,
+                 init_registers: Iterable[tuple[int, int]] = INIT_REGISTERS, fsensor_mode: FSensorMode = "auto",
+                 time_scale: float = 1.0, auto_retries: int = 3, connect_timeout: float = 30.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.transport = transport
+        self.logic = HostLogic(accepted=accepted, init_registers=init_registers, fsensor_mode=fsensor_mode,
+                               time_scale=time_scale, auto_retries=auto_retries)
+        self.connect_timeout = connect_timeout
+        self._clock = clock
+        self._listeners: list[EventCallback] = []
+        self._wake = asyncio.Event()
+        self._write_lock = asyncio.Lock()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._failure: BaseException | None = None
+        self._ready = asyncio.Event()
+        self._kick = asyncio.Event()
+
+    # ------------------------------------------------------------------------------------------ lifecycle
+
+    async def __aenter__(self) -> Self:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                        tb: TracebackType | None) -> None:
+        await self.close()
+
+    async def connect(self) -> None:
+        """Start the link and wait for the handshake and first status poll."""
+        self._listeners.append(self._watch_link)
+        self.logic.start(self._clock())
+        await self._flush()
+        self._tasks = [asyncio.create_task(self._reader(), name="mmu-reader"),
+                       asyncio.create_task(self._timer(), name="mmu-timer")]
+        try:
+            async with asyncio.timeout(self.connect_timeout):
+                await self._until(lambda: self._ready.is_set())
+        except TimeoutError:
+            await self.close()
+            if self._failure is not None:
+                raise self._failure from None
+            raise LinkTimeout(f"the MMU on {self.transport.peer or self.transport.url} did not complete the "
+                              f"handshake within {self.connect_timeout:g} s: check power and cable") from None
+        except BaseException:
+            await self.close()
+            raise
+
+    async def close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(BaseException):
+                await task
+        self._tasks = []
+
+    def _watch_link(self, event: HostEvent) -> None:
+        if isinstance(event, LinkUp):
+            self._ready.set()
+        elif isinstance(event, LinkFailed) and event.code == 0x802C:
+            self._fail(DeviceError("802c", f"{event.info.meaning}: {event.detail}", action=event.info.action))
+        elif isinstance(event, LinkFailed) and not self._ready.is_set():
+            self._fail(LinkTimeout(f"{event.info.meaning} on {self.transport.peer or self.transport.url} "
+                                   f"({event.detail}) — {event.info.action}"))
+
+    def _fail(self, exc: BaseException) -> None:
+        if self._failure is None:
+            self._failure = exc
+        self._wake.set()
+
+    # ------------------------------------------------------------------------------------------ plumbing
+
+    def _dispatch(self) -> None:
+        for event in self.logic.events():
+            for listener in list(self._listeners):
+                listener(event)
+        self._wake.set()
+
+    async def _flush(self) -> None:
+        async with self._write_lock:
+            data = self.logic.data_to_send()
+            if data:
+                await self.transport.write(data)
+
+    async def _reader(self) -> None:
+        try:
+            while True:
+                data = await self.transport.read(4096)
+                self.logic.receive(data, self._clock())
+                self._dispatch()
+                await self._flush()
+        except LinkClosed as exc:
+            self._fail(exc)
+        except Exception as exc:
+            self._fail(LinkClosed(f"link to the MMU failed: {exc!r}"))
+
+    async def _timer(self) -> None:
+        try:
+            while True:
+                deadline = self.logic.next_deadline()
+                delay = None if deadline is None else max(0.0, deadline - self._clock())
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(delay):
+                        await self._kick.wait()
+                self._kick.clear()
+                self.logic.handle_timer(self._clock())
+                self._dispatch()
+                await self._flush()
+        except LinkClosed as exc:
+            self._fail(exc)
+
+    async def _until(self, done: Callable[[], bool]) -> None:
+        while not done():
+            if self._failure is not None:
+                raise self._failure
+            self._wake.clear()
+            await self._wake.wait()
+
+    async def _operate(self, start: Callable[[float], None], outcome: Callable[[HostEvent], Any],
+                       on_event: EventCallback | None, timeout: float | None) -> Any:
+        """Run `start`, then wait for the first event `outcome` maps to a value (or raises on)."""
+        result: list[Any] = []
+        errors: list[BaseException] = []
+
+        def listen(event: HostEvent) -> None:
+            if on_event is not None:
+                on_event(event)
+            if result or errors:
+                return
+            try:
+                value = outcome(event)
+            except BaseException as exc:  # the outcome says this event is a failure
+                errors.append(exc)
+                return
+            if value is not None:
+                result.append(value)
+
+        self._listeners.append(listen)
+        try:
+            if self._failure is not None:
+                raise self._failure
+            start(self._clock())
+            self._kick.set()
+            await self._flush()
+            async with asyncio.timeout(timeout):
+                await self._until(lambda: bool(result or errors))
+        except TimeoutError:
+            raise LinkTimeout(f"the MMU did not finish within {timeout:g} s") from None
+        finally:
+            self._listeners.remove(listen)
+        if errors:
+            raise errors[0]
+        return result[0]
+
+    # ------------------------------------------------------------------------------------------ operations
+
+    @property
+    def status(self) -> Status:
+        return self.logic.status
+
+    @property
+    def version(self) -> codes.FirmwareVersion | None:
+        return self.logic.version
+
+    def subscribe(self, callback: EventCallback) -> Callable[[], None]:
+        """Call `callback` for every host event; returns the unsubscribe function."""
+        self._listeners.append(callback)
+        return lambda: self._listeners.remove(callback) if callback in self._listeners else None
+
+    async def run(self, request: Request, *, on_event: EventCallback | None = None,
+                  timeout: float | None = None, confirm_eject: bool = True) -> CommandFinished:
+        """Run one command to its end; an error the host cannot retry away raises DeviceError."""
+        if request.code in "TLEK":
+            check_slot(request.value)
+        if self.logic.busy:
+            raise InputError(f"the MMU is already running {self.logic.command}")
+        expected = f"{request}"
+
+        def outcome(event: HostEvent) -> CommandFinished | None:
+            if isinstance(event, CommandFinished) and event.command == expected:
+                return event
+            if isinstance(event, ErrorRaised) and not event.auto_retry:
+                if confirm_eject and event.code == 0x800C:
+                    self.logic.press(int(codes.Button.MIDDLE), self._clock())
+                    self._kick.set()
+                    return None
+                self.logic.abandon()
+                raise error_for(event)
+            if isinstance(event, CommandRejected):
+                raise DeviceError("rejected", f"the MMU rejected {event.command} {event.attempts} times "
+                                  "(busy, in an error state, or the filament state does not allow it)",
+                                  action="check `fabwire mmu status`, resolve any error, then try again")
+            if isinstance(event, CommandInterrupted):
+                raise RemoteProtocolError(f"{event.command} was interrupted: the MMU reported {event.reported} "
+                                          "(it probably rebooted)")
+            if isinstance(event, LinkFailed):
+                raise LinkTimeout(f"MMU link failed: {event.info.meaning} ({event.detail})")
+            return None
+
+        finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
+                                                        outcome, on_event, timeout)
+        return finished
+
+    async def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:
+        return await self.run(ToolChange(check_slot(slot)), **kwargs)
+
+    async def load(self, slot: int, **kwargs: Any) -> CommandFinished:
+        return await self.run(Load(check_slot(slot)), **kwargs)
+
+    async def unload(self, **kwargs: Any) -> CommandFinished:
+        return await self.run(Unload(0), **kwargs)
+
+    async def eject(self, slot: int, **kwargs: Any) -> CommandFinished:
+        return await self.run(Eject(check_slot(slot)), **kwargs)
+
+    async def cut(self, slot: int, **kwargs: Any) -> CommandFinished:
+        return await self.run(Cut(check_slot(slot)), **kwargs)
+
+    async def home(self, **kwargs: Any) -> CommandFinished:
+        return await self.run(Home(0), **kwargs)
+
+    async def set_mode(self, stealth: bool, **kwargs: Any) -> CommandFinished:
+        return await self.run(Mode(int(stealth)), **kwargs)
+
+    async def press(self, button: int | str, timeout: float | None = 10.0) -> None:
+        """Press an MMU button from the printer: 0/right/stop, 1/middle/retry/continue, 2/left."""
+        if isinstance(button, str):
+            if button.lower() not in codes.BUTTON_ALIASES:
+                raise InputError(f"unknown button {button!r}: use retry, continue, stop, left, middle or right")
+            button = codes.BUTTON_ALIASES[button.lower()]
+        if button not in (0, 1, 2):
+            raise InputError(f"button must be 0, 1 or 2, not {button!r}")
+        number = int(button)
+
+        def outcome(event: HostEvent) -> bool | None:
+            return True if isinstance(event, ButtonSent) and event.button == number else None
+
+        await self._operate(lambda now: self.logic.press(number, now), outcome, None, timeout)
+
+    async def read_register(self, register: int | str, timeout: float | None = 10.0) -> int:
+        address = resolve_register(register).address
+
+        def outcome(event: HostEvent) -> int | None:
+            if isinstance(event, RegisterRead) and event.address == address:
+                if event.value is None:
+                    raise DeviceError("R", f"the MMU rejected the read of register 0x{address:02x}")
+                return event.value
+            return None
+
+        value: int = await self._operate(lambda now: self.logic.read_register(address, now), outcome, None,
+                                         timeout)
+        return value
+
+    async def write_register(self, register: int | str, value: int, timeout: float | None = 10.0) -> None:
+        version = self.version.triple if self.version else (3, 0, 4)
+        found = resolve_register(register, for_write=True, version=version)
+        limit = (1 << found.bits) - 1
+        if not isinstance(value, int) or not 0 <= value <= 0xFFFF:
+            raise InputError(f"register value must be 0 to 65535, not {value!r}")
+        if value > limit:
+            raise InputError(f"register 0x{found.address:02x} ({found.name}) holds {found.bits} bits: "
+                             f"0 to {limit}, not {value}")
+
+        def outcome(event: HostEvent) -> bool | None:
+            if isinstance(event, RegisterWritten) and event.address == found.address:
+                if not event.accepted:
+                    raise DeviceError("R", f"the MMU refused the write to register 0x{found.address:02x}")
+                return True
+            return None
+
+        await self._operate(lambda now: self.logic.write_register(found.address, value, now), outcome, None,
+                            timeout)
+
+    async def refresh(self, timeout: float | None = 10.0) -> Status:
+        """Wait for the next heartbeat's status poll."""
+
+        def outcome(event: HostEvent) -> Status | None:
+            return event.status if isinstance(event, StatusUpdated) else None
+
+        status: Status = await self._operate(lambda now: None, outcome, None, timeout)
+        return status
+
+    async def reset(self, timeout: float | None = 30.0) -> codes.FirmwareVersion:
+        """Reboot the MMU (X0) and wait until the link is back."""
+        self._ready.clear()
+
+        def outcome(event: HostEvent) -> codes.FirmwareVersion | None:
+            return event.version if isinstance(event, LinkUp) else None
+
+        version: codes.FirmwareVersion = await self._operate(self.logic.reset, outcome, None, timeout)
+        return version
+
+    async def events(self) -> AsyncIterator[HostEvent]:
+        """Every host event as it happens, until the link fails."""
+        queue: asyncio.Queue[HostEvent] = asyncio.Queue(maxsize=1000)
+
+        def put(event: HostEvent) -> None:
+            with contextlib.suppress(asyncio.QueueFull):
+                queue.put_nowait(event)
+
+        unsubscribe = self.subscribe(put)
+        try:
+            while True:
+                if self._failure is not None and queue.empty():
+                    raise self._failure
+                getter = asyncio.ensure_future(queue.get())
+                waker = asyncio.ensure_future(self._wait_failure())
+                done, _ = await asyncio.wait({getter, waker}, return_when=asyncio.FIRST_COMPLETED)
+                waker.cancel()
+                if getter in done:
+                    yield getter.result()
+                else:
+                    getter.cancel()
+        finally:
+            unsubscribe()
+
+    async def _wait_failure(self) -> None:
+        while self._failure is None:
+            self._wake.clear()
+            await self._wake.wait()
+
+    @property
+    def link_state(self) -> Link:
+        return self.logic.link
+
+
+class SyncMMU:
+    """The same operations, blocking, for scripts: `with SyncMMU("sim://mmu?speed=50") as mmu: mmu.load(2)`."""
+
+    def __init__(self, address: str, **options: Any) -> None:
+        self._thread = LoopThread("fabwire-mmu")
+        self._address = address
+        self._options = options
+        self._mmu: MMU | None = None
+
+    def __enter__(self) -> Self:
+        async def open_() -> MMU:
+            from fabwire.devices import MMU as MMU_KIND
+
+            transport = await open_transport(self._address, MMU_KIND)
+            mmu = MMU(transport, **self._options)
+            try:
+                await mmu.connect()
+            except BaseException:
+                await transport.close()
+                raise
+            return mmu
+
+        try:
+            self._mmu = self._thread.call(open_())
+        except BaseException:
+            self._thread.close()
+            raise
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        mmu = self._mmu
+        if mmu is not None:
+            async def shut() -> None:
+                await mmu.close()
+                await mmu.transport.close()
+
+            self._thread.call(shut())
+        self._thread.close()
+
+    @property
+    def mmu(self) -> MMU:
+        if self._mmu is None:
+            raise LinkClosed("the MMU link is not open")
+        return self._mmu
+
+    def _call(self, coro: Any) -> Any:
+        return self._thread.call(coro)
+
+    def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:
+        result: CommandFinished = self._call(self.mmu.tool_change(slot, **kwargs))
+        return result
+
+    def load(self, slot: int, **kwargs: Any) -> CommandFinished:
+        result: CommandFinished = self._call(self.mmu.load(slot, **kwargs))
+        return result
+
+    def unload(self, **kwargs: Any) -> CommandFinished:
+        result: CommandFinished = self._call(self.mmu.unload(**kwargs))
+        return result
+
+    def eject(self, slot: int, **kwargs: Any) -> CommandFinished:
+        result: CommandFinished = self._call(self.mmu.eject(slot, **kwargs))
+        return result
+
+    def cut(self, slot: int, **kwargs: Any) -> CommandFinished:
+        result: CommandFinished = self._call(self.mmu.cut(slot, **kwargs))
+        return result
+
+    def home(self) -> CommandFinished:
+        result: CommandFinished = self._call(self.mmu.home())
+        return result
+
+    def press(self, button: int | str) -> None:
+        self._call(self.mmu.press(button))
+
+    def read_register(self, register: int | str) -> int:
+        value: int = self._call(self.mmu.read_register(register))
+        return value
+
+    def write_register(self, register: int | str, value: int) -> None:
+        self._call(self.mmu.write_register(register, value))
+
+    def reset(self) -> codes.FirmwareVersion:
+        version: codes.FirmwareVersion = self._call(self.mmu.reset())
+        return version
+
+    @property
+    def status(self) -> Status:
+        return self.mmu.status

@@ -1,0 +1,388 @@
+"""The MMU3's numeric vocabularies, with the names the firmware uses and what they mean to a person.
+
+Wire values are hex; the enums hold the numbers, `describe_*` turn them into words.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class Progress(enum.IntEnum):
+    OK = 0
+    ENGAGING_IDLER = 1
+    DISENGAGING_IDLER = 2
+    UNLOADING_TO_FINDA = 3
+    UNLOADING_TO_PULLEY = 4
+    FEEDING_TO_FINDA = 5
+    FEEDING_TO_BONDTECH = 6
+    FEEDING_TO_NOZZLE = 7
+    AVOIDING_GRIND = 8
+    FINISHING_MOVES = 9
+    ERR_DISENGAGING_IDLER = 10
+    ERR_ENGAGING_IDLER = 11
+    ERR_WAITING_FOR_USER = 12
+    ERR_INTERNAL = 13
+    ERR_HELPING_FILAMENT = 14
+    ERR_TMC_FAILED = 15
+    UNLOADING_FILAMENT = 16
+    LOADING_FILAMENT = 17
+    SELECTING_FILAMENT_SLOT = 18
+    PREPARING_BLADE = 19
+    PUSHING_FILAMENT = 20
+    PERFORMING_CUT = 21
+    RETURNING_SELECTOR = 22
+    PARKING_SELECTOR = 23
+    EJECTING_FILAMENT = 24
+    RETRACTING_FROM_FINDA = 25
+    HOMING = 26
+    MOVING_SELECTOR = 27
+    FEEDING_TO_FSENSOR = 28
+    HW_TEST_BEGIN = 29
+    HW_TEST_IDLER = 30
+    HW_TEST_SELECTOR = 31
+    HW_TEST_PULLEY = 32
+    HW_TEST_CLEANUP = 33
+    HW_TEST_EXEC = 34
+    HW_TEST_DISPLAY = 35
+    ERR_HW_TEST_FAILED = 36
+    EMPTY = 255
+
+
+PROGRESS_WORDS: dict[int, str] = {
+    0: "OK",
+    1: "Engaging idler",
+    2: "Disengaging idler",
+    3: "Unloading to FINDA",
+    4: "Unloading to pulley",
+    5: "Feeding to FINDA",
+    6: "Feeding to extruder",
+    7: "Feeding to nozzle",
+    8: "Avoiding grind",
+    9: "Finishing moves",
+    10: "Disengaging idler (error)",
+    11: "Engaging idler (error)",
+    12: "Waiting for user",
+    13: "Internal error",
+    14: "Helping filament",
+    15: "TMC driver failed",
+    16: "Unloading filament",
+    17: "Loading filament",
+    18: "Selecting filament slot",
+    19: "Preparing blade",
+    20: "Pushing filament",
+    21: "Performing cut",
+    22: "Returning selector",
+    23: "Parking selector",
+    24: "Ejecting filament",
+    25: "Retracting from FINDA",
+    26: "Homing",
+    27: "Moving selector",
+    28: "Feeding to FSensor",
+    29: "Hardware test: begin",
+    30: "Hardware test: idler",
+    31: "Hardware test: selector",
+    32: "Hardware test: pulley",
+    33: "Hardware test: cleanup",
+    34: "Hardware test: running",
+    35: "Hardware test: display",
+    36: "Hardware test failed",
+    255: "Empty",
+}
+
+
+def progress_words(code: int) -> str:
+    return PROGRESS_WORDS.get(code, f"unknown progress 0x{code:x}")
+
+
+def progress_name(code: int) -> str:
+    try:
+        return Progress(code).name
+    except ValueError:
+        return f"PROGRESS_{code:X}"
+
+
+class Result(enum.IntEnum):
+    OK = 0
+    CANCELLED = 1
+
+
+class Button(enum.IntEnum):
+    """What `B` carries in both directions; Middle is the one the MMU's own recovery listens to."""
+
+    RIGHT = 0
+    MIDDLE = 1
+    LEFT = 2
+
+
+BUTTON_WORDS = {0: "Right", 1: "Middle", 2: "Left"}
+
+BUTTON_ALIASES: dict[str, int] = {
+    "right": 0, "stop": 0,
+    "middle": 1, "retry": 1, "continue": 1,
+    "left": 2,
+}
+"""Printer dialog words for the MMU's buttons: Retry and Continue are both the Middle button."""
+
+
+class FilamentState(enum.IntEnum):
+    NOT_LOADED = 0
+    AT_PULLEY = 1
+    IN_SELECTOR = 2
+    IN_FSENSOR = 4
+    IN_NOZZLE = 8
+
+
+FILAMENT_WORDS = {0: "not loaded", 1: "at pulley", 2: "in selector", 4: "in filament sensor", 8: "in nozzle"}
+
+
+class FSensor(enum.IntEnum):
+    """Printer filament-sensor states a host reports with `f`; the MMU treats any non-zero value as 'on'."""
+
+    NOT_PRESENT = 0
+    AT_FSENSOR = 1
+    IN_NOZZLE = 2
+    UNAVAILABLE = 3
+
+
+# ---------------------------------------------------------------------------------------------- errors
+
+RUNNING = 0x0000
+ERROR_OK = 0x0001
+
+AXIS_BITS = {0x0040: "pulley", 0x0080: "selector", 0x0100: "idler"}
+AXIS_MASK = 0x01C0
+TMC_FLAGS = {
+    0x0200: "TMC_IOIN_MISMATCH",
+    0x0400: "TMC_RESET",
+    0x0800: "TMC_UNDERVOLTAGE_ON_CHARGE_PUMP",
+    0x1000: "TMC_SHORT_TO_GROUND",
+    0x2000: "TMC_OVER_TEMPERATURE_WARN",
+    0x4000: "TMC_OVER_TEMPERATURE_ERROR",
+}
+TMC_WORDS = {
+    0x0200: "driver IOIN mismatch",
+    0x0400: "driver reset",
+    0x0800: "undervoltage on charge pump",
+    0x1000: "short to ground",
+    0x2000: "over-temperature warning",
+    0x4000: "over-temperature",
+}
+TMC_BASE = 0x8000
+SOLDERING_NEEDS_ATTENTION = 0xC200
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorInfo:
+    code: int
+    name: str
+    title: str
+    meaning: str
+    action: str
+    printer_code: str
+    retryable: bool
+    """The printer's dialog offers Retry (Middle): hosts may press it on their own."""
+
+
+_BASIC: dict[int, tuple[str, str, str, str, str, bool]] = {
+    # code: (name, printer code, title, meaning, action, retryable)
+    0x8001: ("FINDA_DIDNT_SWITCH_ON", "04101", "FINDA DIDNT TRIGGER", "FINDA didn't trigger",
+             "check the filament path, then Retry", True),
+    0x8002: ("FINDA_DIDNT_SWITCH_OFF", "04102", "FINDA FILAM. STUCK", "FINDA didn't switch off: filament stuck",
+             "free the filament from the selector, then Retry", True),
+    0x8003: ("FSENSOR_DIDNT_SWITCH_ON", "04103", "FSENSOR DIDNT TRIGG.", "printer filament sensor didn't trigger",
+             "check the filament reached the extruder and the sensor works, then Retry", True),
+    0x8004: ("FSENSOR_DIDNT_SWITCH_OFF", "04104", "FSENSOR FIL. STUCK", "printer filament sensor still sees filament",
+             "pull the filament out of the extruder, then Retry", True),
+    0x8005: ("FILAMENT_ALREADY_LOADED", "04501", "FILAMENT ALREADY LOADED", "filament already loaded",
+             "Unload (Left) or Continue (Right)", False),
+    0x8006: ("INVALID_TOOL", "04502", "INVALID TOOL", "requested filament slot does not exist",
+             "use a slot from 0 to 4", False),
+    0x8008: ("FINDA_VS_EEPROM_DISREPANCY", "04506", "UNLOAD MANUALLY",
+             "FINDA sees filament but the MMU does not know which slot is loaded",
+             "unload the filament manually, then Retry", True),
+    0x8009: ("FSENSOR_TOO_EARLY", "04106", "FSENSOR TOO EARLY",
+             "printer filament sensor triggered before the filament could reach it",
+             "check the sensor and the bowden length, then Retry", True),
+    0x800A: ("FINDA_FLICKERS", "04107", "INSPECT FINDA", "selector can't move: FINDA sees filament",
+             "check the FINDA and remove filament from the selector, then Retry", True),
+    0x800C: ("FILAMENT_EJECTED", "04507", "FILAMENT EJECTED", "filament ejected",
+             "remove the filament, then Continue", False),
+    0x800D: ("MCU_UNDERVOLTAGE_VCC", "04306", "MMU MCU ERROR", "MMU supply voltage too low",
+             "check the power supply, then reset the MMU", False),
+    0x8029: ("FILAMENT_CHANGE", "04508", "FILAMENT CHANGE", "filament change requested by the printer",
+             "follow the printer's instructions", False),
+    0x802A: ("LOAD_TO_EXTRUDER_FAILED", "04108", "LOAD TO EXTR. FAILED", "loading to the extruder failed",
+             "check the extruder, then Continue", False),
+    0x802B: ("QUEUE_FULL", "04503", "QUEUE FULL", "MMU motion queue overflow", "reset the MMU", False),
+    0x802C: ("VERSION_MISMATCH", "04504", "MMU FW UPDATE NEEDED", "MMU firmware version not supported",
+             "update the MMU firmware", False),
+    0x802D: ("PROTOCOL_ERROR", "04402", "COMMUNICATION ERROR", "communication with the MMU failed",
+             "check the cable, then reset the MMU", False),
+    0x802E: ("MMU_NOT_RESPONDING", "04401", "MMU NOT RESPONDING", "the MMU does not answer",
+             "check the cable and the MMU's power, then reset the MMU", False),
+    0x802F: ("INTERNAL", "04505", "FW RUNTIME ERROR", "MMU firmware internal error", "reset the MMU", False),
+}
+_AXIS_CODES = {
+    # base: (name, {axis: printer code}, title, meaning, action, retryable)
+    0x8007: ("HOMING_FAILED", {0x80: "04115", 0x100: "04125", 0x40: "04105"}, "HOMING FAILED",
+             "homing failed", "check the {axis} can move freely, then Retry", True),
+    0x800B: ("MOVE_FAILED", {0x80: "04116", 0x100: "04126", 0x40: "04105"}, "MOVE FAILED",
+             "move failed", "check the {axis} can move freely, then Retry", True),
+}
+_TMC_PRINTER = {
+    0x0200: ("04301", "04311", "04321"), 0x0400: ("04302", "04312", "04322"),
+    0x0800: ("04303", "04313", "04323"), 0x1000: ("04304", "04314", "04324"),
+    0x2000: ("04201", "04211", "04221"), 0x4000: ("04202", "04212", "04222"),
+}
+_AXIS_INDEX = {0x40: 0, 0x80: 1, 0x100: 2}
+
+
+def axes_in(code: int) -> list[str]:
+    return [name for bit, name in AXIS_BITS.items() if code & bit]
+
+
+def describe_error(code: int) -> ErrorInfo:
+    """Name, words and the action a person should take for any 16-bit MMU error code, combined flags included."""
+    if code in _BASIC:
+        name, pcode, title, meaning, action, retry = _BASIC[code]
+        return ErrorInfo(code, name, title, meaning, action, pcode, retry)
+    axes = axes_in(code)
+    axis_words = " and ".join(axes) or "axis"
+    base = code & ~AXIS_MASK
+    if base in _AXIS_CODES:
+        name, pcodes, title, meaning, action, retry = _AXIS_CODES[base]
+        axis_bits = code & AXIS_MASK
+        suffix = "_" + "_".join(a.upper() for a in axes) if axes else ""
+        if base == 0x8007 and axis_bits == 0x40:
+            name, suffix = "STALLED_PULLEY", ""
+        return ErrorInfo(code, name + suffix, title, f"{axis_words} {meaning}", action.format(axis=axis_words),
+                         pcodes.get(axis_bits, ""), retry)
+    if base == SOLDERING_NEEDS_ATTENTION:
+        return ErrorInfo(code, "MMU_SOLDERING_NEEDS_ATTENTION", "SOLDERING NEEDS ATTENTION",
+                         f"{axis_words} driver failed the power-on test (soldering needs attention)",
+                         "check the MMU board, then reset the MMU", "", False)
+    rest = base & ~TMC_BASE
+    if base & TMC_BASE and rest and not rest & ~0x7E00:
+        flags = [bit for bit in TMC_FLAGS if rest & bit]
+        if flags:
+            name = "|".join(TMC_FLAGS[f] for f in flags)
+            words = ", ".join(TMC_WORDS[f] for f in flags)
+            warn_only = flags == [0x2000]
+            axis_bits = code & AXIS_MASK
+            pcode = ""
+            if len(flags) == 1 and axis_bits in _AXIS_INDEX:
+                pcode = _TMC_PRINTER[flags[0]][_AXIS_INDEX[axis_bits]]
+            action = "let the MMU cool down, then Continue" if warn_only else "reset the MMU"
+            return ErrorInfo(code, name + ("_" + "_".join(a.upper() for a in axes) if axes else ""),
+                             "TMC DRIVER ERROR", f"{axis_words} driver: {words}", action, pcode, False)
+    return ErrorInfo(code, f"ERROR_{code:X}", "UNKNOWN ERROR", f"unknown error 0x{code:x}", "reset the MMU", "",
+                     False)
+
+
+def tmc_error(flag: int, axis: str) -> int:
+    """The error code a driver fault on one axis produces (`flag` from TMC_FLAGS)."""
+    bit = {v: k for k, v in AXIS_BITS.items()}[axis]
+    return TMC_BASE | flag | bit
+
+
+# ------------------------------------------------------------------------------------------- registers
+
+class Access(enum.Enum):
+    RO = "read-only"
+    RW = "read/write"
+    RW_304 = "read-only before 3.0.4, read/write from 3.0.4"
+
+
+@dataclass(frozen=True, slots=True)
+class Register:
+    address: int
+    name: str
+    bits: int
+    access: Access
+    default: int | None
+    meaning: str
+
+    def writable(self, version: tuple[int, int, int]) -> bool:
+        if self.access is Access.RW:
+            return True
+        return self.access is Access.RW_304 and version >= (3, 0, 4)
+
+
+REGISTERS: tuple[Register, ...] = (
+    Register(0x00, "project_major", 8, Access.RO, 3, "firmware major version"),
+    Register(0x01, "project_minor", 8, Access.RO, 0, "firmware minor version"),
+    Register(0x02, "project_revision", 8, Access.RO, None, "firmware revision"),
+    Register(0x03, "project_build", 16, Access.RO, None, "firmware build number"),
+    Register(0x04, "drive_errors", 16, Access.RO, 0, "drive errors counted since the EEPROM was reset"),
+    Register(0x05, "progress", 8, Access.RO, None, "current progress code"),
+    Register(0x06, "error", 16, Access.RO, None, "current error code"),
+    Register(0x07, "filament_state", 8, Access.RW, 1, "where the filament is (0,1,2,4,8)"),
+    Register(0x08, "finda", 8, Access.RO, 0, "FINDA sees filament (1) or not (0)"),
+    Register(0x09, "fsensor", 8, Access.RW, 0, "printer filament sensor as reported by the printer"),
+    Register(0x0A, "motor_mode", 8, Access.RO, 0, "0 normal, 1 stealth"),
+    Register(0x0B, "extra_load_distance", 8, Access.RW, 30, "mm pushed from the filament sensor to the nozzle"),
+    Register(0x0C, "fsensor_unload_check_distance", 8, Access.RW, 40, "mm pulled before the sensor must be clear"),
+    Register(0x0D, "pulley_unload_feedrate", 16, Access.RW, 95, "mm/s"),
+    Register(0x0E, "pulley_acceleration", 16, Access.RW_304, 800, "mm/s²"),
+    Register(0x0F, "selector_acceleration", 16, Access.RW_304, 200, "mm/s²"),
+    Register(0x10, "idler_acceleration", 16, Access.RW_304, 500, "deg/s²"),
+    Register(0x11, "pulley_load_feedrate", 16, Access.RW, 95, "mm/s"),
+    Register(0x12, "selector_nominal_feedrate", 16, Access.RW, 45, "mm/s"),
+    Register(0x13, "idler_nominal_feedrate", 16, Access.RW, 300, "deg/s"),
+    Register(0x14, "pulley_slow_feedrate", 16, Access.RW, 20, "mm/s"),
+    Register(0x15, "selector_homing_feedrate", 16, Access.RW, 30, "mm/s"),
+    Register(0x16, "idler_homing_feedrate", 16, Access.RW, 265, "deg/s"),
+    Register(0x17, "pulley_sg_thrs", 8, Access.RW, 8, "pulley StallGuard threshold"),
+    Register(0x18, "selector_sg_thrs", 8, Access.RW, 3, "selector StallGuard threshold"),
+    Register(0x19, "idler_sg_thrs", 8, Access.RW, 7, "idler StallGuard threshold"),
+    Register(0x1A, "pulley_position", 16, Access.RO, 0, "pulley position, mm"),
+    Register(0x1B, "selector_slot", 8, Access.RW, None, "selector slot (5 = park, 255 = unknown)"),
+    Register(0x1C, "idler_slot", 8, Access.RW, None, "idler slot (5 = disengaged, 255 = unknown)"),
+    Register(0x1D, "selector_cut_irun", 8, Access.RW, 40, "selector current while cutting"),
+    Register(0x1E, "pulley_irun", 8, Access.RW, 13, "pulley run current"),
+    Register(0x1F, "selector_irun", 8, Access.RW, 31, "selector run current"),
+    Register(0x20, "idler_irun", 8, Access.RW, 31, "idler run current"),
+    Register(0x21, "vcc", 16, Access.RO, 225, "supply voltage (placeholder value)"),
+    Register(0x22, "bowden_length", 16, Access.RW, 360, "bowden tube length, mm (341-1000)"),
+    Register(0x23, "cut_length", 8, Access.RW, 8, "mm of filament cut"),
+)
+REGISTER_COUNT = len(REGISTERS)
+REGISTERS_BY_NAME = {r.name: r for r in REGISTERS}
+
+
+def find_register(text: str) -> Register | None:
+    """A register by name or by address (decimal, or hex with 0x)."""
+    key = text.strip().lower().replace("-", "_")
+    if key in REGISTERS_BY_NAME:
+        return REGISTERS_BY_NAME[key]
+    try:
+        address = int(key, 0)
+    except ValueError:
+        return None
+    return REGISTERS[address] if 0 <= address < REGISTER_COUNT else None
+
+
+# ---------------------------------------------------------------------------------------------- versions
+
+@dataclass(frozen=True, slots=True)
+class FirmwareVersion:
+    major: int
+    minor: int
+    revision: int
+    build: int
+
+    @property
+    def triple(self) -> tuple[int, int, int]:
+        return (self.major, self.minor, self.revision)
+
+    def __str__(self) -> str:
+        return f"{self.major}.{self.minor}.{self.revision}+{self.build}"
+
+
+FIRMWARES = {
+    "3.0.2": FirmwareVersion(3, 0, 2, 878),
+    "3.0.3": FirmwareVersion(3, 0, 3, 896),
+    "3.0.4": FirmwareVersion(3, 0, 4, 936),
+}

@@ -1,0 +1,617 @@
+"""Sans-IO codec for the MMU3 serial protocol, both roles, exact to the byte.
+
+Requests (`T1*cf`) go printer → MMU, responses (`T1 A*27`) come back. Numbers are minimal lowercase hex; the
+CRC-8 (poly 0x07) covers the binary field values, not the text. The two decoders reproduce the firmware's
+byte-at-a-time automata, quirks included: over-long numbers keep their low bits, an empty number is 0, uppercase
+hex is an error, `\\r` ends a message like `\\n`, and after an error everything up to the next newline is eaten —
+so a bad line also costs the message after it when the error was only noticed at its newline.
+
+A fast path decodes well-formed lines with a regular expression and a CRC table and memoises them; anything
+else goes through the exact automaton, so both give the same events.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import ClassVar, Final
+
+from fabwire.errors import LocalProtocolError, RemoteProtocolError
+
+REQUEST_CODES: Final = "QTLMUXPSBEWKFfHR"
+PARAM_CODES: Final = "ARPEFB"
+COMMAND_CODES: Final = "TLUEKHM"
+"""Requests the MMU plans as a command (busy rule, `currentCommand` echo in Q0 replies)."""
+
+# ------------------------------------------------------------------------------------------------- CRC-8
+
+
+def _crc_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table.append(crc)
+    return tuple(table)
+
+
+CRC_TABLE: Final = _crc_table()
+
+
+def crc8(data: bytes | bytearray, crc: int = 0) -> int:
+    """CRC-8/SMBUS: poly 0x07, init 0, no reflection, no final XOR."""
+    table = CRC_TABLE
+    for byte in data:
+        crc = table[crc ^ byte]
+    return crc
+
+
+def request_crc(code: str, value: int, value2: int = 0) -> int:
+    """The request CRC: over code, value and the 16-bit W word little-endian (0 for every other request)."""
+    t = CRC_TABLE
+    return t[t[t[t[ord(code)] ^ (value & 0xFF)] ^ (value2 & 0xFF)] ^ ((value2 >> 8) & 0xFF)]
+
+
+def response_crc(code: str, value: int, param: str, pvalue: int) -> int:
+    """The response CRC: the request CRC with value2 = 0, continued over param code and 16-bit value."""
+    t = CRC_TABLE
+    crc = t[request_crc(code, value) ^ ord(param)]
+    return t[t[crc ^ (pvalue & 0xFF)] ^ ((pvalue >> 8) & 0xFF)]
+
+
+# ---------------------------------------------------------------------------------------------- messages
+
+
+def _check(name: str, value: int, bits: int) -> None:
+    if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value < (1 << bits):
+        raise LocalProtocolError(f"{name} must be an integer from 0 to {(1 << bits) - 1}, not {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A printer → MMU request; `value` is the 8-bit field after the code."""
+
+    code: ClassVar[str] = "?"
+    value: int = 0
+
+    def __post_init__(self) -> None:
+        _check(f"{type(self).__name__} value", self.value, 8)
+
+    @property
+    def value2(self) -> int:
+        return 0
+
+    def __str__(self) -> str:
+        return f"{self.code}{self.value:x}"
+
+
+@dataclass(frozen=True, slots=True)
+class Query(Request):
+    code: ClassVar[str] = "Q"
+
+
+@dataclass(frozen=True, slots=True)
+class ToolChange(Request):
+    code: ClassVar[str] = "T"
+
+
+@dataclass(frozen=True, slots=True)
+class Load(Request):
+    code: ClassVar[str] = "L"
+
+
+@dataclass(frozen=True, slots=True)
+class Mode(Request):
+    """0 = normal (SpreadCycle), anything else = stealth."""
+
+    code: ClassVar[str] = "M"
+
+
+@dataclass(frozen=True, slots=True)
+class Unload(Request):
+    code: ClassVar[str] = "U"
+
+
+@dataclass(frozen=True, slots=True)
+class Reset(Request):
+    """0 reboots; 42 erases the EEPROM first. Never answered."""
+
+    code: ClassVar[str] = "X"
+
+
+@dataclass(frozen=True, slots=True)
+class FindaQuery(Request):
+    code: ClassVar[str] = "P"
+
+
+@dataclass(frozen=True, slots=True)
+class Version(Request):
+    """`value` is a register address: 0 major, 1 minor, 2 revision, 3 build."""
+
+    code: ClassVar[str] = "S"
+
+
+@dataclass(frozen=True, slots=True)
+class ButtonPress(Request):
+    code: ClassVar[str] = "B"
+
+
+@dataclass(frozen=True, slots=True)
+class Eject(Request):
+    code: ClassVar[str] = "E"
+
+
+@dataclass(frozen=True, slots=True)
+class Cut(Request):
+    code: ClassVar[str] = "K"
+
+
+@dataclass(frozen=True, slots=True)
+class FilamentType(Request):
+    """Decoded by the MMU but never answered."""
+
+    code: ClassVar[str] = "F"
+
+
+@dataclass(frozen=True, slots=True)
+class FSensorState(Request):
+    """The printer's filament sensor: 0 off; 1, 2 and 3 all count as on."""
+
+    code: ClassVar[str] = "f"
+
+
+@dataclass(frozen=True, slots=True)
+class Home(Request):
+    code: ClassVar[str] = "H"
+
+
+@dataclass(frozen=True, slots=True)
+class Read(Request):
+    """`value` is the register address."""
+
+    code: ClassVar[str] = "R"
+
+
+@dataclass(frozen=True, slots=True)
+class Write(Request):
+    """`value` is the register address, `data` the 16-bit word written."""
+
+    code: ClassVar[str] = "W"
+    data: int = 0
+
+    def __post_init__(self) -> None:
+        _check("Write address", self.value, 8)
+        _check("Write data", self.data, 16)
+
+    @property
+    def address(self) -> int:
+        return self.value
+
+    @property
+    def value2(self) -> int:
+        return self.data
+
+    def __str__(self) -> str:
+        return f"W{self.value:x} {self.data:x}"
+
+
+REQUEST_TYPES: Final[dict[str, type[Request]]] = {
+    cls.code: cls
+    for cls in (Query, ToolChange, Load, Mode, Unload, Reset, FindaQuery, Version, ButtonPress, Eject, Write, Cut,
+                FilamentType, FSensorState, Home, Read)
+}
+
+
+def make_request(code: str, value: int = 0, data: int = 0) -> Request:
+    cls = REQUEST_TYPES.get(code)
+    if cls is None:
+        raise LocalProtocolError(f"{code!r} is not an MMU request code (one of {REQUEST_CODES})")
+    if cls is Write:
+        return Write(value, data)
+    if data:
+        raise LocalProtocolError(f"only W requests carry a data word, not {code!r}")
+    return cls(value)
+
+
+@dataclass(frozen=True, slots=True)
+class Response:
+    """An MMU → printer reply: the echoed request (`request_code`, `request_value`), a parameter and its value.
+
+    `value` is None when the text had no digits (acknowledgements); the CRC then counts it as 0.
+    """
+
+    param: ClassVar[str] = "?"
+    request_code: str
+    request_value: int = 0
+    value: int | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.request_code, str) or len(self.request_code) != 1 or \
+                self.request_code not in REQUEST_CODES:
+            raise LocalProtocolError(f"{self.request_code!r} is not an MMU request code (one of {REQUEST_CODES})")
+        _check("response request value", self.request_value, 8)
+        if self.value is not None:
+            _check(f"{type(self).__name__} value", self.value, 16)
+
+    @property
+    def number(self) -> int:
+        """The value as the firmware sees it (missing digits = 0)."""
+        return self.value or 0
+
+    @property
+    def command(self) -> str:
+        return f"{self.request_code}{self.request_value:x}"
+
+    def answers(self, request: Request) -> bool:
+        return self.request_code == request.code and self.request_value == request.value
+
+    def __str__(self) -> str:
+        digits = "" if self.value is None else f"{self.value:x}"
+        return f"{self.command} {self.param}{digits}"
+
+
+@dataclass(frozen=True, slots=True)
+class Accepted(Response):
+    param: ClassVar[str] = "A"
+
+
+@dataclass(frozen=True, slots=True)
+class Rejected(Response):
+    param: ClassVar[str] = "R"
+
+
+@dataclass(frozen=True, slots=True)
+class Processing(Response):
+    """The command is running; `value` is a progress code."""
+
+    param: ClassVar[str] = "P"
+
+
+@dataclass(frozen=True, slots=True)
+class CommandError(Response):
+    """The command stopped on an error; `value` is an error code."""
+
+    param: ClassVar[str] = "E"
+
+
+@dataclass(frozen=True, slots=True)
+class Finished(Response):
+    """The command finished; `value` is a result code (0 OK, 1 cancelled)."""
+
+    param: ClassVar[str] = "F"
+
+
+@dataclass(frozen=True, slots=True)
+class ButtonPressed(Response):
+    """A button was pressed on the MMU during a tool change; the printer decides what it means."""
+
+    param: ClassVar[str] = "B"
+
+
+RESPONSE_TYPES: Final[dict[str, type[Response]]] = {
+    cls.param: cls for cls in (Accepted, Rejected, Processing, CommandError, Finished, ButtonPressed)
+}
+
+
+@dataclass(frozen=True, slots=True)
+class DecodeError:
+    """Bytes the decoder could not accept; `data` is the start of the offending line (at most 32 bytes)."""
+
+    reason: str
+    data: bytes = b""
+
+    def exception(self) -> RemoteProtocolError:
+        return RemoteProtocolError(f"MMU protocol error: {self.reason} in {self.data!r}")
+
+
+Message = Request | Response
+RequestEvent = Request | DecodeError
+ResponseEvent = Response | DecodeError
+
+# ---------------------------------------------------------------------------------------------- encoding
+
+_ENCODED: dict[Message, bytes] = {}
+_CACHE_LIMIT = 4096
+
+
+def encode_request(request: Request) -> bytes:
+    if not isinstance(request, Request) or type(request) is Request:
+        raise LocalProtocolError(f"cannot encode {request!r} as an MMU request")
+    out = _ENCODED.get(request)
+    if out is None:
+        code, value, value2 = request.code, request.value, request.value2
+        crc = request_crc(code, value, value2)
+        out = f"{request}*{crc:x}\n".encode()
+        if len(_ENCODED) >= _CACHE_LIMIT:
+            _ENCODED.clear()
+        _ENCODED[request] = out
+    return out
+
+
+def encode_response(response: Response) -> bytes:
+    if not isinstance(response, Response) or type(response) is Response:
+        raise LocalProtocolError(f"cannot encode {response!r} as an MMU response")
+    out = _ENCODED.get(response)
+    if out is None:
+        crc = response_crc(response.request_code, response.request_value, response.param, response.number)
+        out = f"{response}*{crc:x}\n".encode()
+        if len(_ENCODED) >= _CACHE_LIMIT:
+            _ENCODED.clear()
+        _ENCODED[response] = out
+    return out
+
+
+def encode(message: Message) -> bytes:
+    if isinstance(message, Request):
+        return encode_request(message)
+    return encode_response(message)
+
+
+# ---------------------------------------------------------------------------------------------- decoding
+
+_HEX: Final = tuple(int(chr(b), 16) if chr(b) in "0123456789abcdef" else -1 for b in range(256))
+_NEWLINE: Final = (0x0A, 0x0D)
+_REQUEST_CODE_BYTES: Final = frozenset(REQUEST_CODES.encode())
+_PARAM_CODE_BYTES: Final = frozenset(PARAM_CODES.encode())
+_ERROR_SNIPPET = 32
+
+_FAST_REQUEST = re.compile(rb"([QTLMUXPSBEKFfHR])([0-9a-f]*)\*([0-9a-f]*)")
+_FAST_WRITE = re.compile(rb"W([0-9a-f]*) ([0-9a-f]*)\*([0-9a-f]*)")
+_FAST_RESPONSE = re.compile(rb"([QTLMUXPSBEWKFfHR])([0-9a-f]*) ([ARPEFB])([0-9a-f]*)\*([0-9a-f]*)")
+
+
+_set = object.__setattr__
+
+
+def _response(cls: type[Response], code: str, value: int, pvalue: int | None) -> Response:
+    """Build a decoded response without re-validating fields the decoder already bounded."""
+    message = object.__new__(cls)
+    _set(message, "request_code", code)
+    _set(message, "request_value", value)
+    _set(message, "value", pvalue)
+    return message
+
+
+def _hex(digits: bytes, mask: int) -> int:
+    return int(digits, 16) & mask if digits else 0
+
+
+class _Decoder:
+    """Shared plumbing: memo of well-formed lines, error snippets, the line-by-line driver."""
+
+    _START = 0
+    _ERROR = 5
+
+    def __init__(self) -> None:
+        self._state = self._START
+        self._line = bytearray()
+        self._memo: dict[bytes, Message] = {}
+        self.errors = 0
+        """How many error events this decoder has produced."""
+
+    @property
+    def idle(self) -> bool:
+        """True between messages (no partial line pending)."""
+        return self._state == self._START and not self._line
+
+    def reset(self) -> None:
+        self._state = self._START
+        self._line.clear()
+
+    def _fail(self, reason: str, events: list[object]) -> None:
+        events.append(DecodeError(reason, bytes(self._line)))
+        self.errors += 1
+        self._state = self._ERROR
+        self._line.clear()
+
+    def _fast(self, line: bytes) -> Message | None:
+        raise NotImplementedError
+
+    def _step(self, byte: int, events: list[object]) -> None:
+        raise NotImplementedError
+
+    def _feed(self, data: bytes) -> list[object]:
+        events: list[object] = []
+        memo = self._memo
+        start = self._START
+        pos, size = 0, len(data)
+        while pos < size:
+            if self._state == start and not self._line:
+                nl = data.find(b"\n", pos)
+                if nl < 0:
+                    end = size
+                else:
+                    line = data[pos:nl]
+                    message = memo.get(line)
+                    if message is None:
+                        message = self._fast(line)
+                        if message is not None:
+                            if len(memo) >= _CACHE_LIMIT:
+                                memo.clear()
+                            memo[line] = message
+                    if message is not None:
+                        events.append(message)
+                        pos = nl + 1
+                        continue
+                    end = nl + 1
+            else:
+                nl = data.find(b"\n", pos)
+                end = size if nl < 0 else nl + 1
+            step = self._step
+            for i in range(pos, end):
+                step(data[i], events)
+            pos = end
+        return events
+
+
+class RequestDecoder(_Decoder):
+    """The MMU's request automaton. `feed` returns requests and `DecodeError`s; a line that ends in error gives
+    no message (the firmware completes it as an 'unknown' request and does not answer)."""
+
+    _CODE, _VALUE, _ADDRESS, _WVALUE, _CRC = 0, 1, 2, 3, 4
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._code = ""
+        self._value = 0
+        self._value2 = 0
+        self._crc = 0
+
+    def feed(self, data: bytes | bytearray) -> list[RequestEvent]:
+        return self._feed(bytes(data))  # type: ignore[return-value]
+
+    def _fast(self, line: bytes) -> Request | None:
+        match = _FAST_REQUEST.fullmatch(line)
+        if match is not None:
+            code, value, crc = match.group(1).decode(), _hex(match.group(2), 0xFF), _hex(match.group(3), 0xFF)
+            if crc != request_crc(code, value):
+                return None
+            return REQUEST_TYPES[code](value)
+        match = _FAST_WRITE.fullmatch(line)
+        if match is not None:
+            value, data, crc = (_hex(match.group(1), 0xFF), _hex(match.group(2), 0xFFFF),
+                                _hex(match.group(3), 0xFF))
+            if crc != request_crc("W", value, data):
+                return None
+            return Write(value, data)
+        return None
+
+    def _step(self, byte: int, events: list[object]) -> None:
+        state = self._state
+        if state == self._ERROR:
+            if byte in _NEWLINE:
+                self._state = self._CODE
+            return
+        if len(self._line) < _ERROR_SNIPPET:
+            self._line.append(byte)
+        nibble = _HEX[byte]
+        if state == self._CODE:
+            if byte in _REQUEST_CODE_BYTES:
+                self._code = chr(byte)
+                self._value = self._value2 = self._crc = 0
+                self._state = self._ADDRESS if byte == 0x57 else self._VALUE
+                return
+            self._fail("not a request code", events)
+        elif state == self._VALUE:
+            if nibble >= 0:
+                self._value = ((self._value << 4) | nibble) & 0xFF
+            elif byte == 0x2A:
+                self._state = self._CRC
+            else:
+                self._fail("expected a lowercase hex digit or '*'", events)
+        elif state == self._ADDRESS:
+            if nibble >= 0:
+                self._value = ((self._value << 4) | nibble) & 0xFF
+            elif byte == 0x20:
+                self._state = self._WVALUE
+            else:
+                self._fail("expected a lowercase hex digit or ' ' after the W address", events)
+        elif state == self._WVALUE:
+            if nibble >= 0:
+                self._value2 = ((self._value2 << 4) | nibble) & 0xFFFF
+            elif byte == 0x2A:
+                self._state = self._CRC
+            else:
+                self._fail("expected a lowercase hex digit or '*'", events)
+        else:  # CRC
+            if nibble >= 0:
+                self._crc = ((self._crc << 4) | nibble) & 0xFF
+            elif byte in _NEWLINE:
+                if self._crc == request_crc(self._code, self._value, self._value2):
+                    cls = REQUEST_TYPES[self._code]
+                    events.append(Write(self._value, self._value2) if cls is Write else cls(self._value))
+                    self._state = self._CODE
+                    self._line.clear()
+                else:
+                    self._fail("CRC mismatch", events)
+            else:
+                self._fail("expected a lowercase hex digit or newline in the CRC", events)
+
+
+class ResponseDecoder(_Decoder):
+    """The printer's response automaton: like the request one, but leading CR/LF are skipped."""
+
+    _RCODE, _RVALUE, _PCODE, _PVALUE, _CRC = 0, 1, 2, 3, 4
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._code = ""
+        self._value = 0
+        self._param = ""
+        self._pvalue = 0
+        self._digits = False
+        self._crc = 0
+
+    def feed(self, data: bytes | bytearray) -> list[ResponseEvent]:
+        return self._feed(bytes(data))  # type: ignore[return-value]
+
+    def _fast(self, line: bytes) -> Response | None:
+        match = _FAST_RESPONSE.fullmatch(line)
+        if match is None:
+            return None
+        code_b, value_b, param_b, digits, crc_b = match.groups()
+        code, param = chr(code_b[0]), chr(param_b[0])
+        value = int(value_b, 16) & 0xFF if value_b else 0
+        pvalue = int(digits, 16) & 0xFFFF if digits else 0
+        crc = int(crc_b, 16) & 0xFF if crc_b else 0
+        if crc != response_crc(code, value, param, pvalue):
+            return None
+        return _response(RESPONSE_TYPES[param], code, value, pvalue if digits else None)
+
+    def _step(self, byte: int, events: list[object]) -> None:
+        state = self._state
+        if state == self._ERROR:
+            if byte in _NEWLINE:
+                self._state = self._RCODE
+            return
+        nibble = _HEX[byte]
+        if state == self._RCODE:
+            if byte in _NEWLINE:
+                return
+            self._line.append(byte)
+            if byte in _REQUEST_CODE_BYTES:
+                self._code = chr(byte)
+                self._value = self._pvalue = self._crc = 0
+                self._state = self._RVALUE
+                return
+            self._fail("not a request code", events)
+            return
+        if len(self._line) < _ERROR_SNIPPET:
+            self._line.append(byte)
+        if state == self._RVALUE:
+            if nibble >= 0:
+                self._value = ((self._value << 4) | nibble) & 0xFF
+            elif byte == 0x20:
+                self._state = self._PCODE
+            else:
+                self._fail("expected a lowercase hex digit or ' '", events)
+        elif state == self._PCODE:
+            if byte in _PARAM_CODE_BYTES:
+                self._param = chr(byte)
+                self._pvalue = 0
+                self._digits = False
+                self._state = self._PVALUE
+            else:
+                self._fail("not a response parameter code", events)
+        elif state == self._PVALUE:
+            if nibble >= 0:
+                self._pvalue = ((self._pvalue << 4) | nibble) & 0xFFFF
+                self._digits = True
+            elif byte == 0x2A:
+                self._state = self._CRC
+            else:
+                self._fail("expected a lowercase hex digit or '*'", events)
+        else:  # CRC
+            if nibble >= 0:
+                self._crc = ((self._crc << 4) | nibble) & 0xFF
+            elif byte in _NEWLINE:
+                if self._crc == response_crc(self._code, self._value, self._param, self._pvalue):
+                    events.append(_response(RESPONSE_TYPES[self._param], self._code, self._value,
+                                            self._pvalue if self._digits else None))
+                    self._state = self._RCODE
+                    self._line.clear()
+                else:
+                    self._fail("CRC mismatch", events)
+            else:
+                self._fail("expected a lowercase hex digit or newline in the CRC", events)

@@ -1,0 +1,195 @@
+"""An MMU3 on the wire: the firmware's request automaton and dispatch rules in front of the machine model.
+
+One request is processed per tick, nothing is ever sent unprompted, X/F/garbage/bad CRC get no reply, and the
+UART is deaf while booting. Model time = real time × speed, from an injectable clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Sequence
+from typing import Protocol
+
+from fabwire.errors import InputError, LinkClosed
+from fabwire.mmu import codes
+from fabwire.mmu.model import Fault, HistoryItem, MMUModel, parse_fault
+from fabwire.mmu.protocol import Request, RequestDecoder, encode_response
+from fabwire.transport import Transport, register_simulator, spawn_in_process
+
+PENDING_LIMIT = 8
+"""Decoded requests waiting for the main loop; the real RX ring holds 32 bytes, so a flood loses messages."""
+
+
+def firmware(version: str) -> codes.FirmwareVersion:
+    try:
+        return codes.FIRMWARES[version]
+    except KeyError:
+        raise InputError(f"unknown MMU firmware {version!r}; choose one of {', '.join(codes.FIRMWARES)}") from None
+
+
+class MMUSimulator:
+    """A whole MMU: control plane (faults, buttons) plus `serve(transport)` for one connection at a time."""
+
+    def __init__(self, version: str = "3.0.4", *, speed: float = 1.0, faults: Iterable[str | Fault] = (),
+                 clock: Callable[[], float] | None = None) -> None:
+        if not speed > 0:
+            raise InputError(f"speed must be positive, not {speed}")
+        self.speed = speed
+        self._clock = clock or time.monotonic
+        self._t0 = self._clock()
+        parsed = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)
+        self.model = MMUModel(firmware(version), faults=parsed, now=0.0)
+        self._decoder = RequestDecoder()
+        self._pending: deque[Request] = deque()
+        self.dropped_requests = 0
+
+    # ------------------------------------------------------------------------------------------ sans-IO
+
+    def now(self) -> float:
+        """Model seconds since power-on."""
+        return (self._clock() - self._t0) * self.speed
+
+    def receive(self, data: bytes, now: float | None = None) -> None:
+        """Bytes from the printer. While booting they are lost, as on the real UART."""
+        now = self.now() if now is None else now
+        self.model.advance(now)
+        if self.model.booting:
+            return
+        for event in self._decoder.feed(data):
+            if isinstance(event, Request):
+                if len(self._pending) >= PENDING_LIMIT:
+                    self.dropped_requests += 1
+                    continue
+                self._pending.append(event)
+
+    @property
+    def pending(self) -> int:
+        return len(self._pending)
+
+    def tick(self, now: float | None = None) -> bytes:
+        """One main-loop pass: process at most one request; return the reply bytes (often none)."""
+        now = self.now() if now is None else now
+        self.model.advance(now)
+        if self.model.booting:
+            self._pending.clear()
+            return b""
+        if not self._pending:
+            return b""
+        reply = self.model.handle(self._pending.popleft(), now)
+        if self.model.booting:  # X: the board resets, whatever was still queued is lost
+            self._pending.clear()
+            self._decoder.reset()
+        return b"" if reply is None else encode_response(reply)
+
+    def exchange(self, data: bytes, now: float | None = None) -> bytes:
+        """Receive `data` and run ticks until every complete request has been handled."""
+        self.receive(data, now)
+        out = bytearray()
+        while self._pending:
+            out += self.tick(now)
+        return bytes(out)
+
+    # ------------------------------------------------------------------------------------------ control
+
+    def inject(self, fault: str | Fault) -> None:
+        self.model.inject(fault)
+
+    def press(self, button: int) -> None:
+        self.model.advance(self.now())
+        self.model.press(button)
+
+    @property
+    def history(self) -> list[HistoryItem]:
+        return list(self.model.history)
+
+    def progress_sequence(self, command: str | None = None) -> list[str]:
+        """`P5`, `E8001`, `F0`… in order, for one command's echo (e.g. 'T1') or all."""
+        return [f"{h.kind}{h.value:x}" for h in self.model.history if command is None or h.command == command]
+
+    # ------------------------------------------------------------------------------------------ serving
+
+    async def serve(self, transport: Transport) -> None:
+        """Answer one connection until it closes. A new connection sees the same machine (like a UART)."""
+        self._decoder.reset()
+        self._pending.clear()
+        try:
+            while True:
+                data = await transport.read(256)
+                self.receive(data)
+                while self._pending:
+                    out = self.tick()
+                    if out:
+                        await transport.write(out)
+                    await asyncio.sleep(0)
+        except LinkClosed:
+            return
+
+
+def options_to_simulator(options: dict[str, str]) -> MMUSimulator:
+    speed_text = options.get("speed", "1")
+    try:
+        speed = float(speed_text)
+    except ValueError:
+        raise InputError(f"sim://mmu speed must be a number, not {speed_text!r}") from None
+    faults = [f for f in options.get("fault", "").split(",") if f.strip()]
+    return MMUSimulator(options.get("version", "3.0.4"), speed=speed, faults=faults)
+
+
+async def _factory(options: dict[str, str]) -> Transport:
+    return await spawn_in_process("mmu", options_to_simulator(options).serve)
+
+
+register_simulator("mmu", _factory)
+
+
+class Lockstep:
+    """A host core and a simulator wired together on one fake clock: deterministic, instant, no I/O.
+
+    `host` needs `data_to_send`, `receive(data, now)`, `handle_timer(now)`, `next_deadline()` and `events()`.
+    """
+
+    def __init__(self, host: LockstepHost, simulator: MMUSimulator, now: float = 0.0) -> None:
+        self.host = host
+        self.sim = simulator
+        self.now = now
+        self.wire: list[tuple[float, str, bytes]] = []
+        self.record = False
+
+    def run(self, until: Callable[[list[object]], bool], limit: float = 600.0,
+            mangle: Callable[[bytes], bytes] | None = None) -> list[object]:
+        """Advance until `until(new_events)` is true or `limit` seconds of fake time pass; return all events."""
+        seen: list[object] = []
+        end = self.now + limit
+        while True:
+            data = self.host.data_to_send()
+            if data:
+                if self.record:
+                    self.wire.append((self.now, ">", data))
+                reply = self.sim.exchange(data, self.now)
+                if reply and mangle is not None:
+                    reply = mangle(reply)
+                if reply:
+                    if self.record:
+                        self.wire.append((self.now, "<", reply))
+                    self.host.receive(reply, self.now)
+            new = list(self.host.events())
+            seen += new
+            if new and until(new):
+                return seen
+            if data:
+                continue
+            deadline = self.host.next_deadline()
+            if deadline is None or deadline > end:
+                return seen
+            self.now = max(self.now, deadline)
+            self.host.handle_timer(self.now)
+
+
+class LockstepHost(Protocol):
+    def data_to_send(self) -> bytes: ...
+    def receive(self, data: bytes, now: float) -> None: ...
+    def handle_timer(self, now: float) -> None: ...
+    def next_deadline(self) -> float | None: ...
+    def events(self) -> Sequence[object]: ...

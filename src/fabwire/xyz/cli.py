@@ -1,0 +1,460 @@
+"""`fabwire xyz …` (drive a da Vinci printer) and `fabwire sim xyz` (be one)."""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import sys
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+from rich.panel import Panel
+from rich.progress import (
+    BarColumn,
+    DownloadColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeRemainingColumn,
+    TransferSpeedColumn,
+)
+from rich.table import Table
+
+from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
+from fabwire.devices import XYZ
+from fabwire.errors import InputError
+from fabwire.simserve import server_options
+from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.models import PrinterModel, find_model
+from fabwire.xyz.protocol import Link
+from fabwire.xyz.status import Status
+
+T = TypeVar("T")
+
+
+@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.")
+def xyz() -> None:
+    """XYZprinting da Vinci printers."""
+
+
+def _link_kind(dctx: DeviceContext) -> Link | None:
+    endpoint = dctx.target().endpoint
+    if endpoint.scheme == "sim":
+        return Link.WIFI if endpoint.options.get("link") == "wifi" else Link.SERIAL
+    return Link.WIFI if endpoint.scheme == "tcp" else Link.SERIAL
+
+
+def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[T]]) -> T:
+    async def main() -> T:
+        async with dctx.link() as transport:
+            printer = XYZPrinter(transport, link=_link_kind(dctx), timeout=max(dctx.timeout, 2.0))
+            try:
+                return await action(printer)
+            finally:
+                await printer.close()
+
+    return asyncio.run(main())
+
+
+async def _ask(message: str) -> None:
+    """Wait for Enter on stdin; end of input means nobody is there to confirm."""
+    sys.stderr.write(f"{message} [press Enter] ")
+    sys.stderr.flush()
+    line = await asyncio.to_thread(sys.stdin.readline)
+    if not line:
+        raise InputError("no confirmation on standard input; the step was stopped")
+
+
+def _bool(value: bool | None) -> str:
+    return "?" if value is None else "on" if value else "off"
+
+
+def render_status(status: Status) -> Panel:
+    table = Table.grid(padding=(0, 2))
+    table.add_column(style="bold")
+    table.add_column()
+    model = status.model
+    table.add_row("Model", f"{model.name if model else '?'} ({status.model_number or '?'})")
+    table.add_row("Name", status.name or "?")
+    table.add_row("Serial", status.serial or "?")
+    table.add_row("Firmware", status.firmware_version or "?")
+    table.add_row("State", f"{status.state_name} ({status.state_code},{status.substate})")
+    for word in status.error_words:
+        table.add_row("Error", str(word))
+    target = status.extruder_target
+    table.add_row("Extruder", f"{status.extruder if status.extruder is not None else '--'} °C"
+                  + (f" → {target} °C" if target else ""))
+    if status.bed is not None:
+        table.add_row("Bed", f"{status.bed} °C")
+    if status.progress and (status.progress.percent or status.progress.elapsed_min):
+        left = status.progress.remaining_min
+        table.add_row("Job", f"{status.progress.percent} %, {status.progress.elapsed_min} min elapsed, "
+                      + ("time left unknown" if left is None else f"{left} min left"))
+    cart = status.cartridge
+    if cart is not None:
+        fil = status.filament_mm
+        text = "none" if not cart.present else f"{cart.fields[0]} {cart.colour or ''}".strip()
+        table.add_row("Filament", text + (f", {fil / 1000:.1f} m left" if fil is not None else ""))
+    if status.nozzle:
+        table.add_row("Nozzle", f"{status.nozzle.diameter_mm or '?'} mm (type {status.nozzle.kind})")
+    table.add_row("Z offset", f"{status.zoffset / 100:.2f} mm" if status.zoffset is not None else "?")
+    table.add_row("Auto-level", _bool(status.autolevel))
+    table.add_row("Buzzer", _bool(status.buzzer))
+    if status.network is not None:
+        net = status.network
+        table.add_row("Wi-Fi", f"{net.ip} {net.ssid or ''}".strip() if net.connected else "not connected")
+    return Panel(table, title="da Vinci status", expand=False)
+
+
+def _status_line(status: Status) -> str:
+    parts = [status.state_name, f"extruder {status.extruder}°C/{status.extruder_target or 0}°C"]
+    if status.progress and status.state_code in (9505, 9601):
+        left = status.progress.remaining_min
+        parts.append(f"{status.progress.percent}% ({'?' if left is None else left} min left)")
+    return ", ".join(parts)
+
+
+@xyz.command()
+@click.option("--watch", is_flag=True, help="Keep polling and show live temperatures and progress.")
+@click.option("--interval", type=click.FloatRange(min=0.05), default=1.0, show_default=True,
+              help="Seconds between polls with --watch.")
+@click.option("--count", type=click.IntRange(min=1), help="With --watch: stop after N polls.")
+@pass_device
+def status(dctx: DeviceContext, watch: bool, interval: float, count: int | None) -> None:
+    """Show the printer's status (all fields with --json)."""
+    out = dctx.output
+
+    async def run(printer: XYZPrinter) -> None:
+        if not watch:
+            st = await printer.status()
+            out.result(st.to_dict(), lambda: out.out.print(render_status(st)))
+            return
+        async for st in printer.monitor(interval, count):
+            out.event(st.to_dict(), _status_line(st))
+
+    _with_printer(dctx, run)
+
+
+def _resolve_model(text: str | None) -> PrinterModel | None:
+    return find_model(text) if text else None
+
+
+@xyz.command("print")
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--no-wait", is_flag=True, help="Return once the printer has started the job.")
+@click.option("--model", "model_text", metavar="MODEL", help="Convert for this model instead of the printer's own.")
+@pass_device
+def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None) -> None:
+    """Print a G-code (converted to the printer's .3w) or a .3w file."""
+    model = _resolve_model(model_text)
+    out = dctx.output
+
+    async def run(printer: XYZPrinter) -> Status:
+        columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
+                   TimeRemainingColumn())
+        with Progress(*columns, console=out.err, transient=False, disable=out.json_mode) as bar:
+            tasks: list[TaskID] = []
+            last = [""]
+
+            def uploaded(done: int, total: int) -> None:
+                if not tasks:  # only once the printer has taken the upload
+                    tasks.append(bar.add_task(f"upload {file.name}", total=total))
+                bar.update(tasks[0], completed=done, total=total)
+
+            def job(st: Status) -> None:
+                line = _status_line(st)
+                if line == last[0]:
+                    return
+                last[0] = line
+                if out.json_mode:
+                    out.event({"event": "status", **st.to_dict()}, line)
+                else:
+                    out.note(line)
+
+            return await printer.print_file(file, model=model, progress=uploaded, on_status=job, wait=not no_wait)
+
+    final = _with_printer(dctx, run)
+    out.result({"event": "done", "state": final.state_code, "state_name": final.state_name},
+               f"{file.name}: {final.state_name}")
+
+
+def _simple(name: str, help_text: str, call: Callable[[XYZPrinter], Awaitable[Any]], done: str) -> None:
+    @xyz.command(name, help=help_text)
+    @pass_device
+    def command(dctx: DeviceContext) -> None:
+        _with_printer(dctx, call)
+        dctx.output.result({"ok": True, "command": name}, done)
+
+
+_simple("pause", "Pause the running print.", lambda pr: pr.pause(), "paused")
+_simple("resume", "Resume a paused print.", lambda pr: pr.resume(), "resumed")
+_simple("cancel", "Cancel the running print.", lambda pr: pr.cancel(), "cancelling")
+_simple("home", "Home all axes and wait until done.", lambda pr: pr.home(), "homed")
+_simple("acknowledge", "Confirm the finished print was removed (leave 'print finished').",
+        lambda pr: pr.acknowledge(), "ready")
+
+
+@xyz.command(context_settings={"ignore_unknown_options": True})
+@click.argument("axis", type=click.Choice(["x", "y", "z"], case_sensitive=False))
+@click.argument("distance", type=float)
+@pass_device
+def jog(dctx: DeviceContext, axis: str, distance: float) -> None:
+    """Move AXIS by DISTANCE mm (negative = towards the minimum)."""
+    _with_printer(dctx, lambda pr: pr.jog(axis.lower(), distance))
+    dctx.output.result({"ok": True, "axis": axis, "distance": distance}, f"moved {axis} by {distance:g} mm")
+
+
+def _progress_note(dctx: DeviceContext) -> Callable[[Status], None]:
+    last = [""]
+
+    def note(st: Status) -> None:
+        line = _status_line(st)
+        if line != last[0]:
+            last[0] = line
+            dctx.output.note(line)
+
+    return note
+
+
+@xyz.command()
+@pass_device
+def calibrate(dctx: DeviceContext) -> None:
+    """Level the bed with the detector (you lower and raise it when asked)."""
+    values = _with_printer(dctx, lambda pr: pr.calibrate(_ask, on_status=_progress_note(dctx)))
+    dctx.output.result({"calibration": list(values)}, f"calibration values: {', '.join(map(str, values))}")
+
+
+@xyz.command("clean-nozzle")
+@pass_device
+def clean_nozzle(dctx: DeviceContext) -> None:
+    """Heat the nozzle for cleaning; confirm when done."""
+    _with_printer(dctx, lambda pr: pr.clean_nozzle(_ask, on_status=_progress_note(dctx)))
+    dctx.output.result({"ok": True}, "nozzle clean finished")
+
+
+@xyz.command()
+@click.option("--retry", is_flag=True, help="Retry after a failed or finished load.")
+@pass_device
+def load(dctx: DeviceContext, retry: bool) -> None:
+    """Load filament: heats, feeds, and stops when you confirm it comes out of the nozzle."""
+    _with_printer(dctx, lambda pr: pr.load_filament(_ask, on_status=_progress_note(dctx), retry=retry))
+    dctx.output.result({"ok": True}, "filament loaded")
+
+
+@xyz.command()
+@click.option("--retry", is_flag=True, help="Retry after a failed or finished unload.")
+@pass_device
+def unload(dctx: DeviceContext, retry: bool) -> None:
+    """Unload filament (heats, then backs it out)."""
+    _with_printer(dctx, lambda pr: pr.unload_filament(on_status=_progress_note(dctx), retry=retry))
+    dctx.output.result({"ok": True}, "filament unloaded")
+
+
+@xyz.command("set")
+@click.argument("setting", type=click.Choice(["autolevel", "buzzer"]))
+@click.argument("value", type=click.Choice(["on", "off"]))
+@pass_device
+def set_cmd(dctx: DeviceContext, setting: str, value: str) -> None:
+    """Turn auto bed-levelling or the print-finished buzzer on or off."""
+    on = value == "on"
+
+    async def run(pr: XYZPrinter) -> None:
+        await (pr.set_autolevel(on) if setting == "autolevel" else pr.set_buzzer(on))
+
+    _with_printer(dctx, run)
+    dctx.output.result({setting: value}, f"{setting} {value}")
+
+
+@xyz.command(context_settings={"ignore_unknown_options": True})
+@click.argument("value", required=False)
+@pass_device
+def zoffset(dctx: DeviceContext, value: str | None) -> None:
+    """Show the Z offset, set it (in 1/100 mm, e.g. 245 or -12), or nudge it one step: up / down."""
+    if value is not None and value not in ("up", "down"):
+        try:
+            number = int(value)
+        except ValueError:
+            raise InputError(f"z offset must be a whole number of 1/100 mm, or up/down, not {value!r}") from None
+
+    async def run(pr: XYZPrinter) -> int:
+        if value is None:
+            st = await pr.status("z")
+            return st.zoffset if st.zoffset is not None else await pr.zoffset()
+        if value in ("up", "down"):
+            return await pr.nudge_zoffset(value == "up")
+        return await pr.set_zoffset(number)
+
+    result = _with_printer(dctx, run)
+    dctx.output.result({"zoffset": result}, f"z offset {result} ({result / 100:.2f} mm)")
+
+
+@xyz.command()
+@click.argument("new", required=False)
+@pass_device
+def name(dctx: DeviceContext, new: str | None) -> None:
+    """Show or set the printer's name (up to 16 characters)."""
+
+    async def run(pr: XYZPrinter) -> str:
+        if new is not None:
+            await pr.set_name(new)
+        st = await pr.status("n")
+        return st.name or ""
+
+    result = _with_printer(dctx, run)
+    dctx.output.result({"name": result}, result)
+
+
+@xyz.command()
+@click.argument("code")
+@pass_device
+def language(dctx: DeviceContext, code: str) -> None:
+    """Set the display language (en, fr, it, de, es, jp)."""
+    _with_printer(dctx, lambda pr: pr.set_language(code.lower()))
+    dctx.output.result({"language": code.lower()}, f"language {code.lower()}")
+
+
+@xyz.command()
+@click.argument("minutes", type=int)
+@pass_device
+def energy(dctx: DeviceContext, minutes: int) -> None:
+    """Set energy saving: minutes of idle before the lights go off (0-9)."""
+    _with_printer(dctx, lambda pr: pr.set_energy(minutes))
+    dctx.output.result({"energy": minutes}, f"energy saving {minutes} min")
+
+
+@xyz.command("restore-defaults")
+@click.option("--yes", is_flag=True, help="Really reset every setting.")
+@pass_device
+def restore_defaults(dctx: DeviceContext, yes: bool) -> None:
+    """Reset the printer's settings to factory defaults."""
+    if not yes:
+        raise InputError("restore-defaults resets every setting: add --yes to confirm")
+    _with_printer(dctx, lambda pr: pr.restore_defaults())
+    dctx.output.result({"ok": True}, "settings restored to defaults")
+
+
+@xyz.group()
+def wifi() -> None:
+    """The printer's Wi-Fi connection."""
+
+
+@wifi.command("info")
+@pass_device
+def wifi_info(dctx: DeviceContext) -> None:
+    """Show the printer's network address and SSID."""
+    st = _with_printer(dctx, lambda pr: pr.wifi_info())
+    net = st.network
+    data = {"ip": net.ip, "ssid": net.ssid, "rssi": net.rssi, "mac": net.mac, "connected": net.connected} \
+        if net else {"connected": False}
+    human = (f"{net.ip} on {net.ssid or '?'} (signal {net.signal_percent if net.signal_percent is not None else '?'} %)"
+             if net and net.connected else "not connected (or no Wi-Fi on this model)")
+    dctx.output.result(data, human)
+
+
+@wifi.command("join")
+@click.argument("ssid")
+@click.option("--password", prompt=True, hide_input=True, help="Network password.")
+@click.option("--channel", type=click.IntRange(0, 165), default=0, show_default=True)
+@pass_device
+def wifi_join(dctx: DeviceContext, ssid: str, password: str, channel: int) -> None:
+    """Join a Wi-Fi network (do this over USB)."""
+    _with_printer(dctx, lambda pr: pr.join_wifi(ssid, password, channel))
+    dctx.output.result({"ok": True, "ssid": ssid}, f"joining {ssid}")
+
+
+@wifi.command("leave")
+@pass_device
+def wifi_leave(dctx: DeviceContext) -> None:
+    """Disconnect from the Wi-Fi network."""
+    _with_printer(dctx, lambda pr: pr.leave_wifi())
+    dctx.output.result({"ok": True}, "left the Wi-Fi network")
+
+
+@xyz.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--yes", is_flag=True, help="Really flash this firmware.")
+@pass_device
+def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
+    """Flash a firmware image (.bin with its `<model>+<version>` header). Can brick the printer."""
+    if not yes:
+        raise InputError("flashing firmware can brick the printer: add --yes to confirm")
+    image = file.read_bytes()
+    result = _with_printer(dctx, lambda pr: pr.upload_firmware(image, confirm=True))
+    dctx.output.result({"ok": True, "bytes": result.size}, f"sent {result.size} bytes of firmware")
+
+
+@xyz.command()
+@click.option("--host", "hosts", multiple=True, metavar="HOST", help="Probe this host on port 9100 (repeat).")
+@click.option("--subnet", metavar="CIDR", help="Probe every address in CIDR, e.g. 192.168.1.0/24.")
+@click.option("--port", type=click.IntRange(1, 65535), default=9100, show_default=True)
+@click.option("--probe-timeout", type=click.FloatRange(min=0.05), default=1.0, show_default=True)
+@click.option("--concurrency", type=click.IntRange(1, 1024), default=64, show_default=True)
+@pass_device
+def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
+             concurrency: int) -> None:
+    """List XYZprinting USB serial ports and printers answering on TCP 9100."""
+    from fabwire.xyz.discovery import hosts_in, probe_hosts, usb_printers
+
+    targets = list(hosts) + (hosts_in(subnet) if subnet else [])
+    found = usb_printers()
+    if targets:
+        found += asyncio.run(probe_hosts(targets, port, timeout=probe_timeout, concurrency=concurrency))
+    data = [{"address": f.address, "model": f.model_number, "name": f.name, "serial": f.serial,
+             "detail": f.detail} for f in found]
+
+    def human() -> None:
+        if not found:
+            dctx.output.out.print("no printers found")
+        for f in found:
+            dctx.output.out.print(f"{f.address}  {f.name or '?'}  {f.serial or ''}  {f.detail}")
+
+    dctx.output.result(data, human)
+
+
+def _add_threew_commands() -> None:
+    """`convert` and `info` (.3w files) live in their own module; mount them when it is present."""
+    try:
+        module = importlib.import_module("fabwire.xyz.threew_cli")
+    except ImportError:
+        return
+    for command_name in ("convert", "info"):
+        command = getattr(module, command_name, None)
+        if isinstance(command, click.Command):
+            xyz.add_command(command)
+
+
+_add_threew_commands()
+
+
+@click.command("xyz")
+@server_options(XYZ.default_port)
+@click.option("--model", "model_text", default="dv1MW0A000", show_default=True,
+              help="Model personality (model number or name, e.g. miniMaker, nano, 'mini w', 1.0 Pro).")
+@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+              help="Time speed-up factor for heating, flows and prints.")
+@click.option("--fault", "faults", multiple=True, metavar="NAME",
+              help="Start with a fault: no-cartridge, door-open, file-rejected, heater-failure, link-drop, stuck.")
+@click.option("--state", "state_file", type=click.Path(dir_okay=False, path_type=Path),
+              help="Keep settings in this JSON file across runs.")
+@click.option("--store", type=click.Path(file_okay=False, path_type=Path), help="Save received files here.")
+@click.option("--strict", is_flag=True, help="Require a correct CRC-32 trailer on every upload block.")
+@click.option("--link-style", type=click.Choice(["auto", "serial", "wifi"]), default="auto", show_default=True,
+              help="Reply framing: auto = serial on the pty, Wi-Fi on TCP.")
+@pass_app
+def sim_xyz(app: App, listen: tuple[str, ...], use_pty: bool, link: Path | None, model_text: str, speed: float,
+            faults: tuple[str, ...], state_file: Path | None, store: Path | None, strict: bool,
+            link_style: str) -> None:
+    """A da Vinci printer on TCP 9100 and/or a raw pty that real clients cannot tell from the machine."""
+    from fabwire.simserve import serve
+    from fabwire.xyz.sim import XYZSimulator
+
+    sim = XYZSimulator(model_text, speed=speed, faults=faults, state_file=state_file, store=store, strict=strict,
+                       link=None if link_style == "auto" else Link(link_style))
+    started = time.monotonic()
+    asyncio.run(serve("xyz", sim.serve, listen=listen, use_pty=use_pty, link=link,
+                      default_port=XYZ.default_port, json_mode=app.json))
+    app.output.note(f"xyz simulator stopped after {time.monotonic() - started:.0f} s, "
+                    f"{len([u for u in sim.uploads if u.complete])} upload(s)")

@@ -1,0 +1,674 @@
+"""`XYZPrinter`: status, printing, job control and every maintenance flow of a da Vinci, over serial or Wi-Fi.
+
+One command is in flight at a time; a background task reads the link so a lost connection is noticed at
+once and stale replies are dropped before each command. Flows are driven by polling the printer's state,
+which works the same on both link kinds (Wi-Fi printers send no progress lines).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import re
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self, TypeVar
+from urllib.parse import parse_qsl, urlsplit
+
+from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
+from fabwire.sync import LoopThread
+from fabwire.transport import Transport, open_transport
+from fabwire.xyz import protocol as p
+from fabwire.xyz.models import PrinterModel, model_for_file_id
+from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
+from fabwire.xyz.status import FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
+
+T = TypeVar("T")
+UploadProgress = Callable[[int, int], None]
+StatusCallback = Callable[[Status], None]
+Prompt = Callable[[str], Awaitable[None]]
+
+REPLY_ERRORS = {
+    0: "the printer refused the command",
+    1: "the printer refused the command",
+    3: "the printer is busy",
+    4: "the printer is busy finishing a job",
+    7: "the printer is busy finishing a job",
+}
+TRANSIENT_RETRIES = 20
+HANGS_UP = frozenset({"dvF110B000"})
+"""Models that close the TCP connection after every reply."""
+_MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
+
+
+def link_for(transport: Transport) -> Link:
+    """TCP is Wi-Fi framing, everything else serial; `sim://xyz?link=wifi` says so itself."""
+    url = transport.url
+    if url.startswith("tcp://"):
+        return Link.WIFI
+    if url.startswith("sim://"):
+        options = dict(parse_qsl(urlsplit(url).query))
+        return Link.WIFI if options.get("link") == "wifi" else Link.SERIAL
+    return Link.SERIAL
+
+
+def link_for_address(address: str) -> Link | None:
+    """`sim://xyz?link=wifi` names its framing; other addresses leave it to the transport."""
+    if address.startswith("sim://"):
+        return Link.WIFI if dict(parse_qsl(urlsplit(address).query)).get("link") == "wifi" else Link.SERIAL
+    return None
+
+
+@dataclass(frozen=True, slots=True)
+class UploadResult:
+    name: str
+    size: int
+    blocks: int
+    seconds: float
+
+
+class XYZPrinter:
+    """Async client for one printer on an open transport."""
+
+    poll_interval = 0.25
+    upload_window = 8
+    """Blocks in flight on Wi-Fi (TCP buffers them; miniMover sends every block without waiting).
+    Serial links wait for each block's ack, as every serial client does."""
+
+    def __init__(self, transport: Transport, *, link: Link | None = None, timeout: float = 5.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.transport = transport
+        self.link = link or link_for(transport)
+        self.timeout = timeout
+        self.clock = clock
+        self.reader = ReplyReader(self.link)
+        self.last_status: Status = Status()
+        self.stats: deque[ActionStat] = deque(maxlen=200)
+        self._wake = asyncio.Event()
+        self._lock = asyncio.Lock()
+        self._lost: LinkError | None = None
+        self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="xyz-reader")
+        self.address: str | None = None
+        """Set by `connect`: lets a Wi-Fi client reconnect when the printer closes the connection."""
+        self.per_command = False
+        """Open a new connection for every command (the 1.1 Plus hangs up after each reply)."""
+
+    @classmethod
+    async def connect(cls, address: str, *, link: Link | None = None, timeout: float = 5.0) -> XYZPrinter:
+        from fabwire.devices import XYZ
+
+        transport = await open_transport(address, XYZ, connect_timeout=timeout)
+        client = cls(transport, link=link or link_for_address(address), timeout=timeout)
+        client.address = address
+        return client
+
+    async def _reconnect(self) -> None:
+        """Wi-Fi printers such as the 1.1 Plus close the connection after every reply: open a new one."""
+        if self._lost is None or self.address is None or self.link is not Link.WIFI:
+            return
+        from fabwire.devices import XYZ
+
+        await self.transport.close()
+        self.transport = await open_transport(self.address, XYZ, connect_timeout=self.timeout)
+        self._lost = None
+        self.reader = ReplyReader(self.link)
+        self._start_pump()
+
+    async def close(self) -> None:
+        self._pump_task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await self._pump_task
+        await self.transport.close()
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                        tb: TracebackType | None) -> None:
+        await self.close()
+
+    # ---------------------------------------------------------------------------------------- plumbing
+
+    async def _pump(self) -> None:
+        try:
+            while True:
+                data = await self.transport.read()
+                self.reader.receive(data, self.clock())
+                self._wake.set()
+        except LinkError as exc:
+            self._lost = exc
+        self._wake.set()
+
+    def _check_link(self, doing: str) -> None:
+        if self._lost is not None:
+            raise LinkClosed(f"the link to the printer was lost while {doing}: {self._lost}")
+
+    async def _write(self, data: bytes, doing: str) -> None:
+        self._check_link(doing)
+        try:
+            await self.transport.write(data)
+        except LinkError as exc:
+            raise LinkClosed(f"the link to the printer was lost while {doing}: {exc}") from exc
+
+    def _match(self, event: p.ReaderEvent | None, command: p.Command, doing: str) -> Reply | None:
+        if isinstance(event, ActionStat):
+            self.stats.append(event)
+        elif isinstance(event, Reply) and event.command is command:
+            return event
+        elif isinstance(event, ErrorReply) and event.command is command:
+            meaning = REPLY_ERRORS.get(event.code) or ErrorWord.decode(event.code).meaning
+            raise DeviceError(f"E{event.code}", meaning, action=f"while {doing}")
+        elif isinstance(event, NoReply) and event.command is command:
+            raise LinkTimeout(f"the printer did not answer {command.body!r} within {self.timeout:g} s")
+        return None
+
+    def _wait_time(self) -> float:
+        deadline = self.reader.deadline()
+        return 1.0 if deadline is None else max(0.0, deadline - self.clock()) + 0.001
+
+    async def _event(self, command: p.Command, doing: str) -> Reply:
+        while True:
+            event = self.reader.next_event(self.clock())
+            reply = self._match(event, command, doing)
+            if reply is not None:
+                return reply
+            if event is not None:
+                continue
+            self._check_link(doing)
+            self._wake.clear()
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(self._wait_time()):
+                    await self._wake.wait()
+
+    async def _direct_event(self, command: p.Command, doing: str) -> Reply:
+        """Like _event, reading the link itself: one task hop less per upload block."""
+        while True:
+            event = self.reader.next_event(self.clock())
+            reply = self._match(event, command, doing)
+            if reply is not None:
+                return reply
+            if event is not None:
+                continue
+            try:
+                async with asyncio.timeout(self._wait_time()):
+                    data = await self.transport.read()
+            except TimeoutError:
+                continue
+            except LinkError as exc:
+                self._lost = exc
+                raise LinkClosed(f"the link to the printer was lost while {doing}: {exc}") from exc
+            self.reader.receive(data, self.clock())
+
+    async def _stop_pump(self) -> None:
+        self._pump_task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await self._pump_task
+
+    def _start_pump(self) -> None:
+        if self._lost is None:
+            self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="xyz-reader")
+
+    async def request(self, command: p.Command, *, timeout: float | None = None) -> Reply:
+        """Send one command and return its reply (drops stale input first)."""
+        async with self._lock:
+            return await self._request_once_more(command, timeout or self.timeout)
+
+    async def _request_once_more(self, command: p.Command, timeout: float) -> Reply:
+        """A Wi-Fi printer may hang up between commands; on a new connection the command is sent again."""
+        if self.per_command and self.address is not None and self._lost is None:
+            self._lost = LinkClosed("a new connection for every command")
+        await self._reconnect()
+        try:
+            return await self._request(command, timeout)
+        except LinkClosed as exc:
+            if self.address is None or self.link is not Link.WIFI:
+                raise
+            self._lost = self._lost or exc
+            self.per_command = True  # it hangs up: from now on, one connection per command like XYZware
+            await self._reconnect()
+            return await self._request(command, timeout)
+
+    async def _request(self, command: p.Command, timeout: float) -> Reply:
+        doing = f"sending {command.body!r}"
+        self._check_link(doing)
+        self.reader.discard()
+        data = self.reader.send(command, self.clock(), timeout)
+        try:
+            await self._write(data, doing)
+            wait_for = self._direct_event if self._pump_task.done() else self._event
+            return await wait_for(command, doing)
+        finally:
+            self.reader.abandon()
+
+    # ------------------------------------------------------------------------------------------ status
+
+    async def status(self, letters: str = "a") -> Status:
+        """Query the printer; a partial query merges into the last full status.
+
+        `E4$`/`E7$` (firmware busy while a print winds down) are transient: ask again for a few seconds.
+        """
+        for attempt in range(TRANSIENT_RETRIES + 1):
+            try:
+                reply = await self.request(p.Query(letters))
+                break
+            except DeviceError as exc:
+                if exc.code not in ("E4", "E7") or attempt == TRANSIENT_RETRIES:
+                    raise
+                await asyncio.sleep(self.poll_interval)
+        base = Status() if "a" in letters else self.last_status
+        self.last_status = base.update(reply.lines)
+        if self.last_status.model_number in HANGS_UP and self.link is Link.WIFI:
+            self.per_command = True
+        return self.last_status
+
+    async def monitor(self, interval: float = 1.0, count: int | None = None) -> AsyncIterator[Status]:
+        n = 0
+        while count is None or n < count:
+            yield await self.status()
+            n += 1
+            if count is None or n < count:
+                await asyncio.sleep(interval)
+
+    async def model(self) -> PrinterModel:
+        status = self.last_status if self.last_status.model_number else await self.status()
+        model = status.model
+        if model is None:
+            raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}")
+        return model
+
+    async def require_idle(self, doing: str) -> Status:
+        """A busy printer or one reporting an error cannot start something new: say which, in words."""
+        status = await self.status()
+        for word in status.error_words:
+            raise DeviceError(f"0x{word.raw:08X}", word.meaning, action=f"cannot {doing}")
+        if status.state_code != IDLE:
+            raise DeviceError(str(status.state_code), f"the printer is busy ({status.state_name})",
+                              action=f"cannot {doing}")
+        return status
+
+    # ------------------------------------------------------------------------------------------ printing
+
+    def prepare(self, source: Path | bytes, model: PrinterModel, *, override: bool = False) -> bytes:
+        """The bytes to upload: a .3w as is (if it suits `model`), G-code converted for `model`."""
+        from fabwire.xyz.threew import inspect_3w, is_3w, write_3w
+
+        if isinstance(source, Path):
+            try:
+                data = source.read_bytes()
+            except OSError as exc:
+                raise InputError(f"cannot read {source}: {exc.strerror}") from exc
+            name = source.name
+        else:
+            data, name = source, "the data"
+        if not data:
+            raise InputError(f"{name} is empty")
+        if is_3w(data):
+            info = inspect_3w(data)
+            machine = (info.machine or "").strip()
+            target = model_for_file_id(machine) if machine else None
+            if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
+                what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
+                raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; "
+                                 f"convert the G-code for this printer instead")
+            return data
+        if not _looks_like_gcode(data):
+            raise InputError(f"{name} is neither G-code nor a .3w print file")
+        if m := _MACHINE_LINE.search(data[:16384]):
+            declared = m[1].decode("latin-1")
+            other = model_for_file_id(declared)
+            if not override and other is not None and other.file_id.lower() != model.file_id.lower():
+                raise InputError(f"{name} was sliced for {other.name} ({declared}), but the printer is a "
+                                 f"{model.name}; slice it for this printer or pass --model")
+        return write_3w(data, model, filename=Path(name).stem + ".3w")
+
+    async def upload(self, data: bytes, name: str, *, progress: UploadProgress | None = None,
+                     firmware: bool = False, crc: bool = True) -> UploadResult:
+        """Send a file in blocks, each acknowledged; a link lost on the way is a LinkError, never success."""
+        if not data:
+            raise InputError("nothing to upload: the file is empty")
+        block = self.last_status.block_size if self.last_status.packet else (await self.status()).block_size
+        command: p.Upload | p.FirmwareUpload = (
+            p.FirmwareUpload(name, len(data)) if firmware else p.Upload(name, len(data)))
+        started = self.clock()
+        sent = 0
+        blocks = 0
+        window = self.upload_window if self.link is Link.WIFI else 1
+        async with self._lock:
+            if self.per_command and self.address is not None:
+                self._lost = LinkClosed("a new connection for the upload")
+                await self._reconnect()
+            else:
+                await self._request_once_more(p.Query("o"), self.timeout)  # the link is alive right now
+            await self._stop_pump()
+            try:
+                await self._request(command, self.timeout)
+                acks = p.AckCounter()
+                in_flight: deque[int] = deque()
+                for chunk in p.iter_blocks(data, block, crc=crc):
+                    await self._write(chunk, "uploading")
+                    in_flight.append(len(chunk) - 12)
+                    blocks += 1
+                    while len(in_flight) >= window:
+                        for _ in range(await self._acks(acks, len(in_flight))):
+                            sent += in_flight.popleft()
+                        if progress is not None:
+                            progress(sent, len(data))
+                while in_flight:
+                    for _ in range(await self._acks(acks, len(in_flight))):
+                        sent += in_flight.popleft()
+                    if progress is not None:
+                        progress(sent, len(data))
+                await self._request(p.UploadDidFinish(), self.timeout)
+            except (LinkError, LinkTimeout) as exc:
+                raise LinkError(f"upload of {name} failed after {sent} of {len(data)} bytes: {exc}; "
+                                "the printer did not receive the whole file") from exc
+            finally:
+                self._start_pump()
+        return UploadResult(name, len(data), blocks, self.clock() - started)
+
+    async def _acks(self, counter: p.AckCounter, most: int) -> int:
+        """Wait for at least one block ack; return how many came (never more than `most`)."""
+        try:
+            async with asyncio.timeout(self.timeout):
+                while True:
+                    count, error = counter.feed(await self.transport.read())
+                    if error is not None:
+                        meaning = REPLY_ERRORS.get(error) or ErrorWord.decode(error).meaning
+                        raise DeviceError(f"E{error}", meaning, action="the printer refused an upload block")
+                    if count:
+                        if count > most:
+                            raise RemoteProtocolError(f"the printer acknowledged {count} blocks, {most} were sent")
+                        return count
+        except TimeoutError:
+            raise LinkTimeout(f"the printer did not acknowledge an upload block within {self.timeout:g} s") from None
+        except LinkError as exc:
+            self._lost = exc
+            raise LinkClosed(f"the link to the printer was lost while uploading: {exc}") from exc
+
+    async def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
+                         progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
+                         wait: bool = True, name: str | None = None) -> Status:
+        """Convert if needed, upload, start and (unless wait=False) follow the job to its end."""
+        status = await self.require_idle("print")
+        printer_model = status.model
+        target = model or printer_model
+        if target is None:
+            raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
+        data = self.prepare(source, target, override=model is not None)
+        if name is None:
+            name = (Path(source.name).stem if isinstance(source, Path) else "fabwire") + ".3w"
+        await self.upload(data, name, progress=progress)
+        status = await self._await_job_start()
+        if on_status:
+            on_status(status)
+        if not wait:
+            return status
+        return await self.follow_job(on_status)
+
+    async def _await_job_start(self, limit: float = 30.0) -> Status:
+        end = self.clock() + limit
+        while True:
+            status = await self.status()
+            if FILE_REJECTED in [w.code for w in status.error_words]:
+                raise DeviceError("0x020D", "the printer rejected the file (unsupported file version)")
+            if status.state_code != IDLE or self.clock() > end:
+                return status
+            await asyncio.sleep(self.poll_interval)
+
+    async def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None) -> Status:
+        """Poll until the job ends (9509 print done or back to idle); a printer error raises DeviceError."""
+        end = None if limit is None else self.clock() + limit
+        while True:
+            status = await self.status()
+            if on_status:
+                on_status(status)
+            words = status.error_words
+            if words:
+                word = words[0]
+                raise DeviceError(f"0x{word.raw:08X}", word.meaning, action="the job stopped")
+            if status.state_code in (PRINT_DONE, IDLE):
+                return status
+            if end is not None and self.clock() > end:
+                raise LinkTimeout("the job did not finish in time")
+            await asyncio.sleep(self.poll_interval)
+
+    async def pause(self) -> None:
+        await self._job_control("pause", (PRINTING,))
+
+    async def resume(self) -> None:
+        await self._job_control("resume", (PAUSED,))
+
+    async def cancel(self) -> None:
+        await self._job_control("cancel", (PRINTING, PAUSED, 9520))
+
+    async def acknowledge(self) -> None:
+        """Tell the printer the finished print was taken off the bed (leaves 'print finished')."""
+        await self._job_control("complete", (PRINT_DONE,))
+
+    async def _job_control(self, op: str, states: tuple[int, ...]) -> None:
+        status = await self.status()
+        if status.state_code not in states:
+            raise DeviceError(str(status.state_code), f"nothing to {op}: the printer is {status.state_name}")
+        await self.request(p.PrintControl(op))
+
+    # --------------------------------------------------------------------------------------------- flows
+
+    async def _wait_state(self, done: Callable[[Status], bool], doing: str, limit: float,
+                          on_status: StatusCallback | None = None) -> Status:
+        end = self.clock() + limit
+        while True:
+            try:
+                status = await self.status()
+            except LinkTimeout:
+                status = self.last_status  # some firmware goes quiet mid-action; ask again
+            if on_status:
+                on_status(status)
+            for word in status.error_words:
+                raise DeviceError(f"0x{word.raw:08X}", word.meaning, action=f"while {doing}")
+            if done(status):
+                return status
+            if self.clock() > end:
+                raise LinkTimeout(f"the printer did not finish {doing} within {limit:g} s ({status.state_name})")
+            await asyncio.sleep(self.poll_interval)
+
+    async def home(self, *, limit: float = 120.0) -> Status:
+        await self.require_idle("home")
+        await self.request(p.Home())
+        return await self._wait_state(lambda s: s.idle, "homing", limit)
+
+    async def jog(self, axis: str, distance: float, *, limit: float = 120.0) -> Status:
+        command = p.Jog(axis.lower(), distance)
+        await self.require_idle("jog")
+        await self.request(command)
+        return await self._wait_state(lambda s: s.idle, "jogging", limit)
+
+    async def _flow(self, flow: str, op: str) -> Reply:
+        reply = await self.request(p.Flow(flow, op))
+        for line in reply.lines:
+            stat = p.parse_stat_line(line)
+            if stat is not None and stat.stat == "fail":
+                status = await self.status()
+                words = status.error_words
+                meaning = words[0].meaning if words else f"the printer reports {flow} failed"
+                raise DeviceError(f"0x{words[0].raw:08X}" if words else flow, meaning, action=f"{flow} failed")
+        return reply
+
+    async def load_filament(self, ready: Prompt, *, on_status: StatusCallback | None = None,
+                            retry: bool = False, limit: float = 360.0) -> Status:
+        """Heat, feed, then `ready(...)` returns once filament comes out of the nozzle; we then stop feeding."""
+        await self.require_idle("load filament")
+        await self._flow("load", "retry" if retry else "new")
+        status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
+                                        on_status)
+        if status.idle:
+            return status  # the printer finished feeding on its own before anyone confirmed
+        try:
+            await ready("Filament is feeding: confirm when it comes out of the nozzle")
+        finally:
+            await self._flow("load", "cancel")
+        return await self._wait_state(lambda s: s.idle, "finishing the load", 30.0, on_status)
+
+    async def cancel_flow(self, flow: str) -> None:
+        """Stop a running load, unload or nozzle clean."""
+        await self.request(p.Flow(flow, "cancel"))
+
+    async def unload_filament(self, *, on_status: StatusCallback | None = None, retry: bool = False,
+                              limit: float = 360.0) -> Status:
+        await self.require_idle("unload filament")
+        await self._flow("unload", "retry" if retry else "new")
+        await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
+        return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
+
+    async def clean_nozzle(self, ready: Prompt, *, on_status: StatusCallback | None = None,
+                           limit: float = 360.0) -> Status:
+        await self.require_idle("clean the nozzle")
+        await self._flow("cleannozzle", "new")
+        await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit, on_status)
+        try:
+            await ready("The nozzle is hot: clean it, then confirm")
+        finally:
+            await self._flow("cleannozzle", "cancel")
+        return await self._wait_state(lambda s: s.idle, "finishing the nozzle clean", 30.0, on_status)
+
+    async def calibrate(self, prompt: Prompt, *, on_status: StatusCallback | None = None,
+                        limit: float = 240.0) -> tuple[int, ...]:
+        """Bed calibration with the detector; `prompt` asks the user to lower, then raise it."""
+        await self.require_idle("calibrate")
+        await self._flow("calibratejr", "new")
+        await self._wait_state(lambda s: s.state == (9535, 41), "starting calibration", limit, on_status)
+        await prompt("Lower the calibration detector, then confirm")
+        await self._flow("calibratejr", "detectorok")
+        await self._wait_state(lambda s: s.state == (9535, 44), "measuring the bed", limit, on_status)
+        reply = await self.request(p.Flow("calibratejr", "getdata"))
+        stat = p.parse_stat_line(reply.lines[0]) if reply.lines else None
+        values = stat.values if stat else ()
+        await prompt("Raise the calibration detector, then confirm")
+        await self._flow("calibratejr", "release")
+        await self._wait_state(lambda s: s.idle, "finishing calibration", 30.0, on_status)
+        return values
+
+    # -------------------------------------------------------------------------------------------- config
+
+    async def _config(self, command: p.Command) -> None:
+        await self.request(command)
+
+    async def set_autolevel(self, on: bool) -> None:
+        await self._config(p.SetAutoLevel(on))
+
+    async def set_buzzer(self, on: bool) -> None:
+        await self._config(p.SetBuzzer(on))
+
+    async def zoffset(self) -> int:
+        reply = await self.request(p.GetZOffset())
+        if not reply.lines:
+            raise LinkTimeout("the printer sent no z offset")
+        return int(reply.lines[0])
+
+    async def set_zoffset(self, value: int) -> int:
+        await self._config(p.SetZOffset(value))
+        return value
+
+    async def nudge_zoffset(self, up: bool) -> int:
+        """One 0.01 mm step; returns the new offset as the next status reports it."""
+        await self.request(p.NudgeZOffset(up))
+        status = await self.status("z")
+        return status.zoffset if status.zoffset is not None else 0
+
+    async def set_name(self, name: str) -> None:
+        await self._config(p.SetName(name))
+
+    async def set_language(self, code: str) -> None:
+        await self._config(p.SetLanguage(code))
+
+    async def set_energy(self, minutes: int) -> None:
+        await self._config(p.SetEnergy(minutes))
+
+    async def restore_defaults(self) -> None:
+        await self._config(p.RestoreDefaults())
+
+    async def wifi_info(self) -> Status:
+        return await self.status("4")
+
+    async def join_wifi(self, ssid: str, password: str, channel: int = 0) -> None:
+        command = p.JoinWifi(ssid, password, channel)
+        await self._config(p.LeaveWifi())
+        await self.request(command, timeout=25.0)
+
+    async def leave_wifi(self) -> None:
+        await self._config(p.LeaveWifi())
+
+    async def upload_firmware(self, image: bytes, *, confirm: bool, progress: UploadProgress | None = None,
+                              name: str = "temp.bin") -> UploadResult:
+        """Flash firmware (the image's 16-byte `<model>+<version>` header is checked, then not sent)."""
+        if not confirm:
+            raise InputError("firmware upload can brick the printer: confirm it explicitly")
+        if len(image) <= 16:
+            raise InputError("the firmware image is too short")
+        header = image[:16].rstrip(b"\x00 ").decode("latin-1", "replace")
+        model_text, _, version = header.partition("+")
+        model = await self.model()
+        if model_text != model.model_number or not version:
+            raise InputError(f"the firmware image is for {model_text or 'an unknown model'!r}, "
+                             f"not this {model.name} ({model.model_number})")
+        await self.require_idle("update the firmware")
+        return await self.upload(image[16:], name, progress=progress, firmware=True)
+
+
+def _looks_like_gcode(data: bytes) -> bool:
+    head = data[:4096]
+    if b"\x00" in head:
+        return False
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        text = head.decode("latin-1")
+        if sum(c.isprintable() or c.isspace() for c in text) < 0.95 * len(text):
+            return False
+    return bool(re.search(r"(?m)^\s*(?:[GMT]\d+|;)", text))
+
+
+class SyncXYZPrinter:
+    """The same client for plain scripts: `with SyncXYZPrinter("192.168.1.50") as printer: printer.status()`."""
+
+    def __init__(self, address: str, *, link: Link | None = None, timeout: float = 5.0) -> None:
+        self._loop = LoopThread("xyz")
+        try:
+            self._client = self._loop.call(XYZPrinter.connect(address, link=link, timeout=timeout))
+        except BaseException:
+            self._loop.close()
+            raise
+
+    def _call(self, coro: Coroutine[Any, Any, T]) -> T:
+        return self._loop.call(coro)
+
+    def status(self, letters: str = "a") -> Status:
+        return self._call(self._client.status(letters))
+
+    def print_file(self, source: Path | bytes, **kwargs: Any) -> Status:
+        return self._call(self._client.print_file(source, **kwargs))
+
+    def __getattr__(self, name: str) -> Callable[..., Any]:
+        method = getattr(self._client, name)
+        if not asyncio.iscoroutinefunction(method):
+            return method  # type: ignore[no-any-return]
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            return self._call(method(*args, **kwargs))
+
+        return call
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self._loop.call(self._client.close(), timeout=5)
+        self._loop.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()

@@ -1,0 +1,101 @@
+"""Finding da Vinci printers: USB serial ports with XYZprinting's vendor id, and TCP 9100 probes.
+
+The printers announce nothing on the network, so a host or subnet is probed with `query=a` under a
+concurrency bound and a per-host timeout; only hosts answering with a status carrying a model count.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ipaddress
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import serialx
+
+from fabwire.errors import FabwireError, InputError
+from fabwire.transport.tcp import open_tcp
+from fabwire.xyz import protocol as p
+from fabwire.xyz.protocol import Link, Reply, ReplyReader
+from fabwire.xyz.status import Status
+
+XYZ_VID = 0x11F1
+USB_MODELS = {0x2519: "da Vinci nano", 0x2520: "da Vinci 1.0 Pro"}
+PORT = 9100
+MAX_HOSTS = 4096
+
+
+@dataclass(frozen=True, slots=True)
+class Found:
+    address: str
+    """`/dev/ttyACM0` or `host:port`."""
+    model_number: str | None
+    name: str | None
+    serial: str | None
+    detail: str = ""
+
+
+def usb_printers() -> list[Found]:
+    """Serial ports whose USB vendor id is XYZprinting's (0x11F1); no port is opened."""
+    found = []
+    for port in serialx.list_serial_ports():
+        if port.vid != XYZ_VID:
+            continue
+        hint = USB_MODELS.get(port.pid or 0, f"USB product 0x{port.pid or 0:04X}")
+        found.append(Found(port.device, None, port.product, port.serial_number, hint))
+    return found
+
+
+def hosts_in(subnet: str) -> list[str]:
+    try:
+        network = ipaddress.ip_network(subnet, strict=False)
+    except ValueError as exc:
+        raise InputError(f"bad subnet {subnet!r}: {exc}") from None
+    if network.num_addresses > MAX_HOSTS:
+        raise InputError(f"subnet {subnet} has {network.num_addresses} addresses; probe at most {MAX_HOSTS}")
+    hosts = list(network.hosts()) or [network.network_address]
+    return [str(h) for h in hosts]
+
+
+async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | None:
+    """Ask one host for its status; None if nothing printer-like answers in time."""
+    try:
+        async with asyncio.timeout(timeout):
+            transport = await open_tcp(host, port, timeout=timeout)
+            try:
+                reader = ReplyReader(Link.WIFI)
+                query = p.Query("a")
+                await transport.write(reader.send(query, 0.0, timeout))
+                while True:
+                    reader.receive(await transport.read(), 0.0)
+                    event = reader.next_event(0.0)
+                    if event is not None:
+                        break
+            finally:
+                await transport.close()
+    except (TimeoutError, FabwireError, OSError):
+        return None
+    if not isinstance(event, Reply):
+        return None
+    status = Status.parse(event.lines)
+    if status.model_number is None:
+        return None
+    model = status.model
+    return Found(f"{host}:{port}", status.model_number, model.name if model else None, status.serial,
+                 status.state_name)
+
+
+async def probe_hosts(hosts: Iterable[str], port: int = PORT, *, timeout: float = 1.0,
+                      concurrency: int = 64) -> list[Found]:
+    """Probe many hosts at once, at most `concurrency` in flight."""
+    limit = asyncio.Semaphore(max(1, concurrency))
+
+    async def one(host: str) -> Found | None:
+        async with limit:
+            with contextlib.suppress(Exception):
+                return await probe(host, port, timeout)
+            return None
+
+    results = await asyncio.gather(*(one(h) for h in hosts))
+    return [r for r in results if r is not None]

@@ -1,0 +1,414 @@
+"""What a printer's display needs to know about a G-code: print time, filament and layers.
+
+Slicers state these in comments (at the top for Cura/XYZ, at the end for PrusaSlicer/Slic3r/Simplify3D); when a value
+is missing it is computed from the moves themselves.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+DEFAULT_FACETS = 50
+DEFAULT_FEED_MM_MIN = 1500.0
+"""Feed rate assumed for moves before the first F word."""
+
+
+@dataclass(frozen=True, slots=True)
+class GcodeMetadata:
+    """Values for the .3w header; None where neither a comment nor the moves told."""
+
+    print_time_s: int | None = None
+    filament_mm: float | None = None
+    layers: int | None = None
+    facets: int | None = None
+    slicer: str | None = None
+
+    @property
+    def complete(self) -> bool:
+        return None not in (self.print_time_s, self.filament_mm, self.layers)
+
+    def merged(self, other: GcodeMetadata) -> GcodeMetadata:
+        """Fill this one's gaps from `other`."""
+        return GcodeMetadata(
+            print_time_s=self.print_time_s if self.print_time_s is not None else other.print_time_s,
+            filament_mm=self.filament_mm if self.filament_mm is not None else other.filament_mm,
+            layers=self.layers if self.layers is not None else other.layers,
+            facets=self.facets if self.facets is not None else other.facets,
+            slicer=self.slicer or other.slicer,
+        )
+
+
+_NUM = rb"([0-9]+(?:\.[0-9]*)?)"
+
+
+def _first(pattern: bytes) -> re.Pattern[bytes]:
+    return re.compile(pattern, re.MULTILINE | re.IGNORECASE)
+
+
+# Each list is in order of preference: the XYZ key a previous conversion wrote wins over a slicer's own wording.
+_TIME = (
+    ("xyz", _first(rb"^;[ \t]*print_time[ \t]*=[ \t]*" + _NUM)),
+    ("cura", _first(rb"^;TIME:[ \t]*" + _NUM)),
+    ("prusaslicer", _first(rb"^;[ \t]*estimated printing time \(normal mode\)[ \t]*=[ \t]*([^\r\n]+)")),
+    ("simplify3d", _first(rb"^;[ \t]*Build time:[ \t]*([^\r\n]+)")),
+)
+_FILAMENT = (
+    ("xyz", _first(rb"^;[ \t]*total_filament[ \t]*=[ \t]*" + _NUM)),
+    ("cura", _first(rb"^;Filament used:[ \t]*([0-9.,m \t]+)\r?$")),
+    ("prusaslicer", _first(rb"^;[ \t]*filament used \[mm\][ \t]*=[ \t]*([0-9., \t]+)")),
+    ("simplify3d", _first(rb"^;[ \t]*Filament length:[ \t]*" + _NUM + rb"[ \t]*mm")),
+    ("slic3r", _first(rb"^;[ \t]*filament[ _]used[ \t]*=[ \t]*" + _NUM)),
+)
+_LAYERS = (
+    ("xyz", _first(rb"^;[ \t]*total_layers[ \t]*=[ \t]*([0-9]+)")),
+    ("cura", _first(rb"^;LAYER_COUNT:[ \t]*([0-9]+)")),
+    ("prusaslicer", _first(rb"^;[ \t]*total layers count[ \t]*=[ \t]*([0-9]+)")),
+)
+_FACETS = _first(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)")
+_DURATION = re.compile(rb"([0-9.]+)[ \t]*(d|h|m|s)", re.IGNORECASE)
+_S3D_DURATION = re.compile(rb"([0-9.]+)[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
+_UNIT_SECONDS = {b"d": 86400, b"h": 3600, b"m": 60, b"s": 1, b"hour": 3600, b"hr": 3600, b"minute": 60, b"min": 60,
+                 b"second": 1, b"sec": 1}
+_SLICER_NAMES = (
+    (rb"prusaslicer", "prusaslicer"), (rb"superslicer", "prusaslicer"), (rb"cura", "cura"),
+    (rb"simplify3d", "simplify3d"), (rb"slic3r", "slic3r"), (rb"xyzprint", "xyz"), (rb"xyzware", "xyz"),
+)
+
+
+def _duration(text: bytes, units: re.Pattern[bytes]) -> int | None:
+    parts = units.findall(text)
+    if not parts:
+        return None
+    return round(sum(float(value) * _UNIT_SECONDS[unit.lower()] for value, unit in parts))
+
+
+def _sum_numbers(text: bytes) -> float | None:
+    values = [float(v) for v in re.findall(rb"[0-9]+(?:\.[0-9]*)?", text)]
+    return round(sum(values), 6) if values else None
+
+
+def _search(patterns: Iterable[tuple[str, re.Pattern[bytes]]], windows: Iterable[bytes]) -> tuple[str, bytes] | None:
+    for name, pattern in patterns:
+        for window in windows:
+            found = pattern.search(window)
+            if found:
+                return name, found.group(1)
+    return None
+
+
+def header_metadata(*windows: bytes) -> GcodeMetadata:
+    """The values slicer comments state in the given pieces of a G-code (its head and its tail)."""
+    time_s: int | None = None
+    filament: float | None = None
+    layers: int | None = None
+    found = _search(_TIME, windows)
+    if found:
+        name, raw = found
+        if name == "prusaslicer":
+            time_s = _duration(raw, _DURATION)
+        elif name == "simplify3d":
+            time_s = _duration(raw, _S3D_DURATION)
+        else:
+            time_s = round(float(raw))
+    found = _search(_FILAMENT, windows)
+    if found:
+        name, raw = found
+        if name == "cura":
+            metres = _sum_numbers(raw)
+            filament = None if metres is None else round(metres * 1000.0, 6)
+        else:
+            filament = _sum_numbers(raw)
+    found = _search(_LAYERS, windows)
+    if found:
+        layers = int(found[1])
+    facets = _search((("xyz", _FACETS),), windows)
+    slicer = None
+    lowered = windows[0][:4096].lower() if windows else b""
+    for needle, name in _SLICER_NAMES:
+        if needle in lowered:
+            slicer = name
+            break
+    return GcodeMetadata(time_s, filament, layers, int(facets[1]) if facets else None, slicer)
+
+
+_COMMAND = re.compile(
+    rb"\n[ \t]*(?:[Nn][0-9]+[ \t]*)?([GgMm])0*([0-9]+)(?![0-9.])([^\n;]*)",
+)
+_WORD = re.compile(rb"([A-Za-z])[ \t]*([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)")
+_ODD_LINE_START = re.compile(rb"\n[ \tN]")
+_CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
+_AXIS_INDEX = np.full(256, -1, dtype=np.intp)
+_AXIS_INDEX[list(b"XYZEF")] = np.arange(5)
+_IS_AXIS = _AXIS_INDEX >= 0
+_NUMBER_CHARS = np.zeros(256, dtype=bool)
+_NUMBER_CHARS[list(b"0123456789.+-")] = True
+_DIGITS = np.zeros(256, dtype=bool)
+_DIGITS[list(b"0123456789.")] = True
+_MOVE_DIGIT = np.zeros(256, dtype=bool)
+_MOVE_DIGIT[list(b"0123")] = True
+_VALUE_WIDTH = 24
+_POWERS = 10.0 ** np.arange(_VALUE_WIDTH + 1)
+_PIECE = 1 << 20
+
+
+def _ffill(values: NDArray[np.float64], start: float) -> NDArray[np.float64]:
+    """Each NaN replaced by the last value before it (`start` before the first)."""
+    known = ~np.isnan(values)
+    index = np.where(known, np.arange(len(values)), -1)
+    np.maximum.accumulate(index, out=index)
+    return np.where(index >= 0, values[np.maximum(index, 0)], start)
+
+
+def _parse_numbers(data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
+    """The decimal numbers starting at offsets `at` of `data`, as float() reads them (NaN where there is none).
+
+    Digits are accumulated column by column across all numbers at once: an exact integer mantissa divided by an
+    exact power of ten rounds the same way a float parser does, for up to 15 significant digits.
+    """
+    count = len(at)
+    first = data[at]
+    signed = (first == 45) | (first == 43)
+    mantissa = np.zeros(count, np.int64)
+    fraction = np.zeros(count, np.intp)
+    digits = np.zeros(count, np.intp)
+    dotted = np.zeros(count, bool)
+    active = np.ones(count, bool)
+    for column in range(_VALUE_WIDTH):
+        byte = first if column == 0 else data[at + column]
+        value = byte - np.uint8(48)  # wraps below '0', so one comparison finds the digits
+        is_digit = active & (value <= 9)
+        is_dot = active & (byte == 46) & ~dotted
+        active = is_digit | is_dot | (signed if column == 0 else False)
+        if not active.any():
+            break
+        mantissa = np.where(is_digit, mantissa * 10 + value, mantissa)
+        fraction += is_digit & dotted
+        digits += is_digit
+        dotted |= is_dot
+    parsed: NDArray[np.float64] = mantissa / _POWERS[np.minimum(fraction, _VALUE_WIDTH)]
+    parsed = np.where(first == 45, -parsed, parsed)
+    parsed[digits == 0] = np.nan
+    odd = np.flatnonzero((digits > 15) | active)
+    for i in odd:  # very long numbers: let the float parser have them
+        text = bytes(data[at[i]:at[i] + _VALUE_WIDTH])
+        parsed[i] = _to_float(re.match(rb"[-+]?[0-9]*\.?[0-9]*", text).group(0))  # type: ignore[union-attr]
+    return parsed
+
+
+def _to_float(text: bytes) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
+
+
+class MoveAnalyzer:
+    """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
+
+    Time is length / feed rate per move (no acceleration), so it is an estimate on the short side. Ordinary slicer
+    output is analysed with array operations; chunks with indented or numbered lines take a line-by-line path.
+    """
+
+    def __init__(self) -> None:
+        self.pos = [0.0, 0.0, 0.0]
+        self.e = 0.0
+        self.feed = DEFAULT_FEED_MM_MIN
+        self.absolute = True
+        self.absolute_e = True
+        self.filament = 0.0
+        self.seconds = 0.0
+        self.layer_heights: set[int] = set()
+        """Heights (in µm) at which extruding moves happened."""
+
+    def feed_chunk(self, chunk: bytes) -> None:
+        """Analyse whole lines; `chunk` must start at a line start and end with a newline."""
+        start = 0
+        while start < len(chunk):  # bounded pieces keep the per-word arrays small
+            end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
+            piece = chunk[start:end]
+            text = b"\n" + piece.upper()
+            if _ODD_LINE_START.search(text):
+                self.feed_lines(piece)
+            else:
+                self._feed_arrays(text)
+            start = end
+
+    def feed_lines(self, chunk: bytes) -> None:
+        """The line-by-line analysis (any G-code layout)."""
+        for letter, number, params in _COMMAND.findall(b"\n" + chunk):
+            self._command(letter.upper() + number.lstrip(b"0").rjust(1, b"0"), params.upper())
+
+    def _command(self, command: bytes, params: bytes) -> None:
+        if command in (b"G0", b"G1", b"G2", b"G3"):
+            self._move(params)
+        elif command == b"G92":
+            self._set_position(params)
+        elif command == b"G90":
+            self.absolute = self.absolute_e = True
+        elif command == b"G91":
+            self.absolute = self.absolute_e = False
+        elif command == b"G28":
+            self._home(params)
+        elif command == b"G4":
+            self._dwell(params)
+        elif command == b"M82":
+            self.absolute_e = True
+        elif command == b"M83":
+            self.absolute_e = False
+
+    def _move(self, params: bytes) -> None:
+        x, y, z = self.pos
+        e = self.e
+        target_x, target_y, target_z, target_e = x, y, z, e
+        for axis, value in _WORD.findall(params):
+            number = float(value)
+            if axis == b"X":
+                target_x = number if self.absolute else x + number
+            elif axis == b"Y":
+                target_y = number if self.absolute else y + number
+            elif axis == b"Z":
+                target_z = number if self.absolute else z + number
+            elif axis == b"E":
+                target_e = number if self.absolute_e else e + number
+            elif axis == b"F" and number > 0:
+                self.feed = number
+        dx, dy, dz, de = target_x - x, target_y - y, target_z - z, target_e - e
+        length = math.sqrt(dx * dx + dy * dy + dz * dz) or abs(de)
+        self.seconds += length * 60.0 / self.feed
+        self.filament += de
+        if de > 0 and (dx or dy):
+            self.layer_heights.add(round(target_z * 1000))
+        self.pos = [target_x, target_y, target_z]
+        self.e = target_e
+
+    def _set_position(self, params: bytes) -> None:
+        words = _WORD.findall(params)
+        if not words:
+            self.pos = [0.0, 0.0, 0.0]
+            self.e = 0.0
+        for axis, value in words:
+            if axis == b"E":
+                self.e = float(value)
+            elif axis in (b"X", b"Y", b"Z"):
+                self.pos[b"XYZ".index(axis)] = float(value)
+
+    def _home(self, params: bytes) -> None:
+        axes = set(re.findall(rb"[XYZ]", params)) or {b"X", b"Y", b"Z"}
+        for axis in axes:
+            self.pos[b"XYZ".index(axis)] = 0.0
+
+    def _dwell(self, params: bytes) -> None:
+        for word, value in _WORD.findall(params):
+            if word == b"P":
+                self.seconds += float(value) / 1000.0
+            elif word == b"S":
+                self.seconds += float(value)
+
+    def _feed_arrays(self, text: bytes) -> None:
+        """`text` is upper-cased, starts with a newline and every line starts with its command letter."""
+        data = np.frombuffer(text + bytes(_VALUE_WIDTH + 4), dtype=np.uint8)
+        newlines = np.flatnonzero(data[: len(text)] == 10)
+        starts = newlines[:-1] + 1
+        ends = newlines[1:]
+        if not len(starts):
+            return
+        c0, c1, c2, c3 = (data[starts + i] for i in range(4))
+        is_move = (c0 == ord("G")) & (
+            (_MOVE_DIGIT[c1] & ~_DIGITS[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGITS[c3])
+        )
+        controls: list[tuple[int, bytes, bytes]] = []
+        is_set = np.zeros(len(starts), dtype=bool)
+        for found in _CONTROL.finditer(text):
+            control_line = int(np.searchsorted(starts, found.start() + 1))
+            code = b"G" + found.group(1) if found.group(1) else b"M" + found.group(2)
+            params = found.group(3)
+            if code == b"G92" and _WORD.search(params) and not re.search(rb"[^XYZE0-9.+\- \t]", params):
+                is_set[control_line] = True
+            else:
+                controls.append((control_line, code, params))
+        is_row = is_move | is_set
+        row_lines = np.flatnonzero(is_row)
+        if not len(row_lines) and not controls:
+            return
+        row_of_line = np.full(len(starts), -1, dtype=np.int64)
+        row_of_line[row_lines] = np.arange(len(row_lines))
+        semis = np.flatnonzero(data[: len(text)] == ord(";"))
+        semis = np.append(semis, len(text))
+        code_end = np.minimum(semis[np.searchsorted(semis, starts)], ends)
+        values = np.full((5, len(row_lines)), np.nan)
+        where = np.flatnonzero(_IS_AXIS[data[: len(text)]])
+        line = np.searchsorted(starts, where, side="right") - 1
+        keep = (line >= 0) & is_row[np.maximum(line, 0)]
+        where, line = where[keep], line[keep]
+        keep = where < code_end[line]
+        where, line = where[keep], line[keep]
+        if len(where):
+            values[_AXIS_INDEX[data[where]], row_of_line[line]] = _parse_numbers(data, where + 1)
+        sets = is_set[row_lines]
+        bounds = [0]
+        bounds.extend(int(np.searchsorted(row_lines, control[0])) for control in controls)
+        bounds.append(len(row_lines))
+        for i in range(len(bounds) - 1):
+            lo, hi = bounds[i], bounds[i + 1]
+            if hi > lo:
+                self._segment(values[:, lo:hi], sets[lo:hi])
+            if i < len(controls):
+                _line, code, params = controls[i]
+                self._command(code, params)
+
+    def _axis(self, given: NDArray[np.float64], sets: NDArray[np.bool_], start: float,
+              absolute: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(position after each row, delta of each row) for one axis."""
+        if absolute:
+            after = _ffill(given, start)
+            delta = np.diff(after, prepend=start)
+            delta[sets] = 0.0
+            return after, delta
+        delta = np.where(sets, 0.0, np.nan_to_num(given))
+        total = np.cumsum(delta)
+        base = np.where(sets, given - total, np.nan)
+        return total + _ffill(base, start), delta
+
+    def _segment(self, values: NDArray[np.float64], sets: NDArray[np.bool_]) -> None:
+        (x, dx), (y, dy), (z, dz) = (
+            self._axis(values[k], sets, self.pos[k], self.absolute) for k in range(3)
+        )
+        e, de = self._axis(values[3], sets, self.e, self.absolute_e)
+        feeds = values[4]
+        feeds[feeds <= 0] = np.nan
+        feed = _ffill(feeds, self.feed)
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        length = np.where(length > 0, length, np.abs(de))
+        self.seconds += float(np.sum(length * 60.0 / feed))
+        self.filament += float(np.sum(de))
+        printing = (de > 0) & ((dx != 0) | (dy != 0))
+        if printing.any():
+            self.layer_heights.update(np.unique(np.rint(z[printing] * 1000)).astype(np.int64).tolist())
+        self.pos = [float(x[-1]), float(y[-1]), float(z[-1])]
+        self.e = float(e[-1])
+        self.feed = float(feed[-1])
+
+    def result(self) -> GcodeMetadata:
+        return GcodeMetadata(
+            print_time_s=max(1, round(self.seconds)),
+            filament_mm=max(0.0, self.filament),
+            layers=max(1, len(self.layer_heights)),
+        )
+
+
+def finish(stated: GcodeMetadata, computed: GcodeMetadata | None) -> GcodeMetadata:
+    """Stated values first, computed ones for the gaps, the conventional defaults for anything left."""
+    merged = stated.merged(computed) if computed is not None else stated
+    return replace(
+        merged,
+        print_time_s=merged.print_time_s if merged.print_time_s is not None else 1,
+        filament_mm=merged.filament_mm if merged.filament_mm is not None else 1.0,
+        layers=merged.layers if merged.layers is not None else 10,
+        facets=merged.facets if merged.facets is not None else DEFAULT_FACETS,
+    )

@@ -1,0 +1,324 @@
+"""A da Vinci printer on the wire: serial framing on a pty, Wi-Fi framing on TCP 9100, or in-process (`sim://xyz`).
+
+The link decides the framing (`$` terminators, config acks, action progress lines), as on the real machines;
+the printer itself (printer.py) is shared by every connection, so a client may poll on one connection while
+another uploads.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from fabwire.errors import InputError, LinkClosed
+from fabwire.transport import Transport, register_simulator, spawn_in_process
+from fabwire.xyz import protocol as p
+from fabwire.xyz.printer import FAULTS, FileVerdict, Printer, personality
+from fabwire.xyz.protocol import Block, DeviceDecoder, Garbage, Link, Received, UploadStalled
+
+log = logging.getLogger(__name__)
+
+PC_COMMUNICATION_ERROR = 0x0201
+BUSY_REPLY = 3
+BAD_COMMAND_REPLY = 1
+
+
+@dataclass
+class UploadRecord:
+    """What a client sent: kept so tests and users can compare it with the source file."""
+
+    name: str
+    declared: int
+    data: bytes
+    firmware: bool
+    crc_checked: int
+    complete: bool
+
+
+@dataclass
+class _Session:
+    command: p.Upload | p.FirmwareUpload
+    data: bytearray
+    next_index: int = 0
+    crc_checked: int = 0
+
+
+class XYZSimulator:
+    """One printer, served on any number of links."""
+
+    def __init__(
+        self, model: str = "dv1MW0A000", *, speed: float = 1.0, faults: tuple[str, ...] = (),
+        state_file: Path | None = None, store: Path | None = None, strict: bool = False,
+        link: Link | None = None, gap: float = 0.03, upload_idle: float = 30.0, serial: str | None = None,
+        clock: Callable[[], float] = time.monotonic, close_after_reply: bool | None = None,
+    ) -> None:
+        if speed <= 0:
+            raise InputError(f"speed must be positive, not {speed}")
+        self.printer = Printer(personality(model, serial=serial), state_file=state_file, faults=faults)
+        self.speed = speed
+        self.store = store
+        self.strict = strict
+        self.link = link
+        self.gap = gap
+        self.upload_idle = upload_idle
+        self.clock = clock
+        hangs_up = self.printer.persona.model.model_number == "dvF110B000"
+        self.close_after_reply = hangs_up if close_after_reply is None else close_after_reply
+        """Close a TCP connection after each reply, as the da Vinci 1.1 Plus does."""
+        self._t0 = clock()
+        self.uploads: list[UploadRecord] = []
+        self.commands: list[str] = []
+        self.connections = 0
+        self.busy_replies = 0
+        if store is not None:
+            store.mkdir(parents=True, exist_ok=True)
+
+    # ------------------------------------------------------------------------------------- control API
+
+    def inject(self, fault: str, on: bool = True) -> None:
+        """Turn a fault on or off while running (see printer.FAULTS)."""
+        self.printer.inject(fault, on)
+
+    def printer_time(self) -> float:
+        return (self.clock() - self._t0) * self.speed
+
+    def sync(self) -> None:
+        self.printer.advance(self.printer_time())
+
+    def link_for(self, transport: Transport) -> Link:
+        if self.link is not None:
+            return self.link
+        return Link.WIFI if transport.url.startswith("tcp://") else Link.SERIAL
+
+    def received(self, name: str) -> bytes | None:
+        """The last complete upload stored under `name`."""
+        for record in reversed(self.uploads):
+            if record.name == name and record.complete:
+                return record.data
+        return None
+
+    async def serve(self, transport: Transport) -> None:
+        """Run the device side of one connection until the peer goes away."""
+        self.connections += 1
+        try:
+            await _Connection(self, transport, self.link_for(transport)).run()
+        except LinkClosed as exc:  # this side hung up (1.1 Plus style, or an injected link drop)
+            log.info("connection closed: %s", exc)
+        finally:
+            self.connections -= 1
+
+
+class _Connection:
+    def __init__(self, sim: XYZSimulator, transport: Transport, link: Link) -> None:
+        self.sim = sim
+        self.printer = sim.printer
+        self.transport = transport
+        self.link = link
+        self.decoder = DeviceDecoder(gap=sim.gap, upload_idle=sim.upload_idle)
+        self.session: _Session | None = None
+
+    def _wait(self) -> float | None:
+        deadline = self.decoder.next_deadline()
+        wait = None if deadline is None else max(0.0, deadline - self.sim.clock())
+        if self.link is Link.SERIAL and (self.printer.flow or self.printer.job or self.printer.outbox):
+            wait = 0.05 if wait is None else min(wait, 0.05)
+        return wait
+
+    async def run(self) -> None:
+        while True:
+            wait = self._wait()
+            try:
+                if wait is None:
+                    data = await self.transport.read()
+                else:
+                    async with asyncio.timeout(wait):
+                        data = await self.transport.read()
+            except TimeoutError:
+                await self._handle(self.decoder.poll(self.sim.clock()))
+                continue
+            except LinkClosed:
+                # Execute what arrived before the close (fire-and-forget clients), then stop.
+                with contextlib.suppress(LinkClosed):
+                    await self._handle(self.decoder.eof(self.sim.clock()), closing=True)
+                self._abandon("the link closed")
+                return
+            await self._handle(self.decoder.feed(data, self.sim.clock()))
+
+    async def _handle(self, events: list[p.DeviceEvent], *, closing: bool = False) -> None:
+        out = bytearray()
+        for event in events:
+            if isinstance(event, Block):
+                out += self._block(event)
+            elif isinstance(event, Received):
+                self.sim.commands.append(event.command.body)
+                out += await self._command(event.command)
+            elif isinstance(event, UploadStalled):
+                self._abandon(f"no data for {self.sim.upload_idle:g} s")
+            elif isinstance(event, Garbage) and self.link is Link.SERIAL and event.raw.strip():
+                out += p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False)
+        self.sim.sync()
+        if self.printer.outbox:
+            if self.link is Link.SERIAL:
+                for line in self.printer.outbox:
+                    out += p.reply_lines([line], dollar=True)
+            self.printer.outbox.clear()
+        if out and not closing:
+            await self._write(bytes(out))
+        hang_up = self.sim.close_after_reply and self.link is Link.WIFI and self.session is None
+        if hang_up and any(isinstance(e, Received) for e in events) and not self.decoder.uploading:
+            await self.transport.close()
+            raise LinkClosed("closed after the reply (1.1 Plus behaviour)")
+
+    async def _write(self, data: bytes) -> None:
+        if self.link is Link.SERIAL:
+            # Nobody may be reading a pty; never let a full buffer freeze the printer.
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(5):
+                    await self.transport.write(data)
+        else:
+            await self.transport.write(data)
+
+    # --------------------------------------------------------------------------------------- commands
+
+    async def _command(self, command: p.Command) -> bytes:
+        serial = self.link is Link.SERIAL
+        self.sim.sync()
+        if isinstance(command, p.Upload | p.FirmwareUpload):
+            return self._start_upload(command)
+        if isinstance(command, p.UploadDidFinish):
+            return await self._finish_upload()
+        if isinstance(command, p.Query):
+            return self._query(command)
+        if isinstance(command, p.UnknownCommand):
+            return p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False) if serial else b""
+        refusal = self.printer.refusal(command)
+        if refusal is not None:
+            return p.reply_lines([p.error_line(refusal)], dollar=False) if serial else b""
+        lines = self.printer.execute(command)
+        expect = command.expects(self.link)
+        if expect is p.Expect.NOTHING or not lines:
+            return b""
+        if expect is p.Expect.LINE:
+            return p.reply_lines(lines[:1], dollar=False)
+        return p.reply_lines(lines, dollar=True)
+
+    def _query(self, query: p.Query) -> bytes:
+        busy = self.printer.busy_reply()
+        if busy is not None:
+            self.sim.busy_replies += 1
+            return p.reply_lines([p.error_line(busy)], dollar=False)
+        status = self.printer.status()
+        if not query.wanted:
+            return p.reply_lines(status.lines(), dollar=True)
+        lines = status.lines("".join(sorted(query.wanted)))
+        return p.reply_lines(lines, dollar=self.link is Link.SERIAL)
+
+    def _ok(self, *, command_ack: bool = False) -> bytes:
+        return b"ok \n" if command_ack and self.link is Link.WIFI else b"ok\n"
+
+    # ---------------------------------------------------------------------------------------- uploads
+
+    def _start_upload(self, command: p.Upload | p.FirmwareUpload) -> bytes:
+        refusal = self.printer.refusal(command)
+        if refusal is not None:
+            self.decoder.cancel_upload()
+            return p.reply_lines([p.error_line(refusal)], dollar=False)
+        self.session = _Session(command, bytearray())
+        return self._ok(command_ack=True)
+
+    def _block(self, block: Block) -> bytes:
+        session = self.session
+        if session is None:
+            return b""
+        if block.index != session.next_index:
+            self._fail_upload(f"block {block.index} arrived, expected {session.next_index}")
+            return p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False)
+        if self.sim.strict and (block.trailer == 0 or not block.crc_ok):
+            self._fail_upload(f"block {block.index} CRC-32 does not match")
+            return p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False)
+        session.data += block.data
+        session.next_index += 1
+        session.crc_checked += block.trailer != 0
+        if "link-drop" in self.printer.faults and len(session.data) * 2 >= session.command.size:
+            self._abandon("link dropped on demand")
+            raise LinkClosed("link dropped mid-upload (injected fault)")
+        return self._ok()
+
+    def _fail_upload(self, why: str) -> None:
+        log.info("upload refused: %s", why)
+        self.decoder.cancel_upload()
+        self._abandon(why)
+        if PC_COMMUNICATION_ERROR not in self.printer.errors:
+            self.printer.errors.append(PC_COMMUNICATION_ERROR)
+
+    def _abandon(self, why: str) -> None:
+        session, self.session = self.session, None
+        if session is not None:
+            log.info("upload of %s abandoned after %d bytes: %s", session.command.name, len(session.data), why)
+            self.sim.uploads.append(UploadRecord(session.command.name, session.command.size, bytes(session.data),
+                                                 isinstance(session.command, p.FirmwareUpload),
+                                                 session.crc_checked, complete=False))
+
+    async def _finish_upload(self) -> bytes:
+        session, self.session = self.session, None
+        reply = b"ok\n" + (b"ok\n" if self.link is Link.WIFI else b"")
+        if session is None:
+            return reply
+        data = bytes(session.data)
+        firmware = isinstance(session.command, p.FirmwareUpload)
+        record = UploadRecord(session.command.name, session.command.size, data, firmware, session.crc_checked,
+                              complete=len(data) == session.command.size)
+        self.sim.uploads.append(record)
+        self._store(record)
+        if firmware:
+            self.printer.firmware_images.append(data)
+            return reply
+        verdict = await asyncio.to_thread(self.printer.check_file, data) if record.complete else None
+        if verdict is None:
+            verdict = FileVerdict(False, reason=f"short upload: {len(data)} of {session.command.size} bytes")
+        self.sim.sync()
+        self.printer.start_job(session.command.name, data, verdict)
+        return reply
+
+    def _store(self, record: UploadRecord) -> None:
+        if self.sim.store is None:
+            return
+        name = Path(record.name).name or "upload.bin"
+        with contextlib.suppress(OSError):
+            (self.sim.store / name).write_bytes(record.data)
+
+
+def simulator_from_options(options: dict[str, str]) -> XYZSimulator:
+    """Build a simulator from `sim://xyz?model=…&speed=…&link=serial|wifi&fault=…&strict=1`."""
+    unknown = set(options) - {"model", "speed", "link", "fault", "strict", "state", "store", "serial"}
+    if unknown:
+        raise InputError(f"unknown sim://xyz option(s): {', '.join(sorted(unknown))}")
+    try:
+        speed = float(options.get("speed", "1"))
+    except ValueError:
+        raise InputError(f"speed must be a number, not {options['speed']!r}") from None
+    link_text = options.get("link", "serial")
+    if link_text not in ("serial", "wifi"):
+        raise InputError("link must be serial or wifi")
+    faults = tuple(f for f in options.get("fault", "").split("+") if f)
+    for fault in faults:
+        if fault not in FAULTS:
+            raise InputError(f"unknown fault {fault!r}; known: {', '.join(FAULTS)}")
+    return XYZSimulator(
+        options.get("model", "dv1MW0A000"), speed=speed, faults=faults, link=Link(link_text),
+        strict=options.get("strict", "0") in ("1", "true", "yes"),
+        state_file=Path(options["state"]) if "state" in options else None,
+        store=Path(options["store"]) if "store" in options else None, serial=options.get("serial"),
+    )
+
+
+async def _factory(options: dict[str, str]) -> Transport:
+    return await spawn_in_process("xyz", simulator_from_options(options).serve)
+
+
+register_simulator("xyz", _factory)

@@ -1,0 +1,639 @@
+"""Status letters (`x:value` lines) to typed fields and back to the exact wire text.
+
+One table maps each letter to a field, a parser and a renderer, so the client reads what the simulator
+writes with the same code. A line that does not parse is kept raw in `unparsed`; an unknown letter in
+`extra`: neither is ever fatal, and both render back unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from fabwire.errors import InputError
+from fabwire.xyz.models import PrinterModel, find_model
+from fabwire.xyz.protocol import DEFAULT_BLOCK_SIZE, NO_CARTRIDGE_SERIAL, REMAINING_UNKNOWN, block_size_from_packet
+
+# ------------------------------------------------------------------------------------------- code tables
+
+STATE_NAMES: dict[int, str] = {
+    9500: "print initial", 9501: "print heating", 9502: "printing", 9503: "print calibrating",
+    9504: "print calibrating done", 9505: "printing", 9506: "print cooling done", 9507: "print cooling end",
+    9508: "print ending", 9509: "print finished", 9510: "print job done", 9511: "idle", 9512: "print stopped",
+    9513: "loading filament", 9514: "unloading filament", 9515: "auto calibration", 9516: "jog mode",
+    9517: "fatal error", 9520: "checking file", 9530: "loading filament", 9531: "unloading filament",
+    9532: "jogging", 9533: "fatal error", 9534: "homing", 9535: "calibrating bed", 9536: "cleaning nozzle",
+    9537: "reading SD file", 9538: "printing SD file", 9539: "engraver: place object", 9540: "adjusting Z offset",
+    9601: "print paused", 9602: "cancelling print", 9700: "busy", 9800: "scanner idle", 9801: "scanner running",
+    30: "busy",
+}
+SUBSTATE_NAMES: dict[tuple[int, int], str] = {
+    (9530, 11): "heating", (9530, 12): "loading", (9530, 14): "done",
+    (9531, 21): "heating", (9531, 22): "unloading", (9531, 24): "done",
+    (9532, 30): "moving", (9534, 5): "homing",
+    (9535, 40): "starting", (9535, 41): "lower the detector", (9535, 43): "measuring",
+    (9535, 44): "raise the detector",
+    (9536, 51): "warming up", (9536, 52): "ready to clean", (9539, 30): "place object",
+}
+IDLE, PRINTING, PRINT_DONE, FILE_CHECK, PAUSED, CANCELLING = 9511, 9505, 9509, 9520, 9601, 9602
+
+
+def translate_state(code: int) -> int:
+    """Old firmwares report 0–17; map them onto the 95xx codes."""
+    if 0 <= code <= 4:
+        return 9500 + code
+    if 5 <= code <= 10:
+        return 9501 + code
+    if code == 11:
+        return 9505
+    if 12 <= code <= 17:
+        return 9500 + code
+    return code
+
+
+ERROR_CODES: dict[int, tuple[str, str]] = {
+    0x001B: ("M_MACHINE_BUSY", "the printer is busy"),
+    0x001F: ("SCANNER_ERROR", "scanner error"),
+    0x0020: ("SCANNER_BUSY", "scanner busy"),
+    0x0101: ("M_THERMAL_HEATER_OUT_TIMER", "the extruder cannot reach its target temperature"),
+    0x0102: ("M_THERMAL_BED_OUT_TIMER", "the bed cannot reach its target temperature"),
+    0x0103: ("M_THERMAL_HEATER_OUT_CONTROL", "the extruder is too hot"),
+    0x0104: ("M_THERMAL_BED_OUT_CONTROL", "the bed is too hot"),
+    0x0105: ("L_ERROR_SD_CARD", "storage (SD card) error"),
+    0x0108: ("M_MACHINE_ERROR_X_AXIS", "X axis error (motion or endstop)"),
+    0x0109: ("M_MACHINE_ERROR_Y_AXIS", "Y axis error (motion or endstop)"),
+    0x010A: ("M_MACHINE_ERROR_Z_AXIS", "Z axis error (motion or endstop)"),
+    0x010B: ("M_FLASHMEMORY_ERROR", "memory error"),
+    0x010D: ("L_ERROR_FLASH_RAM", "internal communication error; restart the printer"),
+    0x010E: ("L_ERROR_NOZZLE_EEPROM", "extruder storage error; replace the extruder"),
+    0x010F: ("L_40W35W_NOZZLE_EEPROM", "incompatible nozzle"),
+    0x0201: ("M_PC_COMMUNICATION_ERROR", "connection between computer and printer failed"),
+    0x0202: ("M_FW_UPDATE_ERROR", "firmware update failed"),
+    0x0203: ("M_FILAMENT_JAM", "filament jam"),
+    0x0205: ("M_FILAMENT_WRONG", "wrong filament"),
+    0x0206: ("M_NO_CASSETTE", "no filament cartridge installed"),
+    0x0207: ("M_CASSETTE_EMPTY", "filament cartridge empty"),
+    0x0208: ("M_CASSETTE_EEPROM_WRITE_ERROR", "cannot write the cartridge tag"),
+    0x0209: ("M_CASSETTE_EEPROM_READ_ERROR", "cannot read the cartridge tag"),
+    0x020C: ("L_ERROR_SD_CARD", "SD card error"),
+    0x020D: ("L_FILE_VERSION", "unsupported file version: the printer rejected the file"),
+    0x020F: ("L_FILAMENT_NO_INSTALL", "filament not installed"),
+    0x0401: ("M_TOP_DOOR_OPEN", "top door open"),
+    0x0402: ("M_FRONT_DOOR_OPEN", "front door open"),
+    0x0403: ("M_FILAMENT_LOW", "filament low"),
+    0x0404: ("M_FILAMENT_LOW_TO_EMPTY", "filament nearly empty"),
+    0x0405: ("M_FILAMENT_END", "filament ran out"),
+}
+_OLD_ERRORS = {2: 0x0101, 3: 0x001B, 4: 0x0103, 5: 0x0104, 6: 0x0105, 7: 0x0208, 8: 0x0209, 9: 0x0108, 10: 0x0109,
+               11: 0x010A, 14: 0x0202, 15: 0x0203, 16: 0x0405, 17: 0x0205, 18: 0x010B, 20: 0x0401, 21: 0x0402,
+               23: 0x0404, 24: 0x0405, 28: 0x0206, 29: 0x0207, 0x020B: 0x020C}
+NO_CARTRIDGE = 0x40000206
+FILE_REJECTED = 0x020D
+HEATER_TIMEOUT = 0x40000101
+DOOR_OPEN = 0x0401
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorWord:
+    """One `e:` value decoded: where (extruder 1/2 or machine), the code, its name and meaning."""
+
+    raw: int
+    source: str
+    code: int
+    name: str
+    meaning: str
+
+    @classmethod
+    def decode(cls, raw: int) -> ErrorWord:
+        high = (raw >> 24) & 0xFF
+        source = {0x40: "extruder 1", 0x20: "extruder 2"}.get(high, "machine")
+        code = _OLD_ERRORS.get(raw & 0xFFFF, raw & 0xFFFF)
+        name, meaning = ERROR_CODES.get(code, ("UNKNOWN", f"unknown error 0x{code:04X}"))
+        return cls(raw, source, code, name, meaning)
+
+    def __str__(self) -> str:
+        where = f" ({self.source})" if self.source != "machine" else ""
+        return f"0x{self.raw:08X} {self.meaning}{where}"
+
+
+COLOURS = {
+    "0": "Bronze", "1": "Silver", "2": "Clear Red", "3": "Clear", "4": "Bottle Green", "5": "Neon Magenta",
+    "6": "SteelBlue", "7": "Sun Orange", "8": "Pearl White", "9": "Copper", "A": "Purple", "B": "Blue",
+    "C": "Neon Tangerine", "D": "Viridity", "E": "Olivine", "F": "Gold", "G": "Green", "H": "Neon Green",
+    "I": "Snow White", "J": "Neon Yellow", "K": "Black", "L": "Violet", "M": "Grape Purple", "N": "Purpurine",
+    "O": "Clear Yellow", "P": "Clear Green", "Q": "Clear Tangerine", "R": "Red", "S": "Cyber Yellow",
+    "T": "Tangerine", "U": "Clear Blue", "V": "Clear Purple", "W": "White", "X": "Clear Magenta", "Y": "Yellow",
+    "Z": "Nature",
+}
+CARTRIDGE_LENGTHS = {"3": 120_000, "5": 185_000, "6": 240_000}
+MATERIALS = {41: "ABS", 46: "TPE", 47: "PETG", 50: "PLA", 51: "PLA", 54: "Tough PLA", 56: "PVA"}
+NOZZLES = {"3": 0.3, "84": 0.3, "1": 0.4, "77": 0.4, "82": 0.4, "2": 0.4, "54": 0.6, "56": 0.8, "75": 0.3}
+
+
+# ------------------------------------------------------------------------------------------- value types
+
+
+@dataclass(frozen=True, slots=True)
+class Progress:
+    percent: int
+    elapsed_min: int
+    remaining_min: int | None
+    """None when the printer has no estimate (wire sentinel 71582788)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Temperatures:
+    """`t:<n>,a[,b]`: n=1 → extruder and its target; otherwise two extruders. None = `--`."""
+
+    count: int
+    values: tuple[int | None, ...]
+
+    @property
+    def extruder(self) -> int | None:
+        return self.values[0] if self.values else None
+
+    @property
+    def target(self) -> int | None:
+        return self.values[1] if self.count == 1 and len(self.values) > 1 else None
+
+    @property
+    def extruder2(self) -> int | None:
+        return self.values[1] if self.count != 1 and len(self.values) > 1 else None
+
+
+@dataclass(frozen=True, slots=True)
+class Cartridge:
+    """`w:<n>,<serial>[,x]`: n=1 → x is a default filament temperature; n=2 → x is the second spool."""
+
+    count: int
+    fields: tuple[str, ...]
+
+    @property
+    def serials(self) -> tuple[str, ...]:
+        return self.fields[: max(1, self.count)] if self.count == 2 else self.fields[:1]
+
+    @property
+    def present(self) -> bool:
+        return bool(self.fields) and self.fields[0] != NO_CARTRIDGE_SERIAL and not set(self.fields[0]) <= {"-"}
+
+    @property
+    def colour(self) -> str | None:
+        serial = self.fields[0] if self.fields else ""
+        return COLOURS.get(serial[4:5]) if self.present and len(serial) > 4 else None
+
+    @property
+    def material_code(self) -> str | None:
+        serial = self.fields[0] if self.fields else ""
+        return serial[2] if self.present and len(serial) > 2 else None
+
+    @property
+    def length_mm(self) -> int | None:
+        serial = self.fields[0] if self.fields else ""
+        return CARTRIDGE_LENGTHS.get(serial[3:4]) if self.present else None
+
+
+@dataclass(frozen=True, slots=True)
+class Nozzle:
+    kind: str
+    serials: tuple[str, ...]
+
+    @property
+    def diameter_mm(self) -> float | None:
+        return NOZZLES.get(self.kind)
+
+    @property
+    def laser(self) -> bool:
+        return self.kind in ("L", "N", "H", "Q")
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    """`o:p<k>,t<x>,c<y>[,a±]`."""
+
+    k: int
+    t: str = "1"
+    c: str = "1"
+    autolevel: bool | None = None
+
+    @property
+    def block_size(self) -> int:
+        return block_size_from_packet(self.k)
+
+
+@dataclass(frozen=True, slots=True)
+class Lifetime:
+    unknown: int
+    machine_min: int
+    extruder_min: int
+    last_min: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Network:
+    ip: str
+    ssid: str | None = None
+    channel: str | None = None
+    rssi: int | None = None
+    mac: str | None = None
+    json_form: bool = True
+
+    @property
+    def connected(self) -> bool:
+        return self.ip not in ("", "0.0.0.0")
+
+    @property
+    def signal_percent(self) -> int | None:
+        if self.rssi is None:
+            return None
+        dbm = -self.rssi
+        return 100 if dbm >= -50 else 0 if dbm <= -100 else 2 * (dbm + 100)
+
+
+# ------------------------------------------------------------------------------------ parsers / renderers
+
+
+def _opt_int(text: str) -> int | None:
+    text = text.strip()
+    return None if text.startswith("--") else int(text)
+
+
+def _fmt_opt(value: int | None) -> str:
+    return "--" if value is None else str(value)
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    return tuple(int(x) for x in text.split(","))
+
+
+def _fmt_ints(values: Iterable[int]) -> str:
+    return ",".join(str(v) for v in values)
+
+
+def _progress(text: str) -> Progress:
+    pct, elapsed, remaining = (int(x) for x in text.split(","))
+    return Progress(pct, elapsed, None if remaining == REMAINING_UNKNOWN or remaining < 0 else remaining)
+
+
+def _fmt_progress(p: Progress) -> str:
+    return f"{p.percent},{p.elapsed_min},{REMAINING_UNKNOWN if p.remaining_min is None else p.remaining_min}"
+
+
+def _temps(text: str) -> Temperatures:
+    head, *rest = text.split(",")
+    return Temperatures(int(head), tuple(_opt_int(x) for x in rest))
+
+
+def _fmt_temps(t: Temperatures) -> str:
+    return ",".join([str(t.count), *(_fmt_opt(v) for v in t.values)])
+
+
+def _cal(text: str) -> tuple[str, ...]:
+    if not (text.startswith("{") and text.endswith("}")):
+        raise ValueError("calibration values are enclosed in braces")
+    parts = tuple(x.strip() for x in text[1:-1].split(",") if x.strip())
+    for part in parts[:9]:
+        int(part)
+    for part in parts[9:]:
+        float(part)
+    return parts
+
+
+def _state(text: str) -> tuple[int, int | None]:
+    head, _, sub = text.partition(",")
+    return int(head), (int(sub) if sub else None)
+
+
+def _fmt_state(value: tuple[int, int | None]) -> str:
+    return str(value[0]) + ("" if value[1] is None else f",{value[1]}")
+
+
+def _cartridge(text: str) -> Cartridge:
+    head, *rest = text.split(",")
+    return Cartridge(int(head), tuple(rest))
+
+
+def _nozzle(text: str) -> Nozzle:
+    head, *rest = text.split(",")
+    return Nozzle(head, tuple(rest))
+
+
+def _packet(text: str) -> Packet:
+    k, t, c, auto = 0, "1", "1", None
+    for part in text.split(","):
+        if part.startswith("p"):
+            k = int(part[1:])
+        elif part.startswith("t"):
+            t = part[1:]
+        elif part.startswith("c"):
+            c = part[1:]
+        elif part in ("a+", "a-"):
+            auto = part == "a+"
+    return Packet(k, t, c, auto)
+
+
+def _fmt_packet(p: Packet) -> str:
+    auto = "" if p.autolevel is None else (",a+" if p.autolevel else ",a-")
+    return f"p{p.k},t{p.t},c{p.c}{auto}"
+
+
+def _lifetime(text: str) -> Lifetime:
+    values = _ints(text)
+    return Lifetime(values[0], values[1], values[2], values[3] if len(values) > 3 else None)
+
+
+def _fmt_lifetime(v: Lifetime) -> str:
+    return _fmt_ints([v.unknown, v.machine_min, v.extruder_min, *([] if v.last_min is None else [v.last_min])])
+
+
+def _json_obj(text: str) -> dict[str, Any]:
+    value = json.loads(text)
+    if not isinstance(value, dict):
+        raise ValueError("expected a JSON object")
+    return value
+
+
+def _json_any(text: str) -> Any:
+    return json.loads(text)
+
+
+def _fmt_json(value: Any) -> str:
+    return json.dumps(value, separators=(",", ":"))
+
+
+def _network(text: str) -> Network:
+    if not text.startswith("{"):
+        return Network(text.strip(), json_form=False)
+    wlan = _json_obj(text).get("wlan", {})
+    rssi = wlan.get("rssiValue")
+    return Network(str(wlan.get("ip", "")), wlan.get("ssid"), wlan.get("channel"),
+                   int(rssi) if rssi not in (None, "") else None, wlan.get("MAC"))
+
+
+def _fmt_network(n: Network) -> str:
+    if not n.json_form:
+        return n.ip
+    wlan = {"ip": n.ip, "ssid": n.ssid or "", "channel": n.channel or "0",
+            "rssiValue": "" if n.rssi is None else str(n.rssi), "MAC": n.mac or ""}
+    return _fmt_json({"wlan": wlan})
+
+
+def _name(text: str) -> str:
+    return text.rstrip(" ")
+
+
+def _fmt_name(name: str) -> str:
+    return name.ljust(16)
+
+
+def _str(text: str) -> str:
+    return text
+
+
+def _versions(text: str) -> tuple[str, ...]:
+    return tuple(text.split(","))
+
+
+Parser = Callable[[str], Any]
+Renderer = Callable[[Any], str]
+
+LETTERS: dict[str, tuple[str, Parser, Renderer]] = {
+    "b": ("bed", _opt_int, _fmt_opt),
+    "c": ("calibration", _cal, lambda v: "{" + ",".join(v) + "}"),
+    "d": ("progress", _progress, _fmt_progress),
+    "e": ("errors", _ints, _fmt_ints),
+    "f": ("filament", _ints, _fmt_ints),
+    "h": ("pla", int, str),
+    "i": ("serial", _str, _str),
+    "j": ("state", _state, _fmt_state),
+    "k": ("material", int, str),
+    "l": ("language", _str, _str),
+    "m": ("m", _ints, _fmt_ints),
+    "n": ("name", _name, _fmt_name),
+    "o": ("packet", _packet, _fmt_packet),
+    "O": ("targets", _json_obj, _fmt_json),
+    "p": ("model_number", _str, _str),
+    "s": ("settings", _json_obj, _fmt_json),
+    "t": ("temperatures", _temps, _fmt_temps),
+    "v": ("firmware", _versions, ",".join),
+    "w": ("cartridge", _cartridge, lambda c: ",".join([str(c.count), *c.fields])),
+    "z": ("zoffset", int, str),
+    "G": ("last_used", _json_obj, _fmt_json),
+    "L": ("lifetime", _lifetime, _fmt_lifetime),
+    "V": ("wifi_firmware", _str, _str),
+    "W": ("networks", _json_any, _fmt_json),
+    "X": ("nozzle", _nozzle, lambda n: ",".join([n.kind, *n.serials])),
+    "4": ("network", _network, _fmt_network),
+    "Z": ("print_file", _json_obj, _fmt_json),
+}
+
+
+# ----------------------------------------------------------------------------------------------- status
+
+
+@dataclass(frozen=True, slots=True)
+class Status:
+    """Everything the printer reported; a letter it did not send stays None."""
+
+    bed: int | None = None
+    calibration: tuple[str, ...] | None = None
+    progress: Progress | None = None
+    errors: tuple[int, ...] | None = None
+    filament: tuple[int, ...] | None = None
+    pla: int | None = None
+    serial: str | None = None
+    state: tuple[int, int | None] | None = None
+    material: int | None = None
+    language: str | None = None
+    m: tuple[int, ...] | None = None
+    name: str | None = None
+    packet: Packet | None = None
+    targets: dict[str, Any] | None = field(default=None, hash=False)
+    model_number: str | None = None
+    settings: dict[str, Any] | None = field(default=None, hash=False)
+    temperatures: Temperatures | None = None
+    firmware: tuple[str, ...] | None = None
+    cartridge: Cartridge | None = None
+    zoffset: int | None = None
+    last_used: dict[str, Any] | None = field(default=None, hash=False)
+    lifetime: Lifetime | None = None
+    wifi_firmware: str | None = None
+    networks: Any = field(default=None, hash=False)
+    nozzle: Nozzle | None = None
+    network: Network | None = None
+    print_file: dict[str, Any] | None = field(default=None, hash=False)
+    order: tuple[str, ...] = ()
+    """Letters in the order the printer sent them (rendering keeps it)."""
+    extra: dict[str, str] = field(default_factory=dict, hash=False)
+    """Letters this table does not know, raw."""
+    unparsed: dict[str, str] = field(default_factory=dict, hash=False)
+    """Known letters whose value did not parse, raw."""
+    dashed: frozenset[str] = frozenset()
+    """Letters reported as `--` (no such sensor, e.g. `b:--` on a printer without a heated bed)."""
+
+    # -- parsing
+
+    @classmethod
+    def parse(cls, lines: Iterable[str]) -> Status:
+        return cls().update(lines)
+
+    def update(self, lines: Iterable[str]) -> Status:
+        """This status with the letters in `lines` replaced (a partial query merges into the last full one)."""
+        changes: dict[str, Any] = {}
+        order = list(self.order)
+        extra = dict(self.extra)
+        unparsed = dict(self.unparsed)
+        dashed = set(self.dashed)
+        for line in lines:
+            if len(line) < 2 or line[1] != ":":
+                continue
+            letter, value = line[0], line[2:]
+            if letter not in order:
+                order.append(letter)
+            spec = LETTERS.get(letter)
+            if spec is None:
+                extra[letter] = value
+                continue
+            attr, parse, _ = spec
+            if value.strip() == "--":
+                dashed.add(letter)
+                changes[attr] = None
+                continue
+            dashed.discard(letter)
+            try:
+                changes[attr] = parse(value)
+                unparsed.pop(letter, None)
+            except (ValueError, IndexError, TypeError, AttributeError):
+                unparsed[letter] = value
+                changes[attr] = None
+        return replace(self, order=tuple(order), extra=extra, unparsed=unparsed, dashed=frozenset(dashed), **changes)
+
+    # -- rendering
+
+    def line(self, letter: str) -> str | None:
+        if letter in self.unparsed:
+            return f"{letter}:{self.unparsed[letter]}"
+        if letter in self.extra:
+            return f"{letter}:{self.extra[letter]}"
+        if letter in self.dashed:
+            return f"{letter}:--"
+        spec = LETTERS.get(letter)
+        if spec is None:
+            return None
+        value = getattr(self, spec[0])
+        return None if value is None else f"{letter}:{spec[2](value)}"
+
+    def lines(self, letters: str | None = None) -> list[str]:
+        """The wire lines (without `\\n`) for `letters` (all when None), in the printer's order."""
+        present = [*self.order, *(letter for letter in self._set_letters() if letter not in self.order)]
+        chosen = present if letters is None else [letter for letter in present if letter in letters]
+        return [text for letter in chosen if (text := self.line(letter)) is not None]
+
+    def _set_letters(self) -> list[str]:
+        return [letter for letter, spec in LETTERS.items() if getattr(self, spec[0]) is not None]
+
+    # -- decoded views
+
+    @property
+    def state_code(self) -> int | None:
+        return translate_state(self.state[0]) if self.state else None
+
+    @property
+    def substate(self) -> int | None:
+        return self.state[1] if self.state else None
+
+    @property
+    def state_name(self) -> str:
+        code = self.state_code
+        if code is None:
+            return "unknown"
+        name = STATE_NAMES.get(code, f"state {code}")
+        sub = SUBSTATE_NAMES.get((code, self.substate or 0))
+        return f"{name}: {sub}" if sub and sub != name else name
+
+    @property
+    def idle(self) -> bool:
+        return self.state_code == IDLE
+
+    @property
+    def error_words(self) -> tuple[ErrorWord, ...]:
+        return tuple(ErrorWord.decode(e) for e in (self.errors or ()) if e)
+
+    @property
+    def extruder(self) -> int | None:
+        return self.temperatures.extruder if self.temperatures else None
+
+    @property
+    def extruder_target(self) -> int | None:
+        if self.temperatures and self.temperatures.target is not None:
+            return self.temperatures.target
+        if self.targets and str(self.targets.get("nozzle", "")).isdigit():
+            return int(self.targets["nozzle"])
+        return None
+
+    @property
+    def block_size(self) -> int:
+        return self.packet.block_size if self.packet else DEFAULT_BLOCK_SIZE
+
+    @property
+    def autolevel(self) -> bool | None:
+        return self.packet.autolevel if self.packet else None
+
+    @property
+    def buzzer(self) -> bool | None:
+        value = (self.settings or {}).get("buzzer")
+        return None if value is None else value == "on"
+
+    @property
+    def doors_open(self) -> tuple[str, ...]:
+        doors = (self.settings or {}).get("dr") or {}
+        return tuple(k for k, v in doors.items() if v == "on") if isinstance(doors, dict) else ()
+
+    @property
+    def filament_mm(self) -> int | None:
+        if not self.filament or len(self.filament) < 2 or self.filament[1] < 0:
+            return None
+        return self.filament[1]
+
+    @property
+    def model(self) -> PrinterModel | None:
+        if not self.model_number:
+            return None
+        try:
+            return find_model(self.model_number)
+        except InputError:
+            return None
+
+    @property
+    def firmware_version(self) -> str | None:
+        return ",".join(self.firmware) if self.firmware else None
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready view: raw fields plus the decoded meanings people and scripts ask for."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is not None and f.name not in ("order", "dashed") and value != {}:
+                out[f.name] = _plain(value)
+        model = self.model
+        out["decoded"] = {
+            "state": self.state_code, "substate": self.substate, "state_name": self.state_name,
+            "errors": [{"raw": w.raw, "source": w.source, "code": w.code, "name": w.name, "meaning": w.meaning}
+                       for w in self.error_words],
+            "extruder": self.extruder, "extruder_target": self.extruder_target, "block_size": self.block_size,
+            "autolevel": self.autolevel, "buzzer": self.buzzer, "filament_mm": self.filament_mm,
+            "cartridge_present": self.cartridge.present if self.cartridge else None,
+            "cartridge_colour": self.cartridge.colour if self.cartridge else None,
+            "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
+            "model": model.name if model else None,
+        }
+        return out
+
+
+def _plain(value: Any) -> Any:
+    if hasattr(value, "__dataclass_fields__"):
+        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    return value

@@ -1,0 +1,653 @@
+"""XYZprinting `.3w` print files: G-code in, the encrypted container the printers accept out, and back.
+
+Layout: magic, a zero gap, a cipher tag, offsets and a CRC-32 of the stored body, the header comment block (AES-128-CBC
+in v2, plaintext in v5) and, from 0x2000, the body: the whole processed G-code either AES-256-ECB (`TagEJ256`) or
+zipped and AES-128-CBC in 0x2000-byte pieces (`TagEa128`). Everything streams in large chunks so file size does not
+bound memory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import tempfile
+import zipfile
+import zlib
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+from typing import BinaryIO, Literal
+
+from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
+
+from fabwire.errors import InputError
+from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
+from fabwire.xyz.models import PrinterModel, default_model, find_model, model_for_file_id
+
+MAGIC = b"3DPFNKG13WTW"
+BODY_OFFSET = 0x2000
+TAG_ECB = b"TagEJ256"
+TAG_ZIP = b"TagEa128"
+KEY_256 = b"@xyzprinting.com@xyzprinting.com"
+KEY_128 = b"@xyzprinting.com"
+ZIP_PIECE = 0x2000
+ZIP_CIPHER_PIECE = ZIP_PIECE + 16
+ZIP_MEMBER = "sample.gcode"
+GAP = 4684
+"""Zero bytes before the tag in miniMover/XYZware files (XYZprint's compact layout uses 8)."""
+HEADER_OFFSET = {2: 68, 5: 80}
+XYZ_VERSION = "18020109"
+CHUNK = 1 << 22
+HEAD_WINDOW = 1 << 18
+TAIL_WINDOW = 1 << 18
+GCODE_SUFFIXES = (".gcode", ".gco", ".g")
+
+Progress = Callable[[int, int], None]
+"""Called with (bytes of input done, input size)."""
+
+_FIRST_CODE_LINE = re.compile(rb"^[ \t]*[^;\s]", re.MULTILINE)
+_XYZ_KEY_LINE = re.compile(
+    rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
+)
+_G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg]0?)0(?![0-9.])")
+_ODD_LINE_START = re.compile(rb"\n[ \tNng]")
+_G0_AT_LINE_START = re.compile(rb"\nG0(0?)(?![0-9.])")
+_HEADER_FIELD = re.compile(rb"^[ \t]*;[ \t]*([A-Za-z_][A-Za-z0-9_ ]*?)[ \t]*=[ \t]*(.*?)[ \t\r]*$", re.MULTILINE)
+
+
+@dataclass(frozen=True, slots=True)
+class ThreeWInfo:
+    """What a .3w says about itself; `gcode_size` is the processed G-code's length."""
+
+    container: int
+    tag: str
+    zipped: bool
+    header_encrypted: bool
+    body_encrypted: bool
+    header: bytes
+    fields: dict[str, str]
+    crc_stored: int
+    crc_computed: int
+    gcode_size: int
+    body_size: int
+    gap: int = GAP
+    header_offset: int = 0
+    pad_ok: bool = True
+    model: PrinterModel | None = None
+
+    @property
+    def crc_ok(self) -> bool:
+        return self.crc_stored == self.crc_computed
+
+    @property
+    def machine(self) -> str | None:
+        return self.fields.get("machine")
+
+    @property
+    def print_time_s(self) -> int | None:
+        return _int(self.fields.get("print_time"))
+
+    @property
+    def filament_mm(self) -> float | None:
+        return _float(self.fields.get("total_filament"))
+
+    @property
+    def layers(self) -> int | None:
+        return _int(self.fields.get("total_layers"))
+
+    @property
+    def variant(self) -> str:
+        return f"v{self.container} {self.tag}" + (" zipped" if self.zipped else "")
+
+
+@dataclass(frozen=True, slots=True)
+class ThreeWFile(ThreeWInfo):
+    gcode: bytes = field(default=b"", repr=False)
+
+
+def _float(text: str | None) -> float | None:
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def _int(text: str | None) -> int | None:
+    value = _float(text)
+    return None if value is None else round(value)
+
+
+def _pkcs7(data: bytes) -> bytes:
+    n = 16 - len(data) % 16
+    return data + bytes([n]) * n
+
+
+def _unpad(data: bytes) -> tuple[bytes, bool]:
+    """Strip a valid PKCS#7 pad; keep everything when there is none (miniMover omits it on aligned sizes)."""
+    n = data[-1] if data else 0
+    if 1 <= n <= 16 and len(data) >= n and data[-n:] == bytes([n]) * n:
+        return data[:-n], True
+    return data, False
+
+
+def _cbc128(data: bytes, *, decrypt: bool = False) -> bytes:
+    cipher = Cipher(algorithms.AES(KEY_128), modes.CBC(bytes(16)))
+    ctx = cipher.decryptor() if decrypt else cipher.encryptor()
+    return ctx.update(data) + ctx.finalize()
+
+
+def _resolve_model(model: PrinterModel | str | None) -> PrinterModel:
+    if model is None:
+        return default_model()
+    return model if isinstance(model, PrinterModel) else find_model(model)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# G-code → processed text
+
+
+@dataclass(frozen=True, slots=True)
+class _Prepared:
+    header: bytes
+    """The processed leading comment block, which is both the .3w header and the start of the body."""
+    metadata: GcodeMetadata
+    rest_start: int
+    """Input offset of the first code line."""
+    analysed: bool
+    """The moves were read once already to compute metadata (so progress counts two passes)."""
+
+
+def _size(src: BinaryIO) -> int:
+    here = src.tell()
+    end = src.seek(0, os.SEEK_END)
+    src.seek(here)
+    return end
+
+
+def _lines(src: BinaryIO, start: int, progress: Progress | None, total: int) -> Iterator[bytes]:
+    """Line-aligned chunks from `start` to EOF; the last one gets a newline if the file lacks it."""
+    src.seek(start)
+    carry = b""
+    done = start
+    while True:
+        block = src.read(CHUNK)
+        if not block:
+            break
+        done += len(block)
+        block = carry + block if carry else block
+        cut = block.rfind(b"\n") + 1
+        if cut == 0:
+            carry = block
+            continue
+        carry = block[cut:]
+        yield block[:cut] if carry else block
+        if progress is not None:
+            progress(done - len(carry), total)
+    if carry:
+        yield (carry[:-1] if carry.endswith(b"\r") else carry) + b"\n"
+    if progress is not None:
+        progress(total, total)
+
+
+def _first_half(progress: Progress | None) -> Progress | None:
+    return None if progress is None else lambda done, total: progress(done // 2, total)
+
+
+def _second_half(progress: Progress | None) -> Progress | None:
+    return None if progress is None else lambda done, total: progress((total + done) // 2, total)
+
+
+def _prepare(src: BinaryIO, file_id: str, filename: str, progress: Progress | None) -> _Prepared:
+    total = _size(src)
+    src.seek(0)
+    head = src.read(CHUNK)
+    if not head.strip():
+        raise InputError("empty G-code: nothing to convert")
+    found = _FIRST_CODE_LINE.search(head)
+    if found is None:
+        if len(head) < total:
+            raise InputError(f"the leading comment block is over {CHUNK} bytes; it cannot fit a .3w header")
+        raise InputError("the G-code has no commands, only comments")
+    rest_start = found.start()
+    kept = [
+        line.removesuffix(b"\r") + b"\n"
+        for line in head[:rest_start].split(b"\n")[:-1]
+        if not _XYZ_KEY_LINE.match(line)
+    ]
+    stated, computed = _metadata(src, head, rest_start, total, _first_half(progress))
+    meta = finish(stated, computed)
+    safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
+    synthetic = (
+        f"; filename = {safe_name}\n"
+        f"; print_time = {meta.print_time_s}\n"
+        f"; machine = {file_id}\n"
+        f"; facets = {meta.facets}\n"
+        f"; total_layers = {meta.layers}\n"
+        f"; version = {XYZ_VERSION}\n"
+        f"; total_filament = {meta.filament_mm:.2f}\n"
+    ).encode()
+    return _Prepared(synthetic + b"".join(kept), meta, rest_start, computed is not None)
+
+
+def _metadata(
+    src: BinaryIO, head: bytes, start: int, total: int, progress: Progress | None = None,
+) -> tuple[GcodeMetadata, GcodeMetadata | None]:
+    """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
+    tail = b""
+    if total > len(head):
+        src.seek(max(len(head), total - TAIL_WINDOW))
+        tail = src.read()
+    stated = header_metadata(head[:HEAD_WINDOW], tail)
+    if stated.complete:
+        return stated, None
+    analyzer = MoveAnalyzer()
+    for chunk in _lines(src, start, progress, total):
+        analyzer.feed_chunk(chunk)
+    return stated, analyzer.result()
+
+
+def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
+    """What a G-code file's comments state, and what its moves say where the comments are silent."""
+    with _open_input(path) as src:
+        total = _size(src)
+        head = src.read(CHUNK)
+        found = _FIRST_CODE_LINE.search(head)
+        return _metadata(src, head, found.start() if found else len(head), total)
+
+
+def _process(chunk: bytes) -> bytes:
+    """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
+    text = b"\n" + chunk.replace(b"\r\n", b"\n")
+    if _ODD_LINE_START.search(text):
+        return _G0_WORD.sub(rb"\n\g<1>1", text)[1:]
+    # Every line starts with its command: plain replaces do the common spellings at memory speed.
+    text = text.replace(b"\nG0 ", b"\nG1 ")
+    if b"\nG0" in text:
+        text = _G0_AT_LINE_START.sub(rb"\nG\g<1>1", text)
+    return text[1:]
+
+
+def _processed(src: BinaryIO, prepared: _Prepared, progress: Progress | None) -> Iterator[bytes]:
+    yield prepared.header
+    total = _size(src)
+    if prepared.analysed:
+        progress = _second_half(progress)
+    for chunk in _lines(src, prepared.rest_start, progress, total):
+        yield _process(chunk)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Writing
+
+
+def _header_start(container: int) -> int:
+    """Where the header goes: right after the offset field (and the v5 `1` field) plus the offset."""
+    offset_field_end = 20 + GAP + 8 + (4 if container == 5 else 0) + 4
+    return offset_field_end + HEADER_OFFSET[container]
+
+
+def _preamble(container: int, tag: bytes, stored_header: bytes, crc: int) -> bytes:
+    """The first 0x2000 bytes, in the miniMover/XYZware layout."""
+    out = bytearray(MAGIC + bytes([1, container, 0, 0]) + GAP.to_bytes(4, "big") + bytes(GAP) + tag)
+    offset = HEADER_OFFSET[container]
+    if container == 5:
+        out += len(stored_header).to_bytes(4, "big")
+    out += offset.to_bytes(4, "big")
+    if container == 5:
+        out += (1).to_bytes(4, "big")
+    out += crc.to_bytes(4, "big")
+    start = _header_start(container)
+    space = BODY_OFFSET - start
+    if len(stored_header) > space:
+        raise InputError(
+            f"the G-code's leading comment block makes a {len(stored_header)}-byte .3w header; "
+            f"a v{container} file has room for {space} bytes — shorten the comments before the first command"
+        )
+    out += bytes(start - len(out)) + stored_header
+    out += bytes(BODY_OFFSET - len(out))
+    return bytes(out)
+
+
+def _stored_header(container: int, header: bytes) -> bytes:
+    padded = _pkcs7(header)
+    return padded if container == 5 else _cbc128(padded)
+
+
+def _encrypt_ecb(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]:
+    """Returns (crc of stored body, stored size, plaintext size)."""
+    encryptor = Cipher(algorithms.AES(KEY_256), modes.ECB()).encryptor()  # buffers partial blocks itself
+    crc = size = plain = 0
+    for piece in pieces:
+        plain += len(piece)
+        enc = encryptor.update(piece)
+        crc = zlib.crc32(enc, crc)
+        size += len(enc)
+        out.write(enc)
+    pad = 16 - plain % 16
+    enc = encryptor.update(bytes([pad]) * pad) + encryptor.finalize()
+    crc = zlib.crc32(enc, crc)
+    out.write(enc)
+    return crc, size + len(enc), plain
+
+
+def _encrypt_zip(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]:
+    plain = 0
+    with tempfile.TemporaryFile() as scratch:
+        info = zipfile.ZipInfo(ZIP_MEMBER, date_time=(1980, 1, 1, 0, 0, 0))
+        info.compress_type = zipfile.ZIP_DEFLATED
+        info.external_attr = 0o644 << 16
+        try:
+            with zipfile.ZipFile(scratch, "w") as archive, archive.open(info, "w", force_zip64=False) as member:
+                for piece in pieces:
+                    plain += len(piece)
+                    member.write(piece)
+        except (RuntimeError, zipfile.LargeZipFile) as exc:
+            raise InputError(f"the G-code is too large for a zipped .3w ({exc})") from exc
+        scratch.seek(0)
+        crc = size = 0
+        while piece := scratch.read(ZIP_PIECE):
+            enc = _cbc128(_pkcs7(piece))
+            crc = zlib.crc32(enc, crc)
+            size += len(enc)
+            out.write(enc)
+    return crc, size, plain
+
+
+def _write(
+    src: BinaryIO, out: BinaryIO, model: PrinterModel, container: int | None, zipped: bool | None,
+    filename: str, progress: Progress | None,
+) -> ThreeWInfo:
+    container = model.container if container is None else container
+    zipped = model.zipped if zipped is None else zipped
+    if container not in HEADER_OFFSET:
+        raise InputError(f"unknown .3w container version {container}; use 2 or 5")
+    prepared = _prepare(src, model.file_id, filename, progress)
+    stored = _stored_header(container, prepared.header)
+    tag = TAG_ZIP if zipped else TAG_ECB
+    _preamble(container, tag, stored, 0)  # fail on an oversized header before writing the body
+    out.seek(BODY_OFFSET)
+    body = _processed(src, prepared, progress)
+    crc, size, plain = (_encrypt_zip if zipped else _encrypt_ecb)(body, out)
+    out.seek(0)
+    out.write(_preamble(container, tag, stored, crc))
+    return ThreeWInfo(
+        container=container, tag=tag.decode(), zipped=zipped, header_encrypted=container != 5, body_encrypted=True,
+        header=prepared.header, fields=_fields(prepared.header), crc_stored=crc, crc_computed=crc, gcode_size=plain,
+        body_size=size, gap=GAP, header_offset=_header_start(container), model=model,
+    )
+
+
+def write_3w(
+    gcode: bytes, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
+    zipped: bool | None = None, progress: Progress | None = None, filename: str = "temp.3w",
+) -> bytes:
+    """The .3w bytes for `gcode` as `model` expects them (container/zipped override the model's defaults)."""
+    out = BytesIO()
+    _write(BytesIO(gcode), out, _resolve_model(model), container, zipped, filename, progress)
+    return out.getvalue()
+
+
+@contextlib.contextmanager
+def _atomic(dst: Path) -> Iterator[BinaryIO]:
+    """A temporary file next to `dst` that replaces it only if the block succeeds."""
+    dst = Path(dst)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".part", dir=dst.parent)
+    except OSError as exc:
+        raise InputError(f"cannot write {dst}: {exc.strerror}") from exc
+    tmp = Path(tmp_name)
+    try:
+        with os.fdopen(fd, "w+b") as handle:
+            yield handle
+        os.replace(tmp, dst)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _open_input(src: Path) -> BinaryIO:
+    try:
+        return Path(src).open("rb")
+    except OSError as exc:
+        raise InputError(f"cannot read {src}: {exc.strerror}") from exc
+
+
+def convert_gcode_file(
+    src: Path, dst: Path, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
+    zipped: bool | None = None, progress: Progress | None = None,
+) -> ThreeWInfo:
+    """Convert a G-code file to a .3w file; `dst` appears complete or not at all."""
+    target = _resolve_model(model)
+    with _open_input(src) as source, _atomic(dst) as out:
+        return _write(source, out, target, container, zipped, Path(dst).name, progress)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Reading
+
+
+@dataclass(frozen=True, slots=True)
+class _Layout:
+    container: int
+    tag: bytes
+    gap: int
+    header_offset: int
+    header_length: int | None
+    crc: int
+
+
+def _u32(data: bytes, at: int) -> int:
+    return int.from_bytes(data[at:at + 4], "big")
+
+
+def _parse_layout(pre: bytes, name: str) -> _Layout:
+    if len(pre) < len(MAGIC) or pre[:len(MAGIC)] != MAGIC:
+        raise InputError(f"{name} is not a .3w file (no 3DPFNKG13WTW signature)")
+    if len(pre) < BODY_OFFSET:
+        raise InputError(f"{name} is truncated: {len(pre)} bytes, a .3w has at least {BODY_OFFSET + 16}")
+    container = pre[13]
+    if container not in (2, 5):
+        raise InputError(f"{name}: unsupported .3w container version {container} (known: 2, 5)")
+    gap = _u32(pre, 16)
+    at = 20 + gap
+    fields_end = at + 8 + (16 if container == 5 else 8)
+    if fields_end > BODY_OFFSET:
+        raise InputError(f"{name} is corrupt: the header gap ({gap} bytes) runs past the body")
+    tag = pre[at:at + 8]
+    if tag not in (TAG_ECB, TAG_ZIP):
+        raise InputError(f"{name} is corrupt: unknown body tag {tag!r} (expected TagEJ256 or TagEa128)")
+    at += 8
+    length = None
+    if container == 5:
+        length = _u32(pre, at)
+        at += 4
+    offset_end = at + 4
+    header_offset = offset_end + _u32(pre, at)
+    at += 4 + (4 if container == 5 else 0)
+    crc = _u32(pre, at)
+    if not at + 4 <= header_offset <= BODY_OFFSET or (length is not None and header_offset + length > BODY_OFFSET):
+        raise InputError(f"{name} is corrupt: the header lies outside the first {BODY_OFFSET} bytes")
+    return _Layout(container, tag, gap, header_offset, length, crc)
+
+
+def _looks_like_text(data: bytes) -> bool:
+    sample = data[:64]
+    return bool(sample) and not re.search(rb"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]", sample)
+
+
+def _read_header(pre: bytes, layout: _Layout, name: str) -> tuple[bytes, bool]:
+    """(header text, was it encrypted)."""
+    if layout.header_length is not None:
+        raw = pre[layout.header_offset:layout.header_offset + layout.header_length]
+    else:
+        raw = pre[layout.header_offset:BODY_OFFSET]
+        if not raw.lstrip().startswith(b";"):
+            region = raw[:len(raw) - len(raw) % 16]
+            blocks = [region[i:i + 16] for i in range(0, len(region), 16)]
+            while blocks and not any(blocks[-1]):
+                blocks.pop()
+            raw = b"".join(blocks)
+        else:
+            raw = raw.rstrip(b"\0")
+    if not raw or raw.lstrip().startswith(b";"):
+        return _unpad(raw)[0], False
+    if len(raw) % 16:
+        raise InputError(f"{name} is corrupt: encrypted header of {len(raw)} bytes is not a multiple of 16")
+    text = _unpad(_cbc128(raw, decrypt=True))[0]
+    if not _looks_like_text(text):
+        raise InputError(f"{name}: the header does not decrypt to text (wrong key or encryption variant)")
+    return text, True
+
+
+def _fields(header: bytes) -> dict[str, str]:
+    found: dict[str, str] = {}
+    for key, value in _HEADER_FIELD.findall(header):
+        found.setdefault(key.decode("utf-8", "replace").strip(), value.decode("utf-8", "replace"))
+    return found
+
+
+def _decrypt_ecb(
+    src: BinaryIO, body_size: int, sink: Callable[[bytes], object], name: str, progress: Progress | None, total: int,
+) -> tuple[int, int, bool, bool]:
+    """Returns (crc of stored body, plaintext size, pad present, body encrypted)."""
+    first = src.read(CHUNK)
+    crc = zlib.crc32(first)
+    if first[:1] == b";":
+        sink(first)
+        plain = len(first)
+        while block := src.read(CHUNK):
+            crc = zlib.crc32(block, crc)
+            sink(block)
+            plain += len(block)
+        return crc, plain, True, False
+    if body_size % 16:
+        raise InputError(f"{name} is truncated or corrupt: the body is {body_size} bytes, not a multiple of 16")
+    decryptor = Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor()
+    held = b""
+    plain = 0
+    block = first
+    checked = False
+    done = BODY_OFFSET
+    while block:
+        done += len(block)
+        text = held + decryptor.update(block)
+        if not checked:
+            if not _looks_like_text(text):
+                raise InputError(f"{name}: the body does not decrypt to G-code (wrong key or encryption variant)")
+            checked = True
+        held = text[-16:]
+        if len(text) > 16:
+            sink(text[:-16])
+            plain += len(text) - 16
+        if progress is not None:
+            progress(done, total)
+        block = src.read(CHUNK)
+        crc = zlib.crc32(block, crc)
+    last, pad_ok = _unpad(held + decryptor.finalize())
+    sink(last)
+    return crc, plain + len(last), pad_ok, True
+
+
+def _decrypt_zip(
+    src: BinaryIO, body_size: int, sink: Callable[[bytes], object], name: str, progress: Progress | None, total: int,
+) -> tuple[int, int, bool, bool]:
+    crc = 0
+    pad_ok = True
+    done = BODY_OFFSET
+    with tempfile.TemporaryFile() as scratch:
+        while piece := src.read(ZIP_CIPHER_PIECE):
+            crc = zlib.crc32(piece, crc)
+            done += len(piece)
+            if len(piece) % 16:
+                raise InputError(f"{name} is truncated or corrupt: a zipped body piece of {len(piece)} bytes")
+            plain, pad_ok = _unpad(_cbc128(piece, decrypt=True))
+            if scratch.tell() == 0 and not plain.startswith(b"PK\x03\x04"):
+                raise InputError(f"{name}: the body does not decrypt to a zip archive (wrong key or variant)")
+            scratch.write(plain)
+            if progress is not None:
+                progress(done, total)
+        scratch.seek(0)
+        size = 0
+        try:
+            with zipfile.ZipFile(scratch) as archive:
+                members = archive.infolist()
+                if len(members) != 1:
+                    raise InputError(f"{name}: the zipped body holds {len(members)} files, expected exactly one")
+                with archive.open(members[0]) as member:
+                    while data := member.read(CHUNK):
+                        sink(data)
+                        size += len(data)
+        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as exc:
+            raise InputError(f"{name}: the zipped body is corrupt ({exc})") from exc
+    return crc, size, pad_ok, True
+
+
+def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: Progress | None) -> ThreeWInfo:
+    total = _size(src)
+    src.seek(0)
+    pre = src.read(BODY_OFFSET)
+    layout = _parse_layout(pre, name)
+    header, header_encrypted = _read_header(pre, layout, name)
+    body_size = total - BODY_OFFSET
+    if body_size <= 0:
+        raise InputError(f"{name} is truncated: it has no body after its {BODY_OFFSET}-byte header area")
+    decrypt = _decrypt_zip if layout.tag == TAG_ZIP else _decrypt_ecb
+    crc, plain, pad_ok, body_encrypted = decrypt(src, body_size, sink, name, progress, total)
+    if plain == 0:
+        raise InputError(f"{name}: the body holds no G-code")
+    fields = _fields(header)
+    machine = fields.get("machine")
+    return ThreeWInfo(
+        container=layout.container, tag=layout.tag.decode(), zipped=layout.tag == TAG_ZIP,
+        header_encrypted=header_encrypted, body_encrypted=body_encrypted, header=header, fields=fields,
+        crc_stored=layout.crc, crc_computed=crc, gcode_size=plain, body_size=body_size, gap=layout.gap,
+        header_offset=layout.header_offset, pad_ok=pad_ok, model=model_for_file_id(machine) if machine else None,
+    )
+
+
+def _source(data_or_path: bytes | str | Path) -> tuple[BinaryIO, str]:
+    if isinstance(data_or_path, bytes | bytearray | memoryview):
+        return BytesIO(bytes(data_or_path)), "the data"
+    return _open_input(Path(data_or_path)), str(data_or_path)
+
+
+def read_3w(data_or_path: bytes | str | Path) -> ThreeWFile:
+    """Decode a whole .3w (from a path or its bytes) into memory; CRC mismatches are reported, not raised."""
+    parts: list[bytes] = []
+    source, name = _source(data_or_path)
+    with source:
+        info = _read(source, name, parts.append, None)
+    values = {f: getattr(info, f) for f in ThreeWInfo.__dataclass_fields__}
+    return ThreeWFile(**values, gcode=b"".join(parts))
+
+
+def inspect_3w(data_or_path: bytes | str | Path, progress: Progress | None = None) -> ThreeWInfo:
+    """Everything `read_3w` tells except the G-code, streaming (the body is still decrypted to validate it)."""
+    source, name = _source(data_or_path)
+    with source:
+        return _read(source, name, lambda _data: None, progress)
+
+
+def convert_3w_to_gcode(src: Path, dst: Path, progress: Progress | None = None) -> ThreeWInfo:
+    """Write the processed G-code a .3w carries (header included); `dst` appears complete or not at all."""
+    with _open_input(src) as source, _atomic(dst) as out:
+        return _read(source, str(src), out.write, progress)
+
+
+def is_3w(data_or_path: bytes | bytearray | memoryview | str | Path) -> bool:
+    """Whether the bytes (or the file) start with the .3w signature."""
+    if isinstance(data_or_path, bytes | bytearray | memoryview):
+        return bytes(data_or_path[:len(MAGIC)]) == MAGIC
+    try:
+        with Path(data_or_path).open("rb") as handle:
+            return handle.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
+def is_gcode_path(path: str | Path) -> bool:
+    return Path(path).suffix.lower() in GCODE_SUFFIXES

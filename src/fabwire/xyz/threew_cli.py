@@ -1,0 +1,220 @@
+"""`fabwire xyz convert` and `fabwire xyz info`: .3w files on disk, no printer needed."""
+
+from __future__ import annotations
+
+import contextlib
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, Literal
+
+import click
+from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
+from rich.table import Table
+
+from fabwire.cli_support import App
+from fabwire.errors import InputError
+from fabwire.xyz.gcodeinfo import GcodeMetadata, finish
+from fabwire.xyz.models import PrinterModel, find_model
+from fabwire.xyz.threew import (
+    Progress as ProgressCallback,
+)
+from fabwire.xyz.threew import (
+    ThreeWInfo,
+    convert_3w_to_gcode,
+    convert_gcode_file,
+    gcode_metadata,
+    inspect_3w,
+    is_3w,
+    is_gcode_path,
+)
+
+BAR_THRESHOLD = 8 << 20
+"""Files at least this large get a progress bar."""
+
+
+def _app(ctx: click.Context) -> App:
+    return ctx.find_object(App) or App()
+
+
+@contextlib.contextmanager
+def _progress(app: App, label: str, size: int) -> Iterator[ProgressCallback | None]:
+    if size < BAR_THRESHOLD:
+        yield None
+        return
+    columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
+               TimeRemainingColumn())
+    with Progress(*columns, console=app.output.err, transient=True) as bar:
+        task = bar.add_task(label, total=size)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+def _duration(seconds: int | None) -> str:
+    if seconds is None:
+        return "?"
+    hours, rest = divmod(seconds, 3600)
+    return f"{hours}h {rest // 60:02d}m" if hours else f"{rest // 60}m {rest % 60:02d}s"
+
+
+def _model_data(model: PrinterModel | None) -> dict[str, Any] | None:
+    if model is None:
+        return None
+    return {"model_number": model.model_number, "name": model.name, "file_id": model.file_id,
+            "file_format": model.file_format.value}
+
+
+def _info_data(info: ThreeWInfo) -> dict[str, Any]:
+    return {
+        "variant": info.variant, "container": info.container, "tag": info.tag, "zipped": info.zipped,
+        "header_encrypted": info.header_encrypted, "body_encrypted": info.body_encrypted,
+        "gap": info.gap, "header_offset": info.header_offset, "header_bytes": len(info.header),
+        "crc_stored": f"{info.crc_stored:08x}", "crc_computed": f"{info.crc_computed:08x}", "crc_ok": info.crc_ok,
+        "pad_ok": info.pad_ok, "machine": info.machine, "model": _model_data(info.model),
+        "print_time_s": info.print_time_s, "filament_mm": info.filament_mm, "layers": info.layers,
+        "gcode_bytes": info.gcode_size, "body_bytes": info.body_size, "fields": info.fields,
+    }
+
+
+def _summary(info: ThreeWInfo) -> str:
+    filament = "?" if info.filament_mm is None else f"{info.filament_mm / 1000:.2f} m"
+    return (f"print time {_duration(info.print_time_s)}, filament {filament}, "
+            f"{info.layers if info.layers is not None else '?'} layers")
+
+
+def _warn_crc(app: App, name: Path, info: ThreeWInfo) -> None:
+    if not info.crc_ok:
+        app.output.note(f"warning: {name}: CRC mismatch (stored {info.crc_stored:08x}, computed "
+                        f"{info.crc_computed:08x}); the file may be damaged")
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror}") from exc
+
+
+@click.command("convert")
+@click.argument("src", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("dst", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-m", "--model", "model_text", metavar="MODEL",
+              help="Target printer for a .3w: model number, name or alias (default: miniMaker, or the source "
+                   ".3w's own model when re-targeting).")
+@click.option("--format", "file_format", type=click.Choice(["v2", "v5"]),
+              help="Container version (default: what the model needs; nano on firmware 3.x wants v5).")
+@click.option("--zip/--no-zip", "zipped", default=None, help="Zipped AES-128 body (1.0/1.1/2.0 generation) or not.")
+@click.pass_context
+def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, file_format: str | None,
+            zipped: bool | None) -> None:
+    """Convert G-code to a .3w print file or back; the direction follows the files' types.
+
+    A .3w source with a .3w destination is re-targeted (e.g. for another model or format).
+    """
+    app = _app(ctx)
+    size = _size(src)
+    container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
+    writing = dst.suffix.lower() == ".3w"
+    if is_3w(src):
+        if not writing:
+            if model_text or file_format or zipped is not None:
+                raise InputError("--model, --format and --zip only apply when writing a .3w file")
+            with _progress(app, f"decoding {src.name}", size) as progress:
+                info = convert_3w_to_gcode(src, dst, progress)
+            _warn_crc(app, src, info)
+            _report(app, "3w-to-gcode", src, dst, info)
+            return
+        source_info = inspect_3w(src)
+        _warn_crc(app, src, source_info)
+        model = find_model(model_text) if model_text else source_info.model
+        if model is None:
+            raise InputError(f"{src} names no known model (machine {source_info.machine!r}); give --model")
+        with tempfile.TemporaryDirectory(dir=dst.parent if dst.parent.is_dir() else None) as scratch:
+            middle = Path(scratch) / "source.gcode"
+            with _progress(app, f"decoding {src.name}", size) as progress:
+                convert_3w_to_gcode(src, middle, progress)
+            with _progress(app, f"encoding {dst.name}", _size(middle)) as progress:
+                info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress)
+        _report(app, "3w-to-3w", src, dst, info)
+        return
+    if not writing:
+        kind = "G-code" if is_gcode_path(src) else "not a .3w file"
+        raise InputError(f"{src} is {kind} and {dst} is not a .3w file: nothing to convert "
+                         "(name the output *.3w to make a print file)")
+    model = find_model(model_text or "dv1MX0A000")
+    with _progress(app, f"encoding {dst.name}", size) as progress:
+        info = convert_gcode_file(src, dst, model, container=container, zipped=zipped, progress=progress)
+    _report(app, "gcode-to-3w", src, dst, info)
+
+
+def _report(app: App, direction: str, src: Path, dst: Path, info: ThreeWInfo) -> None:
+    data = {"direction": direction, "source": str(src), "output": str(dst), "bytes_written": _size(dst),
+            **_info_data(info)}
+    model = info.model.name if info.model else info.machine or "unknown model"
+    if direction == "3w-to-gcode":
+        text = f"wrote {dst} ({info.gcode_size} bytes of G-code) from a {info.variant} file for {model}; "
+    else:
+        text = f"wrote {dst} for {model} ({info.variant}, {data['bytes_written']} bytes); "
+    app.output.result(data, text + _summary(info))
+
+
+@click.command("info")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.pass_context
+def info(ctx: click.Context, file: Path) -> None:
+    """Show what a .3w file holds (variant, CRC, model, print metadata), or what a G-code file would give."""
+    app = _app(ctx)
+    size = _size(file)
+    if not is_3w(file):
+        if not is_gcode_path(file):
+            raise InputError(f"{file} is not a .3w file (no 3DPFNKG13WTW signature) nor named like G-code")
+        _gcode_info(app, file)
+        return
+    with _progress(app, f"checking {file.name}", size) as progress:
+        details = inspect_3w(file, progress)
+    data = {"file": str(file), "size": size, **_info_data(details)}
+
+    def human() -> None:
+        table = Table(show_header=False, box=None)
+        table.add_column(style="bold")
+        table.add_column()
+        model = details.model
+        table.add_row("file", f"{file} ({size} bytes)")
+        table.add_row("variant", details.variant)
+        table.add_row("header", f"{'AES-128-CBC' if details.header_encrypted else 'plaintext'}, "
+                                f"{len(details.header)} bytes at {details.header_offset} (gap {details.gap})")
+        table.add_row("body", f"{details.body_size} bytes, {'encrypted' if details.body_encrypted else 'plaintext'}"
+                              f"{'' if details.pad_ok else ', no final pad'}; {details.gcode_size} bytes of G-code")
+        crc = "ok" if details.crc_ok else f"MISMATCH (computed {details.crc_computed:08x})"
+        table.add_row("crc", f"{details.crc_stored:08x} {crc}")
+        table.add_row("model", f"{model.name} ({model.model_number})" if model
+                      else f"unknown (machine {details.machine!r})")
+        table.add_row("print time", _duration(details.print_time_s))
+        table.add_row("filament", "?" if details.filament_mm is None else f"{details.filament_mm:.2f} mm")
+        table.add_row("layers", str(details.layers) if details.layers is not None else "?")
+        for key, value in details.fields.items():
+            if key not in {"print_time", "total_filament", "total_layers", "machine"}:
+                table.add_row(key, value)
+        app.output.out.print(table)
+
+    app.output.result(data, human)
+
+
+def _gcode_info(app: App, file: Path) -> None:
+    stated, computed = gcode_metadata(file)
+    final: GcodeMetadata = finish(stated, computed)
+
+    def source(value: object) -> str:
+        return "stated" if value is not None else "computed" if computed is not None else "default"
+
+    sources = {"print_time_s": source(stated.print_time_s), "filament_mm": source(stated.filament_mm),
+               "layers": source(stated.layers)}
+    data = {"file": str(file), "kind": "gcode", "slicer": stated.slicer, "print_time_s": final.print_time_s,
+            "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources}
+    filament = f"{final.filament_mm:.2f} mm" if final.filament_mm is not None else "?"
+    app.output.result(data, f"{file}: G-code from {stated.slicer or 'an unknown slicer'}; print time "
+                            f"{_duration(final.print_time_s)} ({sources['print_time_s']}), filament "
+                            f"{filament} ({sources['filament_mm']}), {final.layers} layers ({sources['layers']})")

@@ -1,0 +1,152 @@
+"""`fabwire lineus …` and `fabwire sim lineus` as real subprocesses over loopback TCP."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import pytest
+
+from clitools import run_cli
+
+
+def cli(url: str, *args: str, json_out: bool = False):
+    return run_cli(*(["--json"] if json_out else []), "lineus", "-d", url, *args)
+
+
+def test_session_through_the_cli(simulator, tmp_path: Path) -> None:
+    record = tmp_path / "drawn.svg"
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--name", "cli-bot",
+                    "--record", str(record))
+    url = sim.url
+    assert url.startswith("tcp://127.0.0.1:")
+
+    info = cli(url, "info", json_out=True)
+    assert info.returncode == 0, info.stderr
+    data = json.loads(info.stdout)
+    assert data["name"] == "cli-bot"
+    assert data["firmware_major"] == 3
+    assert data["capabilities"] == {"CONNECTMODE": "ST", "MACHINENAME": "cli-bot"}
+
+    moved = cli(url, "move", "1200", "0", "--pen", "down", json_out=True)
+    assert json.loads(moved.stdout) == {"x": 1200.0, "y": 0.0, "z": 0.0, "pen": "down", "clamped": False}
+    # Each CLI call is a new connection: the arm homes (pen up) before greeting, so this stroke starts from a drop.
+    assert cli(url, "move", "1200", "-300", "--pen", "down").returncode == 0
+    assert cli(url, "move", "1200", "300", "--pen", "down").returncode == 0
+    clamped = cli(url, "move", "2500", "0", json_out=True)
+    assert json.loads(clamped.stdout)["x"] == 1950.0
+    assert json.loads(clamped.stdout)["clamped"] is True
+    assert "outside the drawing area" in clamped.stderr
+
+    position = cli(url, "position")  # a new connection homes the arm first
+    assert position.returncode == 0
+    assert "X 1000  Y 1000  Z 1000  (pen up)" in position.stdout
+    assert "S 135.00  E 45.00" in cli(url, "home").stdout + cli(url, "position", "--servos").stdout
+
+    gcode = tmp_path / "square.gcode"
+    gcode.write_text("; a square\nG54 X0 Y0 S1\nG01 X1100 Y0 Z1000\nG01 X1200 Y0 Z0 ; first side\n\nG01 Z1000\n")
+    saved = cli(url, "files", "save", str(gcode), "7", json_out=True)
+    assert json.loads(saved.stdout) == {"slot": 7, "lines": 4}
+    listing = json.loads(cli(url, "files", "list", json_out=True).stdout)
+    assert [row["slot"] for row in listing] == [1, 7]
+    assert cli(url, "files", "delete", "7").returncode == 0
+    assert "/0000007.txt" not in cli(url, "files", "list").stdout
+    missing = cli(url, "files", "delete", "7")
+    assert missing.returncode == 7
+    assert "no drawing 7" in missing.stderr
+
+    assert cli(url, "name").stdout.strip() == "cli-bot"
+    assert cli(url, "name", "renamed").stdout.strip() == "renamed"
+    bad_name = cli(url, "name", "bad name!")
+    assert bad_name.returncode == 4
+    assert "Traceback" not in bad_name.stderr
+
+    assert cli(url, "wifi", "add", "cafe net", "--password", "p w").returncode == 0
+    networks = json.loads(cli(url, "wifi", "list", json_out=True).stdout)
+    assert {"ssid": "cafe net", "visible": False, "known": True} in networks
+    assert cli(url, "wifi", "forget", "--all").returncode == 0
+    assert "known" not in cli(url, "wifi", "list").stdout.replace("unknown", "")
+
+    refused = cli(url, "calibrate")
+    assert refused.returncode == 4
+    assert "--yes" in refused.stderr
+    assert cli(url, "calibrate", "--yes").returncode == 0
+
+    sent = cli(url, "send", "M115")
+    assert sent.stdout.strip() == "ok CONNECTMODE:ST MACHINENAME:renamed"
+    assert cli(url, "send", "G04", "P100").returncode == 4
+
+    trace = tmp_path / "wire.trace"
+    assert run_cli("lineus", "-d", url, "--trace", str(trace), "position").returncode == 0
+    shown = run_cli("trace", "show", "--no-time", str(trace))
+    assert "M114" in shown.stdout
+    assert "hello" in shown.stdout
+
+    host, port = url.removeprefix("tcp://").rsplit(":", 1)
+    with socket.create_connection((host, int(port)), timeout=10) as sock:
+        stream = sock.makefile("rb")
+        assert stream.readline().startswith(b"hello ")
+        for command in (b"G01 X1200 Y0 Z0\x00", b"G01 X1400 Y0 Z0\x00", b"G01 Z1000\x00"):
+            sock.sendall(command)
+            assert stream.read(1) == b"\x00"
+            assert stream.readline().startswith(b"ok ")
+    sim.process.terminate()
+    assert sim.process.wait(10) == 0
+    assert sim.process.stderr is not None
+    assert "recorded 1 stroke(s)" in sim.process.stderr.read()
+    svg = record.read_text()
+    assert svg.startswith("<?xml")
+    assert "1200" in svg
+
+
+def test_errors_are_one_line(tmp_path: Path) -> None:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    refused = run_cli("lineus", "-d", f"127.0.0.1:{port}", "position")
+    assert refused.returncode == 8
+    assert "connection refused" in refused.stderr
+    assert "Traceback" not in refused.stderr
+    gcode = tmp_path / "bad.gcode"
+    gcode.write_text("G01 X1e5\n")
+    bad = run_cli("lineus", "-d", f"127.0.0.1:{port}", "files", "save", str(gcode), "3")
+    assert bad.returncode == 4
+    assert "line 1" in bad.stderr
+
+
+def test_not_a_lineus_host(simulator) -> None:
+    other = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--version", "1.0.1")
+    ok = run_cli("--json", "lineus", "-d", other.url, "info")
+    assert json.loads(ok.stdout)["firmware_major"] == 1
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+        silent = run_cli("lineus", "-d", f"127.0.0.1:{port}", "--timeout", "1", "position", timeout=30)
+    assert silent.returncode == 9
+    assert "no hello" in silent.stderr
+
+
+def test_in_process_simulator_url() -> None:
+    done = run_cli("--json", "lineus", "-d", "sim://lineus?speed=inf", "move", "1300", "200")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["x"] == 1300.0
+
+
+def test_sim_rejects_bad_options(tmp_path: Path) -> None:
+    bad = run_cli("sim", "lineus", "--listen", "127.0.0.1:0", "--version", "banana")
+    assert bad.returncode == 4
+    assert "version" in bad.stderr
+    bad_record = run_cli("sim", "lineus", "--listen", "127.0.0.1:0", "--record", str(tmp_path / "x.txt"))
+    assert bad_record.returncode == 4
+
+
+@pytest.mark.timeout(60)
+def test_discover_finds_advertised_simulator(simulator) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--name", "adv-bot", "--advertise")
+    port = int(sim.url.rsplit(":", 1)[1])
+    found = run_cli("--json", "lineus", "discover", "--wait", "1.5", "--interface", "127.0.0.1")
+    assert found.returncode == 0, found.stderr
+    expected = {"name": "adv-bot", "host": "adv-bot.local.", "address": "127.0.0.1", "port": port}
+    assert expected in json.loads(found.stdout)

@@ -1,0 +1,251 @@
+"""The client against the simulator over TCP and fault-injecting links, and against hosts that are not a Line-us."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+from collections.abc import AsyncIterator
+
+import pytest
+
+from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, LocalProtocolError, RemoteProtocolError
+from fabwire.lineus import protocol as p
+from fabwire.lineus.client import LineUs, LineUsSync, Network, Position, StoredDrawing, parse_file_list
+from fabwire.lineus.sim import LineUsSim, SimOptions, resolve_version
+from fabwire.transport import FaultPlan, FaultyTransport, Transport, open_tcp, serve_tcp
+
+
+@contextlib.asynccontextmanager
+async def connected(port: int, *, plan: FaultPlan | None = None, **kwargs: object) -> AsyncIterator[LineUs]:
+    async with asyncio.timeout(30):
+        transport: Transport = await open_tcp("127.0.0.1", port)
+        if plan is not None:
+            transport = FaultyTransport(transport, plan)
+        arm = await LineUs.connect(transport, **kwargs)  # type: ignore[arg-type]
+        try:
+            yield arm
+        finally:
+            await arm.close()
+
+
+async def test_every_command(lineus_sim) -> None:
+    running = await lineus_sim()
+    async with connected(running.port) as arm:
+        assert arm.hello == p.Hello("3.2.0 Nov 17 2019 17:54:57", "line-us", "123456")
+        assert arm.hello.firmware_major == 3
+        assert await arm.position() == Position(1000, 1000, 1000)
+        assert await arm.move(1200, 0) == Position(1200, 0, 1000)
+        assert (await arm.pen_down()).pen_down
+        assert await arm.move(1300, 0) == Position(1300, 0, 0)
+        assert not (await arm.pen_up()).pen_down
+        assert await arm.rapid(1000, -500) == Position(1000, -500, 1000)
+        await arm.set_origin(100, 0, 2)
+        assert await arm.move(500, 0) == Position(1100, 0, 1000)
+        assert await arm.move_uncalibrated(1200, 100, keep="xy") == Position(1200, 100, 1000)
+        assert await arm.home() == Position(1000, 1000, 1000)
+        await arm.set_speed(3, 20)
+        assert arm.model.draw_step == 3
+        assert arm.model.travel_step == 20
+        assert await arm.servo_angles() == {"S": 135.0, "E": 45.0, "P": 135.0}
+        assert await arm.capabilities() == {"CONNECTMODE": "ST", "MACHINENAME": "line-us"}
+        diag = await arm.diagnostics()
+        assert diag["ChipID"] == "123456"
+        assert diag["ResetReason"] == "External System"
+        assert await arm.name() == "line-us"
+        await arm.set_name("studio-arm")
+        assert await arm.name() == "studio-arm"
+        expected = [Network("fabwire-lab", True, True), Network("neighbours-wifi", True, False)]
+        assert await arm.wifi_networks() == expected
+        await arm.add_wifi("cafe net", "pass word")
+        assert Network("cafe net", False, True) in await arm.wifi_networks()
+        await arm.forget_wifi("cafe net")
+        with pytest.raises(DeviceError, match="no stored network"):
+            await arm.forget_wifi("cafe net")
+        await arm.forget_wifi()
+        assert all(not n.known for n in await arm.wifi_networks())
+        assert await arm.list_drawings() == [StoredDrawing(1, 156, "/0000001.txt")]
+        assert await arm.save_drawing(5, ["G54 X0 Y0 S1", "", "G01 X1200 Y0 Z0", "G01 Z1000"]) == 3
+        assert running.sim.files[5] == "G54 X0 Y0 S1\nG01 X1200 Y0 Z0\nG01 Z1000\n"
+        assert [d.slot for d in await arm.list_drawings()] == [1, 5]
+        await arm.delete_drawing(5)
+        with pytest.raises(DeviceError, match="no drawing 5"):
+            await arm.delete_drawing(5)
+        usage = await arm.storage()
+        assert usage["FSTotal"] == 1953282
+        assert await arm.zmap() == (0, 100, 300, 200)
+        await arm.set_zmap((0, 50, 60, 70))
+        assert await arm.zmap() == (0, 50, 60, 70)
+        await arm.set_zmap(None)
+        assert await arm.zmap() == (0, 0, 0, 0)
+        await arm.gestures(False)
+        await arm.memory_drawing(1)
+        await arm.timed_demo(3, 120, 1)
+        with pytest.raises(InputError, match="confirm"):
+            await arm.calibrate()
+        await arm.calibrate(confirm=True)
+        with pytest.raises(InputError, match="confirm"):
+            await arm.factory_reset()
+        with pytest.raises(InputError, match="confirm"):
+            await arm.firmware_update()
+        with pytest.raises(DeviceError, match="unreachable"):
+            await arm.firmware_update(confirm=True)
+        await arm.factory_reset(wipe_files=True, confirm=True)
+        assert await arm.list_drawings() == []
+        assert await arm.name() == "line-us"
+        with pytest.raises(LocalProtocolError):
+            await arm.set_name("no spaces allowed")
+        with pytest.raises(LocalProtocolError):
+            await arm.move(float("nan"), 0)
+
+
+async def test_clamped_move_reports_clamped_point(lineus_sim) -> None:
+    running = await lineus_sim()
+    async with connected(running.port) as arm:
+        await arm.move(1200, 0, 0)
+        assert await arm.move(2500, 0) == Position(1950, 0, 1000)
+
+
+async def test_firmware1_personality(lineus_sim) -> None:
+    running = await lineus_sim(version=resolve_version("1.0.1"))
+    async with connected(running.port, lookahead=True) as arm:
+        assert arm.hello.firmware == (1, 0, 1)
+        assert not arm.lookahead  # firmware 1 cannot buffer a second command
+        assert await arm.move(1200.4, 10.6) == Position(1200, 11, 1000)
+
+
+async def test_reply_awaited_no_earlier_than_the_move(lineus_sim) -> None:
+    running = await lineus_sim(speed=20.0)
+    async with connected(running.port) as arm:
+        await arm.move(1000, -800)
+        loop = asyncio.get_running_loop()
+        began = loop.time()
+        await arm.move(1000, 800)
+        elapsed = loop.time() - began
+        move = running.sim.arm.moves[-1]
+        assert elapsed >= (move.finished - move.started) / 20.0 * 0.9
+
+
+async def test_lookahead_pipelines_moves(lineus_sim) -> None:
+    running = await lineus_sim(speed=20.0)
+    async with connected(running.port, lookahead=True) as arm:
+        commands = [p.Move(1000 + 20 * i, -300 + 40 * i, 0) for i in range(15)]
+        replies = await arm.run(commands)
+        assert [r.get("Y") for r in replies] == [f"{-300 + 40 * i:.2f}" for i in range(15)]
+        moves = list(running.sim.arm.moves)[-14:]
+        chained = sum(1 for a, b in itertools.pairwise(moves) if b.started == pytest.approx(a.finished))
+        assert chained >= 10
+
+
+@pytest.mark.parametrize("plan", [FaultPlan(chunk=1, seed=1), FaultPlan(chunk=3, delay=0.002, seed=2)])
+async def test_over_split_and_delayed_links(lineus_sim, plan: FaultPlan) -> None:
+    running = await lineus_sim()
+    async with connected(running.port, plan=plan) as arm:
+        assert arm.hello.name == "line-us"
+        for i in range(5):
+            assert await arm.move(1100 + 10 * i, 0, 0) == Position(1100 + 10 * i, 0, 0)
+        assert (await arm.diagnostics())["name"] == "line-us"
+    assert running.sim.arm.strokes == [[(1100, 0), (1110, 0), (1120, 0), (1130, 0), (1140, 0)]]
+
+
+async def test_corrupted_replies_end_in_a_clear_error(lineus_sim) -> None:
+    running = await lineus_sim()
+    outcomes: list[str] = []
+    for seed in range(4):
+        plan = FaultPlan(corrupt=0.01, side="read", seed=seed)
+        try:
+            async with connected(running.port, plan=plan, reply_timeout=0.3, hello_timeout=1.0) as arm:
+                for i in range(20):  # short moves near home keep each reply's time limit short
+                    await arm.move(1000 + 5 * i, 1000)
+            outcomes.append("ok")
+        except (RemoteProtocolError, LinkTimeout, DeviceError) as exc:
+            outcomes.append(type(exc).__name__)
+    assert any(outcome != "ok" for outcome in outcomes)
+
+
+async def test_disconnect_mid_drawing_is_a_clear_error() -> None:
+    sim = LineUsSim(SimOptions(speed=5.0))
+
+    async def cut_after_a_few_replies(transport: Transport) -> None:
+        await sim.serve(FaultyTransport(transport, FaultPlan(disconnect_after=200, side="write")))
+
+    server = await serve_tcp(cut_after_a_few_replies, "127.0.0.1", 0)
+    try:
+        async with connected(server.sockets[0].getsockname()[1]) as arm:
+            async def draw() -> None:
+                for i in range(50):
+                    await arm.move(1000 + 10 * i, 0, 0)
+
+            with pytest.raises(LinkClosed, match="unanswered"):
+                await draw()
+            with pytest.raises(LinkClosed):
+                await arm.position()
+    finally:
+        server.close()
+        await sim.close()
+
+
+@contextlib.asynccontextmanager
+async def impostor(greeting: bytes | None, *, close: bool = False) -> AsyncIterator[int]:
+    async def handler(transport: Transport) -> None:
+        if greeting:
+            await transport.write(greeting)
+        if close:
+            return
+        with contextlib.suppress(LinkClosed):
+            while True:
+                await transport.read()
+
+    server = await serve_tcp(handler, "127.0.0.1", 0)
+    try:
+        yield server.sockets[0].getsockname()[1]
+    finally:
+        server.close()
+
+
+@pytest.mark.parametrize(("greeting", "close", "error", "match"), [
+    (b"SSH-2.0-OpenSSH_9.6\r\n", False, RemoteProtocolError, "not a Line-us"),
+    (b"ok X:1 Y:2 Z:3\r\n\x00", False, RemoteProtocolError, "not a Line-us"),
+    (None, False, LinkTimeout, "no hello"),
+    (b"hel", True, LinkClosed, "before greeting"),
+])
+async def test_host_that_is_not_a_lineus(greeting: bytes | None, close: bool, error: type[Exception],
+                                         match: str) -> None:
+    async with impostor(greeting, close=close) as port, asyncio.timeout(10):
+        transport = await open_tcp("127.0.0.1", port)
+        with pytest.raises(error, match=match):
+            await LineUs.connect(transport, hello_timeout=0.5)
+        assert transport.closed
+
+
+async def test_wedged_device_times_out() -> None:
+    hello = p.Hello("3.2.0", "line-us", "1").encode()
+    async with impostor(hello) as port, connected(port, reply_timeout=0.3) as arm:
+        with pytest.raises(LinkTimeout, match="no reply to 'M114'"):
+            await arm.position()
+        with pytest.raises(LinkTimeout):
+            await arm.position()
+
+
+def test_file_list_parsing() -> None:
+    assert parse_file_list("/0000001.txt-109291;/cal-29;/key-344; ") == [StoredDrawing(1, 109291, "/0000001.txt")]
+    assert parse_file_list("") == []
+    with pytest.raises(RemoteProtocolError):
+        parse_file_list("/0000001.txt;")
+
+
+async def test_sync_facade(lineus_sim) -> None:
+    running = await lineus_sim()
+
+    def script() -> tuple[Position, Position, list[StoredDrawing]]:
+        with LineUs.open_sync(running.address) as arm:
+            assert isinstance(arm, LineUsSync)
+            assert arm.hello.name == "line-us"
+            moved = arm.move(1200, 0, 0)
+            arm.pen_up()
+            return moved, arm.position(), arm.list_drawings()
+
+    moved, where, drawings = await asyncio.wait_for(asyncio.to_thread(script), 20)
+    assert moved == Position(1200, 0, 0)
+    assert where == Position(1200, 0, 1000)
+    assert drawings[0].slot == 1

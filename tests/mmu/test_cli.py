@@ -1,0 +1,137 @@
+"""`fabwire mmu …` and `fabwire sim mmu` as real subprocesses over TCP and a pty."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from clitools import SimulatorStarter, run_cli
+from fabwire.mmu import codes
+
+SPEED = "50"
+
+
+def mmu(url: str, *args: str, json_mode: bool = False) -> tuple[int, str, str]:
+    prefix = ["--json"] if json_mode else []
+    done = run_cli(*prefix, "mmu", "-d", url, *args, "--speed", SPEED, timeout=60)
+    return done.returncode, done.stdout, done.stderr
+
+
+def test_version_status_and_registers(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--version", "3.0.3")
+    assert sim.url.startswith("tcp://127.0.0.1:")
+    code, out, err = mmu(sim.url, "version")
+    assert (code, out.strip()) == (0, "MMU firmware 3.0.3+896"), err
+    code, out, _ = mmu(sim.url, "version", json_mode=True)
+    assert json.loads(out) == {"major": 3, "minor": 0, "revision": 3, "build": 896, "version": "3.0.3+896"}
+    code, out, _ = mmu(sim.url, "status")
+    assert code == 0
+    assert "FINDA         off" in out
+    assert "selector      parked" in out
+    assert "command       X0 finished" in out
+    code, out, _ = mmu(sim.url, "write", "bowden_length", "420")
+    assert (code, out.strip()) == (0, "0x22 bowden_length := 420")
+    code, out, _ = mmu(sim.url, "read", "0x22", json_mode=True)
+    assert json.loads(out) == {"address": 0x22, "name": "bowden_length", "value": 420}
+    code, _, err = mmu(sim.url, "write", "pulley_acceleration", "900")
+    assert code == 4  # read-only on 3.0.3, known once the version is
+    assert "read-only on this firmware" in err
+
+
+def test_tool_change_prints_progress_in_words(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
+    code, out, err = mmu(sim.url, "tool-change", "2")
+    assert code == 0, err
+    assert out.strip() == "T2 finished"
+    assert "T2: Feeding to FSensor" in err  # the MMU waits there for the host's f1, so it is always seen
+    known = set(codes.PROGRESS_WORDS.values())
+    assert all(line.removeprefix("T2: ") in known for line in err.splitlines() if not line.startswith("link lost"))
+    code, out, _ = mmu(sim.url, "status", json_mode=True)
+    status = json.loads(out)
+    assert status["command"] == "T2"
+    assert status["finda"] is True
+    assert status["filament_text"] == "in nozzle"
+    assert status["slot"] == 2
+    code, out, _ = mmu(sim.url, "unload", json_mode=True)
+    result = json.loads(out)
+    assert result["command"] == "U0"
+    assert result["result"] == 0
+    assert any(e["name"] == "UNLOADING_TO_FINDA" for e in result["events"])
+
+
+def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", "finda-didnt-trigger:4")
+    code, _, err = mmu(sim.url, "tool-change", "1")
+    assert code == 7
+    assert "FINDA didn't trigger — check the filament path, then Retry" in err
+    assert err.count("(retrying automatically)") == 3
+    code, out, _ = mmu(sim.url, "status", json_mode=True)
+    assert json.loads(out)["kind"] == "E"
+    code, out, _ = mmu(sim.url, "button", "retry")
+    assert (code, out.strip()) == (0, "pressed Middle (retry)")
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("tool-change", "5"), "filament slot must be 0 to 4"),
+    (("load", "9"), "filament slot must be 0 to 4"),
+    (("read", "nosuch"), "unknown MMU register 'nosuch'"),
+    (("write", "vcc", "1"), "is read-only"),
+    (("write", "cut_length", "zz"), "must be a number"),
+])
+def test_bad_arguments_fail_before_connecting(args: tuple[str, ...], message: str) -> None:
+    done = run_cli("mmu", "-d", "127.0.0.1:9", *args)  # nothing listens there: bad input must win
+    assert done.returncode == 4
+    assert message in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_unreachable_mmu_is_a_link_error() -> None:
+    done = run_cli("mmu", "-d", "127.0.0.1:9", "version")
+    assert done.returncode == 8
+    assert "connection refused" in done.stderr
+
+
+def test_monitor_is_bounded_and_json(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
+    code, out, err = mmu(sim.url, "monitor", "--count", "3", json_mode=True)
+    assert code == 0, err
+    lines = [json.loads(line) for line in out.splitlines()]
+    assert len(lines) == 3
+    assert all(line["event"] == "status" for line in lines)
+    code, out, _ = mmu(sim.url, "monitor", "--duration", "1")
+    assert code == 0
+    assert out.startswith("status: X0 finished, FINDA off")
+
+
+def test_over_a_pty_with_trace(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    link = tmp_path / "ttyMMU"
+    sim = simulator("mmu", "--pty", "--link", str(link), "--speed", SPEED)
+    trace = tmp_path / "trace.jsonl"
+    done = run_cli("mmu", "-d", str(link), "--trace", str(trace), "load", "3", "--speed", SPEED, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "L3 finished"
+    shown = run_cli("trace", "show", str(trace), "--no-time")
+    assert "S0*c6" in shown.stdout
+    assert "L3*" in shown.stdout
+    assert sim.where[0].startswith("/dev/")
+
+
+def test_home_eject_cut_reset(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
+    for args, expected in ((("eject", "4"), "E4 finished"), (("cut", "0"), "K0 finished"),
+                           (("home",), "H0 finished")):
+        code, out, err = mmu(sim.url, *args)
+        assert (code, out.strip()) == (0, expected), err
+    code, out, err = mmu(sim.url, "reset")
+    assert (code, out.strip()) == (0, "MMU reset; firmware 3.0.4+936 answering"), err
+
+
+def test_sim_refuses_unknown_fault_and_missing_address() -> None:
+    done = run_cli("sim", "mmu", "--fault", "gremlins")
+    assert done.returncode == 4
+    assert "unknown MMU fault 'gremlins'" in done.stderr
+    done = run_cli("sim", "mmu")
+    assert done.returncode == 4
+    assert "--listen HOST:PORT" in done.stderr

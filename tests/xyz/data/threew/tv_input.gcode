@@ -1,0 +1,7 @@
+;TIME:600
+;LAYER_COUNT:3
+;Filament used: 0.25m
+G28
+G0 X10 Y10
+G1 X20 Y20 E1
+M84

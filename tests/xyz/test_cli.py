@@ -1,0 +1,191 @@
+"""`fabwire xyz …` as a subprocess against `fabwire sim xyz` on loopback TCP and on a pty."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import pytest
+
+from clitools import SimulatorStarter, run_cli
+from fabwire.xyz.models import find_model
+from fabwire.xyz.threew import read_3w, write_3w
+
+GCODE = b";TIME:600\n;LAYER_COUNT:3\n;Filament used: 0.25m\nG28\nG0 X10 Y10\nG1 X20 Y20 E1\nM84\n"
+
+
+def device(url: str) -> str:
+    return url.removeprefix("tcp://")
+
+
+def status_json(dev: str) -> dict[str, object]:
+    result = run_cli("--json", "xyz", "-d", dev, "status")
+    assert result.returncode == 0, result.stderr
+    data: dict[str, object] = json.loads(result.stdout)
+    return data
+
+
+def free_port_on(*hosts: str) -> int:
+    for _ in range(50):
+        with socket.socket() as probe:
+            probe.bind((hosts[0], 0))
+            port = int(probe.getsockname()[1])
+        ok = True
+        for host in hosts[1:]:
+            with socket.socket() as other:
+                try:
+                    other.bind((host, port))
+                except OSError:
+                    ok = False
+        if ok:
+            return port
+    raise RuntimeError("no common free port")
+
+
+def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    store = tmp_path / "store"
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--store", str(store))
+    dev = device(sim.url)
+    human = run_cli("xyz", "-d", dev, "status")
+    assert human.returncode == 0, human.stderr
+    assert "da Vinci mini w" in human.stdout
+    assert "idle" in human.stdout
+    src = tmp_path / "cube.gcode"
+    src.write_bytes(GCODE * 50)
+    result = run_cli("xyz", "-d", dev, "print", str(src))
+    assert result.returncode == 0, result.stderr
+    assert "print finished" in result.stdout
+    stored = (store / "cube.3w").read_bytes()
+    assert stored == write_3w(GCODE * 50, find_model("dv1MW0A000"), filename="cube.3w")
+    assert read_3w(stored).gcode.count(b"G28") == 50
+    assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
+    data = status_json(dev)
+    assert data["state"] == [9511, 0]
+
+
+def test_settings_commands(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
+    dev = device(sim.url)
+    for args in (("set", "buzzer", "off"), ("set", "autolevel", "off"), ("zoffset", "-12"), ("name", "Lab"),
+                 ("language", "fr"), ("energy", "6")):
+        result = run_cli("xyz", "-d", dev, *args)
+        assert result.returncode == 0, result.stderr
+    data = status_json(dev)
+    decoded = data["decoded"]
+    assert isinstance(decoded, dict)
+    assert decoded["buzzer"] is False
+    assert decoded["autolevel"] is False
+    assert (data["zoffset"], data["name"], data["language"]) == (-12, "Lab", "fr")
+    up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
+    assert json.loads(up.stdout) == {"zoffset": -11}
+    refused = run_cli("xyz", "-d", dev, "restore-defaults")
+    assert refused.returncode == 4
+    assert "--yes" in refused.stderr
+    assert run_cli("xyz", "-d", dev, "restore-defaults", "--yes").returncode == 0
+    assert status_json(dev)["name"] == "mini w"
+    watch = run_cli("--json", "xyz", "-d", dev, "status", "--watch", "--count", "3", "--interval", "0.05")
+    assert watch.returncode == 0
+    assert len(watch.stdout.strip().splitlines()) == 3
+
+
+def test_flows_with_prompts(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "100")
+    dev = device(sim.url)
+    assert run_cli("xyz", "-d", dev, "home").returncode == 0
+    assert run_cli("xyz", "-d", dev, "jog", "x", "10").returncode == 0
+    assert run_cli("xyz", "-d", dev, "jog", "z", "-5").returncode == 0
+    assert run_cli("xyz", "-d", dev, "load", input_text="\n").returncode == 0
+    assert run_cli("xyz", "-d", dev, "unload").returncode == 0
+    assert run_cli("xyz", "-d", dev, "clean-nozzle", input_text="\n").returncode == 0
+    calib = run_cli("--json", "xyz", "-d", dev, "calibrate", input_text="\n\n")
+    assert calib.returncode == 0, calib.stderr
+    values = json.loads(calib.stdout)["calibration"]
+    assert len(values) == 9
+    assert status_json(dev)["calibration"] == [str(v) for v in values]
+    no_answer = run_cli("xyz", "-d", dev, "load", input_text="")
+    assert no_answer.returncode == 4
+    assert "no confirmation" in no_answer.stderr
+    assert status_json(dev)["state"] == [9511, 0]
+
+
+def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
+    dev = device(sim.url)
+    png = tmp_path / "photo.gcode"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(200))
+    result = run_cli("xyz", "-d", dev, "print", str(png))
+    assert result.returncode == 4
+    assert "neither G-code nor a .3w" in result.stderr
+    other = tmp_path / "pro.3w"
+    other.write_bytes(write_3w(GCODE, find_model("dvF1W0A000")))
+    result = run_cli("xyz", "-d", dev, "print", str(other))
+    assert result.returncode == 4
+    assert "1.0 Pro" in result.stderr
+    result = run_cli("xyz", "-d", dev, "print", "--model", "no-such-printer", str(other))
+    assert result.returncode == 4
+    assert "unknown printer model" in result.stderr
+    long_job = tmp_path / "long.gcode"
+    long_job.write_bytes(b";TIME:1000000\n" + GCODE)
+    assert run_cli("xyz", "-d", dev, "print", "--no-wait", str(long_job)).returncode == 0
+    busy = run_cli("xyz", "-d", dev, "home")
+    assert busy.returncode == 7
+    assert "busy" in busy.stderr
+    assert "printing" in busy.stderr or "checking file" in busy.stderr
+    assert run_cli("xyz", "-d", dev, "cancel").returncode == 0
+    assert "Traceback" not in busy.stderr
+
+
+def test_faulty_printers(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    src = tmp_path / "part.gcode"
+    src.write_bytes(GCODE * 2000)
+    nocart = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--fault", "no-cartridge")
+    result = run_cli("xyz", "-d", device(nocart.url), "print", str(src))
+    assert result.returncode == 7
+    assert "no filament cartridge installed" in result.stderr
+    drop = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--fault", "link-drop")
+    result = run_cli("xyz", "-d", device(drop.url), "print", str(src))
+    assert result.returncode == 8
+    assert "did not receive the whole file" in result.stderr
+    unreachable = run_cli("xyz", "-d", "127.0.0.1:1", "status")
+    assert unreachable.returncode == 8
+
+
+def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> None:
+    port = free_port_on("127.0.0.2", "127.0.0.3")
+    a = simulator("xyz", "--listen", f"127.0.0.2:{port}", "--model", "miniMaker")
+    b = simulator("xyz", "--listen", f"127.0.0.3:{port}", "--model", "nano")
+    assert status_json(device(a.url))["model_number"] == "dv1MX0A000"
+    nano = status_json(device(b.url))
+    assert nano["model_number"] == "dv1NX0A000"
+    assert nano["zoffset"] == -469
+    found = run_cli("--json", "xyz", "discover", "--host", "127.0.0.2", "--host", "127.0.0.3", "--host", "127.0.0.4",
+                    "--port", str(port), "--probe-timeout", "0.5")
+    assert found.returncode == 0, found.stderr
+    addresses = {entry["address"]: entry["model"] for entry in json.loads(found.stdout)}
+    assert addresses == {f"127.0.0.2:{port}": "dv1MX0A000", f"127.0.0.3:{port}": "dv1NX0A000"}
+    subnet = run_cli("--json", "xyz", "discover", "--subnet", "127.0.0.0/30", "--port", str(port),
+                     "--probe-timeout", "0.5")
+    assert {entry["address"] for entry in json.loads(subnet.stdout)} == {f"127.0.0.2:{port}"}
+
+
+def test_pty_simulator_and_state_file(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    state = tmp_path / "state.json"
+    link = tmp_path / "ttyXYZ"
+    sim = simulator("xyz", "--pty", "--link", str(link), "--state", str(state), "--speed", "1000")
+    assert run_cli("xyz", "-d", str(link), "name", "Persist").returncode == 0
+    assert run_cli("xyz", "-d", str(link), "zoffset", "261").returncode == 0
+    data = status_json(str(link))
+    assert (data["name"], data["zoffset"]) == ("Persist", 261)
+    sim.process.terminate()
+    sim.process.wait(10)
+    again = simulator("xyz", "--listen", "127.0.0.1:0", "--state", str(state))
+    data = status_json(device(again.url))
+    assert (data["name"], data["zoffset"]) == ("Persist", 261)
+
+
+@pytest.mark.parametrize("args", [("--model", "nosuch"), ("--fault", "gremlins")])
+def test_simulator_refuses_bad_options(args: tuple[str, str]) -> None:
+    result = run_cli("sim", "xyz", "--listen", "127.0.0.1:0", *args, timeout=20)
+    assert result.returncode == 4
+    assert "unknown" in result.stderr

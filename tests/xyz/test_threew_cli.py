@@ -1,0 +1,167 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from clitools import cli_env, run_cli
+from fabwire.cli_support import App
+from fabwire.errors import InputError
+from fabwire.xyz.threew import read_3w
+from fabwire.xyz.threew_cli import convert, info
+
+DATA = Path(__file__).parent / "data" / "threew"
+TV_INPUT = (DATA / "tv_input.gcode").read_bytes()
+
+
+def invoke(command, *args: str, json_mode: bool = False):  # type: ignore[no-untyped-def]
+    app = App()
+    app.output.json_mode = json_mode
+    return CliRunner().invoke(command, list(args), obj=app)
+
+
+@pytest.fixture
+def gcode(tmp_path: Path) -> Path:
+    path = tmp_path / "part.gcode"
+    path.write_bytes(TV_INPUT)
+    return path
+
+
+def test_convert_gcode_to_3w_and_back(gcode: Path, tmp_path: Path) -> None:
+    result = invoke(convert, str(gcode), str(tmp_path / "part.3w"), "--model", "mini w")
+    assert result.exit_code == 0, result.output
+    assert "wrote" in result.output
+    assert "da Vinci mini w" in result.output
+    decoded = read_3w(tmp_path / "part.3w")
+    assert decoded.machine == "dv1MW0A000"
+    assert decoded.fields["filename"] == "part.3w"
+    result = invoke(convert, str(tmp_path / "part.3w"), str(tmp_path / "back.gcode"), json_mode=True)
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["direction"] == "3w-to-gcode"
+    assert data["crc_ok"] is True
+    assert data["model"]["model_number"] == "dv1MW0A000"
+    assert (tmp_path / "back.gcode").read_bytes() == decoded.gcode
+
+
+def test_convert_defaults_to_minimaker_and_honours_format_and_zip(gcode: Path, tmp_path: Path) -> None:
+    assert invoke(convert, str(gcode), str(tmp_path / "a.3w")).exit_code == 0
+    assert read_3w(tmp_path / "a.3w").model is not None
+    assert read_3w(tmp_path / "a.3w").machine == "dv1MX0A000"
+    assert invoke(convert, str(gcode), str(tmp_path / "b.3w"), "-m", "nano", "--format", "v5").exit_code == 0
+    nano = read_3w(tmp_path / "b.3w")
+    assert (nano.container, nano.header_encrypted, nano.machine) == (5, False, "dv1NX0A000")
+    assert invoke(convert, str(gcode), str(tmp_path / "c.3w"), "--zip").exit_code == 0
+    assert read_3w(tmp_path / "c.3w").zipped
+    assert invoke(convert, str(gcode), str(tmp_path / "d.3w"), "-m", "1.0", "--no-zip").exit_code == 0
+    assert read_3w(tmp_path / "d.3w").tag == "TagEJ256"
+
+
+def test_convert_retargets_a_3w(tmp_path: Path) -> None:
+    result = invoke(convert, str(DATA / "tv1_minimaker_v2.3w"), str(tmp_path / "pro.3w"), "-m", "dv1JP0A000",
+                    json_mode=True)
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["direction"] == "3w-to-3w"
+    pro = read_3w(tmp_path / "pro.3w")
+    assert (pro.container, pro.machine, pro.print_time_s) == (5, "dv1JP0A000", 600)
+    assert pro.gcode.endswith(
+        b";TIME:600\n;LAYER_COUNT:3\n;Filament used: 0.25m\nG28\nG1 X10 Y10\nG1 X20 Y20 E1\nM84\n")
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["{gcode}", "{tmp}/out.gcode"], "nothing to convert"),
+        (["{tv1}", "{tmp}/out.gcode", "--model", "nano"], "only apply when writing"),
+        (["{gcode}", "{tmp}/out.3w", "--model", "prusa"], "unknown printer model"),
+        (["{tmp}/missing.gcode", "{tmp}/out.3w"], "cannot read"),
+    ],
+)
+def test_convert_refuses_bad_requests(args: list[str], message: str, gcode: Path, tmp_path: Path) -> None:
+    filled = [a.format(gcode=gcode, tmp=tmp_path, tv1=DATA / "tv1_minimaker_v2.3w") for a in args]
+    result = invoke(convert, *filled)
+    assert isinstance(result.exception, InputError)
+    assert message in str(result.exception)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["part.gcode"]
+
+
+def test_info_human_and_json() -> None:
+    result = invoke(info, str(DATA / "tv2_jr_pro_v5.3w"))
+    assert result.exit_code == 0, result.output
+    for text in ("v5 TagEJ256", "plaintext", "ok", "da Vinci Jr. 1.0 Pro (dv1JP0A000)", "10m 00s", "250.00 mm"):
+        assert text in result.output
+    result = invoke(info, str(DATA / "tv1_minimaker_v2.3w"), json_mode=True)
+    data = json.loads(result.stdout)
+    assert data["variant"] == "v2 TagEJ256"
+    assert data["crc_stored"] == "49b4a4a3"
+    assert data["crc_ok"] is True
+    assert data["header_encrypted"] is True
+    assert data["fields"]["machine"] == "dv1MX0A000"
+    assert data["layers"] == 3
+
+
+def test_info_reports_a_crc_mismatch(tmp_path: Path) -> None:
+    damaged = bytearray((DATA / "tv1_minimaker_v2.3w").read_bytes())
+    damaged[4719] ^= 1
+    (tmp_path / "bad.3w").write_bytes(bytes(damaged))
+    result = invoke(info, str(tmp_path / "bad.3w"))
+    assert result.exit_code == 0
+    assert "MISMATCH (computed 49b4a4a3)" in result.output
+
+
+def test_info_on_gcode_shows_what_a_conversion_would_use(gcode: Path, tmp_path: Path) -> None:
+    data = json.loads(invoke(info, str(gcode), json_mode=True).stdout)
+    assert (data["slicer"], data["print_time_s"], data["filament_mm"], data["layers"]) == (None, 600, 250.0, 3)
+    plain = tmp_path / "plain.gcode"
+    plain.write_bytes(b"G28\nG1 Z0.2 F600\nG1 X10 E1\n")
+    data = json.loads(invoke(info, str(plain), json_mode=True).stdout)
+    assert data["sources"] == {"print_time_s": "computed", "filament_mm": "computed", "layers": "computed"}
+    assert data["filament_mm"] == 1.0
+    other = tmp_path / "notes.txt"
+    other.write_text("hello")
+    assert "not a .3w file" in str(invoke(info, str(other)).exception)
+
+
+# ------------------------------------------------------------------------------------------ as real subprocesses
+
+
+def test_cli_subprocess_round_trip(gcode: Path, tmp_path: Path) -> None:
+    env = cli_env(tmp_path)
+    done = run_cli("--json", "xyz", "convert", str(gcode), str(tmp_path / "p.3w"), "--model", "dv1JP0A000", env=env)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["variant"] == "v5 TagEJ256"
+    done = run_cli("xyz", "info", str(tmp_path / "p.3w"), env=env)
+    assert done.returncode == 0, done.stderr
+    assert "da Vinci Jr. 1.0 Pro" in done.stdout
+    done = run_cli("xyz", "convert", str(tmp_path / "p.3w"), str(tmp_path / "p.gcode"), env=env)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "p.gcode").read_bytes() == read_3w(tmp_path / "p.3w").gcode
+
+
+def test_cli_subprocess_errors_are_one_line_with_input_exit_code(tmp_path: Path) -> None:
+    env = cli_env(tmp_path)
+    bad = tmp_path / "bad.3w"
+    bad.write_bytes((DATA / "tv1_minimaker_v2.3w").read_bytes()[:8200])
+    done = run_cli("xyz", "convert", str(bad), str(tmp_path / "out.gcode"), env=env)
+    assert done.returncode == InputError.exit_code
+    assert done.stderr.strip().count("\n") == 0
+    assert "not a multiple of 16" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "out.gcode").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.3w"]
+    done = run_cli("xyz", "info", str(bad), env=env)
+    assert done.returncode == InputError.exit_code
+    assert "not a multiple of 16" in done.stderr
+
+
+def test_cli_subprocess_large_file_keeps_stdout_clean(tmp_path: Path) -> None:
+    line = b"G1 X10.000 Y20.000 E0.01234 F1800\n"
+    big = tmp_path / "big.gcode"
+    big.write_bytes(b";TIME:5\n;LAYER_COUNT:1\n;Filament used: 1m\nG28\n" + line * (9_000_000 // len(line)))
+    done = run_cli("--json", "xyz", "convert", str(big), str(tmp_path / "big.3w"), env=cli_env(tmp_path))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    assert data["bytes_written"] == (tmp_path / "big.3w").stat().st_size
+    assert data["gcode_bytes"] > 9_000_000
