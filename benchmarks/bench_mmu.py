@@ -73,7 +73,8 @@ def bench_decode() -> list[Figure]:
                 decoder._step(byte, events)
 
     baseline = _rate(len(few), _time(exact, 2))
-    out = [Figure("mmu: decode replies (streaming, fast path)", rate, "frames/s", ">= 1,000,000", rate >= 1e6,
+    out = [Figure("mmu: decode replies (streaming, repetitive traffic, memo hits)", rate, "frames/s",
+                  ">= 1,000,000", rate >= 1e6,
                   baseline, "exact byte automaton")]
 
     rng = random.Random(7)
@@ -96,8 +97,9 @@ def bench_decode() -> list[Figure]:
             for byte in chunk:
                 decoder._step(byte, events)
 
-    out.append(Figure("mmu: decode replies, every frame distinct (no memo hits)",
-                      _rate(len(distinct), _time(unseen, 2)), "frames/s", "", None,
+    distinct_rate = _rate(len(distinct), _time(unseen, 2))
+    out.append(Figure("mmu: decode replies, every frame distinct (no memo hits)", distinct_rate, "frames/s",
+                      ">= 1,000,000", distinct_rate >= 1e6,
                       _rate(len(some), _time(exact_distinct, 2)), "exact byte automaton"))
     return out
 

@@ -8,8 +8,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.common import Figure, cpu_seconds
-
+from common import Figure, cpu_seconds
 from fabwire.xyz.threew import convert_3w_to_gcode, convert_gcode_file
 
 SIZE = 50_000_000

@@ -150,3 +150,13 @@ def test_discover_finds_advertised_simulator(simulator) -> None:
     assert found.returncode == 0, found.stderr
     expected = {"name": "adv-bot", "host": "adv-bot.local.", "address": "127.0.0.1", "port": port}
     assert expected in json.loads(found.stdout)
+
+
+def test_firmware_update_needs_yes_and_reports_the_refusal() -> None:
+    unconfirmed = run_cli("lineus", "-d", "sim://lineus?speed=inf", "update")
+    assert unconfirmed.returncode == 4
+    assert "--yes" in unconfirmed.stderr
+    refused = run_cli("lineus", "-d", "sim://lineus?speed=inf", "update", "--yes")
+    assert refused.returncode not in (0, 4)
+    assert "update server unreachable" in refused.stderr
+    assert "Traceback" not in refused.stderr

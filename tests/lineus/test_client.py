@@ -249,3 +249,17 @@ async def test_sync_facade(lineus_sim) -> None:
     assert moved == Position(1200, 0, 0)
     assert where == Position(1200, 0, 1000)
     assert drawings[0].slot == 1
+
+
+async def test_move_wait_is_sized_in_machine_units_under_g54(lineus_sim) -> None:
+    running = await lineus_sim(speed=float("inf"))
+    arm = await LineUs.open(running.address)
+    try:
+        await arm.move(1000, 0, 1000)
+        unscaled = arm._timeout_for(p.Move(900, 0))
+        await arm.set_origin(0, 0, 2.0)
+        # Under scale 2 the drawing-unit move to X900 ends at machine X1800: eight times as far.
+        assert arm._timeout_for(p.Move(900, 0)) > unscaled
+        assert await arm.move(900, 0) == Position(1800, 0, 1000)
+    finally:
+        await arm.close()

@@ -144,3 +144,41 @@ def test_motion_model_steps_and_times() -> None:
     assert m.polyline_time([(1000, 0), (1100, 0), (1100, 50)]) == pytest.approx(0.30)
     with pytest.raises(ValueError, match="draw_step"):
         k.MotionModel(draw_step=0)
+
+
+def _boundary_probes() -> tuple[list[float], list[float]]:
+    """Points on and within a few ulps / micro-units of every boundary piece, corner and clearance step."""
+    base = [*k.area_outline(0.25), *k._VERTICES, (500.0, 0.0), (700.0, 0.0), (700.0, -0.0), (1950.0, 0.0),
+            (500.0, 1e-300), (700.0, -1e-300), (0.0, 0.0), (2000.0, 0.0), (1000.0, 1000.0)]
+    xs: list[float] = []
+    ys: list[float] = []
+    for x, y in base:
+        for dx in (0.0, 1e-6, -1e-6, 2e-6, -2e-6, 1e-9, -1e-9):
+            for dy in (0.0, 1e-6, -1e-6, 1e-9, -1e-9):
+                xs.append(x + dx)
+                ys.append(y + dy)
+                xs.append(math.nextafter(x + dx, math.inf))
+                ys.append(math.nextafter(y + dy, -math.inf))
+    for r in (k.R_MAX, k.R_MAX + k._EPS, math.nextafter(k.R_MAX + k._EPS, math.inf)):
+        for a in np.linspace(-0.6, 0.6, 97).tolist():
+            xs.append(r * math.cos(a))
+            ys.append(r * math.sin(a))
+    xs += [math.nan, math.inf, -math.inf, 1000.0, 1000.0]
+    ys += [0.0, 0.0, 0.0, math.nan, math.inf]
+    return xs, ys
+
+
+def test_scalar_and_array_reachability_agree_everywhere() -> None:
+    rng = np.random.default_rng(7)
+    rand_x = rng.uniform(-200, 2200, 50_000).tolist()
+    rand_y = rng.uniform(-2200, 2200, 50_000).tolist()
+    edge_x, edge_y = _boundary_probes()
+    xs = rand_x + edge_x
+    ys = rand_y + edge_y
+    mask = k.reachable_mask(xs, ys).tolist()
+    scalar = [k.is_reachable(x, y) for x, y in zip(xs, ys, strict=True)]
+    mismatched = [(x, y) for x, y, a, b in zip(xs, ys, mask, scalar, strict=True) if a != b]
+    assert mismatched == []
+    assert all(type(v) is bool for v in scalar[:100])
+    assert sum(scalar[len(rand_x):]) > 100  # the probes straddle the boundary: many land inside
+    assert sum(not v for v in scalar[len(rand_x):]) > 100

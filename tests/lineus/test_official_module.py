@@ -120,3 +120,34 @@ async def test_official_module_finds_advertised_simulator(lineus_sim) -> None:
     if not found:
         pytest.skip("multicast on this host does not reach the official module's all-interface browser")
     assert ("line-us", "line-us.local.", "127.0.0.1", running.port) in found
+
+
+def keyboard_like_the_example(port: int) -> list[str]:
+    """The keyboard example's traffic through the official module, its port set on the class as the module
+    allows: G94 P50 (out of range, its reply ignored), then G01 with float Y and a few fixed X."""
+    saved = lineus.LineUs._default_port
+    lineus.LineUs._default_port = port
+    arm = lineus.LineUs()
+    try:
+        assert arm.connect("127.0.0.1", timeout=50)
+        assert arm.get_name() == "127.0.0.1"
+        replies = [arm.send_gcode("G94", "P50")]
+        for x, y in ((1000, 1216.6666666666667), (1200, -1550.0), (1300, 0.5)):
+            replies.append(arm.g01(x, y, 0))
+            replies.append(arm.g01(z=1000))
+        replies.append(arm.send_gcode("M122"))
+        return replies
+    finally:
+        arm.disconnect()
+        arm.zeroconf.close()
+        lineus.LineUs._default_port = saved
+
+
+async def test_keyboard_example_traffic(lineus_sim) -> None:
+    running = await lineus_sim(speed=100.0)
+    replies = await asyncio.wait_for(asyncio.to_thread(keyboard_like_the_example, running.port), 60)
+    assert replies[0].startswith("error INFO:")
+    assert replies[1] == "ok X:1000.00 Y:1216.67 Z:0.00"
+    assert all(r.startswith("ok X:") for r in replies[2:7])
+    assert replies[-1].startswith("ok ChipID:")
+    assert list(running.sim.received)[:2] == ["G94 P50", "G01  X1000 Y1216.6666666666667 Z0"]

@@ -308,3 +308,25 @@ def test_number_formatting() -> None:
     assert p.format_coordinate(999.6, False) == "1000"
     with pytest.raises(LocalProtocolError):
         p.format_number(float("nan"))
+
+
+@pytest.mark.parametrize(("line", "expected"), [
+    ("G01 X1000 Y-300 Z0", p.Move(1000, -300, 0)),
+    ("g1 x1200.5 y.5", p.Move(1200.5, 0.5)),
+    ("G0 Z1000", p.Move(z=1000, rapid=True)),
+    ("G001\tX-0", p.Move(0.0)),
+])
+def test_plain_moves_parse_like_the_general_grammar(line: str, expected: p.Command) -> None:
+    assert p.parse_command(line) == expected
+
+
+@pytest.mark.parametrize("line", ["G01 X1 X2", "G01 X999999", "G01 X1e3", "G02 X1"])
+def test_plain_move_lookalikes_are_still_refused(line: str) -> None:
+    with pytest.raises(RemoteProtocolError):
+        p.parse_command(line)
+
+
+def test_position_reply_bytes_match_the_reply_codec() -> None:
+    assert p.encode_position(1000, -0.001, 0, True) == b"ok X:1000.00 Y:0.00 Z:0.00\r\n\x00"
+    assert p.encode_position(1200.4, 0, 1000, False) == p.Reply(
+        True, (("X", "1200"), ("Y", "0"), ("Z", "1000"))).encode()

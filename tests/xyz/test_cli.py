@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
 from pathlib import Path
 
 import pytest
@@ -189,3 +190,32 @@ def test_simulator_refuses_bad_options(args: tuple[str, str]) -> None:
     result = run_cli("sim", "xyz", "--listen", "127.0.0.1:0", *args, timeout=20)
     assert result.returncode == 4
     assert "unknown" in result.stderr
+
+
+def test_wifi_scan_plus_limits_and_a_wrong_device(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
+    scan = run_cli("--json", "xyz", "-d", device(sim.url), "wifi", "scan")
+    assert scan.returncode == 0, scan.stderr
+    assert "TUCKER_HOME" in [n["ssid"] for n in json.loads(scan.stdout)]
+    plus = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--model", "1.1 Plus")
+    refused = run_cli("xyz", "-d", device(plus.url), "set", "buzzer", "off")
+    assert refused.returncode == 7
+    assert "only status" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+
+        def answer() -> None:
+            conn, _ = listener.accept()
+            with conn:
+                conn.recv(100)
+                conn.sendall(b"SSH-2.0-OpenSSH_9.2\r\n")
+
+        threading.Thread(target=answer, daemon=True).start()
+        wrong = run_cli("xyz", "-d", f"127.0.0.1:{port}", "--timeout", "2", "status")
+    assert wrong.returncode == 6, wrong.stderr
+    assert "not an XYZv3 printer" in wrong.stderr
+    assert "SSH-2.0" in wrong.stderr
+    assert "Traceback" not in wrong.stderr

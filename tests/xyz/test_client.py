@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from fabwire.errors import DeviceError, InputError, LinkError
-from fabwire.transport import FaultPlan, FaultyTransport, open_pty, serve_tcp
+from fabwire.errors import DeviceError, InputError, LinkError, RemoteProtocolError
+from fabwire.transport import FaultPlan, FaultyTransport, Transport, open_pty, serve_tcp
 from fabwire.transport.serial import open_serial
 from fabwire.transport.tcp import open_tcp
 from fabwire.xyz.client import SyncXYZPrinter, XYZPrinter
@@ -311,11 +311,88 @@ async def test_reconnects_to_a_printer_that_hangs_up_after_every_reply() -> None
     try:
         async with asyncio.timeout(LIMIT):
             assert (await printer.status()).idle
-            await printer.set_buzzer(False)
-            assert (await printer.status()).buzzer is False
+            assert (await printer.status("j")).state == (10, None)  # a second connection, old-style idle code
             final = await printer.print_file(data, name="plus.3w")
         assert final.state_code == 9509
+        assert final.state == (8, None)
         assert sim.received("plus.3w") == data
+    finally:
+        await printer.close()
+        server.close()
+
+
+async def test_fw3_raw_replies_wifi_scan_and_in_band_faults() -> None:
+    sim = XYZSimulator("nano", speed=1000, link=Link.WIFI)
+    server = await serve_tcp(sim.serve, "127.0.0.1", 0)
+    printer = await XYZPrinter.connect(f"127.0.0.1:{server.sockets[0].getsockname()[1]}")
+    try:
+        async with asyncio.timeout(LIMIT):
+            signature = await printer.signature()
+            assert len(signature) == 32
+            assert signature == await printer.signature()  # one fixed value per machine
+            assert len(await printer.uid()) == 4
+            assert await printer.tag_info() == "3FNAXPUS5TH7CM0041"
+            assert await printer.sim_control("fault:no-cartridge:on") == ("no-cartridge",)
+            assert (await printer.status()).errors == (0x40000206,)
+            with pytest.raises(DeviceError, match="no filament cartridge"):
+                await printer.home()
+            assert await printer.sim_control("clear") == ()
+            with pytest.raises(DeviceError, match="unknown fault"):
+                await printer.sim_control("fault:gremlins:on")
+            assert (await printer.status()).error_words == ()
+    finally:
+        await printer.close()
+        server.close()
+
+
+async def test_wifi_scan_and_fw3_commands_refused_by_older_firmware() -> None:
+    sim = XYZSimulator("mini w", speed=1000)
+    server = await serve_tcp(sim.serve, "127.0.0.1", 0)
+    printer = await XYZPrinter.connect(f"127.0.0.1:{server.sockets[0].getsockname()[1]}")
+    try:
+        async with asyncio.timeout(LIMIT):
+            networks = await printer.scan_wifi()
+            assert "TUCKER_HOME" in [n["ssid"] for n in networks]
+            assert "W" not in (await printer.status()).order  # a scan only when asked
+            with pytest.raises(DeviceError):
+                await printer.signature()
+    finally:
+        await printer.close()
+        server.close()
+
+
+async def test_plus_takes_only_status_and_prints() -> None:
+    sim = XYZSimulator("1.1 Plus", speed=1000)
+    server = await serve_tcp(sim.serve, "127.0.0.1", 0)
+    printer = await XYZPrinter.connect(f"127.0.0.1:{server.sockets[0].getsockname()[1]}")
+    try:
+        async with asyncio.timeout(LIMIT):
+            st = await printer.status()
+            assert st.idle
+            assert st.errors == (2,)
+            assert st.error_words == ()
+            with pytest.raises(DeviceError, match="only status"):
+                await printer.set_buzzer(False)
+            with pytest.raises(DeviceError, match="only status"):
+                await printer.home()
+            assert not any("buzzer" in c for c in sim.commands)
+    finally:
+        await printer.close()
+        server.close()
+
+
+async def test_a_peer_that_is_not_a_printer_is_named_as_such() -> None:
+    async def http(transport: Transport) -> None:
+        await transport.read()
+        await transport.write(b"HTTP/1.0 400 Bad Request\r\n\r\n")
+        await transport.close()
+
+    server = await serve_tcp(http, "127.0.0.1", 0)
+    printer = await XYZPrinter.connect(f"127.0.0.1:{server.sockets[0].getsockname()[1]}", timeout=2)
+    try:
+        async with asyncio.timeout(LIMIT):
+            with pytest.raises(RemoteProtocolError, match=r"not an XYZv3 printer.*HTTP/1\.0 400"):
+                await printer.status()
     finally:
         await printer.close()
         server.close()

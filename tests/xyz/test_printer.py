@@ -149,3 +149,16 @@ def test_fw3_answers_busy_while_a_print_winds_down() -> None:
     assert seen[0] == 7
     assert seen[-1] == 4
     assert replies[-1] is None
+
+
+def test_plus_status_is_its_own_capture() -> None:
+    capture = (Path(__file__).parent / "data" / "plus_11.txt").read_text()
+    pr = Printer(personality("1.1 Plus"))
+    assert "".join(f"{line}\n" for line in pr.status().lines()) + "$\n" == capture
+    assert pr.refusal(p.Home()) == 1
+    assert pr.refusal(p.SetBuzzer(False)) == 1
+    assert pr.refusal(p.Query("a")) is None
+    assert Printer(personality("mini w")).refusal(p.Signature()) == 1
+    nano = Printer(personality("nano"))
+    (line,) = nano.execute(p.Signature())
+    assert p.raw_reply_value(p.Signature(), line) is not None

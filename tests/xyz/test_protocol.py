@@ -338,3 +338,28 @@ def test_splitter_recovers_any_command_stream_in_any_chunking(commands: list[tup
         events += dec.feed(wire[i : i + chunk], 0.0)
     events += dec.eof(0.0)
     assert bodies(events) == [c.body for c, _ in commands]
+
+
+@pytest.mark.parametrize("bytewise", [False, True])
+def test_raw_signature_and_uid_are_read_by_count(bytewise: bool) -> None:
+    value = b'\n"$ok\r\n' + bytes(range(25))
+    for link in Link:
+        reader = ReplyReader(link)
+        reader.send(p.Signature(), 0.0)
+        wire = (p.raw_reply_line(p.Signature(), value) + "\n").encode("latin-1")
+        for chunk in ([wire[i : i + 1] for i in range(len(wire))] if bytewise else [wire]):
+            reader.receive(chunk, 0.0)
+        reply = reader.next_event(0.0)
+        assert isinstance(reply, p.Reply)
+        assert p.raw_reply_value(p.Signature(), reply.lines[0]) == value
+        reader.send(p.Uid(), 0.0)
+        reader.receive((p.raw_reply_line(p.Uid(), b"\n\n$\n") + "\n$\n").encode("latin-1"), 0.0)
+        uid = reader.next_event(0.0)
+        assert isinstance(uid, p.Reply)
+        assert p.raw_reply_value(p.Uid(), uid.lines[0]) == b"\n\n$\n"
+
+
+def test_sim_control_vectors() -> None:
+    assert p.encode(p.SimControl("fault:door-open:on"), Link.WIFI) == b"XYZv3/simctl=fault:door-open:on\r\n"
+    assert p.parse_command("simctl=clear") == p.SimControl("clear")
+    assert isinstance(p.parse_command("simctl=rm -rf"), p.UnknownCommand)

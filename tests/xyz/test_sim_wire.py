@@ -285,3 +285,19 @@ async def test_minimover_over_a_real_pty() -> None:
         await port.close()
         task.cancel()
         await device.close()
+
+
+async def test_in_band_control_can_be_switched_off() -> None:
+    from fabwire.transport import open_transport
+
+    on = await open_transport("sim://xyz?speed=100&fault=door-open")
+    off = await open_transport("sim://xyz?speed=100&control=0")
+    try:
+        async with asyncio.timeout(10):
+            await on.write(b"XYZv3/simctl=fault:stuck:on\n")
+            assert await read_until(on, b"$\n") == b"simctl:door-open+stuck\n$\n"
+            await off.write(b"XYZv3/simctl=fault:stuck:on\n")
+            assert await read_until(off, b"$\n") == b"E1$\n"
+    finally:
+        await on.close()
+        await off.close()

@@ -110,7 +110,18 @@ def test_plus_capture_fields() -> None:
     assert s.packet.autolevel is None
     assert s.packet.c == "0"
     assert s.filament == (1, 0)
-    assert s.error_words[0].code == 0x0101  # old-style code 2
+    assert s.errors == (2,)
+    assert s.error_words == ()  # the 1.1 Plus reports e:2 while idle: not an error
+    assert Status.parse(["e:2"]).error_words[0].code == 0x0101  # on other models, old-style code 2
+
+
+def test_material_and_wifi_scan_forms() -> None:
+    assert Status.parse(["k:65"]).material_name == "ABS"  # XYZware reads the hex spelling
+    assert Status.parse(["k:50"]).material_name == "PLA"
+    assert Status.parse(["k:74"]).material_name is None
+    one = Status.parse(['W:{"ssid":"a","bssid":"b","channel":"1","rssiValue":"40","PHY":"n","security":"x"}'])
+    assert [n["ssid"] for n in one.wifi_networks] == ["a"]
+    assert [n["ssid"] for n in Status.parse(['W:[{"ssid":"a"},{"ssid":"b"}]']).wifi_networks] == ["a", "b"]
 
 
 @pytest.mark.parametrize("name", ["mini_w_wifi.txt", "nano_fw320_usb.txt", "pro_10.txt", "plus_11.txt"])

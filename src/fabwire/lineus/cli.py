@@ -258,6 +258,20 @@ def calibrate(dctx: DeviceContext, yes: bool, clear: bool) -> None:
                        "calibration cleared" if clear else "calibration saved")
 
 
+@lineus.command("update")
+@click.option("--yes", is_flag=True, help="Really let the machine download new firmware and restart.")
+@pass_device
+def firmware_update(dctx: DeviceContext, yes: bool) -> None:
+    """Ask the machine to download and install the latest firmware (M997). Needs --yes.
+
+    The machine fetches the firmware itself from the maker's update server and restarts; it answers `error`
+    when that server cannot be reached."""
+    if not yes:
+        raise InputError("a firmware update downloads new firmware and restarts the machine: add --yes to go ahead")
+    _with_arm(dctx, lambda arm: arm.firmware_update(confirm=True))
+    dctx.output.result({"firmware_update": "started"}, "firmware update started; the machine restarts when done")
+
+
 @lineus.command()
 @click.option("--wait", type=click.FloatRange(min=0.1, max=60), default=3.0, show_default=True,
               help="Seconds to listen for answers.")

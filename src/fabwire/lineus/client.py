@@ -93,6 +93,8 @@ class LineUs:
         self._slots = asyncio.Semaphore(self._window)
         self._waiting: collections.deque[tuple[str, asyncio.Future[p.Reply]]] = collections.deque()
         self._planned: Position | None = None
+        self._origin = (0.0, 0.0, 1.0)
+        """This connection's G54 (x, y, scale), so a move's wait is sized in machine units."""
         self._failure: BaseException | None = None
         self._read_task = asyncio.create_task(self._read_loop(), name="lineus-replies") if lookahead else None
         """With one command in flight the waiting caller reads its own reply (no task hop per command)."""
@@ -250,7 +252,9 @@ class LineUs:
             return self.reply_timeout
         start = self._planned or Position(kin.HOME[0], kin.HOME[1], kin.Z_UP)
         if isinstance(command, p.Move | p.RawMove):
-            end = (start.x if command.x is None else command.x, start.y if command.y is None else command.y,
+            ox, oy, scale = self._origin if isinstance(command, p.Move) else (0.0, 0.0, 1.0)
+            end = (start.x if command.x is None else command.x * scale + ox,
+                   start.y if command.y is None else command.y * scale + oy,
                    start.z if command.z is None else command.z)
         else:
             end = (kin.HOME[0], kin.HOME[1], kin.Z_UP)
@@ -320,6 +324,7 @@ class LineUs:
     async def set_origin(self, x: float = 0.0, y: float = 0.0, scale: float = 1.0) -> None:
         """G54 for this connection: machine = drawing × scale + (x, y)."""
         await self.request(p.SetOrigin(x, y, scale))
+        self._origin = (x, y, scale)
 
     async def set_speed(self, draw: float | None = None, travel: float | None = None) -> None:
         """G94: the largest interpolation step while drawing (S) and travelling (P); smaller is slower."""

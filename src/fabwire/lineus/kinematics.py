@@ -49,8 +49,23 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def is_reachable(x: float, y: float) -> bool:
-    """True if the pen can reach (x, y): the closed form of the documented drawing area."""
-    return bool(reachable_mask(np.asarray([x], dtype=float), np.asarray([y], dtype=float))[0])
+    """True if the pen can reach (x, y): the closed form of the documented drawing area.
+
+    Plain math rather than numpy: the simulator asks this once per move, where array set-up would dominate.
+    It applies exactly the tests of `reachable_mask`.
+    """
+    x = float(x)
+    y = float(y)
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return False
+    if x < (X_MIN_UPPER if y >= 0 else X_MIN_LOWER) - _EPS:
+        return False
+    r = math.hypot(x, y)
+    if not r <= R_MAX + _EPS:
+        return False
+    alpha = math.acos(min(r / (2 * LINK), 1.0))
+    phi = math.atan2(y, x)
+    return phi - alpha <= _LIMIT + 1e-9 and phi + alpha >= -_LIMIT - 1e-9
 
 
 def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike) -> npt.NDArray[np.bool_]:

@@ -43,6 +43,13 @@ def format_number(value: float) -> str:
     return "0" if text in ("-0", "") else text
 
 
+def encode_position(x: float, y: float, z: float, decimals: bool) -> bytes:
+    """`ok X:… Y:… Z:…` with its terminator: the reply to every move, so it is built without the general
+    reply machinery (its three values can never need quoting)."""
+    return (f"ok X:{format_coordinate(x, decimals)} Y:{format_coordinate(y, decimals)} "
+            f"Z:{format_coordinate(z, decimals)}").encode("ascii") + REPLY_TERMINATOR
+
+
 def format_coordinate(value: float, decimals: bool) -> str:
     """Reply style: firmware 3 prints two decimals (`1000.00`), firmware 1 integers (`1000`)."""
     if decimals:
@@ -66,6 +73,8 @@ def parse_number(text: str, what: str) -> float:
 
 def _check_number(value: float | None, what: str, low: float = -COORD_LIMIT, high: float = COORD_LIMIT) -> None:
     if value is None:
+        return
+    if type(value) is float and low <= value <= high:  # the common case; NaN fails the comparison
         return
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise LocalProtocolError(f"{what} must be a number, not {type(value).__name__}")
@@ -557,8 +566,23 @@ class _Params:
             raise LocalProtocolError(f"{self.code} does not take {', '.join(sorted(self.values))}")
 
 
+_PLAIN_MOVE = re.compile(r"[Gg]0{0,2}([01])((?:[ \t]+[XYZxyz][+-]?(?:\d+(?:\.\d*)?|\.\d+))+)")
+"""A G00/G01 line of plain numbers: the bulk of any drawing, parsed without the general machinery."""
+
+
 def parse_command(line: str) -> Command:
     """One received line (terminators removed) → a typed command, or RemoteProtocolError saying why not."""
+    match = _PLAIN_MOVE.fullmatch(line)
+    if match is not None:
+        axes: dict[str, float] = {}
+        for token in match.group(2).split():
+            value = float(token[1:]) + 0.0
+            letter = token[0].upper()
+            if letter in axes or abs(value) > COORD_LIMIT:
+                break  # duplicated or out of range: the general parser says which
+            axes[letter] = value
+        else:
+            return Move(axes.get("X"), axes.get("Y"), axes.get("Z"), rapid=match.group(1) == "0")
     try:
         return _parse(line)
     except LocalProtocolError as exc:
@@ -841,17 +865,25 @@ def parse_message(text: str) -> Message:
         key, sep, value = token.partition(":")
         if not sep or not key:
             raise RemoteProtocolError(f"reply field {token!r} is not KEY:value")
-        if any(ch in key for ch in '"\r\n\0') or any(ch in value for ch in '"\r\n\0'):
+        if _FORBIDDEN.search(token):
             raise RemoteProtocolError(f"reply field {token!r} holds a forbidden character")
         pairs.append((key, value))
+    if status != "hello":
+        # Every field was checked above (ASCII text, no quote or terminator byte), which is all Reply checks.
+        reply = object.__new__(Reply)
+        object.__setattr__(reply, "ok", status == "ok")
+        object.__setattr__(reply, "fields", tuple(pairs))
+        object.__setattr__(reply, "quoted", ALWAYS_QUOTED)
+        return reply
     try:
-        if status == "hello":
-            found = dict(pairs)
-            rest = tuple((k, v) for k, v in pairs if k not in ("VERSION", "NAME", "SERIAL"))
-            return Hello(found.get("VERSION", ""), found.get("NAME", ""), found.get("SERIAL", ""), rest)
-        return Reply(status == "ok", tuple(pairs))
+        found = dict(pairs)
+        rest = tuple((k, v) for k, v in pairs if k not in ("VERSION", "NAME", "SERIAL"))
+        return Hello(found.get("VERSION", ""), found.get("NAME", ""), found.get("SERIAL", ""), rest)
     except LocalProtocolError as exc:
         raise RemoteProtocolError(str(exc)) from None
+
+
+_FORBIDDEN = re.compile('["\r\n\x00]')
 
 
 class ReplyReader:

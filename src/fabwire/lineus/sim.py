@@ -138,12 +138,9 @@ class Clock:
 
     def __init__(self, speed: float) -> None:
         self.speed = speed
+        self.instant = math.isinf(speed)
         self._t0 = time.monotonic()
         self._virtual = 0.0
-
-    @property
-    def instant(self) -> bool:
-        return math.isinf(self.speed)
 
     def now(self) -> float:
         if self.instant:
@@ -370,7 +367,7 @@ class LineUsSim:
                     action = self._dispatch(item, session) if isinstance(item, p.Line) else _error(item.reason)
                     source = await self._start_move(action) if isinstance(action, _PendingMove) else action
                     if session.backlog == 0 and (ready := self._ready(source)) is not None:
-                        await self._send(transport, ready.encode())  # nothing owed before it: answer now
+                        await self._send(transport, ready)  # nothing owed before it: answer now
                         continue
                     session.backlog += 1
                     written: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -396,10 +393,14 @@ class LineUsSim:
         self.sent.append((self.clock.now(), data))
         await transport.write(data)
 
-    def _ready(self, source: ReplySource) -> p.Reply | None:
+    def _ready(self, source: ReplySource) -> bytes | None:
+        """The reply's bytes if it is due now, None if it waits for its move."""
         if isinstance(source, _Job):
-            return self.position_reply(source.done.result().end) if source.done.done() else None
-        return source if isinstance(source, p.Reply) else source()
+            if not source.done.done():
+                return None
+            x, y, z = source.done.result().end
+            return p.encode_position(x, y, z, self.decimals)
+        return (source if isinstance(source, p.Reply) else source()).encode()
 
     async def _write_replies(
         self, transport: Transport, queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None],
@@ -409,10 +410,11 @@ class LineUsSim:
         while (entry := await queue.get()) is not None:
             source, written = entry
             if isinstance(source, _Job):
-                reply = self.position_reply((await source.done).end)
+                x, y, z = (await source.done).end
+                data = p.encode_position(x, y, z, self.decimals)
             else:
-                reply = source if isinstance(source, p.Reply) else source()
-            await self._send(transport, reply.encode())
+                data = (source if isinstance(source, p.Reply) else source()).encode()
+            await self._send(transport, data)
             session.backlog -= 1
             if not written.done():
                 written.set_result(None)

@@ -268,8 +268,12 @@ class MMU:
                 raise LinkTimeout(f"MMU link failed: {event.info.meaning} ({event.detail})")
             return None
 
-        finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
-                                                        outcome, on_event, timeout)
+        try:
+            finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
+                                                            outcome, on_event, timeout)
+        except LinkTimeout:
+            self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
+            raise
         return finished
 
     async def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:

@@ -354,6 +354,22 @@ def wifi_info(dctx: DeviceContext) -> None:
     dctx.output.result(data, human)
 
 
+@wifi.command("scan")
+@pass_device
+def wifi_scan(dctx: DeviceContext) -> None:
+    """List the Wi-Fi networks the printer can see."""
+    networks = _with_printer(dctx, lambda pr: pr.scan_wifi())
+
+    def human() -> None:
+        if not networks:
+            dctx.output.out.print("no networks found (or no Wi-Fi on this model)")
+        for net in networks:
+            dctx.output.out.print(f"{net.get('ssid', '?'):<32} channel {net.get('channel', '?'):>3}  "
+                                  f"-{net.get('rssiValue', '?')} dBm  {net.get('security', '')}")
+
+    dctx.output.result(networks, human)
+
+
 @wifi.command("join")
 @click.argument("ssid")
 @click.option("--password", prompt=True, hide_input=True, help="Network password.")
@@ -443,16 +459,17 @@ _add_threew_commands()
 @click.option("--strict", is_flag=True, help="Require a correct CRC-32 trailer on every upload block.")
 @click.option("--link-style", type=click.Choice(["auto", "serial", "wifi"]), default="auto", show_default=True,
               help="Reply framing: auto = serial on the pty, Wi-Fi on TCP.")
+@click.option("--no-control", is_flag=True, help="Refuse in-band fault triggers (XYZv3/simctl=…).")
 @pass_app
 def sim_xyz(app: App, listen: tuple[str, ...], use_pty: bool, link: Path | None, model_text: str, speed: float,
             faults: tuple[str, ...], state_file: Path | None, store: Path | None, strict: bool,
-            link_style: str) -> None:
+            link_style: str, no_control: bool) -> None:
     """A da Vinci printer on TCP 9100 and/or a raw pty that real clients cannot tell from the machine."""
     from fabwire.simserve import serve
     from fabwire.xyz.sim import XYZSimulator
 
     sim = XYZSimulator(model_text, speed=speed, faults=faults, state_file=state_file, store=store, strict=strict,
-                       link=None if link_style == "auto" else Link(link_style))
+                       link=None if link_style == "auto" else Link(link_style), control=not no_control)
     started = time.monotonic()
     asyncio.run(serve("xyz", sim.serve, listen=listen, use_pty=use_pty, link=link,
                       default_port=XYZ.default_port, json_mode=app.json))

@@ -42,6 +42,9 @@ REPLY_ERRORS = {
 TRANSIENT_RETRIES = 20
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
+STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
+"""Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
+_PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
 _MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
 
@@ -96,6 +99,8 @@ class XYZPrinter:
         """Set by `connect`: lets a Wi-Fi client reconnect when the printer closes the connection."""
         self.per_command = False
         """Open a new connection for every command (the 1.1 Plus hangs up after each reply)."""
+        self._heard = False
+        """Some reply made sense: the peer speaks XYZv3 (until then, stray text means a wrong device)."""
 
     @classmethod
     async def connect(cls, address: str, *, link: Link | None = None, timeout: float = 5.0) -> XYZPrinter:
@@ -240,9 +245,20 @@ class XYZPrinter:
         try:
             await self._write(data, doing)
             wait_for = self._direct_event if self._pump_task.done() else self._event
-            return await wait_for(command, doing)
+            reply = await wait_for(command, doing)
+        except (LinkClosed, LinkTimeout) as exc:
+            sample = self.reader.noise_sample
+            if sample is not None and not self._heard:
+                raise RemoteProtocolError(f"{self.transport.peer or self.transport.url} is not an XYZv3 printer: "
+                                          f"it answered {sample!r}") from exc
+            raise
+        except DeviceError:
+            self._heard = True
+            raise
         finally:
             self.reader.abandon()
+        self._heard = True
+        return reply
 
     # ------------------------------------------------------------------------------------------ status
 
@@ -280,9 +296,11 @@ class XYZPrinter:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}")
         return model
 
-    async def require_idle(self, doing: str) -> Status:
+    async def require_idle(self, doing: str, command: p.Command | None = None) -> Status:
         """A busy printer or one reporting an error cannot start something new: say which, in words."""
         status = await self.status()
+        if command is not None:
+            await self._supports(command)
         for word in status.error_words:
             raise DeviceError(f"0x{word.raw:08X}", word.meaning, action=f"cannot {doing}")
         if status.state_code != IDLE:
@@ -452,7 +470,9 @@ class XYZPrinter:
     async def _job_control(self, op: str, states: tuple[int, ...]) -> None:
         status = await self.status()
         if status.state_code not in states:
-            raise DeviceError(str(status.state_code), f"nothing to {op}: the printer is {status.state_name}")
+            wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
+            raise DeviceError(str(status.state_code),
+                              f"nothing to {op}: the printer is not {wanted} (it is {status.state_name})")
         await self.request(p.PrintControl(op))
 
     # --------------------------------------------------------------------------------------------- flows
@@ -476,13 +496,13 @@ class XYZPrinter:
             await asyncio.sleep(self.poll_interval)
 
     async def home(self, *, limit: float = 120.0) -> Status:
-        await self.require_idle("home")
+        await self.require_idle("home", p.Home())
         await self.request(p.Home())
         return await self._wait_state(lambda s: s.idle, "homing", limit)
 
     async def jog(self, axis: str, distance: float, *, limit: float = 120.0) -> Status:
         command = p.Jog(axis.lower(), distance)
-        await self.require_idle("jog")
+        await self.require_idle("jog", command)
         await self.request(command)
         return await self._wait_state(lambda s: s.idle, "jogging", limit)
 
@@ -500,7 +520,7 @@ class XYZPrinter:
     async def load_filament(self, ready: Prompt, *, on_status: StatusCallback | None = None,
                             retry: bool = False, limit: float = 360.0) -> Status:
         """Heat, feed, then `ready(...)` returns once filament comes out of the nozzle; we then stop feeding."""
-        await self.require_idle("load filament")
+        await self.require_idle("load filament", p.Flow("load", "new"))
         await self._flow("load", "retry" if retry else "new")
         status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
                                         on_status)
@@ -518,14 +538,14 @@ class XYZPrinter:
 
     async def unload_filament(self, *, on_status: StatusCallback | None = None, retry: bool = False,
                               limit: float = 360.0) -> Status:
-        await self.require_idle("unload filament")
+        await self.require_idle("unload filament", p.Flow("unload", "new"))
         await self._flow("unload", "retry" if retry else "new")
         await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
         return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
 
     async def clean_nozzle(self, ready: Prompt, *, on_status: StatusCallback | None = None,
                            limit: float = 360.0) -> Status:
-        await self.require_idle("clean the nozzle")
+        await self.require_idle("clean the nozzle", p.Flow("cleannozzle", "new"))
         await self._flow("cleannozzle", "new")
         await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit, on_status)
         try:
@@ -537,7 +557,7 @@ class XYZPrinter:
     async def calibrate(self, prompt: Prompt, *, on_status: StatusCallback | None = None,
                         limit: float = 240.0) -> tuple[int, ...]:
         """Bed calibration with the detector; `prompt` asks the user to lower, then raise it."""
-        await self.require_idle("calibrate")
+        await self.require_idle("calibrate", p.Flow("calibratejr", "new"))
         await self._flow("calibratejr", "new")
         await self._wait_state(lambda s: s.state == (9535, 41), "starting calibration", limit, on_status)
         await prompt("Lower the calibration detector, then confirm")
@@ -553,7 +573,18 @@ class XYZPrinter:
 
     # -------------------------------------------------------------------------------------------- config
 
+    async def _supports(self, command: p.Command) -> None:
+        """Refuse, in words, what this model cannot do over XYZv3 (Wi-Fi printers would just stay silent)."""
+        if isinstance(command, _PRINTING_COMMANDS):
+            return
+        status = self.last_status if self.last_status.model_number else await self.status()
+        if status.model_number in STATUS_AND_UPLOAD_ONLY:
+            model = status.model
+            raise DeviceError("unsupported", f"the {model.name if model else status.model_number} takes only status "
+                              "queries and prints over XYZv3", action=f"cannot send {command.body!r}")
+
     async def _config(self, command: p.Command) -> None:
+        await self._supports(command)
         await self.request(command)
 
     async def set_autolevel(self, on: bool) -> None:
@@ -563,6 +594,7 @@ class XYZPrinter:
         await self._config(p.SetBuzzer(on))
 
     async def zoffset(self) -> int:
+        await self._supports(p.GetZOffset())
         reply = await self.request(p.GetZOffset())
         if not reply.lines:
             raise LinkTimeout("the printer sent no z offset")
@@ -574,7 +606,7 @@ class XYZPrinter:
 
     async def nudge_zoffset(self, up: bool) -> int:
         """One 0.01 mm step; returns the new offset as the next status reports it."""
-        await self.request(p.NudgeZOffset(up))
+        await self._config(p.NudgeZOffset(up))
         status = await self.status("z")
         return status.zoffset if status.zoffset is not None else 0
 
@@ -593,8 +625,46 @@ class XYZPrinter:
     async def wifi_info(self) -> Status:
         return await self.status("4")
 
+    async def scan_wifi(self) -> list[dict[str, Any]]:
+        """The networks the printer can see (`query=W`; it takes a few seconds, as XYZware allows)."""
+        reply = await self.request(p.Query("W"), timeout=max(self.timeout, 5.0))
+        self.last_status = self.last_status.update(reply.lines)
+        return self.last_status.wifi_networks
+
+    async def tag_info(self) -> str:
+        """Firmware 3.x `config=taginfo`: the text between the braces of `taginfo:{…}`."""
+        reply = await self.request(p.TagInfo())
+        line = reply.lines[0] if reply.lines else ""
+        return line.removeprefix("taginfo:").strip("{}")
+
+    async def _raw(self, command: p.Signature | p.Uid) -> bytes:
+        reply = await self.request(command)
+        value = p.raw_reply_value(command, reply.lines[0]) if reply.lines else None
+        if value is None:
+            raise RemoteProtocolError(f"the printer answered {command.body!r} with {reply.lines[:1]!r}")
+        return value
+
+    async def signature(self) -> bytes:
+        """Firmware 3.x `config=signature:[get]`: 32 raw bytes (their use is not documented)."""
+        return await self._raw(p.Signature())
+
+    async def uid(self) -> bytes:
+        """Firmware 3.x `config=uid`: 4 raw bytes."""
+        return await self._raw(p.Uid())
+
+    async def sim_control(self, op: str) -> tuple[str, ...]:
+        """Drive a fabwire simulator's faults in-band (`fault:<name>:on|off`, `clear`, `faults`); a real printer
+        refuses it. Returns the faults now active."""
+        reply = await self.request(p.SimControl(op))
+        line = reply.lines[0] if reply.lines else ""
+        value = line.removeprefix("simctl:")
+        if not line.startswith("simctl:") or value.startswith("E"):
+            raise DeviceError("simctl", value[1:].strip() if value.startswith("E") else "not a fabwire simulator")
+        return tuple(f for f in value.split("+") if f)
+
     async def join_wifi(self, ssid: str, password: str, channel: int = 0) -> None:
         command = p.JoinWifi(ssid, password, channel)
+        await self._supports(command)
         await self._config(p.LeaveWifi())
         await self.request(command, timeout=25.0)
 

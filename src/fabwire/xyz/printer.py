@@ -7,6 +7,7 @@ queued in `outbox`; the link decides whether to send them.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import random
 from dataclasses import asdict, dataclass, field, replace
@@ -71,6 +72,25 @@ class Personality:
     wifi_firmware: str = "5.0.9"
     fw3: bool = False
     """Firmware 3.x extras: `taginfo`, `uid`, `signature` and the `Z:` letter."""
+    old_states: bool = False
+    """`j:10` idle, `j:11` printing…: the pre-95xx state codes (1.1 Plus)."""
+    idle_errors: tuple[int, ...] = (0,)
+    """`e:` while nothing is wrong (`e:2` on the 1.1 Plus)."""
+    sensors: bool = True
+    """False: `b:--` and `t:1,--,--` (the 1.1 Plus reports no temperatures over XYZv3)."""
+    cartridge_tags: bool = True
+    """False: `w:1,--------------` and `f:1,0` always (no NFC cartridge reading)."""
+    packet_c: str = "1"
+    autolevel_in_o: bool = True
+    """`o:p8,t1,c1,a+` (True) or `o:p8,t1,c0` (1.1 Plus, no auto-level flag)."""
+    network_json: bool = True
+    """`4:{"wlan":{…}}` (True) or a bare `4:<ip>` (1.1 Plus)."""
+    lifetime_last: bool = True
+    status_and_upload_only: bool = False
+    """Its XYZv3 covers status and printing only; every other config/action is refused."""
+    ip: str = "192.168.1.118"
+    lifetime: tuple[int, int] = (301080, 28581)
+    """Machine and extruder lifetime minutes at power-on."""
 
 
 _SEED_ORDER = "bcdwefijLmopstvnXlzV4"
@@ -100,6 +120,13 @@ def personality(model_text: str = "dv1MW0A000", *, serial: str | None = None) ->
             settings=(("fm", 1), ("fd", 1), ("dr", {"top": "off", "front": "off"}), ("sd", "yes"), ("eh", "0"),
                       ("of", "1")),
             wifi_firmware="5.1.5",
+        )
+    if number == "dvF110B000":
+        return Personality(
+            model, serial or "3F11XPGBXTH5320151", ("1.1.0.19", "1.1.7.3", "N/A"), "da Vinci 1.1 Plus",
+            "4befijLnoptvw", Nozzle("1", ()), substates=False, old_states=True, idle_errors=(2,), sensors=False,
+            cartridge_tags=False, packet_c="0", autolevel_in_o=False, network_json=False, lifetime_last=False,
+            status_and_upload_only=True, settings=(), ip="192.168.1.126", lifetime=(69342, 21785),
         )
     order = _SEED_ORDER if model.wifi else _SEED_ORDER.replace("V4", "")
     return Personality(model, serial or generated, ("1.2.3",), short[:16], order,
@@ -174,7 +201,8 @@ class Printer:
                 raise InputError(f"unknown fault {fault!r}; known: {', '.join(FAULTS)}")
         self.persona = persona
         self.state_file = state_file
-        defaults = Settings(name=persona.name, zoffset=persona.zoffset)
+        defaults = Settings(name=persona.name, zoffset=persona.zoffset, ip=persona.ip,
+                            machine_min=persona.lifetime[0], extruder_min=persona.lifetime[1])
         if not persona.model.wifi:
             defaults.ssid, defaults.ip = "", "0.0.0.0"
         self.settings = Settings.load(state_file, defaults)
@@ -390,7 +418,12 @@ class Printer:
     _jog_time = 0.5
 
     def refusal(self, command: p.Command) -> int | None:
-        """An `E<n>$` code when the printer cannot take `command` now (busy with something else)."""
+        """An `E<n>$` code when the printer cannot take `command` now (busy, or not a command it knows)."""
+        if isinstance(command, p.TagInfo | p.Signature | p.Uid) and not self.persona.fw3:
+            return 1  # firmware 3.x commands
+        allowed = p.Query | p.Upload | p.UploadDidFinish | p.PrintControl | p.SimControl
+        if self.persona.status_and_upload_only and not isinstance(command, allowed):
+            return 1
         if isinstance(command, p.Home | p.Jog) and self.busy:
             return 3
         if isinstance(command, p.Flow) and command.op == "new" and self.busy:
@@ -434,9 +467,9 @@ class Printer:
         elif isinstance(command, p.TagInfo):
             return [f"taginfo:{{{self.persona.serial}}}"]
         elif isinstance(command, p.Uid):
-            return ['uid:"SIM1"']
+            return [p.raw_reply_line(command, self._machine_bytes(b"uid")[:4])]
         elif isinstance(command, p.Signature):
-            return ['signature:"' + "0" * 32 + '"']
+            return [p.raw_reply_line(command, self._machine_bytes(b"signature"))]
         elif isinstance(command, p.Home):
             self._begin("home", 9534, 5)
             return [p.stat_line("home", "start")]
@@ -448,6 +481,11 @@ class Printer:
             return self._flow(command)
         self._save()
         return ["ok"] if command.expect is p.Expect.ACK else []
+
+    def _machine_bytes(self, what: bytes) -> bytes:
+        """Stable per-machine raw bytes for `uid`/`signature` (their meaning on real firmware is unknown; what
+        clients see is a fixed binary value per printer, any byte value allowed — `\n` and `"` included)."""
+        return hashlib.sha256(what + b":" + self.persona.serial.encode()).digest()
 
     def _print_control(self, op: str) -> list[str]:
         code = self.state[0]
@@ -537,7 +575,17 @@ class Printer:
 
     # ------------------------------------------------------------------------------------------- status
 
-    def status(self) -> Status:
+    def scan(self) -> list[dict[str, str]]:
+        """What a `query=W` Wi-Fi scan finds: the joined network first, then the neighbours."""
+        nearby = [("TUCKER_HOME", "54:8c:a0:06:7e:01", "6", "39"), ("Neighbour-5G", "a4:2b:b0:11:22:33", "36", "71"),
+                  ("PrinterLab", "10:fe:ed:4c:8a:90", "11", "58")]
+        if self.settings.ssid and self.settings.ssid not in [n[0] for n in nearby]:
+            nearby.insert(0, (self.settings.ssid, "54:8c:a0:06:7e:02", "1", "45"))
+        return [{"ssid": ssid, "bssid": bssid, "channel": channel, "rssiValue": rssi, "PHY": "11n",
+                 "security": "WPA2-PSK"} for ssid, bssid, channel, rssi in nearby]
+
+    def status(self, *, scan: bool = False) -> Status:
+        """The status letters of this personality; `scan` adds a `W:` Wi-Fi scan (sent only when asked)."""
         persona, s = self.persona, self.settings
         code, sub = self.state
         job = self.job
@@ -545,25 +593,30 @@ class Printer:
         if job is not None and job.phase in ("heat", "print") and code in (PRINTING, PAUSED):
             pct = min(99, int(100 * job.printed / job.print_time))
             progress = Progress(pct, int(job.printed // 60), int(max(0.0, job.print_time - job.printed) // 60) + 1)
-        present = NO_CARTRIDGE not in self.errors
+        present = NO_CARTRIDGE not in self.errors and persona.cartridge_tags
         settings = dict(persona.settings)
         if "buzzer" in settings:
             settings["buzzer"] = "on" if s.buzzer else "off"
         if "dr" in settings:
             settings["dr"] = {"top": "on" if DOOR_OPEN in self.errors else "off", "front": "off"}
-        temps = (1, (int(self.extruder), self.target)) if persona.target_in_t else (1, (int(self.extruder),))
+        temps: tuple[int, tuple[int | None, ...]] = (
+            (1, (int(self.extruder), self.target)) if persona.target_in_t else (1, (int(self.extruder),)))
+        if not persona.sensors:
+            temps = (1, (None, None))
+        lifetime = Lifetime(1, s.machine_min + int(self.now // 60), s.extruder_min,
+                            int(self.now // 60) if persona.lifetime_last else None)
         fields: dict[str, Any] = {
             "bed": int(AMBIENT) - 2,
             "calibration": tuple(str(v) for v in s.calibration) + persona.calibration_tail,
             "progress": progress,
             "cartridge": Cartridge(1, (persona.cartridge if present else p.NO_CARTRIDGE_SERIAL,)),
-            "errors": tuple(self.errors) or (0,),
-            "filament": (1, s.filament_mm if present else -1),
+            "errors": tuple(self.errors) or persona.idle_errors,
+            "filament": (1, s.filament_mm if present else -1) if persona.cartridge_tags else (1, 0),
             "serial": persona.serial,
-            "state": (code, sub if persona.substates else None),
-            "lifetime": Lifetime(1, s.machine_min + int(self.now // 60), s.extruder_min, int(self.now // 60)),
+            "state": (old_state_code(code) if persona.old_states else code, sub if persona.substates else None),
+            "lifetime": lifetime,
             "m": (0, 0, 0),
-            "packet": Packet(8, "1", "1", s.autolevel),
+            "packet": Packet(8, "1", persona.packet_c, s.autolevel if persona.autolevel_in_o else None),
             "targets": {"nozzle": str(self.target), "bed": "0"},
             "model_number": persona.model.model_number,
             "settings": settings,
@@ -574,12 +627,31 @@ class Printer:
             "language": s.language,
             "zoffset": s.zoffset,
             "wifi_firmware": persona.wifi_firmware,
-            "network": Network(s.ip, s.ssid, "0", 39, "54:8c:a0:06:7e:48"),
+            "network": (Network(s.ip, s.ssid, "0", 39, "54:8c:a0:06:7e:48") if persona.network_json
+                        else Network(s.ip, json_form=False)),
         }
+        if scan and persona.model.wifi:
+            fields["networks"] = self.scan()
         if persona.fw3:
             last = self.job or self.last_job
             fields["print_file"] = {"PrintFile": last.name if last else "", "Complete": 0}
         wanted = {letter: spec[0] for letter, spec in LETTERS.items()}
-        order = persona.order + ("Z" if persona.fw3 else "")
+        order = persona.order + ("Z" if persona.fw3 else "") + ("W" if "networks" in fields else "")
         values = {wanted[letter]: fields[wanted[letter]] for letter in order if wanted.get(letter) in fields}
-        return Status(order=tuple(order), **values)
+        dashed = frozenset() if persona.sensors else frozenset({"b"})
+        if dashed:
+            values.pop("bed", None)
+        return Status(order=tuple(order), dashed=dashed, **values)
+
+
+_OLD_STATES = {9500 + n: n for n in range(5)} | {9501 + n: n for n in range(5, 11)} | {
+    9505: 11, **{9500 + n: n for n in range(12, 18)}}
+
+
+def old_state_code(code: int) -> int:
+    """The pre-95xx code old firmware reports (9511 → 10); codes without an old form stay as they are."""
+    if code == FILE_CHECK:
+        return 0  # "print initial": the closest old state to the file check
+    if code == CANCELLING:
+        return 12  # "print stop"
+    return _OLD_STATES.get(code, code)

@@ -308,6 +308,8 @@ class TagInfo(Command):
 
 @dataclass(frozen=True, slots=True)
 class Signature(Command):
+    """Firmware 3.x: `signature:"<32 raw bytes>"` (no `$`); the bytes may contain `\n`, so they are read by count."""
+
     expect: ClassVar[Expect] = Expect.LINE
 
     @property
@@ -317,11 +319,57 @@ class Signature(Command):
 
 @dataclass(frozen=True, slots=True)
 class Uid(Command):
+    """Firmware 3.x: `uid:"<4 raw bytes>"` then `$`."""
+
     expect: ClassVar[Expect] = Expect.DATA
 
     @property
     def body(self) -> str:
         return "config=uid"
+
+
+RAW_REPLIES: dict[type[Command], tuple[str, int]] = {Signature: ("signature", 32), Uid: ("uid", 4)}
+"""Replies carrying a fixed number of raw bytes between quotes: `<name>:"<bytes>"`."""
+
+
+def raw_reply_line(command: Signature | Uid, value: bytes) -> str:
+    """The device's reply line (latin-1 text, one char per byte) for `signature` or `uid`."""
+    name, size = RAW_REPLIES[type(command)]
+    if len(value) != size:
+        raise LocalProtocolError(f"{name} carries exactly {size} bytes, not {len(value)}")
+    return f'{name}:"{value.decode("latin-1")}"'
+
+
+def raw_reply_value(command: Command, line: str) -> bytes | None:
+    """The raw bytes in a `signature`/`uid` reply line, or None if the line is not one."""
+    spec = RAW_REPLIES.get(type(command))
+    if spec is None:
+        return None
+    head = f'{spec[0]}:"'
+    if not (line.startswith(head) and line.endswith('"') and len(line) == len(head) + spec[1] + 1):
+        return None
+    return line[len(head) : -1].encode("latin-1")
+
+
+CONTROL_VERB = "simctl"
+"""`XYZv3/simctl=…` is the simulator's in-band control plane (fault triggers, OctoPrint-style). No real client
+sends it; a real printer rejects it like any unknown command, so it cannot change what real clients see."""
+
+
+@dataclass(frozen=True, slots=True)
+class SimControl(Command):
+    """`simctl=fault:<name>:on|off`, `simctl=clear` or `simctl=faults`; answered `simctl:<faults>` + `$`."""
+
+    op: str
+    expect: ClassVar[Expect] = Expect.DATA
+
+    def __post_init__(self) -> None:
+        if not re.fullmatch(r"fault:[a-z-]+:(?:on|off)|clear|faults", self.op):
+            raise LocalProtocolError(f"simulator control is fault:<name>:on|off, clear or faults, not {self.op!r}")
+
+    @property
+    def body(self) -> str:
+        return f"{CONTROL_VERB}={self.op}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -489,6 +537,8 @@ def _parse(text: str) -> Command:
         return _parse_config(arg) or UnknownCommand(text)
     if verb == "action":
         return _parse_action(arg) or UnknownCommand(text)
+    if verb == CONTROL_VERB:
+        return SimControl(arg)
     return UnknownCommand(text)
 
 
@@ -663,6 +713,8 @@ class ReplyReader:
         self._pending: _Pending | None = None
         self._swallow_dollar = 0
         self.noise = 0
+        self.noise_sample: str | None = None
+        """The first line that fitted nothing: evidence when the peer is not an XYZv3 printer at all."""
 
     @property
     def busy(self) -> bool:
@@ -697,15 +749,47 @@ class ReplyReader:
         if self._pending is not None:
             self._pending.last_rx = now
         while True:
+            raw_line = self._raw_reply()
+            if raw_line is not None:
+                if raw_line:
+                    self._note(raw_line)
+                    continue
+                break
             end = self._buffer.find(b"\n")
             if end < 0:
                 break
             raw = bytes(self._buffer[:end])
             del self._buffer[: end + 1]
-            self._line(raw.decode("latin-1").rstrip("\r "))
+            self._note(raw.decode("latin-1").rstrip("\r "))
         if len(self._buffer) > 65536:  # a line this long is not XYZv3; keep the reader bounded
             self._buffer.clear()
             self.noise += 1
+
+    def _note(self, line: str) -> None:
+        before = self.noise
+        self._line(line)
+        if self.noise > before and self.noise_sample is None:
+            self.noise_sample = line[:60]
+
+    def _raw_reply(self) -> str | None:
+        """A `signature`/`uid` reply is read by byte count (its raw bytes may hold `\n`): the line, "" while
+        it is still arriving, or None when the buffer does not start with one."""
+        p = self._pending
+        spec = RAW_REPLIES.get(type(p.command)) if p is not None else None
+        if spec is None:
+            return None
+        head = f'{spec[0]}:"'.encode()
+        buf = self._buffer
+        if not (buf.startswith(head) or (len(buf) < len(head) and head.startswith(bytes(buf)) and buf)):
+            return None
+        size = len(head) + spec[1] + 1
+        if len(buf) < size + 1:
+            return ""
+        if buf[size - 1 : size + 1] != b'"\n':
+            return None  # not the framing we know: fall back to reading a line
+        line = bytes(buf[:size]).decode("latin-1")
+        del buf[: size + 1]
+        return line
 
     def next_event(self, now: float) -> ReaderEvent | None:
         self._check_time(now)

@@ -55,7 +55,7 @@ class XYZSimulator:
         self, model: str = "dv1MW0A000", *, speed: float = 1.0, faults: tuple[str, ...] = (),
         state_file: Path | None = None, store: Path | None = None, strict: bool = False,
         link: Link | None = None, gap: float = 0.03, upload_idle: float = 30.0, serial: str | None = None,
-        clock: Callable[[], float] = time.monotonic, close_after_reply: bool | None = None,
+        clock: Callable[[], float] = time.monotonic, close_after_reply: bool | None = None, control: bool = True,
     ) -> None:
         if speed <= 0:
             raise InputError(f"speed must be positive, not {speed}")
@@ -67,6 +67,8 @@ class XYZSimulator:
         self.gap = gap
         self.upload_idle = upload_idle
         self.clock = clock
+        self.control = control
+        """Answer `XYZv3/simctl=…` (in-band fault triggers); off, it is refused like any unknown command."""
         hangs_up = self.printer.persona.model.model_number == "dvF110B000"
         self.close_after_reply = hangs_up if close_after_reply is None else close_after_reply
         """Close a TCP connection after each reply, as the da Vinci 1.1 Plus does."""
@@ -83,6 +85,21 @@ class XYZSimulator:
     def inject(self, fault: str, on: bool = True) -> None:
         """Turn a fault on or off while running (see printer.FAULTS)."""
         self.printer.inject(fault, on)
+
+    def control_command(self, op: str) -> str:
+        """The in-band control plane (`XYZv3/simctl=…`): `fault:<name>:on|off`, `clear`, `faults`.
+
+        Returns the reply line `simctl:<faults now active, + separated>` or `simctl:E<reason>`."""
+        if op == "clear":
+            for fault in list(self.printer.faults):
+                self.printer.inject(fault, False)
+        elif op.startswith("fault:"):
+            _, name, state = op.split(":")
+            try:
+                self.inject(name, state == "on")
+            except InputError as exc:
+                return f"simctl:E {exc}"
+        return "simctl:" + "+".join(sorted(self.printer.faults))
 
     def printer_time(self) -> float:
         return (self.clock() - self._t0) * self.speed
@@ -194,11 +211,14 @@ class _Connection:
             return await self._finish_upload()
         if isinstance(command, p.Query):
             return self._query(command)
-        if isinstance(command, p.UnknownCommand):
+        if isinstance(command, p.SimControl) and self.sim.control:
+            return p.reply_lines([self.sim.control_command(command.op)], dollar=True)
+        if isinstance(command, p.UnknownCommand | p.SimControl):
             return p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False) if serial else b""
         refusal = self.printer.refusal(command)
         if refusal is not None:
-            return p.reply_lines([p.error_line(refusal)], dollar=False) if serial else b""
+            answered = serial or command.expects(self.link) is not p.Expect.NOTHING
+            return p.reply_lines([p.error_line(refusal)], dollar=False) if answered else b""
         lines = self.printer.execute(command)
         expect = command.expects(self.link)
         if expect is p.Expect.NOTHING or not lines:
@@ -212,7 +232,7 @@ class _Connection:
         if busy is not None:
             self.sim.busy_replies += 1
             return p.reply_lines([p.error_line(busy)], dollar=False)
-        status = self.printer.status()
+        status = self.printer.status(scan="W" in query.wanted)
         if not query.wanted:
             return p.reply_lines(status.lines(), dollar=True)
         lines = status.lines("".join(sorted(query.wanted)))
@@ -294,8 +314,8 @@ class _Connection:
 
 
 def simulator_from_options(options: dict[str, str]) -> XYZSimulator:
-    """Build a simulator from `sim://xyz?model=…&speed=…&link=serial|wifi&fault=…&strict=1`."""
-    unknown = set(options) - {"model", "speed", "link", "fault", "strict", "state", "store", "serial"}
+    """Build a simulator from `sim://xyz?model=…&speed=…&link=serial|wifi&fault=…&strict=1&control=0`."""
+    unknown = set(options) - {"model", "speed", "link", "fault", "strict", "state", "store", "serial", "control"}
     if unknown:
         raise InputError(f"unknown sim://xyz option(s): {', '.join(sorted(unknown))}")
     try:
@@ -314,6 +334,7 @@ def simulator_from_options(options: dict[str, str]) -> XYZSimulator:
         strict=options.get("strict", "0") in ("1", "true", "yes"),
         state_file=Path(options["state"]) if "state" in options else None,
         store=Path(options["store"]) if "store" in options else None, serial=options.get("serial"),
+        control=options.get("control", "1") not in ("0", "false", "no"),
     )
 
 

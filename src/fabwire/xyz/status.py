@@ -89,6 +89,8 @@ ERROR_CODES: dict[int, tuple[str, str]] = {
 _OLD_ERRORS = {2: 0x0101, 3: 0x001B, 4: 0x0103, 5: 0x0104, 6: 0x0105, 7: 0x0208, 8: 0x0209, 9: 0x0108, 10: 0x0109,
                11: 0x010A, 14: 0x0202, 15: 0x0203, 16: 0x0405, 17: 0x0205, 18: 0x010B, 20: 0x0401, 21: 0x0402,
                23: 0x0404, 24: 0x0405, 28: 0x0206, 29: 0x0207, 0x020B: 0x020C}
+IDLE_NOISE: dict[str, frozenset[int]] = {"dvF110B000": frozenset({2})}
+"""`e:` values a model reports while nothing is wrong (the 1.1 Plus says `e:2` when idle)."""
 NO_CARTRIDGE = 0x40000206
 FILE_REJECTED = 0x020D
 HEATER_TIMEOUT = 0x40000101
@@ -558,7 +560,26 @@ class Status:
 
     @property
     def error_words(self) -> tuple[ErrorWord, ...]:
-        return tuple(ErrorWord.decode(e) for e in (self.errors or ()) if e)
+        noise = IDLE_NOISE.get(self.model_number or "", frozenset())
+        return tuple(ErrorWord.decode(e) for e in (self.errors or ()) if e and e not in noise)
+
+    @property
+    def material_name(self) -> str | None:
+        """`k:` is decimal on the wire; XYZware reads its hex spelling as the id (65 → "41" → ABS)."""
+        if self.material is None:
+            return None
+        hex_text = f"{self.material:x}"
+        return MATERIALS.get(self.material) or (MATERIALS.get(int(hex_text)) if hex_text.isdigit() else None)
+
+    @property
+    def wifi_networks(self) -> list[dict[str, Any]]:
+        """`W:` (a scan) as a list: XYZware sends an array of objects, older notes show one object."""
+        value = self.networks
+        if isinstance(value, dict):
+            return [value]
+        if isinstance(value, list):
+            return [v for v in value if isinstance(v, dict)]
+        return []
 
     @property
     def extruder(self) -> int | None:
@@ -626,6 +647,8 @@ class Status:
             "cartridge_present": self.cartridge.present if self.cartridge else None,
             "cartridge_colour": self.cartridge.colour if self.cartridge else None,
             "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
+            "material": self.material_name,
+            "progress_remaining_unknown": bool(self.progress and self.progress.remaining_min is None),
             "model": model.name if model else None,
         }
         return out
