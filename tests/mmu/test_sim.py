@@ -279,6 +279,22 @@ def test_move_time_matches_reference_figures() -> None:
     assert move_time(360, 95, 800) == pytest.approx(3.9, abs=0.05)
 
 
+def test_a_skipped_fault_hits_a_later_command() -> None:
+    w = Wire(faults=("finda-didnt-trigger@1:1",))
+    w.send("T0")
+    w.run_until("T0 F0", step=0.05)  # the tool change's one feed to FINDA is let through
+    w.send("T1")
+    replies = w.run_until("T1 E8001", step=0.05)
+    assert replies[-2:] == ["T1 Pa", "T1 E8001"]
+
+
+def test_fault_skip_is_parsed_and_checked() -> None:
+    fault = parse_fault("finda-didnt-trigger@2:always")
+    assert (fault.name, fault.skip, fault.count) == ("finda-didnt-trigger", 2, -1)
+    with pytest.raises(InputError, match="whole number"):
+        parse_fault("finda-stuck@x")
+
+
 def test_fault_names_are_checked() -> None:
     assert parse_fault("tmc-short").name == "tmc-short-pulley"
     assert parse_fault("finda-stuck:always").count == -1

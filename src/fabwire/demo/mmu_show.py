@@ -13,8 +13,8 @@ from fabwire.mmu.client import MMU
 from fabwire.mmu.host import ButtonPushed, CommandFinished, ErrorRaised, HostEvent, LinkLost, ProgressChanged
 from fabwire.transport import open_transport
 
-FAULT = "finda-didnt-trigger:1"
-"""Fires once, on the first feed to FINDA: the T0 tool change."""
+FAULT = "finda-didnt-trigger@1:1"
+"""Lets the first feed to FINDA (T0) pass, then fires once: on the T1 tool change."""
 SLOTS = (0, 1, 2)
 
 

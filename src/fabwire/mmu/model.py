@@ -73,6 +73,8 @@ class Fault:
     name: str
     count: int = 1
     """How many times it fires; -1 = every time."""
+    skip: int = 0
+    """How many chances to fire pass harmlessly first (so a fault can hit, say, the second tool change)."""
 
 
 FAULT_NAMES = {
@@ -94,20 +96,26 @@ for _kind in _TMC_KINDS:
 
 
 def parse_fault(text: str) -> Fault:
-    """`NAME`, `NAME:COUNT` or `NAME:always`."""
+    """`NAME`, `NAME:COUNT` or `NAME:always`, optionally `NAME@SKIP…` to let SKIP chances pass first."""
     name, _, count_text = text.strip().partition(":")
+    name, _, skip_text = name.partition("@")
     name = name.strip().lower().replace("_", "-")
+    skip = 0
+    if skip_text:
+        if not skip_text.strip().isdigit():
+            raise InputError(f"fault skip after '@' must be a whole number, not {skip_text!r}")
+        skip = int(skip_text)
     if name.startswith("tmc-") and name.removeprefix("tmc-") in _TMC_KINDS:
         name += "-pulley"
     if name not in FAULT_NAMES:
         raise InputError(f"unknown MMU fault {name!r}; known: {', '.join(sorted(FAULT_NAMES))}")
     if not count_text:
-        return Fault(name)
+        return Fault(name, skip=skip)
     if count_text in ("always", "-1"):
-        return Fault(name, -1)
+        return Fault(name, -1, skip)
     if not count_text.isdigit() or int(count_text) < 1:
         raise InputError(f"fault count must be a positive number or 'always', not {count_text!r}")
-    return Fault(name, int(count_text))
+    return Fault(name, int(count_text), skip)
 
 
 @dataclass(slots=True)
@@ -136,6 +144,7 @@ class MMUModel:
                  now: float = 0.0) -> None:
         self.firmware = firmware
         self.faults: dict[str, int] = {}
+        self._fault_skips: dict[str, int] = {}
         for fault in faults:
             self.inject(fault)
         self.eeprom = Eeprom()
@@ -154,9 +163,11 @@ class MMUModel:
     def inject(self, fault: Fault | str) -> None:
         fault = parse_fault(fault) if isinstance(fault, str) else fault
         self.faults[fault.name] = fault.count
+        self._fault_skips[fault.name] = fault.skip
 
     def clear_faults(self) -> None:
         self.faults.clear()
+        self._fault_skips.clear()
 
     def press(self, button: int) -> None:
         """A press on the MMU's own buttons."""
@@ -169,6 +180,9 @@ class MMUModel:
     def _fault(self, name: str) -> bool:
         left = self.faults.get(name, 0)
         if left == 0:
+            return False
+        if self._fault_skips.get(name, 0) > 0:
+            self._fault_skips[name] -= 1
             return False
         if left > 0:
             self.faults[name] = left - 1
