@@ -60,6 +60,15 @@ def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> 
     stored = (store / "cube.3w").read_bytes()
     assert stored == write_3w(GCODE * 50, find_model("dv1MW0A000"), filename="cube.3w")
     assert read_3w(stored).gcode.count(b"G28") == 50
+    again = run_cli("xyz", "-d", dev, "print", str(src))
+    assert again.returncode == 7
+    assert "finished but not yet acknowledged" in again.stderr
+    assert "fabwire xyz acknowledge" in again.stderr
+    garbage = tmp_path / "notes.txt"
+    garbage.write_bytes(bytes(range(256)))
+    refused = run_cli("xyz", "-d", dev, "print", str(garbage))  # the file is judged before the printer's state
+    assert refused.returncode == 4
+    assert "notes.txt is neither G-code nor a .3w print file" in refused.stderr
     assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
     data = status_json(dev)
     assert data["state"] == [9511, 0]

@@ -303,6 +303,9 @@ class XYZPrinter:
             await self._supports(command)
         for word in status.error_words:
             raise DeviceError(f"0x{word.raw:08X}", word.meaning, action=f"cannot {doing}")
+        if status.state_code == PRINT_DONE:
+            raise DeviceError(str(status.state_code), "the last print is finished but not yet acknowledged",
+                              action=f"take it off the bed and acknowledge it (fabwire xyz acknowledge) to {doing}")
         if status.state_code != IDLE:
             raise DeviceError(str(status.state_code), f"the printer is busy ({status.state_name})",
                               action=f"cannot {doing}")
@@ -314,16 +317,7 @@ class XYZPrinter:
         """The bytes to upload: a .3w as is (if it suits `model`), G-code converted for `model`."""
         from fabwire.xyz.threew import inspect_3w, is_3w, write_3w
 
-        if isinstance(source, Path):
-            try:
-                data = source.read_bytes()
-            except OSError as exc:
-                raise InputError(f"cannot read {source}: {exc.strerror}") from exc
-            name = source.name
-        else:
-            data, name = source, "the data"
-        if not data:
-            raise InputError(f"{name} is empty")
+        data, name = _load_source(source)
         if is_3w(data):
             info = inspect_3w(data)
             machine = (info.machine or "").strip()
@@ -411,12 +405,17 @@ class XYZPrinter:
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
                          wait: bool = True, name: str | None = None) -> Status:
         """Convert if needed, upload, start and (unless wait=False) follow the job to its end."""
+        from fabwire.xyz.threew import is_3w
+
+        data, shown = _load_source(source)
+        if not is_3w(data) and not _looks_like_gcode(data):  # say so before disturbing the printer
+            raise InputError(f"{shown} is neither G-code nor a .3w print file")
         status = await self.require_idle("print")
         printer_model = status.model
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
-        data = self.prepare(source, target, override=model is not None)
+        data = self.prepare(data if isinstance(source, bytes) else source, target, override=model is not None)
         if name is None:
             name = (Path(source.name).stem if isinstance(source, Path) else "fabwire") + ".3w"
         await self.upload(data, name, progress=progress)
@@ -686,6 +685,21 @@ class XYZPrinter:
                              f"not this {model.name} ({model.model_number})")
         await self.require_idle("update the firmware")
         return await self.upload(image[16:], name, progress=progress, firmware=True)
+
+
+def _load_source(source: Path | bytes) -> tuple[bytes, str]:
+    """The file's bytes and how to name it in messages; an unreadable or empty file is an InputError."""
+    if isinstance(source, Path):
+        try:
+            data = source.read_bytes()
+        except OSError as exc:
+            raise InputError(f"cannot read {source}: {exc.strerror}") from exc
+        name = source.name
+    else:
+        data, name = source, "the data"
+    if not data:
+        raise InputError(f"{name} is empty")
+    return data, name
 
 
 def _looks_like_gcode(data: bytes) -> bool:
