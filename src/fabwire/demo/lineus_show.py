@@ -8,7 +8,7 @@ from rich.progress import BarColumn, Progress, TaskID, TextColumn
 
 from fabwire.demo.context import DemoContext
 from fabwire.lineus.client import LineUs
-from fabwire.lineus.draw_cli import _figures_text, send_plan
+from fabwire.lineus.draw_cli import figures_text, send_plan
 from fabwire.lineus.plot import Plan, PlanOptions, load_drawing, plan_lines, text_lines
 from fabwire.lineus.plot.fit import fit_into_area
 from fabwire.lineus.plot.geometry import affine, bbox, scale_translate
@@ -49,7 +49,7 @@ async def showcase(ctx: DemoContext, url: str) -> None:
     try:
         for name, plan in plans:
             with ctx.summary.step("lineus", f"draw {name}") as step:
-                ctx.say(f"[bold]{name}[/bold]: " + _figures_text(plan).replace("\n", "; "))
+                ctx.say(f"[bold]{name}[/bold]: " + figures_text(plan).replace("\n", "; "))
                 with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
                               console=ctx.err, disable=ctx.quiet_bars) as bar:
                     total = len(plan.strokes)

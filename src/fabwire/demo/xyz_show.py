@@ -9,11 +9,11 @@ from rich.progress import BarColumn, Progress, TaskID, TextColumn
 from fabwire.demo.context import DemoContext
 from fabwire.errors import DeviceError
 from fabwire.samples import SAMPLE_GCODE, sample_path
-from fabwire.xyz.cli import _status_line, render_status
+from fabwire.xyz.cli import job_line, render_status
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.status import PRINT_DONE, Status
 from fabwire.xyz.threew import convert_gcode_file
-from fabwire.xyz.threew_cli import _summary
+from fabwire.xyz.threew_cli import metadata_summary
 
 
 async def showcase(ctx: DemoContext, url: str) -> None:
@@ -32,7 +32,7 @@ async def showcase(ctx: DemoContext, url: str) -> None:
             source = sample_path(SAMPLE_GCODE)
             target = ctx.out_dir / (source.stem + ".3w")
             info = convert_gcode_file(source, target, model)
-            ctx.say(f"converted {source.name} → {target} for {model.name} ({info.variant}); {_summary(info)}")
+            ctx.say(f"converted {source.name} → {target} for {model.name} ({info.variant}); {metadata_summary(info)}")
             step.detail = info.variant
             step.files.append(target)
         await _print(ctx, printer, target)
@@ -63,11 +63,11 @@ async def _print(ctx: DemoContext, printer: XYZPrinter, target: object) -> None:
                 upload_done.append(time.monotonic())
             if st.state_name not in states:
                 states.append(st.state_name)
-                bar.console.print(_status_line(st))
+                bar.console.print(job_line(st))
             if "job" not in tasks:
                 tasks["job"] = bar.add_task("print", total=100, amount="")
             percent = 100 if st.state_code == PRINT_DONE else st.progress.percent if st.progress else 0
-            bar.update(tasks["job"], completed=percent, description=_status_line(st), amount=f"{percent} %")
+            bar.update(tasks["job"], completed=percent, description=job_line(st), amount=f"{percent} %")
 
         final = await printer.print_file(target, progress=uploaded, on_status=job)
     end = time.monotonic()

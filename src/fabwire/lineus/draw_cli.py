@@ -61,7 +61,7 @@ def _options(fit: bool | None, margin: float, rotate: float, clip: bool, no_opti
                        time_budget=optimize_time)
 
 
-def _figures_text(plan: Plan) -> str:
+def figures_text(plan: Plan) -> str:
     f = plan.figures()
     minutes, seconds = divmod(round(f.estimated_seconds), 60)
     lines = [
@@ -76,7 +76,7 @@ def _report(dctx: DeviceContext, plan: Plan, extra: dict[str, Any] | None = None
     for note in plan.notes:
         dctx.output.note(note)
     data = {**plan.figures().as_dict(), **(extra or {})}
-    dctx.output.result(data, _figures_text(plan))
+    dctx.output.result(data, figures_text(plan))
 
 
 # -- resume state ---------------------------------------------------------------------------------------------------
@@ -249,7 +249,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
         return
     for note in plan.notes:
         dctx.output.note(note)
-    dctx.output.note(_figures_text(plan))
+    dctx.output.note(figures_text(plan))
     _draw(dctx, plan, key, state, resume, str(file), pen_z)
 
 
@@ -279,7 +279,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
     if dry_run:
         _report(dctx, plan, {"text": text})
         return
-    dctx.output.note(_figures_text(plan))
+    dctx.output.note(figures_text(plan))
     _draw(dctx, plan, key, state, resume, repr(text), pen_z)
 
 

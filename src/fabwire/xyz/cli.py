@@ -109,7 +109,7 @@ def render_status(status: Status) -> Panel:
     return Panel(table, title="da Vinci status", expand=False)
 
 
-def _status_line(status: Status) -> str:
+def job_line(status: Status) -> str:
     parts = [status.state_name, f"extruder {status.extruder}°C/{status.extruder_target or 0}°C"]
     if status.progress and status.state_code in (9505, 9601):
         left = status.progress.remaining_min
@@ -133,7 +133,7 @@ def status(dctx: DeviceContext, watch: bool, interval: float, count: int | None)
             out.result(st.to_dict(), lambda: out.out.print(render_status(st)))
             return
         async for st in printer.monitor(interval, count):
-            out.event(st.to_dict(), _status_line(st))
+            out.event(st.to_dict(), job_line(st))
 
     _with_printer(dctx, run)
 
@@ -165,7 +165,7 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
                 bar.update(tasks[0], completed=done, total=total)
 
             def job(st: Status) -> None:
-                line = _status_line(st)
+                line = job_line(st)
                 if line == last[0]:
                     return
                 last[0] = line
@@ -211,7 +211,7 @@ def _progress_note(dctx: DeviceContext) -> Callable[[Status], None]:
     last = [""]
 
     def note(st: Status) -> None:
-        line = _status_line(st)
+        line = job_line(st)
         if line != last[0]:
             last[0] = line
             dctx.output.note(line)

@@ -79,7 +79,7 @@ def _info_data(info: ThreeWInfo) -> dict[str, Any]:
     }
 
 
-def _summary(info: ThreeWInfo) -> str:
+def metadata_summary(info: ThreeWInfo) -> str:
     filament = "?" if info.filament_mm is None else f"{info.filament_mm / 1000:.2f} m"
     return (f"print time {_duration(info.print_time_s)}, filament {filament}, "
             f"{info.layers if info.layers is not None else '?'} layers")
@@ -158,7 +158,7 @@ def _report(app: App, direction: str, src: Path, dst: Path, info: ThreeWInfo) ->
         text = f"wrote {dst} ({info.gcode_size} bytes of G-code) from a {info.variant} file for {model}; "
     else:
         text = f"wrote {dst} for {model} ({info.variant}, {data['bytes_written']} bytes); "
-    app.output.result(data, text + _summary(info))
+    app.output.result(data, text + metadata_summary(info))
 
 
 @click.command("info")
