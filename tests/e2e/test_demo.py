@@ -42,7 +42,10 @@ def test_full_demo_writes_valid_files_and_stops_every_simulator(tmp_path: Path) 
     for line in sample_path(SAMPLE_GCODE).read_text().splitlines():
         if line.startswith(("G1 ", "G28")):
             assert line.encode() in gcode
-    recovered = [s for s in summary["steps"] if s["step"] == "tool change T0"]
+    details = {s["step"]: s["detail"] for s in summary["steps"] if s["device"] == "mmu"}
+    assert details["tool change T0"] == "finished"
+    assert details["tool change T2"] == "finished"
+    recovered = [{"detail": details["tool change T1"]}]
     assert "FINDA didn't trigger" in recovered[0]["detail"]
     assert "Retry" in recovered[0]["detail"]
     assert "pressing Retry" in done.stderr
