@@ -69,6 +69,10 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     assert err.count("(retrying automatically)") == 3
     code, out, _ = mmu(sim.url, "status", json_mode=True)
     assert json.loads(out)["kind"] == "E"
+    code, _, err = mmu(sim.url, "tool-change", "2")  # the MMU still waits in T1's error
+    assert code == 7
+    assert "the MMU is still busy with T1" in err
+    assert "fabwire mmu button retry" in err
     code, out, _ = mmu(sim.url, "button", "retry")
     assert (code, out.strip()) == (0, "pressed Middle (retry)")
 

@@ -244,7 +244,9 @@ class MMU:
         if request.code in "TLEK":
             check_slot(request.value)
         if self.logic.busy:
-            raise InputError(f"the MMU is already running {self.logic.command}")
+            raise DeviceError("busy", f"the MMU is still busy with {self.logic.command}",
+                              action="let it finish, or answer its error (fabwire mmu button retry|continue|stop), "
+                                     "or reset it")
         expected = f"{request}"
 
         def outcome(event: HostEvent) -> CommandFinished | None:
