@@ -98,3 +98,10 @@ async def test_closing_a_tap_twice_records_one_close(tmp_path: Path) -> None:
     await tap.close()
     await tap.close()
     assert [r.event for r in read_trace(path)] == ["close"]
+
+
+def test_deeply_nested_json_is_a_clear_error_not_a_crash(tmp_path: Path) -> None:
+    bad = tmp_path / "nested.jsonl"
+    bad.write_text('{"trace": "fabwire", "version": 1}\n' + "[" * 100000 + "]" * 100000 + "\n")
+    with pytest.raises(InputError, match="line 2"):
+        list(read_trace(bad))

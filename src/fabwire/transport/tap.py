@@ -102,7 +102,7 @@ def read_trace(path: str | Path) -> Iterator[TraceRecord]:
             if direction not in (TO_DEVICE, FROM_DEVICE):
                 raise ValueError(f"unknown direction {direction!r}")
             yield TraceRecord(float(obj["t"]), direction, obj["data"].encode("latin-1"))
-        except (ValueError, KeyError, TypeError, AttributeError, UnicodeEncodeError) as exc:
+        except (ValueError, KeyError, TypeError, AttributeError, UnicodeEncodeError, RecursionError) as exc:
             raise InputError(f"{path}, line {number}: not a fabwire trace record ({exc})") from None
 
 
