@@ -111,29 +111,102 @@ def test_chunks_can_be_fed_in_pieces() -> None:
     assert pieces.filament == pytest.approx(whole.filament)
 
 
-def number() -> st.SearchStrategy[str]:
-    return st.builds(lambda v, d: f"{v:.{d}f}", st.floats(-200, 200, allow_nan=False), st.integers(0, 4))
-
-
-move = st.builds(
-    lambda cmd, letters, values: cmd + "".join(f" {a}{v}" for a, v in zip(letters, values, strict=False)),
-    st.sampled_from(["G0", "G1", "G00", "G01", "G1", "G1"]),
-    st.lists(st.sampled_from("XYZEF"), unique=True, max_size=5),
-    st.lists(number(), min_size=5, max_size=5),
+@pytest.mark.parametrize("by_lines", [False, True])
+@pytest.mark.parametrize(
+    ("text", "pos", "e"),
+    [
+        pytest.param(b"G1 X 5 Y\t6 E 1\n", [5.0, 6.0, 0.0], 1.0, id="blank-after-letter"),
+        pytest.param(b"G1X10Y10E5\n", [10.0, 10.0, 0.0], 5.0, id="compact-words"),
+        pytest.param(b"G1 X1E5\n", [1.0, 0.0, 0.0], 5.0, id="no-exponent"),
+        pytest.param(b"g1 x1e5 y2.5\r\n", [1.0, 2.5, 0.0], 5.0, id="lowercase-crlf"),
+        pytest.param(b"G1 X2 (Y7 E9) Z3 ; E8\n", [2.0, 0.0, 3.0], 0.0, id="comments"),
+        pytest.param(b"N7 G1 X3 E2*91\n", [3.0, 0.0, 0.0], 2.0, id="checksum"),
+        pytest.param(b"G1 X4 X9 Y E1\n", [4.0, 0.0, 0.0], 1.0, id="first-word-wins"),
+        pytest.param(b"G 1 X5 E.5\nM 83\nG001 E1\n", [5.0, 0.0, 0.0], 1.5, id="blank-in-command"),
+        pytest.param(b"G1 X0.1234567890123456789012345 E+5.\n", [0.1234567890123456789012345, 0.0, 0.0], 5.0,
+                     id="long-number"),
+    ],
 )
-control = st.sampled_from(["M82", "M83", "G90", "G91", "G92 E0", "G92", "G92 X1 Y2", "G28", "G28 X Y", "G4 P250",
-                           "; comment G1 X5", "", "M104 S200", "G1 X5 ; E9", "G10", "G2 X1 Y1 I1 J0"])
-program = st.lists(st.one_of(move, move, move, control), max_size=80)
+def test_words_are_read_as_marlin_reads_them(text: bytes, pos: list[float], e: float, by_lines: bool) -> None:
+    analyzer = analyse(text, lines=by_lines)
+    assert (analyzer.pos, analyzer.e) == (pos, e)
 
 
-@settings(max_examples=200, deadline=None)
-@given(program)
-def test_array_analysis_matches_line_analysis(lines: list[str]) -> None:
-    text = "".join(line + "\n" for line in lines).encode()
-    fast, slow = analyse(text), analyse(text, lines=True)
+def test_dwell_seconds_override_milliseconds() -> None:
+    assert analyse(b"G4 P500 S2\n").seconds == 2.0
+
+
+def number() -> st.SearchStrategy[str]:
+    plain = st.builds(lambda v, d: f"{v:.{d}f}", st.floats(-200, 200, allow_nan=False), st.integers(0, 4))
+    odd = st.sampled_from(["+5", ".5", "-.25", "5.", "0.1234567890123456789012", "123.45678901234567", "-0",
+                           "1.2.3", "+-1", "-", "."])
+    return st.one_of(plain, plain, plain, odd)
+
+
+@st.composite
+def gcode(draw: st.DrawFn) -> bytes:
+    """A program with the spellings Marlin accepts, each style switched on for the whole program or not at all."""
+    often, rarely = st.booleans(), st.sampled_from([False, False, False, True])
+    style = draw(st.fixed_dictionaries({
+        "compact": often, "blank_after_letter": often, "lowercase": often, "comments": often, "crlf": often,
+        "bare": rarely, "parens": rarely, "numbered": rarely, "indent": rarely,
+    }))
+
+    def word(letter: str, value: str) -> str:
+        blank = draw(st.sampled_from(["", " ", "\t"])) if style["blank_after_letter"] else ""
+        return letter + blank + value
+
+    lines = []
+    for _ in range(draw(st.integers(0, 40))):
+        kind = draw(st.sampled_from(["move", "move", "move", "control"]))
+        if kind == "move":
+            letters = draw(st.lists(st.sampled_from("XYZEF" if not style["bare"] else "XYZEFXI"), max_size=6,
+                                    unique=not style["bare"]))
+            words = [word(a, draw(number())) for a in letters]
+            if style["bare"] and draw(st.booleans()):
+                words.append(draw(st.sampled_from("XYZE")))
+            separator = draw(st.sampled_from(["", " "])) if style["compact"] else " "
+            line = draw(st.sampled_from(["G0", "G1", "G00", "G01", "G1", "G1", "G2", "G3"])) + separator
+            line += separator.join(words)
+        else:
+            line = draw(st.sampled_from([
+                "M82", "M83", "G90", "G91", "G92 E0", "G92", "G92 X1 Y2", "G92E3.5", "G28", "G28 X Y", "G28X",
+                "G4 P250", "G4 S1", "; comment G1 X5", "", "M104 S200", "G1 X5 ; E9", "G10", "G2 X1 Y1 I1 J0",
+                "T0", "G1.5 X3", "M84",
+            ]))
+        if style["comments"] and draw(st.booleans()):
+            line += draw(st.sampled_from([" ; E5 X9", ";G92 E0", "; (", " ;"]))
+        if style["parens"] and draw(st.booleans()):
+            cut = draw(st.integers(0, len(line)))
+            line = line[:cut] + draw(st.sampled_from(["(E9)", " (X1 Y2) ", "(", "(;)"])) + line[cut:]
+        if style["numbered"] and draw(st.booleans()):
+            line = f"N{draw(st.integers(0, 999))} {line}*{draw(st.integers(0, 255))}"
+        if style["indent"] and draw(st.booleans()):
+            line = draw(st.sampled_from([" ", "\t", "  "])) + line
+        if style["lowercase"]:
+            line = draw(st.sampled_from([line, line.lower(), line.swapcase()]))
+        lines.append(line + ("\r\n" if style["crlf"] else "\n"))
+    return "".join(lines).encode()
+
+
+def chunks(text: bytes, cuts: list[int]) -> list[bytes]:
+    """`text` cut after the newlines nearest to the given offsets."""
+    bounds = sorted({text.find(b"\n", cut) + 1 for cut in cuts} - {0, len(text)})
+    return [text[a:b] for a, b in zip([0, *bounds], [*bounds, len(text)], strict=True) if b > a]
+
+
+@settings(max_examples=300, deadline=None)
+@given(gcode(), st.lists(st.integers(0, 4000), max_size=4), st.lists(st.integers(0, 4000), max_size=4))
+def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int], slow_cuts: list[int]) -> None:
+    fast, slow = MoveAnalyzer(), MoveAnalyzer()
+    for chunk in chunks(text, fast_cuts):
+        fast.feed_chunk(chunk)
+    for chunk in chunks(text, slow_cuts):
+        slow.feed_lines(chunk)
+    assert fast.layer_heights == slow.layer_heights
+    assert (fast.absolute, fast.absolute_e) == (slow.absolute, slow.absolute_e)
+    assert fast.feed == slow.feed
     assert fast.seconds == pytest.approx(slow.seconds, rel=1e-9, abs=1e-9)
     assert fast.filament == pytest.approx(slow.filament, rel=1e-9, abs=1e-9)
-    assert fast.layer_heights == slow.layer_heights
-    assert fast.pos == pytest.approx(slow.pos)
-    assert (fast.e, fast.feed, fast.absolute, fast.absolute_e) == pytest.approx(
-        (slow.e, slow.feed, slow.absolute, slow.absolute_e))
+    assert fast.pos == pytest.approx(slow.pos, rel=1e-12, abs=1e-9)
+    assert fast.e == pytest.approx(slow.e, rel=1e-12, abs=1e-9)

@@ -2,6 +2,8 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
+import stat
 import zipfile
 import zlib
 from pathlib import Path
@@ -329,6 +331,9 @@ def test_input_without_final_newline() -> None:
         (b"G02 X1 I1", b"G02 X1 I1"),
         (b"G10", b"G10"),
         (b"G0.5", b"G0.5"),
+        (b"G 0 X5", b"G 1 X5"),
+        (b"G\t00 X5", b"G\t01 X5"),
+        (b"G 1 X5", b"G 1 X5"),
         (b"G1 X10 ; G0 in a comment", b"G1 X10 ; G0 in a comment"),
         (b"; G0 in a comment", b"; G0 in a comment"),
         (b"M117 G0 done", b"M117 G0 done"),
@@ -550,3 +555,20 @@ def test_an_interrupted_conversion_leaves_nothing_behind(tmp_path: Path) -> None
     with pytest.raises(KeyboardInterrupt):
         convert_3w_to_gcode(tmp_path / "big.3w", tmp_path / "back.gcode", progress=stop)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.3w", "big.gcode"]
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o002, 0o077])
+def test_converted_files_get_the_mode_the_umask_gives(mask: int, tmp_path: Path) -> None:
+    src = tmp_path / "part.gcode"
+    src.write_bytes(TV_INPUT)
+    previous = os.umask(mask)
+    try:
+        convert_gcode_file(src, tmp_path / "part.3w")
+        convert_3w_to_gcode(tmp_path / "part.3w", tmp_path / "back.gcode")
+        (tmp_path / "plain").write_bytes(b"")
+    finally:
+        os.umask(previous)
+    expected = 0o666 & ~mask
+    assert stat.S_IMODE((tmp_path / "plain").stat().st_mode) == expected
+    assert stat.S_IMODE((tmp_path / "part.3w").stat().st_mode) == expected
+    assert stat.S_IMODE((tmp_path / "back.gcode").stat().st_mode) == expected

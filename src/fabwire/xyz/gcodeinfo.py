@@ -137,15 +137,22 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
     return GcodeMetadata(time_s, filament, layers, int(facets[1]) if facets else None, slicer)
 
 
+# G-code as Marlin reads it: a word is a letter, optional blanks, then a decimal number without exponent (so
+# `G1X10E5` is X10 E5 and `X1E5` is X1 E5); `;` ends the code of a line, `(...)` is a comment and `*` starts the
+# checksum. A command word opens the line, after blanks and an optional N line number.
+_VALUE = rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
+_NUMBER = re.compile(_VALUE)
 _COMMAND = re.compile(
-    rb"\n[ \t]*(?:[Nn][0-9]+[ \t]*)?([GgMm])0*([0-9]+)(?![0-9.])([^\n;]*)",
+    rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(?![0-9.])([^\n;]*)",
 )
-_WORD = re.compile(rb"([A-Za-z])[ \t]*([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)")
-_ODD_LINE_START = re.compile(rb"\n[ \tN]")
+_WORD = re.compile(rb"([A-Z])[ \t]*(" + _VALUE + rb")")
+_PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
 _CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
 _AXIS_INDEX = np.full(256, -1, dtype=np.intp)
 _AXIS_INDEX[list(b"XYZEF")] = np.arange(5)
 _IS_AXIS = _AXIS_INDEX >= 0
+_NOT_CODE = np.zeros(256, dtype=bool)
+_NOT_CODE[list(b"(*")] = True
 _NUMBER_CHARS = np.zeros(256, dtype=bool)
 _NUMBER_CHARS[list(b"0123456789.+-")] = True
 _DIGITS = np.zeros(256, dtype=bool)
@@ -165,8 +172,9 @@ def _ffill(values: NDArray[np.float64], start: float) -> NDArray[np.float64]:
     return np.where(index >= 0, values[np.maximum(index, 0)], start)
 
 
-def _parse_numbers(data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
-    """The decimal numbers starting at offsets `at` of `data`, as float() reads them (NaN where there is none).
+def _parse_numbers(text: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
+    """The numbers `_NUMBER` matches at offsets `at` of `text` (viewed as `data`), as float() reads them (NaN
+    where there is none).
 
     Digits are accumulated column by column across all numbers at once: an exact integer mantissa divided by an
     exact power of ten rounds the same way a float parser does, for up to 15 significant digits.
@@ -196,16 +204,24 @@ def _parse_numbers(data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.
     parsed[digits == 0] = np.nan
     odd = np.flatnonzero((digits > 15) | active)
     for i in odd:  # very long numbers: let the float parser have them
-        text = bytes(data[at[i]:at[i] + _VALUE_WIDTH])
-        parsed[i] = _to_float(re.match(rb"[-+]?[0-9]*\.?[0-9]*", text).group(0))  # type: ignore[union-attr]
+        found = _NUMBER.match(text, int(at[i]))
+        parsed[i] = float(found.group(0)) if found else math.nan
     return parsed
 
 
-def _to_float(text: bytes) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        return math.nan
+def _code(params: bytes) -> bytes:
+    """A command's parameters without comments in parentheses and without the checksum."""
+    if b"(" in params:
+        params = _PAREN_COMMENT.sub(b" ", params)
+    return params.partition(b"*")[0]
+
+
+def _words(params: bytes) -> dict[bytes, float]:
+    """Letter -> value of upper-cased parameters; the first word wins when a letter repeats, as in Marlin."""
+    words: dict[bytes, float] = {}
+    for letter, value in _WORD.findall(_code(params)):
+        words.setdefault(letter, float(value))
+    return words
 
 
 class MoveAnalyzer:
@@ -233,10 +249,8 @@ class MoveAnalyzer:
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             piece = chunk[start:end]
             text = b"\n" + piece.upper()
-            if _ODD_LINE_START.search(text):
+            if not self._feed_arrays(text):
                 self.feed_lines(piece)
-            else:
-                self._feed_arrays(text)
             start = end
 
     def feed_lines(self, chunk: bytes) -> None:
@@ -266,8 +280,7 @@ class MoveAnalyzer:
         x, y, z = self.pos
         e = self.e
         target_x, target_y, target_z, target_e = x, y, z, e
-        for axis, value in _WORD.findall(params):
-            number = float(value)
+        for axis, number in _words(params).items():
             if axis == b"X":
                 target_x = number if self.absolute else x + number
             elif axis == b"Y":
@@ -282,50 +295,60 @@ class MoveAnalyzer:
         length = math.sqrt(dx * dx + dy * dy + dz * dz) or abs(de)
         self.seconds += length * 60.0 / self.feed
         self.filament += de
-        if de > 0 and (dx or dy):
+        if de > 0 and (dx or dy) and math.isfinite(target_z):
             self.layer_heights.add(round(target_z * 1000))
         self.pos = [target_x, target_y, target_z]
         self.e = target_e
 
     def _set_position(self, params: bytes) -> None:
-        words = _WORD.findall(params)
+        words = _words(params)
         if not words:
             self.pos = [0.0, 0.0, 0.0]
             self.e = 0.0
-        for axis, value in words:
+        for axis, number in words.items():
             if axis == b"E":
-                self.e = float(value)
+                self.e = number
             elif axis in (b"X", b"Y", b"Z"):
-                self.pos[b"XYZ".index(axis)] = float(value)
+                self.pos[b"XYZ".index(axis)] = number
 
     def _home(self, params: bytes) -> None:
-        axes = set(re.findall(rb"[XYZ]", params)) or {b"X", b"Y", b"Z"}
+        axes = set(re.findall(rb"[XYZ]", _code(params))) or {b"X", b"Y", b"Z"}
         for axis in axes:
             self.pos[b"XYZ".index(axis)] = 0.0
 
     def _dwell(self, params: bytes) -> None:
-        for word, value in _WORD.findall(params):
-            if word == b"P":
-                self.seconds += float(value) / 1000.0
-            elif word == b"S":
-                self.seconds += float(value)
+        words = _words(params)  # S (seconds) overrides P (milliseconds), as in Marlin
+        if b"S" in words:
+            self.seconds += words[b"S"]
+        elif b"P" in words:
+            self.seconds += words[b"P"] / 1000.0
 
-    def _feed_arrays(self, text: bytes) -> None:
-        """`text` is upper-cased, starts with a newline and every line starts with its command letter."""
+    def _feed_arrays(self, text: bytes) -> bool:
+        """Analyse `text` if it is plain enough for array operations, else leave the state alone and say False.
+
+        `text` is upper-cased, starts with a newline and every line starts with its command letter.
+        """
         data = np.frombuffer(text + bytes(_VALUE_WIDTH + 4), dtype=np.uint8)
         newlines = np.flatnonzero(data[: len(text)] == 10)
         starts = newlines[:-1] + 1
         ends = newlines[1:]
         if not len(starts):
-            return
+            return True
         c0, c1, c2, c3 = (data[starts + i] for i in range(4))
+        blank1 = (c1 == 32) | (c1 == 9)
+        command = (c0 == ord("G")) | (c0 == ord("M"))
+        if ((c0 == 32) | (c0 == 9) | (c0 == ord("N")) | (command & (
+                blank1 | ((c1 == 48) & (c2 == 48) & (c3 - np.uint8(48) <= 9))))).any():
+            return False  # blanks or a number before the command, blanks inside it, or `G001`
         is_move = (c0 == ord("G")) & (
             (_MOVE_DIGIT[c1] & ~_DIGITS[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGITS[c3])
         )
         controls: list[tuple[int, bytes, bytes]] = []
         is_set = np.zeros(len(starts), dtype=bool)
-        for found in _CONTROL.finditer(text):
-            control_line = int(np.searchsorted(starts, found.start() + 1))
+        for control_line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
+            found = _CONTROL.match(text, int(starts[control_line]) - 1)
+            if found is None:
+                continue
             code = b"G" + found.group(1) if found.group(1) else b"M" + found.group(2)
             params = found.group(3)
             if code == b"G92" and _WORD.search(params) and not re.search(rb"[^XYZE0-9.+\- \t]", params):
@@ -335,12 +358,17 @@ class MoveAnalyzer:
         is_row = is_move | is_set
         row_lines = np.flatnonzero(is_row)
         if not len(row_lines) and not controls:
-            return
+            return True
         row_of_line = np.full(len(starts), -1, dtype=np.int64)
         row_of_line[row_lines] = np.arange(len(row_lines))
         semis = np.flatnonzero(data[: len(text)] == ord(";"))
         semis = np.append(semis, len(text))
         code_end = np.minimum(semis[np.searchsorted(semis, starts)], ends)
+        if b"(" in text or b"*" in text:
+            odd = np.flatnonzero(_NOT_CODE[data[: len(text)]])
+            odd_line = np.searchsorted(starts, odd, side="right") - 1
+            if (odd < code_end[odd_line]).any():  # a comment in parentheses or a checksum
+                return False
         values = np.full((5, len(row_lines)), np.nan)
         where = np.flatnonzero(_IS_AXIS[data[: len(text)]])
         line = np.searchsorted(starts, where, side="right") - 1
@@ -349,7 +377,19 @@ class MoveAnalyzer:
         keep = where < code_end[line]
         where, line = where[keep], line[keep]
         if len(where):
-            values[_AXIS_INDEX[data[where]], row_of_line[line]] = _parse_numbers(data, where + 1)
+            at = where + 1
+            blank = (data[at] == 32) | (data[at] == 9)
+            while blank.any():  # blanks between a letter and its number
+                at += blank
+                blank = (data[at] == 32) | (data[at] == 9)
+            numbers = _parse_numbers(text, data, at)
+            axis, row = _AXIS_INDEX[data[where]], row_of_line[line]
+            known = ~np.isnan(numbers)
+            if not known.all():  # bare letters are not words
+                axis, row, numbers = axis[known], row[known], numbers[known]
+            if len(row) and np.bincount(row * 5 + axis).max() > 1:
+                return False  # a letter repeats within a line
+            values[axis, row] = numbers
         sets = is_set[row_lines]
         bounds = [0]
         bounds.extend(int(np.searchsorted(row_lines, control[0])) for control in controls)
@@ -361,6 +401,7 @@ class MoveAnalyzer:
             if i < len(controls):
                 _line, code, params = controls[i]
                 self._command(code, params)
+        return True
 
     def _axis(self, given: NDArray[np.float64], sets: NDArray[np.bool_], start: float,
               absolute: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -387,17 +428,18 @@ class MoveAnalyzer:
         length = np.where(length > 0, length, np.abs(de))
         self.seconds += float(np.sum(length * 60.0 / feed))
         self.filament += float(np.sum(de))
-        printing = (de > 0) & ((dx != 0) | (dy != 0))
+        printing = (de > 0) & ((dx != 0) | (dy != 0)) & np.isfinite(z)
         if printing.any():
-            self.layer_heights.update(np.unique(np.rint(z[printing] * 1000)).astype(np.int64).tolist())
+            self.layer_heights.update(map(round, np.unique(z[printing] * 1000).tolist()))
         self.pos = [float(x[-1]), float(y[-1]), float(z[-1])]
         self.e = float(e[-1])
         self.feed = float(feed[-1])
 
     def result(self) -> GcodeMetadata:
+        """The totals; absurd coordinates (beyond what a float holds) leave time and filament unknown."""
         return GcodeMetadata(
-            print_time_s=max(1, round(self.seconds)),
-            filament_mm=max(0.0, self.filament),
+            print_time_s=max(1, round(self.seconds)) if math.isfinite(self.seconds) else None,
+            filament_mm=max(0.0, self.filament) if math.isfinite(self.filament) else None,
             layers=max(1, len(self.layer_heights)),
         )
 

@@ -51,8 +51,8 @@ _FIRST_CODE_LINE = re.compile(rb"^[ \t]*[^;\s]", re.MULTILINE)
 _XYZ_KEY_LINE = re.compile(
     rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
 )
-_G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg]0?)0(?![0-9.])")
-_ODD_LINE_START = re.compile(rb"\n[ \tNng]")
+_G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
+_ODD_LINE_START = re.compile(rb"\n(?:[ \tNng]|G[ \t])")
 _G0_AT_LINE_START = re.compile(rb"\nG0(0?)(?![0-9.])")
 _HEADER_FIELD = re.compile(rb"^[ \t]*;[ \t]*([A-Za-z_][A-Za-z0-9_ ]*?)[ \t]*=[ \t]*(.*?)[ \t\r]*$", re.MULTILINE)
 
@@ -391,6 +391,20 @@ def write_3w(
     return out.getvalue()
 
 
+def _umask() -> int:
+    """The process umask, read without changing it where /proc tells it (os.umask can only set and return)."""
+    try:
+        with open("/proc/self/status", "rb") as status:
+            for line in status:
+                if line.startswith(b"Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def _atomic(dst: Path) -> Iterator[BinaryIO]:
     """A temporary file next to `dst` that replaces it only if the block succeeds."""
@@ -403,6 +417,7 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
     try:
         with os.fdopen(fd, "w+b") as handle:
             yield handle
+            os.fchmod(handle.fileno(), 0o666 & ~_umask())  # mkstemp's 0600 is for the temporary name only
         os.replace(tmp, dst)
     except BaseException:
         tmp.unlink(missing_ok=True)
