@@ -175,7 +175,9 @@ class XYZPrinter:
         deadline = self.reader.deadline()
         return 1.0 if deadline is None else max(0.0, deadline - self.clock()) + 0.001
 
-    async def _event(self, command: p.Command, doing: str) -> Reply:
+    async def _event(self, command: p.Command, doing: str, *, direct: bool = False) -> Reply:
+        """The reply to `command`; `direct` reads the link here instead of waiting on the reader task
+        (one task hop less per upload block)."""
         while True:
             event = self.reader.next_event(self.clock())
             reply = self._match(event, command, doing)
@@ -183,30 +185,28 @@ class XYZPrinter:
                 return reply
             if event is not None:
                 continue
-            self._check_link(doing)
-            self._wake.clear()
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(self._wait_time()):
-                    await self._wake.wait()
+            if direct:
+                await self._read_once(doing)
+            else:
+                await self._wait_for_pump(doing)
 
-    async def _direct_event(self, command: p.Command, doing: str) -> Reply:
-        """Like _event, reading the link itself: one task hop less per upload block."""
-        while True:
-            event = self.reader.next_event(self.clock())
-            reply = self._match(event, command, doing)
-            if reply is not None:
-                return reply
-            if event is not None:
-                continue
-            try:
-                async with asyncio.timeout(self._wait_time()):
-                    data = await self.transport.read()
-            except TimeoutError:
-                continue
-            except LinkError as exc:
-                self._lost = exc
-                raise LinkClosed(f"the link to the printer was lost while {doing}: {exc}") from exc
-            self.reader.receive(data, self.clock())
+    async def _wait_for_pump(self, doing: str) -> None:
+        self._check_link(doing)
+        self._wake.clear()
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(self._wait_time()):
+                await self._wake.wait()
+
+    async def _read_once(self, doing: str) -> None:
+        try:
+            async with asyncio.timeout(self._wait_time()):
+                data = await self.transport.read()
+        except TimeoutError:
+            return
+        except LinkError as exc:
+            self._lost = exc
+            raise LinkClosed(f"the link to the printer was lost while {doing}: {exc}") from exc
+        self.reader.receive(data, self.clock())
 
     async def _stop_pump(self) -> None:
         self._pump_task.cancel()
@@ -244,8 +244,7 @@ class XYZPrinter:
         data = self.reader.send(command, self.clock(), timeout)
         try:
             await self._write(data, doing)
-            wait_for = self._direct_event if self._pump_task.done() else self._event
-            reply = await wait_for(command, doing)
+            reply = await self._event(command, doing, direct=self._pump_task.done())
         except (LinkClosed, LinkTimeout) as exc:
             sample = self.reader.noise_sample
             if sample is not None and not self._heard:
