@@ -18,10 +18,9 @@ from fabwire.transport import (
     Transport,
     memory_pair,
     open_pty,
-    open_tcp,
-    serve_tcp,
 )
 from fabwire.transport.serial import open_serial
+from linktools import loopback_tcp
 
 SPEED = 100.0
 LIMIT = 20.0
@@ -57,19 +56,8 @@ async def over_pty(sim: MMUSimulator) -> AsyncIterator[Transport]:
         await device.close()
 
 
-@contextlib.asynccontextmanager
-async def over_tcp(sim: MMUSimulator) -> AsyncIterator[Transport]:
-    server = await serve_tcp(sim.serve, "127.0.0.1", 0)
-    port = server.sockets[0].getsockname()[1]
-    client = await open_tcp("127.0.0.1", port)
-    try:
-        yield client
-    finally:
-        await client.close()
-        server.close()
-        with contextlib.suppress(BaseException):
-            async with asyncio.timeout(2):
-                await server.wait_closed()
+def over_tcp(sim: MMUSimulator) -> contextlib.AbstractAsyncContextManager[Transport]:
+    return loopback_tcp(sim.serve)
 
 
 LINKS = {"memory": over_memory, "pty": over_pty, "tcp": over_tcp}

@@ -20,11 +20,11 @@ from fabwire.lineus.sim import LineUsSim, SimOptions
 from fabwire.mmu import MMU
 from fabwire.mmu.codes import FilamentState
 from fabwire.mmu.sim import MMUSimulator
-from fabwire.transport import FaultPlan, FaultyTransport, Transport, memory_pair, serve_tcp
-from fabwire.transport.tcp import open_tcp
+from fabwire.transport import FaultPlan, FaultyTransport, Transport, memory_pair
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.sim import XYZSimulator
+from linktools import loopback_tcp
 
 LIMIT = 20.0
 SEEDS = [1, 2, 3]
@@ -81,16 +81,8 @@ async def link(serve: Callable[[Transport], Coroutine[Any, Any, None]], plan: Fa
     async def faulty_serve(transport: Transport) -> None:
         await serve(FaultyTransport(transport, plan) if plan else transport)
 
-    server = await serve_tcp(faulty_serve, "127.0.0.1", 0)
-    client = await open_tcp("127.0.0.1", server.sockets[0].getsockname()[1])
-    try:
+    async with loopback_tcp(faulty_serve) as client:
         yield client
-    finally:
-        await client.close()
-        server.close()
-        with contextlib.suppress(BaseException):
-            async with asyncio.timeout(2):
-                await server.wait_closed()
 
 
 # ------------------------------------------------------------------------------------------------- MMU3
