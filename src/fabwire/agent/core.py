@@ -91,7 +91,7 @@ def make_event(device: str, type_: EventType, **payload: Any) -> dict[str, Any]:
     return {"ts": now_iso(), "device": device, "type": type_, **payload}
 
 
-class Subscription:
+class Subscription(AsyncIterator[dict[str, Any]]):
     """Live events as an async iterator; registered when created, so nothing published after that is missed."""
 
     def __init__(self, agent: Agent, device_id: str | None) -> None:
@@ -185,7 +185,7 @@ class Agent:
         the same view for every kind, SI units in the key names (see `fabwire.agent.drivers.base.Summary`)."""
         return self._session(device_id).state
 
-    def subscribe(self, device_id: str | None = None) -> AsyncIterator[dict[str, Any]]:
+    def subscribe(self, device_id: str | None = None) -> Subscription:
         """Live events of one device (or all); iterate, and `aclose()` when done."""
         if device_id is not None:
             self._session(device_id)
