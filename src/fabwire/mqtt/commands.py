@@ -9,6 +9,7 @@ MQTT 5 askers may instead give a response topic and correlation data; the reply 
 from __future__ import annotations
 
 import json
+import re
 from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from typing import Any
 
 from fabwire.errors import FabwireError, InputError
 
+ACTION_NAME = re.compile(r"[a-z][a-z0-9_]{0,63}")
 REMEMBERED = 4096
 """Command ids remembered per agent for de-duplication."""
 
@@ -38,7 +40,7 @@ def parse_command(payload: bytes) -> Command:
     if not text:
         raise InputError("empty command")
     if not text.startswith("{"):
-        if any(c.isspace() for c in text) or len(text) > 64:
+        if not ACTION_NAME.fullmatch(text):
             raise InputError(f"a command is a JSON object or an action name, not {text[:40]!r}")
         return Command(text, {})
     try:
