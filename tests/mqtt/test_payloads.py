@@ -141,7 +141,8 @@ def test_bad_broker_urls(url: str) -> None:
 
 
 @pytest.mark.parametrize(("payload", "error"), [
-    (b"", "empty"), (b"\xff\xfe", "UTF-8"), (b"[1]", "action name"), (b'["a"]', "action name"), (b'{"params": {}}', '"action"'),
+    (b"", "empty"), (b"\xff\xfe", "UTF-8"), (b"[1]", "action name"), (b'["a"]', "action name"),
+    (b'{"params": {}}', '"action"'),
     (b'{"action": "x", "params": 3}', '"params"'), (b"two words", "action name"), (b"{bad", "valid JSON"),
 ])
 def test_bad_commands_say_what_is_wrong(payload: bytes, error: str) -> None:
