@@ -83,6 +83,8 @@ class Bridge:
         self.connected = asyncio.Event()
         self._client: aiomqtt.Client | None = None
         self._pending: dict[str, dict[str, Any]] = {}
+        self._availability: dict[str, str] = {}
+        """What this connection last published on each device's availability topic."""
         self._wake = asyncio.Event()
         self._synced = asyncio.Event()
         self._sync_token = ""
@@ -121,6 +123,7 @@ class Bridge:
         self.view = FleetView()
         self.owned.clear()
         self.known.clear()
+        self._availability.clear()
         me = self.agent_id
         for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/device/+/claim/+", f"{PREFIX}/device/+/command",
                       HA_STATUS, agent_topic(me, "sync")):
@@ -235,6 +238,7 @@ class Bridge:
         elif not mine and device in self.owned:
             self.owned.discard(device)
             self._pending.pop(device, None)
+            self._availability.pop(device, None)
             log.info("MQTT: %s is now published by agent %s", device, self.view.owner(device))
 
     async def _forget_stale_claims(self) -> None:
@@ -248,8 +252,8 @@ class Bridge:
         await self._publish(device_topic(device, "info"), _dump({**info, "agent": self.agent_id}))
         await self._publish_discovery(device)
         state = self.agent.state(device)
-        await self._publish(device_topic(device, "availability"), ONLINE if state.get("online") else OFFLINE)
-        await self._publish(device_topic(device, "state"), _dump(state))
+        self._availability.pop(device, None)
+        await self._publish_state(device, state)
 
     async def _publish_discovery(self, device: str) -> None:
         await self._publish(discovery_topic(device), _dump(discovery_payload(self.known[device], self.agent_id)))
@@ -265,6 +269,7 @@ class Bridge:
                 await self._publish(device_topic(device, leaf), b"")
         self.owned.discard(device)
         self._pending.pop(device, None)
+        self._availability.pop(device, None)
         self.known.pop(device, None)
         await self._publish(claim_topic(device, self.agent_id), b"")
 
@@ -313,7 +318,7 @@ class Bridge:
                 if kind == "online" and isinstance(event.get("info"), dict):
                     self.known[device] = event["info"]
                     await self._publish_device(device)
-                await self._publish(device_topic(device, "availability"), ONLINE if kind == "online" else OFFLINE)
+                await self._set_availability(device, kind == "online")
             else:
                 await self._publish(device_topic(device, "event"), _dump(event), retain=False)
 
@@ -324,8 +329,18 @@ class Bridge:
             await self._wake.wait()
             self._wake.clear()
             batch, self._pending = self._pending, {}
-            await asyncio.gather(*(self._publish(device_topic(d, "state"), _dump(s))
-                                   for d, s in batch.items() if d in self.owned))
+            await asyncio.gather(*(self._publish_state(d, s) for d, s in batch.items() if d in self.owned))
+
+    async def _publish_state(self, device: str, state: dict[str, Any]) -> None:
+        """The state, and the availability when the state's `online` flag changed it."""
+        await self._set_availability(device, bool(state.get("online")))
+        await self._publish(device_topic(device, "state"), _dump(state))
+
+    async def _set_availability(self, device: str, online: bool) -> None:
+        value = ONLINE if online else OFFLINE
+        if self._availability.get(device) != value:
+            self._availability[device] = value
+            await self._publish(device_topic(device, "availability"), value)
 
 
 def _retrieve(task: asyncio.Task[Any]) -> None:
