@@ -94,9 +94,9 @@ class Watch:
 
     def device_of_kind(self, kind: str) -> str | None:
         for topic, payload in list(self.latest.items()):
-            if topic.endswith("/info") and topic.startswith("fabwire/device/") and payload:
-                if json.loads(payload).get("kind") == kind:
-                    return topic.split("/")[2]
+            info = json.loads(payload) if topic.endswith("/info") and payload else {}
+            if topic.startswith("fabwire/device/") and info.get("kind") == kind:
+                return topic.split("/")[2]
         return None
 
     def send(self, device: str, body: dict[str, Any]) -> None:
