@@ -22,10 +22,11 @@ from urllib.parse import parse_qsl, urlsplit
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
 from fabwire.sync import LoopThread
 from fabwire.transport import Transport, open_transport
+from fabwire.xyz import intake, userinput
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import PrinterModel, model_for_file_id
 from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
-from fabwire.xyz.status import FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
+from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
 
 T = TypeVar("T")
 UploadProgress = Callable[[int, int], None]
@@ -40,6 +41,8 @@ REPLY_ERRORS = {
     7: "the printer is busy finishing a job",
 }
 TRANSIENT_RETRIES = 20
+FILE_CHECK_LIMIT = 120.0
+"""Seconds of "checking file" (9520) after which a print is reported stuck (printers check in seconds)."""
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
 STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
@@ -275,7 +278,11 @@ class XYZPrinter:
                     raise
                 await asyncio.sleep(self.poll_interval)
         base = Status() if "a" in letters else self.last_status
-        self.last_status = base.update(reply.lines)
+        status = base.update(reply.lines)
+        if "a" in letters and status.state is None:
+            raise RemoteProtocolError(f"the status reply has no state (j:) among its {len(reply.lines)} lines; "
+                                      "this is not a da Vinci answering XYZv3")
+        self.last_status = status
         if self.last_status.model_number in HANGS_UP and self.link is Link.WIFI:
             self.per_command = True
         return self.last_status
@@ -313,37 +320,41 @@ class XYZPrinter:
     # ------------------------------------------------------------------------------------------ printing
 
     def prepare(self, source: Path | bytes, model: PrinterModel, *, override: bool = False) -> bytes:
-        """The bytes to upload: a .3w as is (if it suits `model`), G-code converted for `model`."""
-        from fabwire.xyz.threew import inspect_3w, is_3w, write_3w
+        """The bytes to upload: a .3w (binary or base64 text) as is if it suits `model`, G-code converted for
+        `model`; any other kind of file is an InputError saying what it is."""
+        from fabwire.xyz.threew import inspect_3w, write_3w
 
         data, name = _load_source(source)
-        if is_3w(data):
+        kind = intake.require_printable(intake.identify(data[:intake.SNIFF], len(data)), name, data[:intake.SNIFF])
+        data = intake.plain_bytes(data, name)
+        if kind.decoded is intake.Kind.THREEW:
             info = inspect_3w(data)
             machine = (info.machine or "").strip()
-            target = model_for_file_id(machine) if machine else None
+            target = model_for_file_id(machine, model) if machine else None
             if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
                 what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
                 raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; "
                                  f"convert the G-code for this printer instead")
             return data
-        if not _looks_like_gcode(data):
-            raise InputError(f"{name} is neither G-code nor a .3w print file")
-        if m := _MACHINE_LINE.search(data[:16384]):
+        if m := _MACHINE_LINE.search(intake.normalise(data[:16384], first=True)):
             declared = m[1].decode("latin-1")
-            other = model_for_file_id(declared)
+            other = model_for_file_id(declared, model)
             if not override and other is not None and other.file_id.lower() != model.file_id.lower():
                 raise InputError(f"{name} was sliced for {other.name} ({declared}), but the printer is a "
                                  f"{model.name}; slice it for this printer or pass --model")
-        return write_3w(data, model, filename=Path(name).stem + ".3w")
+        return write_3w(data, model, filename=userinput.derived_upload_name(name))
 
     async def upload(self, data: bytes, name: str, *, progress: UploadProgress | None = None,
-                     firmware: bool = False, crc: bool = True) -> UploadResult:
-        """Send a file in blocks, each acknowledged; a link lost on the way is a LinkError, never success."""
+                     firmware: bool = False, crc: bool = True, save_to_sd: bool = False) -> UploadResult:
+        """Send a file in blocks, each acknowledged; a link lost on the way is a LinkError, never success.
+
+        `name` is checked as user input (InputError); `save_to_sd` adds XYZware's `,SaveToSD` flag."""
         if not data:
             raise InputError("nothing to upload: the file is empty")
+        name = userinput.upload_name(name)
         block = self.last_status.block_size if self.last_status.packet else (await self.status()).block_size
         command: p.Upload | p.FirmwareUpload = (
-            p.FirmwareUpload(name, len(data)) if firmware else p.Upload(name, len(data)))
+            p.FirmwareUpload(name, len(data)) if firmware else p.Upload(name, len(data), save_to_sd))
         started = self.clock()
         sent = 0
         blocks = 0
@@ -402,22 +413,24 @@ class XYZPrinter:
 
     async def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
-                         wait: bool = True, name: str | None = None) -> Status:
-        """Convert if needed, upload, start and (unless wait=False) follow the job to its end."""
-        from fabwire.xyz.threew import is_3w
+                         wait: bool = True, name: str | None = None, save_to_sd: bool = False) -> Status:
+        """Convert if needed, upload, start and (unless wait=False) follow the job to its end.
 
+        `name` is the upload name (default: a safe one derived from the file name). The job counts as started
+        only when the printer says so (checking the file, printing, or a file error); a printer that stays idle
+        is a DeviceError, never success."""
         data, shown = _load_source(source)
-        if not is_3w(data) and not _looks_like_gcode(data):  # say so before disturbing the printer
-            raise InputError(f"{shown} is neither G-code nor a .3w print file")
+        head = data[:intake.SNIFF]
+        intake.require_printable(intake.identify(head, len(data)), shown, head)  # before disturbing the printer
+        name = userinput.upload_name(name) if name is not None else userinput.derived_upload_name(
+            source.name if isinstance(source, Path) else None)
         status = await self.require_idle("print")
         printer_model = status.model
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
         data = self.prepare(data if isinstance(source, bytes) else source, target, override=model is not None)
-        if name is None:
-            name = (Path(source.name).stem if isinstance(source, Path) else "fabwire") + ".3w"
-        await self.upload(data, name, progress=progress)
+        await self.upload(data, name, progress=progress, save_to_sd=save_to_sd)
         status = await self._await_job_start()
         if on_status:
             on_status(status)
@@ -426,18 +439,25 @@ class XYZPrinter:
         return await self.follow_job(on_status)
 
     async def _await_job_start(self, limit: float = 30.0) -> Status:
+        """The first status that shows the job under way; a printer still idle after `limit` s never took it."""
         end = self.clock() + limit
         while True:
             status = await self.status()
             if FILE_REJECTED in [w.code for w in status.error_words]:
                 raise DeviceError("0x020D", "the printer rejected the file (unsupported file version)")
-            if status.state_code != IDLE or self.clock() > end:
+            if status.state_code is not None and status.state_code != IDLE:
                 return status
+            if self.clock() > end:
+                raise DeviceError(str(status.state_code), f"the printer took the file but did not start the job "
+                                  f"within {limit:g} s (it is {status.state_name})",
+                                  action="nothing is printing; check the printer's screen and send the file again")
             await asyncio.sleep(self.poll_interval)
 
     async def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None) -> Status:
-        """Poll until the job ends (9509 print done or back to idle); a printer error raises DeviceError."""
+        """Poll until the job ends (9509 print done or back to idle); a printer error raises DeviceError, and so
+        does a file check (9520) that lasts over FILE_CHECK_LIMIT s."""
         end = None if limit is None else self.clock() + limit
+        checking_since: float | None = None
         while True:
             status = await self.status()
             if on_status:
@@ -446,6 +466,13 @@ class XYZPrinter:
             if words:
                 word = words[0]
                 raise DeviceError(f"0x{word.raw:08X}", word.meaning, action="the job stopped")
+            if status.state_code == FILE_CHECK:
+                checking_since = self.clock() if checking_since is None else checking_since
+                if self.clock() - checking_since > FILE_CHECK_LIMIT:
+                    raise LinkTimeout(f"the printer has been checking the file for over {FILE_CHECK_LIMIT:g} s "
+                                      "(it usually takes seconds); stop it with `fabwire xyz cancel` or on its panel")
+            else:
+                checking_since = None
             if status.state_code in (PRINT_DONE, IDLE):
                 return status
             if end is not None and self.clock() > end:
@@ -609,10 +636,10 @@ class XYZPrinter:
         return status.zoffset if status.zoffset is not None else 0
 
     async def set_name(self, name: str) -> None:
-        await self._config(p.SetName(name))
+        await self._config(p.SetName(userinput.printer_name(name)))
 
     async def set_language(self, code: str) -> None:
-        await self._config(p.SetLanguage(code))
+        await self._config(p.SetLanguage(userinput.language(code)))
 
     async def set_energy(self, minutes: int) -> None:
         await self._config(p.SetEnergy(minutes))
@@ -661,7 +688,7 @@ class XYZPrinter:
         return tuple(f for f in value.split("+") if f)
 
     async def join_wifi(self, ssid: str, password: str, channel: int = 0) -> None:
-        command = p.JoinWifi(ssid, password, channel)
+        command = p.JoinWifi(userinput.ssid(ssid), userinput.wifi_password(password), channel)
         await self._supports(command)
         await self._config(p.LeaveWifi())
         await self.request(command, timeout=25.0)
@@ -699,19 +726,6 @@ def _load_source(source: Path | bytes) -> tuple[bytes, str]:
     if not data:
         raise InputError(f"{name} is empty")
     return data, name
-
-
-def _looks_like_gcode(data: bytes) -> bool:
-    head = data[:4096]
-    if b"\x00" in head:
-        return False
-    try:
-        text = head.decode("utf-8")
-    except UnicodeDecodeError:
-        text = head.decode("latin-1")
-        if sum(c.isprintable() or c.isspace() for c in text) < 0.95 * len(text):
-            return False
-    return bool(re.search(r"(?m)^\s*(?:[GMT]\d+|;)", text))
 
 
 class SyncXYZPrinter:
