@@ -68,7 +68,7 @@ def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> 
     garbage.write_bytes(bytes(range(256)))
     refused = run_cli("xyz", "-d", dev, "print", str(garbage))  # the file is judged before the printer's state
     assert refused.returncode == 4
-    assert "notes.txt is neither G-code nor a .3w print file" in refused.stderr
+    assert "notes.txt is binary data: not G-code or a .3w print file" in refused.stderr
     assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
     data = status_json(dev)
     assert data["state"] == [9511, 0]
@@ -82,11 +82,10 @@ def test_settings_commands(simulator: SimulatorStarter) -> None:
         result = run_cli("xyz", "-d", dev, *args)
         assert result.returncode == 0, result.stderr
     data = status_json(dev)
-    decoded = data["decoded"]
-    assert isinstance(decoded, dict)
-    assert decoded["buzzer"] is False
-    assert decoded["autolevel"] is False
-    assert (data["zoffset"], data["name"], data["language"]) == (-12, "Lab", "fr")
+    assert data["buzzer"] is False
+    assert data["autolevel"] is False
+    assert (data["zoffset_mm"], data["name"], data["language"]) == (-0.12, "Lab", "fr")
+    assert data["raw"]["z"] == "-12"
     up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
     assert json.loads(up.stdout) == {"zoffset": -11}
     refused = run_cli("xyz", "-d", dev, "restore-defaults")

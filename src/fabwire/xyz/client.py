@@ -48,6 +48,7 @@ HANGS_UP = frozenset({"dvF110B000"})
 STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
 """Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
 _PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
+_FIRMWARE_HEADER = re.compile(rb"([A-Za-z0-9]{10})\+([0-9][0-9A-Za-z.]*)")
 _MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
 
@@ -493,11 +494,19 @@ class XYZPrinter:
         await self._job_control("complete", (PRINT_DONE,))
 
     async def _job_control(self, op: str, states: tuple[int, ...]) -> None:
+        """Send a job command if the printer's state allows it; otherwise an InputError in words (the host's own
+        check: the firmware would only answer with a bare error code)."""
         status = await self.status()
         if status.state_code not in states:
+            state = status.state_name
+            if op == "pause" and status.state_code == PAUSED:
+                raise InputError("the print is already paused (fabwire xyz resume continues it)")
+            if op == "resume" and status.state_code == PRINTING:
+                raise InputError("the print is already running")
+            if op == "cancel":
+                raise InputError(f"nothing to cancel: no print is running (the printer is {state})")
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
-            raise DeviceError(str(status.state_code),
-                              f"nothing to {op}: the printer is not {wanted} (it is {status.state_name})")
+            raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
         await self.request(p.PrintControl(op))
 
     # --------------------------------------------------------------------------------------------- flows
@@ -703,8 +712,10 @@ class XYZPrinter:
             raise InputError("firmware upload can brick the printer: confirm it explicitly")
         if len(image) <= 16:
             raise InputError("the firmware image is too short")
-        header = image[:16].rstrip(b"\x00 ").decode("latin-1", "replace")
-        model_text, _, version = header.partition("+")
+        found = _FIRMWARE_HEADER.fullmatch(image[:16].rstrip(b"\x00 "))
+        if found is None:
+            raise InputError("not a da Vinci firmware image (it does not start with a <model>+<version> header)")
+        model_text, version = found[1].decode("ascii"), found[2].decode("ascii")
         model = await self.model()
         if model_text != model.model_number or not version:
             raise InputError(f"the firmware image is for {model_text or 'an unknown model'!r}, "
