@@ -68,7 +68,7 @@ def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> 
     garbage.write_bytes(bytes(range(256)))
     refused = run_cli("xyz", "-d", dev, "print", str(garbage))  # the file is judged before the printer's state
     assert refused.returncode == 4
-    assert "notes.txt is binary data: not G-code or a .3w print file" in refused.stderr
+    assert "notes.txt is binary data, not G-code or a .3w print file" in refused.stderr
     assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
     data = status_json(dev)
     assert data["state"] == [9511, 0]

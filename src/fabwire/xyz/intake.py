@@ -156,7 +156,8 @@ def refusal(kind: Kind, name: str, head: bytes = b"") -> InputError:
         Kind.PROJECT_3MF: "a 3MF project", Kind.GZIP: "gzip-compressed", Kind.UTF16: "UTF-16 text",
         Kind.BINARY_GCODE: "binary G-code (.bgcode)",
     }.get(kind, kind.value)
-    return InputError(f"{name} is {what}: {_ADVICE.get(kind, 'it cannot be printed')}")
+    advice = _ADVICE.get(kind, "it cannot be printed")
+    return InputError(f"{name} is {what}{', ' if advice.startswith('not ') else ': '}{advice}")
 
 
 def sniff(path: Path) -> tuple[Kind, bytes]:
