@@ -125,7 +125,7 @@ def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Pat
     png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(200))
     result = run_cli("xyz", "-d", dev, "print", str(png))
     assert result.returncode == 4
-    assert "neither G-code nor a .3w" in result.stderr
+    assert "photo.gcode is an image (PNG), not G-code" in result.stderr
     other = tmp_path / "pro.3w"
     other.write_bytes(write_3w(GCODE, find_model("dvF1W0A000")))
     result = run_cli("xyz", "-d", dev, "print", str(other))

@@ -414,12 +414,13 @@ class XYZPrinter:
 
     async def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
-                         wait: bool = True, name: str | None = None, save_to_sd: bool = False) -> Status:
+                         wait: bool = True, name: str | None = None, save_to_sd: bool = False,
+                         start_limit: float = 30.0) -> Status:
         """Convert if needed, upload, start and (unless wait=False) follow the job to its end.
 
         `name` is the upload name (default: a safe one derived from the file name). The job counts as started
         only when the printer says so (checking the file, printing, or a file error); a printer that stays idle
-        is a DeviceError, never success."""
+        for `start_limit` s is a DeviceError, never success."""
         data, shown = _load_source(source)
         head = data[:intake.SNIFF]
         intake.require_printable(intake.identify(head, len(data)), shown, head)  # before disturbing the printer
@@ -432,7 +433,7 @@ class XYZPrinter:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
         data = self.prepare(data if isinstance(source, bytes) else source, target, override=model is not None)
         await self.upload(data, name, progress=progress, save_to_sd=save_to_sd)
-        status = await self._await_job_start()
+        status = await self._await_job_start(start_limit)
         if on_status:
             on_status(status)
         if not wait:
