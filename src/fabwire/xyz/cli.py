@@ -20,7 +20,8 @@ from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError
 from fabwire.simserve import server_options
 from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
-from fabwire.xyz.live import ABSENT, JobView, job_line as job_line, known, now_iso  # job_line: also the demo's
+from fabwire.xyz.live import ABSENT, JobView, known, now_iso
+from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
