@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import logging
 import sys
 import traceback
 from pathlib import Path
@@ -12,7 +11,7 @@ from pathlib import Path
 import click
 
 from fabwire import __version__
-from fabwire.cli_support import App
+from fabwire.cli_support import DEVICE_OPTIONS, GLOBAL_OPTIONS, App, SharingGroup
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError
 from fabwire.transport.tap import read_trace
 from fabwire.transport.trace_show import render_trace
@@ -21,7 +20,7 @@ EXIT_LINK = 8
 EXIT_TIMEOUT = 9
 
 
-class LazyGroup(click.Group):
+class LazyGroup(SharingGroup):
     """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
 
     def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
@@ -44,13 +43,8 @@ class LazyGroup(click.Group):
             command = getattr(importlib.import_module(module_name), attr)
             if not isinstance(command, click.Command):
                 raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
-            return command
+            return self.share(command)
         return super().get_command(ctx, cmd_name)
-
-
-def _setup_logging(verbose: int) -> None:
-    level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
-    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(name)s: %(message)s")
 
 
 @click.group(
@@ -64,20 +58,16 @@ def _setup_logging(verbose: int) -> None:
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )
 @click.version_option(__version__, "-V", "--version", prog_name="fabwire")
-@click.option("--json", "json_output", is_flag=True, help="Machine-readable results on stdout (text goes to stderr).")
-@click.option("-v", "--verbose", count=True, help="Log more; -vv logs every byte on the wire (logger fabwire.wire).")
-@click.option("--debug", is_flag=True, help="Show tracebacks on errors.")
-@click.pass_context
-def cli(ctx: click.Context, json_output: bool, verbose: int, debug: bool) -> None:
+def cli() -> None:
     """Talk to maker machines over their own wire protocols — or simulate them.
 
     Devices: xyz (XYZprinting da Vinci printers), lineus (Line-us drawing robot), mmu (Prusa MMU3).
+    Options such as -d, --json, --trace, --timeout and -v go before or after the subcommand.
     """
-    app = ctx.ensure_object(App)
-    app.output.json_mode = json_output
-    app.verbose = verbose
-    app.debug = debug or app.debug
-    _setup_logging(verbose)
+
+
+cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS))
+cli.shared = GLOBAL_OPTIONS
 
 
 @cli.group(

@@ -40,21 +40,10 @@ def xyz() -> None:
     """XYZprinting da Vinci printers."""
 
 
-def _link_kind(dctx: DeviceContext) -> Link | None:
-    endpoint = dctx.target().endpoint
-    if endpoint.scheme == "sim":
-        return Link.WIFI if endpoint.options.get("link") == "wifi" else Link.SERIAL
-    return Link.WIFI if endpoint.scheme == "tcp" else Link.SERIAL
-
-
 def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with dctx.link() as transport:
-            printer = XYZPrinter(transport, link=_link_kind(dctx), timeout=max(dctx.timeout, 2.0))
-            try:
-                return await action(printer)
-            finally:
-                await printer.close()
+        async with dctx.open(XYZPrinter) as printer:
+            return await action(printer)
 
     return asyncio.run(main())
 
@@ -153,6 +142,7 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
     out = dctx.output
 
     async def run(printer: XYZPrinter) -> Status:
+        chosen = model or _resolve_model(printer.settings.model)
         columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                    TimeRemainingColumn())
         with Progress(*columns, console=out.err, transient=False, disable=out.json_mode) as bar:
@@ -174,7 +164,7 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
                 else:
                     out.note(line)
 
-            return await printer.print_file(file, model=model, progress=uploaded, on_status=job, wait=not no_wait)
+            return await printer.print_file(file, model=chosen, progress=uploaded, on_status=job, wait=not no_wait)
 
     final = _with_printer(dctx, run)
     out.result({"event": "done", "state": final.state_code, "state_name": final.state_name},
