@@ -54,6 +54,7 @@ class LazyGroup(SharingGroup):
         "lineus": "fabwire.lineus.cli:lineus",
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
+        "devices": "fabwire.devices_cli:devices",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )

@@ -33,7 +33,7 @@ class Output:
         elif callable(human):
             human()
         elif human is not None:
-            self.out.print(human)
+            self.out.print(human, markup=False)  # device names and replies may contain [brackets]
         else:
             self.out.print(data)
 
@@ -43,8 +43,8 @@ class Output:
             sys.stdout.write(json.dumps(data, default=_default, ensure_ascii=False) + "\n")
             sys.stdout.flush()
         else:
-            self.out.print(human)
+            self.out.print(human, markup=False)
 
     def note(self, text: str) -> None:
         """Text for people only, never on stdout."""
-        self.err.print(text)
+        self.err.print(text, markup=False)
