@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import sys
 import traceback
 from pathlib import Path
@@ -11,40 +9,13 @@ from pathlib import Path
 import click
 
 from fabwire import __version__
-from fabwire.cli_support import DEVICE_OPTIONS, GLOBAL_OPTIONS, App, SharingGroup
+from fabwire.cli_support import DEVICE_OPTIONS, GLOBAL_OPTIONS, App, LazyGroup
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError
 from fabwire.transport.tap import read_trace
 from fabwire.transport.trace_show import render_trace
 
 EXIT_LINK = 8
 EXIT_TIMEOUT = 9
-
-
-class LazyGroup(SharingGroup):
-    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
-
-    def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
-        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
-        self._lazy = lazy or {}
-
-    def _available(self, name: str) -> bool:
-        module = self._lazy[name].partition(":")[0]
-        try:
-            return importlib.util.find_spec(module) is not None
-        except ModuleNotFoundError:
-            return False
-
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(set(super().list_commands(ctx)) | {n for n in self._lazy if self._available(n)})
-
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name in self._lazy and self._available(cmd_name):
-            module_name, _, attr = self._lazy[cmd_name].partition(":")
-            command = getattr(importlib.import_module(module_name), attr)
-            if not isinstance(command, click.Command):
-                raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
-            return self.share(command)
-        return super().get_command(ctx, cmd_name)
 
 
 @click.group(

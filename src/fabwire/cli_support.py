@@ -9,6 +9,8 @@ stores its value on the one `App`; the last one on the line wins (`-v` adds up).
 from __future__ import annotations
 
 import asyncio
+import importlib
+import importlib.util
 import logging
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
@@ -159,6 +161,33 @@ class SharingGroup(click.Group):
         return command
 
 
+class LazyGroup(SharingGroup):
+    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
+
+    def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._lazy = lazy or {}
+
+    def _available(self, name: str) -> bool:
+        module = self._lazy[name].partition(":")[0]
+        try:
+            return importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:
+            return False
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(super().list_commands(ctx)) | {n for n in self._lazy if self._available(n)})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in self._lazy and self._available(cmd_name):
+            module_name, _, attr = self._lazy[cmd_name].partition(":")
+            command = getattr(importlib.import_module(module_name), attr)
+            if not isinstance(command, click.Command):
+                raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
+            return self.share(command)
+        return super().get_command(ctx, cmd_name)
+
+
 @dataclass
 class DeviceContext:
     """A device group's view of the command line, read by its subcommands."""
@@ -188,12 +217,15 @@ class DeviceContext:
         return client.open(self.app.device, **self.open_options(**options))
 
 
-def device_group(kind: DeviceKind, help_text: str,
-                 link_options: Sequence[OptionFactory] = ()) -> Callable[[Callable[..., None]], click.Group]:
-    """A click group for one device kind; the shared device options and `link_options` work at every level."""
+def device_group(kind: DeviceKind, help_text: str, link_options: Sequence[OptionFactory] = (),
+                 lazy: dict[str, str] | None = None) -> Callable[[Callable[..., None]], click.Group]:
+    """A click group for one device kind; the shared device options and `link_options` work at every level.
+
+    `lazy` maps subcommand names to `module:attribute`, imported only when that subcommand runs.
+    """
 
     def decorate(func: Callable[..., None]) -> click.Group:
-        @click.group(name=kind.name, help=help_text, cls=click.Group)
+        @click.group(name=kind.name, help=help_text, cls=LazyGroup, lazy=lazy or {})
         @click.pass_context
         def group(ctx: click.Context) -> None:
             ctx.obj = DeviceContext(_app(ctx), kind)

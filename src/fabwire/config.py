@@ -12,10 +12,8 @@ Every command and `X.open` apply a device's settings; options given explicitly w
 
 from __future__ import annotations
 
-import difflib
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args, get_type_hints
@@ -110,6 +108,8 @@ def config_path() -> Path:
 
 def closest(word: str, choices: object) -> str:
     """` (did you mean 'x'?)` for the nearest choice, or nothing."""
+    import difflib
+
     names = [str(c) for c in choices]  # type: ignore[attr-defined]
     match = difflib.get_close_matches(word, names, n=1, cutoff=0.6)
     return f" (did you mean {match[0]!r}?)" if match else ""
@@ -189,6 +189,8 @@ def _entry(path: Path, name: str, table: object, line: int) -> NamedDevice:
 
 def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
     """The devices in a config file's text; any malformed or hostile content is a ConfigError."""
+    import tomllib
+
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -3,25 +3,13 @@
 from __future__ import annotations
 
 import asyncio
-import importlib
 import sys
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
-from rich.panel import Panel
-from rich.progress import (
-    BarColumn,
-    DownloadColumn,
-    Progress,
-    TaskID,
-    TextColumn,
-    TimeRemainingColumn,
-    TransferSpeedColumn,
-)
-from rich.table import Table
 
 from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
@@ -32,10 +20,14 @@ from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
 
+if TYPE_CHECKING:
+    from rich.panel import Panel
+
 T = TypeVar("T")
 
 
-@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.")
+@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.",
+              lazy={"convert": "fabwire.xyz.threew_cli:convert", "info": "fabwire.xyz.threew_cli:info"})
 def xyz() -> None:
     """XYZprinting da Vinci printers."""
 
@@ -62,6 +54,9 @@ def _bool(value: bool | None) -> str:
 
 
 def render_status(status: Status) -> Panel:
+    from rich.panel import Panel
+    from rich.table import Table
+
     table = Table.grid(padding=(0, 2))
     table.add_column(style="bold")
     table.add_column()
@@ -142,6 +137,16 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
     out = dctx.output
 
     async def run(printer: XYZPrinter) -> Status:
+        from rich.progress import (
+            BarColumn,
+            DownloadColumn,
+            Progress,
+            TaskID,
+            TextColumn,
+            TimeRemainingColumn,
+            TransferSpeedColumn,
+        )
+
         chosen = model or _resolve_model(printer.settings.model)
         columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                    TimeRemainingColumn())
@@ -420,19 +425,6 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
     dctx.output.result(data, human)
 
 
-def _add_threew_commands() -> None:
-    """`convert` and `info` (.3w files) live in their own module; mount them when it is present."""
-    try:
-        module = importlib.import_module("fabwire.xyz.threew_cli")
-    except ImportError:
-        return
-    for command_name in ("convert", "info"):
-        command = getattr(module, command_name, None)
-        if isinstance(command, click.Command):
-            xyz.add_command(command)
-
-
-_add_threew_commands()
 
 
 @click.command("xyz")
