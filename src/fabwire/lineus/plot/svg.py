@@ -188,8 +188,8 @@ class _Reader:
         direct = sum(1 for el in self.root.iter() if local(el.tag) in SHAPES)
         total = weight(self.root, (), 0)
         if total - direct > MAX_USE_COPIES:
-            raise InputError(f"{self.name}: <use> elements expand the drawing to {total:,} shapes from {direct:,}; "
-                             f"refusing more than {MAX_USE_COPIES:,} copies")
+            raise InputError(f"{self.name}: <use> elements copy its {direct:,} shapes more than {MAX_USE_COPIES:,} "
+                             "times; refusing such an expansion")
 
     def report(self) -> list[str]:
         notes = [f"{what} ({count}x)" if count > 1 else what for what, count in sorted(self.unsupported.items())]
