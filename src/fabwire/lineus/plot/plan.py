@@ -27,6 +27,8 @@ from fabwire.lineus.plot.geometry import (
     segment_count,
 )
 from fabwire.lineus.plot.intake import FLATTEN_TOLERANCE, Drawing, read_drawing
+from fabwire.lineus.plot.intake import PAGE_ORIGIN as PAGE_ORIGIN
+from fabwire.lineus.plot.intake import SVG_UNITS_PER_PX as SVG_UNITS_PER_PX
 from fabwire.lineus.plot.optimize import RESOLUTION, optimise, travel_length
 from fabwire.lineus.plot.text import DEFAULT_FONT, text_lines
 
