@@ -208,10 +208,11 @@ def test_clipped_lines_stay_inside_the_clip_under_any_transform(dx: float, dy: f
     # The clip circle is in the group's user space: map the kept points back through the group's transform.
     a = math.radians(angle)
     for line in drawing.lines:
-        p = line - (dx, dy) - (50, 50)
-        back = np.column_stack([p[:, 0] * math.cos(a) + p[:, 1] * math.sin(a),
-                                -p[:, 0] * math.sin(a) + p[:, 1] * math.cos(a)]) + (50, 50)
-        back /= s
+        centre = np.array([50.0, 50.0])
+        p = line - np.array([dx, dy]) - centre
+        turned = np.column_stack([p[:, 0] * math.cos(a) + p[:, 1] * math.sin(a),
+                                  -p[:, 0] * math.sin(a) + p[:, 1] * math.cos(a)])
+        back = (turned + centre) / s
         assert (np.hypot(back[:, 0] - 50, back[:, 1] - 50) <= 30 + 1e-3 / s + 1e-6).all()
 
 
