@@ -195,30 +195,26 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
     weights = [max(1, round(t * 1000)) for t in per_stroke]  # the bar advances by estimated milliseconds
     total = len(plan.strokes)
     began = time.monotonic()
-    async with dctx.link() as transport:
-        arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
-        try:
-            with Progress(
-                TextColumn("[progress.description]{task.description}"),
-                BarColumn(),
-                TextColumn("{task.percentage:>3.0f}%"),
-                TimeRemainingColumn(),
-                console=dctx.output.err,
-                disable=dctx.output.json_mode,
-            ) as bar:
-                estimate = sum(per_stroke[progress.done :], 0.0)
-                task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=sum(weights),
-                                    completed=sum(weights[: progress.done]))
+    async with dctx.open(LineUs) as arm:
+        with Progress(
+            TextColumn("[progress.description]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.percentage:>3.0f}%"),
+            TimeRemainingColumn(),
+            console=dctx.output.err,
+            disable=dctx.output.json_mode,
+        ) as bar:
+            estimate = sum(per_stroke[progress.done :], 0.0)
+            task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=sum(weights),
+                                completed=sum(weights[: progress.done]))
 
-                def done(index: int) -> None:
-                    progress.done = index + 1
-                    progress.save()
-                    bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
+            def done(index: int) -> None:
+                progress.done = index + 1
+                progress.save()
+                bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
 
-                await send_plan(arm, plan, start=progress.done, pen_z=pen_z, on_stroke=done)
-            await arm.home()
-        finally:
-            await arm.close()
+            await send_plan(arm, plan, start=progress.done, pen_z=pen_z, on_stroke=done)
+        await arm.home()
     return total, time.monotonic() - began
 
 

@@ -21,7 +21,7 @@ from fabwire.lineus import protocol as p
 from fabwire.lineus.kinematics import Z_UP
 from fabwire.lineus.plot import MoveTo, PenDown, Plan, PlanFigures, PlanOptions, plan_lines
 from fabwire.lineus.plot.geometry import FloatArray, Polylines
-from fabwire.lineus.plot.plan import PAGE_ORIGIN, SVG_UNITS_PER_PX
+from fabwire.lineus.plot.intake import PAGE_ORIGIN, SVG_UNITS_PER_PX
 
 LAYER_NAME = "vp_name"
 """vpype's layer-name property."""
