@@ -58,7 +58,8 @@ def start_agent(state_dir: Path, *args: str, env: dict[str, str] | None = None) 
         command += ["--listen", "127.0.0.1:0"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                env=env or cli_env(state_dir))
-    assert process.stdout is not None and process.stderr is not None
+    assert process.stdout is not None
+    assert process.stderr is not None
     stderr: list[str] = []
     with selectors.DefaultSelector() as sel:
         sel.register(process.stdout, selectors.EVENT_READ)

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
-from .agenttools import RunningAgent, start_agent
 from clitools import RunningSimulator, start_simulator
+
+from .agenttools import RunningAgent, start_agent
 
 SPEED = "30"
 LINEUS_SPEED = "4"
@@ -51,9 +53,11 @@ speed = {SPEED}
 
 
 def start_bench(state_dir: Path, *agent_args: str) -> Bench:
-    sims = [start_simulator("xyz", "--listen", "127.0.0.1:0", "--speed", SPEED),
-            start_simulator("lineus", "--listen", "127.0.0.1:0", "--speed", LINEUS_SPEED),
-            start_simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", MMU_FAULT)]
+    commands = [("xyz", "--listen", "127.0.0.1:0", "--speed", SPEED),
+                ("lineus", "--listen", "127.0.0.1:0", "--speed", LINEUS_SPEED),
+                ("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", MMU_FAULT)]
+    with ThreadPoolExecutor(3) as pool:  # three interpreters start at once
+        sims = list(pool.map(lambda args: start_simulator(*args), commands))
     config = write_config(state_dir.parent / "devices.toml", sims)
     try:
         agent = start_agent(state_dir, "--config", str(config), *agent_args)

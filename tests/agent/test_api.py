@@ -28,13 +28,17 @@ def test_devices_come_online_with_identity_and_state(bench: Bench) -> None:
         by_kind = {d["kind"]: d for d in devices}
         assert set(by_kind) == {"xyz", "lineus", "mmu"}
         printer = by_kind["xyz"]
-        assert printer["serial"] and printer["id"] == f"xyz-{printer['serial'].lower()}"
+        assert printer["serial"]
+        assert printer["id"] == f"xyz-{printer['serial'].lower()}"
         assert printer["model"] == "da Vinci mini w"
-        assert printer["name"] == "printer" and printer["address"] == bench.xyz.url
+        assert printer["name"] == "printer"
+        assert printer["address"] == bench.xyz.url
         state = client.get(f"/api/v1/devices/{printer['id']}/state").json()
-        assert state["online"] is True and state["ts"].endswith("Z")
+        assert state["online"] is True
+        assert state["ts"].endswith("Z")
         assert state["status"]["serial"] == printer["serial"]  # the `--json status` dict, as the CLI prints it
-        assert state["summary"]["state"] == "idle" and state["summary"]["extruder_temp_c"] is not None
+        assert state["summary"]["state"] == "idle"
+        assert state["summary"]["extruder_temp_c"] is not None
         mmu = by_kind["mmu"]
         assert mmu["firmware"].startswith("3.0.4")
         assert summary(client, mmu["id"])["filament_position"]
@@ -48,7 +52,8 @@ def test_mmu_tool_change_through_the_api(bench: Bench) -> None:
         assert response.json() == {"started": "tool_change"}
         done = wait_for(lambda: (s := summary(client, mmu["id"]))["active_slot"] == 0 and s["state"] == "idle" and s,
                         "T0 finished")
-        assert done["finda"] is True and done["filament_position"] == "loaded past FINDA"
+        assert done["finda"] is True
+        assert done["filament_position"] == "loaded past FINDA"
         events = client.get(f"/api/v1/devices/{mmu['id']}/history").json()["events"]
         progress = [e["event"]["name"] for e in events if e["type"] == "event" and e["event"]["event"] == "progress"]
         assert "FEEDING_TO_FINDA" in progress
@@ -63,7 +68,8 @@ def test_print_job_from_upload_to_done(bench: Bench) -> None:
                                content=data, headers={"content-type": "application/octet-stream"})
         assert response.status_code == 201, response.text
         job = response.json()
-        assert job["device"] == printer["id"] and job["filename"] == "square.gcode"
+        assert job["device"] == printer["id"]
+        assert job["filename"] == "square.gcode"
         assert job["size_bytes"] == len(data)
         heating = wait_for(lambda: (s := summary(client, printer["id"]))["extruder_target_c"] and s,
                            "the printer heating for the job")
@@ -124,7 +130,9 @@ def test_devices_added_and_removed_at_run_time(bench: Bench, simulator: Any) -> 
         assert response.status_code == 201, response.text
         added = response.json()
         # both simulators report one serial number: the second is told apart by its address
-        assert added["id"] != first["id"] and added["id"].startswith("xyz-") and added["serial"] == first["serial"]
+        assert added["id"] != first["id"]
+        assert added["id"].startswith("xyz-")
+        assert added["serial"] == first["serial"]
         ids = [d["id"] for d in client.get("/api/v1/devices").json()]
         assert len(ids) == len(set(ids)) == 4
         _error(client.post("/api/v1/devices", json={"name": "again", "kind": "xyz", "address": second.url}), 400, 4)
