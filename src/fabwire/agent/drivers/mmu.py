@@ -8,9 +8,9 @@ from typing import Any
 from fabwire.agent.drivers.base import Action, Driver, Identity, Param, summary
 from fabwire.agent.opening import open_mmu
 from fabwire.errors import LinkClosed
-from fabwire.mmu import codes
 from fabwire.mmu.cli import describe, status_dict
 from fabwire.mmu.client import MMU
+from fabwire.mmu.errors import describe_error
 from fabwire.mmu.host import CommandFinished, HostEvent, LinkFailed, StatusUpdated
 from fabwire.mmu.protocol import Cut, Eject, Home, Load, Request, ToolChange, Unload
 
@@ -84,7 +84,7 @@ class MMUDriver(Driver):
             raise LinkClosed(f"the MMU link failed: {failure}")
         status = mmu.status
         busy = mmu.logic.busy
-        error = codes.describe_error(status.value) if status.kind == "E" else None
+        error = describe_error(status.value) if status.kind == "E" else None
         if error is not None:
             state, text = "error", f"{status.command}: {error.meaning} — {error.action}"
             actions = ["retry" if error.retryable else "continue", "stop"]
