@@ -52,8 +52,8 @@ speed = {SPEED}
     return path
 
 
-def start_bench(state_dir: Path, *agent_args: str) -> Bench:
-    commands = [("xyz", "--listen", "127.0.0.1:0", "--speed", SPEED),
+def start_bench(state_dir: Path, *agent_args: str, printer_speed: str = SPEED) -> Bench:
+    commands = [("xyz", "--listen", "127.0.0.1:0", "--speed", printer_speed),
                 ("lineus", "--listen", "127.0.0.1:0", "--speed", LINEUS_SPEED),
                 ("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", MMU_FAULT)]
     with ThreadPoolExecutor(3) as pool:  # three interpreters start at once
