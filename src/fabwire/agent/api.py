@@ -187,7 +187,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
         try:
             subscription = agent.subscribe(device)
         except UnknownDevice as exc:
-            await websocket.close(code=4404, reason=str(exc)[:120])
+            await websocket.send_denial_response(error_response(404, str(exc), exc.exit_code, "UnknownDevice"))
             return
         await websocket.accept(subprotocol=SUBPROTOCOL if SUBPROTOCOL in offered else None)
         receiver: asyncio.Future[Any] = asyncio.ensure_future(websocket.receive())

@@ -77,6 +77,7 @@ class Session:
         self._background: set[asyncio.Task[None]] = set()
         self._last_job_event = 0.0
         self._reason = "not connected yet"
+        self._stopping = False
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -95,6 +96,7 @@ class Session:
         self._id_ready.set()
 
     async def stop(self) -> None:
+        self._stopping = True
         tasks = [t for t in (self._task, self._job_task, *self._background) if t is not None]
         for task in tasks:
             task.cancel()
@@ -236,7 +238,10 @@ class Session:
         try:
             message = await self.driver.run_job(path, job["type"], _Handle(self), job.get("params") or {})
         except asyncio.CancelledError:
-            await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
+            if self._stopping:
+                await self._job_changed(state="interrupted", message="the agent stopped while the job ran")
+            else:
+                await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
             raise
         except (*LINK_FAILURES, FabwireError) as exc:
             await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
