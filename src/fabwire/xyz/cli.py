@@ -3,16 +3,13 @@
 from __future__ import annotations
 
 import asyncio
-import importlib
 import sys
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
-from rich.panel import Panel
-from rich.table import Table
 
 from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
@@ -26,6 +23,9 @@ from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
 
+if TYPE_CHECKING:
+    from rich.panel import Panel
+
 T = TypeVar("T")
 
 
@@ -35,26 +35,16 @@ class FollowInterrupted(FabwireError):
     exit_code = EXIT_INTERRUPTED
 
 
-@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.")
+@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.",
+              lazy={"convert": "fabwire.xyz.threew_cli:convert", "info": "fabwire.xyz.threew_cli:info"})
 def xyz() -> None:
     """XYZprinting da Vinci printers."""
 
 
-def _link_kind(dctx: DeviceContext) -> Link | None:
-    endpoint = dctx.target().endpoint
-    if endpoint.scheme == "sim":
-        return Link.WIFI if endpoint.options.get("link") == "wifi" else Link.SERIAL
-    return Link.WIFI if endpoint.scheme == "tcp" else Link.SERIAL
-
-
 def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with dctx.link() as transport:
-            printer = XYZPrinter(transport, link=_link_kind(dctx), timeout=max(dctx.timeout, 2.0))
-            try:
-                return await action(printer)
-            finally:
-                await printer.close()
+        async with dctx.open(XYZPrinter) as printer:
+            return await action(printer)
 
     return asyncio.run(main())
 
@@ -80,6 +70,9 @@ def _state(status: Status) -> str:
 
 
 def render_status(status: Status) -> Panel:
+    from rich.panel import Panel
+    from rich.table import Table
+
     table = Table.grid(padding=(0, 2))
     table.add_column(style="bold")
     table.add_column()
@@ -187,12 +180,13 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
     started = [False]
 
     async def run(printer: XYZPrinter) -> Status:
+        chosen = model or _resolve_model(printer.settings.model)
         with JobView(out, out.err, file.name) as view:
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)
 
-            return await printer.print_file(file, model=model, progress=uploaded,
+            return await printer.print_file(file, model=chosen, progress=uploaded,
                                             on_status=lambda st: view.show(st, {"event": "status"}),
                                             wait=not no_wait, name=upload_name, save_to_sd=save_to_sd)
 
@@ -463,19 +457,6 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
     dctx.output.result(data, human)
 
 
-def _add_threew_commands() -> None:
-    """`convert` and `info` (.3w files) live in their own module; mount them when it is present."""
-    try:
-        module = importlib.import_module("fabwire.xyz.threew_cli")
-    except ImportError:
-        return
-    for command_name in ("convert", "info"):
-        command = getattr(module, command_name, None)
-        if isinstance(command, click.Command):
-            xyz.add_command(command)
-
-
-_add_threew_commands()
 
 
 @click.command("xyz")

@@ -12,21 +12,26 @@ import contextlib
 import re
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
+from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self, TypeVar
+from typing import TYPE_CHECKING, Any, Self, TypeVar
 from urllib.parse import parse_qsl, urlsplit
 
+from fabwire.config import XYZSettings
+from fabwire.devices import XYZ
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
-from fabwire.sync import LoopThread
+from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
 from fabwire.xyz import intake, userinput
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import PrinterModel, model_for_file_id
 from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
 from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
+
+if TYPE_CHECKING:
+    from fabwire.xyz.sync import SyncXYZPrinter
 
 T = TypeVar("T")
 UploadProgress = Callable[[int, int], None]
@@ -101,28 +106,54 @@ class XYZPrinter:
         self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="xyz-reader")
         self.address: str | None = None
         """Set by `connect`: lets a Wi-Fi client reconnect when the printer closes the connection."""
+        self.reopen: Callable[[], Awaitable[Transport]] | None = None
+        """Set by `open`: opens a new link to the same address, wrapped like the first (trace, faults)."""
+        self.settings = XYZSettings()
         self.per_command = False
         """Open a new connection for every command (the 1.1 Plus hangs up after each reply)."""
         self._heard = False
         """Some reply made sense: the peer speaks XYZv3 (until then, stray text means a wrong device)."""
 
     @classmethod
-    async def connect(cls, address: str, *, link: Link | None = None, timeout: float = 5.0) -> XYZPrinter:
-        from fabwire.devices import XYZ
+    def open(cls, target: DeviceTarget = None, **options: Any) -> Opening[XYZPrinter]:
+        """`async with XYZPrinter.open("192.168.1.50") as printer` (or `await` it): the one way to open a printer.
 
-        transport = await open_transport(address, XYZ, connect_timeout=timeout)
-        client = cls(transport, link=link or link_for_address(address), timeout=timeout)
-        client.address = address
+        `target` and the common options are described in `fabwire.opening`; the printer's settings are
+        `fabwire.config.XYZSettings` (link, reply_timeout, model). A Wi-Fi printer that hangs up after every reply
+        (the 1.1 Plus) is reconnected to the same address, through the same trace.
+        """
+        return Opening(XYZ, target, options, cls._on_link)
+
+    @classmethod
+    def open_sync(cls, target: DeviceTarget = None, **options: Any) -> SyncXYZPrinter:
+        """The same, blocking, for plain scripts: `with XYZPrinter.open_sync("office") as printer: printer.status()`."""
+        from fabwire.xyz.sync import SyncXYZPrinter
+
+        return SyncXYZPrinter(target, **options)
+
+    @classmethod
+    async def _on_link(cls, transport: Transport, opened: DeviceLink) -> XYZPrinter:
+        settings = opened.settings
+        assert isinstance(settings, XYZSettings)
+        address = opened.address
+        link = Link(settings.link) if settings.link != "auto" else link_for_address(address) if address else None
+        client = cls(transport, link=link, timeout=settings.reply_timeout or max(settings.timeout, 2.0))
+        client.address, client.settings = address, settings
+        client.reopen = opened.reopen if address else None
         return client
+
+    @classmethod
+    async def connect(cls, address: str, *, link: Link | None = None, timeout: float = 5.0) -> XYZPrinter:
+        """Kept for older scripts: `await XYZPrinter.open(address, timeout=…, reply_timeout=…)`."""
+        return await cls.open(address, link=link.value if link else None, timeout=timeout, reply_timeout=timeout)
 
     async def _reconnect(self) -> None:
         """Wi-Fi printers such as the 1.1 Plus close the connection after every reply: open a new one."""
         if self._lost is None or self.address is None or self.link is not Link.WIFI:
             return
-        from fabwire.devices import XYZ
-
         await self.transport.close()
-        self.transport = await open_transport(self.address, XYZ, connect_timeout=self.timeout)
+        self.transport = await (self.reopen() if self.reopen is not None else
+                                open_transport(self.address, XYZ, connect_timeout=self.timeout))
         self._lost = None
         self.reader = ReplyReader(self.link)
         self._start_pump()
@@ -740,44 +771,3 @@ def _load_source(source: Path | bytes) -> tuple[bytes, str]:
     return data, name
 
 
-class SyncXYZPrinter:
-    """The same client for plain scripts: `with SyncXYZPrinter("192.168.1.50") as printer: printer.status()`."""
-
-    def __init__(self, address: str, *, link: Link | None = None, timeout: float = 5.0) -> None:
-        self._loop = LoopThread("xyz")
-        try:
-            self._client = self._loop.call(XYZPrinter.connect(address, link=link, timeout=timeout))
-        except BaseException:
-            self._loop.close()
-            raise
-
-    def _call(self, coro: Coroutine[Any, Any, T]) -> T:
-        return self._loop.call(coro)
-
-    def status(self, letters: str = "a") -> Status:
-        return self._call(self._client.status(letters))
-
-    def print_file(self, source: Path | bytes, **kwargs: Any) -> Status:
-        return self._call(self._client.print_file(source, **kwargs))
-
-    def __getattr__(self, name: str) -> Callable[..., Any]:
-        method = getattr(self._client, name)
-        if not asyncio.iscoroutinefunction(method):
-            return method  # type: ignore[no-any-return]
-
-        def call(*args: Any, **kwargs: Any) -> Any:
-            return self._call(method(*args, **kwargs))
-
-        return call
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self._loop.call(self._client.close(), timeout=5)
-        self._loop.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()

@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import datetime
 from types import TracebackType
-from typing import Any
-
-from rich.console import Console, Group
-from rich.live import Live
-from rich.panel import Panel
-from rich.progress_bar import ProgressBar
-from rich.table import Table
+from typing import TYPE_CHECKING, Any
 
 from fabwire.console import Output
 from fabwire.xyz.status import PAUSED, PRINTING, Status
+
+if TYPE_CHECKING:  # rich is imported when a view is drawn, not when the CLI starts
+    from rich.console import Console
+    from rich.live import Live
+    from rich.panel import Panel
 
 ABSENT = "—"
 """What a value the printer did not report shows as."""
@@ -55,6 +54,11 @@ def _bed_target(status: Status) -> int | None:
 
 def job_panel(status: Status, title: str, upload: tuple[int, int] | None = None) -> Panel:
     """The live view of a job: state, a progress bar, temperatures with targets, elapsed and time left."""
+    from rich.console import Group
+    from rich.panel import Panel
+    from rich.progress_bar import ProgressBar
+    from rich.table import Table
+
     table = Table.grid(padding=(0, 2))
     table.add_column(style="bold")
     table.add_column()
@@ -93,6 +97,8 @@ class JobView:
 
     def __enter__(self) -> JobView:
         if self.live_mode:
+            from rich.live import Live
+
             self._live = Live(job_panel(self._status, self.title), console=self.console, auto_refresh=False,
                               transient=False)
             self._live.start()
