@@ -465,7 +465,7 @@ def optimise(
     ends = np.array([line[-1] for line in cleaned], dtype=float)
     began = time.perf_counter()
     order, flips = greedy_order(starts, ends, origin)
-    order, flips = improve(starts, ends, order, flips, origin, time_budget=time_budget * 0.7)
+    order, flips = improve(starts, ends, order, flips, origin, time_budget=time_budget * 0.9)
     ordered = arrange(cleaned, order, flips)
     left = time_budget - (time.perf_counter() - began)
     return _reorder_runs(ordered, origin, left) if left > 0 else ordered
