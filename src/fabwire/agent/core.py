@@ -21,6 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from fabwire import __version__
 from fabwire.errors import FabwireError, InputError
 
 if TYPE_CHECKING:
@@ -227,6 +228,15 @@ class Agent:
     async def cancel_job(self, job_id: str, *, confirm: bool) -> dict[str, Any]:
         job = await self.jobs.get(job_id)
         return await self._session(job["device"]).cancel_job(job_id, confirm=confirm)
+
+    def health(self) -> dict[str, Any]:
+        """Counts and poll punctuality (a poll is late when it starts over half an interval after its slot)."""
+        sessions = list(self._sessions.values())
+        lags = sorted(lag for s in sessions for lag in s.stats.lags)
+        return {"version": __version__, "devices": len(sessions), "online": sum(s.online for s in sessions),
+                "polls": sum(s.stats.polls for s in sessions), "late_polls": sum(s.stats.late for s in sessions),
+                "poll_lag_p99_s": lags[int(0.99 * (len(lags) - 1))] if lags else None,
+                "poll_lag_max_s": lags[-1] if lags else None, "subscribers": len(self._subscribers)}
 
     # ------------------------------------------------------------------------------------------ plumbing
 
