@@ -19,8 +19,12 @@ from pathlib import Path
 import httpx
 
 try:
+    from bench_xyz import _start as start_printers
+    from bench_xyz import _stop
     from common import Figure
 except ImportError:  # imported as benchmarks.bench_agent
+    from benchmarks.bench_xyz import _start as start_printers
+    from benchmarks.bench_xyz import _stop
     from benchmarks.common import Figure
 
 PRINTERS = 1000
@@ -29,35 +33,12 @@ SETTLE_S = 10.0
 DASHBOARD_PRINTERS = 50
 SRC = Path(__file__).resolve().parents[1] / "src"
 
-_SERVE = """
-import asyncio, sys
-from fabwire.transport import serve_tcp
-from fabwire.xyz.sim import XYZSimulator
-
-async def main(count):
-    servers = [await serve_tcp(XYZSimulator(speed=30).serve, "127.0.0.1", 0) for _ in range(count)]
-    print(" ".join(str(s.sockets[0].getsockname()[1]) for s in servers), flush=True)
-    await asyncio.Event().wait()
-
-asyncio.run(main(int(sys.argv[1])))
-"""
 
 
 def _env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("FABWIRE_")}
     env["PYTHONPATH"] = str(SRC)
     return env
-
-
-def _simulators(count: int) -> tuple[subprocess.Popen[str], list[int]]:
-    proc = subprocess.Popen([sys.executable, "-c", _SERVE, str(count)], stdout=subprocess.PIPE, text=True,
-                            env=_env())
-    assert proc.stdout is not None
-    line = proc.stdout.readline()
-    if not line:
-        proc.kill()
-        raise RuntimeError("the simulators did not start")
-    return proc, [int(x) for x in line.split()]
 
 
 def _agent(ports: list[int], where: Path) -> tuple[subprocess.Popen[str], str]:
@@ -80,22 +61,13 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _stop(proc: subprocess.Popen[str]) -> None:
-    proc.terminate()
-    try:
-        proc.wait(30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-
-
 def _percentile(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def bench_figures() -> list[Figure]:
-    sims, ports = _simulators(PRINTERS)
+    sims, ports = start_printers(PRINTERS)
     where = Path(tempfile.mkdtemp(prefix="fabwire-bench-agent-"))
     agent = None
     try:
@@ -151,7 +123,7 @@ def dashboard_figures() -> list[Figure]:
     from playwright.sync_api import sync_playwright
 
     chromium = shutil.which("chromium") or "/usr/bin/chromium"
-    sims, ports = _simulators(DASHBOARD_PRINTERS)
+    sims, ports = start_printers(DASHBOARD_PRINTERS)
     where = Path(tempfile.mkdtemp(prefix="fabwire-bench-dashboard-"))
     agent = None
     paints: list[float] = []

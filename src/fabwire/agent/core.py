@@ -152,6 +152,7 @@ class Agent:
         self._sessions: dict[str, Session] = {}
         self._subscribers: set[Subscription] = set()
         self._started = False
+        self._added = 0
 
     async def __aenter__(self) -> Agent:
         await self.start()
@@ -177,7 +178,8 @@ class Agent:
     # ------------------------------------------------------------------------------------------ the contract
 
     def devices(self) -> list[DeviceInfo]:
-        return [s.info for s in self._sessions.values()]
+        """In the order they were added (the config's order), however long each took to answer."""
+        return [s.info for s in self.sessions()]
 
     def state(self, device_id: str) -> dict[str, Any]:
         """The latest state: `{"ts", "online", "device", "kind", "name", "summary": {…}, "status": {…}, "job"}`.
@@ -208,7 +210,8 @@ class Agent:
                 raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
             if session.spec.name == spec.name:
                 raise InputError(f"a device named {spec.name!r} is already monitored")
-        session = Session(self, spec)
+        session = Session(self, spec, order=self._added)
+        self._added += 1
         await session.start()
         self._sessions[session.info.id] = session
         await self.history.remember_device(session.info)
@@ -258,7 +261,7 @@ class Agent:
                 from None
 
     def sessions(self) -> list[Session]:
-        return list(self._sessions.values())
+        return sorted(self._sessions.values(), key=lambda s: s.order)
 
     @staticmethod
     def error_event(device: str, exc: BaseException) -> dict[str, Any]:

@@ -59,8 +59,9 @@ class PollStats:
 
 
 class Session:
-    def __init__(self, agent: Agent, spec: DeviceSpec) -> None:
+    def __init__(self, agent: Agent, spec: DeviceSpec, *, order: int = 0) -> None:
         self.agent = agent
+        self.order = order
         self.spec = spec
         self.driver = make_driver(spec, self._device_event)
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
