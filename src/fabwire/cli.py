@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import logging
 import sys
 import traceback
 from pathlib import Path
@@ -12,45 +9,13 @@ from pathlib import Path
 import click
 
 from fabwire import __version__
-from fabwire.cli_support import App
+from fabwire.cli_support import DEVICE_OPTIONS, GLOBAL_OPTIONS, App, LazyGroup
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError
 from fabwire.transport.tap import read_trace
 from fabwire.transport.trace_show import render_trace
 
 EXIT_LINK = 8
 EXIT_TIMEOUT = 9
-
-
-class LazyGroup(click.Group):
-    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
-
-    def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
-        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
-        self._lazy = lazy or {}
-
-    def _available(self, name: str) -> bool:
-        module = self._lazy[name].partition(":")[0]
-        try:
-            return importlib.util.find_spec(module) is not None
-        except ModuleNotFoundError:
-            return False
-
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(set(super().list_commands(ctx)) | {n for n in self._lazy if self._available(n)})
-
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name in self._lazy and self._available(cmd_name):
-            module_name, _, attr = self._lazy[cmd_name].partition(":")
-            command = getattr(importlib.import_module(module_name), attr)
-            if not isinstance(command, click.Command):
-                raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
-            return command
-        return super().get_command(ctx, cmd_name)
-
-
-def _setup_logging(verbose: int) -> None:
-    level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
-    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(name)s: %(message)s")
 
 
 @click.group(
@@ -61,24 +26,21 @@ def _setup_logging(verbose: int) -> None:
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
         "serve": "fabwire.agent.command:serve",
+        "devices": "fabwire.devices_cli:devices",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )
 @click.version_option(__version__, "-V", "--version", prog_name="fabwire")
-@click.option("--json", "json_output", is_flag=True, help="Machine-readable results on stdout (text goes to stderr).")
-@click.option("-v", "--verbose", count=True, help="Log more; -vv logs every byte on the wire (logger fabwire.wire).")
-@click.option("--debug", is_flag=True, help="Show tracebacks on errors.")
-@click.pass_context
-def cli(ctx: click.Context, json_output: bool, verbose: int, debug: bool) -> None:
+def cli() -> None:
     """Talk to maker machines over their own wire protocols — or simulate them.
 
     Devices: xyz (XYZprinting da Vinci printers), lineus (Line-us drawing robot), mmu (Prusa MMU3).
+    Options such as -d, --json, --trace, --timeout and -v go before or after the subcommand.
     """
-    app = ctx.ensure_object(App)
-    app.output.json_mode = json_output
-    app.verbose = verbose
-    app.debug = debug or app.debug
-    _setup_logging(verbose)
+
+
+cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS))
+cli.shared = GLOBAL_OPTIONS
 
 
 @cli.group(

@@ -15,7 +15,6 @@ from typing import Any
 import click
 
 from fabwire.errors import InputError
-from fabwire.transport.pty import open_pty
 from fabwire.transport.registry import DeviceServer
 from fabwire.transport.tcp import serve_tcp
 
@@ -98,6 +97,8 @@ async def serve(
             shown = f"[{host}]" if ":" in host else host
             announce(f"tcp://{shown}:{port}", kind, json_mode)
         if use_pty:
+            from fabwire.transport.pty import open_pty  # POSIX only: imported when a pty is asked for
+
             pty_device = open_pty(link)
             tasks.append(asyncio.ensure_future(handler(pty_device.transport)))
             where = f"{pty_device.path}" + (f" (link {link})" if link else "")

@@ -12,11 +12,12 @@ from fabwire.errors import DeviceError, InputError, LinkError, RemoteProtocolErr
 from fabwire.transport import FaultPlan, FaultyTransport, Transport, open_pty, serve_tcp
 from fabwire.transport.serial import open_serial
 from fabwire.transport.tcp import open_tcp
-from fabwire.xyz.client import SyncXYZPrinter, XYZPrinter
+from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.models import find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.sim import XYZSimulator
 from fabwire.xyz.status import Status
+from fabwire.xyz.sync import SyncXYZPrinter
 from fabwire.xyz.threew import read_3w, write_3w
 
 GCODE = b";TIME:600\n;LAYER_COUNT:3\n;Filament used: 0.25m\nG28\nG0 X10 Y10\nG1 X20 Y20 E1\nM84\n"

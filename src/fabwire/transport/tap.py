@@ -38,10 +38,15 @@ class TraceRecord:
 
 
 class TraceWriter:
-    """Appends records to a JSONL file; flushes each line so a crash keeps everything before it."""
+    """Appends records to a JSONL file; flushes each line so a crash keeps everything before it.
 
-    def __init__(self, stream: IO[str], *, url: str, peer: str) -> None:
+    A writer made by `to_file` reopens its file for appending when a record comes after `close`, so a client
+    that reconnects (a new link, a new tap) keeps one capture.
+    """
+
+    def __init__(self, stream: IO[str], *, url: str, peer: str, path: Path | None = None) -> None:
         self._stream = stream
+        self._path = path
         self._start = time.monotonic()
         header = {
             "trace": "fabwire",
@@ -58,9 +63,14 @@ class TraceWriter:
             stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by close()
         except OSError as exc:
             raise InputError(f"cannot write trace file {path}: {exc.strerror}") from exc
-        return cls(stream, url=url, peer=peer)
+        return cls(stream, url=url, peer=peer, path=Path(path))
 
     def _emit(self, obj: dict[str, object]) -> None:
+        if self._stream.closed and self._path is not None:
+            try:
+                self._stream = open(self._path, "a", encoding="utf-8")  # noqa: SIM115 - closed by close()
+            except OSError as exc:
+                raise InputError(f"cannot write trace file {self._path}: {exc.strerror}") from exc
         self._stream.write(json.dumps(obj, ensure_ascii=True) + "\n")
         self._stream.flush()
 

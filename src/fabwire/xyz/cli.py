@@ -3,58 +3,40 @@
 from __future__ import annotations
 
 import asyncio
-import importlib
 import sys
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
-from rich.panel import Panel
-from rich.progress import (
-    BarColumn,
-    DownloadColumn,
-    Progress,
-    TaskID,
-    TextColumn,
-    TimeRemainingColumn,
-    TransferSpeedColumn,
-)
-from rich.table import Table
 
 from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
 from fabwire.errors import InputError
 from fabwire.simserve import server_options
+from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
 
+if TYPE_CHECKING:
+    from rich.panel import Panel
+
 T = TypeVar("T")
 
 
-@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.")
+@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.",
+              lazy={"convert": "fabwire.xyz.threew_cli:convert", "info": "fabwire.xyz.threew_cli:info"})
 def xyz() -> None:
     """XYZprinting da Vinci printers."""
 
 
-def _link_kind(dctx: DeviceContext) -> Link | None:
-    endpoint = dctx.target().endpoint
-    if endpoint.scheme == "sim":
-        return Link.WIFI if endpoint.options.get("link") == "wifi" else Link.SERIAL
-    return Link.WIFI if endpoint.scheme == "tcp" else Link.SERIAL
-
-
 def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with dctx.link() as transport:
-            printer = XYZPrinter(transport, link=_link_kind(dctx), timeout=max(dctx.timeout, 2.0))
-            try:
-                return await action(printer)
-            finally:
-                await printer.close()
+        async with dctx.open(XYZPrinter) as printer:
+            return await action(printer)
 
     return asyncio.run(main())
 
@@ -68,25 +50,42 @@ async def _ask(message: str) -> None:
         raise InputError("no confirmation on standard input; the step was stopped")
 
 
+ABSENT = "—"
+"""What a value the printer did not report shows as."""
+
+
 def _bool(value: bool | None) -> str:
-    return "?" if value is None else "on" if value else "off"
+    return ABSENT if value is None else "on" if value else "off"
+
+
+def _known(value: object, unit: str = "") -> str:
+    return ABSENT if value is None else f"{value}{unit}"
+
+
+def _state(status: Status) -> str:
+    if status.state is None:
+        return ABSENT
+    code = f"{status.state_code}" + (f",{status.substate}" if status.substate is not None else "")
+    return f"{status.state_name} ({code})"
 
 
 def render_status(status: Status) -> Panel:
+    from rich.panel import Panel
+    from rich.table import Table
+
     table = Table.grid(padding=(0, 2))
     table.add_column(style="bold")
     table.add_column()
     model = status.model
-    table.add_row("Model", f"{model.name if model else '?'} ({status.model_number or '?'})")
-    table.add_row("Name", status.name or "?")
-    table.add_row("Serial", status.serial or "?")
-    table.add_row("Firmware", status.firmware_version or "?")
-    table.add_row("State", f"{status.state_name} ({status.state_code},{status.substate})")
+    table.add_row("Model", f"{model.name if model else ABSENT} ({_known(status.model_number)})")
+    table.add_row("Name", _known(status.name))
+    table.add_row("Serial", _known(status.serial))
+    table.add_row("Firmware", _known(status.firmware_version))
+    table.add_row("State", _state(status))
     for word in status.error_words:
         table.add_row("Error", str(word))
     target = status.extruder_target
-    table.add_row("Extruder", f"{status.extruder if status.extruder is not None else '--'} °C"
-                  + (f" → {target} °C" if target else ""))
+    table.add_row("Extruder", _known(status.extruder, " °C") + (f" → {target} °C" if target else ""))
     if status.bed is not None:
         table.add_row("Bed", f"{status.bed} °C")
     if status.progress and (status.progress.percent or status.progress.elapsed_min):
@@ -99,8 +98,8 @@ def render_status(status: Status) -> Panel:
         text = "none" if not cart.present else f"{cart.fields[0]} {cart.colour or ''}".strip()
         table.add_row("Filament", text + (f", {fil / 1000:.1f} m left" if fil is not None else ""))
     if status.nozzle:
-        table.add_row("Nozzle", f"{status.nozzle.diameter_mm or '?'} mm (type {status.nozzle.kind})")
-    table.add_row("Z offset", f"{status.zoffset / 100:.2f} mm" if status.zoffset is not None else "?")
+        table.add_row("Nozzle", f"{_known(status.nozzle.diameter_mm, ' mm')} (type {status.nozzle.kind})")
+    table.add_row("Z offset", f"{status.zoffset / 100:.2f} mm" if status.zoffset is not None else ABSENT)
     table.add_row("Auto-level", _bool(status.autolevel))
     table.add_row("Buzzer", _bool(status.buzzer))
     if status.network is not None:
@@ -110,10 +109,13 @@ def render_status(status: Status) -> Panel:
 
 
 def job_line(status: Status) -> str:
-    parts = [status.state_name, f"extruder {status.extruder}°C/{status.extruder_target or 0}°C"]
+    target = status.extruder_target
+    parts = [status.state_name, f"extruder {_known(status.extruder, '°C')}" + (f"/{target}°C" if target else "")]
+    if status.bed is not None:
+        parts.append(f"bed {status.bed}°C")
     if status.progress and status.state_code in (9505, 9601):
         left = status.progress.remaining_min
-        parts.append(f"{status.progress.percent}% ({'?' if left is None else left} min left)")
+        parts.append(f"{status.progress.percent}% ({ABSENT if left is None else left} min left)")
     return ", ".join(parts)
 
 
@@ -146,13 +148,31 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--no-wait", is_flag=True, help="Return once the printer has started the job.")
 @click.option("--model", "model_text", metavar="MODEL", help="Convert for this model instead of the printer's own.")
+@click.option("--name", "upload_name", metavar="NAME",
+              help="Name the file is uploaded under (default: derived from the file name, ASCII only).")
+@click.option("--save-to-sd", is_flag=True, help="Keep the file on the printer's SD card (XYZware's SaveToSD; some "
+                                                 "Jr. 2.0 models need it).")
 @pass_device
-def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None) -> None:
+def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None, upload_name: str | None,
+              save_to_sd: bool) -> None:
     """Print a G-code (converted to the printer's .3w) or a .3w file."""
     model = _resolve_model(model_text)
+    if upload_name is not None:
+        userinput.upload_name(upload_name)
     out = dctx.output
 
     async def run(printer: XYZPrinter) -> Status:
+        from rich.progress import (
+            BarColumn,
+            DownloadColumn,
+            Progress,
+            TaskID,
+            TextColumn,
+            TimeRemainingColumn,
+            TransferSpeedColumn,
+        )
+
+        chosen = model or _resolve_model(printer.settings.model)
         columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                    TimeRemainingColumn())
         with Progress(*columns, console=out.err, transient=False, disable=out.json_mode) as bar:
@@ -174,7 +194,8 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
                 else:
                     out.note(line)
 
-            return await printer.print_file(file, model=model, progress=uploaded, on_status=job, wait=not no_wait)
+            return await printer.print_file(file, model=chosen, progress=uploaded, on_status=job, wait=not no_wait,
+                                            name=upload_name, save_to_sd=save_to_sd)
 
     final = _with_printer(dctx, run)
     out.result({"event": "done", "state": final.state_code, "state_name": final.state_name},
@@ -297,6 +318,9 @@ def zoffset(dctx: DeviceContext, value: str | None) -> None:
 def name(dctx: DeviceContext, new: str | None) -> None:
     """Show or set the printer's name (up to 16 characters)."""
 
+    if new is not None:
+        userinput.printer_name(new)
+
     async def run(pr: XYZPrinter) -> str:
         if new is not None:
             await pr.set_name(new)
@@ -312,8 +336,9 @@ def name(dctx: DeviceContext, new: str | None) -> None:
 @pass_device
 def language(dctx: DeviceContext, code: str) -> None:
     """Set the display language (en, fr, it, de, es, jp)."""
-    _with_printer(dctx, lambda pr: pr.set_language(code.lower()))
-    dctx.output.result({"language": code.lower()}, f"language {code.lower()}")
+    code = userinput.language(code)
+    _with_printer(dctx, lambda pr: pr.set_language(code))
+    dctx.output.result({"language": code}, f"language {code}")
 
 
 @xyz.command()
@@ -377,6 +402,8 @@ def wifi_scan(dctx: DeviceContext) -> None:
 @pass_device
 def wifi_join(dctx: DeviceContext, ssid: str, password: str, channel: int) -> None:
     """Join a Wi-Fi network (do this over USB)."""
+    userinput.ssid(ssid)
+    userinput.wifi_password(password)
     _with_printer(dctx, lambda pr: pr.join_wifi(ssid, password, channel))
     dctx.output.result({"ok": True, "ssid": ssid}, f"joining {ssid}")
 
@@ -430,19 +457,6 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
     dctx.output.result(data, human)
 
 
-def _add_threew_commands() -> None:
-    """`convert` and `info` (.3w files) live in their own module; mount them when it is present."""
-    try:
-        module = importlib.import_module("fabwire.xyz.threew_cli")
-    except ImportError:
-        return
-    for command_name in ("convert", "info"):
-        command = getattr(module, command_name, None)
-        if isinstance(command, click.Command):
-            xyz.add_command(command)
-
-
-_add_threew_commands()
 
 
 @click.command("xyz")
