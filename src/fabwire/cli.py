@@ -25,6 +25,7 @@ EXIT_TIMEOUT = 9
         "lineus": "fabwire.lineus.cli:lineus",
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
+        "fleet": "fabwire.mqtt.fleet:fleet",
         "serve": "fabwire.agent.command:serve",
         "devices": "fabwire.devices_cli:devices",
     },
