@@ -26,6 +26,7 @@ EXIT_TIMEOUT = 9
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
         "devices": "fabwire.devices_cli:devices",
+        "serve": "fabwire.agent.command:serve",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )

@@ -12,18 +12,22 @@ import asyncio
 import importlib
 import importlib.util
 import logging
+import os
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
 from functools import update_wrapper
 from pathlib import Path
-from typing import Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import click
 
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
 from fabwire.transport.faults import FaultPlan
+
+if TYPE_CHECKING:
+    from fabwire.config import Target
 
 P = ParamSpec("P")
 T = TypeVar("T")
@@ -206,6 +210,13 @@ class DeviceContext:
     @property
     def timeout(self) -> float:
         return self.app.timeout or 5.0
+
+    def target(self) -> Target:
+        """Where the command goes (checks a device name against the config before any work starts)."""
+        from fabwire.config import resolve_target
+
+        return resolve_target(self.app.device or os.environ.get(f"FABWIRE_{self.kind.name.upper()}_DEVICE"),
+                              self.kind)
 
     def open_options(self, **options: Any) -> dict[str, Any]:
         """The command line's link options, ready for `X.open` (unset ones leave the config's in force)."""
