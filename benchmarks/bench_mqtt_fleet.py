@@ -107,27 +107,34 @@ class FarmAgent:
                         queue.put_nowait(event)
 
 
-async def agent_main(name: str, url: str, seconds: float) -> None:
+async def agent_main(name: str, url: str) -> None:
+    """One agent process: "ready" once bridged; then standard input says "start" and "stop" (the measuring
+    window) and "quit" (after the commands were answered), when it prints its figures."""
     from fabwire.mqtt.bridge import run_bridge
 
     farm = FarmAgent(name, PRINTERS)
     made: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
-    bridge = asyncio.create_task(run_bridge(farm, url, agent_id=f"farm-{name}", on_bridge=made.set_result))
+    bridge_task = asyncio.create_task(run_bridge(farm, url, agent_id=f"farm-{name}", on_bridge=made.set_result))
     ticker = asyncio.create_task(farm.run())
-    await (await made).connected.wait()
+    bridge = await made
+    await bridge.connected.wait()
     print("ready", flush=True)
-    await asyncio.sleep(WARMUP)
+
+    async def line() -> str:
+        return (await asyncio.to_thread(sys.stdin.readline)).strip()
+
+    assert await line() == "start"
     before = resource.getrusage(resource.RUSAGE_SELF)
     began = time.monotonic()
-    generated, published = farm.generated, (await made).states_published
-    await asyncio.sleep(seconds)
-    generated, published = farm.generated - generated, (await made).states_published - published
+    generated, published = farm.generated, bridge.states_published
+    assert await line() == "stop"
+    generated, published = farm.generated - generated, bridge.states_published - published
     after = resource.getrusage(resource.RUSAGE_SELF)
     wall = time.monotonic() - began
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    await asyncio.sleep(3.0)  # commands still in flight
+    await line()
     ticker.cancel()
-    bridge.cancel()
+    bridge_task.cancel()
     print(json.dumps({"cores": cpu / wall, "runs": farm.runs, "rate": generated / wall,
                       "published": published / max(generated, 1)}), flush=True)
 
@@ -178,6 +185,13 @@ class Subscriber:
         self.client.disconnect()
 
 
+def tell(agents: list[subprocess.Popen[str]], word: str) -> None:
+    for process in agents:
+        assert process.stdin is not None
+        process.stdin.write(word + "\n")
+        process.stdin.flush()
+
+
 def _quantile(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else float("nan")
@@ -193,26 +207,31 @@ def run() -> list[Figure]:
         try:
             names = [chr(ord("a") + k) for k in range(AGENTS)]
             for name in names:
-                agents.append(subprocess.Popen([sys.executable, __file__, "--agent", name, broker.url,
-                                                str(SECONDS)], stdout=subprocess.PIPE, text=True))
+                agents.append(subprocess.Popen([sys.executable, __file__, "--agent", name, broker.url],
+                                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True))
             for process in agents:
                 assert process.stdout is not None
                 assert process.stdout.readline().strip() == "ready"
             watcher = Subscriber(broker.port)
             time.sleep(WARMUP)
+            tell(agents, "start")
             watcher.measuring = True
             window = time.monotonic()
             rng = random.Random(7)
             sent = 0
-            began = time.monotonic()
-            while time.monotonic() - began < SECONDS - 1:
+            while time.monotonic() - window < SECONDS:
                 if sent < COMMANDS:
                     name = rng.choice(names)
                     watcher.command(f"xyz-{name}{rng.randrange(PRINTERS):04d}", sent)
                     sent += 1
-                time.sleep((SECONDS - 2) / COMMANDS)
+                time.sleep(SECONDS / COMMANDS)
+            tell(agents, "stop")
             watcher.measuring = False
             window = time.monotonic() - window
+            deadline = time.monotonic() + 60  # every command answered, however loaded the machine
+            while len({r["id"] for r in watcher.replies}) < sent and time.monotonic() < deadline:
+                time.sleep(0.2)
+            tell(agents, "quit")
             results = []
             for process in agents:
                 out, _ = process.communicate(timeout=60)
@@ -253,7 +272,7 @@ def run() -> list[Figure]:
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--agent":
-        asyncio.run(agent_main(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+        asyncio.run(agent_main(sys.argv[2], sys.argv[3]))
     else:
         for figure in run():
             print(f"{figure.name:55s} {figure.value:12.3f} {figure.unit:6s} {figure.target:16s} {figure.meets_target}")

@@ -95,7 +95,7 @@ class Observer:
                 self.log.append((message.topic.value, payload, message.retain))
                 self._changed.notify_all()
 
-    async def wait_for(self, predicate: Any, timeout: float = 15.0) -> Any:
+    async def wait_for(self, predicate: Any, timeout: float = 30.0) -> Any:
         """Wait until `predicate(self)` is truthy (re-checked on each message); returns its value."""
         async with asyncio.timeout(timeout), self._changed:
             while not (value := predicate(self)):
