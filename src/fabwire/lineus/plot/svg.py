@@ -225,7 +225,11 @@ class _Reader:
         style = inherit(parent, own)
         if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
             return
-        matrix = then(matrix, transform(el.get("transform")))
+        try:
+            matrix = then(matrix, transform(el.get("transform")))
+        except ValueError:
+            self.unsupported[f"<{tag}> elements with a transform that is not finite are left out"] += 1
+            return
         target: Polylines = []
         if tag in SHAPES:
             self.shape(el, tag, style, matrix, viewport, target)
@@ -336,6 +340,7 @@ class _Reader:
                 continue  # a lone moveto is never stroked
             pts = sub.points
             if not np.isfinite(pts).all():
+                self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
             if bool((pts == pts[0]).all()):
                 if dots:
