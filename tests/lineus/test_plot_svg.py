@@ -343,3 +343,11 @@ def test_any_path_data_reads_or_is_refused_cleanly(d: str, extra: str) -> None:
     for line in drawing.lines:
         assert np.isfinite(line).all()
         assert len(line) >= 1
+
+
+def test_switch_draws_its_first_qualifying_child() -> None:
+    text = svg('<switch><foreignObject requiredExtensions="http://www.w3.org/1999/xhtml"><p>x</p></foreignObject>'
+               '<path d="M0 0 H10" stroke="black"/><path d="M0 5 H10" stroke="black"/></switch>')
+    drawing = parse_svg(text)
+    assert boxes(drawing.lines) == [(0.0, 0.0, 10.0, 0.0)]
+    assert drawing.skipped == {}

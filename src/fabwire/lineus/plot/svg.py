@@ -210,8 +210,9 @@ class _Reader:
     def children(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
                  out: Polylines, depth: int, uses: tuple[str, ...]) -> None:
         kids: Iterator[ET.Element] = iter(el)
-        if local(el.tag) == "switch":  # the first child that qualifies; fabwire meets no test attributes
-            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE][:1])
+        if local(el.tag) == "switch":  # the first child that qualifies; no extension is supported (SVG 1.1 §5.8.2)
+            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE
+                         and not (k.get("requiredExtensions") or "").strip()][:1])
         for child in kids:
             self.element(child, style, matrix, viewport, out, depth + 1, uses)
 
