@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
-from fabwire.lineus.plot import PlanOptions, parse_svg, plan_file, read_drawing
+from fabwire.lineus.plot import PlanOptions, parse_svg, plan_drawing, plan_file, read_drawing
 from fabwire.lineus.plot.svg import MAX_USE_COPIES
 
 DATA = Path(__file__).parent / "data" / "svg"
@@ -351,3 +352,22 @@ def test_switch_draws_its_first_qualifying_child() -> None:
     drawing = parse_svg(text)
     assert boxes(drawing.lines) == [(0.0, 0.0, 10.0, 0.0)]
     assert drawing.skipped == {}
+
+
+def test_memory_follows_the_geometry(tmp_path: Path) -> None:
+    # A long generated path: reading and planning hold a few hundred bytes per segment at most, not kilobytes.
+    count = 20_000
+    path = tmp_path / "long.svg"
+    steps = " ".join(f"L{i % 100} {(i * 7) % 100}" for i in range(count))
+    path.write_text(svg(f'<path d="M0 0 {steps}" stroke="black" fill="none"/>'))
+    tracemalloc.start()
+    try:
+        drawing = read_drawing(path)
+        read_peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        plan_drawing(drawing, PlanOptions(time_budget=0.05))
+        plan_peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert read_peak / count < 400
+    assert plan_peak / count < 400
