@@ -65,29 +65,10 @@ from fabwire.mmu.protocol import (
 )
 
 __all__ = [  # the events are re-exported: callers need them with the logic
-    "HEARTBEAT",
-    "INIT_REGISTERS",
-    "LINK_TIMEOUT",
-    "POLL_REGISTERS",
-    "SUPPORTED",
-    "ButtonPushed",
-    "ButtonSent",
-    "CommandFinished",
-    "CommandInterrupted",
-    "CommandRejected",
-    "ErrorRaised",
-    "FSensorMode",
-    "HostEvent",
-    "HostLogic",
-    "Link",
-    "LinkFailed",
-    "LinkLost",
-    "LinkUp",
-    "ProgressChanged",
-    "RegisterRead",
-    "RegisterWritten",
-    "Status",
-    "StatusUpdated"
+    "HEARTBEAT", "INIT_REGISTERS", "LINK_TIMEOUT", "POLL_REGISTERS", "SUPPORTED", "ButtonPushed", "ButtonSent",
+    "CommandFinished", "CommandInterrupted", "CommandRejected", "ErrorRaised", "FSensorMode", "HostEvent",
+    "HostLogic", "Link", "LinkFailed", "LinkLost", "LinkUp", "ProgressChanged", "RegisterRead", "RegisterWritten",
+    "Status", "StatusUpdated"
 ]
 
 HEARTBEAT = 1.0
