@@ -29,12 +29,8 @@ def lineus() -> None:
 
 def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with dctx.link() as transport:
-            arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
-            try:
-                return await action(arm)
-            finally:
-                await arm.detach()  # the link's context closes the transport (and its trace)
+        async with dctx.open(LineUs) as arm:
+            return await action(arm)
 
     return asyncio.run(main())
 

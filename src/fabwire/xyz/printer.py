@@ -129,8 +129,11 @@ def personality(model_text: str = "dv1MW0A000", *, serial: str | None = None) ->
             status_and_upload_only=True, settings=(), ip="192.168.1.126", lifetime=(69342, 21785),
         )
     order = _SEED_ORDER if model.wifi else _SEED_ORDER.replace("V4", "")
+    # XYZprint writes v5 files for the Jr line (a Jr. 1.0w file in the Rojman1984 samples; Jr 1.0 on firmware
+    # 2.4.8 per mwiens' converter), so their firmware takes both.
+    accepts = (FileFormat.V2, FileFormat.V5) if number.startswith(("dv1J", "dv2J")) and model.container == 2 else ()
     return Personality(model, serial or generated, ("1.2.3",), short[:16], order,
-                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)))
+                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)), accepts=accepts)
 
 
 @dataclass
@@ -566,7 +569,7 @@ class Printer:
         return FileVerdict(True, float(info.print_time_s or 60), float(info.filament_mm or 0.0))
 
     def start_job(self, name: str, data: bytes, verdict: FileVerdict) -> None:
-        self.stored[name] = data
+        self.stored = {name: data}  # the printer keeps the file it prints, not every file it was sent
         self.job = Job(name, data, max(verdict.print_time, 1.0), verdict.filament_mm, rejected=not verdict.ok,
                        filament_start=self.settings.filament_mm)
         self.errors = [e for e in self.errors if e != FILE_REJECTED]

@@ -14,6 +14,7 @@ from rich.table import Table
 
 from fabwire.cli_support import App
 from fabwire.errors import InputError
+from fabwire.xyz import intake
 from fabwire.xyz.gcodeinfo import GcodeMetadata, finish
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.threew import (
@@ -25,8 +26,6 @@ from fabwire.xyz.threew import (
     convert_gcode_file,
     gcode_metadata,
     inspect_3w,
-    is_3w,
-    is_gcode_path,
 )
 
 BAR_THRESHOLD = 8 << 20
@@ -115,19 +114,28 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
     A .3w source with a .3w destination is re-targeted (e.g. for another model or format).
     """
     app = _app(ctx)
-    size = _size(src)
     container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
     writing = dst.suffix.lower() == ".3w"
-    if is_3w(src):
+    kind, head = intake.sniff(src)
+    intake.require_printable(kind, str(src), head)
+    with intake.decoded_path(src, kind) as plain:
+        _convert(app, src, plain, kind.decoded, dst, writing, model_text, container, zipped)
+
+
+def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
+             container: Literal[2, 5] | None, zipped: bool | None) -> None:
+    """Convert `plain` (the source with any base64 layer decoded) of `kind` THREEW or GCODE."""
+    size = _size(plain)
+    if kind is intake.Kind.THREEW:
         if not writing:
-            if model_text or file_format or zipped is not None:
+            if model_text or container or zipped is not None:
                 raise InputError("--model, --format and --zip only apply when writing a .3w file")
             with _progress(app, f"decoding {src.name}", size) as progress:
-                info = convert_3w_to_gcode(src, dst, progress)
+                info = convert_3w_to_gcode(plain, dst, progress)
             _warn_crc(app, src, info)
             _report(app, "3w-to-gcode", src, dst, info)
             return
-        source_info = inspect_3w(src)
+        source_info = inspect_3w(plain)
         _warn_crc(app, src, source_info)
         model = find_model(model_text) if model_text else source_info.model
         if model is None:
@@ -135,18 +143,17 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
         with tempfile.TemporaryDirectory(dir=dst.parent if dst.parent.is_dir() else None) as scratch:
             middle = Path(scratch) / "source.gcode"
             with _progress(app, f"decoding {src.name}", size) as progress:
-                convert_3w_to_gcode(src, middle, progress)
+                convert_3w_to_gcode(plain, middle, progress)
             with _progress(app, f"encoding {dst.name}", _size(middle)) as progress:
                 info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress)
         _report(app, "3w-to-3w", src, dst, info)
         return
     if not writing:
-        kind = "G-code" if is_gcode_path(src) else "not a .3w file"
-        raise InputError(f"{src} is {kind} and {dst} is not a .3w file: nothing to convert "
+        raise InputError(f"{src} is G-code and {dst} is not a .3w file: nothing to convert "
                          "(name the output *.3w to make a print file)")
     model = find_model(model_text or "dv1MX0A000")
     with _progress(app, f"encoding {dst.name}", size) as progress:
-        info = convert_gcode_file(src, dst, model, container=container, zipped=zipped, progress=progress)
+        info = convert_gcode_file(plain, dst, model, container=container, zipped=zipped, progress=progress)
     _report(app, "gcode-to-3w", src, dst, info)
 
 
@@ -168,13 +175,14 @@ def info(ctx: click.Context, file: Path) -> None:
     """Show what a .3w file holds (variant, CRC, model, print metadata), or what a G-code file would give."""
     app = _app(ctx)
     size = _size(file)
-    if not is_3w(file):
-        if not is_gcode_path(file):
-            raise InputError(f"{file} is not a .3w file (no 3DPFNKG13WTW signature) nor named like G-code")
-        _gcode_info(app, file)
-        return
-    with _progress(app, f"checking {file.name}", size) as progress:
-        details = inspect_3w(file, progress)
+    kind, head = intake.sniff(file)
+    intake.require_printable(kind, str(file), head)
+    with intake.decoded_path(file, kind) as plain:
+        if kind.decoded is intake.Kind.GCODE:
+            _gcode_info(app, plain, file)
+            return
+        with _progress(app, f"checking {file.name}", size) as progress:
+            details = inspect_3w(plain, progress)
     data = {"file": str(file), "size": size, **_info_data(details)}
 
     def human() -> None:
@@ -203,8 +211,8 @@ def info(ctx: click.Context, file: Path) -> None:
     app.output.result(data, human)
 
 
-def _gcode_info(app: App, file: Path) -> None:
-    stated, computed = gcode_metadata(file)
+def _gcode_info(app: App, plain: Path, file: Path) -> None:
+    stated, computed = gcode_metadata(plain)
     final: GcodeMetadata = finish(stated, computed)
 
     def source(value: object) -> str:
