@@ -25,8 +25,9 @@ EXIT_TIMEOUT = 9
         "lineus": "fabwire.lineus.cli:lineus",
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
-        "devices": "fabwire.devices_cli:devices",
+        "fleet": "fabwire.mqtt.fleet:fleet",
         "serve": "fabwire.agent.command:serve",
+        "devices": "fabwire.devices_cli:devices",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )

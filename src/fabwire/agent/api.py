@@ -100,6 +100,10 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
         session_info = next(d for d in agent.devices() if d.id == device_id)
         return {**session_info.to_dict(), "state": agent.state(device_id)}
 
+    @api.get("/agent", summary="The agent itself: version, devices, and how punctual its polls are")
+    async def about() -> dict[str, Any]:
+        return agent.health()
+
     @api.get("/devices", summary="Every monitored device with its latest state")
     async def devices() -> list[dict[str, Any]]:
         return [device_dict(d.id) for d in agent.devices()]
@@ -187,7 +191,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
         try:
             subscription = agent.subscribe(device)
         except UnknownDevice as exc:
-            await websocket.close(code=4404, reason=str(exc)[:120])
+            await websocket.send_denial_response(error_response(404, str(exc), exc.exit_code, "UnknownDevice"))
             return
         await websocket.accept(subprotocol=SUBPROTOCOL if SUBPROTOCOL in offered else None)
         receiver: asyncio.Future[Any] = asyncio.ensure_future(websocket.receive())

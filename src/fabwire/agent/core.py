@@ -21,6 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from fabwire import __version__
 from fabwire.errors import FabwireError, InputError
 
 if TYPE_CHECKING:
@@ -151,6 +152,7 @@ class Agent:
         self._sessions: dict[str, Session] = {}
         self._subscribers: set[Subscription] = set()
         self._started = False
+        self._added = 0
 
     async def __aenter__(self) -> Agent:
         await self.start()
@@ -176,7 +178,8 @@ class Agent:
     # ------------------------------------------------------------------------------------------ the contract
 
     def devices(self) -> list[DeviceInfo]:
-        return [s.info for s in self._sessions.values()]
+        """In the order they were added (the config's order), however long each took to answer."""
+        return [s.info for s in self.sessions()]
 
     def state(self, device_id: str) -> dict[str, Any]:
         """The latest state: `{"ts", "online", "device", "kind", "name", "summary": {…}, "status": {…}, "job"}`.
@@ -207,7 +210,8 @@ class Agent:
                 raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
             if session.spec.name == spec.name:
                 raise InputError(f"a device named {spec.name!r} is already monitored")
-        session = Session(self, spec)
+        session = Session(self, spec, order=self._added)
+        self._added += 1
         await session.start()
         self._sessions[session.info.id] = session
         await self.history.remember_device(session.info)
@@ -227,6 +231,15 @@ class Agent:
     async def cancel_job(self, job_id: str, *, confirm: bool) -> dict[str, Any]:
         job = await self.jobs.get(job_id)
         return await self._session(job["device"]).cancel_job(job_id, confirm=confirm)
+
+    def health(self) -> dict[str, Any]:
+        """Counts and poll punctuality (a poll is late when it starts over half an interval after its slot)."""
+        sessions = list(self._sessions.values())
+        lags = sorted(lag for s in sessions for lag in s.stats.lags)
+        return {"version": __version__, "devices": len(sessions), "online": sum(s.online for s in sessions),
+                "polls": sum(s.stats.polls for s in sessions), "late_polls": sum(s.stats.late for s in sessions),
+                "poll_lag_p99_s": lags[int(0.99 * (len(lags) - 1))] if lags else None,
+                "poll_lag_max_s": lags[-1] if lags else None, "subscribers": len(self._subscribers)}
 
     # ------------------------------------------------------------------------------------------ plumbing
 
@@ -248,7 +261,7 @@ class Agent:
                 from None
 
     def sessions(self) -> list[Session]:
-        return list(self._sessions.values())
+        return sorted(self._sessions.values(), key=lambda s: s.order)
 
     @staticmethod
     def error_event(device: str, exc: BaseException) -> dict[str, Any]:

@@ -107,21 +107,28 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
     A .3w source with a .3w destination is re-targeted (e.g. for another model or format).
     """
     app = _app(ctx)
-    size = _size(src)
     container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
     writing = dst.suffix.lower() == ".3w"
     kind, head = intake.sniff(src)
     intake.require_printable(kind, str(src), head)
-    if kind is not intake.Kind.GCODE:
+    with intake.decoded_path(src, kind) as plain:
+        _convert(app, src, plain, kind.decoded, dst, writing, model_text, container, zipped)
+
+
+def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
+             container: Literal[2, 5] | None, zipped: bool | None) -> None:
+    """Convert `plain` (the source with any base64 layer decoded) of `kind` THREEW or GCODE."""
+    size = _size(plain)
+    if kind is intake.Kind.THREEW:
         if not writing:
-            if model_text or file_format or zipped is not None:
+            if model_text or container or zipped is not None:
                 raise InputError("--model, --format and --zip only apply when writing a .3w file")
             with _progress(app, f"decoding {src.name}", size) as progress:
-                info = convert_3w_to_gcode(src, dst, progress)
+                info = convert_3w_to_gcode(plain, dst, progress)
             _warn_crc(app, src, info)
             _report(app, "3w-to-gcode", src, dst, info)
             return
-        source_info = inspect_3w(src)
+        source_info = inspect_3w(plain)
         _warn_crc(app, src, source_info)
         model = find_model(model_text) if model_text else source_info.model
         if model is None:
@@ -129,7 +136,7 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
         with tempfile.TemporaryDirectory(dir=dst.parent if dst.parent.is_dir() else None) as scratch:
             middle = Path(scratch) / "source.gcode"
             with _progress(app, f"decoding {src.name}", size) as progress:
-                convert_3w_to_gcode(src, middle, progress)
+                convert_3w_to_gcode(plain, middle, progress)
             with _progress(app, f"encoding {dst.name}", _size(middle)) as progress:
                 info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress)
         _report(app, "3w-to-3w", src, dst, info)
@@ -139,7 +146,7 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
                          "(name the output *.3w to make a print file)")
     model = find_model(model_text or "dv1MX0A000")
     with _progress(app, f"encoding {dst.name}", size) as progress:
-        info = convert_gcode_file(src, dst, model, container=container, zipped=zipped, progress=progress)
+        info = convert_gcode_file(plain, dst, model, container=container, zipped=zipped, progress=progress)
     _report(app, "gcode-to-3w", src, dst, info)
 
 
@@ -162,11 +169,13 @@ def info(ctx: click.Context, file: Path) -> None:
     app = _app(ctx)
     size = _size(file)
     kind, head = intake.sniff(file)
-    if intake.require_printable(kind, str(file), head) is intake.Kind.GCODE:
-        _gcode_info(app, file)
-        return
-    with _progress(app, f"checking {file.name}", size) as progress:
-        details = inspect_3w(file, progress)
+    intake.require_printable(kind, str(file), head)
+    with intake.decoded_path(file, kind) as plain:
+        if kind.decoded is intake.Kind.GCODE:
+            _gcode_info(app, plain, file)
+            return
+        with _progress(app, f"checking {file.name}", size) as progress:
+            details = inspect_3w(plain, progress)
     data = {"file": str(file), "size": size, **_info_data(details)}
 
     def human() -> None:
@@ -195,8 +204,8 @@ def info(ctx: click.Context, file: Path) -> None:
     app.output.result(data, human)
 
 
-def _gcode_info(app: App, file: Path) -> None:
-    stated, computed = gcode_metadata(file)
+def _gcode_info(app: App, plain: Path, file: Path) -> None:
+    stated, computed = gcode_metadata(plain)
     final: GcodeMetadata = finish(stated, computed)
 
     def source(value: object) -> str:

@@ -159,15 +159,17 @@ class _Reader:
 
     def check_expansion(self) -> None:
         """Count the shape copies `<use>` makes before drawing any, refusing cycles and fan-out bombs."""
-        weights: dict[int, int] = {}
+        weights: dict[tuple[int, bool], int] = {}
 
-        def weight(el: ET.Element, stack: tuple[str, ...], depth: int) -> int:
+        def weight(el: ET.Element, stack: tuple[str, ...], depth: int, used: bool) -> int:
+            """Shapes drawn for `el`; `used` when reached through a <use> (symbols are drawn only so)."""
             if depth > MAX_DEPTH:
                 raise InputError(f"{self.name}: elements or <use> references nested deeper than {MAX_DEPTH}")
-            key = id(el)
+            key = (id(el), used)
             if key in weights:
                 return weights[key]
             tag = local(el.tag)
+            total = 0
             if tag in SHAPES:
                 total = 1
             elif tag == "use":
@@ -175,21 +177,21 @@ class _Reader:
                 target = self.ids.get(ref) if ref else None
                 if ref in stack:
                     raise InputError(f"{self.name}: <use> refers back to itself through #{ref}")
-                total = weight(target, (*stack, ref), depth + 1) if target is not None and ref else 0
-            else:
-                total = 0
+                if target is not None and ref:
+                    total = weight(target, (*stack, ref), depth + 1, True)
+            elif tag in CONTAINERS or (tag == "symbol" and used):
                 for child in el:
-                    total += weight(child, stack, depth + 1)
+                    total += weight(child, stack, depth + 1, False)
                     if total > MAX_USE_COPIES * 64:
                         break
             weights[key] = total
             return total
 
         direct = sum(1 for el in self.root.iter() if local(el.tag) in SHAPES)
-        total = weight(self.root, (), 0)
+        total = weight(self.root, (), 0, False)
         if total - direct > MAX_USE_COPIES:
-            raise InputError(f"{self.name}: <use> elements expand the drawing to {total:,} shapes from {direct:,}; "
-                             f"refusing more than {MAX_USE_COPIES:,} copies")
+            raise InputError(f"{self.name}: <use> elements copy its {direct:,} shapes more than {MAX_USE_COPIES:,} "
+                             "times; refusing such an expansion")
 
     def report(self) -> list[str]:
         notes = [f"{what} ({count}x)" if count > 1 else what for what, count in sorted(self.unsupported.items())]
