@@ -40,7 +40,8 @@ class NewDevice(BaseModel):
     name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
     kind: str = Field(pattern="^(xyz|lineus|mmu)$")
     address: str = Field(min_length=1, max_length=300, description="As for -d: host[:port], tcp://…, /dev/…")
-    options: dict[str, str | int | float | bool] = Field(default_factory=dict)
+    options: dict[str, str | int | float | bool | list[str]] = Field(
+        default_factory=dict, description="The kind's settings, as in devices.toml (timeout, speed, auto_retries …)")
 
 
 class Confirm(BaseModel):

@@ -66,7 +66,8 @@ class DeviceSpec:
     name: str
     kind: Kind
     address: str
-    options: Mapping[str, str | int | float | bool] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
+    """The kind's settings (`fabwire.config`: timeout, speed, auto_retries …), as in devices.toml."""
 
 
 _LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?::1\]?)(:|/|$))", re.IGNORECASE)
@@ -202,9 +203,12 @@ class Agent:
     async def add_device(self, spec: DeviceSpec) -> DeviceInfo:
         """Start monitoring; waits for the first connection attempt (bounded) so the id can use the serial."""
         from fabwire.agent.session import Session
+        from fabwire.config import validate_settings
+        from fabwire.devices import KINDS as DEVICE_KINDS
 
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
+        validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
         for session in self._sessions.values():
             if session.spec.address == spec.address and session.spec.kind == spec.kind:
                 raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
