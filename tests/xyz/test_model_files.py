@@ -11,7 +11,8 @@ import pytest
 
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.models import MODELS, PrinterModel, find_model, model_for_file_id, models_for_file_id
-from fabwire.xyz.printer import Printer, personality
+from fabwire.xyz.personas import personality
+from fabwire.xyz.printer import Printer
 from fabwire.xyz.sim import XYZSimulator
 from fabwire.xyz.threew import BODY_OFFSET, MAGIC, TAG_ECB, inspect_3w, read_3w, write_3w
 from linktools import loopback_tcp
