@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from fabwire.errors import InputError
+from fabwire.xyz import intake
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import FileFormat
 from fabwire.xyz.personas import Personality
@@ -461,12 +462,14 @@ class Printer:
 
     def check_file(self, data: bytes) -> FileVerdict:
         """What the firmware decides in state 9520: can this model print these bytes?"""
-        from fabwire.xyz.threew import inspect_3w, is_3w
+        from fabwire.xyz.threew import inspect_3w
 
         if "file-rejected" in self.faults:
             return FileVerdict(False, reason="rejected on demand")
-        if not is_3w(data):
-            return FileVerdict(self.persona.accepts_gcode, reason="not a .3w file")
+        kind = intake.identify(data[:intake.SNIFF], len(data))  # the printer decodes no base64 (XYZware did)
+        if kind is not intake.Kind.THREEW:
+            accepted = kind is intake.Kind.GCODE and self.persona.accepts_gcode
+            return FileVerdict(accepted, reason=f"{kind.value}, not a .3w file")
         try:
             info = inspect_3w(data)
         except InputError as exc:
@@ -474,8 +477,7 @@ class Printer:
         fmt = FileFormat.V2_ZIP if info.zipped else FileFormat.V5 if info.container == 5 else FileFormat.V2
         accepts = self.persona.accepts or (self.persona.model.file_format,)
         machine = (info.machine or "").strip()
-        mine = {self.persona.model.file_id.lower(), self.persona.model.model_number.lower()}
-        if not info.crc_ok or fmt not in accepts or machine.lower() not in mine:
+        if not info.crc_ok or fmt not in accepts or machine.lower() != self.persona.model.file_id.lower():
             return FileVerdict(False, reason=f"{fmt.value} file for {machine or 'unknown machine'}")
         return FileVerdict(True, float(info.print_time_s or 60), float(info.filament_mm or 0.0))
 
