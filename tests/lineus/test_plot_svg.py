@@ -10,12 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import svgelements as se
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
 from fabwire.lineus.plot import PlanOptions, parse_svg, plan_drawing, plan_file, read_drawing
 from fabwire.lineus.plot.svg import MAX_USE_COPIES
+from fabwire.lineus.plot.svgpath import PathBuilder, straight_path_data
 
 DATA = Path(__file__).parent / "data" / "svg"
 HEAD = '<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" '
@@ -371,3 +373,51 @@ def test_memory_follows_the_geometry(tmp_path: Path) -> None:
         tracemalloc.stop()
     assert read_peak / count < 400
     assert plan_peak / count < 400
+
+
+@st.composite
+def straight_command(draw: st.DrawFn) -> tuple[str, list[int]]:
+    """A straight-line path command, mostly with the right count of numbers, sometimes not."""
+    letter = draw(st.sampled_from("MmLlHhVvZz"))
+    arity = {"m": 2, "l": 2, "h": 1, "v": 1, "z": 0}[letter.lower()]
+    size = arity * draw(st.integers(1, 3)) if draw(st.integers(0, 9)) else draw(st.integers(0, 5))
+    return letter, draw(st.lists(st.integers(-50, 50), min_size=size, max_size=size))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(straight_command(), min_size=1, max_size=40), st.sampled_from([" ", ",", " , ", "\n"]),
+       st.booleans())
+def test_straight_path_reader_agrees_with_the_general_one(commands: list[tuple[str, list[int]]], sep: str,
+                                                          tidy: bool) -> None:
+    if tidy:  # what generators write: a fresh absolute moveto after every closepath
+        commands = [part for c in commands for part in ([c, ("M", [4, 8])] if c[0] in "Zz" else [c])]
+    d = " ".join(f"{c}{sep.join(str(v / 4) for v in values)}" for c, values in commands)
+    d = d + " " * max(0, 300 - len(d))  # long enough to take the array route
+    matrix = np.array([[2.0, 0.5, 3.0], [-0.5, 1.5, 7.0]])
+    fast = PathBuilder(matrix, 0.1)
+    taken = straight_path_data(fast, d)
+    general = PathBuilder(matrix, 0.1)
+    try:
+        se.SVGLexicalParser().parse(general, d)
+        general.end()
+    except ValueError:
+        general.subpaths = []
+        assert not taken or fast.subpaths == []
+        return
+    if not taken:
+        return
+    assert len(fast.subpaths) == len(general.subpaths)
+    for a, b in zip(fast.subpaths, general.subpaths, strict=True):
+        assert a.closed == b.closed
+        assert a.segments == b.segments
+        assert np.allclose(a.points, b.points)
+
+
+def test_straight_path_reader_takes_generated_paths() -> None:
+    d = "M0 0 " + " ".join(f"L{i % 100} {(i * 7) % 100}" for i in range(500)) + " Z M 5 5 h 10 v -3.5e1 l-2-2z"
+    builder = PathBuilder(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.1)
+    assert straight_path_data(builder, d)
+    first, second = builder.subpaths
+    assert first.closed
+    assert first.segments == 501
+    assert np.allclose(second.points, [(5, 5), (15, 5), (15, -30), (13, -32), (5, 5)])
