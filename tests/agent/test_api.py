@@ -154,6 +154,12 @@ def test_devices_added_and_removed_at_run_time(bench: Bench, simulator: Any) -> 
         assert len(ids) == len(set(ids)) == 4
         _error(client.post("/api/v1/devices", json={"name": "again", "kind": "xyz", "address": second.url}), 400, 4)
         _error(client.post("/api/v1/devices", json={"name": "bad name!", "kind": "xyz", "address": "x"}), 422, 4)
+        for path in ("/etc/passwd", "serial:///dev/../etc/shadow", "/dev/sda", "/dev/ttyS0/../../etc/passwd"):
+            refused = _error(client.post("/api/v1/devices", json={"name": "p", "kind": "xyz", "address": path}),
+                             400, 4)
+            assert "not a serial port" in refused["message"]
+        _error(client.post("/api/v1/devices", json={"name": "p", "kind": "mmu", "address": second.url,
+                                                     "options": {"sped": 3}}), 400, 4)
         assert client.delete(f"/api/v1/devices/{added['id']}").status_code == 204
         assert len(client.get("/api/v1/devices").json()) == 3
 
