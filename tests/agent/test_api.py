@@ -182,3 +182,21 @@ def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
         assert idle["pen_down"] is False  # the pen was lifted
         assert "not running" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True}),
                                        400, 4)["message"]
+
+
+def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        printer = device_of(client, "xyz")
+        actions = f"/api/v1/devices/{printer['id']}/actions"
+        if summary(client, printer["id"])["state"] == "done":  # a finished print waits to be taken off the bed
+            assert client.post(f"{actions}/acknowledge", json={}).status_code == 200
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle")
+        job = client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "square.g"},
+                          content=sample_path(SAMPLE_GCODE).read_bytes()).json()
+        wait_for(lambda: summary(client, printer["id"])["state"] == "printing", "the print under way")
+        assert "confirm" in _error(client.post(f"{actions}/cancel", json={}), 400, 4)["message"]
+        cancelled = client.post(f"{actions}/cancel", json={"confirm": True})
+        assert cancelled.status_code == 200, cancelled.text
+        assert cancelled.json()["id"] == job["id"]
+        assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "cancelled"
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle after cancelling")
