@@ -68,9 +68,9 @@ def drive(w: Wire, limit: float = 200.0) -> str:
         if reply.endswith(" E800c"):
             w.send("B1")
             continue
-        if " E" in reply or (" F" in reply and reply != "X0 F0") or (reply == "X0 F0" and last == "X0 F0"):
-            if reply != "X0 F0" or w.sim.model.next_deadline() is None:
-                return reply
+        ended = " E" in reply or (" F" in reply and reply != "X0 F0") or (reply == "X0 F0" and last == "X0 F0")
+        if ended and (reply != "X0 F0" or w.sim.model.next_deadline() is None):
+            return reply
         last = reply
         deadline = w.sim.model.next_deadline()
         if deadline is None:

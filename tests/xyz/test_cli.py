@@ -167,7 +167,7 @@ def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> 
     assert status_json(device(a.url))["model_number"] == "dv1MX0A000"
     nano = status_json(device(b.url))
     assert nano["model_number"] == "dv1NX0A000"
-    assert nano["zoffset"] == -469
+    assert nano["zoffset_mm"] == -4.69
     found = run_cli("--json", "xyz", "discover", "--host", "127.0.0.2", "--host", "127.0.0.3", "--host", "127.0.0.4",
                     "--port", str(port), "--probe-timeout", "0.5")
     assert found.returncode == 0, found.stderr

@@ -75,7 +75,7 @@ async def test_status_and_config_changes_visible(rig: Rig) -> None:
         assert await pr.nudge_zoffset(True) == -468
         await pr.leave_wifi()
         assert not (await pr.wifi_info()).network.connected  # type: ignore[union-attr]
-        await pr.join_wifi("lab", "pw", 6)
+        await pr.join_wifi("lab", "password", 6)
         net = (await pr.wifi_info()).network
         assert net is not None
         assert net.ssid == "lab"
@@ -171,7 +171,7 @@ async def test_rejected_file_and_wrong_model(rig: Rig) -> None:
     async with asyncio.timeout(LIMIT):
         with pytest.raises(InputError, match=r"Jr\. 1\.0 Pro"):
             await pr.print_file(pro)
-        with pytest.raises(InputError, match="neither G-code"):
+        with pytest.raises(InputError, match="an image \\(PNG\\), not G-code"):
             await pr.print_file(b"\x89PNG\r\n\x1a\n" + bytes(100))
         with pytest.raises(InputError, match="sliced for"):
             await pr.print_file(b"; machine = dv1JP0A000\n" + GCODE)

@@ -84,7 +84,7 @@ async def test_the_client_refuses_bad_strings_before_sending_anything() -> None:
         try:
             for call in (lambda: printer.set_language("xx"), lambda: printer.set_name("a" * 17),
                          lambda: printer.set_name("Drucker-Ü"), lambda: printer.join_wifi("Lab,5G", "password1"),
-                         lambda: printer.join_wifi("Lab", "short"), lambda: printer.upload(GCODE, "a,b.3w")):
+                         lambda: printer.join_wifi("Lab", "x" * 70), lambda: printer.upload(GCODE, "a,b.3w")):
                 with pytest.raises(InputError):
                     await call()
         finally:

@@ -73,10 +73,11 @@ def ssid(text: str) -> str:
 
 
 def wifi_password(text: str) -> str:
-    """A WPA passphrase (8-63 printable ASCII characters) or 64 hex digits, or empty for an open network; never
-    `,` or brackets, which end the command's fields."""
-    if text and not (8 <= len(text) <= 63 and _printable_ascii(text)) and not re.fullmatch(r"[0-9A-Fa-f]{64}", text):
-        raise InputError("Wi-Fi password must be 8-63 printable ASCII characters (or 64 hex digits)")
+    """A Wi-Fi key: up to 63 printable ASCII characters (WPA passphrases are 8-63, WEP keys 5 or 13) or 64 hex
+    digits, or empty for an open network; never `,` or brackets, which end the command's fields."""
+    if len(text) > 64 or (len(text) == 64 and not re.fullmatch(r"[0-9A-Fa-f]{64}", text)) or (
+            text and not _printable_ascii(text)):
+        raise InputError("Wi-Fi password must be up to 63 printable ASCII characters (or 64 hex digits)")
     if any(c in text for c in ",[]"):
         raise InputError("the printer cannot take a Wi-Fi password containing ',' or brackets")
     return text
