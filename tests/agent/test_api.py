@@ -154,6 +154,12 @@ def test_devices_added_and_removed_at_run_time(bench: Bench, simulator: Any) -> 
         assert len(ids) == len(set(ids)) == 4
         _error(client.post("/api/v1/devices", json={"name": "again", "kind": "xyz", "address": second.url}), 400, 4)
         _error(client.post("/api/v1/devices", json={"name": "bad name!", "kind": "xyz", "address": "x"}), 422, 4)
+        for path in ("/etc/passwd", "serial:///dev/../etc/shadow", "/dev/sda", "/dev/ttyS0/../../etc/passwd"):
+            refused = _error(client.post("/api/v1/devices", json={"name": "p", "kind": "xyz", "address": path}),
+                             400, 4)
+            assert "not a serial port" in refused["message"]
+        _error(client.post("/api/v1/devices", json={"name": "p", "kind": "mmu", "address": second.url,
+                                                     "options": {"sped": 3}}), 400, 4)
         assert client.delete(f"/api/v1/devices/{added['id']}").status_code == 204
         assert len(client.get("/api/v1/devices").json()) == 3
 
@@ -176,3 +182,21 @@ def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
         assert idle["pen_down"] is False  # the pen was lifted
         assert "not running" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True}),
                                        400, 4)["message"]
+
+
+def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        printer = device_of(client, "xyz")
+        actions = f"/api/v1/devices/{printer['id']}/actions"
+        if summary(client, printer["id"])["state"] == "done":  # a finished print waits to be taken off the bed
+            assert client.post(f"{actions}/acknowledge", json={}).status_code == 200
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle")
+        job = client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "square.g"},
+                          content=sample_path(SAMPLE_GCODE).read_bytes()).json()
+        wait_for(lambda: summary(client, printer["id"])["state"] == "printing", "the print under way")
+        assert "confirm" in _error(client.post(f"{actions}/cancel", json={}), 400, 4)["message"]
+        cancelled = client.post(f"{actions}/cancel", json={"confirm": True})
+        assert cancelled.status_code == 200, cancelled.text
+        assert cancelled.json()["id"] == job["id"]
+        assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "cancelled"
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle after cancelling")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import re
 from datetime import UTC, datetime, timedelta
 from importlib import resources
 from typing import Any
@@ -46,6 +47,22 @@ class NewDevice(BaseModel):
 
 class Confirm(BaseModel):
     confirm: bool = False
+
+
+SERIAL_PORT = re.compile(r"^/dev/(tty[A-Za-z0-9_.-]+|cu\.[A-Za-z0-9_.-]+|serial/by-(id|path)/[A-Za-z0-9_.:+-]+)$")
+"""The only paths a device added over the API may name: serial ports (a request must not open any file)."""
+
+
+def checked_address(body: NewDevice) -> str:
+    """The address as the agent will open it; over the API, a path must be a serial port's."""
+    from fabwire.devices import KINDS as DEVICE_KINDS
+    from fabwire.transport.urls import parse_url
+
+    endpoint = parse_url(body.address, DEVICE_KINDS[body.kind])
+    if endpoint.scheme == "serial" and (not SERIAL_PORT.match(endpoint.path) or ".." in endpoint.path):
+        raise InputError(f"{endpoint.path!r} is not a serial port: over the API a device path must look like "
+                         "/dev/ttyACM0 or /dev/serial/by-id/…")
+    return endpoint.url
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 404, 409, 413, 503, 504)}
@@ -111,7 +128,8 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
 
     @api.post("/devices", status_code=201, summary="Start monitoring a device")
     async def add_device(body: NewDevice) -> dict[str, Any]:
-        info = await agent.add_device(DeviceSpec(body.name, body.kind, body.address, body.options))  # type: ignore[arg-type]
+        spec = DeviceSpec(body.name, body.kind, checked_address(body), body.options)  # type: ignore[arg-type]
+        info = await agent.add_device(spec)
         return device_dict(info.id)
 
     @api.get("/devices/{device_id}", summary="One device and its latest state")
