@@ -82,10 +82,10 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
 
 def test_retry_with_the_cause_still_there_says_so(simulator: SimulatorStarter) -> None:
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", "homing-failed:always")
-    code, out, err = mmu(sim.url, "button", "retry")
+    code, _, err = mmu(sim.url, "button", "retry")  # the re-home stalls again
     assert code == 7
     assert "04115 SELECTOR CANNOT HOME (0x8087) during X0" in err
-    code, out, err = mmu(sim.url, "button", "continue")  # the printer's dialog offers Retry only
+    code, _, err = mmu(sim.url, "button", "continue")  # the printer's dialog offers Retry only
     assert code == 4
     assert "04115 SELECTOR CANNOT HOME (0x8087) offers Retry, not continue" in err
 

@@ -143,10 +143,8 @@ class HostLogic:
         self._command: Request | None = None
         self._command_sent = self._own = False
         """`_own`: planned by this host — only then does it press Retry by itself (not on an adopted error)."""
-        self._command_acked = False
-        """The MMU took the command: it said A, or Q0 showed it running."""
-        self._probe = False
-        """Ask Q0 before (re)sending the command: the MMU may already be running it."""
+        self._command_acked = False  # the MMU took it: it said A, or Q0 showed it running
+        self._probe = False  # ask Q0 before (re)sending the command: the MMU may already be running it
         self._rejects = 0
         self._fsensor_reported: int | None = None
         self._retries_left = auto_retries
