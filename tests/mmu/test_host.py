@@ -223,8 +223,9 @@ def test_after_a_full_restart_the_host_adopts_the_running_command_and_its_error(
     events = pair.run(_ended, mangle=cable_out)
     assert any(isinstance(e, h.LinkUp) for e in events)  # a new handshake happened
     assert pair.host.busy  # type: ignore[attr-defined]
-    assert isinstance(events[-1], h.ErrorRaised) and events[-1].code == 0x8003
-    assert events[-1].command == "T1"
+    last = events[-1]
+    assert isinstance(last, h.ErrorRaised)
+    assert (last.code, last.command) == (0x8003, "T1")
 
 
 def test_interrupted_when_the_mmu_reboots_mid_command() -> None:

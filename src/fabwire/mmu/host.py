@@ -9,8 +9,7 @@ Where the printer re-handshakes after every garbled reply or timeout, this host 
 short quiet gap, drains its decoder and asks again, keeping the handshake stage and the command it tracks; only
 a run of drop-outs with no good reply (as when the MMU reboots) restarts the handshake. A command whose
 acknowledgement was lost, or that the MMU rejected as busy, is looked up with Q0 first: when the MMU reports
-it running, the host adopts it instead of sending it again. On a line that flips 1 % of bytes this keeps tool
-changes going where the printer's logic would spend its time re-handshaking.
+it running, the host adopts it instead of sending it again.
 """
 
 from __future__ import annotations
@@ -63,6 +62,7 @@ from fabwire.mmu.protocol import (
     encode_request,
     make_request,
 )
+from fabwire.mmu.timing import TimingCheck
 
 __all__ = [  # the events are re-exported: callers need them with the logic
     "HEARTBEAT", "INIT_REGISTERS", "LINK_TIMEOUT", "POLL_REGISTERS", "SUPPORTED", "ButtonPushed", "ButtonSent",
@@ -124,6 +124,9 @@ class HostLogic:
         self.status = Status()
         self.drop_outs = 0
         """Drop-outs since the last good reply (the printer's DropOutFilter)."""
+        self.timing = TimingCheck(time_scale)
+        self.last_drop_out = ""
+        self._now = 0.0
         self._decoder = ResponseDecoder()
         self._out = bytearray()
         self._events: list[HostEvent] = []
@@ -138,11 +141,10 @@ class HostLogic:
         self._followups: deque[Request] = deque()
         self._planned: deque[Request] = deque()
         self._command: Request | None = None
-        self._command_sent = False
-        self._command_acked = False
-        """The MMU took the command: it said A, or Q0 showed it running."""
-        self._probe = False
-        """Ask Q0 before (re)sending the command: the MMU may already be running it."""
+        self._command_sent = self._own = False
+        """`_own`: planned by this host — only then does it press Retry by itself (not on an adopted error)."""
+        self._command_acked = False  # the MMU took it: it said A, or Q0 showed it running
+        self._probe = False  # ask Q0 before (re)sending the command: the MMU may already be running it
         self._rejects = 0
         self._fsensor_reported: int | None = None
         self._retries_left = auto_retries
@@ -186,11 +188,6 @@ class HostLogic:
     def command(self) -> Request | None:
         return self._command
 
-    @property
-    def error_pending(self) -> int | None:
-        """The error word the MMU last reported for the current command or at idle, None when there is none."""
-        return self.status.value if self.status.kind == "E" else None
-
     # ----------------------------------------------------------------------------------------- inputs
 
     def start(self, now: float) -> None:
@@ -200,7 +197,7 @@ class HostLogic:
     def receive(self, data: bytes, now: float) -> None:
         if not data or self._scope == "stopped":
             return
-        self._last_activity = now
+        self._last_activity = self._now = now
         self._silent = 0
         if self._scope == "resync":
             return  # the rest of a garbled burst: drained when the line goes quiet
@@ -246,8 +243,8 @@ class HostLogic:
         self._rejects = 0
         self._resend_at = now
         self._command = request
-        self._command_sent = False
-        self._command_acked = False
+        self._command_sent = self._command_acked = False
+        self._own = True
         self._probe = False
         self._pump(now)
 
@@ -313,6 +310,7 @@ class HostLogic:
             self._probe = True
 
     def _drop_out(self, reason: str) -> None:
+        self.last_drop_out = reason
         self.drop_outs += 1
         self._events.append(LinkLost(reason, self.drop_outs))
         if self.drop_outs % DROP_OUT_LIMIT == 0:
@@ -469,6 +467,7 @@ class HostLogic:
             if code in BUSY_CODES and running:
                 self._command = make_request(code, response.request_value)  # adopt what the MMU is doing
                 self._command_sent = self._command_acked = True
+                self._own = False
                 self._scope = "command"
             else:
                 self._scope = "idle"
@@ -520,7 +519,7 @@ class HostLogic:
         if self.fsensor_mode == "auto" and code == 0x8004:
             self.fsensor = int(codes.FSensor.NOT_PRESENT)  # the printer retracts to help the unload
         info = describe_error(code)
-        auto = info.retryable and self._retries_left > 0 and self._command is not None
+        auto = info.retryable and self._retries_left > 0 and self._command is not None and self._own
         if auto and not self._retry_pending:
             self._retry_pending = True
             self._planned.appendleft(ButtonPress(int(codes.Button.MIDDLE)))
@@ -577,6 +576,7 @@ class HostLogic:
         elif sent.code == "W":
             self._events.append(RegisterWritten(sent.value, sent.value2, isinstance(response, Accepted)))
         elif sent.code == "B" and isinstance(response, Accepted):
+            self._last_report = None  # after a press, the same error again is news
             if sent.value == codes.Button.MIDDLE and self._retry_pending and self._retries_left > 0:
                 self._retries_left -= 1
                 self._retry_pending = False
@@ -590,6 +590,7 @@ class HostLogic:
             pulley -= 0x10000  # the firmware's int32 millimetres, truncated to 16 bits
         self.status = replace(self.status, finda=bool(r.get(0x08)), selector=r.get(0x1B), idler=r.get(0x1C),
                               drive_errors=r.get(0x04), pulley=pulley)
+        self.timing.observe(self._now, pulley)
         if not self._announced and self.version is not None:
             self._announced = True
             self.link = Link.READY
