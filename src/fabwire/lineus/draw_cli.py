@@ -7,7 +7,6 @@ import asyncio
 import hashlib
 import json
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -114,8 +113,9 @@ def _report(dctx: DeviceContext, plan: Plan, extra: dict[str, Any] | None = None
 
 
 def state_dir() -> Path:
-    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(base) / "fabwire" / "lineus"
+    from fabwire.config import state_path
+
+    return state_path() / "lineus"
 
 
 @dataclass

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import time
 from collections.abc import AsyncIterator, Callable, Iterable
 from types import TracebackType
@@ -31,6 +32,7 @@ from fabwire.mmu.host import (
     HostLogic,
     Link,
     LinkFailed,
+    LinkLost,
     LinkUp,
     RegisterRead,
     RegisterWritten,
@@ -41,6 +43,7 @@ from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChan
 from fabwire.opening import DeviceLink, DeviceTarget, Opening, SyncClient
 from fabwire.transport import Transport
 
+log = logging.getLogger("fabwire.mmu")
 T = TypeVar("T")
 CONNECT_SECONDS = 5.0
 """Default time for the handshake, in MMU seconds: an MMU that is up answers S0 at once; one that is booting
@@ -171,6 +174,8 @@ class MMU:
             await self.transport.close()
 
     def _watch_link(self, event: HostEvent) -> None:
+        if isinstance(event, LinkUp | LinkLost | LinkFailed | ErrorRaised | CommandFinished):
+            log.info("%s", event)
         if isinstance(event, LinkUp):
             self._ready.set()
         elif isinstance(event, LinkFailed) and event.code == 0x802C:

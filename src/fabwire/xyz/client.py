@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import re
 import time
 from collections import deque
@@ -36,6 +37,7 @@ from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DO
 if TYPE_CHECKING:
     from fabwire.xyz.sync import SyncXYZPrinter
 
+log = logging.getLogger("fabwire.xyz")
 T = TypeVar("T")
 UploadProgress = Callable[[int, int], None]
 
@@ -150,6 +152,7 @@ class XYZPrinter(Maintenance):
         """Wi-Fi printers such as the 1.1 Plus close the connection after every reply: open a new one."""
         if self._lost is None or self.address is None or self.link is not Link.WIFI:
             return
+        log.info("the printer closed the connection (%s): opening a new one", self._lost)
         await self.transport.close()
         self.transport = await (self.reopen() if self.reopen is not None else
                                 open_transport(self.address, XYZ, connect_timeout=self.timeout))
@@ -313,6 +316,8 @@ class XYZPrinter(Maintenance):
         if "a" in letters and status.state is None:
             raise RemoteProtocolError(f"the status reply has no state (j:) among its {len(reply.lines)} lines; "
                                       "this is not a da Vinci answering XYZv3")
+        if status.state != self.last_status.state:
+            log.info("printer state: %s (%s)", status.state_name, status.state_code)
         self.last_status = status
         if self.last_status.model_number in HANGS_UP and self.link is Link.WIFI:
             self.per_command = True
