@@ -12,18 +12,22 @@ import asyncio
 import importlib
 import importlib.util
 import logging
+import os
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
 from functools import update_wrapper
 from pathlib import Path
-from typing import Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import click
 
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
 from fabwire.transport.faults import FaultPlan
+
+if TYPE_CHECKING:
+    from fabwire.config import Target
 
 P = ParamSpec("P")
 T = TypeVar("T")
@@ -44,6 +48,8 @@ class App:
     faults: FaultPlan | None = None
     link_options: dict[str, Any] = field(default_factory=dict)
     """A device's own link options given on the command line (e.g. the MMU's speed), by settings field name."""
+    server_options: dict[str, Any] = field(default_factory=dict)
+    """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simserve`."""
 
     @property
     def json(self) -> bool:
@@ -94,6 +100,25 @@ def _set_faults(app: App, value: str) -> None:
     app.faults = FaultPlan.parse(value)
 
 
+def _device_names(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
+    """Shell completion for -d: the configured names (of the command's device kind, when known)."""
+    from fabwire.config import load_devices
+    from fabwire.errors import FabwireError
+
+    try:
+        devices = load_devices()
+    except FabwireError:
+        return []
+    kinds = set()
+    current: click.Context | None = ctx
+    while current is not None:
+        kinds.add(current.info_name)
+        current = current.parent
+    wanted = kinds & {"xyz", "lineus", "mmu"}
+    return sorted(name for name, device in devices.items()
+                  if name.startswith(incomplete) and (not wanted or device.kind.name in wanted))
+
+
 GLOBAL_OPTIONS: tuple[OptionFactory, ...] = (
     lambda: click.Option(["--json", "shared_json"], is_flag=True, expose_value=False,
                          callback=_setter(_set_json),
@@ -108,7 +133,7 @@ GLOBAL_OPTIONS: tuple[OptionFactory, ...] = (
 
 DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
     lambda: click.Option(["-d", "--device", "shared_device"], metavar="DEVICE", expose_value=False,
-                         callback=_setter(lambda app, v: setattr(app, "device", v)),
+                         callback=_setter(lambda app, v: setattr(app, "device", v)), shell_complete=_device_names,
                          help="Address (host[:port], tcp://…, /dev/tty…, sim://KIND) or a configured device name."),
     lambda: click.Option(["--trace", "shared_trace"], type=click.Path(dir_okay=False, path_type=Path),
                          expose_value=False, callback=_setter(lambda app, v: setattr(app, "trace", v)),
@@ -161,6 +186,19 @@ class SharingGroup(click.Group):
         return command
 
 
+def _needs_extra(name: str, missing: Exception) -> click.Command:
+    """Stands in for a command whose extra is not installed: listed in help, and says what to install."""
+
+    def fail(args: tuple[str, ...]) -> None:
+        raise missing
+
+    command = click.Command(name, callback=fail, help=f"(not installed: {missing})",
+                            params=[click.Argument(["args"], nargs=-1)],
+                            context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+    command.short_help = str(missing).split(": ", 1)[-1]
+    return command
+
+
 class LazyGroup(SharingGroup):
     """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
 
@@ -181,7 +219,15 @@ class LazyGroup(SharingGroup):
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name in self._lazy and self._available(cmd_name):
             module_name, _, attr = self._lazy[cmd_name].partition(":")
-            command = getattr(importlib.import_module(module_name), attr)
+            try:
+                command = getattr(importlib.import_module(module_name), attr)
+            except ImportError as exc:
+                from fabwire.extras import missing_extra
+
+                missing = missing_extra(exc)
+                if missing is None:
+                    raise
+                return _needs_extra(cmd_name, missing)
             if not isinstance(command, click.Command):
                 raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
             return self.share(command)
@@ -206,6 +252,13 @@ class DeviceContext:
     @property
     def timeout(self) -> float:
         return self.app.timeout or 5.0
+
+    def target(self) -> Target:
+        """Where the command goes (checks a device name against the config before any work starts)."""
+        from fabwire.config import resolve_target
+
+        return resolve_target(self.app.device or os.environ.get(f"FABWIRE_{self.kind.name.upper()}_DEVICE"),
+                              self.kind)
 
     def open_options(self, **options: Any) -> dict[str, Any]:
         """The command line's link options, ready for `X.open` (unset ones leave the config's in force)."""

@@ -10,6 +10,7 @@ import contextlib
 import logging
 import random
 import time
+from collections import deque
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -24,6 +25,8 @@ log = logging.getLogger("fabwire.agent")
 LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
 """What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
 JOB_EVENT_EVERY_S = 0.5
+STOP_WAIT_S = 30.0
+"""How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
 
 def make_driver(spec: DeviceSpec, emit: Any) -> Driver:
@@ -47,19 +50,20 @@ class PollStats:
     def __init__(self) -> None:
         self.polls = 0
         self.late = 0
-        self.lags: list[float] = []
+        self.lags: deque[float] = deque(maxlen=600)
+        """The last ten minutes' lags at 1 Hz."""
 
     def record(self, lag: float, interval: float) -> None:
         self.polls += 1
         if lag > interval / 2:
             self.late += 1
-        if len(self.lags) < 100_000:
-            self.lags.append(lag)
+        self.lags.append(lag)
 
 
 class Session:
-    def __init__(self, agent: Agent, spec: DeviceSpec) -> None:
+    def __init__(self, agent: Agent, spec: DeviceSpec, *, order: int = 0) -> None:
         self.agent = agent
+        self.order = order
         self.spec = spec
         self.driver = make_driver(spec, self._device_event)
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
@@ -78,6 +82,7 @@ class Session:
         self._last_job_event = 0.0
         self._reason = "not connected yet"
         self._stopping = False
+        self._cancelling = False
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -170,6 +175,10 @@ class Session:
     def _set_state(self, *, online: bool, summary: dict[str, Any] | None, status: dict[str, Any] | None = None
                    ) -> None:
         previous = self.state
+        if previous and status is not None and status is previous["status"] and summary is previous["summary"] \
+                and online == previous["online"] and self._job is previous["job"]:
+            self.state = {**previous, "ts": now_iso()}  # the same objects as last time: nothing to compare
+            return
         state = {"ts": now_iso(), "online": online, "device": self.info.id, "kind": self.spec.kind,
                  "name": self.spec.name, "summary": summary or previous.get("summary") or offline_summary(""),
                  "status": status if status is not None else previous.get("status"), "job": self._job}
@@ -194,6 +203,8 @@ class Session:
         spec = self.driver.action(action)
         checked = checked_params(spec, params)
         self._require_online()
+        if action == "cancel" and self._job is not None:  # the print is this agent's job: end the job with it
+            return await self.cancel_job(self._job["id"], confirm=True)
         if spec.job:
             job = await self._start_job(action, None, None, checked)
             return {"started": action, "job": job}
@@ -244,13 +255,18 @@ class Session:
                 await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
             raise
         except (*LINK_FAILURES, FabwireError) as exc:
-            await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
-            self._publish("error", message=f"job {job['id']}: {exc}", exit_code=exit_code_of(exc), job=job["id"])
+            if self._cancelling:
+                await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
+            else:
+                await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
+                self._publish("error", message=f"job {job['id']}: {exc}", exit_code=exit_code_of(exc),
+                              job=job["id"])
         else:
             await self._job_changed(state="done", finished=now_iso(), progress_percent=100.0, time_left_s=0.0,
                                     message=message)
         finally:
             self._job = None
+            self._cancelling = False
             self._set_state(online=self.online, summary=None)
 
     async def _job_changed(self, **fields: Any) -> None:
@@ -287,14 +303,20 @@ class Session:
         if not confirm:
             raise InputError(f"cancelling job {job_id} stops it for good: send \"confirm\": true to go ahead")
         job = dict(self._job)
-        self._job_task.cancel()
-        with contextlib.suppress(BaseException):
-            await self._job_task
+        task = self._job_task
+        self._cancelling = True
         try:
-            await self.driver.stop_job()
+            await self.driver.stop_job()  # the machine stops; the job's own loop then winds down cleanly
+            _, pending = await asyncio.wait({task}, timeout=STOP_WAIT_S)
         except (*LINK_FAILURES, FabwireError) as exc:
             self._publish("error", message=f"stopping job {job_id}: {exc}", exit_code=exit_code_of(exc))
-        return {**job, "state": "cancelled"}
+            pending = {task}
+        if pending:  # it would not stop: cut it off, and start the link afresh (a command may be half-answered)
+            task.cancel()
+            with contextlib.suppress(BaseException):
+                await task
+            await self.driver.close()
+        return await self.agent.jobs.get(job_id)
 
 
 class _Handle:

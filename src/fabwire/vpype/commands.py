@@ -199,8 +199,8 @@ def lineus_draw(document: Any, device: str | None, timeout: float, clip: bool, n
     is saved after every stroke: after a lost link, run the same pipeline with --resume.
     """
     with fabwire_errors():
-        app = App()
-        dctx = DeviceContext(app, LINEUS, device, None, timeout)
+        app = App(device=device, timeout=timeout)
+        dctx = DeviceContext(app, LINEUS)
         dctx.target()  # an unknown device name fails before any planning
         options = _plan_options(clip, no_optimize, optimize_time)
         layer_ids = vpype_cli.multiple_to_layer_ids(layer, document)

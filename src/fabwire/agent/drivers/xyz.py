@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
-from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, Param, summary
+from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_xyz
 from fabwire.errors import InputError, LinkClosed
 from fabwire.xyz.client import XYZPrinter
@@ -77,6 +77,9 @@ class XYZDriver(Driver):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.printer: XYZPrinter | None = None
+        self._last: tuple[Status, dict[str, Any], dict[str, Any]] | None = None
+        """The previous poll's status and its two views: an idle printer answers the same each second, and
+        converting it again would cost as much as the poll itself."""
 
     def _client(self) -> XYZPrinter:
         if self.printer is None:
@@ -91,7 +94,9 @@ class XYZDriver(Driver):
 
     async def poll(self) -> tuple[dict[str, Any] | None, dict[str, Any]]:
         status = await self._client().status()
-        return status.to_dict(), printer_summary(status)
+        if self._last is None or self._last[0] != status:
+            self._last = (status, status.to_dict(), printer_summary(status))
+        return self._last[1], self._last[2]
 
     async def close(self) -> None:
         printer, self.printer = self.printer, None
@@ -132,8 +137,10 @@ class XYZDriver(Driver):
             handle.progress(percent, time_left_s=left, message=status.state_name)
 
         final = await printer.print_file(path, progress=uploaded, on_status=followed)
+        if final.state_code != PRINT_DONE:
+            raise JobStopped(f"the printer became {final.state_name} before the print finished")
         return f"{final.state_name} after {time.monotonic() - began:.0f} s"
 
     async def stop_job(self) -> None:
-        if self.printer is not None:
-            await self.printer.cancel()
+        """Cancel the print on the printer; following it then sees the printer go idle."""
+        await self._client().cancel()

@@ -357,6 +357,7 @@ async function loadDevices() {
     card.device = device; card.state = device.state;
     render(card);
   }
+  performance.mark("fabwire-cards");  // first meaningful paint: every machine on the page
   for (const card of cards.values()) {
     loadHistory(card).catch(() => {});
     loadDrawing(card).catch(() => {});
