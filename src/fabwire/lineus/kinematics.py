@@ -92,17 +92,6 @@ def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike) -> npt.NDArray[np.bool_
     return np.asarray(ok, dtype=bool)
 
 
-def area_mask(xs: npt.ArrayLike, ys: npt.ArrayLike, *, full: bool = False) -> npt.NDArray[np.bool_]:
-    """Points inside the drawing area: the app area within reach, or with `full` the whole reachable area."""
-    ok = reachable_mask(xs, ys)
-    if not full:
-        x = np.asarray(xs, dtype=float)
-        y = np.asarray(ys, dtype=float)
-        x0, y0, x1, y1 = APP_AREA
-        ok &= (x >= x0 - _EPS) & (x <= x1 + _EPS) & (y >= y0 - _EPS) & (y <= y1 + _EPS)
-    return ok
-
-
 def outside_length(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> float:
     """Length of a polyline that lies outside the reachable area, sampled every `step` units.
 

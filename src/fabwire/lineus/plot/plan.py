@@ -193,6 +193,11 @@ def auto_rotation(polys: Polylines, options: PlanOptions) -> float:
     return 90.0 if turned > upright * 1.001 else 0.0
 
 
+def rotation_of(polys: Polylines, options: PlanOptions) -> float:
+    """The degrees `options` ask for: their own, or 0/90 chosen by `auto_rotation`."""
+    return auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+
+
 def _identity() -> FloatArray:
     return scale_translate(1.0, 0.0, 0.0)
 
@@ -213,7 +218,7 @@ def plan_lines(
     if options.margin_mm < 0:
         raise InputError(f"the margin must not be negative, got {options.margin_mm:g} mm")
     fit = fit_default if options.fit is None else options.fit
-    degrees = auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+    degrees = rotation_of(polys, options)
     matrix = _identity()
     if degrees % 360:
         matrix = _rotation_about_centre(polys, degrees)
@@ -244,7 +249,7 @@ def plan_drawing(drawing: Drawing, options: PlanOptions = PlanOptions()) -> Plan
     if fit and drawing.curved:
         polys = drawing.lines
         if options.rotate_auto or options.rotate_deg % 360:
-            degrees = auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+            degrees = rotation_of(polys, options)
             polys = affine(polys, _rotation_about_centre(polys, degrees))
         scale, _ = fit_scale(polys, margin=options.margin_mm * UNITS_PER_MM, full=options.full_area)
         if drawing.tolerance * scale > FLATTEN_TOLERANCE * 1.001:
@@ -271,7 +276,7 @@ def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise InputError(f"the text size must be a positive number of mm, got {size_mm:g}")
     lines = text_lines(text, font=font, cap_height=size_mm * UNITS_PER_MM, notes=notes)
-    degrees = auto_rotation(lines, options) if options.rotate_auto else options.rotate_deg
+    degrees = rotation_of(lines, options)
     if degrees % 360:
         lines = affine(lines, _rotation_about_centre(lines, degrees))
     x0, y0, x1, y1 = bbox(lines)
