@@ -513,8 +513,9 @@ class HostLogic:
 
     def _error(self, code: int) -> None:
         if self._last_report == ("E", code) and not self._retry_acked:
-            if self._retry_pending and not self._retry_queued():
-                self._planned.appendleft(ButtonPress(int(codes.Button.MIDDLE)))  # our Retry was lost on the line
+            middle = ButtonPress(int(codes.Button.MIDDLE))
+            if self._retry_pending and middle not in self._planned and self._inflight != middle:
+                self._planned.appendleft(middle)  # our Retry was lost on the line
             return
         self._last_report = ("E", code)
         self._retry_acked = False
@@ -526,10 +527,6 @@ class HostLogic:
             self._retry_pending = True
             self._planned.appendleft(ButtonPress(int(codes.Button.MIDDLE)))
         self._events.append(ErrorRaised(self.status.command, code, info, auto, self._retries_left))
-
-    def _retry_queued(self) -> bool:
-        middle = ButtonPress(int(codes.Button.MIDDLE))
-        return middle in self._planned or self._inflight == middle
 
     def _finished(self, response: Finished) -> None:
         self._events.append(CommandFinished(response.command, response.number))
