@@ -339,6 +339,6 @@ def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: boo
         dctx.output.json_mode = True
     plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area))
     for out in outputs:
-        write_drawing(out, plan.strokes, plan.travel(), title=Path(str(file)).name, hidden=plan.hidden,
-                      scale=dpi_scale(dpi))
+        write_drawing(out, plan.strokes, plan.travel(), title="standard input" if str(file) == "-" else file.name,
+                      hidden=plan.hidden, scale=dpi_scale(dpi))
     _report(dctx, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})
