@@ -288,7 +288,7 @@ async def home(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 
 
 @mmu.command("version")
-@with_mmu()
+@with_mmu(auto_retries=0)
 async def version(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show the MMU firmware version and build."""
     v = mmu_.version
@@ -298,7 +298,7 @@ async def version(dctx: DeviceContext, mmu_: MMU) -> None:
 
 
 @mmu.command("status")
-@with_mmu()
+@with_mmu(auto_retries=0)
 async def status(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show FINDA, filament sensor, slot, selector/idler, drive errors and the current command."""
     st = mmu_.status
@@ -401,7 +401,7 @@ async def registers(dctx: DeviceContext, mmu_: MMU) -> None:
 
 @mmu.command("read")
 @click.argument("register")
-@with_mmu(_register_arg)
+@with_mmu(_register_arg, auto_retries=0)
 async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
     """Read REGISTER (a name such as bowden_length, or an address like 0x22)."""
     reg = resolve_register(register)
@@ -413,7 +413,7 @@ async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
 @mmu.command("write")
 @click.argument("register")
 @click.argument("value")
-@with_mmu(_write_args)
+@with_mmu(_write_args, auto_retries=0)
 async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> None:
     """Write VALUE to REGISTER (by name or address)."""
     reg = resolve_register(register, for_write=True)

@@ -94,11 +94,11 @@ idle reply `H0 F0` as a protocol error; we include it so a Home does not trigger
 
 
 FSensorMode = Literal["auto", "manual"]
+# In "auto" mode the host plays the printer's sensor: on while the MMU feeds to it, off once it unloads, retracts
+# or feeds to FINDA (so one missed poll cannot leave it stuck on).
 AUTO_FSENSOR_ON = frozenset({codes.Progress.FEEDING_TO_FSENSOR, codes.Progress.FEEDING_TO_NOZZLE})
-"""In "auto" mode the host plays the printer's sensor: filament reaches it while the MMU feeds to it …"""
 AUTO_FSENSOR_OFF = frozenset({codes.Progress.UNLOADING_TO_FINDA, codes.Progress.RETRACTING_FROM_FINDA,
                               codes.Progress.FEEDING_TO_FINDA})
-"""… and has left it once the MMU unloads, retracts or feeds to FINDA (a missed poll cannot leave it stuck on)."""
 
 
 class HostLogic:
@@ -142,7 +142,8 @@ class HostLogic:
         self._planned: deque[Request] = deque()
         self._command: Request | None = None
         self._command_sent = self._own = False
-        """`_own`: planned by this host — only then does it press Retry by itself (not on an adopted error)."""
+        """`_own`: sent by this host — only then does it press Retry by itself (not on someone else's error)."""
+        self._last_sent: Request | None = None
         self._command_acked = False  # the MMU took it: it said A, or Q0 showed it running
         self._probe = False  # ask Q0 before (re)sending the command: the MMU may already be running it
         self._rejects = 0
@@ -385,6 +386,7 @@ class HostLogic:
                 return
             self._scope = "command"
             self._command_sent = True
+            self._last_sent = self._command
             self._send(self._command, now)
             return
         if self._planned:
@@ -467,7 +469,7 @@ class HostLogic:
             if code in BUSY_CODES and running:
                 self._command = make_request(code, response.request_value)  # adopt what the MMU is doing
                 self._command_sent = self._command_acked = True
-                self._own = False
+                self._own = self._command == self._last_sent  # ours from before (given up on, or a restart)
                 self._scope = "command"
             else:
                 self._scope = "idle"
@@ -511,8 +513,9 @@ class HostLogic:
 
     def _error(self, code: int) -> None:
         if self._last_report == ("E", code) and not self._retry_acked:
-            if self._retry_pending and not self._retry_queued():
-                self._planned.appendleft(ButtonPress(int(codes.Button.MIDDLE)))  # our Retry was lost on the line
+            middle = ButtonPress(int(codes.Button.MIDDLE))
+            if self._retry_pending and middle not in self._planned and self._inflight != middle:
+                self._planned.appendleft(middle)  # our Retry was lost on the line
             return
         self._last_report = ("E", code)
         self._retry_acked = False
@@ -524,10 +527,6 @@ class HostLogic:
             self._retry_pending = True
             self._planned.appendleft(ButtonPress(int(codes.Button.MIDDLE)))
         self._events.append(ErrorRaised(self.status.command, code, info, auto, self._retries_left))
-
-    def _retry_queued(self) -> bool:
-        middle = ButtonPress(int(codes.Button.MIDDLE))
-        return middle in self._planned or self._inflight == middle
 
     def _finished(self, response: Finished) -> None:
         self._events.append(CommandFinished(response.command, response.number))
