@@ -72,7 +72,8 @@ class LineUsDriver(Driver):
         if not self.drawing:
             self.position = await self._client().position()
         pos = self.position
-        status = {"x": pos.x, "y": pos.y, "z": pos.z, "pen_down": pos.pen_down} if pos else None
+        # the shape `fabwire lineus position --json` prints
+        status = {"x": pos.x, "y": pos.y, "z": pos.z, "pen": "down" if pos.pen_down else "up"} if pos else None
         return status, self._summary()
 
     async def close(self) -> None:
