@@ -94,7 +94,9 @@ def test_session_through_the_cli(simulator, tmp_path: Path) -> None:
     sim.process.terminate()
     assert sim.process.wait(10) == 0
     assert sim.process.stderr is not None
-    assert "recorded 1 stroke(s)" in sim.process.stderr.read()
+    # The three `move --pen down` calls each put the pen down in one place (a dot; the next connection's homing
+    # lifts it), and the raw session drew one line.
+    assert "recorded 4 stroke(s)" in sim.process.stderr.read()
     svg = record.read_text()
     assert svg.startswith("<?xml")
     assert "1200" in svg

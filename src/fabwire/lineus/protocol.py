@@ -589,10 +589,36 @@ def parse_command(line: str) -> Command:
         raise RemoteProtocolError(str(exc)) from None
 
 
+_HEAD = re.compile(r"([GgMm]\d{1,3})(?=[A-Za-z]|$)")
+_RUN_TOGETHER = re.compile(r"(?:[A-Za-z][+-]?(?:\d+(?:\.\d*)?|\.\d+))+")
+_ONE_PARAM = re.compile(r"[A-Za-z][+-]?(?:\d+(?:\.\d*)?|\.\d+)")
+
+
+def command_code(line: str) -> str | None:
+    """The normalised code a line starts with (`G01`, `M114`), or None when it does not start with one."""
+    tokens = line.split(maxsplit=1)
+    match = _HEAD.match(tokens[0]) if tokens else None
+    return _normalise_code(match.group(1)) if match else None
+
+
+def _g_tokens(tokens: list[str]) -> list[str]:
+    """`G01X1000Y0` and `X1400Y0`: G-code parameters written without spaces, as converters do, split apart.
+    Only numeric G parameters are split; M-code values are text (`M550 Pmy-bot2`)."""
+    head = _HEAD.match(tokens[0])
+    if head is None or head.group(1)[0] not in "Gg":
+        return tokens
+    out = [head.group(1)]
+    rest = tokens[0][head.end():]
+    for token in ([rest] if rest else []) + tokens[1:]:
+        out.extend(_ONE_PARAM.findall(token) if _RUN_TOGETHER.fullmatch(token) else [token])
+    return out
+
+
 def _parse(line: str) -> Command:
     tokens = split_fields(line)
     if not tokens:
         raise RemoteProtocolError("empty command")
+    tokens = _g_tokens(tokens)
     code = _normalise_code(tokens[0])
     p = _Params(code)
     flags: set[str] = set()

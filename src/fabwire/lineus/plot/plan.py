@@ -188,7 +188,7 @@ def load_drawing(path: str | Path) -> tuple[Polylines, str, list[str]]:
         lines = affine(drawing.lines, m)
         kind = "svg"
     elif suffix in (".gcode", ".gc", ".nc", ".txt", ".ngc", ".g"):
-        lines = parse_gcode(p)
+        lines = parse_gcode(p, notes=notes)
         kind = "gcode"
     else:
         raise InputError(f"{p}: unknown drawing type {p.suffix or '(none)'!r}; give an .svg or .gcode file")
