@@ -34,6 +34,8 @@ def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> 
             try:
                 return await action(arm)
             finally:
+                for notice in arm.notices:
+                    dctx.output.note(notice)
                 await arm.detach()  # the link's context closes the transport (and its trace)
 
     return asyncio.run(main())
