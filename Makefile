@@ -24,6 +24,7 @@ typecheck: $(STAMP)
 	$(BIN)/mypy --strict src
 
 pytest: $(STAMP)
+	scripts/ensure-system-packages
 	$(BIN)/pytest -q
 
 soak: $(STAMP)

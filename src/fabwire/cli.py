@@ -60,6 +60,7 @@ def _setup_logging(verbose: int) -> None:
         "lineus": "fabwire.lineus.cli:lineus",
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
+        "serve": "fabwire.agent.command:serve",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )

@@ -133,8 +133,10 @@ def test_empty_and_missing_files_are_input_errors(tmp_path: Path) -> None:
         plan_file(DATA / "empty.svg")
     with pytest.raises(InputError, match="no such file"):
         plan_file(tmp_path / "missing.svg")
-    with pytest.raises(InputError, match="unknown drawing type"):
-        plan_file(tmp_path / "drawing.pdf")
+    pdf = tmp_path / "drawing.pdf"
+    pdf.write_bytes(b"%PDF-1.7\n%\xe2\xe3\xcf\xd3\n")
+    with pytest.raises(InputError, match=r"unknown drawing type '\.pdf'"):
+        plan_file(pdf)
 
 
 def random_segments_svg(rng: np.random.Generator, count: int) -> tuple[str, list[np.ndarray]]:
@@ -253,7 +255,12 @@ def test_fit_margin_and_rotation() -> None:
     x0, y0 = np.min(plain.strokes[0], axis=0)
     x1, y1 = np.max(plain.strokes[0], axis=0)
     assert (x1 - x0) / (y1 - y0) == pytest.approx(4.0, rel=1e-6)
-    assert (x1 - x0) > 1200  # fills the area's width
+    assert 1100 < (x1 - x0) <= 1125  # fills the app area's width (650..1775)
+    assert min(x0 - 650, 1775 - x1, y0 + 1000, 1000 - y1) >= -1e-6  # inside the app area
+    full = plan_lines(wide, PlanOptions(margin_mm=0, optimize=False, full_area=True))
+    fx0, fx1 = np.min(full.strokes[0][:, 0]), np.max(full.strokes[0][:, 0])
+    assert fx1 - fx0 > 1200  # the whole reachable area is wider than the app's
+    assert kin.polyline_reachable(full.strokes[0])
     rotated = plan_lines(wide, PlanOptions(rotate_deg=90, margin_mm=0, optimize=False))
     rx0, ry0 = np.min(rotated.strokes[0], axis=0)
     rx1, ry1 = np.max(rotated.strokes[0], axis=0)

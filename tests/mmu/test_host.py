@@ -13,9 +13,11 @@ REFERENCE_HANDSHAKE = [
     (">", "S0*c6"), ("<", "S0 A3*22"), (">", "S1*ad"), ("<", "S1 A0*34"), (">", "S2*10"), ("<", "S2 A2*65"),
     (">", "S3*7b"), ("<", "S3 A36e*4c"), (">", "Wb 5*33"), ("<", "Wb A*5c"), (">", "W14 14*94"),
     ("<", "W14 A*52"), (">", "f0*21"), ("<", "f0 A*c5"), (">", "Q0*ea"), ("<", "X0 F0*87"), (">", "R8*81"),
-    ("<", "R8 A0*8d"), (">", "R1b*9e"), ("<", "R1b A5*29"), (">", "R1c*88"), ("<", "R1c A5*f6"), (">", "R4*7b"),
+    ("<", "R8 A0*8d"), (">", "R1b*9e"), ("<", "R1b Aff*bf"), (">", "R1c*88"), ("<", "R1c Aff*60"), (">", "R4*7b"),
     ("<", "R4 A0*66"), (">", "R1a*f5"), ("<", "R1a A0*41"),
 ]
+"""Right after power-on both axes are still homing, so their slots read 0xff; once homed the same poll reads
+`R1b A5*29` / `R1c A5*f6` (idle capture, prusa3d/Prusa-Firmware#4301)."""
 
 
 def _pair(version: str = "3.0.4", faults: tuple[str, ...] = (), **options: object) -> Lockstep:
@@ -56,6 +58,9 @@ def test_handshake_bytes_match_the_printer() -> None:
     assert all(line == (">", "S0*c6") for line in lines[:first_answer])  # re-sent every 2 s while it boots
     s0_times = [t for t, d, data in pair.wire if data == b"S0*c6\n"]
     assert s0_times == [0.0, 2.0, 4.0]
+    pair.run(lambda new: any(isinstance(e, h.StatusUpdated) and e.status.selector == 5 for e in new), limit=10)
+    assert ("<", "R1b A5*29") in _lines(pair)[len(lines):]
+    assert ("<", "R1c A5*f6") in _lines(pair)[len(lines):]
 
 
 def test_heartbeat_after_one_second_of_silence() -> None:

@@ -5,8 +5,9 @@ from __future__ import annotations
 import pytest
 
 from fabwire.errors import InputError
-from fabwire.mmu.model import move_time, parse_fault
+from fabwire.mmu.faults import parse_fault
 from fabwire.mmu.protocol import Read, encode
+from fabwire.mmu.scripts import move_time
 
 from .wire import Wire
 
@@ -268,6 +269,8 @@ def test_reset_42_erases_eeprom_counters() -> None:
 def test_idle_middle_starts_a_load_under_the_old_command() -> None:
     w = Wire()
     w.send("H0")
+    assert w.send("Q0") == "H0 P1a"
+    w.run_until("H0 F0")
     w.send("B1", 2.0)
     assert w.send("Q0") == "H0 P5"
 
@@ -327,8 +330,14 @@ def test_idler_homing_failure() -> None:
 
 
 def test_undervoltage_panics_until_reset() -> None:
-    w = Wire(faults=("undervoltage",))
+    w = Wire()
     w.send("T0")
-    w.run_until("T0 E800d")
+    assert w.send("Q0", 1.0) == "T0 P5"
+    w.sim.inject("undervoltage")
+    assert w.send("Q0") == "T0 E800d"  # the supply is checked on every main-loop pass
     assert w.send("R5") == "R5 Ad"
     assert w.send("T1") == "T1 R"
+    assert w.send("B1") == "B1 A"
+    assert w.send("Q0", 5.0) == "T0 E800d"
+    w.send("X0")
+    assert w.send("Q0", 4.5) == "X0 F0"  # the one failing check was used up: the reset cleared the panic

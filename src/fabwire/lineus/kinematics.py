@@ -46,6 +46,14 @@ _CENTRE_DOWN = (LINK * math.cos(_LIMIT), -LINK * math.sin(_LIMIT))
 Y_EXTENT = _CENTRE_UP[1] + LINK
 BOUNDS = (X_MIN_UPPER, -Y_EXTENT, R_MAX, Y_EXTENT)
 """Bounding box of the reachable area: (x_min, y_min, x_max, y_max)."""
+APP_AREA = (650.0, -1000.0, 1775.0, 1000.0)
+"""The official app's drawing rectangle (x_min, y_min, x_max, y_max), from the published drawing-area sheet.
+Its far corners and x < 700 below y = 0 are not reachable, so the app area is this rectangle within reach."""
+BODY = (-251.0, -1356.0, 249.0, 564.0)
+"""The machine body's footprint (x_min, y_min, x_max, y_max), from the same sheet."""
+
+_MAX_SAMPLES = 1 << 20
+"""Points sampled per slice when measuring segments against the area."""
 
 Point = tuple[float, float]
 FloatArray = npt.NDArray[np.float64]
@@ -89,6 +97,17 @@ def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike, *, x_min_lower: float =
     return np.asarray(ok, dtype=bool)
 
 
+def area_mask(xs: npt.ArrayLike, ys: npt.ArrayLike, *, full: bool = False) -> npt.NDArray[np.bool_]:
+    """Points inside the drawing area: the app area within reach, or with `full` the whole reachable area."""
+    ok = reachable_mask(xs, ys)
+    if not full:
+        x = np.asarray(xs, dtype=float)
+        y = np.asarray(ys, dtype=float)
+        x0, y0, x1, y1 = APP_AREA
+        ok &= (x >= x0 - _EPS) & (x <= x1 + _EPS) & (y >= y0 - _EPS) & (y <= y1 + _EPS)
+    return ok
+
+
 def outside_length(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> float:
     """Length of a polyline that lies outside the reachable area, sampled every `step` units.
 
@@ -108,14 +127,23 @@ def segments_outside(starts: FloatArray, ends: FloatArray, *, step: float = 2.0)
     if len(a) == 0:
         return 0.0
     lengths = np.hypot(d[:, 0], d[:, 1])
-    n = np.maximum(1, np.ceil(lengths / step)).astype(np.int64)
-    seg = np.repeat(np.arange(len(d)), n)
-    first = np.cumsum(n) - n
-    t = (np.arange(int(n.sum())) - first[seg] + 0.5) / n[seg]
-    xs = a[seg, 0] + d[seg, 0] * t
-    ys = a[seg, 1] + d[seg, 1] * t
-    bad = ~reachable_mask(xs, ys)
-    return float(np.sum(lengths[seg] / n[seg] * bad))
+    n = np.minimum(np.maximum(1, np.ceil(lengths / step)), 1 << 20).astype(np.int64)
+    # Sample in slices of about _MAX_SAMPLES points, so memory stays bounded whatever the segment lengths.
+    total = 0.0
+    cuts = np.searchsorted(np.cumsum(n), np.arange(_MAX_SAMPLES, int(n.sum()) + _MAX_SAMPLES, _MAX_SAMPLES))
+    lo = 0
+    for hi in [*cuts.tolist(), len(n)]:
+        hi = max(hi, lo + 1)
+        if lo >= len(n):
+            break
+        part = n[lo:hi]
+        seg = np.repeat(np.arange(lo, hi), part)
+        first = np.cumsum(part) - part
+        t = (np.arange(int(part.sum())) - first[seg - lo] + 0.5) / n[seg]
+        bad = ~reachable_mask(a[seg, 0] + d[seg, 0] * t, a[seg, 1] + d[seg, 1] * t)
+        total += float(np.sum(lengths[seg] / n[seg] * bad))
+        lo = hi
+    return total
 
 
 def lines_outside(lines: Sequence[FloatArray], *, step: float = 2.0) -> float:

@@ -16,6 +16,8 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
+from fabwire.mmu.errors import describe_error
+from fabwire.mmu.faults import FAULT_NAMES, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
     ButtonSent,
@@ -33,7 +35,6 @@ from fabwire.mmu.host import (
     Status,
     StatusUpdated,
 )
-from fabwire.mmu.model import FAULT_NAMES, parse_fault
 from fabwire.simserve import serve, server_options
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -286,7 +287,7 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
             ("pulley", f"{st.pulley} mm"),
         ]
         if st.kind == "E":
-            info = codes.describe_error(st.value)
+            info = describe_error(st.value)
             rows.append(("error", f"{info.meaning} — {info.action}"))
         for key, value in rows:
             out.print(f"{key:<13} {value}")

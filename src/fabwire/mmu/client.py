@@ -15,6 +15,7 @@ from typing import Any, Self, TypeVar
 
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.mmu import codes
+from fabwire.mmu.errors import MMUError, format_error
 from fabwire.mmu.host import (
     INIT_REGISTERS,
     SUPPORTED,
@@ -61,10 +62,8 @@ def resolve_register(register: int | str, *, for_write: bool = False,
     return found
 
 
-def error_for(event: ErrorRaised | LinkFailed) -> DeviceError:
-    info = event.info
-    return DeviceError(f"{info.code:04x}", f"{info.meaning}" + (f" ({info.printer_code})" if info.printer_code
-                                                                else ""), action=info.action)
+def error_for(event: ErrorRaised) -> MMUError:
+    return MMUError(event.code, command=event.command)
 
 
 class MMU:
@@ -129,10 +128,11 @@ class MMU:
         if isinstance(event, LinkUp):
             self._ready.set()
         elif isinstance(event, LinkFailed) and event.code == 0x802C:
-            self._fail(DeviceError("802c", f"{event.info.meaning}: {event.detail}", action=event.info.action))
+            self._fail(MMUError(0x802C, detail=event.detail))
         elif isinstance(event, LinkFailed) and not self._ready.is_set():
-            self._fail(LinkTimeout(f"{event.info.meaning} on {self.transport.peer or self.transport.url} "
-                                   f"({event.detail}) — {event.info.action}"))
+            self._fail(LinkTimeout(f"{format_error(event.code)}: {event.info.meaning} on "
+                                   f"{self.transport.peer or self.transport.url} ({event.detail}) — "
+                                   f"{event.info.action}"))
 
     def _fail(self, exc: BaseException) -> None:
         if self._failure is None:
@@ -267,7 +267,8 @@ class MMU:
                 raise RemoteProtocolError(f"{event.command} was interrupted: the MMU reported {event.reported} "
                                           "(it probably rebooted)")
             if isinstance(event, LinkFailed):
-                raise LinkTimeout(f"MMU link failed: {event.info.meaning} ({event.detail})")
+                raise LinkTimeout(f"{format_error(event.code)}: MMU link failed: {event.info.meaning} "
+                                  f"({event.detail})")
             return None
 
         try:

@@ -8,6 +8,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+from fabwire.mmu.errors import ErrorInfo, describe_error, format_error  # noqa: F401  (error words: own module)
+
 
 class Progress(enum.IntEnum):
     OK = 0
@@ -144,147 +146,6 @@ class FSensor(enum.IntEnum):
     AT_FSENSOR = 1
     IN_NOZZLE = 2
     UNAVAILABLE = 3
-
-
-# ---------------------------------------------------------------------------------------------- errors
-
-RUNNING = 0x0000
-ERROR_OK = 0x0001
-
-AXIS_BITS = {0x0040: "pulley", 0x0080: "selector", 0x0100: "idler"}
-AXIS_MASK = 0x01C0
-TMC_FLAGS = {
-    0x0200: "TMC_IOIN_MISMATCH",
-    0x0400: "TMC_RESET",
-    0x0800: "TMC_UNDERVOLTAGE_ON_CHARGE_PUMP",
-    0x1000: "TMC_SHORT_TO_GROUND",
-    0x2000: "TMC_OVER_TEMPERATURE_WARN",
-    0x4000: "TMC_OVER_TEMPERATURE_ERROR",
-}
-TMC_WORDS = {
-    0x0200: "driver IOIN mismatch",
-    0x0400: "driver reset",
-    0x0800: "undervoltage on charge pump",
-    0x1000: "short to ground",
-    0x2000: "over-temperature warning",
-    0x4000: "over-temperature",
-}
-TMC_BASE = 0x8000
-SOLDERING_NEEDS_ATTENTION = 0xC200
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorInfo:
-    code: int
-    name: str
-    title: str
-    meaning: str
-    action: str
-    printer_code: str
-    retryable: bool
-    """The printer's dialog offers Retry (Middle): hosts may press it on their own."""
-
-
-_BASIC: dict[int, tuple[str, str, str, str, str, bool]] = {
-    # code: (name, printer code, title, meaning, action, retryable)
-    0x8001: ("FINDA_DIDNT_SWITCH_ON", "04101", "FINDA DIDNT TRIGGER", "FINDA didn't trigger",
-             "check the filament path, then Retry", True),
-    0x8002: ("FINDA_DIDNT_SWITCH_OFF", "04102", "FINDA FILAM. STUCK", "FINDA didn't switch off: filament stuck",
-             "free the filament from the selector, then Retry", True),
-    0x8003: ("FSENSOR_DIDNT_SWITCH_ON", "04103", "FSENSOR DIDNT TRIGG.", "printer filament sensor didn't trigger",
-             "check the filament reached the extruder and the sensor works, then Retry", True),
-    0x8004: ("FSENSOR_DIDNT_SWITCH_OFF", "04104", "FSENSOR FIL. STUCK", "printer filament sensor still sees filament",
-             "pull the filament out of the extruder, then Retry", True),
-    0x8005: ("FILAMENT_ALREADY_LOADED", "04501", "FILAMENT ALREADY LOADED", "filament already loaded",
-             "Unload (Left) or Continue (Right)", False),
-    0x8006: ("INVALID_TOOL", "04502", "INVALID TOOL", "requested filament slot does not exist",
-             "use a slot from 0 to 4", False),
-    0x8008: ("FINDA_VS_EEPROM_DISREPANCY", "04506", "UNLOAD MANUALLY",
-             "FINDA sees filament but the MMU does not know which slot is loaded",
-             "unload the filament manually, then Retry", True),
-    0x8009: ("FSENSOR_TOO_EARLY", "04106", "FSENSOR TOO EARLY",
-             "printer filament sensor triggered before the filament could reach it",
-             "check the sensor and the bowden length, then Retry", True),
-    0x800A: ("FINDA_FLICKERS", "04107", "INSPECT FINDA", "selector can't move: FINDA sees filament",
-             "check the FINDA and remove filament from the selector, then Retry", True),
-    0x800C: ("FILAMENT_EJECTED", "04507", "FILAMENT EJECTED", "filament ejected",
-             "remove the filament, then Continue", False),
-    0x800D: ("MCU_UNDERVOLTAGE_VCC", "04306", "MMU MCU ERROR", "MMU supply voltage too low",
-             "check the power supply, then reset the MMU", False),
-    0x8029: ("FILAMENT_CHANGE", "04508", "FILAMENT CHANGE", "filament change requested by the printer",
-             "follow the printer's instructions", False),
-    0x802A: ("LOAD_TO_EXTRUDER_FAILED", "04108", "LOAD TO EXTR. FAILED", "loading to the extruder failed",
-             "check the extruder, then Continue", False),
-    0x802B: ("QUEUE_FULL", "04503", "QUEUE FULL", "MMU motion queue overflow", "reset the MMU", False),
-    0x802C: ("VERSION_MISMATCH", "04504", "MMU FW UPDATE NEEDED", "MMU firmware version not supported",
-             "update the MMU firmware", False),
-    0x802D: ("PROTOCOL_ERROR", "04402", "COMMUNICATION ERROR", "communication with the MMU failed",
-             "check the cable, then reset the MMU", False),
-    0x802E: ("MMU_NOT_RESPONDING", "04401", "MMU NOT RESPONDING", "the MMU does not answer",
-             "check the cable and the MMU's power, then reset the MMU", False),
-    0x802F: ("INTERNAL", "04505", "FW RUNTIME ERROR", "MMU firmware internal error", "reset the MMU", False),
-}
-_AXIS_CODES = {
-    # base: (name, {axis: printer code}, title, meaning, action, retryable)
-    0x8007: ("HOMING_FAILED", {0x80: "04115", 0x100: "04125", 0x40: "04105"}, "HOMING FAILED",
-             "homing failed", "check the {axis} can move freely, then Retry", True),
-    0x800B: ("MOVE_FAILED", {0x80: "04116", 0x100: "04126", 0x40: "04105"}, "MOVE FAILED",
-             "move failed", "check the {axis} can move freely, then Retry", True),
-}
-_TMC_PRINTER = {
-    0x0200: ("04301", "04311", "04321"), 0x0400: ("04302", "04312", "04322"),
-    0x0800: ("04303", "04313", "04323"), 0x1000: ("04304", "04314", "04324"),
-    0x2000: ("04201", "04211", "04221"), 0x4000: ("04202", "04212", "04222"),
-}
-_AXIS_INDEX = {0x40: 0, 0x80: 1, 0x100: 2}
-
-
-def axes_in(code: int) -> list[str]:
-    return [name for bit, name in AXIS_BITS.items() if code & bit]
-
-
-def describe_error(code: int) -> ErrorInfo:
-    """Name, words and the action a person should take for any 16-bit MMU error code, combined flags included."""
-    if code in _BASIC:
-        name, pcode, title, meaning, action, retry = _BASIC[code]
-        return ErrorInfo(code, name, title, meaning, action, pcode, retry)
-    axes = axes_in(code)
-    axis_words = " and ".join(axes) or "axis"
-    base = code & ~AXIS_MASK
-    if base in _AXIS_CODES:
-        name, pcodes, title, meaning, action, retry = _AXIS_CODES[base]
-        axis_bits = code & AXIS_MASK
-        suffix = "_" + "_".join(a.upper() for a in axes) if axes else ""
-        if base == 0x8007 and axis_bits == 0x40:
-            name, suffix = "STALLED_PULLEY", ""
-        return ErrorInfo(code, name + suffix, title, f"{axis_words} {meaning}", action.format(axis=axis_words),
-                         pcodes.get(axis_bits, ""), retry)
-    if base == SOLDERING_NEEDS_ATTENTION:
-        return ErrorInfo(code, "MMU_SOLDERING_NEEDS_ATTENTION", "SOLDERING NEEDS ATTENTION",
-                         f"{axis_words} driver failed the power-on test (soldering needs attention)",
-                         "check the MMU board, then reset the MMU", "", False)
-    rest = base & ~TMC_BASE
-    if base & TMC_BASE and rest and not rest & ~0x7E00:
-        flags = [bit for bit in TMC_FLAGS if rest & bit]
-        if flags:
-            name = "|".join(TMC_FLAGS[f] for f in flags)
-            words = ", ".join(TMC_WORDS[f] for f in flags)
-            warn_only = flags == [0x2000]
-            axis_bits = code & AXIS_MASK
-            pcode = ""
-            if len(flags) == 1 and axis_bits in _AXIS_INDEX:
-                pcode = _TMC_PRINTER[flags[0]][_AXIS_INDEX[axis_bits]]
-            action = "let the MMU cool down, then Continue" if warn_only else "reset the MMU"
-            return ErrorInfo(code, name + ("_" + "_".join(a.upper() for a in axes) if axes else ""),
-                             "TMC DRIVER ERROR", f"{axis_words} driver: {words}", action, pcode, False)
-    return ErrorInfo(code, f"ERROR_{code:X}", "UNKNOWN ERROR", f"unknown error 0x{code:x}", "reset the MMU", "",
-                     False)
-
-
-def tmc_error(flag: int, axis: str) -> int:
-    """The error code a driver fault on one axis produces (`flag` from TMC_FLAGS)."""
-    bit = {v: k for k, v in AXIS_BITS.items()}[axis]
-    return TMC_BASE | flag | bit
 
 
 # ------------------------------------------------------------------------------------------- registers

@@ -16,7 +16,7 @@ from typing import Literal
 
 from fabwire.errors import LocalProtocolError
 from fabwire.mmu import codes
-from fabwire.mmu.codes import ErrorInfo
+from fabwire.mmu.errors import ErrorInfo, describe_error
 from fabwire.mmu.protocol import (
     Accepted,
     ButtonPress,
@@ -82,7 +82,7 @@ class Status:
         if self.kind == "P":
             return codes.progress_words(self.value)
         if self.kind == "E":
-            return codes.describe_error(self.value).meaning
+            return describe_error(self.value).meaning
         if self.kind == "F":
             return "finished" if self.value == 0 else "cancelled"
         if self.kind == "B":
@@ -386,7 +386,7 @@ class HostLogic:
         self._events.append(LinkLost(reason, self.drop_outs))
         if self.drop_outs % DROP_OUT_LIMIT == 0:
             code = 0x802D if reason.startswith("protocol") else 0x802E
-            self._events.append(LinkFailed(code, codes.describe_error(code), reason))
+            self._events.append(LinkFailed(code, describe_error(code), reason))
 
     def _protocol_error(self, now: float, reason: str) -> None:
         self._drop_out(now, f"protocol error: {reason}")
@@ -399,7 +399,7 @@ class HostLogic:
         self._scope = "stopped"
         self.link = Link.FAILED
         self._inflight = None
-        self._events.append(LinkFailed(0x802C, codes.describe_error(0x802C), detail))
+        self._events.append(LinkFailed(0x802C, describe_error(0x802C), detail))
 
     def _pump(self, now: float) -> None:
         """Send the next request if none is outstanding."""
@@ -561,7 +561,7 @@ class HostLogic:
             return
         self._last_report = ("E", code)
         self._retry_acked = False
-        info = codes.describe_error(code)
+        info = describe_error(code)
         auto = info.retryable and self._retries_left > 0 and self._command is not None
         if auto and not self._retry_pending:
             self._retry_pending = True

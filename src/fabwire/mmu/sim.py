@@ -14,12 +14,30 @@ from typing import Protocol
 
 from fabwire.errors import InputError, LinkClosed
 from fabwire.mmu import codes
-from fabwire.mmu.model import Fault, HistoryItem, MMUModel, parse_fault
+from fabwire.mmu.faults import Fault, parse_fault
+from fabwire.mmu.machine import HistoryItem
+from fabwire.mmu.model import MMUModel
 from fabwire.mmu.protocol import Request, RequestDecoder, encode_response
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
 PENDING_LIMIT = 8
 """Decoded requests waiting for the main loop; the real RX ring holds 32 bytes, so a flood loses messages."""
+
+
+class Port:
+    """One line into the MMU: its own request decoder and queue of decoded requests.
+
+    A real MMU has one UART. Over TCP every connection gets its own Port, so one client's stray or half-sent
+    bytes never mix with another's requests; all ports drive the same machine, one request per tick."""
+
+    def __init__(self) -> None:
+        self.decoder = RequestDecoder()
+        self.pending: deque[Request] = deque()
+        self.dropped = 0
+
+    def reset(self) -> None:
+        self.decoder.reset()
+        self.pending.clear()
 
 
 def firmware(version: str) -> codes.FirmwareVersion:
@@ -30,7 +48,7 @@ def firmware(version: str) -> codes.FirmwareVersion:
 
 
 class MMUSimulator:
-    """A whole MMU: control plane (faults, buttons) plus `serve(transport)` for one connection at a time."""
+    """A whole MMU: control plane (faults, buttons) plus `serve(transport)`, one decoder per connection."""
 
     def __init__(self, version: str = "3.0.4", *, speed: float = 1.0, faults: Iterable[str | Fault] = (),
                  clock: Callable[[], float] | None = None) -> None:
@@ -41,9 +59,9 @@ class MMUSimulator:
         self._t0 = self._clock()
         parsed = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)
         self.model = MMUModel(firmware(version), faults=parsed, now=0.0)
-        self._decoder = RequestDecoder()
-        self._pending: deque[Request] = deque()
-        self.dropped_requests = 0
+        self._port = Port()
+        """The line `receive`/`tick`/`exchange` use when no port is given (in-process and lockstep use)."""
+        self._ports: list[Port] = [self._port]
 
     # ------------------------------------------------------------------------------------------ sans-IO
 
@@ -51,43 +69,49 @@ class MMUSimulator:
         """Model seconds since power-on."""
         return (self._clock() - self._t0) * self.speed
 
-    def receive(self, data: bytes, now: float | None = None) -> None:
+    def receive(self, data: bytes, now: float | None = None, port: Port | None = None) -> None:
         """Bytes from the printer. While booting they are lost, as on the real UART."""
+        port = port or self._port
         now = self.now() if now is None else now
         self.model.advance(now)
         if self.model.booting:
             return
-        for event in self._decoder.feed(data):
+        for event in port.decoder.feed(data):
             if isinstance(event, Request):
-                if len(self._pending) >= PENDING_LIMIT:
-                    self.dropped_requests += 1
+                if len(port.pending) >= PENDING_LIMIT:
+                    port.dropped += 1
                     continue
-                self._pending.append(event)
+                port.pending.append(event)
 
     @property
     def pending(self) -> int:
-        return len(self._pending)
+        return len(self._port.pending)
 
-    def tick(self, now: float | None = None) -> bytes:
+    @property
+    def dropped_requests(self) -> int:
+        return sum(p.dropped for p in self._ports)
+
+    def tick(self, now: float | None = None, port: Port | None = None) -> bytes:
         """One main-loop pass: process at most one request; return the reply bytes (often none)."""
+        port = port or self._port
         now = self.now() if now is None else now
         self.model.advance(now)
         if self.model.booting:
-            self._pending.clear()
+            port.pending.clear()
             return b""
-        if not self._pending:
+        if not port.pending:
             return b""
-        reply = self.model.handle(self._pending.popleft(), now)
-        if self.model.booting:  # X: the board resets, whatever was still queued is lost
-            self._pending.clear()
-            self._decoder.reset()
+        reply = self.model.handle(port.pending.popleft(), now)
+        if self.model.booting:  # X: the board resets, whatever was still queued on any line is lost
+            for each in self._ports:
+                each.reset()
         return b"" if reply is None else encode_response(reply)
 
     def exchange(self, data: bytes, now: float | None = None) -> bytes:
         """Receive `data` and run ticks until every complete request has been handled."""
         self.receive(data, now)
         out = bytearray()
-        while self._pending:
+        while self._port.pending:
             out += self.tick(now)
         return bytes(out)
 
@@ -95,6 +119,10 @@ class MMUSimulator:
 
     def inject(self, fault: str | Fault) -> None:
         self.model.inject(fault)
+
+    def clear_faults(self, name: str | None = None) -> None:
+        """Remove a fault's cause (all when None); the error it raised waits for Retry or a reset."""
+        self.model.clear_faults(name)
 
     def press(self, button: int) -> None:
         self.model.advance(self.now())
@@ -111,20 +139,23 @@ class MMUSimulator:
     # ------------------------------------------------------------------------------------------ serving
 
     async def serve(self, transport: Transport) -> None:
-        """Answer one connection until it closes. A new connection sees the same machine (like a UART)."""
-        self._decoder.reset()
-        self._pending.clear()
+        """Answer one connection until it closes. Every connection sees the same machine through its own
+        decoder, so clients never corrupt each other's requests (replies go to whoever asked)."""
+        port = Port()
+        self._ports.append(port)
         try:
             while True:
                 data = await transport.read(256)
-                self.receive(data)
-                while self._pending:
-                    out = self.tick()
+                self.receive(data, port=port)
+                while port.pending:
+                    out = self.tick(port=port)
                     if out:
                         await transport.write(out)
                     await asyncio.sleep(0)
         except LinkClosed:
             return
+        finally:
+            self._ports.remove(port)
 
 
 def options_to_simulator(options: dict[str, str]) -> MMUSimulator:

@@ -460,18 +460,21 @@ _add_threew_commands()
 @click.option("--link-style", type=click.Choice(["auto", "serial", "wifi"]), default="auto", show_default=True,
               help="Reply framing: auto = serial on the pty, Wi-Fi on TCP.")
 @click.option("--no-control", is_flag=True, help="Refuse in-band fault triggers (XYZv3/simctl=…).")
+@click.option("--max-upload", "max_upload_mb", type=click.IntRange(min=1), default=256, show_default=True,
+              help="Largest upload taken, in MiB (a larger declared size is refused before any block is held).")
 @pass_app
 def sim_xyz(app: App, listen: tuple[str, ...], use_pty: bool, link: Path | None, model_text: str, speed: float,
             faults: tuple[str, ...], state_file: Path | None, store: Path | None, strict: bool,
-            link_style: str, no_control: bool) -> None:
+            link_style: str, no_control: bool, max_upload_mb: int) -> None:
     """A da Vinci printer on TCP 9100 and/or a raw pty that real clients cannot tell from the machine."""
     from fabwire.simserve import serve
     from fabwire.xyz.sim import XYZSimulator
 
     sim = XYZSimulator(model_text, speed=speed, faults=faults, state_file=state_file, store=store, strict=strict,
-                       link=None if link_style == "auto" else Link(link_style), control=not no_control)
+                       link=None if link_style == "auto" else Link(link_style), control=not no_control,
+                       max_upload=max_upload_mb << 20)
     started = time.monotonic()
     asyncio.run(serve("xyz", sim.serve, listen=listen, use_pty=use_pty, link=link,
                       default_port=XYZ.default_port, json_mode=app.json))
     app.output.note(f"xyz simulator stopped after {time.monotonic() - started:.0f} s, "
-                    f"{len([u for u in sim.uploads if u.complete])} upload(s)")
+                    f"{sim.completed_uploads} upload(s)")

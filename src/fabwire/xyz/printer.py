@@ -566,7 +566,7 @@ class Printer:
         return FileVerdict(True, float(info.print_time_s or 60), float(info.filament_mm or 0.0))
 
     def start_job(self, name: str, data: bytes, verdict: FileVerdict) -> None:
-        self.stored[name] = data
+        self.stored = {name: data}  # the printer keeps the file it prints, not every file it was sent
         self.job = Job(name, data, max(verdict.print_time, 1.0), verdict.filament_mm, rejected=not verdict.ok,
                        filament_start=self.settings.filament_mm)
         self.errors = [e for e in self.errors if e != FILE_REJECTED]

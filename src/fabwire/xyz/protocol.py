@@ -16,11 +16,15 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from fabwire.errors import LocalProtocolError
+from fabwire.errors import InputError, LocalProtocolError
 
 PREFIX = b"XYZv3/"
+MAX_COMMAND = 4096
+"""Longest command text parsed (the longest real one, a Wi-Fi join, is under 120 characters)."""
 FINISH = b"XYZv3/uploadDidFinish"
 DEFAULT_BLOCK_SIZE = 8192
+MAX_BLOCK = 1 << 16
+"""Largest upload block a device accepts (printers announce `o:p8`, 8 KiB; `p<k>` allows up to k KiB)."""
 NO_CARTRIDGE_SERIAL = "-" * 14
 REMAINING_UNKNOWN = 71582788
 """`d:` remaining-minutes sentinel (0x04444444) meaning the printer has no estimate."""
@@ -507,17 +511,21 @@ def terminator(command: Command, link: Link) -> bytes:
 
 
 def encode(command: Command, link: Link) -> bytes:
-    return PREFIX + command.body.encode("ascii") + terminator(command, link)
+    return PREFIX + command.body.encode("utf-8") + terminator(command, link)
 
 
 # ---------------------------------------------------------------------------------------- command parsing
 
 
 def parse_command(text: str) -> Command:
-    """Parse the text after `XYZv3/` (terminator removed); anything unrecognised is an UnknownCommand."""
+    """Parse the text after `XYZv3/` (terminator removed); anything unrecognised is an UnknownCommand.
+
+    Total: whatever a client sends (deep JSON, huge numbers, odd types) ends as a command or an UnknownCommand."""
+    if len(text) > MAX_COMMAND:
+        return UnknownCommand(text[:MAX_COMMAND])
     try:
         return _parse(text)
-    except LocalProtocolError:
+    except (LocalProtocolError, InputError, ValueError, KeyError, TypeError, RecursionError, OverflowError):
         return UnknownCommand(text)
 
 
@@ -528,7 +536,7 @@ def _parse(text: str) -> Command:
     if verb == "query" and arg:
         return Query(arg)
     if verb in ("upload", "firmware"):
-        m = re.fullmatch(r"([^,]+),(\d+)(?:,(SaveToSD|Downgrade))?", arg)
+        m = re.fullmatch(r"([^,]+),(\d{1,12})(?:,(SaveToSD|Downgrade))?", arg)
         if m:
             if verb == "upload":
                 return Upload(m[1], int(m[2]), m[3] == "SaveToSD")
@@ -551,21 +559,21 @@ def _parse_config(arg: str) -> Command | None:
     }
     if arg in simple:
         return simple[arg]
-    if m := re.fullmatch(r"zoffset:set\[(-?\d+)\]", arg):
+    if m := re.fullmatch(r"zoffset:set\[(-?\d{1,6})\]", arg):
         return SetZOffset(int(m[1]))
     if m := re.fullmatch(r"print\[(\w+)\]", arg):
         return PrintControl(m[1])
     if m := re.fullmatch(r"lang:\[(\w+)\]", arg):
         return SetLanguage(m[1])
-    if m := re.fullmatch(r"energy:\[(\d+)\]", arg):
+    if m := re.fullmatch(r"energy:\[(\d{1,6})\]", arg):
         return SetEnergy(int(m[1]))
     if m := re.fullmatch(r"name:\[(.*)\]", arg):
         return SetName(m[1])
-    if m := re.fullmatch(r"life:\[(\d+)\]", arg):
+    if m := re.fullmatch(r"life:\[(\d{1,12})\]", arg):
         return SetLife(int(m[1]))
-    if m := re.fullmatch(r"ssid:\[([^,]*),([^,]*),(\d+)\]", arg):
+    if m := re.fullmatch(r"ssid:\[([^,]*),([^,]*),(\d{1,6})\]", arg):
         return JoinWifi(m[1], m[2], int(m[3]))
-    if m := re.fullmatch(r"pd([a-e]):\[(\d+)\]", arg):
+    if m := re.fullmatch(r"pd([a-e]):\[(\d{1,12})\]", arg):
         return UnlockFilament(m[1], int(m[2]))
     return None
 
@@ -576,6 +584,8 @@ def _parse_action(arg: str) -> Command | None:
     if arg in ("zoffset:up", "zoffset:down"):
         return NudgeZOffset(arg.endswith("up"))
     if arg.startswith("jog:"):
+        if len(arg) > 200:  # a jog spec is about 40 characters; never hand a parser a deep structure
+            return None
         try:
             spec = json.loads(arg[4:])
             distance = float(spec["len"]) * (-1 if spec["dir"] == "-" else 1)
@@ -978,7 +988,7 @@ class Garbage:
 
 DeviceEvent = Received | Block | UploadStalled | Garbage
 
-_UPLOAD_HEAD = re.compile(rb"^XYZv3/(?:upload|firmware)=[^,\r\n]*,\d+(?:,(?:SaveToSD|Downgrade))?")
+_UPLOAD_HEAD = re.compile(rb"^XYZv3/(?:upload|firmware)=[^,\r\n]*,\d{1,12}(?:,(?:SaveToSD|Downgrade))?")
 
 
 class DeviceDecoder:
@@ -989,8 +999,10 @@ class DeviceDecoder:
     binary blocks until `XYZv3/uploadDidFinish`.
     """
 
-    def __init__(self, *, gap: float = 0.03, upload_idle: float = 30.0, max_line: int = 4096) -> None:
+    def __init__(self, *, gap: float = 0.03, upload_idle: float = 30.0, max_line: int = 4096,
+                 max_block: int = MAX_BLOCK) -> None:
         self.gap = gap
+        self.max_block = max_block
         self.upload_idle = upload_idle
         self.max_line = max_line
         self._buffer = bytearray()
@@ -1103,7 +1115,12 @@ class DeviceDecoder:
         return False
 
     def _emit_text(self, raw: bytes) -> None:
-        command = parse_command(raw[len(PREFIX) :].decode("latin-1"))
+        body = raw[len(PREFIX) :]
+        try:
+            text = body.decode("utf-8")
+        except UnicodeDecodeError:
+            text = body.decode("latin-1")
+        command = parse_command(text)
         self._events.append(Received(command, raw))
         if isinstance(command, Upload | FirmwareUpload):
             self._uploading = True
@@ -1124,6 +1141,11 @@ class DeviceDecoder:
         if len(buf) < 8:
             return False
         index, length = struct.unpack_from(">II", buf, 0)
+        if length > self.max_block:  # never buffer what no printer's block size allows
+            self._events.append(Garbage(bytes(buf[:8])))
+            self._uploading = False
+            buf.clear()
+            return False
         take = min(length, self._owed)
         if len(buf) < 8 + take + 4:
             return False

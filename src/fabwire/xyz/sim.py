@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import logging
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,14 @@ BUSY_REPLY = 3
 BAD_COMMAND_REPLY = 1
 
 
+COMMAND_HISTORY = 1000
+"""Commands remembered for tests and users (the oldest are forgotten)."""
+UPLOAD_HISTORY = 8
+"""Finished uploads remembered; an abandoned one keeps its size, not its bytes."""
+MAX_UPLOAD = 256 << 20
+"""Largest declared upload taken (bytes); a larger one is refused before any block is buffered."""
+
+
 @dataclass
 class UploadRecord:
     """What a client sent: kept so tests and users can compare it with the source file."""
@@ -38,6 +47,8 @@ class UploadRecord:
     firmware: bool
     crc_checked: int
     complete: bool
+    received: int = 0
+    """Bytes that arrived (an abandoned upload's data is dropped, so this is all that is left of it)."""
 
 
 @dataclass
@@ -56,6 +67,7 @@ class XYZSimulator:
         state_file: Path | None = None, store: Path | None = None, strict: bool = False,
         link: Link | None = None, gap: float = 0.03, upload_idle: float = 30.0, serial: str | None = None,
         clock: Callable[[], float] = time.monotonic, close_after_reply: bool | None = None, control: bool = True,
+        max_upload: int = MAX_UPLOAD,
     ) -> None:
         if speed <= 0:
             raise InputError(f"speed must be positive, not {speed}")
@@ -73,8 +85,12 @@ class XYZSimulator:
         self.close_after_reply = hangs_up if close_after_reply is None else close_after_reply
         """Close a TCP connection after each reply, as the da Vinci 1.1 Plus does."""
         self._t0 = clock()
-        self.uploads: list[UploadRecord] = []
-        self.commands: list[str] = []
+        self.max_upload = max_upload
+        self.uploads: deque[UploadRecord] = deque(maxlen=UPLOAD_HISTORY)
+        self.completed_uploads = 0
+        self.commands: deque[str] = deque(maxlen=COMMAND_HISTORY)
+        self.uploading: object | None = None
+        """The connection whose upload is under way: a printer takes one file at a time."""
         self.connections = 0
         self.busy_replies = 0
         if store is not None:
@@ -156,15 +172,26 @@ class _Connection:
                     async with asyncio.timeout(wait):
                         data = await self.transport.read()
             except TimeoutError:
-                await self._handle(self.decoder.poll(self.sim.clock()))
+                await self._guarded(self.decoder.poll(self.sim.clock()))
                 continue
             except LinkClosed:
                 # Execute what arrived before the close (fire-and-forget clients), then stop.
                 with contextlib.suppress(LinkClosed):
-                    await self._handle(self.decoder.eof(self.sim.clock()), closing=True)
+                    await self._guarded(self.decoder.eof(self.sim.clock()), closing=True)
                 self._abandon("the link closed")
                 return
-            await self._handle(self.decoder.feed(data, self.sim.clock()))
+            await self._guarded(self.decoder.feed(data, self.sim.clock()))
+
+    async def _guarded(self, events: list[p.DeviceEvent], *, closing: bool = False) -> None:
+        """Handle events; a fault in handling one client's bytes is logged in one line, and the printer goes on
+        answering (a dead handler would leave a serial printer deaf for everyone)."""
+        try:
+            await self._handle(events, closing=closing)
+        except (LinkClosed, asyncio.CancelledError):
+            raise
+        except Exception as exc:  # the boundary where a client's bytes meet the device
+            log.warning("ignored what a client sent: %s: %s", type(exc).__name__, str(exc)[:200])
+            self._abandon("the upload could not be handled")
 
     async def _handle(self, events: list[p.DeviceEvent], *, closing: bool = False) -> None:
         out = bytearray()
@@ -176,6 +203,9 @@ class _Connection:
                 out += await self._command(event.command)
             elif isinstance(event, UploadStalled):
                 self._abandon(f"no data for {self.sim.upload_idle:g} s")
+            elif isinstance(event, Garbage) and self.session is not None:
+                self._fail_upload("an upload block larger than the printer takes")
+                out += p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False)
             elif isinstance(event, Garbage) and self.link is Link.SERIAL and event.raw.strip():
                 out += p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False)
         self.sim.sync()
@@ -245,10 +275,19 @@ class _Connection:
 
     def _start_upload(self, command: p.Upload | p.FirmwareUpload) -> bytes:
         refusal = self.printer.refusal(command)
+        if refusal is None and command.size > self.sim.max_upload:
+            log.info("upload of %s refused: %d bytes declared, the printer takes at most %d",
+                     command.name, command.size, self.sim.max_upload)
+            refusal = BAD_COMMAND_REPLY
+        elif refusal is None and self.sim.uploading not in (None, self):
+            log.info("upload of %s refused: another client's upload is under way", command.name)
+            refusal = BUSY_REPLY
         if refusal is not None:
             self.decoder.cancel_upload()
             return p.reply_lines([p.error_line(refusal)], dollar=False)
+        self._abandon("a new upload started")
         self.session = _Session(command, bytearray())
+        self.sim.uploading = self
         return self._ok(command_ack=True)
 
     def _block(self, block: Block) -> bytes:
@@ -278,22 +317,27 @@ class _Connection:
 
     def _abandon(self, why: str) -> None:
         session, self.session = self.session, None
+        if self.sim.uploading is self:
+            self.sim.uploading = None
         if session is not None:
             log.info("upload of %s abandoned after %d bytes: %s", session.command.name, len(session.data), why)
-            self.sim.uploads.append(UploadRecord(session.command.name, session.command.size, bytes(session.data),
+            self.sim.uploads.append(UploadRecord(session.command.name, session.command.size, b"",
                                                  isinstance(session.command, p.FirmwareUpload),
-                                                 session.crc_checked, complete=False))
+                                                 session.crc_checked, complete=False, received=len(session.data)))
 
     async def _finish_upload(self) -> bytes:
         session, self.session = self.session, None
+        if self.sim.uploading is self:
+            self.sim.uploading = None
         reply = b"ok\n" + (b"ok\n" if self.link is Link.WIFI else b"")
         if session is None:
             return reply
         data = bytes(session.data)
         firmware = isinstance(session.command, p.FirmwareUpload)
         record = UploadRecord(session.command.name, session.command.size, data, firmware, session.crc_checked,
-                              complete=len(data) == session.command.size)
+                              complete=len(data) == session.command.size, received=len(data))
         self.sim.uploads.append(record)
+        self.sim.completed_uploads += record.complete
         self._store(record)
         if firmware:
             self.printer.firmware_images.append(data)

@@ -23,10 +23,11 @@ from typing import BinaryIO, Literal
 from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
 
 from fabwire.errors import InputError
+from fabwire.xyz import intake
 from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
 from fabwire.xyz.models import PrinterModel, default_model, find_model, model_for_file_id
 
-MAGIC = b"3DPFNKG13WTW"
+MAGIC = intake.MAGIC
 BODY_OFFSET = 0x2000
 TAG_ECB = b"TagEJ256"
 TAG_ZIP = b"TagEa128"
@@ -152,11 +153,11 @@ def _resolve_model(model: PrinterModel | str | None) -> PrinterModel:
 
 @dataclass(frozen=True, slots=True)
 class _Prepared:
+    keys: bytes
+    """The XYZ key lines (XYZprint's order) that open the body."""
     header: bytes
-    """The processed leading comment block, which is both the .3w header and the start of the body."""
+    """The .3w header: the keys plus the slicer's leading comments when they fit, else the keys alone."""
     metadata: GcodeMetadata
-    rest_start: int
-    """Input offset of the first code line."""
     analysed: bool
     """The moves were read once already to compute metadata (so progress counts two passes)."""
 
@@ -168,31 +169,6 @@ def _size(src: BinaryIO) -> int:
     return end
 
 
-def _lines(src: BinaryIO, start: int, progress: Progress | None, total: int) -> Iterator[bytes]:
-    """Line-aligned chunks from `start` to EOF; the last one gets a newline if the file lacks it."""
-    src.seek(start)
-    carry = b""
-    done = start
-    while True:
-        block = src.read(CHUNK)
-        if not block:
-            break
-        done += len(block)
-        block = carry + block if carry else block
-        cut = block.rfind(b"\n") + 1
-        if cut == 0:
-            carry = block
-            continue
-        carry = block[cut:]
-        yield block[:cut] if carry else block
-        if progress is not None:
-            progress(done - len(carry), total)
-    if carry:
-        yield (carry[:-1] if carry.endswith(b"\r") else carry) + b"\n"
-    if progress is not None:
-        progress(total, total)
-
-
 def _first_half(progress: Progress | None) -> Progress | None:
     return None if progress is None else lambda done, total: progress(done // 2, total)
 
@@ -201,27 +177,38 @@ def _second_half(progress: Progress | None) -> Progress | None:
     return None if progress is None else lambda done, total: progress((total + done) // 2, total)
 
 
-def _prepare(src: BinaryIO, file_id: str, filename: str, progress: Progress | None) -> _Prepared:
+def _head(src: BinaryIO, name: str) -> tuple[bytes, int]:
+    """(the normalised first CHUNK of the G-code, the file size); G-code without commands is refused."""
     total = _size(src)
     src.seek(0)
-    head = src.read(CHUNK)
+    raw = src.read(CHUNK)
+    head = intake.normalise(raw[:-1] if raw.endswith(b"\r") else raw, first=True)
     if not head.strip():
-        raise InputError("empty G-code: nothing to convert")
-    found = _FIRST_CODE_LINE.search(head)
+        raise InputError(f"{name} is empty G-code: nothing to convert")
+    if not intake.has_commands(head[:HEAD_WINDOW]):
+        found = _FIRST_CODE_LINE.search(head)
+        if found is None and len(raw) == total:
+            raise InputError(f"{name} has no commands, only comments")
+        if found is not None and found.start() < HEAD_WINDOW:
+            raise InputError(f"{name} is text, not G-code: no G, M or T command in its first {HEAD_WINDOW} bytes")
+    return head, total
+
+
+def _leading_comments(head: bytes, room: int) -> bytes | None:
+    """The leading comment block without XYZ key lines, if it is within `room` bytes and ends inside `head`."""
+    found = _FIRST_CODE_LINE.search(head, 0, room + 1)
     if found is None:
-        if len(head) < total:
-            raise InputError(f"the leading comment block is over {CHUNK} bytes; it cannot fit a .3w header")
-        raise InputError("the G-code has no commands, only comments")
-    rest_start = found.start()
-    kept = [
-        line.removesuffix(b"\r") + b"\n"
-        for line in head[:rest_start].split(b"\n")[:-1]
-        if not _XYZ_KEY_LINE.match(line)
-    ]
-    stated, computed = _metadata(src, head, rest_start, total, _first_half(progress))
+        return None
+    return b"".join(line + b"\n" for line in head[:found.start()].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
+
+
+def _prepare(src: BinaryIO, name: str, file_id: str, filename: str, container: int,
+             progress: Progress | None) -> _Prepared:
+    head, total = _head(src, name)
+    stated, computed = _metadata(src, name, head, total, _first_half(progress))
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
-    synthetic = (
+    keys = (
         f"; filename = {safe_name}\n"
         f"; print_time = {meta.print_time_s}\n"
         f"; machine = {file_id}\n"
@@ -230,22 +217,25 @@ def _prepare(src: BinaryIO, file_id: str, filename: str, progress: Progress | No
         f"; version = {XYZ_VERSION}\n"
         f"; total_filament = {meta.filament_mm:.2f}\n"
     ).encode()
-    return _Prepared(synthetic + b"".join(kept), meta, rest_start, computed is not None)
+    space = BODY_OFFSET - _header_start(container)
+    comments = _leading_comments(head, space)
+    header = keys + comments if comments is not None and len(_pkcs7(keys + comments)) <= space else keys
+    return _Prepared(keys, header, meta, computed is not None)
 
 
 def _metadata(
-    src: BinaryIO, head: bytes, start: int, total: int, progress: Progress | None = None,
+    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
     tail = b""
-    if total > len(head):
-        src.seek(max(len(head), total - TAIL_WINDOW))
-        tail = src.read()
+    if total > CHUNK:
+        src.seek(max(CHUNK, total - TAIL_WINDOW))
+        tail = intake.normalise(src.read())
     stated = header_metadata(head[:HEAD_WINDOW], tail)
     if stated.complete:
         return stated, None
     analyzer = MoveAnalyzer()
-    for chunk in _lines(src, start, progress, total):
+    for chunk in intake.gcode_lines(src, name, progress, total):
         analyzer.feed_chunk(chunk)
     return stated, analyzer.result()
 
@@ -253,15 +243,13 @@ def _metadata(
 def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """What a G-code file's comments state, and what its moves say where the comments are silent."""
     with _open_input(path) as src:
-        total = _size(src)
-        head = src.read(CHUNK)
-        found = _FIRST_CODE_LINE.search(head)
-        return _metadata(src, head, found.start() if found else len(head), total)
+        head, total = _head(src, str(path))
+        return _metadata(src, str(path), head, total)
 
 
 def _process(chunk: bytes) -> bytes:
     """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
-    text = b"\n" + chunk.replace(b"\r\n", b"\n")
+    text = b"\n" + chunk
     if _ODD_LINE_START.search(text):
         return _G0_WORD.sub(rb"\n\g<1>1", text)[1:]
     # Every line starts with its command: plain replaces do the common spellings at memory speed.
@@ -271,12 +259,21 @@ def _process(chunk: bytes) -> bytes:
     return text[1:]
 
 
-def _processed(src: BinaryIO, prepared: _Prepared, progress: Progress | None) -> Iterator[bytes]:
-    yield prepared.header
-    total = _size(src)
+def _processed(src: BinaryIO, name: str, prepared: _Prepared, progress: Progress | None) -> Iterator[bytes]:
+    """The body: the XYZ keys, the slicer's leading comments without XYZ key lines, then the processed code."""
+    yield prepared.keys
     if prepared.analysed:
         progress = _second_half(progress)
-    for chunk in _lines(src, prepared.rest_start, progress, total):
+    leading = True
+    for chunk in intake.gcode_lines(src, name, progress, _size(src)):
+        if leading:
+            found = _FIRST_CODE_LINE.search(chunk)
+            end = len(chunk) if found is None else found.start()
+            yield b"".join(line + b"\n" for line in chunk[:end].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
+            if found is None:
+                continue
+            leading = False
+            chunk = chunk[end:]
         yield _process(chunk)
 
 
@@ -358,19 +355,19 @@ def _encrypt_zip(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]
 
 
 def _write(
-    src: BinaryIO, out: BinaryIO, model: PrinterModel, container: int | None, zipped: bool | None,
+    src: BinaryIO, name: str, out: BinaryIO, model: PrinterModel, container: int | None, zipped: bool | None,
     filename: str, progress: Progress | None,
 ) -> ThreeWInfo:
     container = model.container if container is None else container
     zipped = model.zipped if zipped is None else zipped
     if container not in HEADER_OFFSET:
         raise InputError(f"unknown .3w container version {container}; use 2 or 5")
-    prepared = _prepare(src, model.file_id, filename, progress)
+    prepared = _prepare(src, name, model.file_id, filename, container, progress)
     stored = _stored_header(container, prepared.header)
     tag = TAG_ZIP if zipped else TAG_ECB
     _preamble(container, tag, stored, 0)  # fail on an oversized header before writing the body
     out.seek(BODY_OFFSET)
-    body = _processed(src, prepared, progress)
+    body = _processed(src, name, prepared, progress)
     crc, size, plain = (_encrypt_zip if zipped else _encrypt_ecb)(body, out)
     out.seek(0)
     out.write(_preamble(container, tag, stored, crc))
@@ -386,8 +383,11 @@ def write_3w(
     zipped: bool | None = None, progress: Progress | None = None, filename: str = "temp.3w",
 ) -> bytes:
     """The .3w bytes for `gcode` as `model` expects them (container/zipped override the model's defaults)."""
+    kind = intake.identify(gcode[:intake.SNIFF], len(gcode))
+    if kind is not intake.Kind.GCODE:
+        raise intake.refusal(kind, "the data", gcode[:intake.SNIFF])
     out = BytesIO()
-    _write(BytesIO(gcode), out, _resolve_model(model), container, zipped, filename, progress)
+    _write(BytesIO(gcode), "the G-code", out, _resolve_model(model), container, zipped, filename, progress)
     return out.getvalue()
 
 
@@ -437,8 +437,11 @@ def convert_gcode_file(
 ) -> ThreeWInfo:
     """Convert a G-code file to a .3w file; `dst` appears complete or not at all."""
     target = _resolve_model(model)
+    kind, head = intake.sniff(src)
+    if kind is not intake.Kind.GCODE:
+        raise intake.refusal(kind, str(src), head)
     with _open_input(src) as source, _atomic(dst) as out:
-        return _write(source, out, target, container, zipped, Path(dst).name, progress)
+        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress)
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -624,17 +627,23 @@ def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: P
     )
 
 
-def _source(data_or_path: bytes | str | Path) -> tuple[BinaryIO, str]:
+@contextlib.contextmanager
+def _source(data_or_path: bytes | str | Path) -> Iterator[tuple[BinaryIO, str]]:
+    """The .3w bytes (decoded first when they are base64 text) and how to name them in messages."""
     if isinstance(data_or_path, bytes | bytearray | memoryview):
-        return BytesIO(bytes(data_or_path)), "the data"
-    return _open_input(Path(data_or_path)), str(data_or_path)
+        yield BytesIO(intake.threew_bytes(bytes(data_or_path), "the data")), "the data"
+        return
+    path = Path(data_or_path)
+    kind, _head = intake.sniff(path)
+    with intake.open_3w(path, intake.Kind.THREEW_BASE64 if kind is intake.Kind.THREEW_BASE64
+                        else intake.Kind.THREEW) as source:
+        yield source, str(path)
 
 
 def read_3w(data_or_path: bytes | str | Path) -> ThreeWFile:
     """Decode a whole .3w (from a path or its bytes) into memory; CRC mismatches are reported, not raised."""
     parts: list[bytes] = []
-    source, name = _source(data_or_path)
-    with source:
+    with _source(data_or_path) as (source, name):
         info = _read(source, name, parts.append, None)
     values = {f: getattr(info, f) for f in ThreeWInfo.__dataclass_fields__}
     return ThreeWFile(**values, gcode=b"".join(parts))
@@ -642,26 +651,26 @@ def read_3w(data_or_path: bytes | str | Path) -> ThreeWFile:
 
 def inspect_3w(data_or_path: bytes | str | Path, progress: Progress | None = None) -> ThreeWInfo:
     """Everything `read_3w` tells except the G-code, streaming (the body is still decrypted to validate it)."""
-    source, name = _source(data_or_path)
-    with source:
+    with _source(data_or_path) as (source, name):
         return _read(source, name, lambda _data: None, progress)
 
 
 def convert_3w_to_gcode(src: Path, dst: Path, progress: Progress | None = None) -> ThreeWInfo:
     """Write the processed G-code a .3w carries (header included); `dst` appears complete or not at all."""
-    with _open_input(src) as source, _atomic(dst) as out:
-        return _read(source, str(src), out.write, progress)
+    with _source(src) as (source, name), _atomic(dst) as out:
+        return _read(source, name, out.write, progress)
 
 
 def is_3w(data_or_path: bytes | bytearray | memoryview | str | Path) -> bool:
-    """Whether the bytes (or the file) start with the .3w signature."""
+    """Whether the bytes (or the file) are a .3w, in binary or base64 text."""
     if isinstance(data_or_path, bytes | bytearray | memoryview):
-        return bytes(data_or_path[:len(MAGIC)]) == MAGIC
-    try:
-        with Path(data_or_path).open("rb") as handle:
-            return handle.read(len(MAGIC)) == MAGIC
-    except OSError:
-        return False
+        kind = intake.identify(bytes(data_or_path[:intake.SNIFF]))
+    else:
+        try:
+            kind = intake.sniff(Path(data_or_path))[0]
+        except InputError:
+            return False
+    return kind in (intake.Kind.THREEW, intake.Kind.THREEW_BASE64)
 
 
 def is_gcode_path(path: str | Path) -> bool:

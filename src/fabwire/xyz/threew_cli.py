@@ -14,6 +14,7 @@ from rich.table import Table
 
 from fabwire.cli_support import App
 from fabwire.errors import InputError
+from fabwire.xyz import intake
 from fabwire.xyz.gcodeinfo import GcodeMetadata, finish
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.threew import (
@@ -25,8 +26,6 @@ from fabwire.xyz.threew import (
     convert_gcode_file,
     gcode_metadata,
     inspect_3w,
-    is_3w,
-    is_gcode_path,
 )
 
 BAR_THRESHOLD = 8 << 20
@@ -118,7 +117,9 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
     size = _size(src)
     container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
     writing = dst.suffix.lower() == ".3w"
-    if is_3w(src):
+    kind, head = intake.sniff(src)
+    intake.require_printable(kind, str(src), head)
+    if kind is not intake.Kind.GCODE:
         if not writing:
             if model_text or file_format or zipped is not None:
                 raise InputError("--model, --format and --zip only apply when writing a .3w file")
@@ -141,8 +142,7 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
         _report(app, "3w-to-3w", src, dst, info)
         return
     if not writing:
-        kind = "G-code" if is_gcode_path(src) else "not a .3w file"
-        raise InputError(f"{src} is {kind} and {dst} is not a .3w file: nothing to convert "
+        raise InputError(f"{src} is G-code and {dst} is not a .3w file: nothing to convert "
                          "(name the output *.3w to make a print file)")
     model = find_model(model_text or "dv1MX0A000")
     with _progress(app, f"encoding {dst.name}", size) as progress:
@@ -168,9 +168,8 @@ def info(ctx: click.Context, file: Path) -> None:
     """Show what a .3w file holds (variant, CRC, model, print metadata), or what a G-code file would give."""
     app = _app(ctx)
     size = _size(file)
-    if not is_3w(file):
-        if not is_gcode_path(file):
-            raise InputError(f"{file} is not a .3w file (no 3DPFNKG13WTW signature) nor named like G-code")
+    kind, head = intake.sniff(file)
+    if intake.require_printable(kind, str(file), head) is intake.Kind.GCODE:
         _gcode_info(app, file)
         return
     with _progress(app, f"checking {file.name}", size) as progress:

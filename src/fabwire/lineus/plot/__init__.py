@@ -1,7 +1,11 @@
-"""The Line-us drawing pipeline: SVG, G-code and single-stroke text → polylines → placed in the reachable
-area → ordered for least pen-up travel → a typed move stream with time and length figures."""
+"""The Line-us drawing pipeline: SVG, G-code and single-stroke text → polylines → placed in the drawing
+area → ordered for least pen-up travel → a typed move stream with time and length figures.
+
+Public entry points: `read_drawing` (file or '-' → Drawing), `plan_drawing` / `plan_file` / `plan_lines` /
+`plan_text` (→ Plan), `Plan.figures()` (length, travel, time estimate)."""
 
 from fabwire.lineus.plot.gcode import parse_gcode, parse_gcode_text
+from fabwire.lineus.plot.intake import Drawing, read_drawing
 from fabwire.lineus.plot.optimize import drop_fine_points, greedy_order, improve, join_touching, optimise
 from fabwire.lineus.plot.plan import (
     Move,
@@ -11,8 +15,10 @@ from fabwire.lineus.plot.plan import (
     Plan,
     PlanFigures,
     PlanOptions,
+    auto_rotation,
     file_digest,
     load_drawing,
+    plan_drawing,
     plan_file,
     plan_lines,
     plan_text,
@@ -21,6 +27,7 @@ from fabwire.lineus.plot.svg import parse_svg
 from fabwire.lineus.plot.text import font_names, text_lines
 
 __all__ = [
+    "Drawing",
     "Move",
     "MoveTo",
     "PenDown",
@@ -28,6 +35,7 @@ __all__ = [
     "Plan",
     "PlanFigures",
     "PlanOptions",
+    "auto_rotation",
     "drop_fine_points",
     "file_digest",
     "font_names",
@@ -39,8 +47,10 @@ __all__ = [
     "parse_gcode",
     "parse_gcode_text",
     "parse_svg",
+    "plan_drawing",
     "plan_file",
     "plan_lines",
     "plan_text",
+    "read_drawing",
     "text_lines",
 ]

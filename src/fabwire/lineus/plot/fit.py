@@ -1,5 +1,6 @@
-"""Placing a drawing inside the reachable area: the largest box of the drawing's shape, or a check of the
-drawing as given."""
+"""Placing a drawing inside the drawing area: the largest box of the drawing's shape, or a check of the drawing
+as given. The drawing area is the official app's (its rectangle within reach) unless the whole reachable area is
+asked for."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fabwire.errors import InputError
-from fabwire.lineus.kinematics import UNITS_PER_MM, lines_outside, outside_length, reachable_mask
+from fabwire.lineus.kinematics import APP_AREA, UNITS_PER_MM, lines_outside, outside_length, reachable_mask
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, bbox, compose, drawn_length, scale_translate
 
 
@@ -27,9 +28,13 @@ class Box:
         return (self.cx - hw, self.cy - hh, self.cx + hw, self.cy + hh)
 
 
-def _box_inside(cx: float, cy: float, w: float, h: float, margin: float) -> bool:
+def _box_inside(cx: float, cy: float, w: float, h: float, margin: float, full: bool) -> bool:
     x0, y0 = cx - w / 2 - margin, cy - h / 2 - margin
     x1, y1 = cx + w / 2 + margin, cy + h / 2 + margin
+    if not full:
+        ax0, ay0, ax1, ay1 = APP_AREA
+        if x0 < ax0 or y0 < ay0 or x1 > ax1 or y1 > ay1:
+            return False
     n = 48
     t = np.linspace(0.0, 1.0, n)
     xs = np.concatenate([x0 + (x1 - x0) * t, np.full(n, x1), x1 - (x1 - x0) * t, np.full(n, x0)])
@@ -40,24 +45,35 @@ def _box_inside(cx: float, cy: float, w: float, h: float, margin: float) -> bool
 
 
 @functools.lru_cache(maxsize=64)
-def largest_box(aspect: float, margin: float = 0.0) -> Box:
-    """The largest rectangle of width/height `aspect` that lies, with `margin` units around it, in the area."""
+def largest_box(aspect: float, margin: float = 0.0, full: bool = False) -> Box:
+    """The largest rectangle of width/height `aspect` that lies, with `margin` units around it, in the app area
+    (with `full`, in the whole reachable area)."""
     if not aspect > 0:
         raise ValueError("aspect must be positive")
     best = Box(1200.0, 0.0, 0.0, 0.0)
+
+    def grow(cx: float, cy: float) -> None:
+        nonlocal best
+        lo, hi = best.height, 3400.0
+        if not _box_inside(cx, cy, lo * aspect + 1e-3, lo + 1e-3, margin, full):
+            return
+        for _ in range(18):
+            mid = (lo + hi) / 2
+            if _box_inside(cx, cy, mid * aspect, mid, margin, full):
+                lo = mid
+            else:
+                hi = mid
+        if lo > best.height:
+            best = Box(cx, cy, lo * aspect, lo)
+
     for cy in np.linspace(-500.0, 500.0, 21):
         for cx in np.linspace(850.0, 1500.0, 27):
-            lo, hi = best.height, 3400.0
-            if not _box_inside(float(cx), float(cy), lo * aspect + 1e-3, lo + 1e-3, margin):
-                continue
-            for _ in range(18):
-                mid = (lo + hi) / 2
-                if _box_inside(float(cx), float(cy), mid * aspect, mid, margin):
-                    lo = mid
-                else:
-                    hi = mid
-            if lo > best.height:
-                best = Box(float(cx), float(cy), lo * aspect, lo)
+            grow(float(cx), float(cy))
+    # Then finer around the best centre found (the coarse grid steps are 25 and 50 units).
+    centre = (best.cx, best.cy)
+    for dy in np.linspace(-50.0, 50.0, 9):
+        for dx in np.linspace(-25.0, 25.0, 9):
+            grow(centre[0] + float(dx), centre[1] + float(dy))
     if best.height <= 0:
         raise InputError(f"a margin of {margin / UNITS_PER_MM:g} mm leaves no room in the drawing area")
     return best
@@ -74,17 +90,22 @@ class Placement:
     """Pen-down length outside the reachable area, in machine units (0 after fitting)."""
 
 
-def fit_into_area(lines: Polylines, *, margin: float = 0.0) -> tuple[Polylines, Placement]:
-    """Scale (keeping the aspect ratio) and centre `lines`, already in machine orientation, into the area."""
+def fit_scale(lines: Polylines, *, margin: float = 0.0, full: bool = False) -> tuple[float, Box]:
+    """The scale `fit_into_area` gives `lines` (at most: it may shrink a little more), and the box it fills."""
     x0, y0, x1, y1 = bbox(lines)
     w, h = x1 - x0, y1 - y0
     aspect = max(w, 1e-9) / max(h, 1e-9)
     aspect = min(max(aspect, 1e-3), 1e3)
-    box = largest_box(round(aspect, 4), margin)
+    box = largest_box(round(aspect, 4), margin, full)
     if w <= 1e-9 and h <= 1e-9:
-        scale = 1.0
-    else:
-        scale = min(box.width / w if w > 1e-9 else np.inf, box.height / h if h > 1e-9 else np.inf)
+        return 1.0, box
+    return float(min(box.width / w if w > 1e-9 else np.inf, box.height / h if h > 1e-9 else np.inf)), box
+
+
+def fit_into_area(lines: Polylines, *, margin: float = 0.0, full: bool = False) -> tuple[Polylines, Placement]:
+    """Scale (keeping the aspect ratio) and centre `lines`, already in machine orientation, into the area."""
+    x0, y0, x1, y1 = bbox(lines)
+    scale, box = fit_scale(lines, margin=margin, full=full)
     m = scale_translate(float(scale), box.cx - (x0 + x1) / 2 * scale, box.cy - (y0 + y1) / 2 * scale)
     placed = affine(lines, m)
     # The box was checked on a sampled outline: shrink a little in the rare case a corner still grazes out.

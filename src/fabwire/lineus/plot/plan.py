@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -14,8 +14,7 @@ import numpy as np
 
 from fabwire.errors import InputError
 from fabwire.lineus.kinematics import HOME, UNITS_PER_MM, MotionModel, body_detour
-from fabwire.lineus.plot.fit import check_placed, fit_into_area, largest_box
-from fabwire.lineus.plot.gcode import parse_gcode
+from fabwire.lineus.plot.fit import check_placed, fit_into_area, fit_scale, largest_box
 from fabwire.lineus.plot.geometry import (
     FloatArray,
     Polylines,
@@ -27,14 +26,9 @@ from fabwire.lineus.plot.geometry import (
     scale_translate,
     segment_count,
 )
+from fabwire.lineus.plot.intake import FLATTEN_TOLERANCE, Drawing, read_drawing
 from fabwire.lineus.plot.optimize import RESOLUTION, optimise, travel_length
-from fabwire.lineus.plot.svg import parse_svg
 from fabwire.lineus.plot.text import DEFAULT_FONT, text_lines
-
-SVG_UNITS_PER_PX = 25.4 / 96 * UNITS_PER_MM
-"""Machine units per SVG user unit (CSS pixel, 96 per inch)."""
-PAGE_ORIGIN = (650.0, 1000.0)
-"""Unfitted SVG pages sit with their top-left corner here: the corner of the app drawing area."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,6 +86,8 @@ class Plan:
     clipped: float = 0.0
     """Pen-down length (machine units) left out because it lay outside the area."""
     notes: tuple[str, ...] = ()
+    hidden: tuple[FloatArray, ...] = ()
+    """Lines of the drawing that clip paths hide, placed like the strokes (for previews; never drawn)."""
 
     def moves(self, start: int = 0) -> Iterator[Move]:
         """The move stream from stroke `start` on: travel with the pen up, drop, draw, lift."""
@@ -158,6 +154,10 @@ class PlanOptions:
     """Scale into the area; None = yes for SVG and text, no for G-code (already in machine units)."""
     margin_mm: float = 2.0
     rotate_deg: float = 0.0
+    rotate_auto: bool = False
+    """Turn by 0 or 90 degrees, whichever lets the drawing be larger (overrides `rotate_deg`)."""
+    full_area: bool = False
+    """Fit into the whole reachable area instead of the official app's drawing area."""
     optimize: bool = True
     clip: bool = False
     """Without fitting: cut away what lies outside the area instead of refusing the drawing."""
@@ -180,37 +180,37 @@ def file_digest(path: str | Path) -> str:
 
 
 def load_drawing(path: str | Path) -> tuple[Polylines, str, list[str]]:
-    """Read .svg or .gcode into polylines in machine orientation (y up); returns (lines, kind, notes).
+    """Read a drawing (see `read_drawing`) into polylines in machine orientation; returns (lines, kind, notes)."""
+    drawing = read_drawing(path)
+    return drawing.lines, drawing.kind, list(drawing.notes)
 
-    SVG comes out at real size (96 user units per inch) with its page's top-left corner at the app drawing
-    area's corner (650, 1000); G-code is already in machine units.
-    """
-    p = Path(path)
-    suffix = p.suffix.lower()
-    notes: list[str] = []
-    if suffix in (".svg", ".svgz"):
-        drawing = parse_svg(p)
-        for tag, count in sorted(drawing.skipped.items()):
-            notes.append(f"skipped {count} {tag} element(s): convert them to paths to draw them")
-        m = scale_translate(SVG_UNITS_PER_PX, PAGE_ORIGIN[0], PAGE_ORIGIN[1], flip_y=True)
-        lines = affine(drawing.lines, m)
-        kind = "svg"
-    elif suffix in (".gcode", ".gc", ".nc", ".txt", ".ngc", ".g"):
-        lines = parse_gcode(p, notes=notes)
-        kind = "gcode"
-    else:
-        raise InputError(f"{p}: unknown drawing type {p.suffix or '(none)'!r}; give an .svg or .gcode file")
-    if not lines:
-        why = f" ({'; '.join(notes)})" if notes else ""
-        raise InputError(f"{p}: the drawing is empty (nothing for the pen to draw){why}")
-    return lines, kind, notes
+
+def _rotation_about_centre(polys: Polylines, degrees: float) -> FloatArray:
+    x0, y0, x1, y1 = bbox(polys)
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    return compose(scale_translate(1.0, cx, cy), compose(rotation(degrees), scale_translate(1.0, -cx, -cy)))
+
+
+def auto_rotation(polys: Polylines, options: PlanOptions) -> float:
+    """0 or 90 degrees: whichever lets the drawing be fitted larger into the area (0 on a tie)."""
+    margin = options.margin_mm * UNITS_PER_MM
+    upright, _ = fit_scale(polys, margin=margin, full=options.full_area)
+    turned, _ = fit_scale(affine(polys, _rotation_about_centre(polys, 90.0)), margin=margin, full=options.full_area)
+    return 90.0 if turned > upright * 1.001 else 0.0
+
+
+def _identity() -> FloatArray:
+    return scale_translate(1.0, 0.0, 0.0)
 
 
 def plan_lines(
     lines: Sequence[FloatArray], options: PlanOptions = PlanOptions(), *, fit_default: bool = True,
-    notes: Sequence[str] = ()
+    notes: Sequence[str] = (), hidden: Sequence[FloatArray] = ()
 ) -> Plan:
-    """Place (fit or check), optimise and wrap polylines already in machine orientation."""
+    """Place (rotate, then fit or check), optimise and wrap polylines already in machine orientation.
+
+    `hidden` lines (cut away by clip paths) are placed the same way and kept in the plan for previews.
+    """
     polys = [np.asarray(line, dtype=float).reshape(-1, 2) for line in lines if len(line)]
     if not polys:
         raise InputError("the drawing is empty (nothing for the pen to draw)")
@@ -219,17 +219,17 @@ def plan_lines(
     if options.margin_mm < 0:
         raise InputError(f"the margin must not be negative, got {options.margin_mm:g} mm")
     fit = fit_default if options.fit is None else options.fit
-    if options.rotate_deg % 360:
-        x0, y0, x1, y1 = bbox(polys)
-        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-        m = compose(scale_translate(1.0, cx, cy), compose(rotation(options.rotate_deg),
-                                                          scale_translate(1.0, -cx, -cy)))
-        polys = affine(polys, m)
+    degrees = auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+    matrix = _identity()
+    if degrees % 360:
+        matrix = _rotation_about_centre(polys, degrees)
+        polys = affine(polys, matrix)
     clipped = 0.0
     scale = 1.0
     if fit:
-        polys, placement = fit_into_area(polys, margin=options.margin_mm * UNITS_PER_MM)
+        polys, placement = fit_into_area(polys, margin=options.margin_mm * UNITS_PER_MM, full=options.full_area)
         scale = placement.scale
+        matrix = compose(placement.matrix, matrix)
     else:
         polys, clipped = check_placed(polys, clip=options.clip)
         if not polys:
@@ -239,35 +239,58 @@ def plan_lines(
     extra = list(notes)
     if clipped:
         extra.append(f"clipped {clipped / UNITS_PER_MM:.1f} mm of lines outside the reachable area")
-    return Plan(tuple(polys), motion=options.motion, scale=scale, clipped=clipped, notes=tuple(extra))
+    return Plan(tuple(polys), motion=options.motion, scale=scale, clipped=clipped, notes=tuple(extra),
+                hidden=tuple(affine(list(hidden), matrix)))
+
+
+def plan_drawing(drawing: Drawing, options: PlanOptions = PlanOptions()) -> Plan:
+    """Plan a drawing read by `read_drawing`. A fitted SVG's curves are flattened again when fitting enlarges
+    them, so the chord error on paper stays within FLATTEN_TOLERANCE whatever the page size and scale."""
+    fit = options.fit if options.fit is not None else drawing.kind == "svg"
+    if fit and drawing.curved:
+        polys = drawing.lines
+        if options.rotate_auto or options.rotate_deg % 360:
+            degrees = auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+            polys = affine(polys, _rotation_about_centre(polys, degrees))
+        scale, _ = fit_scale(polys, margin=options.margin_mm * UNITS_PER_MM, full=options.full_area)
+        if drawing.tolerance * scale > FLATTEN_TOLERANCE * 1.001:
+            drawing = drawing.reflattened(FLATTEN_TOLERANCE / scale)
+    return plan_lines(drawing.lines, options, fit_default=(drawing.kind == "svg"), notes=drawing.notes,
+                      hidden=drawing.hidden)
 
 
 def plan_file(path: str | Path, options: PlanOptions = PlanOptions()) -> Plan:
-    """Plan an .svg or .gcode drawing."""
-    lines, kind, notes = load_drawing(path)
-    return plan_lines(lines, options, fit_default=(kind == "svg"), notes=notes)
+    """Plan an SVG, SVGZ or Line-us G-code drawing from a file, or from standard input for '-'."""
+    return plan_drawing(read_drawing(path), options)
 
 
 def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float | None = None,
               font: str = DEFAULT_FONT) -> Plan:
-    """Plan text in a single-stroke font: `size_mm` tall capitals centred in the area, or fitted to it."""
+    """Plan text in a single-stroke font: `size_mm` tall capitals centred in the area, or fitted to it.
+
+    The rotation is applied before the size is checked against the area; InputError names the largest size that
+    fits when the text does not.
+    """
     if size_mm is None:
         return plan_lines(text_lines(text, font=font), options, fit_default=True)
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise InputError(f"the text size must be a positive number of mm, got {size_mm:g}")
     lines = text_lines(text, font=font, cap_height=size_mm * UNITS_PER_MM)
+    degrees = auto_rotation(lines, options) if options.rotate_auto else options.rotate_deg
+    if degrees % 360:
+        lines = affine(lines, _rotation_about_centre(lines, degrees))
     x0, y0, x1, y1 = bbox(lines)
     w, h = x1 - x0, y1 - y0
-    box = largest_box(round(max(w, 1e-3) / max(h, 1e-3), 4), options.margin_mm * UNITS_PER_MM)
+    box = largest_box(round(max(w, 1e-3) / max(h, 1e-3), 4), options.margin_mm * UNITS_PER_MM, options.full_area)
     if w > box.width + 1e-6 or h > box.height + 1e-6:
         factor = max(w / box.width, h / box.height)
+        turned = f" turned {degrees:g} degrees" if degrees % 360 else ""
         raise InputError(
-            f"text {size_mm:g} mm tall is {w / UNITS_PER_MM:.0f} x {h / UNITS_PER_MM:.0f} mm and does not fit the "
-            f"drawing area ({box.width / UNITS_PER_MM:.0f} x {box.height / UNITS_PER_MM:.0f} mm at this shape); "
-            f"use --size {size_mm / factor:.1f} or less"
+            f"text {size_mm:g} mm tall{turned} is {w / UNITS_PER_MM:.0f} x {h / UNITS_PER_MM:.0f} mm and does not fit "
+            f"the drawing area ({box.width / UNITS_PER_MM:.0f} x {box.height / UNITS_PER_MM:.0f} mm at this shape); "
+            f"use --size {math.floor(size_mm / factor * 10) / 10:.1f} or less"
+            + ("" if options.rotate_auto or degrees % 360 else ", or --rotate auto")
         )
     placed = affine(lines, scale_translate(1.0, box.cx - (x0 + x1) / 2, box.cy - (y0 + y1) / 2))
-    unfit = PlanOptions(fit=False, margin_mm=options.margin_mm, rotate_deg=options.rotate_deg,
-                        optimize=options.optimize, clip=False, time_budget=options.time_budget,
-                        resolution=options.resolution, motion=options.motion)
+    unfit = replace(options, fit=False, rotate_deg=0.0, rotate_auto=False, clip=False)
     return plan_lines(placed, unfit, fit_default=False)

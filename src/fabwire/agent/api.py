@@ -1,0 +1,229 @@
+"""The HTTP API (`/api/v1`, OpenAPI at `/api/v1/openapi.json`), the live WebSocket and the dashboard's files.
+
+Every error is `{"message": words, "exit_code": the CLI's exit code for that kind of error, "error": class}`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from datetime import UTC, datetime, timedelta
+from importlib import resources
+from typing import Any
+
+from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from fabwire import __version__
+from fabwire.agent.auth import SUBPROTOCOL
+from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
+from fabwire.agent.jobs import JobNotFound, UploadTooLarge
+from fabwire.errors import DeviceError, FabwireError, InputError, LinkError, LinkTimeout, RemoteProtocolError
+
+STATIC = resources.files("fabwire.agent") / "static"
+UPLOAD_QUERY = Query(..., min_length=1, max_length=200, description="The file's name; only its extension is used "
+                     "(it is stored under a generated name).")
+
+
+class ErrorBody(BaseModel):
+    message: str
+    exit_code: int = Field(description="The exit code `fabwire` gives for this kind of error.")
+    error: str = Field(description="The error's class, e.g. DeviceError.")
+
+
+class NewDevice(BaseModel):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+    kind: str = Field(pattern="^(xyz|lineus|mmu)$")
+    address: str = Field(min_length=1, max_length=300, description="As for -d: host[:port], tcp://…, /dev/…")
+    options: dict[str, str | int | float | bool] = Field(default_factory=dict)
+
+
+class Confirm(BaseModel):
+    confirm: bool = False
+
+
+ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 404, 409, 413, 503, 504)}
+
+
+def _status_for(exc: BaseException) -> int:
+    if isinstance(exc, UnknownDevice | JobNotFound):
+        return 404
+    if isinstance(exc, UploadTooLarge):
+        return 413
+    if isinstance(exc, DeviceError):
+        return 409
+    if isinstance(exc, LinkTimeout):
+        return 504
+    if isinstance(exc, LinkError | ConnectionError):
+        return 503
+    if isinstance(exc, RemoteProtocolError):
+        return 502
+    if isinstance(exc, InputError | FabwireError):
+        return 400
+    return 500
+
+
+def error_response(status: int, message: str, exit_code: int, error: str) -> JSONResponse:
+    return JSONResponse({"message": message, "exit_code": exit_code, "error": error}, status_code=status)
+
+
+def _iso(epoch: float) -> str:
+    return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
+    app = FastAPI(title="fabwire agent", version=__version__, openapi_url="/api/v1/openapi.json", docs_url=None,
+                  redoc_url=None, description="Machines, their states and history, jobs and actions; live events "
+                  "on the WebSocket /api/v1/events.")
+
+    @app.exception_handler(FabwireError)
+    async def fabwire_error(request: Request, exc: FabwireError) -> JSONResponse:
+        return error_response(_status_for(exc), str(exc), exc.exit_code, type(exc).__name__)
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+        problems = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors())
+        return error_response(422, f"bad request: {problems}", InputError.exit_code, "InputError")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return error_response(exc.status_code, str(exc.detail), InputError.exit_code, "HTTPError")
+
+    api = APIRouter(prefix="/api/v1", responses=ERRORS)
+
+    def device_dict(device_id: str) -> dict[str, Any]:
+        session_info = next(d for d in agent.devices() if d.id == device_id)
+        return {**session_info.to_dict(), "state": agent.state(device_id)}
+
+    @api.get("/devices", summary="Every monitored device with its latest state")
+    async def devices() -> list[dict[str, Any]]:
+        return [device_dict(d.id) for d in agent.devices()]
+
+    @api.post("/devices", status_code=201, summary="Start monitoring a device")
+    async def add_device(body: NewDevice) -> dict[str, Any]:
+        info = await agent.add_device(DeviceSpec(body.name, body.kind, body.address, body.options))  # type: ignore[arg-type]
+        return device_dict(info.id)
+
+    @api.get("/devices/{device_id}", summary="One device and its latest state")
+    async def device(device_id: str) -> dict[str, Any]:
+        agent.state(device_id)
+        return device_dict(device_id)
+
+    @api.delete("/devices/{device_id}", status_code=204, summary="Stop monitoring a device")
+    async def remove_device(device_id: str) -> Response:
+        await agent.remove_device(device_id)
+        return Response(status_code=204)
+
+    @api.get("/devices/{device_id}/state", summary="The latest state (the `--json` status, a summary, ts, online)")
+    async def state(device_id: str) -> dict[str, Any]:
+        return agent.state(device_id)
+
+    @api.get("/devices/{device_id}/history", summary="Samples (temperatures, progress, state) and events in a range")
+    async def history(device_id: str, since: datetime | None = None, until: datetime | None = None,
+                      limit: int = Query(2000, ge=1, le=20000)) -> dict[str, Any]:
+        agent.state(device_id)
+        end = until or datetime.now(UTC)
+        start = since or end - timedelta(hours=1)
+        samples = await agent.history.samples(device_id, start.timestamp(), end.timestamp(), limit)
+        events = await agent.history.events(device_id, start.timestamp(), end.timestamp(), limit)
+        return {"device": device_id, "since": start.isoformat(), "until": end.isoformat(),
+                "samples": [{**s, "ts": _iso(s["ts"])} for s in samples], "events": events}
+
+    @api.get("/devices/{device_id}/drawing", summary="A Line-us job's planned strokes and the ink drawn so far")
+    async def drawing(device_id: str) -> dict[str, Any]:
+        agent.state(device_id)
+        session = next(s for s in agent.sessions() if s.info.id == device_id)
+        return session.drawing
+
+    @api.get("/devices/{device_id}/actions", summary="The actions of this kind of device, and those that apply now")
+    async def actions(device_id: str) -> dict[str, Any]:
+        session = next((s for s in agent.sessions() if s.info.id == device_id), None)
+        if session is None:
+            agent.state(device_id)
+            raise AssertionError
+        return {"actions": [a.to_dict() for a in session.driver.actions],
+                "applicable": agent.state(device_id)["summary"]["actions"]}
+
+    @api.post("/devices/{device_id}/actions/{action}", summary="Run an action; long ones answer {started} at once")
+    async def act(device_id: str, action: str, params: dict[str, Any] | None = None) -> dict[str, Any]:
+        return await agent.act(device_id, action, params or {})
+
+    @api.post("/devices/{device_id}/jobs", status_code=201, summary="Upload a file (request body) and start it",
+              openapi_extra={"requestBody": {"required": True, "content": {
+                  "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
+    async def upload(device_id: str, request: Request, filename: str = UPLOAD_QUERY) -> dict[str, Any]:
+        agent.state(device_id)
+        declared = request.headers.get("content-length", "")
+        if declared.isdigit() and int(declared) > max_upload_bytes:
+            raise UploadTooLarge(f"the upload is {int(declared):,} bytes; the limit is {max_upload_bytes:,}")
+        data = bytearray()
+        async for chunk in request.stream():
+            data += chunk
+            if len(data) > max_upload_bytes:
+                raise UploadTooLarge(f"the upload is over the limit of {max_upload_bytes:,} bytes")
+        return await agent.start_job(device_id, filename, bytes(data))
+
+    @api.get("/jobs", summary="Jobs, newest first (they survive a restart)")
+    async def jobs(device: str | None = None, limit: int = Query(100, ge=1, le=1000)) -> list[dict[str, Any]]:
+        return await agent.jobs.list(device, limit)
+
+    @api.get("/jobs/{job_id}", summary="One job")
+    async def job(job_id: str) -> dict[str, Any]:
+        return await agent.jobs.get(job_id)
+
+    @api.post("/jobs/{job_id}/cancel", summary="Cancel a running job (needs {\"confirm\": true})")
+    async def cancel(job_id: str, body: Confirm | None = None) -> dict[str, Any]:
+        return await agent.cancel_job(job_id, confirm=bool(body and body.confirm))
+
+    @api.websocket("/events")
+    async def events(websocket: WebSocket, device: str | None = None) -> None:
+        """Live events as JSON text messages (see `fabwire.agent.core`); the current state of each device first."""
+        offered = websocket.scope.get("subprotocols", [])
+        try:
+            subscription = agent.subscribe(device)
+        except UnknownDevice as exc:
+            await websocket.close(code=4404, reason=str(exc)[:120])
+            return
+        await websocket.accept(subprotocol=SUBPROTOCOL if SUBPROTOCOL in offered else None)
+        receiver: asyncio.Future[Any] = asyncio.ensure_future(websocket.receive())
+        try:
+            for info in agent.devices():
+                if device in (None, info.id):
+                    current = agent.state(info.id)
+                    await websocket.send_text(json.dumps({"ts": current["ts"], "device": info.id, "type": "state",
+                                                          "state": current}))
+            while True:
+                getter = asyncio.ensure_future(anext(subscription))
+                done, _ = await asyncio.wait({receiver, getter}, return_when=asyncio.FIRST_COMPLETED)
+                if receiver in done:
+                    getter.cancel()
+                    if receiver.result().get("type") == "websocket.disconnect":
+                        break
+                    receiver = asyncio.ensure_future(websocket.receive())  # messages from clients are ignored
+                    continue
+                await websocket.send_text(json.dumps(getter.result()))
+        except (WebSocketDisconnect, ConnectionError, RuntimeError, StopAsyncIteration):
+            pass
+        finally:
+            subscription.close()
+            receiver.cancel()
+            with contextlib.suppress(BaseException):
+                await receiver
+
+    app.include_router(api)
+    app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
+
+    @app.get("/", include_in_schema=False)
+    async def index() -> FileResponse:
+        return FileResponse(str(STATIC / "index.html"), headers={"cache-control": "no-cache"})
+
+    @app.exception_handler(Exception)
+    async def unexpected(request: Request, exc: Exception) -> JSONResponse:
+        return error_response(500, f"internal error: {exc!r}", exit_code_of(exc), type(exc).__name__)
+
+    return app

@@ -1,0 +1,266 @@
+"""The agent: one session per device, their latest states, a live event stream, actions and jobs.
+
+Every event is a JSON-ready dict `{"ts": ISO-8601 UTC, "device": id, "type": T, ...}` where T is
+  "state"   — `"state"`: the device's latest state (see `Agent.state`), sent when anything in it changed;
+  "online"  — `"info"`: the DeviceInfo as a dict, after a (re)connect;
+  "offline" — `"reason"`: why the link is down, `"retry_in_s"`: when the next attempt is;
+  "event"   — `"event"`: something the device reported (an MMU progress step, an error it raised …);
+  "job"     — `"job"`: a job record (see `fabwire.agent.jobs`), `"stroke"` too while a Line-us draws;
+  "error"   — `"message"`, `"exit_code"`: an action or job failed (the CLI's exit-code class).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import re
+import socket
+from collections.abc import AsyncIterator, Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+from fabwire.errors import FabwireError, InputError
+
+if TYPE_CHECKING:
+    from fabwire.agent.session import Session
+
+Kind = Literal["xyz", "lineus", "mmu"]
+EventType = Literal["state", "event", "online", "offline", "job", "error"]
+KINDS: tuple[Kind, ...] = ("xyz", "lineus", "mmu")
+SUBSCRIBER_QUEUE = 2000
+"""Events a slow subscriber may lag behind by before the oldest are dropped (it sees a `"dropped"` count)."""
+
+
+class UnknownDevice(InputError):
+    """No device with that id is monitored by this agent."""
+
+
+def now_iso() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceInfo:
+    """What a device is; `id` is stable across restarts and unique across agents (see `device_id`)."""
+
+    id: str
+    name: str
+    kind: str
+    """"xyz" | "lineus" | "mmu"."""
+    model: str | None
+    serial: str | None
+    firmware: str | None
+    address: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceSpec:
+    """A device to monitor: how the config (or an API call) names it and where it is."""
+
+    name: str
+    kind: Kind
+    address: str
+    options: Mapping[str, str | int | float | bool] = field(default_factory=dict)
+
+
+_LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?::1\]?)(:|/|$))", re.IGNORECASE)
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "device"
+
+
+def device_id(kind: str, serial: str | None, address: str, host: str | None = None) -> str:
+    """`{kind}-{serial}` when the machine reports a serial number, else `{kind}-{address}` made URL-safe.
+
+    A loopback, serial-port or in-process address means something only on this computer, so it is
+    qualified with the host name: two agents' `127.0.0.1:9100` are two different machines."""
+    if serial and serial.strip():
+        return f"{kind}-{_slug(serial)}"
+    if _LOCAL.match(address):
+        return f"{kind}-{_slug(host or socket.gethostname())}-{_slug(address)}"
+    return f"{kind}-{_slug(address)}"
+
+
+def make_event(device: str, type_: EventType, **payload: Any) -> dict[str, Any]:
+    return {"ts": now_iso(), "device": device, "type": type_, **payload}
+
+
+class Subscription(AsyncIterator[dict[str, Any]]):
+    """Live events as an async iterator; registered when created, so nothing published after that is missed."""
+
+    def __init__(self, agent: Agent, device_id: str | None) -> None:
+        self.device_id = device_id
+        self.dropped = 0
+        self._queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._agent = agent
+        agent._subscribers.add(self)
+
+    def offer(self, event: dict[str, Any]) -> None:
+        if self.device_id is not None and event["device"] != self.device_id:
+            return
+        if self._queue.qsize() >= SUBSCRIBER_QUEUE:
+            self._queue.get_nowait()
+            self.dropped += 1
+        self._queue.put_nowait(event)
+
+    def __aiter__(self) -> Subscription:
+        return self
+
+    async def __anext__(self) -> dict[str, Any]:
+        if self not in self._agent._subscribers and self._queue.empty():
+            raise StopAsyncIteration
+        return await self._queue.get()
+
+    async def aclose(self) -> None:
+        self._agent._subscribers.discard(self)
+
+    def close(self) -> None:
+        self._agent._subscribers.discard(self)
+
+
+class Agent:
+    """Sessions to every device, their states, a live event stream, actions and jobs; history when given a store.
+
+        agent = Agent(state_dir=Path("state"))
+        async with agent:
+            await agent.add_device(DeviceSpec("office", "xyz", "192.168.1.50"))
+            async for event in agent.subscribe("xyz-3dp01p…"):
+                ...
+
+    Errors: `UnknownDevice` (an InputError) for an id it does not monitor; actions raise the FabwireError
+    subclasses the clients raise (DeviceError, LinkError, LinkTimeout, InputError for bad parameters).
+    """
+
+    def __init__(self, *, state_dir: Path | None = None, retention_s: float = 24 * 3600.0,
+                 max_upload_bytes: int = 64 * 1024 * 1024, backoff: tuple[float, float] = (0.5, 30.0),
+                 first_attempt_s: float = 10.0) -> None:
+        from fabwire.agent.history import History
+        from fabwire.agent.jobs import JobStore
+
+        self.state_dir = state_dir
+        self.backoff = backoff
+        self.first_attempt_s = first_attempt_s
+        self.history = History(state_dir / "history.sqlite3" if state_dir else None, retention_s=retention_s)
+        self.jobs = JobStore(self.history, state_dir / "uploads" if state_dir else None, max_upload_bytes)
+        self._sessions: dict[str, Session] = {}
+        self._subscribers: set[Subscription] = set()
+        self._started = False
+
+    async def __aenter__(self) -> Agent:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    async def start(self) -> None:
+        await self.history.open()
+        await self.jobs.recover()
+        self._started = True
+
+    async def stop(self) -> None:
+        sessions = list(self._sessions.values())
+        self._sessions.clear()
+        await asyncio.gather(*(s.stop() for s in sessions), return_exceptions=True)
+        for sub in list(self._subscribers):
+            sub.close()
+        await self.history.close()
+        self._started = False
+
+    # ------------------------------------------------------------------------------------------ the contract
+
+    def devices(self) -> list[DeviceInfo]:
+        return [s.info for s in self._sessions.values()]
+
+    def state(self, device_id: str) -> dict[str, Any]:
+        """The latest state: `{"ts", "online", "device", "kind", "name", "summary": {…}, "status": {…}, "job"}`.
+
+        `status` is exactly what the device's `--json status` prints (None before the first poll); `summary` is
+        the same view for every kind, SI units in the key names (see `fabwire.agent.drivers.base.Summary`)."""
+        return self._session(device_id).state
+
+    def subscribe(self, device_id: str | None = None) -> Subscription:
+        """Live events of one device (or all); iterate, and `aclose()` when done."""
+        if device_id is not None:
+            self._session(device_id)
+        return Subscription(self, device_id)
+
+    async def act(self, device_id: str, action: str, params: Mapping[str, Any]) -> dict[str, Any]:
+        """Run an action (see `actions_for`); returns its result dict. Long ones (a tool change) run in the
+        background and return `{"started": action}`; their end arrives as events."""
+        return await self._session(device_id).act(action, dict(params))
+
+    async def add_device(self, spec: DeviceSpec) -> DeviceInfo:
+        """Start monitoring; waits for the first connection attempt (bounded) so the id can use the serial."""
+        from fabwire.agent.session import Session
+
+        if spec.kind not in KINDS:
+            raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
+        for session in self._sessions.values():
+            if session.spec.address == spec.address and session.spec.kind == spec.kind:
+                raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
+            if session.spec.name == spec.name:
+                raise InputError(f"a device named {spec.name!r} is already monitored")
+        session = Session(self, spec)
+        await session.start()
+        self._sessions[session.info.id] = session
+        await self.history.remember_device(session.info)
+        return session.info
+
+    async def remove_device(self, device_id: str) -> None:
+        session = self._session(device_id)
+        del self._sessions[device_id]
+        await session.stop()
+
+    # ------------------------------------------------------------------------------------------ jobs
+
+    async def start_job(self, device_id: str, filename: str, data: bytes) -> dict[str, Any]:
+        """Store an upload under a generated name and start it on the device (print a G-code/.3w, draw an SVG)."""
+        return await self._session(device_id).start_job(filename, data)
+
+    async def cancel_job(self, job_id: str, *, confirm: bool) -> dict[str, Any]:
+        job = await self.jobs.get(job_id)
+        return await self._session(job["device"]).cancel_job(job_id, confirm=confirm)
+
+    # ------------------------------------------------------------------------------------------ plumbing
+
+    def publish(self, event: dict[str, Any]) -> None:
+        for sub in list(self._subscribers):
+            sub.offer(event)
+        self.history.record_event(event)
+
+    def claim_id(self, wanted: str, fallback: str) -> str:
+        """`wanted` unless another session already has it (two simulators may report one serial)."""
+        taken = set(self._sessions)
+        return wanted if wanted not in taken else fallback
+
+    def _session(self, device_id: str) -> Session:
+        try:
+            return self._sessions[device_id]
+        except KeyError:
+            raise UnknownDevice(f"no device {device_id!r} here (known: {', '.join(self._sessions) or 'none'})") \
+                from None
+
+    def sessions(self) -> list[Session]:
+        return list(self._sessions.values())
+
+    @staticmethod
+    def error_event(device: str, exc: BaseException) -> dict[str, Any]:
+        return make_event(device, "error", message=str(exc) or type(exc).__name__, exit_code=exit_code_of(exc))
+
+
+def exit_code_of(exc: BaseException) -> int:
+    """The CLI's exit-code class for an exception (FabwireError's own, 9 timeouts, 8 links, 1 otherwise)."""
+    if isinstance(exc, FabwireError):
+        return exc.exit_code
+    if isinstance(exc, TimeoutError):
+        return 9
+    if isinstance(exc, ConnectionError | OSError):
+        return 8
+    return 1

@@ -1,0 +1,1 @@
+"""Per-kind drivers: how a session monitors and commands each kind of device."""

@@ -1,0 +1,178 @@
+"""What a session needs from each kind of device: connect, poll, act, run a job — through the CLI's clients.
+
+The summary is the one view the dashboard and the MQTT bridge read for every kind. Its keys (None when the
+kind has no such thing, SI units in the names):
+  state ("idle", "printing", "paused", "busy", "done", "error", "drawing", "offline"), state_text (words),
+  error (words or None), error_code, busy (bool), progress_percent, elapsed_s, time_left_s,
+  extruder_temp_c, extruder_target_c, bed_temp_c, bed_target_c, filament_left_mm,
+  position ({"x", "y", "z"} in the Line-us's own units), pen_down,
+  active_slot, filament_position (words), selector_slot, idler_slot, finda,
+  actions (names of the actions that apply now, for buttons).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Protocol
+
+from fabwire.agent.core import DeviceSpec
+from fabwire.errors import InputError
+
+Emit = Callable[[dict[str, Any]], None]
+"""Forwards a device's own event (an `"event"` payload) to the session."""
+
+SUMMARY_KEYS = (
+    "state", "state_text", "error", "error_code", "busy", "progress_percent", "elapsed_s", "time_left_s",
+    "extruder_temp_c", "extruder_target_c", "bed_temp_c", "bed_target_c", "filament_left_mm", "position",
+    "pen_down", "active_slot", "filament_position", "selector_slot", "idler_slot", "finda", "actions",
+)
+
+
+def summary(**values: Any) -> dict[str, Any]:
+    """A summary with every key present (unknown keys are a programming error)."""
+    unknown = set(values) - set(SUMMARY_KEYS)
+    if unknown:
+        raise KeyError(f"not summary keys: {sorted(unknown)}")
+    out: dict[str, Any] = dict.fromkeys(SUMMARY_KEYS)
+    out.update(values)
+    out["busy"] = bool(out["busy"])
+    out["actions"] = list(out["actions"] or [])
+    return out
+
+
+def offline_summary(reason: str) -> dict[str, Any]:
+    return summary(state="offline", state_text=f"offline: {reason}")
+
+
+@dataclass(frozen=True, slots=True)
+class Identity:
+    model: str | None
+    serial: str | None
+    firmware: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Param:
+    name: str
+    type: str
+    """"int" | "float" | "str" | "bool"."""
+    doc: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Action:
+    name: str
+    doc: str
+    params: tuple[Param, ...] = ()
+    confirm: bool = False
+    """Destructive: refused unless the request says `"confirm": true` (as the CLI asks)."""
+    background: bool = False
+    """Takes long (homing, a tool change): the request returns at once, the outcome arrives as events."""
+    job: bool = False
+    """Runs as a job (listed, cancellable, with progress) through `Driver.run_job`."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "doc": self.doc, "confirm": self.confirm, "background": self.background,
+                "job": self.job,
+                "params": [{"name": p.name, "type": p.type, "doc": p.doc, "min": p.low, "max": p.high,
+                            "choices": list(p.choices) or None} for p in self.params]}
+
+
+class JobHandle(Protocol):
+    """How a running job reports back: progress, and (Line-us) the stroke just drawn."""
+
+    def progress(self, percent: float, *, time_left_s: float | None = None, message: str | None = None) -> None: ...
+
+    def stroke(self, points: list[tuple[float, float]]) -> None: ...
+
+    def preview(self, strokes: list[list[tuple[float, float]]]) -> None: ...
+
+
+def checked_params(action: Action, params: Mapping[str, Any]) -> dict[str, Any]:
+    """Validate `params` against `action`: types, ranges and choices; unknown names are errors."""
+    known = {p.name: p for p in action.params}
+    extra = set(params) - set(known) - {"confirm"}
+    if extra:
+        raise InputError(f"{action.name} takes no parameter {sorted(extra)[0]!r}"
+                         + (f" (it takes {', '.join(known)})" if known else ""))
+    if action.confirm and params.get("confirm") is not True:
+        raise InputError(f"{action.name}: {action.doc.rstrip('.').lower()} cannot be undone: "
+                         "send \"confirm\": true to go ahead")
+    out: dict[str, Any] = {}
+    for param in action.params:
+        if param.name not in params:
+            raise InputError(f"{action.name} needs the parameter {param.name!r} ({param.doc})")
+        out[param.name] = _coerce(action.name, param, params[param.name])
+    return out
+
+
+def _coerce(action: str, param: Param, value: Any) -> Any:
+    where = f"{action}: {param.name}"
+    if param.type == "str":
+        if not isinstance(value, str) or not value.strip():
+            raise InputError(f"{where} must be non-empty text")
+        if param.choices and value not in param.choices:
+            raise InputError(f"{where} must be one of {', '.join(param.choices)}, not {value!r}")
+        return value
+    if param.type == "bool":
+        if not isinstance(value, bool):
+            raise InputError(f"{where} must be true or false")
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{where} must be a number, not {value!r}")
+    if param.type == "int" and value != int(value):
+        raise InputError(f"{where} must be a whole number, not {value!r}")
+    if (param.low is not None and value < param.low) or (param.high is not None and value > param.high):
+        raise InputError(f"{where} must be from {param.low:g} to {param.high:g}, not {value!r}")
+    return int(value) if param.type == "int" else float(value)
+
+
+class Driver(ABC):
+    """One device kind's way of being monitored and commanded; a session owns one driver per device."""
+
+    kind: ClassVar[str]
+    interval_s: ClassVar[float]
+    """How often `poll` runs while connected."""
+    actions: ClassVar[tuple[Action, ...]]
+    job_types: ClassVar[Mapping[str, str]] = {}
+    """File extension (lower case, with the dot) → the kind of job it starts."""
+
+    def __init__(self, spec: DeviceSpec, emit: Emit) -> None:
+        self.spec = spec
+        self.emit = emit
+
+    @abstractmethod
+    async def connect(self) -> Identity:
+        """Open the link and identify the machine; raises LinkError/LinkTimeout/RemoteProtocolError."""
+
+    @abstractmethod
+    async def poll(self) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+        """(the `--json status` dict, the summary); raises when the link is gone."""
+
+    @abstractmethod
+    async def close(self) -> None:
+        """Close the link; never raises."""
+
+    @abstractmethod
+    async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
+        """Run a checked action (see `checked_params`)."""
+
+    async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
+        """Run a stored upload (or a job action with `params`) to its end; returns the closing words.
+        Cancelled by cancelling the task, then `stop_job`."""
+        raise InputError(f"a {self.kind} takes no jobs")
+
+    async def stop_job(self) -> None:  # noqa: B027 - kinds without a device-side job have nothing to stop
+        """Tell the machine to stop the job the cancelled task was running (a print keeps going otherwise)."""
+
+    def action(self, name: str) -> Action:
+        for action in self.actions:
+            if action.name == name:
+                return action
+        raise InputError(f"a {self.kind} has no action {name!r} (it has {', '.join(a.name for a in self.actions)})")

@@ -1,0 +1,128 @@
+"""An MMU3 under the agent: the client's own heartbeat (Q0) keeps its status fresh; events are forwarded as
+they happen; commands and the printer-dialog buttons go through `MMU`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fabwire.agent.drivers.base import Action, Driver, Identity, Param, summary
+from fabwire.agent.opening import open_mmu
+from fabwire.errors import LinkClosed
+from fabwire.mmu.cli import describe, status_dict
+from fabwire.mmu.client import MMU
+from fabwire.mmu.errors import describe_error
+from fabwire.mmu.host import CommandFinished, HostEvent, LinkFailed, StatusUpdated
+from fabwire.mmu.protocol import Cut, Eject, Home, Load, Request, ToolChange, Unload
+
+IDLE_ACTIONS = ("tool_change", "load", "unload", "eject", "cut", "home", "reset")
+SLOT = Param("slot", "int", "filament slot 0 to 4", 0, 4)
+PARKED = 5
+
+
+def _position_words(selector: int | None, finda: bool | None) -> str | None:
+    if finda:
+        return "loaded past FINDA"
+    if finda is None:
+        return None
+    if selector == PARKED:
+        return "unloaded (selector parked)"
+    return "unloaded" if selector is None else f"unloaded (selector at slot {selector})"
+
+
+class MMUDriver(Driver):
+    kind = "mmu"
+    interval_s = 1.0
+    actions = (
+        Action("tool_change", "Change to a filament slot (T).", (SLOT,), background=True),
+        Action("load", "Load filament from a slot to the FINDA (L).", (SLOT,), background=True),
+        Action("unload", "Unload the filament (U).", background=True),
+        Action("eject", "Eject the filament of a slot (E).", (SLOT,), background=True),
+        Action("cut", "Cut the filament of a slot (K).", (SLOT,), background=True),
+        Action("home", "Home the selector and idler (H).", background=True),
+        Action("retry", "Retry after an error (the Middle button)."),
+        Action("continue", "Continue after an error (the Middle button)."),
+        Action("stop", "Stop after an error (the Right button)."),
+        Action("reset", "Restart the MMU (X0).", confirm=True),
+    )
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.mmu: MMU | None = None
+        self.active_slot: int | None = None
+        self._failure: str | None = None
+        self._unsubscribe: Any = None
+
+    def _client(self) -> MMU:
+        if self.mmu is None:
+            raise LinkClosed("the MMU is not connected")
+        return self.mmu
+
+    async def connect(self) -> Identity:
+        self._failure = None
+        self.mmu = await open_mmu(self.spec.address, self.spec.options)
+        self._unsubscribe = self.mmu.subscribe(self._heard)
+        version = self.mmu.version
+        return Identity("MMU3", None, str(version) if version else None)
+
+    def _heard(self, event: HostEvent) -> None:
+        if isinstance(event, StatusUpdated):
+            return  # polled into the state each second
+        if isinstance(event, LinkFailed):
+            self._failure = f"{event.info.meaning} ({event.detail})"
+        if isinstance(event, CommandFinished) and event.result == 0:
+            code, value = event.command[:1], event.command[1:]
+            if code in "TL" and value.isdigit():
+                self.active_slot = int(value)
+            elif code in "UE":
+                self.active_slot = None
+        self.emit(describe(event)[0])
+
+    async def poll(self) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+        mmu = self._client()
+        failure = self._failure or mmu._failure
+        if failure is not None:
+            raise LinkClosed(f"the MMU link failed: {failure}")
+        status = mmu.status
+        busy = mmu.logic.busy
+        error = describe_error(status.value) if status.kind == "E" else None
+        if error is not None:
+            state, text = "error", f"{status.command}: {error.meaning} — {error.action}"
+            actions = ["retry" if error.retryable else "continue", "stop"]
+        elif busy:
+            state, text, actions = "busy", f"{status.command}: {status.words}", []
+        else:
+            state, text, actions = "idle", "idle" + (f" ({status.command} {status.words})" if status.words else ""), \
+                list(IDLE_ACTIONS)
+        active = self.active_slot if status.finda else None
+        return status_dict(status), summary(
+            state=state, state_text=text, busy=busy, error=error.meaning if error else None,
+            error_code=f"{status.value:04x}" if error else None, active_slot=active,
+            filament_position=_position_words(status.selector, status.finda), selector_slot=status.selector,
+            idler_slot=status.idler, finda=status.finda, actions=actions)
+
+    async def close(self) -> None:
+        mmu, self.mmu = self.mmu, None
+        if mmu is not None:
+            if self._unsubscribe is not None:
+                self._unsubscribe()
+            await mmu.close()
+            await mmu.transport.close()
+
+    async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
+        mmu = self._client()
+        speed = float(self.spec.options.get("speed", 1.0) or 1.0)
+        limit = 30.0 + 600.0 / speed
+        requests: dict[str, type[Request]] = {"tool_change": ToolChange, "load": Load, "eject": Eject, "cut": Cut}
+        if action in requests:
+            finished = await mmu.run(requests[action](params["slot"]), timeout=limit)
+        elif action == "unload":
+            finished = await mmu.run(Unload(0), timeout=limit)
+        elif action == "home":
+            finished = await mmu.run(Home(0), timeout=limit)
+        elif action in ("retry", "continue", "stop"):
+            await mmu.press(action)
+            return {"ok": True, "action": action}
+        else:
+            version = await mmu.reset(timeout=limit)
+            return {"ok": True, "action": action, "firmware": str(version)}
+        return {"ok": True, "action": action, "command": finished.command, "result": finished.result}

@@ -1,0 +1,139 @@
+"""A da Vinci under the agent: `XYZPrinter.status()` each second, job control, and printing uploads."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar
+
+from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, Param, summary
+from fabwire.agent.opening import open_xyz
+from fabwire.errors import InputError, LinkClosed
+from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status
+
+PRINT_STATES = range(9500, 9511)
+BUSY_STATES = frozenset({9513, 9514, 9515, 9516, 9530, 9531, 9532, 9534, 9535, 9536, 9537, 9538, 9540, 9700, 30})
+ERROR_STATES = frozenset({9517, 9533})
+
+
+def _target(status: Status, key: str) -> int | None:
+    value = (status.targets or {}).get(key)
+    return int(value) if isinstance(value, int) or (isinstance(value, str) and value.isdigit()) else None
+
+
+def printer_summary(status: Status) -> dict[str, Any]:
+    """The agent's common view of a status (`Status` is what `fabwire xyz status --json` prints)."""
+    code = status.state_code
+    errors = status.error_words
+    if code in ERROR_STATES or errors:
+        state = "error"
+    elif code == PAUSED:
+        state = "paused"
+    elif code == PRINT_DONE:
+        state = "done"
+    elif code in PRINT_STATES or code in (FILE_CHECK, CANCELLING):
+        state = "printing"
+    elif code in BUSY_STATES:
+        state = "busy"
+    else:
+        state = "idle" if code == IDLE else "busy"
+    progress = status.progress
+    actions = {"idle": ["home", "jog", "unload_filament"], "printing": ["pause", "cancel"],
+               "paused": ["resume", "cancel"], "done": ["acknowledge"], "busy": [], "error": []}[state]
+    if state == "error" and code == PRINT_DONE:
+        actions = ["acknowledge"]
+    return summary(
+        state=state, state_text=status.state_name,
+        error="; ".join(w.meaning for w in errors) or None,
+        error_code=f"0x{errors[0].raw:08X}" if errors else None,
+        busy=state in ("printing", "paused", "busy"),
+        progress_percent=progress.percent if progress else None,
+        elapsed_s=progress.elapsed_min * 60 if progress else None,
+        time_left_s=progress.remaining_min * 60 if progress and progress.remaining_min is not None else None,
+        extruder_temp_c=status.extruder, extruder_target_c=status.extruder_target,
+        bed_temp_c=status.bed, bed_target_c=_target(status, "bed"),
+        filament_left_mm=status.filament_mm, actions=actions,
+    )
+
+
+class XYZDriver(Driver):
+    kind = "xyz"
+    interval_s = 1.0
+    actions = (
+        Action("pause", "Pause the print."),
+        Action("resume", "Resume a paused print."),
+        Action("cancel", "Cancel the print.", confirm=True),
+        Action("acknowledge", "Acknowledge a finished print (the printer's OK button)."),
+        Action("home", "Home all axes.", background=True),
+        Action("jog", "Move one axis.", (Param("axis", "str", "x, y or z", choices=("x", "y", "z")),
+                                         Param("distance_mm", "float", "signed distance in mm", -200, 200)),
+               background=True),
+        Action("unload_filament", "Heat and unload the filament.", background=True),
+    )
+    job_types: ClassVar[Mapping[str, str]] = {".gcode": "print", ".gco": "print", ".g": "print", ".3w": "print"}
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.printer: XYZPrinter | None = None
+
+    def _client(self) -> XYZPrinter:
+        if self.printer is None:
+            raise LinkClosed("the printer is not connected")
+        return self.printer
+
+    async def connect(self) -> Identity:
+        self.printer = await open_xyz(self.spec.address, self.spec.options)
+        status = await self.printer.status()
+        model = status.model
+        return Identity(model.name if model else status.model_number, status.serial, status.firmware_version)
+
+    async def poll(self) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+        status = await self._client().status()
+        return status.to_dict(), printer_summary(status)
+
+    async def close(self) -> None:
+        printer, self.printer = self.printer, None
+        if printer is not None:
+            await printer.close()
+
+    async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
+        printer = self._client()
+        if action == "pause":
+            await printer.pause()
+        elif action == "resume":
+            await printer.resume()
+        elif action == "cancel":
+            await printer.cancel()
+        elif action == "acknowledge":
+            await printer.acknowledge()
+        elif action == "home":
+            await printer.home()
+        elif action == "jog":
+            await printer.jog(params["axis"], params["distance_mm"])
+        elif action == "unload_filament":
+            await printer.unload_filament()
+        return {"ok": True, "action": action}
+
+    async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
+        printer = self._client()
+        if path is None:
+            raise InputError("a print job needs a file")
+        began = time.monotonic()
+
+        def uploaded(done: int, total: int) -> None:
+            handle.progress(0.0, message=f"uploading {done * 100 // max(total, 1)} %")
+
+        def followed(status: Status) -> None:
+            progress = status.progress
+            percent = 100.0 if status.state_code == PRINT_DONE else float(progress.percent) if progress else 0.0
+            left = progress.remaining_min * 60.0 if progress and progress.remaining_min is not None else None
+            handle.progress(percent, time_left_s=left, message=status.state_name)
+
+        final = await printer.print_file(path, progress=uploaded, on_status=followed)
+        return f"{final.state_name} after {time.monotonic() - began:.0f} s"
+
+    async def stop_job(self) -> None:
+        if self.printer is not None:
+            await self.printer.cancel()

@@ -1,0 +1,308 @@
+"""One device under the agent: connect, poll on a fixed schedule, reconnect with backoff, run actions and jobs.
+
+Every change becomes an event on the agent (see `fabwire.agent.core` for their shapes) and a history row.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import random
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
+from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
+from fabwire.errors import FabwireError, InputError, LinkError
+
+if TYPE_CHECKING:
+    from fabwire.agent.core import Agent
+
+log = logging.getLogger("fabwire.agent")
+LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
+"""What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
+JOB_EVENT_EVERY_S = 0.5
+
+
+def make_driver(spec: DeviceSpec, emit: Any) -> Driver:
+    """Import only the kind in use: a bench of printers never loads the drawing stack."""
+    if spec.kind == "xyz":
+        from fabwire.agent.drivers.xyz import XYZDriver
+
+        return XYZDriver(spec, emit)
+    if spec.kind == "lineus":
+        from fabwire.agent.drivers.lineus import LineUsDriver
+
+        return LineUsDriver(spec, emit)
+    from fabwire.agent.drivers.mmu import MMUDriver
+
+    return MMUDriver(spec, emit)
+
+
+class PollStats:
+    """How punctual the polls are: a poll is late when it starts more than half an interval after its slot."""
+
+    def __init__(self) -> None:
+        self.polls = 0
+        self.late = 0
+        self.lags: list[float] = []
+
+    def record(self, lag: float, interval: float) -> None:
+        self.polls += 1
+        if lag > interval / 2:
+            self.late += 1
+        if len(self.lags) < 100_000:
+            self.lags.append(lag)
+
+
+class Session:
+    def __init__(self, agent: Agent, spec: DeviceSpec) -> None:
+        self.agent = agent
+        self.spec = spec
+        self.driver = make_driver(spec, self._device_event)
+        self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
+        self.online = False
+        self.stats = PollStats()
+        self.state: dict[str, Any] = {}
+        self.drawing: dict[str, list[list[tuple[float, float]]]] = {"preview": [], "ink": []}
+        """The Line-us job's planned strokes and those drawn so far (a page opened mid-job shows both)."""
+        self._identity: Identity | None = None
+        self._first_attempt = asyncio.Event()
+        self._id_ready = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+        self._job: dict[str, Any] | None = None
+        self._job_task: asyncio.Task[None] | None = None
+        self._background: set[asyncio.Task[None]] = set()
+        self._last_job_event = 0.0
+        self._reason = "not connected yet"
+
+    # ------------------------------------------------------------------------------------------ lifecycle
+
+    async def start(self) -> None:
+        known = await self.agent.history.known_id(self.spec.kind, self.spec.address)
+        self._task = asyncio.create_task(self._run(), name=f"session-{self.spec.name}")
+        if known is None:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(self.agent.first_attempt_s):
+                    await self._first_attempt.wait()
+        serial = self._identity.serial if self._identity else None
+        fallback = device_id(self.spec.kind, None, self.spec.address)
+        chosen = known or self.agent.claim_id(device_id(self.spec.kind, serial, self.spec.address), fallback)
+        self._set_info(chosen)
+        self._set_state(online=self.online, summary=offline_summary(self._reason) if not self.online else None)
+        self._id_ready.set()
+
+    async def stop(self) -> None:
+        tasks = [t for t in (self._task, self._job_task, *self._background) if t is not None]
+        for task in tasks:
+            task.cancel()
+        for task in tasks:
+            with contextlib.suppress(BaseException):
+                await task
+        await self.driver.close()
+
+    def _set_info(self, id_: str | None = None) -> None:
+        ident = self._identity
+        self.info = DeviceInfo(id_ or self.info.id, self.spec.name, self.spec.kind, ident.model if ident else None,
+                               ident.serial if ident else None, ident.firmware if ident else None,
+                               self.spec.address)
+
+    # ------------------------------------------------------------------------------------------ the loop
+
+    async def _run(self) -> None:
+        low, high = self.agent.backoff
+        delay = low
+        while True:
+            try:
+                self._identity = await self.driver.connect()
+            except LINK_FAILURES as exc:
+                self._reason = str(exc) or type(exc).__name__
+                self._first_attempt.set()
+                await self._id_ready.wait()
+                await self._went_offline(delay)
+                await asyncio.sleep(delay * random.uniform(0.8, 1.2))
+                delay = min(delay * 2, high)
+                continue
+            self._first_attempt.set()
+            await self._id_ready.wait()
+            delay = low
+            self._set_info()
+            self.online = True
+            self._publish("online", info=self.info.to_dict())
+            try:
+                await self._monitor()
+            except LINK_FAILURES as exc:
+                self._reason = str(exc) or type(exc).__name__
+            finally:
+                self.online = False
+                await self.driver.close()
+            await self._went_offline(delay)
+            await asyncio.sleep(delay * random.uniform(0.8, 1.2))
+
+    async def _went_offline(self, retry_in: float) -> None:
+        self.online = False
+        log.info("%s offline: %s", self.spec.name, self._reason)
+        self._publish("offline", reason=self._reason, retry_in_s=round(retry_in, 2))
+        summary = offline_summary(self._reason)
+        self._set_state(online=False, summary=summary)
+        self.agent.history.record_sample(self.info.id, time.time(), summary)
+
+    async def _monitor(self) -> None:
+        loop = asyncio.get_running_loop()
+        interval = self.driver.interval_s
+        slot = loop.time() + random.uniform(0, interval)  # spread a bench's polls over the second
+        await asyncio.sleep(slot - loop.time())
+        while True:
+            self.stats.record(loop.time() - slot, interval)
+            status, summary = await self.driver.poll()
+            self._set_state(online=True, summary=summary, status=status)
+            self.agent.history.record_sample(self.info.id, time.time(), summary)
+            slot += interval
+            now = loop.time()
+            if slot < now:
+                slot = now  # fell behind: start again from now rather than firing a burst
+            await asyncio.sleep(slot - now)
+
+    def _set_state(self, *, online: bool, summary: dict[str, Any] | None, status: dict[str, Any] | None = None
+                   ) -> None:
+        previous = self.state
+        state = {"ts": now_iso(), "online": online, "device": self.info.id, "kind": self.spec.kind,
+                 "name": self.spec.name, "summary": summary or previous.get("summary") or offline_summary(""),
+                 "status": status if status is not None else previous.get("status"), "job": self._job}
+        self.state = state
+        if {k: v for k, v in state.items() if k != "ts"} != {k: v for k, v in previous.items() if k != "ts"}:
+            self._publish("state", state=state)
+
+    def _publish(self, type_: Any, **payload: Any) -> None:
+        if self.info.id:
+            self.agent.publish(make_event(self.info.id, type_, **payload))
+
+    def _device_event(self, payload: dict[str, Any]) -> None:
+        self._publish("event", event=payload)
+
+    # ------------------------------------------------------------------------------------------ actions
+
+    def _require_online(self) -> None:
+        if not self.online:
+            raise LinkError(f"{self.spec.name} is offline ({self._reason})")
+
+    async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
+        spec = self.driver.action(action)
+        checked = checked_params(spec, params)
+        self._require_online()
+        if spec.job:
+            job = await self._start_job(action, None, None, checked)
+            return {"started": action, "job": job}
+        if spec.background:
+            task = asyncio.create_task(self._background_action(action, checked))
+            self._background.add(task)
+            task.add_done_callback(self._background.discard)
+            return {"started": action}
+        return await self.driver.act(action, checked)
+
+    async def _background_action(self, action: str, params: dict[str, Any]) -> None:
+        try:
+            result = await self.driver.act(action, params)
+            self._publish("event", event={"event": "action-done", **result})
+        except (*LINK_FAILURES, FabwireError) as exc:
+            self._publish("error", message=f"{action}: {exc}", exit_code=exit_code_of(exc), action=action)
+
+    # ------------------------------------------------------------------------------------------ jobs
+
+    async def start_job(self, filename: str, data: bytes) -> dict[str, Any]:
+        suffix = Path(filename).suffix.lower() if "." in filename else ""
+        job_type = self.driver.job_types.get(suffix)
+        if job_type is None:
+            accepted = ", ".join(sorted(self.driver.job_types)) or "no files"
+            raise InputError(f"a {self.spec.kind} job takes {accepted}, not {suffix or 'a file without extension'}")
+        self._require_online()
+        return await self._start_job(job_type, filename, data, {})
+
+    async def _start_job(self, job_type: str, filename: str | None, data: bytes | None,
+                         params: dict[str, Any]) -> dict[str, Any]:
+        if self._job is not None:
+            raise InputError(f"{self.spec.name} is busy with job {self._job['id']}: cancel it or wait")
+        job = await self.agent.jobs.create(self.info.id, job_type, filename, data, params)
+        self._job = job
+        self.drawing = {"preview": [], "ink": []}
+        self._job_task = asyncio.create_task(self._run_job(job), name=f"job-{job['id']}")
+        return dict(job)
+
+    async def _run_job(self, job: dict[str, Any]) -> None:
+        path = self.agent.jobs.path_of(job)
+        await self._job_changed(state="running", started=now_iso())
+        try:
+            message = await self.driver.run_job(path, job["type"], _Handle(self), job.get("params") or {})
+        except asyncio.CancelledError:
+            await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
+            raise
+        except (*LINK_FAILURES, FabwireError) as exc:
+            await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
+            self._publish("error", message=f"job {job['id']}: {exc}", exit_code=exit_code_of(exc), job=job["id"])
+        else:
+            await self._job_changed(state="done", finished=now_iso(), progress_percent=100.0, time_left_s=0.0,
+                                    message=message)
+        finally:
+            self._job = None
+            self._set_state(online=self.online, summary=None)
+
+    async def _job_changed(self, **fields: Any) -> None:
+        if self._job is None:
+            return
+        self._job.update(fields)
+        await self.agent.jobs.save(self._job)
+        self._publish("job", job=dict(self._job))
+
+    def job_progress(self, percent: float, time_left_s: float | None, message: str | None) -> None:
+        if self._job is None:
+            return
+        self._job.update(progress_percent=round(percent, 1), time_left_s=time_left_s,
+                         message=message or self._job.get("message"))
+        now = time.monotonic()
+        if now - self._last_job_event >= JOB_EVENT_EVERY_S or percent >= 100:
+            self._last_job_event = now
+            self._publish("job", job=dict(self._job))
+
+    def job_stroke(self, points: list[tuple[float, float]]) -> None:
+        self.drawing["ink"].append(points)
+        if self._job is not None:
+            self._publish("job", job=dict(self._job), stroke=points)
+
+    def job_preview(self, strokes: list[list[tuple[float, float]]]) -> None:
+        self.drawing = {"preview": strokes, "ink": []}
+        if self._job is not None:
+            self._publish("job", job=dict(self._job), preview=strokes)
+
+    async def cancel_job(self, job_id: str, *, confirm: bool) -> dict[str, Any]:
+        if self._job is None or self._job["id"] != job_id or self._job_task is None:
+            job = await self.agent.jobs.get(job_id)
+            raise InputError(f"job {job_id} is not running (it is {job['state']})")
+        if not confirm:
+            raise InputError(f"cancelling job {job_id} stops it for good: send \"confirm\": true to go ahead")
+        job = dict(self._job)
+        self._job_task.cancel()
+        with contextlib.suppress(BaseException):
+            await self._job_task
+        try:
+            await self.driver.stop_job()
+        except (*LINK_FAILURES, FabwireError) as exc:
+            self._publish("error", message=f"stopping job {job_id}: {exc}", exit_code=exit_code_of(exc))
+        return {**job, "state": "cancelled"}
+
+
+class _Handle:
+    """The JobHandle a driver reports through."""
+
+    def __init__(self, session: Session) -> None:
+        self._session = session
+
+    def progress(self, percent: float, *, time_left_s: float | None = None, message: str | None = None) -> None:
+        self._session.job_progress(percent, time_left_s, message)
+
+    def stroke(self, points: list[tuple[float, float]]) -> None:
+        self._session.job_stroke(points)
+
+    def preview(self, strokes: list[list[tuple[float, float]]]) -> None:
+        self._session.job_preview(strokes)

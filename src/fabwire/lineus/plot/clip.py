@@ -1,0 +1,77 @@
+"""Clip regions (SVG 1.1 §14.3: the filled area of a clipPath's shapes, each by its clip-rule) and the cutting of
+pen lines to them: the parts inside are drawn, the parts outside are kept apart so a preview can show them."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import shapely
+from shapely.geometry.base import BaseGeometry
+
+from fabwire.lineus.plot.geometry import FloatArray, Polylines
+
+
+def area_of_rings(rings: Sequence[FloatArray], rule: str) -> BaseGeometry:
+    """The area one shape fills: its closed rings combined by `rule` ('evenodd' or 'nonzero').
+
+    Non-zero winding is taken ring by ring: a ring wound against the largest one and lying inside the area so far
+    cuts a hole, any other ring adds area (exact for shapes without self-overlapping rings).
+    """
+    polygons: list[tuple[float, BaseGeometry]] = []
+    for ring in rings:
+        if len(ring) < 3:
+            continue
+        x, y = ring[:, 0], ring[:, 1]
+        signed = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+        if signed == 0:
+            continue
+        polygons.append((signed, shapely.make_valid(shapely.Polygon(ring))))
+    region: BaseGeometry = shapely.Polygon()
+    if not polygons:
+        return region
+    polygons.sort(key=lambda item: -abs(item[0]))
+    outer_sign = np.sign(polygons[0][0])
+    for signed, poly in polygons:
+        if rule == "evenodd":
+            region = shapely.symmetric_difference(region, poly)
+        elif np.sign(signed) != outer_sign and shapely.covers(region, poly):
+            region = shapely.difference(region, poly)
+        else:
+            region = shapely.union(region, poly)
+    return region
+
+
+def _parts(geometry: BaseGeometry) -> Polylines:
+    out: Polylines = []
+    for part in shapely.get_parts(shapely.line_merge(geometry) if geometry.geom_type == "MultiLineString"
+                                  else geometry):
+        if part.geom_type == "LineString" and not part.is_empty:
+            out.append(np.asarray(part.coords, dtype=float)[:, :2])
+        elif part.geom_type in ("MultiLineString", "GeometryCollection"):
+            out.extend(_parts(part))
+    return out
+
+
+def cut(lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
+    """(kept, hidden): the pieces of `lines` inside `region` and those outside it. Dots stay whole."""
+    if not lines:
+        return [], []
+    if region.is_empty:
+        return [], list(lines)
+    shapely.prepare(region)
+    kept: Polylines = []
+    hidden: Polylines = []
+    for line in lines:
+        if len(line) == 1:
+            (kept if shapely.intersects_xy(region, line[0, 0], line[0, 1]) else hidden).append(line)
+            continue
+        geometry = shapely.LineString(line)
+        if shapely.contains_properly(region, geometry):
+            kept.append(line)
+        elif shapely.disjoint(region, geometry):
+            hidden.append(line)
+        else:
+            kept.extend(_parts(shapely.intersection(geometry, region)))
+            hidden.extend(_parts(shapely.difference(geometry, region)))
+    return kept, hidden

@@ -1,0 +1,300 @@
+"""SVG path data and basic shapes to flattened subpaths, built point by point into compact arrays.
+
+The path grammar is svgelements' streaming lexer; this module is the builder it calls. Each segment is
+flattened in the element's user space with a tolerance chosen so that, once the element's transform is applied,
+no chord strays more than `tolerance` output units from the true curve (an affine map stretches a distance by
+at most its largest singular value). Points are kept in `array('d')` buffers, 16 bytes a point, so memory stays
+in proportion to the geometry (SVG 1.1 §8.3 path data, §9 basic shapes, F.6 arc implementation notes).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from array import array
+from dataclasses import dataclass
+
+import numpy as np
+import svgelements as se
+
+from fabwire.lineus.plot.geometry import FloatArray
+
+MAX_CURVE_POINTS = 10_000
+"""Chords for one curve segment at most: beyond any drawing that fits the Line-us area at 0.05 mm."""
+_FLOAT = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+@dataclass(slots=True)
+class Subpath:
+    """One subpath in output units: its points, whether it was closed, and how many segments made it."""
+
+    points: FloatArray
+    closed: bool
+    segments: int
+
+
+class _Point:
+    __slots__ = ("x", "y")
+
+    def __init__(self, x: float, y: float) -> None:
+        self.x = x
+        self.y = y
+
+
+class PathBuilder:
+    """Receives svgelements' lexer callbacks and produces transformed, flattened subpaths.
+
+    `matrix` is the 2x3 user-to-output transform; `tolerance` is the chord error allowed in output units.
+    """
+
+    def __init__(self, matrix: FloatArray, tolerance: float) -> None:
+        self.matrix = matrix
+        stretch = float(np.linalg.norm(matrix[:, :2], 2)) or 1.0
+        self.user_tolerance = tolerance / stretch
+        self.subpaths: list[Subpath] = []
+        self.curved = False
+        self.current_point: _Point | None = None
+        self._start = (0.0, 0.0)
+        self._buf = array("d")
+        self._segments = 0
+        self._last_cubic: tuple[float, float] | None = None
+        self._last_quad: tuple[float, float] | None = None
+
+    # -- lexer protocol ---------------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Beginning of the path data."""
+
+    def end(self) -> None:
+        self._flush(closed=False)
+
+    def move(self, *points: tuple[float, float], relative: bool = False) -> None:
+        self._flush(closed=False)
+        x, y = points[-1]
+        self._buf.extend((x, y))
+        self._start = (x, y)
+        self._at(x, y)
+
+    def line(self, *points: tuple[float, float], relative: bool = False) -> None:
+        for x, y in points:
+            self._begin()
+            self._buf.extend((x, y))
+            self._segments += 1
+            self._at(x, y)
+
+    def horizontal(self, *xs: float, relative: bool = False) -> None:
+        for value in xs:
+            here = self._here()
+            self.line((here[0] + value if relative else value, here[1]))
+
+    def vertical(self, *ys: float, relative: bool = False) -> None:
+        for value in ys:
+            here = self._here()
+            self.line((here[0], here[1] + value if relative else value))
+
+    def cubic(self, c1: tuple[float, float], c2: tuple[float, float], end: tuple[float, float],
+              relative: bool = False) -> None:
+        p0 = self._here()
+        self._bezier(np.array([p0, c1, c2, end], dtype=float))
+        self._at(*end)
+        self._last_cubic = c2
+
+    def smooth_cubic(self, c2: tuple[float, float], end: tuple[float, float], relative: bool = False) -> None:
+        here = self._here()
+        prev = self._last_cubic
+        c1 = (2 * here[0] - prev[0], 2 * here[1] - prev[1]) if prev is not None else here
+        self.cubic(c1, c2, end)
+
+    def quad(self, c: tuple[float, float], end: tuple[float, float], relative: bool = False) -> None:
+        p0 = self._here()
+        self._bezier(np.array([p0, c, end], dtype=float))
+        self._at(*end)
+        self._last_quad = c
+
+    def smooth_quad(self, end: tuple[float, float], relative: bool = False) -> None:
+        here = self._here()
+        prev = self._last_quad
+        c = (2 * here[0] - prev[0], 2 * here[1] - prev[1]) if prev is not None else here
+        self.quad(c, end)
+
+    def arc(self, rx: float, ry: float, rotation: float, large: bool, sweep: bool, end: tuple[float, float],
+            relative: bool = False) -> None:
+        p0 = self._here()
+        self._begin()
+        pts = _arc_points(p0, abs(rx), abs(ry), rotation, bool(large), bool(sweep), end, self.user_tolerance)
+        if len(pts) > 1:
+            self.curved = True
+        self._buf.extend(pts.ravel().tolist())
+        self._segments += 1
+        self._at(*end)
+
+    def closed(self, relative: bool = False) -> None:
+        self._begin()
+        here = self._here()
+        if here != self._start:
+            self._buf.extend(self._start)
+        self._segments += 1
+        self._flush(closed=True)
+        self._at(*self._start)  # a command after Z starts a new subpath at this start point
+
+    # -- internals --------------------------------------------------------------------------------------------
+
+    def _here(self) -> tuple[float, float]:
+        p = self.current_point
+        return (p.x, p.y) if p is not None else (0.0, 0.0)
+
+    def _at(self, x: float, y: float) -> None:
+        self.current_point = _Point(x, y)
+        self._last_cubic = None
+        self._last_quad = None
+
+    def _begin(self) -> None:
+        """A drawing command without a moveto before it starts at the current point."""
+        if not self._buf:
+            here = self._here()
+            self._buf.extend(here)
+            self._start = here
+
+    def _bezier(self, ctrl: FloatArray) -> None:
+        self._begin()
+        n = _bezier_steps(ctrl, self.user_tolerance)
+        t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+        if len(ctrl) == 4:
+            s = 1 - t
+            pts = s**3 * ctrl[0] + 3 * s * s * t * ctrl[1] + 3 * s * t * t * ctrl[2] + t**3 * ctrl[3]
+        else:
+            s = 1 - t
+            pts = s * s * ctrl[0] + 2 * s * t * ctrl[1] + t * t * ctrl[2]
+        if n > 1:
+            self.curved = True
+        self._buf.extend(pts.ravel().tolist())
+        self._segments += 1
+
+    def _flush(self, *, closed: bool) -> None:
+        if self._buf:
+            user = np.frombuffer(self._buf, dtype=float).reshape(-1, 2)
+            out = user @ self.matrix[:, :2].T + self.matrix[:, 2]
+            self.subpaths.append(Subpath(out, closed, self._segments))
+        self._buf = array("d")
+        self._segments = 0
+
+
+def _bezier_steps(ctrl: FloatArray, tolerance: float) -> int:
+    """Chords keeping a Bézier within `tolerance` of its polygon (Wang's bound on the second differences)."""
+    second = ctrl[2:] - 2 * ctrl[1:-1] + ctrl[:-2]
+    m = float(np.hypot(second[:, 0], second[:, 1]).max())
+    degree = len(ctrl) - 1
+    n = math.sqrt(degree * (degree - 1) / 8 * m / tolerance)
+    return max(1, min(MAX_CURVE_POINTS, math.ceil(n))) if math.isfinite(n) else 1
+
+
+def _arc_points(p0: tuple[float, float], rx: float, ry: float, rotation: float, large: bool, sweep: bool,
+                end: tuple[float, float], tolerance: float) -> FloatArray:
+    """Points after `p0` along an elliptical arc, endpoint to centre form (SVG 1.1 F.6.5, radii per F.6.6)."""
+    x1, y1 = p0
+    x2, y2 = end
+    if (x1, y1) == (x2, y2):
+        return np.empty((0, 2))
+    if rx == 0 or ry == 0:
+        return np.array([end], dtype=float)
+    phi = math.radians(rotation % 360)
+    cos_p, sin_p = math.cos(phi), math.sin(phi)
+    dx, dy = (x1 - x2) / 2, (y1 - y2) / 2
+    xp, yp = cos_p * dx + sin_p * dy, -sin_p * dx + cos_p * dy
+    grow = xp * xp / (rx * rx) + yp * yp / (ry * ry)
+    if grow > 1:
+        rx, ry = rx * math.sqrt(grow), ry * math.sqrt(grow)
+    num = rx * rx * ry * ry - rx * rx * yp * yp - ry * ry * xp * xp
+    den = rx * rx * yp * yp + ry * ry * xp * xp
+    k = math.sqrt(max(0.0, num / den)) if den else 0.0
+    if large == sweep:
+        k = -k
+    cxp, cyp = k * rx * yp / ry, -k * ry * xp / rx
+    cx = cos_p * cxp - sin_p * cyp + (x1 + x2) / 2
+    cy = sin_p * cxp + cos_p * cyp + (y1 + y2) / 2
+    theta1 = math.atan2((yp - cyp) / ry, (xp - cxp) / rx)
+    theta2 = math.atan2((-yp - cyp) / ry, (-xp - cxp) / rx)
+    delta = theta2 - theta1
+    if sweep and delta < 0:
+        delta += 2 * math.pi
+    elif not sweep and delta > 0:
+        delta -= 2 * math.pi
+    radius = max(rx, ry)
+    step = 2 * math.acos(1 - tolerance / radius) if tolerance < radius else math.pi / 2
+    n = max(1, min(MAX_CURVE_POINTS, math.ceil(abs(delta) / step))) if step > 0 else 1
+    t = theta1 + delta * np.linspace(0.0, 1.0, n + 1)[1:]
+    ex, ey = rx * np.cos(t), ry * np.sin(t)
+    pts = np.column_stack([cos_p * ex - sin_p * ey + cx, sin_p * ex + cos_p * ey + cy])
+    pts[-1] = end  # land exactly on the endpoint the next segment starts from
+    return pts
+
+
+def path_data(builder: PathBuilder, d: str) -> None:
+    """Feed path data `d` to `builder`; ValueError where the data breaks the grammar (what precedes is kept,
+    as SVG 1.1 §F.2 error processing renders the path up to the error)."""
+    lexer = se.SVGLexicalParser()
+    try:
+        lexer.parse(builder, d)
+    finally:
+        builder.end()
+
+
+def numbers(text: str) -> list[float]:
+    """The numbers in an attribute such as `points`."""
+    return [float(v) for v in _FLOAT.findall(text)]
+
+
+def polyline(builder: PathBuilder, values: list[float], *, close: bool) -> None:
+    """`<polyline>`/`<polygon>` points; an odd trailing number is ignored (SVG 1.1 §9.7.1)."""
+    pts = list(zip(values[0::2], values[1::2], strict=False))
+    if not pts:
+        return
+    builder.move(pts[0])
+    if len(pts) > 1:
+        builder.line(*pts[1:])
+    if close:
+        builder.closed()
+    builder.end()
+
+
+def rect(builder: PathBuilder, x: float, y: float, w: float, h: float, rx: float | None, ry: float | None) -> None:
+    """A rectangle, with rounded corners when rx/ry are given (auto and clamping as SVG 1.1 §9.2)."""
+    if not (w > 0 and h > 0):
+        return
+    if rx is None and ry is None:
+        rx = ry = 0.0
+    rx = ry if rx is None else rx
+    ry = rx if ry is None else ry
+    rx, ry = min(abs(rx or 0.0), w / 2), min(abs(ry or 0.0), h / 2)
+    if rx == 0 or ry == 0:
+        builder.move((x, y))
+        builder.line((x + w, y), (x + w, y + h), (x, y + h))
+    else:
+        builder.move((x + rx, y))
+        builder.line((x + w - rx, y))
+        builder.arc(rx, ry, 0, False, True, (x + w, y + ry))
+        builder.line((x + w, y + h - ry))
+        builder.arc(rx, ry, 0, False, True, (x + w - rx, y + h))
+        builder.line((x + rx, y + h))
+        builder.arc(rx, ry, 0, False, True, (x, y + h - ry))
+        builder.line((x, y + ry))
+        builder.arc(rx, ry, 0, False, True, (x + rx, y))
+    builder.closed()
+    builder.end()
+
+
+def ellipse(builder: PathBuilder, cx: float, cy: float, rx: float, ry: float) -> None:
+    """An ellipse (or circle) from its rightmost point, in the positive-angle direction."""
+    if not (rx > 0 and ry > 0):
+        return
+    builder.move((cx + rx, cy))
+    builder.arc(rx, ry, 0, False, True, (cx - rx, cy))
+    builder.arc(rx, ry, 0, False, True, (cx + rx, cy))
+    builder.closed()
+    builder.end()
+
+
+def line(builder: PathBuilder, x1: float, y1: float, x2: float, y2: float) -> None:
+    builder.move((x1, y1))
+    builder.line((x2, y2))
+    builder.end()

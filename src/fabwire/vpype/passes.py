@@ -1,0 +1,159 @@
+"""A vpype document as Line-us drawing passes: page pixels ↔ machine units, fitting every layer with one
+transform, and one plan per layer.
+
+vpype stores each line as a complex numpy array in CSS pixels (x + iy, y down); its layers are numbered and may
+carry a name in the `vp_name` property (vpype's documented metadata). fabwire's planner works in Line-us machine
+units (x away from the base, y up).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fabwire.errors import InputError
+from fabwire.lineus import protocol as p
+from fabwire.lineus.kinematics import Z_UP
+from fabwire.lineus.plot import MoveTo, PenDown, Plan, PlanFigures, PlanOptions, plan_lines
+from fabwire.lineus.plot.geometry import FloatArray, Polylines
+from fabwire.lineus.plot.intake import PAGE_ORIGIN, SVG_UNITS_PER_PX
+
+LAYER_NAME = "vp_name"
+"""vpype's layer-name property."""
+
+
+def to_machine(line: Any) -> FloatArray:
+    """A vpype line (complex array, pixels, y down) → (n, 2) machine units on the Line-us page."""
+    z = np.asarray(line, dtype=complex).reshape(-1)
+    return np.column_stack([PAGE_ORIGIN[0] + z.real * SVG_UNITS_PER_PX, PAGE_ORIGIN[1] - z.imag * SVG_UNITS_PER_PX])
+
+
+def to_page(points: FloatArray) -> Any:
+    """(n, 2) machine units → a vpype line (complex array, pixels, y down); the inverse of `to_machine`."""
+    x = (points[:, 0] - PAGE_ORIGIN[0]) / SVG_UNITS_PER_PX
+    y = (PAGE_ORIGIN[1] - points[:, 1]) / SVG_UNITS_PER_PX
+    return x + 1j * y
+
+
+@dataclass(frozen=True)
+class Pass:
+    """One vpype layer: what one pen draws."""
+
+    layer_id: int
+    name: str | None
+    lines: Polylines
+    """Machine units, in the layer's order."""
+
+    @property
+    def label(self) -> str:
+        return f"layer {self.layer_id}" + (f" ({self.name})" if self.name else "")
+
+
+def document_passes(document: Any, layer_ids: Iterable[int] | None = None) -> list[Pass]:
+    """The document's non-empty layers (all, or those in `layer_ids`) in layer-number order."""
+    wanted = None if layer_ids is None else set(layer_ids)
+    passes = []
+    for layer_id in sorted(document.layers):
+        if wanted is not None and layer_id not in wanted:
+            continue
+        layer = document.layers[layer_id]
+        lines = [to_machine(line) for line in layer if len(line)]
+        if lines:
+            name = layer.property(LAYER_NAME)
+            passes.append(Pass(layer_id, str(name) if name else None, lines))
+    return passes
+
+
+def fit_document(document: Any, options: PlanOptions) -> Any:
+    """Place every layer with one transform (scaled into the area with `options.fit`, else checked or clipped
+    as it is) and return the document with its lines replaced; layers keep their ids and properties.
+
+    Raises InputError for an empty document or, without fitting or clipping, for lines out of reach."""
+    passes = document_passes(document)
+    if not passes:
+        raise InputError("the document is empty (nothing for the pen to draw)")
+    unordered = dataclasses.replace(options, optimize=False, time_budget=0.0)
+    if options.fit:
+        everything = [line for one in passes for line in one.lines]
+        placed = list(plan_lines(everything, unordered, fit_default=True).strokes)
+        if len(placed) != len(everything):
+            raise InputError("fitting changed the number of lines; cannot keep them on their layers")
+        split: list[Polylines] = []
+        for one in passes:
+            split.append(placed[: len(one.lines)])
+            placed = placed[len(one.lines) :]
+    else:
+        split = [list(plan_lines(one.lines, unordered, fit_default=False).strokes) for one in passes]
+    for one, lines in zip(passes, split, strict=True):
+        layer = document.layers[one.layer_id]
+        document.layers[one.layer_id] = layer.clone([to_page(line) for line in lines])
+    return document
+
+
+@dataclass(frozen=True)
+class PassPlan:
+    """A layer and the plan that draws it (starting from home, where the arm parks for a pen change)."""
+
+    layer: Pass
+    plan: Plan
+
+
+def plan_passes(passes: Sequence[Pass], options: PlanOptions) -> list[PassPlan]:
+    """Check (or clip) each layer as placed and order its lines; raises InputError naming the layer at fault."""
+    if not passes:
+        raise InputError("the document is empty (nothing for the pen to draw)")
+    unplaced = dataclasses.replace(options, fit=False, rotate_deg=0.0)
+    out = []
+    for one in passes:
+        try:
+            plan = plan_lines(one.lines, unplaced, fit_default=False)
+        except InputError as exc:
+            raise InputError(f"{one.label}: {exc} (in vpype: put lineus-fit before this command)") from None
+        out.append(PassPlan(one, plan))
+    return out
+
+
+def total_figures(plans: Sequence[PassPlan]) -> PlanFigures:
+    """The figures of all passes together (each pass starts from home)."""
+    figures = [one.plan.figures() for one in plans]
+    return PlanFigures(
+        strokes=sum(f.strokes for f in figures),
+        segments=sum(f.segments for f in figures),
+        pen_down_length=sum(f.pen_down_length for f in figures),
+        pen_up_travel=sum(f.pen_up_travel for f in figures),
+        pen_lifts=sum(f.pen_lifts for f in figures),
+        estimated_seconds=sum(f.estimated_seconds for f in figures),
+    )
+
+
+def passes_key(passes: Sequence[Pass], options: PlanOptions, extra: str = "") -> str:
+    """A digest of the geometry (to 0.01 unit) and the options: names the resume state of exactly this drawing."""
+    digest = hashlib.sha256()
+    for one in passes:
+        digest.update(f"layer {one.layer_id}|".encode())
+        for line in one.lines:
+            digest.update(np.round(line, 2).astype("<f8").tobytes())
+            digest.update(b"|")
+    digest.update(repr((options.clip, options.optimize, extra)).encode())
+    return digest.hexdigest()
+
+
+def plan_gcode(plans: Sequence[PassPlan], *, pen_z: float = 0.0) -> list[str]:
+    """Line-us G-code for the passes one after another: G01 moves with Z1000 (pen up) and `pen_z` (pen down),
+    as the Line-us app saves drawings; no pen-change stop (G-code has none the firmware honours)."""
+    lines = [p.Move(z=Z_UP).text()]
+    for one in plans:
+        for move in one.plan.moves():
+            if isinstance(move, MoveTo):
+                command = p.Move(move.x, move.y)
+            elif isinstance(move, PenDown):
+                command = p.Move(z=pen_z)
+            else:
+                command = p.Move(z=Z_UP)
+            lines.append(command.text())
+    return lines

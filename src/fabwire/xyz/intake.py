@@ -1,0 +1,271 @@
+"""What a file handed to the XYZ side is, and its G-code text as the printer should see it.
+
+One answer for `convert`, `info`, `print` and the simulator's file check: a `.3w`, a base64-text `.3w` (what
+XYZware imports and some web slicers export), G-code text (any of UTF-8 with or without BOM, ASCII, Latin-1
+comments; LF, CRLF or CR-only line ends; with or without a final newline), or something else named in words
+with what to do about it (binary G-code, 3MF projects and other zips, gzip, images, STL models, PDFs, SVG/XML,
+UTF-16 text, binary junk).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import contextlib
+import enum
+import re
+import tempfile
+from collections.abc import Callable, Iterator
+from io import BytesIO
+from pathlib import Path
+from typing import BinaryIO
+
+from fabwire.errors import InputError
+
+MAGIC = b"3DPFNKG13WTW"
+"""The .3w signature (reference §5.1)."""
+BASE64_MAGIC = base64.b64encode(MAGIC)
+"""`M0RQRk5LRzEzV1RX`: how a base64-text .3w starts."""
+BOM = b"\xef\xbb\xbf"
+SNIFF = 1 << 16
+"""Bytes read to decide what a file is."""
+CHUNK = 1 << 22
+MAX_LINE = 1 << 20
+"""Longest G-code line held in memory (firmware line buffers hold about 100 bytes; slicers wrap thumbnails at 78)."""
+
+Progress = Callable[[int, int], None]
+"""Called with (bytes of input done, input size)."""
+
+_CONTROL = re.compile(rb"[\x00-\x08\x0e-\x1a\x1c-\x1f\x7f]")
+_COMMAND_LINE = re.compile(rb"^[ \t]*(?:[Nn][0-9]+[ \t]*)?[GgMmTt][ \t]*[0-9]", re.MULTILINE)
+_WHITESPACE = b" \t\r\n"
+
+
+class Kind(enum.Enum):
+    """What a file is, as far as a da Vinci printer is concerned."""
+
+    THREEW = ".3w print file"
+    THREEW_BASE64 = "base64-text .3w print file"
+    GCODE = "G-code text"
+    BINARY_GCODE = "binary G-code"
+    PROJECT_3MF = "3MF project"
+    ZIP = "zip archive"
+    GZIP = "gzip-compressed file"
+    IMAGE = "image"
+    STL = "STL model"
+    PDF = "PDF document"
+    XML = "SVG/XML document"
+    UTF16 = "UTF-16 text"
+    BINARY = "binary data"
+    EMPTY = "empty file"
+
+    @property
+    def printable(self) -> bool:
+        """A printer can be given it (after conversion for G-code, after decoding for base64)."""
+        return self in (Kind.THREEW, Kind.THREEW_BASE64, Kind.GCODE)
+
+
+_ADVICE = {
+    Kind.BINARY_GCODE: "turn off Binary G-code in PrusaSlicer's printer settings (Printer Settings > General) and "
+                       "export again",
+    Kind.PROJECT_3MF: "not G-code: export G-code from the slicer",
+    Kind.ZIP: "not G-code: unpack it and give the .gcode inside",
+    Kind.GZIP: "unpack it first (gunzip) and give the G-code inside",
+    Kind.IMAGE: "not G-code: slice a model to G-code first",
+    Kind.STL: "a 3D model, not G-code: slice it to G-code first",
+    Kind.PDF: "not G-code or a .3w print file",
+    Kind.XML: "not G-code or a .3w print file (drawings are for a plotter)",
+    Kind.UTF16: "save the G-code as UTF-8 or ASCII and try again",
+    Kind.BINARY: "not G-code or a .3w print file",
+    Kind.EMPTY: "nothing to print",
+}
+_IMAGES = ((b"\x89PNG\r\n\x1a\n", "PNG"), (b"\xff\xd8\xff", "JPEG"), (b"GIF87a", "GIF"), (b"GIF89a", "GIF"),
+           (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
+
+
+def identify(head: bytes, size: int | None = None) -> Kind:
+    """What the file that starts with `head` (its first `SNIFF` bytes or more) is; `size` is its whole length."""
+    if not head:
+        return Kind.EMPTY
+    if head.startswith(MAGIC):
+        return Kind.THREEW
+    if head.lstrip(_WHITESPACE).startswith(BASE64_MAGIC):
+        return Kind.THREEW_BASE64
+    if head.startswith(b"GCDE"):
+        return Kind.BINARY_GCODE
+    if head.startswith((b"PK\x03\x04", b"PK\x05\x06")):
+        return Kind.PROJECT_3MF if b"3D/3dmodel.model" in head or b"[Content_Types].xml" in head else Kind.ZIP
+    if head.startswith(b"\x1f\x8b"):
+        return Kind.GZIP
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return Kind.UTF16
+    if (head.startswith(b"RIFF") and head[8:12] == b"WEBP") or any(head.startswith(m) for m, _ in _IMAGES):
+        return Kind.IMAGE
+    if head.startswith(b"%PDF"):
+        return Kind.PDF
+    if size is not None and len(head) >= 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little"):
+        return Kind.STL
+    text = head.removeprefix(BOM)
+    if text[:6].lower() == b"solid " and b"facet" in text[:4096]:
+        return Kind.STL
+    if text.lstrip().startswith((b"<?xml", b"<svg", b"<!DOCTYPE", b"<html")):
+        return Kind.XML
+    if _CONTROL.search(head):
+        return Kind.BINARY
+    return Kind.GCODE
+
+
+def _image_name(head: bytes) -> str:
+    for magic, name in _IMAGES:
+        if head.startswith(magic):
+            return name
+    return "WebP"
+
+
+def refusal(kind: Kind, name: str, head: bytes = b"") -> InputError:
+    """The one-line error for a file of `kind` that cannot be printed or converted."""
+    what = f"an image ({_image_name(head)})" if kind is Kind.IMAGE else {
+        Kind.ZIP: "a zip archive", Kind.PDF: "a PDF document", Kind.STL: "an STL model",
+        Kind.XML: "an SVG/XML document", Kind.BINARY: "binary data", Kind.EMPTY: "empty",
+        Kind.PROJECT_3MF: "a 3MF project", Kind.GZIP: "gzip-compressed", Kind.UTF16: "UTF-16 text",
+        Kind.BINARY_GCODE: "binary G-code (.bgcode)",
+    }.get(kind, kind.value)
+    return InputError(f"{name} is {what}: {_ADVICE.get(kind, 'it cannot be printed')}")
+
+
+def sniff(path: Path) -> tuple[Kind, bytes]:
+    """(what the file is, its first bytes); an unreadable file is an InputError."""
+    try:
+        with Path(path).open("rb") as handle:
+            head = handle.read(SNIFF)
+            size = handle.seek(0, 2)
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror}") from exc
+    return identify(head, size), head
+
+
+def require_printable(kind: Kind, name: str, head: bytes) -> Kind:
+    """`kind` if a printer can take it (maybe after conversion), else the refusal for it."""
+    if not kind.printable:
+        raise refusal(kind, name, head)
+    return kind
+
+
+# ------------------------------------------------------------------------------------------- base64 .3w
+
+
+def decode_base64_into(src: BinaryIO, out: BinaryIO, name: str) -> None:
+    """Decode base64 text (any line wrapping) from `src` into `out`, in bounded pieces."""
+    carry = b""
+    while block := src.read(CHUNK):
+        data = carry + block.translate(None, _WHITESPACE)
+        cut = len(data) - len(data) % 4
+        carry = data[cut:]
+        try:
+            out.write(base64.b64decode(data[:cut], validate=True))
+        except binascii.Error as exc:
+            raise InputError(f"{name} is a corrupt base64 .3w ({exc})") from exc
+    if carry:
+        raise InputError(f"{name} is a truncated base64 .3w ({len(carry)} stray characters at the end)")
+
+
+def decode_base64(data: bytes, name: str) -> bytes:
+    out = BytesIO()
+    decode_base64_into(BytesIO(data), out, name)
+    return out.getvalue()
+
+
+@contextlib.contextmanager
+def open_3w(path: Path, kind: Kind) -> Iterator[BinaryIO]:
+    """The .3w bytes of a file of `kind` THREEW or THREEW_BASE64 (decoded into a spooled temporary file)."""
+    try:
+        handle = Path(path).open("rb")  # noqa: SIM115 - closed by the with below; opening errors get our message
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror}") from exc
+    with handle:
+        if kind is Kind.THREEW:
+            yield handle
+            return
+        with tempfile.TemporaryFile() as decoded:
+            decode_base64_into(handle, decoded, str(path))
+            decoded.seek(0)
+            yield decoded
+
+
+def threew_bytes(data: bytes, name: str) -> bytes:
+    """The .3w bytes of in-memory data that is a .3w or a base64-text .3w."""
+    return decode_base64(data, name) if identify(data[:SNIFF]) is Kind.THREEW_BASE64 else data
+
+
+# ------------------------------------------------------------------------------------------- G-code text
+
+
+def normalise(window: bytes, *, first: bool = False) -> bytes:
+    """A piece of G-code with LF line ends (and without the BOM when it is the file's start)."""
+    if first:
+        window = window.removeprefix(BOM)
+    if b"\r" in window:
+        window = window.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    return window
+
+
+def _check_lines(text: bytes, name: str, line_offset: int) -> None:
+    """Refuse a line longer than MAX_LINE: probe windows of MAX_LINE/2 (any such line covers one) for newlines."""
+    step = MAX_LINE // 2
+    for at in range(0, len(text) - step + 1, step):
+        if text.find(b"\n", at, at + step) < 0:
+            start = text.rfind(b"\n", 0, at) + 1
+            end = text.find(b"\n", at)
+            length = (len(text) if end < 0 else end) - start + (line_offset if start == 0 else 0)
+            if length > MAX_LINE:
+                raise _long_line(name, length)
+
+
+def _long_line(name: str, length: int) -> InputError:
+    return InputError(f"{name} has a line of over {length} bytes (the limit is {MAX_LINE}): not G-code as a "
+                      "printer reads it")
+
+
+def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0) -> Iterator[bytes]:
+    """The whole G-code from the file's start as LF-terminated, line-aligned chunks of at most about CHUNK bytes:
+    BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within CHUNK + MAX_LINE."""
+    src.seek(0)
+    carry = b""
+    held_cr = False
+    first = True
+    done = 0
+    while block := src.read(CHUNK):
+        done += len(block)
+        if first:
+            block = block.removeprefix(BOM)
+            first = False
+        if held_cr:
+            block = b"\r" + block
+        held_cr = block.endswith(b"\r")
+        if held_cr:
+            block = block[:-1]
+        text = normalise(block)
+        _check_lines(text, name, len(carry))
+        if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
+            raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
+        cut = text.rfind(b"\n") + 1
+        if cut == 0:
+            carry += text
+            if len(carry) > MAX_LINE:
+                raise _long_line(name, len(carry))
+            continue
+        yield carry + text[:cut] if carry else text[:cut]
+        carry = text[cut:]
+        if len(carry) > MAX_LINE:
+            raise _long_line(name, len(carry))
+        if progress is not None:
+            progress(done - len(carry), total)
+    if carry or held_cr:
+        yield carry + b"\n"
+    if progress is not None:
+        progress(total, total)
+
+
+def has_commands(text: bytes) -> bool:
+    """Whether normalised text holds a G/M/T command line."""
+    return _COMMAND_LINE.search(text) is not None
