@@ -15,8 +15,6 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from fabwire.errors import LinkClosed, RemoteProtocolError
@@ -28,13 +26,12 @@ from fabwire.lineus.personality import DEFAULT_NAME, DEFAULT_SERIAL
 from fabwire.lineus.personality import VERSIONS as VERSIONS
 from fabwire.lineus.personality import SimOptions as SimOptions
 from fabwire.lineus.personality import resolve_version as resolve_version
+from fabwire.lineus.sim_handlers import FS_TOTAL, HANDLERS, ReplySource, Session, error_reply
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
 log = logging.getLogger("fabwire.lineus.sim")
 
 DEFAULT_ZMAP = (0.0, 100.0, 300.0, 200.0)
-FS_TOTAL = 1_953_282
-"""Flash bytes for files (M122/M39 FSTotal on a 3.2.0 machine): stored drawings cannot grow past it."""
 SYSTEM_FILES = (("/cal", 29), ("/key", 344))
 SAVE_BLOCKED = ("M30", "M171", "M374", "M997")
 """Codes the firmware refuses while an M28 recording is open."""
@@ -50,18 +47,6 @@ def sample_drawing() -> str:
     lines += [f"G01 X{x} Y{y} Z0" for x, y in points]
     lines.append("G01 Z1000")
     return "".join(line + "\n" for line in lines)
-
-
-@dataclass
-class _Session:
-    """What the firmware keeps per connection: its G54 (in the interpreter) and its M28 recording."""
-
-    interpreter: Interpreter
-    saving: int | None = None
-    saved: list[str] = field(default_factory=list)
-    saved_bytes: int = 0
-    backlog: int = 0
-    """Replies handed to the writer and not yet sent."""
 
 
 class RateLimitedLog:
@@ -89,15 +74,6 @@ class RateLimitedLog:
             self.suppressed = 0
         self._log.log(self._level, "%s", message)
         return True
-
-
-def _error(text: str) -> p.Reply:
-    clean = "".join(ch if 32 <= ord(ch) < 127 and ch != '"' else "'" for ch in text)[:200]
-    return p.Reply(False, (("INFO", clean),))
-
-
-ReplySource = p.Reply | Callable[[], p.Reply] | Job
-"""A reply now, one computed when its turn comes (M114), or a move's, due when the move ends."""
 
 
 class LineUsSim:
@@ -143,8 +119,8 @@ class LineUsSim:
     def hello(self) -> p.Hello:
         return p.Hello(self.options.version, self.name, self.options.serial)
 
-    def new_session(self) -> _Session:
-        return _Session(Interpreter(x_min_lower=self.options.x_min_lower))
+    def new_session(self) -> Session:
+        return Session(Interpreter(x_min_lower=self.options.x_min_lower))
 
     async def serve(self, transport: Transport) -> None:
         """Run one connection until the client goes away; replies already owed are still sent. A client that
@@ -174,7 +150,7 @@ class LineUsSim:
                 except LinkClosed:
                     break
                 for item in reader.feed(data):
-                    action = self._dispatch(item, session) if isinstance(item, p.Line) else _error(item.reason)
+                    action = self._dispatch(item, session) if isinstance(item, p.Line) else error_reply(item.reason)
                     source = await self._start_move(action) if isinstance(action, Motion) else action
                     if session.backlog == 0 and (ready := self._ready(source)) is not None:
                         await self._send(transport, ready)  # nothing owed before it: answer now
@@ -214,7 +190,7 @@ class LineUsSim:
 
     async def _write_replies(
         self, transport: Transport, queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None],
-        session: _Session,
+        session: Session,
     ) -> None:
         """Writes each reply whole, in command order, as soon as it is due."""
         while (entry := await queue.get()) is not None:
@@ -231,42 +207,42 @@ class LineUsSim:
 
     # -- commands -----------------------------------------------------------------------------------------------
 
-    def _dispatch(self, line: p.Line, session: _Session) -> ReplySource | Motion:
+    def _dispatch(self, line: p.Line, session: Session) -> ReplySource | Motion:
         self.received.append(line.text)
         if session.saving is not None:
             return self._record(line.text, session)
         try:
             command = p.parse_command(line.text)
         except RemoteProtocolError as exc:
-            return _error(str(exc))
+            return error_reply(str(exc))
         if isinstance(command, p.Move | p.Home | p.RawMove):
             return self._motion(command, session, line.text)
-        handler = _HANDLERS.get(type(command))
+        handler = HANDLERS.get(type(command))
         if handler is None:
-            return _error(f"{command.text()} is not supported")
+            return error_reply(f"{command.text()} is not supported")
         try:
             return handler(self, command, session)
         except Exception as exc:  # a simulator bug must cost one reply, never the connection
             log.exception("lineus simulator failed on %r", line.text)
-            return _error(f"internal error: {exc}")
+            return error_reply(f"internal error: {exc}")
 
-    def _record(self, text: str, session: _Session) -> p.Reply:
+    def _record(self, text: str, session: Session) -> p.Reply:
         code = text.split(maxsplit=1)[0].upper() if text.split() else ""
         if code in ("M29",):
             self._close_file(session)
             return p.Reply(True)
         if code in SAVE_BLOCKED:
-            return _error(f"{code} is not allowed while saving a drawing")
+            return error_reply(f"{code} is not allowed while saving a drawing")
         if code == "M28":
-            return _error("already saving a drawing; send M29 first")
+            return error_reply("already saving a drawing; send M29 first")
         size = len(text) + 1
         if self.fs_used(but=session.saving) + session.saved_bytes + size > FS_TOTAL:
-            return _error(f"file system full: {FS_TOTAL} bytes of flash, line not stored")
+            return error_reply(f"file system full: {FS_TOTAL} bytes of flash, line not stored")
         session.saved.append(text)
         session.saved_bytes += size
         return p.Reply(True)
 
-    def _close_file(self, session: _Session) -> None:
+    def _close_file(self, session: Session) -> None:
         assert session.saving is not None
         self.files[session.saving] = "".join(line + "\n" for line in session.saved)
         self.last_saved = session.saving
@@ -276,7 +252,7 @@ class LineUsSim:
         dec = self.decimals
         return p.Reply(True, tuple((axis, p.format_coordinate(v, dec)) for axis, v in zip("XYZ", where, strict=True)))
 
-    def _motion(self, command: p.Move | p.Home | p.RawMove, session: _Session, text: str) -> Motion:
+    def _motion(self, command: p.Move | p.Home | p.RawMove, session: Session, text: str) -> Motion:
         motion = session.interpreter.motion(command, self.arm.planned, text)
         if motion.clamped:
             log.info("lineus target of %r is outside the drawing area: moved to (%g, %g), pen lifted",
@@ -393,181 +369,6 @@ class LineUsSim:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         await self.arm.close()
-
-
-# -- non-movement commands -----------------------------------------------------------------------------------------
-
-Handler = Callable[[LineUsSim, p.Command, _Session], ReplySource]
-
-
-def _zmap(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.ZMap)
-    if c.clear:
-        sim.zmap = (0.0, 0.0, 0.0, 0.0)
-    elif c.corners is not None:
-        sim.zmap = c.corners
-    else:
-        return p.Reply(True, (("ZMap", ";".join(p.format_number(v) for v in sim.zmap)),))
-    return p.Reply(True)
-
-
-def _origin(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.SetOrigin)
-    s.interpreter.set_origin(c)
-    return p.Reply(True)
-
-
-def _speed(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.SetSpeed)
-    model = sim.arm.model
-    sim.arm.model = dataclasses.replace(
-        model,
-        draw_step=c.draw if c.draw is not None else model.draw_step,
-        travel_step=c.travel if c.travel is not None else model.travel_step,
-    )
-    return p.Reply(True)
-
-
-def _list_files(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return p.Reply(True, (("FS", sim.file_listing()),))
-
-
-def _memory(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.MemoryDrawing)
-    sim.memory_mode = c.mode
-    return p.Reply(True)
-
-
-def _start_save(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.StartSave)
-    s.saving, s.saved = c.slot, []
-    sim.files[c.slot] = ""
-    return p.Reply(True)
-
-
-def _end_save(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return _error("M29 without M28: not saving a drawing")
-
-
-def _delete(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.DeleteFile)
-    if sim.files.pop(c.slot, None) is None:
-        return _error(f"no drawing {c.slot}")
-    return p.Reply(True)
-
-
-def _usage(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    used = sim.fs_used()
-    return p.Reply(True, (("FSUsed", str(used)), ("FSTotal", str(FS_TOTAL)), ("FSFree", str(FS_TOTAL - used)),
-                          ("FSPercent", str(used * 100 // FS_TOTAL))))
-
-
-def _demo(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.TimedDemo)
-    if c.drawing is not None and c.drawing not in sim.files:
-        return _error(f"no drawing {c.drawing}")
-    sim.set_demo((c.seconds, c.period, c.drawing) if c.period > 0 and c.seconds > 0 else None)
-    return p.Reply(True)
-
-
-def _position(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.GetPosition)
-
-    def report() -> p.Reply:
-        x, y, z = sim.arm.position
-        if not c.servos:
-            return sim.position_reply(sim.arm.position)
-        shoulder, elbow = kin.servo_angles(x, y)
-        pen = 45.0 + 90.0 * z / kin.Z_UP
-        return p.Reply(True, (("S", f"{shoulder:.2f}"), ("E", f"{elbow:.2f}"), ("P", f"{pen:.2f}")))
-
-    return report
-
-
-def _capabilities(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return p.Reply(True, (("CONNECTMODE", "ST"), ("MACHINENAME", sim.name)))
-
-
-def _diagnostics(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return sim.diagnostics()
-
-
-def _reserved(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return _error(f"{c.text()} is reserved for the factory")
-
-
-def _reset(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.FactoryReset)
-    sim.factory_reset(c.wipe_files)
-    return p.Reply(True)
-
-
-def _reverse(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    sim.servo_reverse = [1 - v for v in sim.servo_reverse]
-    return p.Reply(True)
-
-
-def _gestures(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.Gestures)
-    sim.gestures = c.on
-    return p.Reply(True)
-
-
-def _calibrate(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.SaveCalibration)
-    if c.clear:
-        sim.calibration = (0.0, 0.0, 0.0)
-    else:
-        x, y, _ = sim.arm.position
-        sim.calibration = (round((x - kin.HOME[0]) / 20, 5), round((y - kin.HOME[1]) / 20, 5), 0.0)
-    return p.Reply(True)
-
-
-def _name(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.MachineName)
-    if c.name is None:
-        return p.Reply(True, (("MACHINENAME", sim.name),))
-    sim.name = c.name
-    return p.Reply(True, (("MACHINENAME", sim.name),))
-
-
-def _startup(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.StartupMode)
-    sim.startup = (c.mode or sim.startup[0], c.ap_name or sim.startup[1])
-    return p.Reply(True)
-
-
-def _wifi(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.Wifi)
-    if c.ssid is None:
-        return sim.wifi_list()
-    if ":" in c.ssid:
-        return _error("an SSID with ':' cannot be listed")
-    sim.known_wifi[c.ssid] = c.password or ""
-    return p.Reply(True)
-
-
-def _forget(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.ForgetWifi)
-    if c.ssid == "*":
-        sim.known_wifi.clear()
-    elif sim.known_wifi.pop(c.ssid, None) is None:
-        return _error(f"no stored network {c.ssid}")
-    return p.Reply(True)
-
-
-def _update(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return _error("firmware update server unreachable")
-
-
-_HANDLERS: dict[type[p.Command], Handler] = {
-    p.ZMap: _zmap, p.SetOrigin: _origin, p.SetSpeed: _speed, p.ListFiles: _list_files, p.MemoryDrawing: _memory,
-    p.StartSave: _start_save, p.EndSave: _end_save, p.DeleteFile: _delete, p.StorageUsage: _usage,
-    p.TimedDemo: _demo, p.GetPosition: _position, p.Capabilities: _capabilities, p.Diagnostics: _diagnostics,
-    p.Reserved: _reserved, p.FactoryReset: _reset, p.ReverseServos: _reverse, p.Gestures: _gestures,
-    p.SaveCalibration: _calibrate, p.MachineName: _name, p.StartupMode: _startup, p.Wifi: _wifi,
-    p.ForgetWifi: _forget, p.FirmwareUpdate: _update,
-}
 
 
 # -- in-process registration --------------------------------------------------------------------------------
