@@ -18,6 +18,7 @@ from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import draw, preview, text
+from fabwire.lineus.link import open_link
 
 T = TypeVar("T")
 
@@ -29,7 +30,7 @@ def lineus() -> None:
 
 def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with dctx.link() as transport:
+        async with open_link(dctx) as transport:
             arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
             try:
                 return await action(arm)

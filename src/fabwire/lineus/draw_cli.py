@@ -198,12 +198,13 @@ async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, point: int = 0, 
 
 async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float) -> tuple[int, float]:
     from fabwire.lineus.client import LineUs
+    from fabwire.lineus.link import open_link
 
     per_stroke = plan.stroke_seconds()
     weights = [max(1, round(t * 1000)) for t in per_stroke]  # the bar advances by estimated milliseconds
     total = len(plan.strokes)
     began = time.monotonic()
-    async with dctx.link() as transport:
+    async with open_link(dctx) as transport:
         arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
         try:
             with Progress(
