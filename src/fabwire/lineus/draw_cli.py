@@ -345,16 +345,24 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
 @click.command("preview")
 @click.argument("file", type=click.Path(path_type=Path, dir_okay=False))
 @click.option("-o", "--output", "outputs", multiple=True, type=click.Path(path_type=Path, dir_okay=False),
-              help="Picture to write: .svg or .png (repeat for both).")
+              help="File to write: a picture (.svg, .png) or the plan as Line-us G-code (.gcode) for "
+                   "`files save` and `draw`; repeat for several.")
 @placement_options
 @click.option("--json", "json_output", is_flag=True, help="Print the plan figures as JSON.")
+@PEN_Z
 @pass_device
 def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: bool | None, margin: float,
-            rotate: float, clip: bool, no_optimize: bool, optimize_time: float, json_output: bool) -> None:
+            rotate: float, clip: bool, no_optimize: bool, optimize_time: float, json_output: bool,
+            pen_z: float) -> None:
     """Plan FILE and write a picture of what the pen will do (pen-up travel dashed); no device needed."""
+    from fabwire.lineus.plot.export import GCODE_SUFFIXES, write_gcode
+
     if json_output:
         dctx.output.json_mode = True
     plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time))
     for out in outputs:
-        write_drawing(out, plan.strokes, plan.travel(), title=file.name)
+        if out.suffix.lower() in GCODE_SUFFIXES:
+            write_gcode(out, plan, pen_z=pen_z)
+        else:
+            write_drawing(out, plan.strokes, plan.travel(), title=file.name)
     _report(dctx, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})

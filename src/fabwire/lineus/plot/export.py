@@ -1,0 +1,43 @@
+"""A plan written out as Line-us G-code: the file format of drawings stored on the machine (`files save`), and a
+drawing `draw` reads back to the same strokes.
+
+The text is what the official Inkscape extension writes for the machine: a `G54 X0 Y0 S1` header, then one `G01`
+per line ended by `\\n`; pen lifts and drops are `G01 Z…` moves on their own, so the pen never drags during a hop.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fabwire.errors import InputError
+from fabwire.lineus import kinematics as kin
+from fabwire.lineus import protocol as p
+from fabwire.lineus.plot.plan import MoveTo, PenDown, PenUp, Plan
+
+GCODE_SUFFIXES = (".gcode", ".gc", ".nc", ".ngc", ".g")
+DECIMALS = 2
+"""Coordinates to 1/100 unit (0.5 µm): far below the arm's resolution, and short lines for the machine's flash."""
+
+
+def gcode_lines(plan: Plan, *, pen_z: float = kin.Z_DOWN) -> list[str]:
+    """The plan's move stream as G-code lines (no terminators), starting with the pen lifted."""
+    lines = [p.SetOrigin(0.0, 0.0, 1.0).text(), p.Move(z=kin.Z_UP).text()]
+    for move in plan.moves():
+        if isinstance(move, MoveTo):
+            lines.append(p.Move(round(move.x, DECIMALS), round(move.y, DECIMALS)).text())
+        elif isinstance(move, PenDown):
+            lines.append(p.Move(z=pen_z).text())
+        elif isinstance(move, PenUp):
+            lines.append(p.Move(z=kin.Z_UP).text())
+    return lines
+
+
+def write_gcode(path: str | Path, plan: Plan, *, pen_z: float = kin.Z_DOWN) -> Path:
+    """Write the plan to `path` as Line-us G-code; InputError when it cannot be written."""
+    out = Path(path)
+    text = "".join(line + "\n" for line in gcode_lines(plan, pen_z=pen_z))
+    try:
+        out.write_text(text, encoding="ascii")
+    except OSError as exc:
+        raise InputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    return out
