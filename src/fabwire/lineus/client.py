@@ -330,6 +330,7 @@ class LineUs:
             if aim[2] < kin.PEN_DOWN_BELOW:
                 out.append(p.Move(z=kin.Z_UP))
             out.append(self._move_to(*corner, kin.Z_UP, scaled, command))
+            command = self._move_to(x, y, z, scaled, command)  # the pen as asked at the end (a drop lands there)
         out.append(command)
         return out
 

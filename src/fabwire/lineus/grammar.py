@@ -134,7 +134,8 @@ def parse_command(line: str) -> Command:
 
 
 _HEAD = re.compile(r"([GgMm]\d{1,3})(?=[A-Za-z]|$)")
-_RUN_TOGETHER = re.compile(r"(?:[A-Za-z][+-]?(?:\d+(?:\.\d*)?|\.\d+))+")
+_RUN_TOGETHER = re.compile(r"(?:[XYZSPKxyzspk][+-]?(?:\d+(?:\.\d*)?|\.\d+))+")
+"""G parameters (the letters G codes take) written without spaces; `X1e3` is not two of them."""
 _ONE_PARAM = re.compile(r"[A-Za-z][+-]?(?:\d+(?:\.\d*)?|\.\d+)")
 
 
