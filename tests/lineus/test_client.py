@@ -331,3 +331,16 @@ async def test_a_reply_that_never_comes_leaves_no_unretrieved_exception(caplog) 
     gc.collect()
     await asyncio.sleep(0)
     assert not [r for r in caplog.records if "never retrieved" in r.getMessage()]
+
+
+async def test_saving_past_the_flash_reports_the_machines_answer(lineus_sim) -> None:
+    from fabwire.lineus.sim_handlers import FS_TOTAL
+
+    line = "G01 X1200 Y0 Z0\n"
+    running = await lineus_sim(files={1: line * ((FS_TOTAL - 1000) // len(line))})
+    async with connected(running.port) as arm:
+        with pytest.raises(DeviceError, match="file system full"):
+            await arm.save_drawing(2, ["G01 X1300 Y100 Z0"] * 200)
+        assert [d.slot for d in await arm.list_drawings()] == [1, 2]  # closed with what fitted
+        usage = await arm.storage()
+        assert usage["FSUsed"] <= usage["FSTotal"] == FS_TOTAL
