@@ -239,7 +239,7 @@ def test_preview_writes_gcode_that_files_save_accepts_and_draw_replays(simulator
     made = run_cli("lineus", "preview", str(svg), "-o", str(plan_gcode), "--pen-z", "300")
     assert made.returncode == 0, made.stderr
     lines = plan_gcode.read_text().splitlines()
-    assert lines[0] == "G54 X0 Y0 S1"
+    assert lines[0] == "G01 Z1000"
     assert "G01 Z300" in lines
     record = tmp_path / "rec.svg"
     sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--record", str(record))

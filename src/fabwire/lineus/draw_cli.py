@@ -148,7 +148,8 @@ class DrawProgress:
         point = data.get("point", 0)
         if (not isinstance(strokes, list) or not isinstance(done, int) or not 0 <= done <= len(strokes)
                 or not isinstance(point, int) or point < 0
-                or (done < len(strokes) and (not isinstance(strokes[done], list) or point >= len(strokes[done])))):
+                or (point and (done >= len(strokes) or not isinstance(strokes[done], list)
+                               or point >= len(strokes[done])))):
             raise InputError(f"resume state {path} is damaged; delete it to start over")
         return cls(path, key, strokes, done, point)
 

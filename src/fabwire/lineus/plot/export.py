@@ -15,20 +15,23 @@ from fabwire.lineus import protocol as p
 from fabwire.lineus.plot.plan import MoveTo, PenDown, PenUp, Plan
 
 GCODE_SUFFIXES = (".gcode", ".gc", ".nc", ".ngc", ".g")
-DECIMALS = 2
-"""Coordinates to 1/100 unit (0.5 µm): far below the arm's resolution, and short lines for the machine's flash."""
+DECIMALS = 3
+"""Coordinates to 1/1000 unit (0.05 µm): far below the arm's resolution, and short lines for the machine's flash."""
 
 
-def gcode_lines(plan: Plan, *, pen_z: float = kin.Z_DOWN) -> list[str]:
-    """The plan's move stream as G-code lines (no terminators), starting with the pen lifted."""
-    lines = [p.SetOrigin(0.0, 0.0, 1.0).text(), p.Move(z=kin.Z_UP).text()]
-    for move in plan.moves():
-        if isinstance(move, MoveTo):
-            lines.append(p.Move(round(move.x, DECIMALS), round(move.y, DECIMALS)).text())
-        elif isinstance(move, PenDown):
-            lines.append(p.Move(z=pen_z).text())
-        elif isinstance(move, PenUp):
-            lines.append(p.Move(z=kin.Z_UP).text())
+def gcode_lines(*plans: Plan, pen_z: float = kin.Z_DOWN) -> list[str]:
+    """The plans' move streams, one after another, as G-code lines (no terminators), starting with the pen lifted.
+
+    No G54 header: a stored drawing plays in a session of its own, which starts at `G54 X0 Y0 S1`."""
+    lines = [p.Move(z=kin.Z_UP).text()]
+    for plan in plans:
+        for move in plan.moves():
+            if isinstance(move, MoveTo):
+                lines.append(p.Move(round(move.x, DECIMALS), round(move.y, DECIMALS)).text())
+            elif isinstance(move, PenDown):
+                lines.append(p.Move(z=pen_z).text())
+            elif isinstance(move, PenUp):
+                lines.append(p.Move(z=kin.Z_UP).text())
     return lines
 
 

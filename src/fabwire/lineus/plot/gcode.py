@@ -29,14 +29,13 @@ def parse_gcode_text(text: str, *, name: str = "G-code", notes: list[str] | None
 
 
 def parse_gcode(path: str | Path, *, notes: list[str] | None = None) -> Polylines:
-    """Read a G-code file; InputError when it is unreadable."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8", errors="strict")
-    except FileNotFoundError as exc:
-        raise InputError(f"{p}: no such file") from exc
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{p}: not a text G-code file") from exc
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from exc
-    return parse_gcode_text(text, name=str(p), notes=notes)
+    """Read a G-code file through the drawing intake (size limit, encodings); InputError when it is unreadable,
+    empty, or not G-code."""
+    from fabwire.lineus.plot.intake import read_drawing
+
+    drawing = read_drawing(path)
+    if drawing.kind != "gcode":
+        raise InputError(f"{path}: not a G-code file")
+    if notes is not None:
+        notes.extend(drawing.notes)
+    return drawing.lines
