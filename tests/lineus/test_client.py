@@ -256,10 +256,11 @@ async def test_move_wait_is_sized_in_machine_units_under_g54(lineus_sim) -> None
     arm = await LineUs.open(running.address)
     try:
         await arm.move(1000, 0, 1000)
-        unscaled = arm._timeout_for(p.Move(900, 0))
+        unscaled = arm._timeout_for(arm._span(p.Move(900, 0))[0])
         await arm.set_origin(0, 0, 2.0)
         # Under scale 2 the drawing-unit move to X900 ends at machine X1800: eight times as far.
-        assert arm._timeout_for(p.Move(900, 0)) > unscaled
+        assert arm._span(p.Move(900, 0)) == (800, (1800, 0, 1000))
+        assert arm._timeout_for(arm._span(p.Move(900, 0))[0]) > unscaled
         assert await arm.move(900, 0) == Position(1800, 0, 1000)
     finally:
         await arm.close()

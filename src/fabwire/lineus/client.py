@@ -97,7 +97,6 @@ class LineUs:
         self._window = window if lookahead else 1
         self._slots = asyncio.Semaphore(self._window)
         self._waiting: collections.deque[tuple[str, asyncio.Future[p.Reply]]] = collections.deque()
-        self._planned: Position | None = None
         self.guard_body = hello.firmware_major <= 1
         """Firmware 1.x lets the arm into the body notch (x < 700 below y = 0, README "CAUTION"): keep out of it
         here, clamping targets and routing moves round the notch's corner with the pen lifted."""
@@ -106,6 +105,8 @@ class LineUs:
         machine units as the firmware will see them."""
         self._aim: Point3 = HOME3
         """Where the last motion command sent will leave the arm."""
+        self._spans: dict[asyncio.Future[p.Reply], float] = {}
+        """Per move in flight: its longest axis travel in machine units (what its reply wait is sized by)."""
         self.notices: list[str] = []
         """What the client changed on the way (clamped targets, detours), for the caller to show."""
         self._failure: BaseException | None = None
@@ -215,6 +216,7 @@ class LineUs:
         """Free the command's slot and mark its exception retrieved: a reply nobody waits for any more (after a
         timeout or an interrupt) must not end the program with "Future exception was never retrieved"."""
         self._slots.release()
+        self._spans.pop(future, None)
         if not future.cancelled():
             future.exception()
 
@@ -251,7 +253,7 @@ class LineUs:
         if isinstance(command, p.SetOrigin):
             self._interpreter.set_origin(command)
         elif isinstance(command, p.Move | p.Home | p.RawMove):
-            self._aim = self._interpreter.motion(command, self._aim).target
+            self._spans[future], self._aim = self._span(command)
         try:
             await self.transport.write(text.encode("ascii") + p.COMMAND_TERMINATOR)
         except LinkClosed as exc:
@@ -259,7 +261,7 @@ class LineUs:
         return future
 
     async def _await_reply(self, command: p.Command, future: asyncio.Future[p.Reply], timeout: float | None) -> p.Reply:
-        limit = timeout if timeout is not None else self._timeout_for(command)
+        limit = timeout if timeout is not None else self._timeout_for(self._spans.pop(future, None))
         try:
             async with asyncio.timeout(limit):
                 if self._read_task is None:
@@ -270,20 +272,21 @@ class LineUs:
             exc = LinkTimeout(f"no reply to {command.text()!r} within {limit:.1f} s: the Line-us may be wedged")
             self._fail(exc)
             raise exc from None
-        if command.moves and reply.ok:
-            with contextlib.suppress(RemoteProtocolError):
-                self._planned = Position.from_reply(reply)
         return reply
 
-    def _timeout_for(self, command: p.Command) -> float:
-        """Room for the move itself (and the one ahead of it with look-ahead) on top of the link's slack."""
-        if not isinstance(command, p.Move | p.Home | p.RawMove):
+    def _span(self, command: p.Move | p.Home | p.RawMove) -> tuple[float, Point3]:
+        """How far (longest axis, machine units) the move goes from where the moves sent so far leave the arm,
+        and where it ends."""
+        end = self._interpreter.motion(command, self._aim).target
+        return max(abs(end[0] - self._aim[0]), abs(end[1] - self._aim[1])), end
+
+    def _timeout_for(self, span: float | None) -> float:
+        """Room for a move spanning `span` units (and the one ahead of it with look-ahead) on top of the link's
+        slack; None for a command that does not move."""
+        if span is None:
             return self.reply_timeout
-        start = self._planned or Position(*HOME3)
-        end = self._interpreter.motion(command, (start.x, start.y, start.z)).target
         # Bound the move by the smallest step the firmware allows (1 unit), in case G94 was set elsewhere,
         # and double it: the step period is modelled, not measured. With look-ahead the move ahead counts too.
-        span = max(abs(end[0] - start.x), abs(end[1] - start.y))
         worst = math.ceil(span) * self.model.step_time + 2 * self.model.pen_time
         return self.reply_timeout + (2 if self.lookahead else 1) * 2 * worst
 

@@ -48,6 +48,7 @@ class Motion:
     """Where one move command sends the arm, in machine units."""
 
     command: str
+    """The line as received (empty when the caller did not give it)."""
     target: Point3
     clamped: bool
     """The target was outside the drawing area: moved to the nearest reachable point, pen lifted."""
@@ -89,7 +90,7 @@ class Interpreter:
             if where.clamped:
                 x, y, z, clamped = where.x, where.y, kin.Z_UP, True
         rapid = isinstance(command, p.Move) and command.rapid
-        return Motion(text or command.text(), (x, y, z), clamped, rapid)
+        return Motion(text, (x, y, z), clamped, rapid)
 
 
 # -- the paper ------------------------------------------------------------------------------------------------------
