@@ -2,10 +2,15 @@
 
 import sys
 
-from fabwire.cli import main
-
 
 def run() -> None:
+    if sys.argv[1:] in (["--version"], ["-V"]):  # answered before click and the CLI are imported
+        from fabwire import __version__
+
+        sys.stdout.write(f"fabwire, version {__version__}\n")
+        sys.exit(0)
+    from fabwire.cli import main
+
     sys.exit(main())
 
 

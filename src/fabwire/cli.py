@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import logging
 import sys
 import traceback
 from pathlib import Path
@@ -12,45 +9,13 @@ from pathlib import Path
 import click
 
 from fabwire import __version__
-from fabwire.cli_support import App
+from fabwire.cli_support import DEVICE_OPTIONS, GLOBAL_OPTIONS, App, LazyGroup, configure_logging, pass_app
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError
-from fabwire.transport.tap import read_trace
-from fabwire.transport.trace_show import render_trace
+from fabwire.extras import missing_extra
+from fabwire.simserve import SERVE_OPTIONS
 
 EXIT_LINK = 8
 EXIT_TIMEOUT = 9
-
-
-class LazyGroup(click.Group):
-    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
-
-    def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
-        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
-        self._lazy = lazy or {}
-
-    def _available(self, name: str) -> bool:
-        module = self._lazy[name].partition(":")[0]
-        try:
-            return importlib.util.find_spec(module) is not None
-        except ModuleNotFoundError:
-            return False
-
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(set(super().list_commands(ctx)) | {n for n in self._lazy if self._available(n)})
-
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name in self._lazy and self._available(cmd_name):
-            module_name, _, attr = self._lazy[cmd_name].partition(":")
-            command = getattr(importlib.import_module(module_name), attr)
-            if not isinstance(command, click.Command):
-                raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
-            return command
-        return super().get_command(ctx, cmd_name)
-
-
-def _setup_logging(verbose: int) -> None:
-    level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
-    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(name)s: %(message)s")
 
 
 @click.group(
@@ -60,25 +25,23 @@ def _setup_logging(verbose: int) -> None:
         "lineus": "fabwire.lineus.cli:lineus",
         "mmu": "fabwire.mmu.cli:mmu",
         "demo": "fabwire.demo:demo",
+        "fleet": "fabwire.mqtt.fleet:fleet",
         "serve": "fabwire.agent.command:serve",
+        "devices": "fabwire.devices_cli:devices",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )
 @click.version_option(__version__, "-V", "--version", prog_name="fabwire")
-@click.option("--json", "json_output", is_flag=True, help="Machine-readable results on stdout (text goes to stderr).")
-@click.option("-v", "--verbose", count=True, help="Log more; -vv logs every byte on the wire (logger fabwire.wire).")
-@click.option("--debug", is_flag=True, help="Show tracebacks on errors.")
-@click.pass_context
-def cli(ctx: click.Context, json_output: bool, verbose: int, debug: bool) -> None:
+def cli() -> None:
     """Talk to maker machines over their own wire protocols — or simulate them.
 
     Devices: xyz (XYZprinting da Vinci printers), lineus (Line-us drawing robot), mmu (Prusa MMU3).
+    Options such as -d, --json, --trace, --timeout and -v go before or after the subcommand.
     """
-    app = ctx.ensure_object(App)
-    app.output.json_mode = json_output
-    app.verbose = verbose
-    app.debug = debug or app.debug
-    _setup_logging(verbose)
+
+
+cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS))
+cli.shared = GLOBAL_OPTIONS
 
 
 @cli.group(
@@ -93,6 +56,38 @@ def sim() -> None:
     """Run a faithful simulator of a device on TCP or a raw pty."""
 
 
+sim.own_options = SERVE_OPTIONS  # type: ignore[attr-defined]
+
+
+@cli.command()
+@click.argument("shell", type=click.Choice(["bash", "zsh", "fish"]))
+def completion(shell: str) -> None:
+    """Print the completion script for SHELL; it completes commands, options and configured device names.
+
+    \b
+    bash: fabwire completion bash > ~/.local/share/bash-completion/completions/fabwire
+    zsh:  fabwire completion zsh > "${fpath[1]}/_fabwire"
+    fish: fabwire completion fish > ~/.config/fish/completions/fabwire.fish
+    """
+    from click.shell_completion import get_completion_class
+
+    complete = get_completion_class(shell)
+    assert complete is not None  # the choice above only allows shells click supports
+    click.echo(complete(cli, {}, "fabwire", "_FABWIRE_COMPLETE").source())
+
+
+@cli.command()
+@click.argument("directory", type=click.Path(file_okay=False, path_type=Path), default=".")
+@click.option("--force", is_flag=True, help="Replace files of the same name.")
+@pass_app
+def samples(app: App, directory: Path, force: bool) -> None:
+    """Write the sample print and drawing the README's tour uses into DIRECTORY (default: here)."""
+    from fabwire.samples import write_samples
+
+    written = write_samples(directory, overwrite=force)
+    app.output.result([str(p) for p in written], "\n".join(f"wrote {p}" for p in written))
+
+
 @cli.group()
 def trace() -> None:
     """Read wire captures made with --trace."""
@@ -101,17 +96,55 @@ def trace() -> None:
 @trace.command("show")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--no-time", is_flag=True, help="Leave out the timestamps.")
-@click.pass_obj
+@pass_app
 def trace_show(app: App, file: Path, no_time: bool) -> None:
-    """Print a capture: `>` bytes to the device, `<` bytes from it, hexdump for binary."""
-    records = list(read_trace(file))
+    """Print a capture: `>` bytes to the device, `<` bytes from it, hexdump for binary (--json: one record a line)."""
+    from fabwire.transport.tap import read_trace
+    from fabwire.transport.trace_show import render_trace
+
     if app.json:
-        app.output.result(
-            [{"t": r.t, "dir": r.direction, "data": r.data, "event": r.event or None} for r in records]
-        )
+        for r in read_trace(file):
+            app.output.event({"t": r.t, "dir": r.direction, "data": r.data, "event": r.event or None}, "")
         return
-    for line in render_trace(records, timestamps=not no_time):
+    for line in render_trace(read_trace(file), timestamps=not no_time):
         click.echo(line)
+
+
+@trace.command("replay")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--to", "address", required=True, metavar="ADDRESS",
+              help="Where to send: host:port, tcp://…, /dev/tty…, or sim://KIND.")
+@click.option("--quiet", type=click.FloatRange(min=0.01), default=2.0, show_default=True,
+              help="Seconds of silence that end a reply shorter than the recorded one.")
+@pass_app
+def trace_replay(app: App, file: Path, address: str, quiet: float) -> int:
+    """Send the host side of a capture to ADDRESS and report each reply that differs from the recording."""
+    import asyncio
+
+    from fabwire.transport import open_transport
+    from fabwire.transport.replay import Difference, replay
+    from fabwire.transport.tap import escape_text, read_trace
+
+    async def main() -> list[Difference]:
+        link = await open_transport(address, connect_timeout=app.timeout or 5.0)
+        try:
+            return await replay(link, read_trace(file), quiet=quiet)
+        finally:
+            await link.close()
+
+    found = asyncio.run(main())
+
+    def human() -> None:
+        if not found:
+            click.echo("every reply matches the recording")
+        for d in found:
+            click.echo(f"exchange {d.exchange.number}: sent {escape_text(d.exchange.sent)[:80]}")
+            click.echo(f"  expected {escape_text(d.exchange.expected)[:200]}")
+            click.echo(f"  got      {escape_text(d.got)[:200]}  (differs from byte {d.offset})")
+
+    app.output.result([{"exchange": d.exchange.number, "sent": d.exchange.sent, "expected": d.exchange.expected,
+                        "got": d.got, "offset": d.offset} for d in found], human)
+    return 0 if not found else 1
 
 
 def _fail(app: App, message: str, code: int) -> int:
@@ -124,6 +157,7 @@ def _fail(app: App, message: str, code: int) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: one line on stderr and a distinct exit code per error kind; a traceback only with --debug."""
     app = App(debug="--debug" in (argv if argv is not None else sys.argv[1:]))
+    configure_logging(0)
     try:
         result = cli.main(args=argv, prog_name="fabwire", obj=app, standalone_mode=False)
     except click.exceptions.Abort:
@@ -137,6 +171,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     except FabwireError as exc:
         return _fail(app, str(exc), exc.exit_code)
+    except ImportError as exc:
+        extra = missing_extra(exc)
+        if extra is None:
+            return _fail(app, f"internal error: {exc!r} (run with --debug for the traceback)", 1)
+        return _fail(app, str(extra), extra.exit_code)
     except TimeoutError as exc:
         return _fail(app, f"timed out: {exc or 'the device did not answer'}", EXIT_TIMEOUT)
     except ConnectionError as exc:

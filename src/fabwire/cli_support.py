@@ -1,108 +1,290 @@
-"""What every device's CLI shares: the app state, -d/--trace options, opening the link, running async code."""
+"""What every device's CLI shares: the app state, options accepted anywhere, opening devices, running async code.
+
+Shared options (`--json`, `-v`, `--debug`, `-d`, `--trace`, `--timeout` and each device's link options such as the
+MMU's `--speed`) are defined once here and attached to every command below the group that shares them, so
+`fabwire xyz status -d HOST --json` and `fabwire --json xyz -d HOST status` mean the same. Each occurrence
+stores its value on the one `App`; the last one on the line wins (`-v` adds up).
+"""
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
+import importlib
+import importlib.util
 import logging
-from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
+import os
+import sys
+from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
 from functools import update_wrapper
 from pathlib import Path
-from typing import Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import click
 
-from fabwire.config import Target, resolve_target
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
-from fabwire.transport import Transport, open_transport
-from fabwire.transport.faults import FaultPlan, FaultyTransport
-from fabwire.transport.tap import TapTransport, TraceWriter
+from fabwire.transport.faults import FaultPlan
+
+if TYPE_CHECKING:
+    from fabwire.config import Target
 
 P = ParamSpec("P")
 T = TypeVar("T")
 
+OptionFactory = Callable[[], click.Option]
+
 
 @dataclass
 class App:
-    """Global options, filled in by the root group."""
+    """Options of the whole command line, filled in wherever they appear on it."""
 
     output: Output = field(default_factory=Output)
     verbose: int = 0
     debug: bool = False
+    device: str | None = None
+    trace: Path | None = None
+    timeout: float | None = None
+    faults: FaultPlan | None = None
+    link_options: dict[str, Any] = field(default_factory=dict)
+    """A device's own link options given on the command line (e.g. the MMU's speed), by settings field name."""
+    server_options: dict[str, Any] = field(default_factory=dict)
+    """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simserve`."""
 
     @property
     def json(self) -> bool:
         return self.output.json_mode
 
 
+def configure_logging(verbose: int) -> None:
+    """-v: connects, retries and state changes (INFO); -vv: also every byte on the wire (DEBUG)."""
+    root = logging.getLogger("fabwire")
+    if not any(getattr(h, "fabwire_cli", False) for h in root.handlers):
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s: %(message)s"))
+        handler.fabwire_cli = True  # type: ignore[attr-defined]
+        root.addHandler(handler)
+    root.setLevel(logging.WARNING if verbose <= 0 else logging.INFO if verbose == 1 else logging.DEBUG)
+
+
+def _app(ctx: click.Context) -> App:
+    app = ctx.find_object(App)
+    if app is None:
+        app = ctx.ensure_object(App)
+    return app
+
+
+def _given(ctx: click.Context, param: click.Parameter) -> bool:
+    source = ctx.get_parameter_source(param.name or "")
+    return source not in (None, click.core.ParameterSource.DEFAULT)
+
+
+def _setter(apply: Callable[[App, Any], None]) -> Callable[[click.Context, click.Parameter, Any], None]:
+    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> None:
+        if _given(ctx, param):
+            apply(_app(ctx), value)
+
+    return callback
+
+
+def _set_json(app: App, value: bool) -> None:
+    app.output.json_mode = app.output.json_mode or value
+
+
+def _add_verbose(app: App, value: int) -> None:
+    app.verbose += value
+    configure_logging(app.verbose)
+
+
+def _set_faults(app: App, value: str) -> None:
+    app.faults = FaultPlan.parse(value)
+
+
+def _device_names(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
+    """Shell completion for -d: the configured names (of the command's device kind, when known)."""
+    from fabwire.config import load_devices
+    from fabwire.errors import FabwireError
+
+    try:
+        devices = load_devices()
+    except FabwireError:
+        return []
+    kinds = set()
+    current: click.Context | None = ctx
+    while current is not None:
+        kinds.add(current.info_name)
+        current = current.parent
+    wanted = kinds & {"xyz", "lineus", "mmu"}
+    return sorted(name for name, device in devices.items()
+                  if name.startswith(incomplete) and (not wanted or device.kind.name in wanted))
+
+
+GLOBAL_OPTIONS: tuple[OptionFactory, ...] = (
+    lambda: click.Option(["--json", "shared_json"], is_flag=True, expose_value=False,
+                         callback=_setter(_set_json),
+                         help="Machine-readable results on stdout (text goes to stderr)."),
+    lambda: click.Option(["-v", "--verbose", "shared_verbose"], count=True, expose_value=False,
+                         callback=_setter(_add_verbose),
+                         help="Log connects, retries and state changes; -vv also every byte on the wire."),
+    lambda: click.Option(["--debug", "shared_debug"], is_flag=True, expose_value=False,
+                         callback=_setter(lambda app, v: setattr(app, "debug", app.debug or v)),
+                         help="Show tracebacks on errors."),
+)
+
+DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
+    lambda: click.Option(["-d", "--device", "shared_device"], metavar="DEVICE", expose_value=False,
+                         callback=_setter(lambda app, v: setattr(app, "device", v)), shell_complete=_device_names,
+                         help="Address (host[:port], tcp://…, /dev/tty…, sim://KIND) or a configured device name."),
+    lambda: click.Option(["--trace", "shared_trace"], type=click.Path(dir_okay=False, path_type=Path),
+                         expose_value=False, callback=_setter(lambda app, v: setattr(app, "trace", v)),
+                         help="Record the wire to FILE."),
+    lambda: click.Option(["--timeout", "shared_timeout"], type=click.FloatRange(min=0.1), expose_value=False,
+                         callback=_setter(lambda app, v: setattr(app, "timeout", v)),
+                         help="Seconds to wait for the link to open [default: 5, or the device's setting]."),
+    lambda: click.Option(["--inject", "shared_inject"], metavar="FAULTS", hidden=True, expose_value=False,
+                         callback=_setter(_set_faults), help="Test aid: fault plan such as chunk=1,drop=0.01,seed=3."),
+)
+
+
+def link_option(setting: str, *decls: str, **attrs: Any) -> OptionFactory:
+    """A device's own link option, stored under the name of its settings field (see `fabwire.config`)."""
+
+    def store(app: App, value: Any) -> None:
+        app.link_options[setting] = list(value) if isinstance(value, tuple) else value
+
+    return lambda: click.Option([*decls, f"shared_{setting}"], expose_value=False, callback=_setter(store), **attrs)
+
+
+def share_options(command: click.Command, factories: Sequence[OptionFactory]) -> None:
+    """Attach shared options to `command` and everything under it, skipping names a command already uses."""
+    taken = {opt for param in command.params for opt in param.opts + param.secondary_opts}
+    for make in factories:
+        option = make()
+        if not taken.intersection(option.opts):
+            command.params.append(option)
+            taken.update(option.opts)
+    if isinstance(command, SharingGroup):
+        command.shared = tuple(dict.fromkeys((*command.shared, *factories)))
+    elif isinstance(command, click.Group):
+        for sub in command.commands.values():
+            share_options(sub, factories)
+
+
+class SharingGroup(click.Group):
+    """A group that hands its shared options (and a child group's own ones) to every command it resolves."""
+
+    shared: tuple[OptionFactory, ...] = ()
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        return self.share(super().get_command(ctx, cmd_name))
+
+    def share(self, command: click.Command | None) -> click.Command | None:
+        """Give a resolved child the shared options, once."""
+        if command is not None and not getattr(command, "_fabwire_shared", False):
+            share_options(command, (*self.shared, *getattr(command, "own_options", ())))
+            command._fabwire_shared = True  # type: ignore[attr-defined]
+        return command
+
+
+def _needs_extra(name: str, missing: Exception) -> click.Command:
+    """Stands in for a command whose extra is not installed: listed in help, and says what to install."""
+
+    def fail(args: tuple[str, ...]) -> None:
+        raise missing
+
+    command = click.Command(name, callback=fail, help=f"(not installed: {missing})",
+                            params=[click.Argument(["args"], nargs=-1)],
+                            context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+    command.short_help = str(missing).split(": ", 1)[-1]
+    return command
+
+
+class LazyGroup(SharingGroup):
+    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
+
+    def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._lazy = lazy or {}
+
+    def _available(self, name: str) -> bool:
+        module = self._lazy[name].partition(":")[0]
+        try:
+            return importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:
+            return False
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(super().list_commands(ctx)) | {n for n in self._lazy if self._available(n)})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in self._lazy and self._available(cmd_name):
+            module_name, _, attr = self._lazy[cmd_name].partition(":")
+            try:
+                command = getattr(importlib.import_module(module_name), attr)
+            except ImportError as exc:
+                from fabwire.extras import missing_extra
+
+                missing = missing_extra(exc)
+                if missing is None:
+                    raise
+                return _needs_extra(cmd_name, missing)
+            if not isinstance(command, click.Command):
+                raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
+            return self.share(command)
+        return super().get_command(ctx, cmd_name)
+
+
 @dataclass
 class DeviceContext:
-    """A device group's options, read by its subcommands."""
+    """A device group's view of the command line, read by its subcommands."""
 
     app: App
     kind: DeviceKind
-    device: str | None
-    trace: Path | None
-    timeout: float
-    faults: FaultPlan | None = None
 
     @property
     def output(self) -> Output:
         return self.app.output
 
+    @property
+    def device(self) -> str | None:
+        return self.app.device
+
+    @property
+    def timeout(self) -> float:
+        return self.app.timeout or 5.0
+
     def target(self) -> Target:
-        return resolve_target(self.device, self.kind)
+        """Where the command goes (checks a device name against the config before any work starts)."""
+        from fabwire.config import resolve_target
 
-    @contextlib.asynccontextmanager
-    async def link(self, target: Target | None = None) -> AsyncIterator[Transport]:
-        """Open the device's link, wrapped in the trace tap when --trace or -vv asks for it."""
-        target = target or self.target()
-        transport: Transport = await open_transport(target.endpoint, self.kind, connect_timeout=self.timeout)
-        if self.faults is not None:
-            transport = FaultyTransport(transport, self.faults)
-        if self.trace is not None or logging.getLogger("fabwire.wire").isEnabledFor(logging.DEBUG):
-            writer = None
-            if self.trace is not None:
-                try:
-                    writer = TraceWriter.to_file(self.trace, url=transport.url, peer=transport.peer)
-                except Exception:
-                    await transport.close()
-                    raise
-            transport = TapTransport(transport, writer)
-        try:
-            yield transport
-        finally:
-            await transport.close()
+        return resolve_target(self.app.device or os.environ.get(f"FABWIRE_{self.kind.name.upper()}_DEVICE"),
+                              self.kind)
+
+    def open_options(self, **options: Any) -> dict[str, Any]:
+        """The command line's link options, ready for `X.open` (unset ones leave the config's in force)."""
+        return {"timeout": self.app.timeout, "trace": self.app.trace, "faults": self.app.faults,
+                **self.app.link_options, **options}
+
+    def open(self, client: Any, **options: Any) -> Any:
+        """`async with dctx.open(XYZPrinter) as printer`: the library's one way to open, with the CLI's options."""
+        return client.open(self.app.device, **self.open_options(**options))
 
 
-def device_group(kind: DeviceKind, help_text: str) -> Callable[[Callable[..., None]], click.Group]:
-    """A click group for one device kind with the shared -d/--trace/--timeout options."""
+def device_group(kind: DeviceKind, help_text: str, link_options: Sequence[OptionFactory] = (),
+                 lazy: dict[str, str] | None = None) -> Callable[[Callable[..., None]], click.Group]:
+    """A click group for one device kind; the shared device options and `link_options` work at every level.
+
+    `lazy` maps subcommand names to `module:attribute`, imported only when that subcommand runs.
+    """
 
     def decorate(func: Callable[..., None]) -> click.Group:
-        @click.group(name=kind.name, help=help_text)
-        @click.option(
-            "-d",
-            "--device",
-            metavar="DEVICE",
-            envvar=f"FABWIRE_{kind.name.upper()}_DEVICE",
-            help=f"Address (host[:port], tcp://…, /dev/tty…, sim://{kind.name}) or a configured device name.",
-        )
-        @click.option("--trace", type=click.Path(dir_okay=False, path_type=Path), help="Record the wire to FILE.")
-        @click.option("--timeout", type=click.FloatRange(min=0.1), default=5.0, show_default=True,
-                      help="Seconds to wait for the link to open.")
-        @click.option("--inject", "inject", metavar="FAULTS", hidden=True,
-                      help="Test aid: fault plan such as chunk=1,drop=0.01,seed=3.")
+        @click.group(name=kind.name, help=help_text, cls=LazyGroup, lazy=lazy or {})
         @click.pass_context
-        def group(
-            ctx: click.Context, device: str | None, trace: Path | None, timeout: float, inject: str | None
-        ) -> None:
-            app = ctx.find_object(App) or App()
-            faults = FaultPlan.parse(inject) if inject else None
-            ctx.obj = DeviceContext(app, kind, device, trace, timeout, faults)
+        def group(ctx: click.Context) -> None:
+            ctx.obj = DeviceContext(_app(ctx), kind)
             func()
 
+        group.own_options = (*DEVICE_OPTIONS, *link_options)  # type: ignore[attr-defined]
         group.__doc__ = help_text
         return group
 

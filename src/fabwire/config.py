@@ -1,28 +1,76 @@
-"""Named devices: an optional TOML file mapping names to a device kind, an address and options.
+"""Named devices: `devices.toml`, validated by a typed schema, maps names to a device kind, an address and settings.
 
     [devices.office]
-    kind = "xyz"
-    url = "192.168.1.50"
-    default = true          # used when -d is not given
-    model = "miniMaker"     # any other key is an option for that device
+    kind = "xyz"              # xyz | lineus | mmu
+    url = "192.168.1.50"      # any address -d takes
+    default = true            # used when -d is not given (at most one per kind)
+    link = "wifi"             # any setting of that kind (see XYZSettings, LineUsSettings, MMUSettings)
 
-Location: $FABWIRE_CONFIG, else $XDG_CONFIG_HOME/fabwire/devices.toml (~/.config/fabwire/devices.toml).
+Location: $FABWIRE_CONFIG, else the platform's config directory (platformdirs), e.g. ~/.config/fabwire/devices.toml.
+Every command and `X.open` apply a device's settings; options given explicitly win over the file.
 """
 
 from __future__ import annotations
 
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Any, Literal, get_args, get_type_hints
+
+import msgspec
 
 from fabwire.devices import KINDS, DeviceKind
-from fabwire.errors import ConfigError
+from fabwire.errors import ConfigError, InputError
 from fabwire.transport.urls import Endpoint, parse_url
 
-OptionValue = str | int | float | bool
 CONFIG_ENV = "FABWIRE_CONFIG"
+MAX_DEVICES = 10_000
+"""A file with more devices than this is refused rather than parsed (a config, not a database)."""
+
+Seconds = Annotated[float, msgspec.Meta(gt=0, le=86_400)]
+
+
+class DeviceSettings(msgspec.Struct, kw_only=True, forbid_unknown_fields=True, tag_field="kind"):
+    """Fields every device entry has."""
+
+    url: str = ""
+    """The device's address (required in the file; absent when `open` is given an address)."""
+    default: bool = False
+    timeout: Seconds = 5.0
+    """Seconds to wait for the link to open."""
+
+
+class XYZSettings(DeviceSettings, tag="xyz"):
+    link: Literal["auto", "serial", "wifi"] = "auto"
+    """Reply framing: auto = Wi-Fi on TCP, serial otherwise."""
+    reply_timeout: Seconds | None = None
+    """Seconds to wait for each reply (default: the link timeout, at least 2 s)."""
+    model: str | None = None
+    """Model to convert G-code for when printing (default: the printer's own)."""
+
+
+class LineUsSettings(DeviceSettings, tag="lineus"):
+    lookahead: bool = False
+    """Keep up to three commands in flight (firmware 3 only) for smoother motion."""
+    hello_timeout: Seconds | None = None
+    """Seconds to wait for the greeting (default: the link timeout, at least 2 s)."""
+    reply_timeout: Seconds = 5.0
+
+
+class MMUSettings(DeviceSettings, tag="mmu"):
+    speed: Annotated[float, msgspec.Meta(gt=0, le=10_000)] = 1.0
+    """The MMU runs this many times faster than real time (a simulator's --speed)."""
+    accept: list[Annotated[str, msgspec.Meta(pattern=r"^\d{1,3}\.\d{1,3}\.\d{1,3}$")]] = []
+    """Firmware versions to accept, e.g. ["3.0.3"] (default: every supported one)."""
+    connect_timeout: Seconds | None = None
+    """Seconds for the handshake (default: 30 s of MMU time)."""
+    auto_retries: Annotated[int, msgspec.Meta(ge=0, le=100)] = 3
+
+
+AnySettings = XYZSettings | LineUsSettings | MMUSettings
+SCHEMAS: dict[str, type[AnySettings]] = {"xyz": XYZSettings, "lineus": LineUsSettings, "mmu": MMUSettings}
+OptionValue = str | int | float | bool | list[str]
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,25 +78,89 @@ class NamedDevice:
     name: str
     kind: DeviceKind
     endpoint: Endpoint
-    default: bool = False
-    options: dict[str, OptionValue] = field(default_factory=dict)
+    settings: AnySettings
+    line: int = 0
+
+    @property
+    def default(self) -> bool:
+        return self.settings.default
+
+    @property
+    def options(self) -> dict[str, Any]:
+        """The settings this entry gives beyond url/default/kind."""
+        return explicit_settings(self.settings)
+
+
+def explicit_settings(settings: AnySettings) -> dict[str, Any]:
+    """Fields that differ from the schema's defaults, without url/default."""
+    blank = type(settings)()
+    return {f: getattr(settings, f) for f in settings.__struct_fields__
+            if f not in ("url", "default") and getattr(settings, f) != getattr(blank, f)}
 
 
 def config_path() -> Path:
     if override := os.environ.get(CONFIG_ENV):
         return Path(override)
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "fabwire" / "devices.toml"
+    from platformdirs import user_config_path
+
+    return user_config_path("fabwire", appauthor=False) / "devices.toml"
 
 
-def _line_of(text: str, name: str) -> int:
-    pattern = re.compile(rf"^[ \t]*\[[ \t]*devices[ \t]*\.[ \t]*\"?{re.escape(name)}\"?\s*\]", re.MULTILINE)
-    match = pattern.search(text)
-    return text.count("\n", 0, match.start()) + 1 if match else 0
+def closest(word: str, choices: object) -> str:
+    """` (did you mean 'x'?)` for the nearest choice, or nothing."""
+    import difflib
+
+    names = [str(c) for c in choices]  # type: ignore[attr-defined]
+    match = difflib.get_close_matches(word, names, n=1, cutoff=0.6)
+    return f" (did you mean {match[0]!r}?)" if match else ""
 
 
-def _parse_device(path: Path, text: str, name: str, table: object) -> NamedDevice:
-    line = _line_of(text, name)
+_HEADER = re.compile(r"""^[ \t]*\[[ \t]*devices[ \t]*\.[ \t]*(?:"([^"\n]*)"|'([^'\n]*)'|([A-Za-z0-9_-]+))[ \t]*\]""",
+                     re.MULTILINE)
+
+
+def section_lines(text: str) -> dict[str, int]:
+    """Line number of each `[devices.NAME]` header, found in one pass over the text."""
+    lines: dict[str, int] = {}
+    line, pos = 1, 0
+    for match in _HEADER.finditer(text):
+        line += text.count("\n", pos, match.start())
+        pos = match.start()
+        lines.setdefault(match.group(1) or match.group(2) or match.group(3) or "", line)
+    return lines
+
+
+def describe_problem(error: msgspec.ValidationError, schema: type[AnySettings]) -> str:
+    """msgspec's message, in the file's terms: which key, and the valid one it most likely meant."""
+    message = str(error)
+    unknown = re.match(r"Object contains unknown field `([^`]*)`", message)
+    if unknown:
+        key = unknown.group(1)
+        return f"unknown key {key!r}{closest(key, schema.__struct_fields__)}"
+    where = re.search(r" - at `\$\.?([^`]*)`", message)
+    what = message.split(" - at ")[0]
+    if not (where and where.group(1)):
+        return what[0].lower() + what[1:]
+    key = where.group(1)
+    choices = get_args(get_type_hints(schema).get(key))
+    bad = re.match(r"Invalid enum value (.*)", what)
+    if bad and choices:
+        word = bad.group(1).strip("'")
+        return f"{key!r}: expected one of {', '.join(map(repr, choices))}, not {bad.group(1)}{closest(word, choices)}"
+    return f"{key!r}: {what[0].lower()}{what[1:]}"
+
+
+def validate_settings(kind: DeviceKind, values: dict[str, Any], *, what: str = "option") -> AnySettings:
+    """`values` checked against the kind's schema; an unknown or ill-typed value is an InputError naming it."""
+    schema = SCHEMAS[kind.name]
+    try:
+        return msgspec.convert({**values, "kind": kind.name}, type=schema)
+    except msgspec.ValidationError as exc:
+        problem = describe_problem(exc, schema).replace("unknown key", f"unknown {what}")
+        raise InputError(f"{kind.title}: {problem}") from None
+
+
+def _entry(path: Path, name: str, table: object, line: int) -> NamedDevice:
     where = f"{path}, line {line}" if line else str(path)
 
     def fail(problem: str) -> ConfigError:
@@ -58,26 +170,55 @@ def _parse_device(path: Path, text: str, name: str, table: object) -> NamedDevic
         raise fail("must be a table like [devices.NAME]")
     kind_name = table.get("kind")
     if not isinstance(kind_name, str) or kind_name not in KINDS:
-        raise fail(f"'kind' must be one of {', '.join(KINDS)} (got {kind_name!r})")
-    kind = KINDS[kind_name]
-    url = table.get("url")
-    if not isinstance(url, str):
-        raise fail("'url' must be a string such as \"192.168.1.50\" or \"/dev/ttyACM0\"")
+        hint = closest(kind_name, KINDS) if isinstance(kind_name, str) else ""
+        raise fail(f"'kind' must be one of {', '.join(KINDS)} (got {kind_name!r}){hint}")
+    schema = SCHEMAS[kind_name]
     try:
-        endpoint = parse_url(url, kind)
-    except Exception as exc:
+        settings = msgspec.convert(table, type=schema)
+    except msgspec.ValidationError as exc:
+        raise fail(describe_problem(exc, schema)) from None
+    if not settings.url:
+        raise fail("'url' must be a non-empty string such as \"192.168.1.50\" or \"/dev/ttyACM0\"")
+    kind = KINDS[kind_name]
+    try:
+        endpoint = parse_url(settings.url, kind)
+    except InputError as exc:
         raise fail(str(exc)) from None
-    default = table.get("default", False)
-    if not isinstance(default, bool):
-        raise fail("'default' must be true or false")
-    options: dict[str, OptionValue] = {}
-    for key, value in table.items():
-        if key in ("kind", "url", "default"):
-            continue
-        if not isinstance(value, str | int | float | bool):
-            raise fail(f"option {key!r} must be a string, number or boolean")
-        options[key] = value
-    return NamedDevice(name, kind, endpoint, default, options)
+    return NamedDevice(name, kind, endpoint, settings, line)
+
+
+def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
+    """The devices in a config file's text; any malformed or hostile content is a ConfigError."""
+    import tomllib
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except (RecursionError, ValueError, MemoryError) as exc:
+        # Deep nesting overflows the parser's recursion; a huge integer exceeds Python's digit limit.
+        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc) or type(exc).__name__
+        raise ConfigError(f"{path}: not a usable config file: {reason}") from None
+    unknown = set(data) - {"devices"}
+    if unknown:
+        key = sorted(unknown)[0]
+        raise ConfigError(f"{path}: unknown top-level key {key!r}{closest(key, ['devices'])}; "
+                          "expected [devices.NAME] sections")
+    devices = data.get("devices", {})
+    if not isinstance(devices, dict):
+        raise ConfigError(f"{path}: 'devices' must be a table of [devices.NAME] sections")
+    if len(devices) > MAX_DEVICES:
+        raise ConfigError(f"{path}: {len(devices)} devices is more than the {MAX_DEVICES} a config file may hold")
+    lines = section_lines(text)
+    found = {name: _entry(path, name, table, lines.get(name, 0)) for name, table in devices.items()}
+    defaults: dict[str, str] = {}
+    for device in found.values():
+        if device.default:
+            other = defaults.setdefault(device.kind.name, device.name)
+            if other != device.name:
+                raise ConfigError(f"{path}: devices {other!r} and {device.name!r} are both the default "
+                                  f"{device.kind.title}: keep `default = true` on one")
+    return found
 
 
 def load_devices(path: Path | None = None) -> dict[str, NamedDevice]:
@@ -89,31 +230,29 @@ def load_devices(path: Path | None = None) -> dict[str, NamedDevice]:
         return {}
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read config file {path}: {exc}") from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    unknown = set(data) - {"devices"}
-    if unknown:
-        raise ConfigError(f"{path}: unknown top-level key(s) {', '.join(sorted(unknown))}; expected [devices.NAME]")
-    devices = data.get("devices", {})
-    if not isinstance(devices, dict):
-        raise ConfigError(f"{path}: 'devices' must be a table of [devices.NAME] sections")
-    return {name: _parse_device(path, text, name, table) for name, table in devices.items()}
+    return parse_devices(text, path)
 
 
 @dataclass(frozen=True, slots=True)
 class Target:
-    """Where a command goes: the address, and the options a named device carries."""
+    """Where a command goes: the address, and the settings a named device carries."""
 
     endpoint: Endpoint
     name: str = ""
-    options: dict[str, OptionValue] = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+def _looks_like_address(text: str) -> bool:
+    return "/" in text or ":" in text
 
 
 def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = None) -> Target:
-    """A -d value may name a configured device or be an address; no -d picks the kind's default device."""
-    if device is not None and ("/" in device or ":" in device):
+    """A -d value may name a configured device or be an address; no -d picks the kind's default device.
+
+    Raises ConfigError for a bad file, an unknown name that resembles a configured one, a name of another kind,
+    or no device at all; InputError for a malformed address.
+    """
+    if device is not None and _looks_like_address(device):
         return Target(parse_url(device, kind))
     devices = load_devices(path)
     if device is None:
@@ -130,5 +269,8 @@ def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = Non
         if found.kind is not kind:
             raise ConfigError(f"device {device!r} is a {found.kind.title}, not a {kind.title}")
     else:
+        hint = "" if "." in device else closest(device, devices)
+        if hint:
+            raise ConfigError(f"no device named {device!r}{hint}")
         return Target(parse_url(device, kind))
-    return Target(found.endpoint, found.name, dict(found.options))
+    return Target(found.endpoint, found.name, found.options)

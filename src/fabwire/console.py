@@ -1,14 +1,17 @@
-"""Where output goes: results on stdout (JSON with --json), people's text and progress on stderr."""
+"""Where output goes: results on stdout (JSON with --json), people's text and progress on stderr.
+
+The rich consoles are made on first use, so a command that prints JSON or one plain line never imports rich.
+"""
 
 from __future__ import annotations
 
 import json
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
+if TYPE_CHECKING:
+    from rich.console import Console
 
 
 def _default(value: object) -> object:
@@ -19,32 +22,57 @@ def _default(value: object) -> object:
     return str(value)
 
 
-@dataclass
+def _console(stderr: bool) -> Console:
+    from rich.console import Console
+
+    return Console(stderr=True, highlight=False) if stderr else Console(highlight=False, soft_wrap=True)
+
+
 class Output:
-    json_mode: bool = False
-    err: Console = field(default_factory=lambda: Console(stderr=True, highlight=False))
-    out: Console = field(default_factory=lambda: Console(highlight=False, soft_wrap=True))
+    def __init__(self, json_mode: bool = False) -> None:
+        self.json_mode = json_mode
+        self._err: Console | None = None
+        self._out: Console | None = None
+
+    @property
+    def err(self) -> Console:
+        """The rich console on stderr (progress bars, notes)."""
+        if self._err is None:
+            self._err = _console(stderr=True)
+        return self._err
+
+    @property
+    def out(self) -> Console:
+        """The rich console on stdout (human results)."""
+        if self._out is None:
+            self._out = _console(stderr=False)
+        return self._out
+
+    def _line(self, stream: Any, text: str) -> None:
+        stream.write(text + "\n")
+        stream.flush()
 
     def result(self, data: Any, human: Callable[[], None] | str | None = None) -> None:
         """Print a command's result: `data` as one JSON document, or `human` for people."""
         if self.json_mode:
-            sys.stdout.write(json.dumps(data, default=_default, ensure_ascii=False) + "\n")
-            sys.stdout.flush()
+            self._line(sys.stdout, json.dumps(data, default=_default, ensure_ascii=False))
         elif callable(human):
             human()
         elif human is not None:
-            self.out.print(human)
+            self._line(sys.stdout, human)  # plain text: names and replies may contain [brackets]
         else:
             self.out.print(data)
 
     def event(self, data: dict[str, Any], human: str) -> None:
         """One item of a stream (monitor, progress): a JSON line per event, or a line of text."""
         if self.json_mode:
-            sys.stdout.write(json.dumps(data, default=_default, ensure_ascii=False) + "\n")
-            sys.stdout.flush()
+            self._line(sys.stdout, json.dumps(data, default=_default, ensure_ascii=False))
         else:
-            self.out.print(human)
+            self._line(sys.stdout, human)
 
     def note(self, text: str) -> None:
         """Text for people only, never on stdout."""
-        self.err.print(text)
+        if self._err is None:
+            self._line(sys.stderr, text)
+        else:
+            self._err.print(text, markup=False)  # keeps a live progress bar below the note

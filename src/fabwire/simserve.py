@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import signal
 import sys
 from collections.abc import Callable
@@ -14,10 +15,15 @@ from typing import Any
 
 import click
 
+from fabwire.cli_support import App
 from fabwire.errors import InputError
-from fabwire.transport.pty import open_pty
+from fabwire.transport.base import Transport
+from fabwire.transport.limits import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS, ConnectionLimits
 from fabwire.transport.registry import DeviceServer
+from fabwire.transport.tap import FROM_DEVICE, TO_DEVICE, Direction, TapTransport, TraceWriter, escape_text
 from fabwire.transport.tcp import serve_tcp
+
+sim_log = logging.getLogger("fabwire.sim")
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +71,75 @@ def announce(where: str, kind: str, json_mode: bool) -> None:
     sys.stdout.flush()
 
 
+@dataclass
+class ServeSettings:
+    """The simulator command line's shared options (`fabwire sim KIND --max-connections … --trace …`)."""
+
+    max_connections: int = DEFAULT_MAX_CONNECTIONS
+    idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT
+    trace: Path | None = None
+
+
+def _settings() -> ServeSettings:
+    ctx = click.get_current_context(silent=True)
+    app = ctx.find_object(App) if ctx is not None else None
+    return ServeSettings(**app.server_options) if app is not None else ServeSettings()
+
+
+def _store(name: str) -> Callable[[click.Context, click.Parameter, Any], None]:
+    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> None:
+        app = ctx.find_object(App)
+        if app is not None and ctx.get_parameter_source(param.name or "") not in (
+                None, click.core.ParameterSource.DEFAULT):
+            app.server_options[name] = None if name == "idle_timeout" and value == 0 else value
+
+    return callback
+
+
+SERVE_OPTIONS = (
+    lambda: click.Option(["--max-connections", "shared_max_connections"], type=click.IntRange(1, 10_000),
+                         expose_value=False, callback=_store("max_connections"),
+                         help=f"Clients served at once; at the limit a new one replaces the quietest "
+                              f"[default: {DEFAULT_MAX_CONNECTIONS}]."),
+    lambda: click.Option(["--idle-timeout", "shared_idle_timeout"], type=click.FloatRange(min=0), expose_value=False,
+                         callback=_store("idle_timeout"),
+                         help=f"Close a connection after this many seconds without traffic; 0 never "
+                              f"[default: {DEFAULT_IDLE_TIMEOUT:g}]."),
+    lambda: click.Option(["--trace", "shared_sim_trace"], type=click.Path(dir_okay=False, path_type=Path),
+                         expose_value=False, callback=_store("trace"),
+                         help="Record every connection's bytes to FILE (`>` received, `<` sent)."),
+)
+"""Options every `fabwire sim KIND` takes, before or after KIND."""
+
+
+class _SimTap(TapTransport):
+    """The tap on the device's end: what it reads went to the device (`>`); with -v, one log line per chunk."""
+
+    def _record(self, direction: Direction, data: bytes) -> None:
+        direction = FROM_DEVICE if direction == TO_DEVICE else TO_DEVICE
+        super()._record(direction, data)
+        if direction == TO_DEVICE and sim_log.isEnabledFor(logging.INFO):
+            shown = escape_text(data[:120]) + (f"… ({len(data)} bytes)" if len(data) > 120 else "")
+            sim_log.info("%s > %s", self.peer, shown)
+
+
+def observed(handler: DeviceServer, writer: TraceWriter | None) -> DeviceServer:
+    """`handler` with each connection logged (-v) and recorded (--trace), when asked for."""
+    if writer is None and not sim_log.isEnabledFor(logging.INFO):
+        return handler
+
+    async def run(link: Transport) -> None:
+        sim_log.info("client %s connected", link.peer or link.url)
+        if writer is not None:
+            writer.event("connect", link.peer or link.url)
+        try:
+            await handler(_SimTap(link, writer, log=False))
+        finally:
+            sim_log.info("client %s gone", link.peer or link.url)
+
+    return run
+
+
 async def serve(
     kind: str,
     handler: DeviceServer,
@@ -75,7 +150,14 @@ async def serve(
     default_port: int | None,
     json_mode: bool = False,
 ) -> None:
-    """Serve until SIGINT/SIGTERM. Each TCP connection and the pty each get their own `handler` call."""
+    """Serve until SIGINT/SIGTERM. Each TCP connection and the pty each get their own `handler` call.
+
+    The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS).
+    """
+    settings = _settings()
+    limits = ConnectionLimits(settings.max_connections, settings.idle_timeout)
+    writer = TraceWriter.to_file(settings.trace, url=f"sim://{kind}", peer="clients") if settings.trace else None
+    handler = observed(handler, writer)
     if not listen and not use_pty:
         if default_port is None:
             raise InputError("say where to serve: --pty, or --listen HOST:PORT")
@@ -92,12 +174,17 @@ async def serve(
     try:
         for text in listen:
             address = parse_listen(text, default_port or 0)
-            server = await serve_tcp(handler, address.host, address.port)
+            server = await serve_tcp(handler, address.host, address.port, limits=limits, what=f"{kind} simulator")
             servers.append(server)
             host, port = server.sockets[0].getsockname()[:2]
             shown = f"[{host}]" if ":" in host else host
             announce(f"tcp://{shown}:{port}", kind, json_mode)
         if use_pty:
+            try:
+                from fabwire.transport.pty import open_pty  # POSIX only: imported when a pty is asked for
+            except ImportError:
+                raise InputError("--pty needs a POSIX system (Linux, macOS): serve on TCP with --listen") from None
+
             pty_device = open_pty(link)
             tasks.append(asyncio.ensure_future(handler(pty_device.transport)))
             where = f"{pty_device.path}" + (f" (link {link})" if link else "")
@@ -117,3 +204,5 @@ async def serve(
             with contextlib.suppress(Exception):
                 async with asyncio.timeout(1):
                     await server.wait_closed()
+        if writer is not None:
+            writer.close()

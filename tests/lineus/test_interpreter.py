@@ -98,8 +98,8 @@ def test_ink_rules() -> None:
     [
         ("G91\nG01 X1 Y1", "G91 .relative positioning"),
         ("G03 X1 Y1 I1 J1", "arcs"),
-        ("G01 X10 Yabc Z0", "bad.gcode:1: cannot read parameters"),
-        ("G01 X1000\nhello there", "bad.gcode:2: cannot read 'hello there'"),
+        ("G01 X10 Yabc Z0", "bad.gcode, line 1: cannot read parameters"),
+        ("G01 X1000\nhello there", "bad.gcode, line 2: cannot read 'hello there'"),
         ("G05 X1", "unknown command G05"),
         ("G01 X1e3", "not a number"),
         ("G01 X1 X2", "given twice"),

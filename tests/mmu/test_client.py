@@ -217,7 +217,7 @@ async def test_monitor_stream_yields_events() -> None:
 
 
 def test_sync_facade() -> None:
-    with SyncMMU(f"sim://mmu?speed={SPEED:g}", time_scale=SPEED) as mmu:
+    with SyncMMU(f"sim://mmu?speed={SPEED:g}", speed=SPEED) as mmu:
         assert mmu.tool_change(4).command == "T4"
         assert mmu.read_register("filament_state") == 8
         mmu.write_register("cut_length", 9)

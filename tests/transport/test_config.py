@@ -39,6 +39,7 @@ def test_good_file_resolves_names_and_defaults(tmp_path: Path) -> None:
     devices = load_devices(path)
     assert set(devices) == {"office", "bench", "arm"}
     assert devices["office"].options == {"model": "miniMaker"}
+    assert devices["office"].settings.link == "auto"  # the schema's default
     office = resolve_target("office", XYZ, path)
     assert office.endpoint == Endpoint("tcp", host="192.168.1.50", port=9100)
     assert office.name == "office"
@@ -71,11 +72,16 @@ def test_device_of_another_kind_is_refused(tmp_path: Path) -> None:
         ("[devices.x]\nkind = \n", "not valid TOML: .*line 2"),
         ("[printers.x]\nkind='xyz'\n", "unknown top-level key"),
         ("\n\n[devices.x]\nkind = 'toaster'\nurl='a'\n", "line 3: device 'x': 'kind' must be one of"),
-        ("[devices.x]\nkind = 'xyz'\n", "line 1: device 'x': 'url' must be a string"),
+        ("[devices.x]\nkind = 'xyz'\n", "line 1: device 'x': 'url' must be a non-empty string"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'ftp://a'\n", "unknown scheme"),
         ("[devices.x]\nkind = 'mmu'\nurl = 'a'\n", "no default TCP port"),
-        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefault = 'yes'\n", "'default' must be true or false"),
-        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\nspeeds = [1]\n", "option 'speeds' must be"),
+        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefault = 'yes'\n", "'default': expected `bool`, got `str`"),
+        ("[devices.x]\nkind = 'mmu'\nurl = '/x'\nspeeds = [1]\n", r"unknown key 'speeds' \(did you mean 'speed'\?\)"),
+        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefualt = 1\n", r"unknown key 'defualt' \(did you mean 'default'\?\)"),
+        ("[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nspeed = 0\n", "'speed': expected `float` > 0"),
+        ("[devices.x]\nkind = 'lineus'\nurl = 'a'\nlink = 'wifi'\n", "unknown key 'link'"),
+        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\nlink = 'usb'\n", "'link': expected one of 'auto', 'serial', 'wifi'"),
+        ("[device.x]\nkind = 'xyz'\n", r"unknown top-level key 'device' \(did you mean 'devices'\?\)"),
         ("devices = 3\n", "must be a table"),
     ],
 )
@@ -84,3 +90,52 @@ def test_bad_files_name_file_line_and_problem(tmp_path: Path, text: str, problem
     with pytest.raises(ConfigError, match=problem) as info:
         load_devices(path)
     assert str(path) in str(info.value)
+
+
+def test_two_defaults_of_one_kind_is_an_error(tmp_path: Path) -> None:
+    path = write(tmp_path, GOOD.replace('url = "/dev/ttyACM0"', 'url = "/dev/ttyACM0"\ndefault = true'))
+    with pytest.raises(ConfigError, match="'office' and 'bench' are both the default XYZprinting da Vinci"):
+        load_devices(path)
+
+
+def test_a_misspelt_name_is_not_looked_up_as_a_host(tmp_path: Path) -> None:
+    path = write(tmp_path, GOOD)
+    with pytest.raises(ConfigError, match=r"no device named 'offfice' \(did you mean 'office'\?\)"):
+        resolve_target("offfice", XYZ, path)
+    assert resolve_target("printer.local", XYZ, path).endpoint.host == "printer.local"
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "[devices.x]\nkind = 'xyz'\nurl = 'a'\nmodel = " + "[" * 5000 + "]" * 5000 + "\n",
+        "[devices.x]\nkind = 'xyz'\nurl = 'a'\nmodel = " + "{a=" * 3000 + "1" + "}" * 3000 + "\n",
+        "[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nauto_retries = " + "9" * 5000 + "\n",
+        "[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nspeed = 1e999999\n",
+        "[devices.x]\nkind = 'xyz'\nurl = 'a'\nmodel = 12\n",
+        "[devices.x]\nkind = 'xyz'\nurl = 'a'\ntimeout = 'soon'\n",
+        "[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\naccept = [[1]]\n",
+        "[devices]\nx = 1\n",
+        "devices = [1, 2]\n",
+        "\x00\x01\x02",
+    ],
+    ids=["deep-arrays", "deep-tables", "huge-integer", "huge-float", "wrong-type", "string-for-number",
+         "nested-list", "entry-not-a-table", "devices-not-a-table", "binary"],
+)
+def test_hostile_config_files_are_config_errors(tmp_path: Path, text: str) -> None:
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_devices(path)
+    assert str(path) in str(info.value)
+    assert len(str(info.value)) < 400
+
+
+def test_section_lines_are_found_for_every_device(tmp_path: Path) -> None:
+    text = "".join(f"# printer {i}\n[devices.p{i}]\nkind = 'xyz'\nurl = '10.0.{i // 250}.{i % 250 + 1}'\n\n"
+                   for i in range(2000))
+    path = write(tmp_path, text + "[devices.bad]\nkind = 'xyz'\nurl = 'a'\nsped = 1\n")
+    with pytest.raises(ConfigError, match=f"line {2000 * 5 + 1}: device 'bad'"):
+        load_devices(path)
+    devices = load_devices(write(tmp_path, text))
+    assert len(devices) == 2000
+    assert devices["p1999"].line == 1999 * 5 + 2

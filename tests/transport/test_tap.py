@@ -77,7 +77,7 @@ async def test_trace_show_cli(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines()[:2] == [">S0*c6\\n", "<S0 A3*22\\n"]
     as_json = run_cli("--json", "trace", "show", str(path))
-    assert json.loads(as_json.stdout)[0]["data"] == "S0*c6\n"
+    assert [json.loads(line)["data"] for line in as_json.stdout.splitlines()] == ["S0*c6\n", "S0 A3*22\n", ""]
 
 
 def test_a_file_that_is_not_a_trace_is_a_clear_error(tmp_path: Path) -> None:
@@ -105,3 +105,27 @@ def test_deeply_nested_json_is_a_clear_error_not_a_crash(tmp_path: Path) -> None
     bad.write_text('{"trace": "fabwire", "version": 1}\n' + "[" * 100000 + "]" * 100000 + "\n")
     with pytest.raises(InputError, match="line 2"):
         list(read_trace(bad))
+
+
+def test_a_block_of_nuls_is_a_hexdump_with_repeats_folded() -> None:
+    from fabwire.transport.tap import TraceRecord
+
+    header = b"3DPFNKG13WTW" + bytes(8192 - 12)
+    lines = list(render_trace([TraceRecord(0.0, ">", header), TraceRecord(0.1, "<", b"ok\r\n\x00")],
+                              timestamps=False))
+    assert lines[0] == "> [8192 bytes]"
+    assert lines[1].strip().startswith("00000000  33 44 50 46")
+    assert lines[3].strip() == "*"
+    assert lines[4].strip() == "00002000"
+    assert lines[5] == "<ok\\r\\n\\0"  # a reply's one trailing NUL is still text
+    assert len(lines) == 6
+
+
+def test_records_stream_before_a_later_bad_line(tmp_path: Path) -> None:
+    path = tmp_path / "cap.jsonl"
+    path.write_text('{"trace": "fabwire", "version": 1}\n{"t": 0, "dir": ">", "data": "M114\\u0000"}\n'
+                    '{"t": 1, "dir": "<"\n')
+    records = read_trace(path)
+    assert next(records).data == b"M114\x00"
+    with pytest.raises(InputError, match="line 3"):
+        next(records)

@@ -88,3 +88,15 @@ def test_gcode_starts_with_the_pen_up_and_lifts_after_every_stroke() -> None:
     assert lines.count("G01 Z300") == 3
     assert lines.count("G01 Z1000") == 4
     assert all(line.startswith("G01 ") for line in lines)
+
+
+def test_fit_uses_the_app_area_as_the_page_unless_the_full_area_is_asked_for() -> None:
+    app = fit_document(two_layer_document(), PlanOptions(fit=True, margin_mm=0.0))
+    full = fit_document(two_layer_document(), PlanOptions(fit=True, margin_mm=0.0, full_area=True))
+    width, height = app.page_size
+    assert (round(width * 25.4 / 96, 1), round(height * 25.4 / 96, 1)) == (56.2, 100.0)  # the app's 56 x 100 mm
+    x0, y0, x1, y1 = app.bounds()
+    assert min(x0, y0) >= -1e-6
+    assert x1 <= width + 1e-6
+    assert y1 <= height + 1e-6
+    assert full.layers[1].width() > app.layers[1].width()

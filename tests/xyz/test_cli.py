@@ -68,10 +68,10 @@ def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> 
     garbage.write_bytes(bytes(range(256)))
     refused = run_cli("xyz", "-d", dev, "print", str(garbage))  # the file is judged before the printer's state
     assert refused.returncode == 4
-    assert "notes.txt is neither G-code nor a .3w print file" in refused.stderr
+    assert "notes.txt is binary data, not G-code or a .3w print file" in refused.stderr
     assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
     data = status_json(dev)
-    assert data["state"] == [9511, 0]
+    assert (data["state"], data["substate"]) == (9511, 0)
 
 
 def test_settings_commands(simulator: SimulatorStarter) -> None:
@@ -82,11 +82,10 @@ def test_settings_commands(simulator: SimulatorStarter) -> None:
         result = run_cli("xyz", "-d", dev, *args)
         assert result.returncode == 0, result.stderr
     data = status_json(dev)
-    decoded = data["decoded"]
-    assert isinstance(decoded, dict)
-    assert decoded["buzzer"] is False
-    assert decoded["autolevel"] is False
-    assert (data["zoffset"], data["name"], data["language"]) == (-12, "Lab", "fr")
+    assert data["buzzer"] is False
+    assert data["autolevel"] is False
+    assert (data["zoffset_mm"], data["name"], data["language"]) == (-0.12, "Lab", "fr")
+    assert data["raw"]["z"] == "-12"
     up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
     assert json.loads(up.stdout) == {"zoffset": -11}
     refused = run_cli("xyz", "-d", dev, "restore-defaults")
@@ -112,11 +111,11 @@ def test_flows_with_prompts(simulator: SimulatorStarter) -> None:
     assert calib.returncode == 0, calib.stderr
     values = json.loads(calib.stdout)["calibration"]
     assert len(values) == 9
-    assert status_json(dev)["calibration"] == [str(v) for v in values]
+    assert status_json(dev)["calibration"] == [int(v) for v in values]
     no_answer = run_cli("xyz", "-d", dev, "load", input_text="")
     assert no_answer.returncode == 4
     assert "no confirmation" in no_answer.stderr
-    assert status_json(dev)["state"] == [9511, 0]
+    assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
 
 
 def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Path) -> None:
@@ -126,7 +125,7 @@ def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Pat
     png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(200))
     result = run_cli("xyz", "-d", dev, "print", str(png))
     assert result.returncode == 4
-    assert "neither G-code nor a .3w" in result.stderr
+    assert "photo.gcode is an image (PNG), not G-code" in result.stderr
     other = tmp_path / "pro.3w"
     other.write_bytes(write_3w(GCODE, find_model("dvF1W0A000")))
     result = run_cli("xyz", "-d", dev, "print", str(other))
@@ -168,7 +167,7 @@ def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> 
     assert status_json(device(a.url))["model_number"] == "dv1MX0A000"
     nano = status_json(device(b.url))
     assert nano["model_number"] == "dv1NX0A000"
-    assert nano["zoffset"] == -469
+    assert nano["zoffset_mm"] == -4.69
     found = run_cli("--json", "xyz", "discover", "--host", "127.0.0.2", "--host", "127.0.0.3", "--host", "127.0.0.4",
                     "--port", str(port), "--probe-timeout", "0.5")
     assert found.returncode == 0, found.stderr
@@ -186,12 +185,12 @@ def test_pty_simulator_and_state_file(simulator: SimulatorStarter, tmp_path: Pat
     assert run_cli("xyz", "-d", str(link), "name", "Persist").returncode == 0
     assert run_cli("xyz", "-d", str(link), "zoffset", "261").returncode == 0
     data = status_json(str(link))
-    assert (data["name"], data["zoffset"]) == ("Persist", 261)
+    assert (data["name"], data["zoffset_mm"]) == ("Persist", 2.61)
     sim.process.terminate()
     sim.process.wait(10)
     again = simulator("xyz", "--listen", "127.0.0.1:0", "--state", str(state))
     data = status_json(device(again.url))
-    assert (data["name"], data["zoffset"]) == ("Persist", 261)
+    assert (data["name"], data["zoffset_mm"]) == ("Persist", 2.61)
 
 
 @pytest.mark.parametrize("args", [("--model", "nosuch"), ("--fault", "gremlins")])

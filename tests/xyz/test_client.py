@@ -12,11 +12,12 @@ from fabwire.errors import DeviceError, InputError, LinkError, RemoteProtocolErr
 from fabwire.transport import FaultPlan, FaultyTransport, Transport, open_pty, serve_tcp
 from fabwire.transport.serial import open_serial
 from fabwire.transport.tcp import open_tcp
-from fabwire.xyz.client import SyncXYZPrinter, XYZPrinter
+from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.models import find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.sim import XYZSimulator
 from fabwire.xyz.status import Status
+from fabwire.xyz.sync import SyncXYZPrinter
 from fabwire.xyz.threew import read_3w, write_3w
 
 GCODE = b";TIME:600\n;LAYER_COUNT:3\n;Filament used: 0.25m\nG28\nG0 X10 Y10\nG1 X20 Y20 E1\nM84\n"
@@ -74,7 +75,7 @@ async def test_status_and_config_changes_visible(rig: Rig) -> None:
         assert await pr.nudge_zoffset(True) == -468
         await pr.leave_wifi()
         assert not (await pr.wifi_info()).network.connected  # type: ignore[union-attr]
-        await pr.join_wifi("lab", "pw", 6)
+        await pr.join_wifi("lab", "password", 6)
         net = (await pr.wifi_info()).network
         assert net is not None
         assert net.ssid == "lab"
@@ -170,7 +171,7 @@ async def test_rejected_file_and_wrong_model(rig: Rig) -> None:
     async with asyncio.timeout(LIMIT):
         with pytest.raises(InputError, match=r"Jr\. 1\.0 Pro"):
             await pr.print_file(pro)
-        with pytest.raises(InputError, match="neither G-code"):
+        with pytest.raises(InputError, match="an image \\(PNG\\), not G-code"):
             await pr.print_file(b"\x89PNG\r\n\x1a\n" + bytes(100))
         with pytest.raises(InputError, match="sliced for"):
             await pr.print_file(b"; machine = dv1JP0A000\n" + GCODE)

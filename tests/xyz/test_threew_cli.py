@@ -121,7 +121,7 @@ def test_info_on_gcode_shows_what_a_conversion_would_use(gcode: Path, tmp_path: 
     assert data["filament_mm"] == 1.0
     other = tmp_path / "notes.txt"
     other.write_text("hello")
-    assert "not a .3w file" in str(invoke(info, str(other)).exception)
+    assert "is text, not G-code" in str(invoke(info, str(other)).exception)
 
 
 # ------------------------------------------------------------------------------------------ as real subprocesses

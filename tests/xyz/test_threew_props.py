@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
+from fabwire.xyz import intake
 from fabwire.xyz.threew import read_3w, write_3w
 
 XYZ_KEYS = re.compile(
@@ -16,7 +17,11 @@ G0_WORD = re.compile(rb"^([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
 
 
 def expected_body(text: bytes) -> bytes | None:
-    """What follows the seven generated header lines, worked out line by line; None if nothing is printable."""
+    """What follows the seven generated header lines, worked out line by line; None if nothing is printable (no
+    command, or not G-code text at all: control characters, another kind of file)."""
+    text = text.removeprefix(intake.BOM)
+    if intake.identify(text) is not intake.Kind.GCODE or not intake.has_commands(text.replace(b"\r", b"")):
+        return None
     lines = text.split(b"\n")
     if lines[-1] == b"":
         lines.pop()

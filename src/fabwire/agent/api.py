@@ -40,7 +40,8 @@ class NewDevice(BaseModel):
     name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
     kind: str = Field(pattern="^(xyz|lineus|mmu)$")
     address: str = Field(min_length=1, max_length=300, description="As for -d: host[:port], tcp://…, /dev/…")
-    options: dict[str, str | int | float | bool] = Field(default_factory=dict)
+    options: dict[str, str | int | float | bool | list[str]] = Field(
+        default_factory=dict, description="The kind's settings, as in devices.toml (timeout, speed, auto_retries …)")
 
 
 class Confirm(BaseModel):
@@ -97,8 +98,12 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
     api = APIRouter(prefix="/api/v1", responses=ERRORS)
 
     def device_dict(device_id: str) -> dict[str, Any]:
-        session_info = next(d for d in agent.devices() if d.id == device_id)
-        return {**session_info.to_dict(), "state": agent.state(device_id)}
+        session = agent.session(device_id)
+        return {**session.info.to_dict(), "state": session.state}
+
+    @api.get("/agent", summary="The agent itself: version, devices, and how punctual its polls are")
+    async def about() -> dict[str, Any]:
+        return agent.health()
 
     @api.get("/devices", summary="Every monitored device with its latest state")
     async def devices() -> list[dict[str, Any]]:
@@ -111,7 +116,6 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
 
     @api.get("/devices/{device_id}", summary="One device and its latest state")
     async def device(device_id: str) -> dict[str, Any]:
-        agent.state(device_id)
         return device_dict(device_id)
 
     @api.delete("/devices/{device_id}", status_code=204, summary="Stop monitoring a device")
@@ -126,7 +130,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
     @api.get("/devices/{device_id}/history", summary="Samples (temperatures, progress, state) and events in a range")
     async def history(device_id: str, since: datetime | None = None, until: datetime | None = None,
                       limit: int = Query(2000, ge=1, le=20000)) -> dict[str, Any]:
-        agent.state(device_id)
+        agent.session(device_id)
         end = until or datetime.now(UTC)
         start = since or end - timedelta(hours=1)
         samples = await agent.history.samples(device_id, start.timestamp(), end.timestamp(), limit)
@@ -136,18 +140,13 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
 
     @api.get("/devices/{device_id}/drawing", summary="A Line-us job's planned strokes and the ink drawn so far")
     async def drawing(device_id: str) -> dict[str, Any]:
-        agent.state(device_id)
-        session = next(s for s in agent.sessions() if s.info.id == device_id)
-        return session.drawing
+        return agent.session(device_id).drawing
 
     @api.get("/devices/{device_id}/actions", summary="The actions of this kind of device, and those that apply now")
     async def actions(device_id: str) -> dict[str, Any]:
-        session = next((s for s in agent.sessions() if s.info.id == device_id), None)
-        if session is None:
-            agent.state(device_id)
-            raise AssertionError
+        session = agent.session(device_id)
         return {"actions": [a.to_dict() for a in session.driver.actions],
-                "applicable": agent.state(device_id)["summary"]["actions"]}
+                "applicable": session.state["summary"]["actions"]}
 
     @api.post("/devices/{device_id}/actions/{action}", summary="Run an action; long ones answer {started} at once")
     async def act(device_id: str, action: str, params: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -157,7 +156,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
     async def upload(device_id: str, request: Request, filename: str = UPLOAD_QUERY) -> dict[str, Any]:
-        agent.state(device_id)
+        agent.session(device_id)
         declared = request.headers.get("content-length", "")
         if declared.isdigit() and int(declared) > max_upload_bytes:
             raise UploadTooLarge(f"the upload is {int(declared):,} bytes; the limit is {max_upload_bytes:,}")
@@ -187,7 +186,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
         try:
             subscription = agent.subscribe(device)
         except UnknownDevice as exc:
-            await websocket.close(code=4404, reason=str(exc)[:120])
+            await websocket.send_denial_response(error_response(404, str(exc), exc.exit_code, "UnknownDevice"))
             return
         await websocket.accept(subprotocol=SUBPROTOCOL if SUBPROTOCOL in offered else None)
         receiver: asyncio.Future[Any] = asyncio.ensure_future(websocket.receive())

@@ -83,15 +83,19 @@ class TokenGuard:
     async def __call__(self, scope: Scope, receive: Any, send: Any) -> None:
         if scope["type"] in ("http", "websocket") and scope["path"].startswith("/api/") and \
                 not hmac.compare_digest(presented_token(scope).encode(), self.token):
-            if scope["type"] == "websocket":
-                await send({"type": "websocket.close", "code": 4401, "reason": "access token required"})
-                return
             body = json.dumps({"message": "this agent needs its access token: send the header "
                                           "'Authorization: Bearer TOKEN' (the token is in the agent's state "
                                           f"directory, file {TOKEN_FILE})",
                                "exit_code": 3, "error": "AccessDenied"}).encode()
-            await send({"type": "http.response.start", "status": 401,
-                        "headers": [(b"content-type", b"application/json"), (b"www-authenticate", b"Bearer")]})
-            await send({"type": "http.response.body", "body": body})
+            headers = [(b"content-type", b"application/json"), (b"www-authenticate", b"Bearer")]
+            if scope["type"] == "http":
+                prefix = "http"
+            elif "websocket.http.response" in scope.get("extensions", {}):
+                prefix = "websocket.http"
+            else:  # a server without the denial-response extension: close the handshake (HTTP 403)
+                await send({"type": "websocket.close", "code": 4401, "reason": "access token required"})
+                return
+            await send({"type": f"{prefix}.response.start", "status": 401, "headers": headers})
+            await send({"type": f"{prefix}.response.body", "body": body})
             return
         await self.app(scope, receive, send)

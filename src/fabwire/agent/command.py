@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import signal
 import socket
 import sys
-from collections.abc import Coroutine
+from collections.abc import Coroutine, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +35,7 @@ def configured_devices(path: Path | None) -> list[DeviceSpec]:
     """The named devices of the config file, as specs the agent monitors."""
     from fabwire.config import load_devices
 
-    return [DeviceSpec(d.name, d.kind.name, d.endpoint.url, dict(d.options))  # type: ignore[arg-type]
+    return [DeviceSpec(d.name, d.kind.name, d.endpoint.url, d.options)  # type: ignore[arg-type]
             for d in load_devices(path).values()]
 
 
@@ -120,8 +121,18 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
             click.echo(f"access token (shown once; kept in {directory}): {secret}", err=True)
         else:
             click.echo(f"access token: the one in {directory}", err=True)
-    asyncio.run(_serve(address.host, address.port, specs, directory, demo, speed, retention * 3600.0,
-                       int(max_upload * 1024 * 1024), secret, bridge))
+    _run(_serve(address.host, address.port, specs, directory, demo, speed, retention * 3600.0,
+                int(max_upload * 1024 * 1024), secret, bridge))
+
+
+def _run(main: Coroutine[Any, Any, None]) -> None:
+    """On uvloop where it is installed: a bench of machines costs a fifth less CPU per poll."""
+    try:
+        import uvloop
+    except ImportError:
+        asyncio.run(main)
+        return
+    uvloop.run(main)
 
 
 async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path, demo: bool, speed: float,
@@ -131,6 +142,7 @@ async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path,
     from fabwire.agent.api import create_app
     from fabwire.agent.auth import TokenGuard
 
+    server_class = _server_class()
     simulators: list[Any] = []
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=max_upload)
     sock = _bind(host, port)
@@ -147,7 +159,7 @@ async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path,
         app: Any = create_app(agent, max_upload_bytes=max_upload)
         if secret is not None:
             app = TokenGuard(app, secret)
-        server = uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
+        server = server_class(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
                                                ws="websockets-sansio"))
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
@@ -169,6 +181,30 @@ async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path,
             await asyncio.to_thread(stop_all, simulators)
 
 
+def _server_class() -> Any:
+    import uvicorn
+
+    class Server(uvicorn.Server):
+        """SIGINT/SIGTERM end the agent gracefully with exit code 0 (uvicorn would re-raise the signal)."""
+
+        @contextlib.contextmanager
+        def capture_signals(self) -> Iterator[None]:
+            loop = asyncio.get_running_loop()
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, self._stop)
+            try:
+                yield
+            finally:
+                for sig in (signal.SIGINT, signal.SIGTERM):
+                    loop.remove_signal_handler(sig)
+
+        def _stop(self) -> None:
+            self.force_exit = self.should_exit
+            self.should_exit = True
+
+    return Server
+
+
 async def _run_bridge(coro: Coroutine[Any, Any, None], server: Any) -> None:
     try:
         await coro
@@ -185,6 +221,6 @@ def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
     args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{speed:g}"],
             "mmu": ["--speed", f"{speed:g}", "--fault", FAULT]}
     sims = start_simulators([(kind, args[kind]) for _, kind in DEMO_DEVICES])
-    specs = [DeviceSpec(name, kind, sim.url, {"speed": speed} if kind == "mmu" else {})  # type: ignore[arg-type]
+    specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {})  # type: ignore[arg-type]
              for (name, kind), sim in zip(DEMO_DEVICES, sims, strict=True)]
     return sims, specs

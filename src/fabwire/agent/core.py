@@ -21,6 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from fabwire import __version__
 from fabwire.errors import FabwireError, InputError
 
 if TYPE_CHECKING:
@@ -65,7 +66,8 @@ class DeviceSpec:
     name: str
     kind: Kind
     address: str
-    options: Mapping[str, str | int | float | bool] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
+    """The kind's settings (`fabwire.config`: timeout, speed, auto_retries …), as in devices.toml."""
 
 
 _LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?::1\]?)(:|/|$))", re.IGNORECASE)
@@ -151,6 +153,7 @@ class Agent:
         self._sessions: dict[str, Session] = {}
         self._subscribers: set[Subscription] = set()
         self._started = False
+        self._added = 0
 
     async def __aenter__(self) -> Agent:
         await self.start()
@@ -176,45 +179,50 @@ class Agent:
     # ------------------------------------------------------------------------------------------ the contract
 
     def devices(self) -> list[DeviceInfo]:
-        return [s.info for s in self._sessions.values()]
+        """In the order they were added (the config's order), however long each took to answer."""
+        return [s.info for s in self.sessions()]
 
     def state(self, device_id: str) -> dict[str, Any]:
         """The latest state: `{"ts", "online", "device", "kind", "name", "summary": {…}, "status": {…}, "job"}`.
 
         `status` is exactly what the device's `--json status` prints (None before the first poll); `summary` is
         the same view for every kind, SI units in the key names (see `fabwire.agent.drivers.base.Summary`)."""
-        return self._session(device_id).state
+        return self.session(device_id).state
 
     def subscribe(self, device_id: str | None = None) -> Subscription:
         """Live events of one device (or all); iterate, and `aclose()` when done."""
         if device_id is not None:
-            self._session(device_id)
+            self.session(device_id)
         return Subscription(self, device_id)
 
     async def act(self, device_id: str, action: str, params: Mapping[str, Any]) -> dict[str, Any]:
         """Run an action (see `actions_for`); returns its result dict. Long ones (a tool change) run in the
         background and return `{"started": action}`; their end arrives as events."""
-        return await self._session(device_id).act(action, dict(params))
+        return await self.session(device_id).act(action, dict(params))
 
     async def add_device(self, spec: DeviceSpec) -> DeviceInfo:
         """Start monitoring; waits for the first connection attempt (bounded) so the id can use the serial."""
         from fabwire.agent.session import Session
+        from fabwire.config import validate_settings
+        from fabwire.devices import KINDS as DEVICE_KINDS
 
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
+        validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
         for session in self._sessions.values():
             if session.spec.address == spec.address and session.spec.kind == spec.kind:
                 raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
             if session.spec.name == spec.name:
                 raise InputError(f"a device named {spec.name!r} is already monitored")
-        session = Session(self, spec)
+        session = Session(self, spec, order=self._added)
+        self._added += 1
         await session.start()
         self._sessions[session.info.id] = session
         await self.history.remember_device(session.info)
         return session.info
 
     async def remove_device(self, device_id: str) -> None:
-        session = self._session(device_id)
+        session = self.session(device_id)
         del self._sessions[device_id]
         await session.stop()
 
@@ -222,11 +230,20 @@ class Agent:
 
     async def start_job(self, device_id: str, filename: str, data: bytes) -> dict[str, Any]:
         """Store an upload under a generated name and start it on the device (print a G-code/.3w, draw an SVG)."""
-        return await self._session(device_id).start_job(filename, data)
+        return await self.session(device_id).start_job(filename, data)
 
     async def cancel_job(self, job_id: str, *, confirm: bool) -> dict[str, Any]:
         job = await self.jobs.get(job_id)
-        return await self._session(job["device"]).cancel_job(job_id, confirm=confirm)
+        return await self.session(job["device"]).cancel_job(job_id, confirm=confirm)
+
+    def health(self) -> dict[str, Any]:
+        """Counts and poll punctuality (a poll is late when it starts over half an interval after its slot)."""
+        sessions = list(self._sessions.values())
+        lags = sorted(lag for s in sessions for lag in s.stats.lags)
+        return {"version": __version__, "devices": len(sessions), "online": sum(s.online for s in sessions),
+                "polls": sum(s.stats.polls for s in sessions), "late_polls": sum(s.stats.late for s in sessions),
+                "poll_lag_p99_s": lags[int(0.99 * (len(lags) - 1))] if lags else None,
+                "poll_lag_max_s": lags[-1] if lags else None, "subscribers": len(self._subscribers)}
 
     # ------------------------------------------------------------------------------------------ plumbing
 
@@ -240,7 +257,8 @@ class Agent:
         taken = set(self._sessions)
         return wanted if wanted not in taken else fallback
 
-    def _session(self, device_id: str) -> Session:
+    def session(self, device_id: str) -> Session:
+        """The session of a device; UnknownDevice if there is none."""
         try:
             return self._sessions[device_id]
         except KeyError:
@@ -248,7 +266,7 @@ class Agent:
                 from None
 
     def sessions(self) -> list[Session]:
-        return list(self._sessions.values())
+        return sorted(self._sessions.values(), key=lambda s: s.order)
 
     @staticmethod
     def error_event(device: str, exc: BaseException) -> dict[str, Any]:

@@ -10,6 +10,7 @@ import contextlib
 import logging
 import random
 import time
+from collections import deque
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -47,19 +48,20 @@ class PollStats:
     def __init__(self) -> None:
         self.polls = 0
         self.late = 0
-        self.lags: list[float] = []
+        self.lags: deque[float] = deque(maxlen=600)
+        """The last ten minutes' lags at 1 Hz."""
 
     def record(self, lag: float, interval: float) -> None:
         self.polls += 1
         if lag > interval / 2:
             self.late += 1
-        if len(self.lags) < 100_000:
-            self.lags.append(lag)
+        self.lags.append(lag)
 
 
 class Session:
-    def __init__(self, agent: Agent, spec: DeviceSpec) -> None:
+    def __init__(self, agent: Agent, spec: DeviceSpec, *, order: int = 0) -> None:
         self.agent = agent
+        self.order = order
         self.spec = spec
         self.driver = make_driver(spec, self._device_event)
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
@@ -77,6 +79,7 @@ class Session:
         self._background: set[asyncio.Task[None]] = set()
         self._last_job_event = 0.0
         self._reason = "not connected yet"
+        self._stopping = False
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -95,6 +98,7 @@ class Session:
         self._id_ready.set()
 
     async def stop(self) -> None:
+        self._stopping = True
         tasks = [t for t in (self._task, self._job_task, *self._background) if t is not None]
         for task in tasks:
             task.cancel()
@@ -168,6 +172,10 @@ class Session:
     def _set_state(self, *, online: bool, summary: dict[str, Any] | None, status: dict[str, Any] | None = None
                    ) -> None:
         previous = self.state
+        if previous and status is not None and status is previous["status"] and summary is previous["summary"] \
+                and online == previous["online"] and self._job is previous["job"]:
+            self.state = {**previous, "ts": now_iso()}  # the same objects as last time: nothing to compare
+            return
         state = {"ts": now_iso(), "online": online, "device": self.info.id, "kind": self.spec.kind,
                  "name": self.spec.name, "summary": summary or previous.get("summary") or offline_summary(""),
                  "status": status if status is not None else previous.get("status"), "job": self._job}
@@ -236,7 +244,10 @@ class Session:
         try:
             message = await self.driver.run_job(path, job["type"], _Handle(self), job.get("params") or {})
         except asyncio.CancelledError:
-            await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
+            if self._stopping:
+                await self._job_changed(state="interrupted", message="the agent stopped while the job ran")
+            else:
+                await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
             raise
         except (*LINK_FAILURES, FabwireError) as exc:
             await self._job_changed(state="failed", finished=now_iso(), message=str(exc))

@@ -18,7 +18,6 @@ from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import draw, preview, text
-from fabwire.lineus.link import open_link
 from fabwire.lineus.shell import shell
 
 T = TypeVar("T")
@@ -31,14 +30,12 @@ def lineus() -> None:
 
 def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with open_link(dctx) as transport:
-            arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
+        async with dctx.open(LineUs) as arm:
             try:
                 return await action(arm)
             finally:
                 for notice in arm.notices:
                     dctx.output.note(notice)
-                await arm.detach()  # the link's context closes the transport (and its trace)
 
     return asyncio.run(main())
 

@@ -16,15 +16,16 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Self, TypeVar
+from typing import Any, Self, TypeVar
 
+from fabwire.config import LineUsSettings
 from fabwire.devices import LINEUS
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
 from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
-from fabwire.sync import LoopThread
-from fabwire.transport import Transport, open_transport
+from fabwire.opening import DeviceLink, DeviceTarget, Opening, SyncClient
+from fabwire.transport import Transport
 
 T = TypeVar("T")
 log = logging.getLogger("fabwire.lineus")
@@ -151,16 +152,26 @@ class LineUs:
         return cls(transport, message, reader, lookahead=lookahead, window=window, reply_timeout=reply_timeout)
 
     @classmethod
-    async def open(cls, address: str, *, lookahead: bool = False, connect_timeout: float = 5.0,
-                   hello_timeout: float = HELLO_TIMEOUT) -> LineUs:
-        """Connect to `host[:port]`, `tcp://…` or `sim://lineus`."""
-        transport = await open_transport(address, LINEUS, connect_timeout=connect_timeout)
-        return await cls.connect(transport, lookahead=lookahead, hello_timeout=hello_timeout)
+    def open(cls, target: DeviceTarget = None, **options: Any) -> Opening[LineUs]:
+        """`async with LineUs.open("line-us.local") as arm` (or `await` it): the one way to open a Line-us.
+
+        `target` and the common options are described in `fabwire.opening`; the arm's settings are
+        `fabwire.config.LineUsSettings` (lookahead, hello_timeout, reply_timeout). A `name.local` address is
+        looked up by mDNS, with the port the machine advertises (`fabwire.lineus.link`).
+        """
+        return _LocalNameOpening(LINEUS, target, options, cls._on_link)
 
     @classmethod
-    def open_sync(cls, address: str, *, lookahead: bool = False, connect_timeout: float = 5.0) -> LineUsSync:
+    def open_sync(cls, target: DeviceTarget = None, **options: Any) -> LineUsSync:
         """`with LineUs.open_sync("line-us.local") as arm: arm.move(1000, 0)` for plain scripts."""
-        return LineUsSync(address, lookahead=lookahead, connect_timeout=connect_timeout)
+        return LineUsSync(target, **options)
+
+    @classmethod
+    async def _on_link(cls, transport: Transport, opened: DeviceLink) -> LineUs:
+        settings = opened.settings
+        assert isinstance(settings, LineUsSettings)
+        return await cls.connect(transport, lookahead=settings.lookahead, reply_timeout=settings.reply_timeout,
+                                 hello_timeout=settings.hello_timeout or max(settings.timeout, 2.0))
 
     async def close(self) -> None:
         await self.detach()
@@ -505,6 +516,18 @@ class LineUs:
         await self.request(p.FirmwareUpdate(), timeout=120.0)
 
 
+class _LocalNameOpening(Opening[LineUs]):
+    """`LineUs.open` for an address, a configured name or the default device: a `.local` host is resolved by mDNS
+    before the link opens, so hosts without a system mDNS resolver reach the machine too."""
+
+    async def open(self) -> LineUs:
+        from fabwire.lineus.link import resolve_local
+
+        if self._target is None or isinstance(self._target, str):
+            self._target, self._options = await resolve_local(self._target, self._options)
+        return await super().open()
+
+
 @dataclass(frozen=True, slots=True)
 class _RawLine(p.Command):
     """A stored-drawing line, sent verbatim (the device records it instead of running it)."""
@@ -526,16 +549,12 @@ def _checked(command: p.Command, reply: p.Reply) -> p.Reply:
     return reply
 
 
-class LineUsSync:
+class LineUsSync(SyncClient[LineUs]):
     """The same client for plain scripts: every call runs on a private event-loop thread."""
 
-    def __init__(self, address: str, *, lookahead: bool = False, connect_timeout: float = 5.0) -> None:
-        self._loop = LoopThread("lineus")
-        try:
-            self._arm = self._loop.call(LineUs.open(address, lookahead=lookahead, connect_timeout=connect_timeout))
-        except BaseException:
-            self._loop.close()
-            raise
+    def __init__(self, target: DeviceTarget = None, **options: Any) -> None:
+        super().__init__(LineUs.open(target, **options), thread_name="fabwire-lineus")
+        self._arm = self.client
 
     @property
     def hello(self) -> p.Hello:
@@ -574,16 +593,3 @@ class LineUsSync:
 
     def diagnostics(self) -> dict[str, str]:
         return self._loop.call(self._arm.diagnostics())
-
-    def close(self) -> None:
-        try:
-            self._loop.call(self._arm.close())
-        finally:
-            self._loop.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()

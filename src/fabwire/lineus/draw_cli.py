@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import json
+import math
 import os
 import time
 from collections.abc import Callable
@@ -20,9 +21,19 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from fabwire.cli_support import DeviceContext, pass_device
 from fabwire.errors import InputError, LinkError
 from fabwire.lineus.kinematics import UNITS_PER_MM
-from fabwire.lineus.plot import MoveTo, PenDown, PenUp, Plan, PlanOptions, file_digest, plan_file, plan_text
+from fabwire.lineus.plot import (
+    MoveTo,
+    PenDown,
+    PenUp,
+    Plan,
+    PlanOptions,
+    plan_drawing,
+    plan_file,
+    plan_text,
+    read_drawing,
+)
 from fabwire.lineus.plot.text import DEFAULT_FONT
-from fabwire.lineus.render import write_drawing
+from fabwire.lineus.render import DEFAULT_DPI, dpi_scale, write_drawing
 
 if TYPE_CHECKING:
     from fabwire.lineus.client import LineUs
@@ -31,14 +42,34 @@ F = TypeVar("F", bound=Callable[..., Any])
 STATE_VERSION = 1
 
 
+def _rotation(ctx: click.Context, param: click.Parameter, value: str) -> float | None:
+    """--rotate: degrees, or 'auto' (given to the command as None)."""
+    if value.strip().lower() == "auto":
+        return None
+    try:
+        degrees = float(value)
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is neither a number of degrees nor 'auto'") from None
+    if not math.isfinite(degrees):
+        raise click.BadParameter(f"{value!r} is not a finite number of degrees")
+    return degrees
+
+
+DPI = click.option("--dpi", type=click.FloatRange(10, 1200), default=DEFAULT_DPI, show_default=True,
+                   help="Resolution of PNG pictures, dots per inch of paper.")
+
+
 def placement_options(func: F) -> F:
     """Options shared by every command that plans a drawing."""
     options = [
         click.option("--fit/--no-fit", "fit", default=None,
                      help="Scale and centre into the drawing area (default: yes for SVG and text, no for G-code)."),
         click.option("--margin", type=float, default=2.0, show_default=True, help="Empty border when fitting, mm."),
-        click.option("--rotate", type=float, default=0.0, show_default=True,
-                     help="Rotate the drawing by DEGREES counter-clockwise before placing it."),
+        click.option("--rotate", default="0", show_default=True, callback=_rotation, metavar="DEGREES|auto",
+                     help="Rotate the drawing by DEGREES counter-clockwise before placing it; 'auto' turns it by 90 "
+                          "when that lets it be larger."),
+        click.option("--full-area", is_flag=True,
+                     help="Fit into the whole reachable area instead of the official app's drawing area."),
         click.option("--clip", is_flag=True, help="Without --fit: leave out lines outside the area instead of "
                                                   "refusing the drawing."),
         click.option("--no-optimize", "no_optimize", is_flag=True,
@@ -64,10 +95,10 @@ PEN_Z = click.option("--pen-z", type=click.FloatRange(0, 499), default=0.0, show
                      help="Pen-down height; about 300 presses less and smears less where the pen lands.")
 
 
-def _options(fit: bool | None, margin: float, rotate: float, clip: bool, no_optimize: bool,
-             optimize_time: float) -> PlanOptions:
-    return PlanOptions(fit=fit, margin_mm=margin, rotate_deg=rotate, clip=clip, optimize=not no_optimize,
-                       time_budget=optimize_time)
+def _options(fit: bool | None, margin: float, rotate: float | None, clip: bool, no_optimize: bool,
+             optimize_time: float, full_area: bool = False) -> PlanOptions:
+    return PlanOptions(fit=fit, margin_mm=margin, rotate_deg=rotate or 0.0, rotate_auto=rotate is None, clip=clip,
+                       optimize=not no_optimize, time_budget=optimize_time, full_area=full_area)
 
 
 def figures_text(plan: Plan) -> str:
@@ -199,37 +230,32 @@ async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, point: int = 0, 
 
 async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float) -> tuple[int, float]:
     from fabwire.lineus.client import LineUs
-    from fabwire.lineus.link import open_link
 
     per_stroke = plan.stroke_seconds()
     weights = [max(1, round(t * 1000)) for t in per_stroke]  # the bar advances by estimated milliseconds
     total = len(plan.strokes)
     began = time.monotonic()
-    async with open_link(dctx) as transport:
-        arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
-        try:
-            with Progress(
-                TextColumn("[progress.description]{task.description}"),
-                BarColumn(),
-                TextColumn("{task.percentage:>3.0f}%"),
-                TimeRemainingColumn(),
-                console=dctx.output.err,
-                disable=dctx.output.json_mode,
-            ) as bar:
-                estimate = sum(per_stroke[progress.done :], 0.0)
-                task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=sum(weights),
-                                    completed=sum(weights[: progress.done]))
+    async with dctx.open(LineUs) as arm:
+        with Progress(
+            TextColumn("[progress.description]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.percentage:>3.0f}%"),
+            TimeRemainingColumn(),
+            console=dctx.output.err,
+            disable=dctx.output.json_mode,
+        ) as bar:
+            estimate = sum(per_stroke[progress.done :], 0.0)
+            task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=sum(weights),
+                                completed=sum(weights[: progress.done]))
 
-                def done(index: int) -> None:
-                    progress.reached(index + 1, 0)
-                    progress.save()
-                    bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
+            def done(index: int) -> None:
+                progress.reached(index + 1, 0)
+                progress.save()
+                bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
 
-                await send_plan(arm, plan, start=progress.done, point=progress.point, pen_z=pen_z, on_stroke=done,
-                                on_point=progress.reached)
-            await arm.home()
-        finally:
-            await arm.close()
+            await send_plan(arm, plan, start=progress.done, point=progress.point, pen_z=pen_z, on_stroke=done,
+                            on_point=progress.reached)
+        await arm.home()
     return total, time.monotonic() - began
 
 
@@ -279,8 +305,13 @@ def _duration(seconds: float) -> str:
     return f"{minutes} min {rest:02d} s" if minutes else f"{rest} s"
 
 
+def _placement_key(options: PlanOptions) -> str:
+    """The placement choices a resume must match beyond those `_state_key` lists."""
+    return f"auto={options.rotate_auto}|full={options.full_area}"
+
+
 @click.command("draw")
-@click.argument("file", type=click.Path(path_type=Path, dir_okay=False))
+@click.argument("file", type=click.Path(path_type=Path, dir_okay=False, allow_dash=True))
 @placement_options
 @click.option("--dry-run", is_flag=True, help="Plan, preview and estimate only; no device needed.")
 @click.option("--preview", "preview", type=click.Path(path_type=Path, dir_okay=False),
@@ -290,18 +321,21 @@ def _duration(seconds: float) -> str:
 @click.option("--state", type=click.Path(path_type=Path, dir_okay=False),
               help="Progress file (default: one per drawing in the user's state directory).")
 @PEN_Z
+@DPI
 @pass_device
-def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotate: float, clip: bool,
-         no_optimize: bool, optimize_time: float, dry_run: bool, preview: Path | None, resume: bool,
-         restart: bool, state: Path | None, pen_z: float) -> None:
-    """Draw an SVG or Line-us G-code FILE."""
+def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotate: float | None, full_area: bool,
+         clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool, preview: Path | None, resume: bool,
+         restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
+    """Draw an SVG, SVGZ or Line-us G-code FILE ('-' reads it from standard input)."""
     _one_start(resume, restart)
-    options = _options(fit, margin, rotate, clip, no_optimize, optimize_time)
-    key = _state_key(file_digest(file), options)
+    options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
+    drawing = read_drawing(file)
+    key = _state_key(drawing.digest, options, _placement_key(options))
     existing = DrawProgress.load(state or state_dir() / f"draw-{key[:24]}.json", key) if resume else None
-    plan = _plan_from_state(existing) if existing is not None else plan_file(file, options)
+    plan = _plan_from_state(existing) if existing is not None else plan_drawing(drawing, options)
     if preview is not None:
-        write_drawing(preview, plan.strokes, plan.travel(), title=file.name)
+        write_drawing(preview, plan.strokes, plan.travel(), title=Path(drawing.name).name, hidden=plan.hidden,
+                      scale=dpi_scale(dpi))
     if dry_run:
         _report(dctx, plan, {"file": str(file)})
         return
@@ -323,47 +357,55 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
 @RESTART
 @click.option("--state", type=click.Path(path_type=Path, dir_okay=False), help="Progress file.")
 @PEN_Z
+@DPI
 @pass_device
 def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: bool | None, margin: float,
-         rotate: float, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
-         preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float) -> None:
+         rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
+         preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
     """Write TEXT in a single-stroke font (\\n starts a new line)."""
     _one_start(resume, restart)
     text = text.replace("\\n", "\n")
-    options = _options(fit, margin, rotate, clip, no_optimize, optimize_time)
-    key = _state_key(hashlib.sha256(text.encode()).hexdigest(), options, f"{size}|{font}")
+    options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
+    key = _state_key(hashlib.sha256(text.encode()).hexdigest(), options,
+                     f"{size}|{font}|{_placement_key(options)}")
     existing = DrawProgress.load(state or state_dir() / f"draw-{key[:24]}.json", key) if resume else None
     plan = _plan_from_state(existing) if existing is not None else plan_text(text, options, size_mm=size, font=font)
     if preview is not None:
-        write_drawing(preview, plan.strokes, plan.travel(), title=text.splitlines()[0][:60])
+        write_drawing(preview, plan.strokes, plan.travel(), title=text.splitlines()[0][:60], scale=dpi_scale(dpi))
     if dry_run:
         _report(dctx, plan, {"text": text})
         return
+    for note in plan.notes:
+        dctx.output.note(note)
     dctx.output.note(figures_text(plan))
     _draw(dctx, plan, key, state, resume, repr(text), pen_z)
 
 
 @click.command("preview")
-@click.argument("file", type=click.Path(path_type=Path, dir_okay=False))
+@click.argument("file", type=click.Path(path_type=Path, dir_okay=False, allow_dash=True))
 @click.option("-o", "--output", "outputs", multiple=True, type=click.Path(path_type=Path, dir_okay=False),
               help="File to write: a picture (.svg, .png) or the plan as Line-us G-code (.gcode) for "
                    "`files save` and `draw`; repeat for several.")
 @placement_options
 @click.option("--json", "json_output", is_flag=True, help="Print the plan figures as JSON.")
+@DPI
 @PEN_Z
 @pass_device
 def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: bool | None, margin: float,
-            rotate: float, clip: bool, no_optimize: bool, optimize_time: float, json_output: bool,
-            pen_z: float) -> None:
-    """Plan FILE and write a picture of what the pen will do (pen-up travel dashed); no device needed."""
+            rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float,
+            json_output: bool, dpi: float, pen_z: float) -> None:
+    """Plan FILE ('-' reads standard input) and write a picture of what the pen will do (pen-up travel dashed,
+    parts hidden by clip paths faint), or the plan as Line-us G-code; no device needed."""
     from fabwire.lineus.plot.export import GCODE_SUFFIXES, write_gcode
 
     if json_output:
         dctx.output.json_mode = True
-    plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time))
+    plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area))
     for out in outputs:
         if out.suffix.lower() in GCODE_SUFFIXES:
             write_gcode(out, plan, pen_z=pen_z)
         else:
-            write_drawing(out, plan.strokes, plan.travel(), title=file.name)
+            write_drawing(out, plan.strokes, plan.travel(),
+                          title="standard input" if str(file) == "-" else file.name, hidden=plan.hidden,
+                          scale=dpi_scale(dpi))
     _report(dctx, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})

@@ -235,7 +235,7 @@ def strip_comment(raw: str) -> str:
 def read_program(text: str, *, name: str = "G-code", strict: bool = True) -> Program:
     """Every line of a G-code file through the device's own grammar.
 
-    strict: a line the Line-us would refuse raises InputError (`file:line: why`), except the harmless codes of
+    strict: a line the Line-us would refuse raises InputError (`file, line N: why`), except the harmless codes of
     other dialects (`G90`, `G21`, unknown M-codes), which are skipped and listed. Not strict: every refused line
     is skipped, as the firmware's memory drawing answers it with `error` and plays on.
     """
@@ -259,7 +259,7 @@ def read_program(text: str, *, name: str = "G-code", strict: bool = True) -> Pro
 def _refuse(name: str, number: int, line: str, why: str) -> None:
     """Raise for a line the grammar refused, unless it is a harmless code of another dialect."""
     code = p.command_code(line)
-    where = f"{name}:{number}"
+    where = f"{name}, line {number}"
     if code is None:
         raise InputError(f"{where}: cannot read {line[:60]!r}: not a Line-us G-code line")
     if code in OTHER_DIALECTS:

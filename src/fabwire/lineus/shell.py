@@ -143,8 +143,6 @@ def shell(dctx: DeviceContext) -> None:
 
     Reads commands line by line from standard input (type help); a wrong line gets a one-line error and the
     session goes on. Ends at `quit` or the end of input."""
-    from fabwire.lineus.link import open_link
-
     interactive = sys.stdin.isatty()
     if interactive:
         import readline  # noqa: F401  (line editing and arrow-key history at the prompt)
@@ -154,21 +152,17 @@ def shell(dctx: DeviceContext) -> None:
 
     async def main() -> int:
         failures = 0
-        async with open_link(dctx) as transport:
-            arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
-            try:
-                hello = arm.hello
-                dctx.output.note(f"connected to {hello.name} (firmware {hello.version.split()[0]}); type help")
-                session = Session(arm, echo)
-                while (line := await _read_line("lineus> " if interactive else None)) is not None:
-                    try:
-                        if not await session.run_line(line):
-                            break
-                    except (InputError, DeviceError) as exc:
-                        failures += 1
-                        click.echo(f"error: {exc}", err=True)
-            finally:
-                await arm.detach()
+        async with dctx.open(LineUs) as arm:
+            hello = arm.hello
+            dctx.output.note(f"connected to {hello.name} (firmware {hello.version.split()[0]}); type help")
+            session = Session(arm, echo)
+            while (line := await _read_line("lineus> " if interactive else None)) is not None:
+                try:
+                    if not await session.run_line(line):
+                        break
+                except (InputError, DeviceError) as exc:
+                    failures += 1
+                    click.echo(f"error: {exc}", err=True)
         return failures
 
     failures = asyncio.run(main())

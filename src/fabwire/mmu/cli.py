@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import DeviceContext, device_group, pass_app, pass_device
+from fabwire.cli_support import DeviceContext, device_group, link_option, pass_app, pass_device
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
@@ -103,26 +103,14 @@ def status_dict(status: Status) -> dict[str, Any]:
     return data
 
 
-def host_options(func: F) -> F:
-    """Options every command that talks to the MMU takes."""
-    func = click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
-                        envvar="FABWIRE_MMU_SPEED",
-                        help="The MMU runs this many times faster than real time (a simulator's --speed); "
-                             "the heartbeat and timeouts shrink to match.")(func)
-    return click.option("--accept", "accept", multiple=True, metavar="X.Y.Z",
-                        help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4).")(func)
-
-
-def _versions(accept: tuple[str, ...]) -> frozenset[tuple[int, int, int]]:
-    if not accept:
-        return frozenset(v.triple for v in codes.FIRMWARES.values())
-    out = set()
-    for text in accept:
-        parts = text.split(".")
-        if len(parts) != 3 or not all(p.isdigit() for p in parts):
-            raise InputError(f"--accept takes versions like 3.0.3, not {text!r}")
-        out.add((int(parts[0]), int(parts[1]), int(parts[2])))
-    return frozenset(out)
+LINK_OPTIONS = (
+    link_option("speed", "--speed", type=click.FloatRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
+                help="The MMU runs this many times faster than real time (a simulator's --speed); "
+                     "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
+    link_option("accept", "--accept", multiple=True, metavar="X.Y.Z",
+                help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4)."),
+)
+"""The MMU's own link options: accepted anywhere on an `fabwire mmu` command line."""
 
 
 def with_mmu(check: Callable[[dict[str, Any]], None] | None = None) -> Callable[[Callable[..., Any]], Any]:
@@ -133,17 +121,13 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None) -> Callable[
 
     def decorate(func: Callable[..., Awaitable[None]]) -> Callable[..., None]:
         @pass_device
-        def wrapper(dctx: DeviceContext, /, *args: Any, speed: float, accept: tuple[str, ...], **kwargs: Any) -> None:
-            versions = _versions(accept)
+        def wrapper(dctx: DeviceContext, /, *args: Any, **kwargs: Any) -> None:
             if check is not None:
                 check(kwargs)
 
             async def main() -> None:
-                async with dctx.link() as transport:
-                    mmu = MMU(transport, accepted=versions, time_scale=speed,
-                              connect_timeout=max(dctx.timeout, 30.0 / speed))
-                    async with mmu:
-                        await func(dctx, mmu, *args, **kwargs)
+                async with dctx.open(MMU) as mmu:
+                    await func(dctx, mmu, *args, **kwargs)
 
             asyncio.run(main())
 
@@ -165,7 +149,7 @@ def _write_args(kwargs: dict[str, Any]) -> None:
     _parse_value(kwargs["value"])
 
 
-@device_group(MMU_KIND, "Drive a Prusa MMU3 over its serial protocol, as the printer does.")
+@device_group(MMU_KIND, "Drive a Prusa MMU3 over its serial protocol, as the printer does.", LINK_OPTIONS)
 def mmu() -> None:
     pass
 
@@ -187,9 +171,8 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
 
 
 def _command_options(func: F) -> F:
-    func = click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+    return click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
                         help="Give up if the command has not ended after this many seconds.")(func)
-    return host_options(func)
 
 
 @mmu.command("tool-change")
@@ -245,7 +228,6 @@ async def home(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 
 
 @mmu.command("version")
-@host_options
 @with_mmu()
 async def version(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show the MMU firmware version and build."""
@@ -256,7 +238,6 @@ async def version(dctx: DeviceContext, mmu_: MMU) -> None:
 
 
 @mmu.command("status")
-@host_options
 @with_mmu()
 async def status(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show FINDA, filament sensor, slot, selector/idler, drive errors and the current command."""
@@ -297,7 +278,6 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
 
 @mmu.command("button")
 @click.argument("button", type=click.Choice(["retry", "continue", "stop", "left", "middle", "right"]))
-@host_options
 @with_mmu()
 async def button(dctx: DeviceContext, mmu_: MMU, button: str) -> None:
     """Press an MMU button from the printer (retry/continue = Middle, stop = Right)."""
@@ -307,7 +287,6 @@ async def button(dctx: DeviceContext, mmu_: MMU, button: str) -> None:
 
 
 @mmu.command("reset")
-@host_options
 @with_mmu()
 async def reset(dctx: DeviceContext, mmu_: MMU) -> None:
     """Reboot the MMU (X0) and wait until it answers again."""
@@ -317,7 +296,6 @@ async def reset(dctx: DeviceContext, mmu_: MMU) -> None:
 
 @mmu.command("read")
 @click.argument("register")
-@host_options
 @with_mmu(_register_arg)
 async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
     """Read REGISTER (a name such as bowden_length, or an address like 0x22)."""
@@ -330,7 +308,6 @@ async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
 @mmu.command("write")
 @click.argument("register")
 @click.argument("value")
-@host_options
 @with_mmu(_write_args)
 async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> None:
     """Write VALUE to REGISTER (by name or address)."""
@@ -355,7 +332,6 @@ def _parse_value(text: str) -> int:
 @click.option("--count", type=click.IntRange(min=1), help="Stop after this many events.")
 @click.option("--duration", type=click.FloatRange(min=0.0), help="Stop after this many seconds.")
 @click.option("--changes", is_flag=True, help="Show a status poll only when something changed.")
-@host_options
 @with_mmu()
 async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: float | None,
                   changes: bool) -> None:

@@ -13,6 +13,8 @@ from collections.abc import AsyncIterator, Callable, Iterable
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
+from fabwire.config import MMUSettings
+from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.mmu import codes
 from fabwire.mmu.errors import MMUError, format_error
@@ -36,8 +38,8 @@ from fabwire.mmu.host import (
     StatusUpdated,
 )
 from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload
-from fabwire.sync import LoopThread
-from fabwire.transport import Transport, open_transport
+from fabwire.opening import DeviceLink, DeviceTarget, Opening, SyncClient
+from fabwire.transport import Transport
 
 T = TypeVar("T")
 EventCallback = Callable[[HostEvent], None]
@@ -85,6 +87,33 @@ class MMU:
         self._failure: BaseException | None = None
         self._ready = asyncio.Event()
         self._kick = asyncio.Event()
+        self.owns_transport = False
+        """Opened by `open`: closing the client also closes the link."""
+
+    @classmethod
+    def open(cls, target: DeviceTarget = None, **options: Any) -> Opening[MMU]:
+        """`async with MMU.open("/dev/ttyACM0") as mmu` (or `await` it): opens the link and completes the handshake.
+
+        `target` and the common options are described in `fabwire.opening`; the MMU's settings are
+        `fabwire.config.MMUSettings` (speed, accept, connect_timeout, auto_retries).
+        """
+        return Opening(MMU_KIND, target, options, cls._on_link)
+
+    @classmethod
+    def open_sync(cls, target: DeviceTarget = None, **options: Any) -> SyncMMU:
+        """`with MMU.open_sync("sim://mmu", speed=50) as mmu: mmu.load(2)` for plain scripts."""
+        return SyncMMU(target, **options)
+
+    @classmethod
+    async def _on_link(cls, transport: Transport, opened: DeviceLink) -> MMU:
+        s = opened.settings
+        assert isinstance(s, MMUSettings)
+        accepted = {(int(a), int(b), int(c)) for a, b, c in (v.split(".") for v in s.accept)} or SUPPORTED
+        mmu = cls(transport, accepted=accepted, time_scale=s.speed, auto_retries=s.auto_retries,
+                  connect_timeout=s.connect_timeout or max(s.timeout, 30.0 / s.speed))
+        mmu.owns_transport = True
+        await mmu.connect()
+        return mmu
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -123,6 +152,8 @@ class MMU:
             with contextlib.suppress(BaseException):
                 await task
         self._tasks = []
+        if self.owns_transport:
+            await self.transport.close()
 
     def _watch_link(self, event: HostEvent) -> None:
         if isinstance(event, LinkUp):
@@ -402,54 +433,15 @@ class MMU:
         return self.logic.link
 
 
-class SyncMMU:
-    """The same operations, blocking, for scripts: `with SyncMMU("sim://mmu?speed=50") as mmu: mmu.load(2)`."""
+class SyncMMU(SyncClient[MMU]):
+    """The same operations, blocking, for scripts: `with MMU.open_sync("sim://mmu?speed=50") as mmu: mmu.load(2)`."""
 
-    def __init__(self, address: str, **options: Any) -> None:
-        self._thread = LoopThread("fabwire-mmu")
-        self._address = address
-        self._options = options
-        self._mmu: MMU | None = None
-
-    def __enter__(self) -> Self:
-        async def open_() -> MMU:
-            from fabwire.devices import MMU as MMU_KIND
-
-            transport = await open_transport(self._address, MMU_KIND)
-            mmu = MMU(transport, **self._options)
-            try:
-                await mmu.connect()
-            except BaseException:
-                await transport.close()
-                raise
-            return mmu
-
-        try:
-            self._mmu = self._thread.call(open_())
-        except BaseException:
-            self._thread.close()
-            raise
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        mmu = self._mmu
-        if mmu is not None:
-            async def shut() -> None:
-                await mmu.close()
-                await mmu.transport.close()
-
-            self._thread.call(shut())
-        self._thread.close()
+    def __init__(self, target: DeviceTarget = None, **options: Any) -> None:
+        super().__init__(MMU.open(target, **options), thread_name="fabwire-mmu")
 
     @property
     def mmu(self) -> MMU:
-        if self._mmu is None:
-            raise LinkClosed("the MMU link is not open")
-        return self._mmu
-
-    def _call(self, coro: Any) -> Any:
-        return self._thread.call(coro)
+        return self.client
 
     def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:
         result: CommandFinished = self._call(self.mmu.tool_change(slot, **kwargs))

@@ -1,18 +1,27 @@
-"""Links to devices: one small interface over TCP, serial, pty, memory and in-process simulators."""
+"""Links to devices: one small interface over TCP, serial, pty, memory and in-process simulators.
+
+Serial ports (serialx) and ptys (termios, POSIX only) are imported when first used, so a TCP status query does not
+pay for them and `import fabwire.transport` works where `termios` does not exist (Windows).
+"""
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError
 from fabwire.transport.base import StreamTransport, Transport
 from fabwire.transport.faults import FaultPlan, FaultyTransport
 from fabwire.transport.memory import memory_pair
-from fabwire.transport.pty import PtyDevice, open_pty
 from fabwire.transport.registry import register_simulator, spawn_in_process
-from fabwire.transport.serial import open_serial
 from fabwire.transport.tap import TapTransport
 from fabwire.transport.tcp import open_tcp, serve_tcp
 from fabwire.transport.urls import Endpoint, parse_url
+
+if TYPE_CHECKING:
+    from fabwire.transport.pty import PtyDevice, open_pty
+    from fabwire.transport.serial import open_serial
 
 __all__ = [
     "Endpoint",
@@ -24,6 +33,8 @@ __all__ = [
     "Transport",
     "memory_pair",
     "open_pty",
+    "open_serial",
+    "open_tcp",
     "open_transport",
     "parse_url",
     "register_simulator",
@@ -31,18 +42,29 @@ __all__ = [
     "spawn_in_process",
 ]
 
+_LAZY = {"PtyDevice": "fabwire.transport.pty", "open_pty": "fabwire.transport.pty",
+         "open_serial": "fabwire.transport.serial"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 async def open_transport(
     address: str | Endpoint, kind: DeviceKind | None = None, *, connect_timeout: float = 5.0
 ) -> Transport:
     """Open the link an address names; `kind` supplies default port and baud rate."""
-    from fabwire.transport.registry import open_simulator
-
     endpoint = address if isinstance(address, Endpoint) else parse_url(address, kind)
     if endpoint.scheme == "tcp":
         return await open_tcp(endpoint.host, endpoint.port, timeout=connect_timeout)
     if endpoint.scheme == "serial":
+        from fabwire.transport.serial import open_serial
+
         return await open_serial(endpoint.path, kind.baudrate if kind else 115200)
     if endpoint.scheme == "sim":
+        from fabwire.transport.registry import open_simulator
+
         return await open_simulator(endpoint.host, endpoint.options)
     raise InputError(f"cannot open {endpoint.url}")

@@ -38,10 +38,15 @@ class TraceRecord:
 
 
 class TraceWriter:
-    """Appends records to a JSONL file; flushes each line so a crash keeps everything before it."""
+    """Appends records to a JSONL file; flushes each line so a crash keeps everything before it.
 
-    def __init__(self, stream: IO[str], *, url: str, peer: str) -> None:
+    A writer made by `to_file` reopens its file for appending when a record comes after `close`, so a client
+    that reconnects (a new link, a new tap) keeps one capture.
+    """
+
+    def __init__(self, stream: IO[str], *, url: str, peer: str, path: Path | None = None) -> None:
         self._stream = stream
+        self._path = path
         self._start = time.monotonic()
         header = {
             "trace": "fabwire",
@@ -58,9 +63,14 @@ class TraceWriter:
             stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by close()
         except OSError as exc:
             raise InputError(f"cannot write trace file {path}: {exc.strerror}") from exc
-        return cls(stream, url=url, peer=peer)
+        return cls(stream, url=url, peer=peer, path=Path(path))
 
     def _emit(self, obj: dict[str, object]) -> None:
+        if self._stream.closed and self._path is not None:
+            try:
+                self._stream = open(self._path, "a", encoding="utf-8")  # noqa: SIM115 - closed by close()
+            except OSError as exc:
+                raise InputError(f"cannot write trace file {self._path}: {exc.strerror}") from exc
         self._stream.write(json.dumps(obj, ensure_ascii=True) + "\n")
         self._stream.flush()
 
@@ -78,32 +88,54 @@ class TraceWriter:
             self._stream.close()
 
 
+MAX_TRACE_LINE = 16 << 20
+"""A record holds one read or write (at most 64 KiB, a few times that as JSON); longer lines are not records."""
+
+
 def read_trace(path: str | Path) -> Iterator[TraceRecord]:
-    """Yield the records of a capture; a malformed line is an InputError naming the line."""
+    """Yield the records of a capture, reading one line at a time (memory stays that of one record).
+
+    Raises InputError naming the line for a malformed record, and for a file that cannot be read.
+    """
     try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
+        stream = open(path, encoding="utf-8", newline="\n")  # noqa: SIM115 - closed below
     except OSError as exc:
         raise InputError(f"cannot read trace file {path}: {exc.strerror}") from exc
-    except UnicodeDecodeError:
-        raise InputError(f"{path} is not a fabwire trace (not UTF-8 text)") from None
-    for number, line in enumerate(lines, start=1):
-        if not line.strip():
-            continue
-        try:
-            obj = json.loads(line)
-            if number == 1:
-                if obj.get("trace") != "fabwire":
-                    raise ValueError("missing the fabwire trace header")
-                continue
-            if "event" in obj:
-                yield TraceRecord(float(obj["t"]), None, event=str(obj["event"]), detail=str(obj.get("detail", "")))
-                continue
-            direction = obj["dir"]
-            if direction not in (TO_DEVICE, FROM_DEVICE):
-                raise ValueError(f"unknown direction {direction!r}")
-            yield TraceRecord(float(obj["t"]), direction, obj["data"].encode("latin-1"))
-        except (ValueError, KeyError, TypeError, AttributeError, UnicodeEncodeError, RecursionError) as exc:
-            raise InputError(f"{path}, line {number}: not a fabwire trace record ({exc})") from None
+    with stream:
+        number = 0
+        while True:
+            try:
+                line = stream.readline(MAX_TRACE_LINE + 1)
+            except UnicodeDecodeError:
+                raise InputError(f"{path} is not a fabwire trace (not UTF-8 text)") from None
+            except OSError as exc:
+                raise InputError(f"cannot read trace file {path}: {exc.strerror}") from exc
+            if not line:
+                return
+            number += 1
+            if len(line) > MAX_TRACE_LINE:
+                raise InputError(f"{path}, line {number}: longer than any trace record")
+            if line.strip():
+                record = _parse_record(path, number, line)
+                if record is not None:
+                    yield record
+
+
+def _parse_record(path: str | Path, number: int, line: str) -> TraceRecord | None:
+    try:
+        obj = json.loads(line)
+        if number == 1:
+            if not isinstance(obj, dict) or obj.get("trace") != "fabwire":
+                raise ValueError("missing the fabwire trace header")
+            return None
+        if "event" in obj:
+            return TraceRecord(float(obj["t"]), None, event=str(obj["event"]), detail=str(obj.get("detail", "")))
+        direction = obj["dir"]
+        if direction not in (TO_DEVICE, FROM_DEVICE):
+            raise ValueError(f"unknown direction {direction!r}")
+        return TraceRecord(float(obj["t"]), direction, obj["data"].encode("latin-1"))
+    except (ValueError, KeyError, TypeError, AttributeError, UnicodeEncodeError, RecursionError) as exc:
+        raise InputError(f"{path}, line {number}: not a fabwire trace record ({exc})") from None
 
 
 def replay_bytes(path: str | Path, direction: Direction) -> bytes:

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import errno
 import socket
 from collections.abc import Awaitable, Callable
 
 from fabwire.errors import LinkError, LinkTimeout
 from fabwire.transport.base import StreamTransport, Transport
+from fabwire.transport.limits import ConnectionLimits, ConnectionPool, Watched
 
 ConnectionHandler = Callable[[Transport], Awaitable[None]]
 
@@ -54,14 +56,32 @@ async def open_tcp(host: str, port: int, *, timeout: float = DEFAULT_CONNECT_TIM
     return StreamTransport(reader, writer, url=f"tcp://{where}", peer=where)
 
 
-async def serve_tcp(handler: ConnectionHandler, host: str, port: int) -> asyncio.Server:
-    """Listen on host:port and run `handler` for each connection; the transport is closed after it."""
+async def serve_tcp(handler: ConnectionHandler, host: str, port: int, *, limits: ConnectionLimits | None = None,
+                    what: str = "simulator") -> asyncio.Server:
+    """Listen on host:port and run `handler` for each connection, within `limits` (see `transport.limits`).
+
+    The transport is closed after the handler; a handler's failure ends its connection with one log line.
+    """
+    pool = ConnectionPool(limits or ConnectionLimits(), what)
 
     async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         _nodelay(writer)
-        link = StreamTransport(reader, writer, url=f"tcp://{host}:{port}", peer=_describe(writer))
+        link = Watched(StreamTransport(reader, writer, url=f"tcp://{host}:{port}", peer=_describe(writer)))
         try:
-            await handler(link)
+            if not await pool.admit(link):
+                return
+            task = asyncio.ensure_future(handler(link))
+            try:
+                await pool.serve(link, task)
+            finally:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, LinkError, ConnectionError):
+                    try:
+                        await task
+                    except Exception as exc:
+                        pool.log.warning("failed", f"{what}: the connection from {link.peer} failed: {exc!r}")
+        except asyncio.CancelledError:
+            pass  # the server is shutting down; ending quietly spares asyncio's stream callback a traceback
         finally:
             await link.close()
 

@@ -127,18 +127,22 @@ def _print_figures(plans: list[PassPlan], as_json: bool) -> None:
 @processor("lineus-fit")
 @click.option("--margin", type=click.FloatRange(min=0.0), default=2.0, show_default=True,
               help="Empty border around the drawing, mm.")
+@click.option("--full-area", is_flag=True, help="Fit into the whole reachable area, not the official app's drawing "
+                                                "area.")
 @click.option("--no-scale", is_flag=True, help="Keep the document's size and place: only check that it can be "
                                                "reached (or, with --clip, cut away what cannot).")
 @click.option("--clip", is_flag=True, help="With --no-scale: leave out lines outside the area instead of refusing.")
-def lineus_fit(document: Any, margin: float, no_scale: bool, clip: bool) -> Any:
+def lineus_fit(document: Any, margin: float, full_area: bool, no_scale: bool, clip: bool) -> Any:
     """Scale and centre the document into the Line-us drawing area.
 
-    All layers move together, keeping their proportions. The result is in Line-us page coordinates: after it,
+    The official app's area by default (it becomes the page), or with --full-area the whole reachable area. All
+    layers move together, keeping their proportions. The result is in Line-us page coordinates: after it,
     lineus-stat, lineus-preview, lineus-draw and lineus-gcode take the document as placed.
     """
     with fabwire_errors():
         try:
-            return fit_document(document, PlanOptions(fit=not no_scale, margin_mm=margin, clip=clip))
+            options = PlanOptions(fit=not no_scale, margin_mm=margin, full_area=full_area, clip=clip)
+            return fit_document(document, options)
         except InputError as exc:
             if not no_scale:
                 raise
@@ -158,7 +162,7 @@ def lineus_stat(document: Any, clip: bool, no_optimize: bool, optimize_time: flo
 
 @processor("lineus-preview")
 @click.option("-o", "--output", "outputs", multiple=True, required=True,
-              type=click.Path(path_type=Path, dir_okay=False),
+              type=vpype_cli.PathType(path_type=Path, dir_okay=False),
               help="Picture to write: .svg or .png (repeat for both).")
 @plan_options
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
@@ -176,14 +180,14 @@ def lineus_preview(document: Any, outputs: tuple[Path, ...], clip: bool, no_opti
 
 
 @processor("lineus-draw")
-@click.option("-d", "--device", metavar="ADDRESS", envvar="FABWIRE_LINEUS_DEVICE",
+@click.option("-d", "--device", metavar="ADDRESS", envvar="FABWIRE_LINEUS_DEVICE", type=vpype_cli.TextType(),
               help="Line-us address (host[:port], tcp://…) or a configured device name.")
 @click.option("--timeout", type=click.FloatRange(min=0.1), default=5.0, show_default=True,
               help="Seconds to wait for the link to open.")
 @plan_options
 @click.option("--no-pause", is_flag=True, help="Draw every layer with one pen: no pen-change stop between layers.")
 @click.option("--resume", is_flag=True, help="Continue an interrupted drawing of this document where it stopped.")
-@click.option("--state", type=click.Path(path_type=Path, dir_okay=False),
+@click.option("--state", type=vpype_cli.PathType(path_type=Path, dir_okay=False),
               help="Progress file (default: one per drawing in the user's state directory).")
 @PEN_Z
 def lineus_draw(document: Any, device: str | None, timeout: float, clip: bool, no_optimize: bool,
@@ -195,8 +199,8 @@ def lineus_draw(document: Any, device: str | None, timeout: float, clip: bool, n
     is saved after every stroke: after a lost link, run the same pipeline with --resume.
     """
     with fabwire_errors():
-        app = App()
-        dctx = DeviceContext(app, LINEUS, device, None, timeout)
+        app = App(device=device, timeout=timeout)
+        dctx = DeviceContext(app, LINEUS)
         dctx.target()  # an unknown device name fails before any planning
         options = _plan_options(clip, no_optimize, optimize_time)
         layer_ids = vpype_cli.multiple_to_layer_ids(layer, document)
@@ -218,7 +222,7 @@ def figures_text_all(plans: list[PassPlan]) -> str:
 
 
 @processor("lineus-gcode")
-@click.argument("file", type=click.Path(path_type=Path, dir_okay=False))
+@click.argument("file", type=vpype_cli.PathType(path_type=Path, dir_okay=False))
 @plan_options
 @PEN_Z
 def lineus_gcode(document: Any, file: Path, clip: bool, no_optimize: bool, optimize_time: float, layer: Any,

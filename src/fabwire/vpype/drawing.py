@@ -71,41 +71,37 @@ async def _run(dctx: DeviceContext, plans: list[Plan], labels: list[str], progre
 
     seconds = [t for plan in plans for t in [0.0, *plan.stroke_seconds()]][1:]  # a pen change costs no estimate
     weights = [max(1, round(t * 1000)) for t in seconds]
-    async with dctx.link() as transport:
-        arm = await LineUs.connect(transport, hello_timeout=max(dctx.timeout, 2.0))
-        try:
-            with Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
-                          TextColumn("{task.percentage:>3.0f}%"), TimeRemainingColumn(),
-                          console=dctx.output.err) as bar:
-                task = bar.add_task("drawing", total=sum(weights), completed=sum(weights[: progress.done]))
-                flat = 0
-                for index, plan in enumerate(plans):
-                    if index:
-                        if progress.done <= flat:
-                            await arm.home()
-                            if pen_change is not None:
-                                bar.stop()
-                                await pen_change(index, labels[index])
-                                bar.start()
-                            progress.done = flat + 1
-                            progress.save()
-                        flat += 1
-                    first = flat
-
-                    def done(stroke: int, first: int = first, label: str = labels[index],
-                             count: int = len(plan.strokes)) -> None:
-                        progress.done = first + stroke + 1
+    async with dctx.open(LineUs) as arm:
+        with Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
+                      TextColumn("{task.percentage:>3.0f}%"), TimeRemainingColumn(),
+                      console=dctx.output.err) as bar:
+            task = bar.add_task("drawing", total=sum(weights), completed=sum(weights[: progress.done]))
+            flat = 0
+            for index, plan in enumerate(plans):
+                if index:
+                    if progress.done <= flat:
+                        await arm.home()
+                        if pen_change is not None:
+                            bar.stop()
+                            await pen_change(index, labels[index])
+                            bar.start()
+                        progress.done = flat + 1
                         progress.save()
-                        bar.update(task, completed=sum(weights[: progress.done]),
-                                   description=f"{label}: stroke {stroke + 1}/{count}")
+                    flat += 1
+                first = flat
 
-                    start = max(0, progress.done - first)
-                    if start < len(plan.strokes):
-                        await send_plan(arm, plan, start=start, pen_z=pen_z, on_stroke=done)
-                    flat += len(plan.strokes)
-            await arm.home()
-        finally:
-            await arm.close()
+                def done(stroke: int, first: int = first, label: str = labels[index],
+                         count: int = len(plan.strokes)) -> None:
+                    progress.done = first + stroke + 1
+                    progress.save()
+                    bar.update(task, completed=sum(weights[: progress.done]),
+                               description=f"{label}: stroke {stroke + 1}/{count}")
+
+                start = max(0, progress.done - first)
+                if start < len(plan.strokes):
+                    await send_plan(arm, plan, start=start, pen_z=pen_z, on_stroke=done)
+                flat += len(plan.strokes)
+        await arm.home()
 
 
 def draw_passes(dctx: DeviceContext, plans: Sequence[PassPlan], key: str, *, state: Path | None, resume: bool,

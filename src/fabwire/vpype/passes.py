@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from fabwire.errors import InputError
+from fabwire.lineus.kinematics import APP_AREA
 from fabwire.lineus.plot import Plan, PlanFigures, PlanOptions, plan_lines
 from fabwire.lineus.plot.export import gcode_lines
 from fabwire.lineus.plot.geometry import FloatArray, Polylines
@@ -37,6 +38,10 @@ def to_page(points: FloatArray) -> Any:
     x = (points[:, 0] - PAGE_ORIGIN[0]) / SVG_UNITS_PER_PX
     y = (PAGE_ORIGIN[1] - points[:, 1]) / SVG_UNITS_PER_PX
     return x + 1j * y
+
+
+APP_PAGE = ((APP_AREA[2] - APP_AREA[0]) / SVG_UNITS_PER_PX, (APP_AREA[3] - APP_AREA[1]) / SVG_UNITS_PER_PX)
+"""The official app's drawing area as a page (width, height) in pixels: its top-left corner is the page origin."""
 
 
 @dataclass(frozen=True)
@@ -70,7 +75,8 @@ def document_passes(document: Any, layer_ids: Iterable[int] | None = None) -> li
 
 def fit_document(document: Any, options: PlanOptions) -> Any:
     """Place every layer with one transform (scaled into the area with `options.fit`, else checked or clipped
-    as it is) and return the document with its lines replaced; layers keep their ids and properties.
+    as it is) and return the document with its lines replaced; layers keep their ids and properties, and the
+    page becomes the app drawing area.
 
     Raises InputError for an empty document or, without fitting or clipping, for lines out of reach."""
     passes = document_passes(document)
@@ -91,6 +97,7 @@ def fit_document(document: Any, options: PlanOptions) -> Any:
     for one, lines in zip(passes, split, strict=True):
         layer = document.layers[one.layer_id]
         document.layers[one.layer_id] = layer.clone([to_page(line) for line in lines])
+    document.page_size = APP_PAGE
     return document
 
 

@@ -3,58 +3,49 @@
 from __future__ import annotations
 
 import asyncio
-import importlib
 import sys
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
-from rich.panel import Panel
-from rich.progress import (
-    BarColumn,
-    DownloadColumn,
-    Progress,
-    TaskID,
-    TextColumn,
-    TimeRemainingColumn,
-    TransferSpeedColumn,
-)
-from rich.table import Table
 
+from fabwire import units
 from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
-from fabwire.errors import InputError
+from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
 from fabwire.simserve import server_options
+from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.live import ABSENT, JobView, known, now_iso
+from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
 
+if TYPE_CHECKING:
+    from rich.panel import Panel
+
 T = TypeVar("T")
 
 
-@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.")
+class FollowInterrupted(FabwireError):
+    """Ctrl-C while following a print the printer has already taken: it goes on printing."""
+
+    exit_code = EXIT_INTERRUPTED
+
+
+@device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.",
+              lazy={"convert": "fabwire.xyz.threew_cli:convert", "info": "fabwire.xyz.threew_cli:info"})
 def xyz() -> None:
     """XYZprinting da Vinci printers."""
 
 
-def _link_kind(dctx: DeviceContext) -> Link | None:
-    endpoint = dctx.target().endpoint
-    if endpoint.scheme == "sim":
-        return Link.WIFI if endpoint.options.get("link") == "wifi" else Link.SERIAL
-    return Link.WIFI if endpoint.scheme == "tcp" else Link.SERIAL
-
-
 def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[T]]) -> T:
     async def main() -> T:
-        async with dctx.link() as transport:
-            printer = XYZPrinter(transport, link=_link_kind(dctx), timeout=max(dctx.timeout, 2.0))
-            try:
-                return await action(printer)
-            finally:
-                await printer.close()
+        async with dctx.open(XYZPrinter) as printer:
+            return await action(printer)
 
     return asyncio.run(main())
 
@@ -69,24 +60,33 @@ async def _ask(message: str) -> None:
 
 
 def _bool(value: bool | None) -> str:
-    return "?" if value is None else "on" if value else "off"
+    return ABSENT if value is None else "on" if value else "off"
+
+
+def _state(status: Status) -> str:
+    if status.state is None:
+        return ABSENT
+    code = f"{status.state_code}" + (f",{status.substate}" if status.substate is not None else "")
+    return f"{status.state_name} ({code})"
 
 
 def render_status(status: Status) -> Panel:
+    from rich.panel import Panel
+    from rich.table import Table
+
     table = Table.grid(padding=(0, 2))
     table.add_column(style="bold")
     table.add_column()
     model = status.model
-    table.add_row("Model", f"{model.name if model else '?'} ({status.model_number or '?'})")
-    table.add_row("Name", status.name or "?")
-    table.add_row("Serial", status.serial or "?")
-    table.add_row("Firmware", status.firmware_version or "?")
-    table.add_row("State", f"{status.state_name} ({status.state_code},{status.substate})")
+    table.add_row("Model", f"{model.name if model else ABSENT} ({known(status.model_number)})")
+    table.add_row("Name", known(status.name))
+    table.add_row("Serial", known(status.serial))
+    table.add_row("Firmware", known(status.firmware_version))
+    table.add_row("State", _state(status))
     for word in status.error_words:
         table.add_row("Error", str(word))
     target = status.extruder_target
-    table.add_row("Extruder", f"{status.extruder if status.extruder is not None else '--'} °C"
-                  + (f" → {target} °C" if target else ""))
+    table.add_row("Extruder", known(status.extruder, " °C") + (f" → {target} °C" if target else ""))
     if status.bed is not None:
         table.add_row("Bed", f"{status.bed} °C")
     if status.progress and (status.progress.percent or status.progress.elapsed_min):
@@ -99,8 +99,8 @@ def render_status(status: Status) -> Panel:
         text = "none" if not cart.present else f"{cart.fields[0]} {cart.colour or ''}".strip()
         table.add_row("Filament", text + (f", {fil / 1000:.1f} m left" if fil is not None else ""))
     if status.nozzle:
-        table.add_row("Nozzle", f"{status.nozzle.diameter_mm or '?'} mm (type {status.nozzle.kind})")
-    table.add_row("Z offset", f"{status.zoffset / 100:.2f} mm" if status.zoffset is not None else "?")
+        table.add_row("Nozzle", f"{known(status.nozzle.diameter_mm, ' mm')} (type {status.nozzle.kind})")
+    table.add_row("Z offset", f"{status.zoffset / 100:.2f} mm" if status.zoffset is not None else ABSENT)
     table.add_row("Auto-level", _bool(status.autolevel))
     table.add_row("Buzzer", _bool(status.buzzer))
     if status.network is not None:
@@ -109,33 +109,52 @@ def render_status(status: Status) -> Panel:
     return Panel(table, title="da Vinci status", expand=False)
 
 
-def job_line(status: Status) -> str:
-    parts = [status.state_name, f"extruder {status.extruder}°C/{status.extruder_target or 0}°C"]
-    if status.progress and status.state_code in (9505, 9601):
-        left = status.progress.remaining_min
-        parts.append(f"{status.progress.percent}% ({'?' if left is None else left} min left)")
-    return ", ".join(parts)
-
-
 @xyz.command()
-@click.option("--watch", is_flag=True, help="Keep polling and show live temperatures and progress.")
+@click.option("--watch", is_flag=True, help="Keep polling and show live temperatures and progress (reconnects when "
+                                            "the link is lost).")
 @click.option("--interval", type=click.FloatRange(min=0.05), default=1.0, show_default=True,
               help="Seconds between polls with --watch.")
 @click.option("--count", type=click.IntRange(min=1), help="With --watch: stop after N polls.")
 @pass_device
 def status(dctx: DeviceContext, watch: bool, interval: float, count: int | None) -> None:
-    """Show the printer's status (all fields with --json)."""
+    """Show the printer's status (all fields with --json; one timestamped JSON line per poll with --watch)."""
     out = dctx.output
+    if not watch:
+        st = _with_printer(dctx, lambda printer: printer.status())
+        out.result(st.to_dict(), lambda: out.out.print(render_status(st)))
+        return
+    _watch(dctx, interval, count)
 
-    async def run(printer: XYZPrinter) -> None:
-        if not watch:
-            st = await printer.status()
-            out.result(st.to_dict(), lambda: out.out.print(render_status(st)))
-            return
-        async for st in printer.monitor(interval, count):
-            out.event(st.to_dict(), job_line(st))
 
-    _with_printer(dctx, run)
+RECONNECT_FIRST = 0.5
+RECONNECT_MOST = 30.0
+"""Seconds between reconnection attempts of `status --watch`: doubling from the first to the most."""
+
+
+def _watch(dctx: DeviceContext, interval: float, count: int | None) -> None:
+    """Poll until `count` statuses were shown; a lost link is reopened with backoff once the printer was reached."""
+    left = [count]
+    reached = [False]
+    delay = RECONNECT_FIRST
+    with JobView(dctx.output, dctx.output.out, "da Vinci") as view:
+
+        async def run(printer: XYZPrinter) -> None:
+            async for st in printer.monitor(interval, left[0]):
+                reached[0] = True
+                view.show(st)
+                if left[0] is not None:
+                    left[0] -= 1
+
+        while left[0] is None or left[0] > 0:
+            try:
+                _with_printer(dctx, run)
+                return
+            except (LinkError, LinkTimeout) as exc:
+                if not reached[0]:
+                    raise
+                view.note(f"link lost ({exc}); reconnecting in {delay:g} s")
+                time.sleep(delay)
+                delay = min(delay * 2, RECONNECT_MOST)
 
 
 def _resolve_model(text: str | None) -> PrinterModel | None:
@@ -146,38 +165,41 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--no-wait", is_flag=True, help="Return once the printer has started the job.")
 @click.option("--model", "model_text", metavar="MODEL", help="Convert for this model instead of the printer's own.")
+@click.option("--name", "upload_name", metavar="NAME",
+              help="Name the file is uploaded under (default: derived from the file name, ASCII only).")
+@click.option("--save-to-sd", is_flag=True, help="Keep the file on the printer's SD card (XYZware's SaveToSD; some "
+                                                 "Jr. 2.0 models need it).")
 @pass_device
-def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None) -> None:
+def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None, upload_name: str | None,
+              save_to_sd: bool) -> None:
     """Print a G-code (converted to the printer's .3w) or a .3w file."""
     model = _resolve_model(model_text)
+    if upload_name is not None:
+        userinput.upload_name(upload_name)
     out = dctx.output
 
+    started = [False]
+
     async def run(printer: XYZPrinter) -> Status:
-        columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
-                   TimeRemainingColumn())
-        with Progress(*columns, console=out.err, transient=False, disable=out.json_mode) as bar:
-            tasks: list[TaskID] = []
-            last = [""]
-
+        chosen = model or _resolve_model(printer.settings.model)
+        with JobView(out, out.err, file.name) as view:
             def uploaded(done: int, total: int) -> None:
-                if not tasks:  # only once the printer has taken the upload
-                    tasks.append(bar.add_task(f"upload {file.name}", total=total))
-                bar.update(tasks[0], completed=done, total=total)
+                started[0] = True  # the printer has taken the upload: from here on it has the job
+                view.upload(done, total)
 
-            def job(st: Status) -> None:
-                line = job_line(st)
-                if line == last[0]:
-                    return
-                last[0] = line
-                if out.json_mode:
-                    out.event({"event": "status", **st.to_dict()}, line)
-                else:
-                    out.note(line)
+            return await printer.print_file(file, model=chosen, progress=uploaded,
+                                            on_status=lambda st: view.show(st, {"event": "status"}),
+                                            wait=not no_wait, name=upload_name, save_to_sd=save_to_sd)
 
-            return await printer.print_file(file, model=model, progress=uploaded, on_status=job, wait=not no_wait)
-
-    final = _with_printer(dctx, run)
-    out.result({"event": "done", "state": final.state_code, "state_name": final.state_name},
+    try:
+        final = _with_printer(dctx, run)
+    except KeyboardInterrupt:
+        if not started[0]:
+            raise
+        where = f" -d {dctx.device}" if dctx.device else ""
+        raise FollowInterrupted(f"stopped following the print; the printer keeps printing {file.name}. Follow it with "
+                          f"`fabwire xyz{where} status --watch`, stop it with `fabwire xyz{where} cancel`") from None
+    out.result({"event": "done", "time": now_iso(), "state": final.state_code, "state_name": final.state_name},
                f"{file.name}: {final.state_name}")
 
 
@@ -272,12 +294,9 @@ def set_cmd(dctx: DeviceContext, setting: str, value: str) -> None:
 @click.argument("value", required=False)
 @pass_device
 def zoffset(dctx: DeviceContext, value: str | None) -> None:
-    """Show the Z offset, set it (in 1/100 mm, e.g. 245 or -12), or nudge it one step: up / down."""
+    """Show the Z offset, set it (2.45mm, or whole 1/100 mm such as 245 or -12), or nudge it one step: up / down."""
     if value is not None and value not in ("up", "down"):
-        try:
-            number = int(value)
-        except ValueError:
-            raise InputError(f"z offset must be a whole number of 1/100 mm, or up/down, not {value!r}") from None
+        number = units.parse_zoffset(value)
 
     async def run(pr: XYZPrinter) -> int:
         if value is None:
@@ -288,7 +307,7 @@ def zoffset(dctx: DeviceContext, value: str | None) -> None:
         return await pr.set_zoffset(number)
 
     result = _with_printer(dctx, run)
-    dctx.output.result({"zoffset": result}, f"z offset {result} ({result / 100:.2f} mm)")
+    dctx.output.result({"zoffset": result}, f"z offset {units.zoffset(result)}")
 
 
 @xyz.command()
@@ -296,6 +315,9 @@ def zoffset(dctx: DeviceContext, value: str | None) -> None:
 @pass_device
 def name(dctx: DeviceContext, new: str | None) -> None:
     """Show or set the printer's name (up to 16 characters)."""
+
+    if new is not None:
+        userinput.printer_name(new)
 
     async def run(pr: XYZPrinter) -> str:
         if new is not None:
@@ -312,8 +334,9 @@ def name(dctx: DeviceContext, new: str | None) -> None:
 @pass_device
 def language(dctx: DeviceContext, code: str) -> None:
     """Set the display language (en, fr, it, de, es, jp)."""
-    _with_printer(dctx, lambda pr: pr.set_language(code.lower()))
-    dctx.output.result({"language": code.lower()}, f"language {code.lower()}")
+    code = userinput.language(code)
+    _with_printer(dctx, lambda pr: pr.set_language(code))
+    dctx.output.result({"language": code}, f"language {code}")
 
 
 @xyz.command()
@@ -377,6 +400,8 @@ def wifi_scan(dctx: DeviceContext) -> None:
 @pass_device
 def wifi_join(dctx: DeviceContext, ssid: str, password: str, channel: int) -> None:
     """Join a Wi-Fi network (do this over USB)."""
+    userinput.ssid(ssid)
+    userinput.wifi_password(password)
     _with_printer(dctx, lambda pr: pr.join_wifi(ssid, password, channel))
     dctx.output.result({"ok": True, "ssid": ssid}, f"joining {ssid}")
 
@@ -430,19 +455,6 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
     dctx.output.result(data, human)
 
 
-def _add_threew_commands() -> None:
-    """`convert` and `info` (.3w files) live in their own module; mount them when it is present."""
-    try:
-        module = importlib.import_module("fabwire.xyz.threew_cli")
-    except ImportError:
-        return
-    for command_name in ("convert", "info"):
-        command = getattr(module, command_name, None)
-        if isinstance(command, click.Command):
-            xyz.add_command(command)
-
-
-_add_threew_commands()
 
 
 @click.command("xyz")

@@ -12,20 +12,26 @@ import contextlib
 import re
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
+from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self, TypeVar
+from typing import TYPE_CHECKING, Any, Self, TypeVar
 from urllib.parse import parse_qsl, urlsplit
 
+from fabwire.config import XYZSettings
+from fabwire.devices import XYZ
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
-from fabwire.sync import LoopThread
+from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
+from fabwire.xyz import intake, userinput
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import PrinterModel, model_for_file_id
 from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
-from fabwire.xyz.status import FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
+from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
+
+if TYPE_CHECKING:
+    from fabwire.xyz.sync import SyncXYZPrinter
 
 T = TypeVar("T")
 UploadProgress = Callable[[int, int], None]
@@ -40,11 +46,14 @@ REPLY_ERRORS = {
     7: "the printer is busy finishing a job",
 }
 TRANSIENT_RETRIES = 20
+FILE_CHECK_LIMIT = 120.0
+"""Seconds of "checking file" (9520) after which a print is reported stuck (printers check in seconds)."""
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
 STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
 """Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
 _PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
+_FIRMWARE_HEADER = re.compile(rb"([A-Za-z0-9]{10})\+([0-9][0-9A-Za-z.]*)")
 _MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
 
@@ -97,28 +106,54 @@ class XYZPrinter:
         self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="xyz-reader")
         self.address: str | None = None
         """Set by `connect`: lets a Wi-Fi client reconnect when the printer closes the connection."""
+        self.reopen: Callable[[], Awaitable[Transport]] | None = None
+        """Set by `open`: opens a new link to the same address, wrapped like the first (trace, faults)."""
+        self.settings = XYZSettings()
         self.per_command = False
         """Open a new connection for every command (the 1.1 Plus hangs up after each reply)."""
         self._heard = False
         """Some reply made sense: the peer speaks XYZv3 (until then, stray text means a wrong device)."""
 
     @classmethod
-    async def connect(cls, address: str, *, link: Link | None = None, timeout: float = 5.0) -> XYZPrinter:
-        from fabwire.devices import XYZ
+    def open(cls, target: DeviceTarget = None, **options: Any) -> Opening[XYZPrinter]:
+        """`async with XYZPrinter.open("192.168.1.50") as printer` (or `await` it): the one way to open a printer.
 
-        transport = await open_transport(address, XYZ, connect_timeout=timeout)
-        client = cls(transport, link=link or link_for_address(address), timeout=timeout)
-        client.address = address
+        `target` and the common options are described in `fabwire.opening`; the printer's settings are
+        `fabwire.config.XYZSettings` (link, reply_timeout, model). A Wi-Fi printer that hangs up after every reply
+        (the 1.1 Plus) is reconnected to the same address, through the same trace.
+        """
+        return Opening(XYZ, target, options, cls._on_link)
+
+    @classmethod
+    def open_sync(cls, target: DeviceTarget = None, **options: Any) -> SyncXYZPrinter:
+        """The same, blocking, for plain scripts: `with XYZPrinter.open_sync("office") as printer: printer.status()`."""
+        from fabwire.xyz.sync import SyncXYZPrinter
+
+        return SyncXYZPrinter(target, **options)
+
+    @classmethod
+    async def _on_link(cls, transport: Transport, opened: DeviceLink) -> XYZPrinter:
+        settings = opened.settings
+        assert isinstance(settings, XYZSettings)
+        address = opened.address
+        link = Link(settings.link) if settings.link != "auto" else link_for_address(address) if address else None
+        client = cls(transport, link=link, timeout=settings.reply_timeout or max(settings.timeout, 2.0))
+        client.address, client.settings = address, settings
+        client.reopen = opened.reopen if address else None
         return client
+
+    @classmethod
+    async def connect(cls, address: str, *, link: Link | None = None, timeout: float = 5.0) -> XYZPrinter:
+        """Kept for older scripts: `await XYZPrinter.open(address, timeout=…, reply_timeout=…)`."""
+        return await cls.open(address, link=link.value if link else None, timeout=timeout, reply_timeout=timeout)
 
     async def _reconnect(self) -> None:
         """Wi-Fi printers such as the 1.1 Plus close the connection after every reply: open a new one."""
         if self._lost is None or self.address is None or self.link is not Link.WIFI:
             return
-        from fabwire.devices import XYZ
-
         await self.transport.close()
-        self.transport = await open_transport(self.address, XYZ, connect_timeout=self.timeout)
+        self.transport = await (self.reopen() if self.reopen is not None else
+                                open_transport(self.address, XYZ, connect_timeout=self.timeout))
         self._lost = None
         self.reader = ReplyReader(self.link)
         self._start_pump()
@@ -275,7 +310,11 @@ class XYZPrinter:
                     raise
                 await asyncio.sleep(self.poll_interval)
         base = Status() if "a" in letters else self.last_status
-        self.last_status = base.update(reply.lines)
+        status = base.update(reply.lines)
+        if "a" in letters and status.state is None:
+            raise RemoteProtocolError(f"the status reply has no state (j:) among its {len(reply.lines)} lines; "
+                                      "this is not a da Vinci answering XYZv3")
+        self.last_status = status
         if self.last_status.model_number in HANGS_UP and self.link is Link.WIFI:
             self.per_command = True
         return self.last_status
@@ -313,37 +352,41 @@ class XYZPrinter:
     # ------------------------------------------------------------------------------------------ printing
 
     def prepare(self, source: Path | bytes, model: PrinterModel, *, override: bool = False) -> bytes:
-        """The bytes to upload: a .3w as is (if it suits `model`), G-code converted for `model`."""
-        from fabwire.xyz.threew import inspect_3w, is_3w, write_3w
+        """The bytes to upload: a .3w (binary or base64 text) as is if it suits `model`, G-code converted for
+        `model`; any other kind of file is an InputError saying what it is."""
+        from fabwire.xyz.threew import inspect_3w, write_3w
 
         data, name = _load_source(source)
-        if is_3w(data):
+        kind = intake.require_printable(intake.identify(data[:intake.SNIFF], len(data)), name, data[:intake.SNIFF])
+        data = intake.plain_bytes(data, name)
+        if kind.decoded is intake.Kind.THREEW:
             info = inspect_3w(data)
             machine = (info.machine or "").strip()
-            target = model_for_file_id(machine) if machine else None
+            target = model_for_file_id(machine, model) if machine else None
             if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
                 what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
                 raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; "
                                  f"convert the G-code for this printer instead")
             return data
-        if not _looks_like_gcode(data):
-            raise InputError(f"{name} is neither G-code nor a .3w print file")
-        if m := _MACHINE_LINE.search(data[:16384]):
+        if m := _MACHINE_LINE.search(intake.normalise(data[:16384], first=True)):
             declared = m[1].decode("latin-1")
-            other = model_for_file_id(declared)
+            other = model_for_file_id(declared, model)
             if not override and other is not None and other.file_id.lower() != model.file_id.lower():
                 raise InputError(f"{name} was sliced for {other.name} ({declared}), but the printer is a "
                                  f"{model.name}; slice it for this printer or pass --model")
-        return write_3w(data, model, filename=Path(name).stem + ".3w")
+        return write_3w(data, model, filename=userinput.derived_upload_name(name))
 
     async def upload(self, data: bytes, name: str, *, progress: UploadProgress | None = None,
-                     firmware: bool = False, crc: bool = True) -> UploadResult:
-        """Send a file in blocks, each acknowledged; a link lost on the way is a LinkError, never success."""
+                     firmware: bool = False, crc: bool = True, save_to_sd: bool = False) -> UploadResult:
+        """Send a file in blocks, each acknowledged; a link lost on the way is a LinkError, never success.
+
+        `name` is checked as user input (InputError); `save_to_sd` adds XYZware's `,SaveToSD` flag."""
         if not data:
             raise InputError("nothing to upload: the file is empty")
+        name = userinput.upload_name(name)
         block = self.last_status.block_size if self.last_status.packet else (await self.status()).block_size
         command: p.Upload | p.FirmwareUpload = (
-            p.FirmwareUpload(name, len(data)) if firmware else p.Upload(name, len(data)))
+            p.FirmwareUpload(name, len(data)) if firmware else p.Upload(name, len(data), save_to_sd))
         started = self.clock()
         sent = 0
         blocks = 0
@@ -402,23 +445,26 @@ class XYZPrinter:
 
     async def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
-                         wait: bool = True, name: str | None = None) -> Status:
-        """Convert if needed, upload, start and (unless wait=False) follow the job to its end."""
-        from fabwire.xyz.threew import is_3w
+                         wait: bool = True, name: str | None = None, save_to_sd: bool = False,
+                         start_limit: float = 30.0) -> Status:
+        """Convert if needed, upload, start and (unless wait=False) follow the job to its end.
 
+        `name` is the upload name (default: a safe one derived from the file name). The job counts as started
+        only when the printer says so (checking the file, printing, or a file error); a printer that stays idle
+        for `start_limit` s is a DeviceError, never success."""
         data, shown = _load_source(source)
-        if not is_3w(data) and not _looks_like_gcode(data):  # say so before disturbing the printer
-            raise InputError(f"{shown} is neither G-code nor a .3w print file")
+        head = data[:intake.SNIFF]
+        intake.require_printable(intake.identify(head, len(data)), shown, head)  # before disturbing the printer
+        name = userinput.upload_name(name) if name is not None else userinput.derived_upload_name(
+            source.name if isinstance(source, Path) else None)
         status = await self.require_idle("print")
         printer_model = status.model
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
         data = self.prepare(data if isinstance(source, bytes) else source, target, override=model is not None)
-        if name is None:
-            name = (Path(source.name).stem if isinstance(source, Path) else "fabwire") + ".3w"
-        await self.upload(data, name, progress=progress)
-        status = await self._await_job_start()
+        await self.upload(data, name, progress=progress, save_to_sd=save_to_sd)
+        status = await self._await_job_start(start_limit)
         if on_status:
             on_status(status)
         if not wait:
@@ -426,18 +472,25 @@ class XYZPrinter:
         return await self.follow_job(on_status)
 
     async def _await_job_start(self, limit: float = 30.0) -> Status:
+        """The first status that shows the job under way; a printer still idle after `limit` s never took it."""
         end = self.clock() + limit
         while True:
             status = await self.status()
             if FILE_REJECTED in [w.code for w in status.error_words]:
                 raise DeviceError("0x020D", "the printer rejected the file (unsupported file version)")
-            if status.state_code != IDLE or self.clock() > end:
+            if status.state_code is not None and status.state_code != IDLE:
                 return status
+            if self.clock() > end:
+                raise DeviceError(str(status.state_code), f"the printer took the file but did not start the job "
+                                  f"within {limit:g} s (it is {status.state_name})",
+                                  action="nothing is printing; check the printer's screen and send the file again")
             await asyncio.sleep(self.poll_interval)
 
     async def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None) -> Status:
-        """Poll until the job ends (9509 print done or back to idle); a printer error raises DeviceError."""
+        """Poll until the job ends (9509 print done or back to idle); a printer error raises DeviceError, and so
+        does a file check (9520) that lasts over FILE_CHECK_LIMIT s."""
         end = None if limit is None else self.clock() + limit
+        checking_since: float | None = None
         while True:
             status = await self.status()
             if on_status:
@@ -446,6 +499,13 @@ class XYZPrinter:
             if words:
                 word = words[0]
                 raise DeviceError(f"0x{word.raw:08X}", word.meaning, action="the job stopped")
+            if status.state_code == FILE_CHECK:
+                checking_since = self.clock() if checking_since is None else checking_since
+                if self.clock() - checking_since > FILE_CHECK_LIMIT:
+                    raise LinkTimeout(f"the printer has been checking the file for over {FILE_CHECK_LIMIT:g} s "
+                                      "(it usually takes seconds); stop it with `fabwire xyz cancel` or on its panel")
+            else:
+                checking_since = None
             if status.state_code in (PRINT_DONE, IDLE):
                 return status
             if end is not None and self.clock() > end:
@@ -466,11 +526,19 @@ class XYZPrinter:
         await self._job_control("complete", (PRINT_DONE,))
 
     async def _job_control(self, op: str, states: tuple[int, ...]) -> None:
+        """Send a job command if the printer's state allows it; otherwise an InputError in words (the host's own
+        check: the firmware would only answer with a bare error code)."""
         status = await self.status()
         if status.state_code not in states:
+            state = status.state_name
+            if op == "pause" and status.state_code == PAUSED:
+                raise InputError("the print is already paused (fabwire xyz resume continues it)")
+            if op == "resume" and status.state_code == PRINTING:
+                raise InputError("the print is already running")
+            if op == "cancel":
+                raise InputError(f"nothing to cancel: no print is running (the printer is {state})")
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
-            raise DeviceError(str(status.state_code),
-                              f"nothing to {op}: the printer is not {wanted} (it is {status.state_name})")
+            raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
         await self.request(p.PrintControl(op))
 
     # --------------------------------------------------------------------------------------------- flows
@@ -609,10 +677,10 @@ class XYZPrinter:
         return status.zoffset if status.zoffset is not None else 0
 
     async def set_name(self, name: str) -> None:
-        await self._config(p.SetName(name))
+        await self._config(p.SetName(userinput.printer_name(name)))
 
     async def set_language(self, code: str) -> None:
-        await self._config(p.SetLanguage(code))
+        await self._config(p.SetLanguage(userinput.language(code)))
 
     async def set_energy(self, minutes: int) -> None:
         await self._config(p.SetEnergy(minutes))
@@ -661,7 +729,7 @@ class XYZPrinter:
         return tuple(f for f in value.split("+") if f)
 
     async def join_wifi(self, ssid: str, password: str, channel: int = 0) -> None:
-        command = p.JoinWifi(ssid, password, channel)
+        command = p.JoinWifi(userinput.ssid(ssid), userinput.wifi_password(password), channel)
         await self._supports(command)
         await self._config(p.LeaveWifi())
         await self.request(command, timeout=25.0)
@@ -676,8 +744,10 @@ class XYZPrinter:
             raise InputError("firmware upload can brick the printer: confirm it explicitly")
         if len(image) <= 16:
             raise InputError("the firmware image is too short")
-        header = image[:16].rstrip(b"\x00 ").decode("latin-1", "replace")
-        model_text, _, version = header.partition("+")
+        found = _FIRMWARE_HEADER.fullmatch(image[:16].rstrip(b"\x00 "))
+        if found is None:
+            raise InputError("not a da Vinci firmware image (it does not start with a <model>+<version> header)")
+        model_text, version = found[1].decode("ascii"), found[2].decode("ascii")
         model = await self.model()
         if model_text != model.model_number or not version:
             raise InputError(f"the firmware image is for {model_text or 'an unknown model'!r}, "
@@ -701,57 +771,3 @@ def _load_source(source: Path | bytes) -> tuple[bytes, str]:
     return data, name
 
 
-def _looks_like_gcode(data: bytes) -> bool:
-    head = data[:4096]
-    if b"\x00" in head:
-        return False
-    try:
-        text = head.decode("utf-8")
-    except UnicodeDecodeError:
-        text = head.decode("latin-1")
-        if sum(c.isprintable() or c.isspace() for c in text) < 0.95 * len(text):
-            return False
-    return bool(re.search(r"(?m)^\s*(?:[GMT]\d+|;)", text))
-
-
-class SyncXYZPrinter:
-    """The same client for plain scripts: `with SyncXYZPrinter("192.168.1.50") as printer: printer.status()`."""
-
-    def __init__(self, address: str, *, link: Link | None = None, timeout: float = 5.0) -> None:
-        self._loop = LoopThread("xyz")
-        try:
-            self._client = self._loop.call(XYZPrinter.connect(address, link=link, timeout=timeout))
-        except BaseException:
-            self._loop.close()
-            raise
-
-    def _call(self, coro: Coroutine[Any, Any, T]) -> T:
-        return self._loop.call(coro)
-
-    def status(self, letters: str = "a") -> Status:
-        return self._call(self._client.status(letters))
-
-    def print_file(self, source: Path | bytes, **kwargs: Any) -> Status:
-        return self._call(self._client.print_file(source, **kwargs))
-
-    def __getattr__(self, name: str) -> Callable[..., Any]:
-        method = getattr(self._client, name)
-        if not asyncio.iscoroutinefunction(method):
-            return method  # type: ignore[no-any-return]
-
-        def call(*args: Any, **kwargs: Any) -> Any:
-            return self._call(method(*args, **kwargs))
-
-        return call
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self._loop.call(self._client.close(), timeout=5)
-        self._loop.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()

@@ -1,10 +1,10 @@
 """What a file handed to the XYZ side is, and its G-code text as the printer should see it.
 
-One answer for `convert`, `info`, `print` and the simulator's file check: a `.3w`, a base64-text `.3w` (what
-XYZware imports and some web slicers export), G-code text (any of UTF-8 with or without BOM, ASCII, Latin-1
-comments; LF, CRLF or CR-only line ends; with or without a final newline), or something else named in words
-with what to do about it (binary G-code, 3MF projects and other zips, gzip, images, STL models, PDFs, SVG/XML,
-UTF-16 text, binary junk).
+One answer for `convert`, `info`, `print` and the simulator's file check: a `.3w`; base64 text of a `.3w` or of
+G-code with its XYZ header (what XYZware imports and web slicers such as Kiri:Moto export for the mini w); G-code
+text (UTF-8 with or without BOM, ASCII, Latin-1 comments; LF, CRLF or CR-only line ends; with or without a final
+newline); or something else, named in words with what to do about it (binary G-code, 3MF projects and other zips,
+gzip, images, STL models, PDFs, SVG/XML, UTF-16 text, binary junk).
 """
 
 from __future__ import annotations
@@ -24,8 +24,7 @@ from fabwire.errors import InputError
 
 MAGIC = b"3DPFNKG13WTW"
 """The .3w signature (reference §5.1)."""
-BASE64_MAGIC = base64.b64encode(MAGIC)
-"""`M0RQRk5LRzEzV1RX`: how a base64-text .3w starts."""
+_BASE64_TEXT = re.compile(rb"[A-Za-z0-9+/=\s]{16,}")
 BOM = b"\xef\xbb\xbf"
 SNIFF = 1 << 16
 """Bytes read to decide what a file is."""
@@ -47,6 +46,7 @@ class Kind(enum.Enum):
     THREEW = ".3w print file"
     THREEW_BASE64 = "base64-text .3w print file"
     GCODE = "G-code text"
+    GCODE_BASE64 = "base64-text G-code"
     BINARY_GCODE = "binary G-code"
     PROJECT_3MF = "3MF project"
     ZIP = "zip archive"
@@ -62,7 +62,16 @@ class Kind(enum.Enum):
     @property
     def printable(self) -> bool:
         """A printer can be given it (after conversion for G-code, after decoding for base64)."""
-        return self in (Kind.THREEW, Kind.THREEW_BASE64, Kind.GCODE)
+        return self in (Kind.THREEW, Kind.THREEW_BASE64, Kind.GCODE, Kind.GCODE_BASE64)
+
+    @property
+    def base64(self) -> bool:
+        return self in (Kind.THREEW_BASE64, Kind.GCODE_BASE64)
+
+    @property
+    def decoded(self) -> Kind:
+        """What the file is once its base64 text is decoded."""
+        return {Kind.THREEW_BASE64: Kind.THREEW, Kind.GCODE_BASE64: Kind.GCODE}.get(self, self)
 
 
 _ADVICE = {
@@ -89,8 +98,10 @@ def identify(head: bytes, size: int | None = None) -> Kind:
         return Kind.EMPTY
     if head.startswith(MAGIC):
         return Kind.THREEW
-    if head.lstrip(_WHITESPACE).startswith(BASE64_MAGIC):
-        return Kind.THREEW_BASE64
+    if _BASE64_TEXT.fullmatch(head[:4096]):
+        inner = _base64_kind(head)
+        if inner is not None:
+            return inner
     if head.startswith(b"GCDE"):
         return Kind.BINARY_GCODE
     if head.startswith((b"PK\x03\x04", b"PK\x05\x06")):
@@ -115,6 +126,21 @@ def identify(head: bytes, size: int | None = None) -> Kind:
     return Kind.GCODE
 
 
+def _base64_kind(head: bytes) -> Kind | None:
+    """THREEW_BASE64 or GCODE_BASE64 when `head` is base64 text of a .3w or of G-code, else None."""
+    text = head.translate(None, _WHITESPACE)
+    try:
+        decoded = base64.b64decode(text[:len(text) - len(text) % 4], validate=True)
+    except binascii.Error:
+        return None
+    if decoded.startswith(MAGIC):
+        return Kind.THREEW_BASE64
+    plain = decoded.removeprefix(BOM)
+    if identify(decoded[:SNIFF]) is Kind.GCODE and (plain.lstrip().startswith(b";") or has_commands(plain)):
+        return Kind.GCODE_BASE64
+    return None
+
+
 def _image_name(head: bytes) -> str:
     for magic, name in _IMAGES:
         if head.startswith(magic):
@@ -130,7 +156,8 @@ def refusal(kind: Kind, name: str, head: bytes = b"") -> InputError:
         Kind.PROJECT_3MF: "a 3MF project", Kind.GZIP: "gzip-compressed", Kind.UTF16: "UTF-16 text",
         Kind.BINARY_GCODE: "binary G-code (.bgcode)",
     }.get(kind, kind.value)
-    return InputError(f"{name} is {what}: {_ADVICE.get(kind, 'it cannot be printed')}")
+    advice = _ADVICE.get(kind, "it cannot be printed")
+    return InputError(f"{name} is {what}{', ' if advice.startswith('not ') else ': '}{advice}")
 
 
 def sniff(path: Path) -> tuple[Kind, bytes]:
@@ -176,14 +203,14 @@ def decode_base64(data: bytes, name: str) -> bytes:
 
 
 @contextlib.contextmanager
-def open_3w(path: Path, kind: Kind) -> Iterator[BinaryIO]:
-    """The .3w bytes of a file of `kind` THREEW or THREEW_BASE64 (decoded into a spooled temporary file)."""
+def decoded_file(path: Path, kind: Kind) -> Iterator[BinaryIO]:
+    """The file's own bytes, or for a base64 kind its decoded bytes (in a temporary file)."""
     try:
         handle = Path(path).open("rb")  # noqa: SIM115 - closed by the with below; opening errors get our message
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror}") from exc
     with handle:
-        if kind is Kind.THREEW:
+        if not kind.base64:
             yield handle
             return
         with tempfile.TemporaryFile() as decoded:
@@ -192,9 +219,23 @@ def open_3w(path: Path, kind: Kind) -> Iterator[BinaryIO]:
             yield decoded
 
 
-def threew_bytes(data: bytes, name: str) -> bytes:
-    """The .3w bytes of in-memory data that is a .3w or a base64-text .3w."""
-    return decode_base64(data, name) if identify(data[:SNIFF]) is Kind.THREEW_BASE64 else data
+@contextlib.contextmanager
+def decoded_path(path: Path, kind: Kind) -> Iterator[Path]:
+    """`path` itself, or for a base64 kind a temporary file holding the decoded bytes."""
+    if not kind.base64:
+        yield path
+        return
+    with tempfile.TemporaryDirectory() as scratch:
+        target = Path(scratch) / (Path(path).stem + (".3w" if kind is Kind.THREEW_BASE64 else ".gcode"))
+        with decoded_file(path, kind) as source, target.open("wb") as out:
+            while block := source.read(CHUNK):
+                out.write(block)
+        yield target
+
+
+def plain_bytes(data: bytes, name: str) -> bytes:
+    """In-memory data with any base64 text layer decoded."""
+    return decode_base64(data, name) if identify(data[:SNIFF]).base64 else data
 
 
 # ------------------------------------------------------------------------------------------- G-code text

@@ -157,14 +157,25 @@ def find_model(text: str) -> PrinterModel:
     return model
 
 
-def model_for_file_id(file_id: str) -> PrinterModel | None:
-    """The model a .3w's `; machine =` value names: an exact model number first, else the first model using that id."""
+def models_for_file_id(file_id: str) -> tuple[PrinterModel, ...]:
+    """Every model whose .3w carries this `; machine =` value (several share one, e.g. `daVinciF10`)."""
+    wanted = file_id.strip().lower()
+    return tuple(model for model in MODELS if model.file_id.lower() == wanted)
+
+
+def model_for_file_id(file_id: str, prefer: PrinterModel | None = None) -> PrinterModel | None:
+    """The model a .3w's `; machine =` value names.
+
+    The value is a file id (miniMover's fileNum), so file ids decide first: `dv1JSOA000` (letter O) is the
+    Jr. 1.0 3in1's file id even though it is also the Open-filament 3in1's model number. Among models sharing the
+    id, `prefer` (e.g. the connected printer) wins, else the first in the table. A value that is no file id but a
+    model number (as some hand-made converters write) names that model."""
+    sharing = models_for_file_id(file_id)
+    if sharing:
+        return prefer if prefer in sharing else sharing[0]
     wanted = file_id.strip().lower()
     for model in MODELS:
         if model.model_number.lower() == wanted:
-            return model
-    for model in MODELS:
-        if model.file_id.lower() == wanted:
             return model
     return None
 

@@ -129,8 +129,11 @@ def personality(model_text: str = "dv1MW0A000", *, serial: str | None = None) ->
             status_and_upload_only=True, settings=(), ip="192.168.1.126", lifetime=(69342, 21785),
         )
     order = _SEED_ORDER if model.wifi else _SEED_ORDER.replace("V4", "")
+    # XYZprint writes v5 files for the Jr line (a Jr. 1.0w file in the Rojman1984 samples; Jr 1.0 on firmware
+    # 2.4.8 per mwiens' converter), so their firmware takes both.
+    accepts = (FileFormat.V2, FileFormat.V5) if number.startswith(("dv1J", "dv2J")) and model.container == 2 else ()
     return Personality(model, serial or generated, ("1.2.3",), short[:16], order,
-                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)))
+                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)), accepts=accepts)
 
 
 @dataclass

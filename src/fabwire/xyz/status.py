@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from fabwire.errors import InputError
@@ -506,8 +506,8 @@ class Status:
             try:
                 changes[attr] = parse(value)
                 unparsed.pop(letter, None)
-            except (ValueError, IndexError, TypeError, AttributeError):
-                unparsed[letter] = value
+            except (ValueError, IndexError, TypeError, AttributeError, RecursionError, OverflowError):
+                unparsed[letter] = value  # a value from the wire that does not parse is kept raw, never raised
                 changes[attr] = None
         return replace(self, order=tuple(order), extra=extra, unparsed=unparsed, dashed=frozenset(dashed), **changes)
 
@@ -631,32 +631,45 @@ class Status:
         return ",".join(self.firmware) if self.firmware else None
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready view: raw fields plus the decoded meanings people and scripts ask for."""
-        out: dict[str, Any] = {}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if value is not None and f.name not in ("order", "dashed") and value != {}:
-                out[f.name] = _plain(value)
+        """A typed, JSON-ready view with units in the key names (°C, mm, s); absent values are null. The wire
+        lines, letter by letter, are under `raw`."""
         model = self.model
-        out["decoded"] = {
+        progress = self.progress
+        remaining = progress.remaining_min if progress else None
+        cart = self.cartridge
+        net = self.network
+        return {
+            "model_number": self.model_number, "model": model.name if model else None, "name": self.name,
+            "serial": self.serial, "firmware": self.firmware_version, "language": self.language,
             "state": self.state_code, "substate": self.substate, "state_name": self.state_name,
             "errors": [{"raw": w.raw, "source": w.source, "code": w.code, "name": w.name, "meaning": w.meaning}
                        for w in self.error_words],
-            "extruder": self.extruder, "extruder_target": self.extruder_target, "block_size": self.block_size,
-            "autolevel": self.autolevel, "buzzer": self.buzzer, "filament_mm": self.filament_mm,
-            "cartridge_present": self.cartridge.present if self.cartridge else None,
-            "cartridge_colour": self.cartridge.colour if self.cartridge else None,
-            "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
-            "material": self.material_name,
-            "progress_remaining_unknown": bool(self.progress and self.progress.remaining_min is None),
-            "model": model.name if model else None,
+            "extruder_c": self.extruder, "extruder_target_c": self.extruder_target,
+            "extruder2_c": self.temperatures.extruder2 if self.temperatures else None, "bed_c": self.bed,
+            "progress_percent": progress.percent if progress else None,
+            "elapsed_s": progress.elapsed_min * 60 if progress else None,
+            "remaining_s": remaining * 60 if remaining is not None else None,
+            "zoffset_mm": self.zoffset / 100 if self.zoffset is not None else None,
+            "calibration": _calibration_ints(self.calibration),
+            "autolevel": self.autolevel, "buzzer": self.buzzer, "block_size_bytes": self.block_size,
+            "filament_left_mm": self.filament_mm,
+            "cartridge_present": cart.present if cart else None, "cartridge_colour": cart.colour if cart else None,
+            "material": self.material_name, "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
+            "network": None if net is None else {
+                "connected": net.connected, "ip": net.ip, "ssid": net.ssid, "mac": net.mac,
+                "rssi_dbm": -net.rssi if net.rssi is not None else None, "signal_percent": net.signal_percent},
+            "raw": {letter: line[2:] for letter in self.order if (line := self.line(letter)) is not None},
         }
-        return out
 
 
-def _plain(value: Any) -> Any:
-    if hasattr(value, "__dataclass_fields__"):
-        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
-    if isinstance(value, tuple):
-        return [_plain(v) for v in value]
-    return value
+def _calibration_ints(values: tuple[str, ...] | None) -> list[int | None] | None:
+    """Calibration readings as integers (None for a reading that is not a number)."""
+    if values is None:
+        return None
+    out: list[int | None] = []
+    for value in values:
+        try:
+            out.append(round(float(value)))
+        except (ValueError, OverflowError):
+            out.append(None)
+    return out

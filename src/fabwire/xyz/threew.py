@@ -631,12 +631,11 @@ def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: P
 def _source(data_or_path: bytes | str | Path) -> Iterator[tuple[BinaryIO, str]]:
     """The .3w bytes (decoded first when they are base64 text) and how to name them in messages."""
     if isinstance(data_or_path, bytes | bytearray | memoryview):
-        yield BytesIO(intake.threew_bytes(bytes(data_or_path), "the data")), "the data"
+        yield BytesIO(intake.plain_bytes(bytes(data_or_path), "the data")), "the data"
         return
     path = Path(data_or_path)
     kind, _head = intake.sniff(path)
-    with intake.open_3w(path, intake.Kind.THREEW_BASE64 if kind is intake.Kind.THREEW_BASE64
-                        else intake.Kind.THREEW) as source:
+    with intake.decoded_file(path, kind) as source:
         yield source, str(path)
 
 

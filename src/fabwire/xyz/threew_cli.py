@@ -12,6 +12,7 @@ import click
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 from rich.table import Table
 
+from fabwire import units
 from fabwire.cli_support import App
 from fabwire.errors import InputError
 from fabwire.xyz import intake
@@ -52,13 +53,6 @@ def _progress(app: App, label: str, size: int) -> Iterator[ProgressCallback | No
         yield update
 
 
-def _duration(seconds: int | None) -> str:
-    if seconds is None:
-        return "?"
-    hours, rest = divmod(seconds, 3600)
-    return f"{hours}h {rest // 60:02d}m" if hours else f"{rest // 60}m {rest % 60:02d}s"
-
-
 def _model_data(model: PrinterModel | None) -> dict[str, Any] | None:
     if model is None:
         return None
@@ -79,8 +73,7 @@ def _info_data(info: ThreeWInfo) -> dict[str, Any]:
 
 
 def metadata_summary(info: ThreeWInfo) -> str:
-    filament = "?" if info.filament_mm is None else f"{info.filament_mm / 1000:.2f} m"
-    return (f"print time {_duration(info.print_time_s)}, filament {filament}, "
+    return (f"print time {units.duration(info.print_time_s)}, filament {units.filament(info.filament_mm)}, "
             f"{info.layers if info.layers is not None else '?'} layers")
 
 
@@ -114,21 +107,28 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
     A .3w source with a .3w destination is re-targeted (e.g. for another model or format).
     """
     app = _app(ctx)
-    size = _size(src)
     container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
     writing = dst.suffix.lower() == ".3w"
     kind, head = intake.sniff(src)
     intake.require_printable(kind, str(src), head)
-    if kind is not intake.Kind.GCODE:
+    with intake.decoded_path(src, kind) as plain:
+        _convert(app, src, plain, kind.decoded, dst, writing, model_text, container, zipped)
+
+
+def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
+             container: Literal[2, 5] | None, zipped: bool | None) -> None:
+    """Convert `plain` (the source with any base64 layer decoded) of `kind` THREEW or GCODE."""
+    size = _size(plain)
+    if kind is intake.Kind.THREEW:
         if not writing:
-            if model_text or file_format or zipped is not None:
+            if model_text or container or zipped is not None:
                 raise InputError("--model, --format and --zip only apply when writing a .3w file")
             with _progress(app, f"decoding {src.name}", size) as progress:
-                info = convert_3w_to_gcode(src, dst, progress)
+                info = convert_3w_to_gcode(plain, dst, progress)
             _warn_crc(app, src, info)
             _report(app, "3w-to-gcode", src, dst, info)
             return
-        source_info = inspect_3w(src)
+        source_info = inspect_3w(plain)
         _warn_crc(app, src, source_info)
         model = find_model(model_text) if model_text else source_info.model
         if model is None:
@@ -136,7 +136,7 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
         with tempfile.TemporaryDirectory(dir=dst.parent if dst.parent.is_dir() else None) as scratch:
             middle = Path(scratch) / "source.gcode"
             with _progress(app, f"decoding {src.name}", size) as progress:
-                convert_3w_to_gcode(src, middle, progress)
+                convert_3w_to_gcode(plain, middle, progress)
             with _progress(app, f"encoding {dst.name}", _size(middle)) as progress:
                 info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress)
         _report(app, "3w-to-3w", src, dst, info)
@@ -146,7 +146,7 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
                          "(name the output *.3w to make a print file)")
     model = find_model(model_text or "dv1MX0A000")
     with _progress(app, f"encoding {dst.name}", size) as progress:
-        info = convert_gcode_file(src, dst, model, container=container, zipped=zipped, progress=progress)
+        info = convert_gcode_file(plain, dst, model, container=container, zipped=zipped, progress=progress)
     _report(app, "gcode-to-3w", src, dst, info)
 
 
@@ -169,11 +169,13 @@ def info(ctx: click.Context, file: Path) -> None:
     app = _app(ctx)
     size = _size(file)
     kind, head = intake.sniff(file)
-    if intake.require_printable(kind, str(file), head) is intake.Kind.GCODE:
-        _gcode_info(app, file)
-        return
-    with _progress(app, f"checking {file.name}", size) as progress:
-        details = inspect_3w(file, progress)
+    intake.require_printable(kind, str(file), head)
+    with intake.decoded_path(file, kind) as plain:
+        if kind.decoded is intake.Kind.GCODE:
+            _gcode_info(app, plain, file)
+            return
+        with _progress(app, f"checking {file.name}", size) as progress:
+            details = inspect_3w(plain, progress)
     data = {"file": str(file), "size": size, **_info_data(details)}
 
     def human() -> None:
@@ -191,7 +193,7 @@ def info(ctx: click.Context, file: Path) -> None:
         table.add_row("crc", f"{details.crc_stored:08x} {crc}")
         table.add_row("model", f"{model.name} ({model.model_number})" if model
                       else f"unknown (machine {details.machine!r})")
-        table.add_row("print time", _duration(details.print_time_s))
+        table.add_row("print time", units.duration(details.print_time_s))
         table.add_row("filament", "?" if details.filament_mm is None else f"{details.filament_mm:.2f} mm")
         table.add_row("layers", str(details.layers) if details.layers is not None else "?")
         for key, value in details.fields.items():
@@ -202,8 +204,8 @@ def info(ctx: click.Context, file: Path) -> None:
     app.output.result(data, human)
 
 
-def _gcode_info(app: App, file: Path) -> None:
-    stated, computed = gcode_metadata(file)
+def _gcode_info(app: App, plain: Path, file: Path) -> None:
+    stated, computed = gcode_metadata(plain)
     final: GcodeMetadata = finish(stated, computed)
 
     def source(value: object) -> str:
@@ -215,5 +217,5 @@ def _gcode_info(app: App, file: Path) -> None:
             "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources}
     filament = f"{final.filament_mm:.2f} mm" if final.filament_mm is not None else "?"
     app.output.result(data, f"{file}: G-code from {stated.slicer or 'an unknown slicer'}; print time "
-                            f"{_duration(final.print_time_s)} ({sources['print_time_s']}), filament "
+                            f"{units.duration(final.print_time_s)} ({sources['print_time_s']}), filament "
                             f"{filament} ({sources['filament_mm']}), {final.layers} layers ({sources['layers']})")

@@ -26,7 +26,12 @@ _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
 def _printable_ascii(text: str) -> bool:
-    return text.isascii() and text.isprintable()
+    return text.isascii() and text.isprintable() and not _starts_a_command(text)
+
+
+def _starts_a_command(text: str) -> bool:
+    """`XYZv3/` inside a value would start a new command for the printer's splitter."""
+    return "XYZv3/" in text
 
 
 def upload_name(text: str) -> str:
@@ -59,7 +64,8 @@ def printer_name(text: str) -> str:
 def ssid(text: str) -> str:
     """A Wi-Fi network name: 1-32 bytes of UTF-8, printable, without `,` or brackets (the command's delimiters)."""
     size = len(text.encode("utf-8", "surrogatepass"))
-    if not text or size > SSID_LIMIT or not text.isprintable() or any(c in text for c in ",[]"):
+    if (not text or size > SSID_LIMIT or not text.isprintable() or any(c in text for c in ",[]")
+            or _starts_a_command(text)):
         raise InputError(f"Wi-Fi network name {text!r} must be 1-{SSID_LIMIT} bytes of printable text without "
                          "',' or brackets")
     _utf8(text, "Wi-Fi network name")
@@ -67,10 +73,11 @@ def ssid(text: str) -> str:
 
 
 def wifi_password(text: str) -> str:
-    """A WPA passphrase (8-63 printable ASCII characters) or 64 hex digits, or empty for an open network; never
-    `,` or brackets, which end the command's fields."""
-    if text and not (8 <= len(text) <= 63 and _printable_ascii(text)) and not re.fullmatch(r"[0-9A-Fa-f]{64}", text):
-        raise InputError("Wi-Fi password must be 8-63 printable ASCII characters (or 64 hex digits)")
+    """A Wi-Fi key: up to 63 printable ASCII characters (WPA passphrases are 8-63, WEP keys 5 or 13) or 64 hex
+    digits, or empty for an open network; never `,` or brackets, which end the command's fields."""
+    if len(text) > 64 or (len(text) == 64 and not re.fullmatch(r"[0-9A-Fa-f]{64}", text)) or (
+            text and not _printable_ascii(text)):
+        raise InputError("Wi-Fi password must be up to 63 printable ASCII characters (or 64 hex digits)")
     if any(c in text for c in ",[]"):
         raise InputError("the printer cannot take a Wi-Fi password containing ',' or brackets")
     return text

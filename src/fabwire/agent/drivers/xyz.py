@@ -77,6 +77,9 @@ class XYZDriver(Driver):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.printer: XYZPrinter | None = None
+        self._last: tuple[Status, dict[str, Any], dict[str, Any]] | None = None
+        """The previous poll's status and its two views: an idle printer answers the same each second, and
+        converting it again would cost as much as the poll itself."""
 
     def _client(self) -> XYZPrinter:
         if self.printer is None:
@@ -91,7 +94,9 @@ class XYZDriver(Driver):
 
     async def poll(self) -> tuple[dict[str, Any] | None, dict[str, Any]]:
         status = await self._client().status()
-        return status.to_dict(), printer_summary(status)
+        if self._last is None or self._last[0] != status:
+            self._last = (status, status.to_dict(), printer_summary(status))
+        return self._last[1], self._last[2]
 
     async def close(self) -> None:
         printer, self.printer = self.printer, None

@@ -128,15 +128,17 @@ function chart(samples, now) {
   const svg = el("svg:svg", {class: "chart", viewBox: `0 0 ${width} ${height}`, preserveAspectRatio: "none",
     role: "img", "aria-label": "temperatures against targets, last ten minutes"});
   const recent = samples.filter((s) => now - s.t <= CHART_WINDOW_S);
+  // the window grows with the history it has, from two minutes to ten, so a fresh curve is not squashed
+  const span = Math.min(CHART_WINDOW_S, Math.max(120, recent.length ? now - recent[0].t : 0));
   const values = recent.flatMap((s) => [s.e, s.et, s.b, s.bt]).filter((v) => v !== null && v !== undefined);
   const top = Math.max(40, Math.ceil((Math.max(0, ...values) + 10) / 40) * 40);
-  const x = (t) => left + (width - left - 2) * (1 - (now - t) / CHART_WINDOW_S);
+  const x = (t) => left + (width - left - 2) * (1 - (now - t) / span);
   const y = (v) => (height - bottom) * (1 - v / top) + 2;
   for (let v = 0; v <= top; v += top / 4) {
     svg.append(el("svg:line", {class: "grid", x1: left, x2: width, y1: y(v), y2: y(v)}),
       el("svg:text", {x: 2, y: y(v) + 3}, `${Math.round(v)}°`));
   }
-  svg.append(el("svg:text", {x: left, y: height - 2}, "−10 min"), el("svg:text", {x: width - 24, y: height - 2}, "now"));
+  svg.append(el("svg:text", {x: left, y: height - 2}, `−${Math.round(span / 60)} min`), el("svg:text", {x: width - 24, y: height - 2}, "now"));
   for (const [key, cls] of [["et", "extruder-target"], ["bt", "bed-target"], ["e", "extruder"], ["b", "bed"]]) {
     const points = recent.filter((s) => s[key] !== null && s[key] !== undefined)
       .map((s) => `${x(s.t).toFixed(1)},${y(s[key]).toFixed(1)}`);
@@ -355,6 +357,7 @@ async function loadDevices() {
     card.device = device; card.state = device.state;
     render(card);
   }
+  performance.mark("fabwire-cards");  // first meaningful paint: every machine on the page
   for (const card of cards.values()) {
     loadHistory(card).catch(() => {});
     loadDrawing(card).catch(() => {});

@@ -107,22 +107,17 @@ def fit_into_area(lines: Polylines, *, margin: float = 0.0, full: bool = False) 
     x0, y0, x1, y1 = bbox(lines)
     scale, box = fit_scale(lines, margin=margin, full=full)
     m = scale_translate(float(scale), box.cx - (x0 + x1) / 2 * scale, box.cy - (y0 + y1) / 2 * scale)
-    placed = affine(lines, m)
-    # The box was checked on a sampled outline: shrink a little in the rare case a corner still grazes out.
+    # Every line lies in the drawing's placed bounding rectangle, and a rectangle is convex: when its outline is
+    # inside the area, so is all of the drawing. The box was checked on a sampled outline, so check the placed
+    # rectangle finely and shrink a little in the rare case a corner still grazes out.
     for _ in range(8):
-        out = lines_outside(placed) + _dots_outside(placed)
-        if out == 0:
+        corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]) @ m[:, :2].T + m[:, 2]
+        if bool(reachable_mask(corners[:, 0], corners[:, 1]).all()) and outside_length(corners, step=0.5) == 0:
             break
         shrink = np.array([[0.99, 0.0, box.cx * 0.01], [0.0, 0.99, box.cy * 0.01]])
         m = compose(shrink, m)
         scale *= 0.99
-        placed = affine(lines, m)
-    return placed, Placement(m, float(scale), box, 0.0)
-
-
-def _dots_outside(lines: Polylines) -> int:
-    pts = np.concatenate(lines)
-    return int(np.count_nonzero(~reachable_mask(pts[:, 0], pts[:, 1])))
+    return affine(lines, m), Placement(m, float(scale), box, 0.0)
 
 
 def check_placed(lines: Polylines, *, clip: bool) -> tuple[Polylines, float]:

@@ -8,6 +8,7 @@ import hashlib
 import io
 import sys
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -55,15 +56,26 @@ class Drawing:
         return _svg_drawing(self.name, self.data, self.digest, tolerance)
 
 
+def _read_limited(read: Callable[[int], bytes]) -> bytes:
+    """Up to MAX_INPUT + 1 bytes, read in pieces so memory follows what is there, not the limit."""
+    out = bytearray()
+    while len(out) <= MAX_INPUT:
+        piece = read(1 << 20)
+        if not piece:
+            break
+        out += piece
+    return bytes(out)
+
+
 def _read_bytes(source: str | Path) -> tuple[str, bytes]:
     if str(source) == STDIN:
-        data = sys.stdin.buffer.read(MAX_INPUT + 1)
+        data = _read_limited(sys.stdin.buffer.read)
         name = "standard input"
     else:
         name = str(source)
         try:
             with Path(source).open("rb") as fh:
-                data = fh.read(MAX_INPUT + 1)
+                data = _read_limited(fh.read)
         except FileNotFoundError as exc:
             raise InputError(f"{name}: no such file") from exc
         except IsADirectoryError as exc:
@@ -78,7 +90,7 @@ def _read_bytes(source: str | Path) -> tuple[str, bytes]:
 def _gunzip(name: str, data: bytes) -> bytes:
     try:
         with gzip.GzipFile(fileobj=io.BytesIO(data)) as fh:
-            out = fh.read(MAX_INPUT + 1)
+            out = _read_limited(fh.read)
     except (OSError, EOFError, zlib.error) as exc:
         raise InputError(f"{name}: not a readable gzip file ({exc})") from exc
     if len(out) > MAX_INPUT:

@@ -463,6 +463,38 @@ def optimise(
         return cleaned
     starts = np.array([line[0] for line in cleaned], dtype=float)
     ends = np.array([line[-1] for line in cleaned], dtype=float)
+    began = time.perf_counter()
     order, flips = greedy_order(starts, ends, origin)
-    order, flips = improve(starts, ends, order, flips, origin, time_budget=time_budget)
-    return arrange(cleaned, order, flips)
+    order, flips = improve(starts, ends, order, flips, origin, time_budget=time_budget * 0.9)
+    ordered = arrange(cleaned, order, flips)
+    left = time_budget - (time.perf_counter() - began)
+    return _reorder_runs(ordered, origin, left) if left > 0 else ordered
+
+
+def _reorder_runs(lines: Polylines, origin: tuple[float, float], time_budget: float) -> Polylines:
+    """Order again at a coarser grain: runs of lines joined by short hops (a hatched patch, a word) move as one
+    piece, either way round. Moves of single lines cannot carry a patch of many lines across the page; this
+    can. Kept only when it shortens the travel."""
+    starts = np.array([line[0] for line in lines])
+    ends = np.array([line[-1] for line in lines])
+    hops = np.hypot(*(starts[1:] - ends[:-1]).T)
+    if len(hops) < 3:
+        return lines
+    short = max(10 * RESOLUTION, 2 * float(np.median(hops)))
+    cuts = np.flatnonzero(hops > short) + 1
+    bounds = [0, *cuts.tolist(), len(lines)]
+    runs = [(bounds[k], bounds[k + 1]) for k in range(len(bounds) - 1)]
+    if not 3 <= len(runs) < len(lines):
+        return lines
+    run_starts = np.array([starts[a] for a, _ in runs])
+    run_ends = np.array([ends[b - 1] for _, b in runs])
+    order, flips = greedy_order(run_starts, run_ends, origin)
+    order, flips = improve(run_starts, run_ends, order, flips, origin, time_budget=time_budget)
+    out: Polylines = []
+    for index, flip in zip(order.tolist(), flips.tolist(), strict=True):
+        a, b = runs[index]
+        if flip:
+            out.extend(line[::-1] for line in reversed(lines[a:b]))
+        else:
+            out.extend(lines[a:b])
+    return out if travel_length(out, origin) < travel_length(lines, origin) else lines

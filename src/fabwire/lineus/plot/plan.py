@@ -27,6 +27,8 @@ from fabwire.lineus.plot.geometry import (
     segment_count,
 )
 from fabwire.lineus.plot.intake import FLATTEN_TOLERANCE, Drawing, read_drawing
+from fabwire.lineus.plot.intake import PAGE_ORIGIN as PAGE_ORIGIN
+from fabwire.lineus.plot.intake import SVG_UNITS_PER_PX as SVG_UNITS_PER_PX
 from fabwire.lineus.plot.optimize import RESOLUTION, optimise, travel_length
 from fabwire.lineus.plot.text import DEFAULT_FONT, text_lines
 
@@ -271,11 +273,12 @@ def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float
     The rotation is applied before the size is checked against the area; InputError names the largest size that
     fits when the text does not.
     """
+    notes: list[str] = []
     if size_mm is None:
-        return plan_lines(text_lines(text, font=font), options, fit_default=True)
+        return plan_lines(text_lines(text, font=font, notes=notes), options, fit_default=True, notes=notes)
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise InputError(f"the text size must be a positive number of mm, got {size_mm:g}")
-    lines = text_lines(text, font=font, cap_height=size_mm * UNITS_PER_MM)
+    lines = text_lines(text, font=font, cap_height=size_mm * UNITS_PER_MM, notes=notes)
     degrees = auto_rotation(lines, options) if options.rotate_auto else options.rotate_deg
     if degrees % 360:
         lines = affine(lines, _rotation_about_centre(lines, degrees))
@@ -293,4 +296,4 @@ def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float
         )
     placed = affine(lines, scale_translate(1.0, box.cx - (x0 + x1) / 2, box.cy - (y0 + y1) / 2))
     unfit = replace(options, fit=False, rotate_deg=0.0, rotate_auto=False, clip=False)
-    return plan_lines(placed, unfit, fit_default=False)
+    return plan_lines(placed, unfit, fit_default=False, notes=notes)

@@ -159,15 +159,17 @@ class _Reader:
 
     def check_expansion(self) -> None:
         """Count the shape copies `<use>` makes before drawing any, refusing cycles and fan-out bombs."""
-        weights: dict[int, int] = {}
+        weights: dict[tuple[int, bool], int] = {}
 
-        def weight(el: ET.Element, stack: tuple[str, ...], depth: int) -> int:
+        def weight(el: ET.Element, stack: tuple[str, ...], depth: int, used: bool) -> int:
+            """Shapes drawn for `el`; `used` when reached through a <use> (symbols are drawn only so)."""
             if depth > MAX_DEPTH:
                 raise InputError(f"{self.name}: elements or <use> references nested deeper than {MAX_DEPTH}")
-            key = id(el)
+            key = (id(el), used)
             if key in weights:
                 return weights[key]
             tag = local(el.tag)
+            total = 0
             if tag in SHAPES:
                 total = 1
             elif tag == "use":
@@ -175,21 +177,21 @@ class _Reader:
                 target = self.ids.get(ref) if ref else None
                 if ref in stack:
                     raise InputError(f"{self.name}: <use> refers back to itself through #{ref}")
-                total = weight(target, (*stack, ref), depth + 1) if target is not None and ref else 0
-            else:
-                total = 0
+                if target is not None and ref:
+                    total = weight(target, (*stack, ref), depth + 1, True)
+            elif tag in CONTAINERS or (tag == "symbol" and used):
                 for child in el:
-                    total += weight(child, stack, depth + 1)
+                    total += weight(child, stack, depth + 1, False)
                     if total > MAX_USE_COPIES * 64:
                         break
             weights[key] = total
             return total
 
         direct = sum(1 for el in self.root.iter() if local(el.tag) in SHAPES)
-        total = weight(self.root, (), 0)
+        total = weight(self.root, (), 0, False)
         if total - direct > MAX_USE_COPIES:
-            raise InputError(f"{self.name}: <use> elements expand the drawing to {total:,} shapes from {direct:,}; "
-                             f"refusing more than {MAX_USE_COPIES:,} copies")
+            raise InputError(f"{self.name}: <use> elements copy its {direct:,} shapes more than {MAX_USE_COPIES:,} "
+                             "times; refusing such an expansion")
 
     def report(self) -> list[str]:
         notes = [f"{what} ({count}x)" if count > 1 else what for what, count in sorted(self.unsupported.items())]
@@ -208,8 +210,9 @@ class _Reader:
     def children(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
                  out: Polylines, depth: int, uses: tuple[str, ...]) -> None:
         kids: Iterator[ET.Element] = iter(el)
-        if local(el.tag) == "switch":  # the first child that qualifies; fabwire meets no test attributes
-            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE][:1])
+        if local(el.tag) == "switch":  # the first child that qualifies; no extension is supported (SVG 1.1 §5.8.2)
+            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE
+                         and not (k.get("requiredExtensions") or "").strip()][:1])
         for child in kids:
             self.element(child, style, matrix, viewport, out, depth + 1, uses)
 
@@ -223,7 +226,11 @@ class _Reader:
         style = inherit(parent, own)
         if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
             return
-        matrix = then(matrix, transform(el.get("transform")))
+        try:
+            matrix = then(matrix, transform(el.get("transform")))
+        except ValueError:
+            self.unsupported[f"<{tag}> elements with a transform that is not finite are left out"] += 1
+            return
         target: Polylines = []
         if tag in SHAPES:
             self.shape(el, tag, style, matrix, viewport, target)
@@ -334,6 +341,7 @@ class _Reader:
                 continue  # a lone moveto is never stroked
             pts = sub.points
             if not np.isfinite(pts).all():
+                self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
             if bool((pts == pts[0]).all()):
                 if dots:

@@ -173,7 +173,8 @@ class PathBuilder:
     def _flush(self, *, closed: bool) -> None:
         if self._buf:
             user = np.frombuffer(self._buf, dtype=float).reshape(-1, 2)
-            out = user @ self.matrix[:, :2].T + self.matrix[:, 2]
+            with np.errstate(invalid="ignore", over="ignore"):  # non-finite points are dropped by the reader
+                out = user @ self.matrix[:, :2].T + self.matrix[:, 2]
             self.subpaths.append(Subpath(out, closed, self._segments))
         self._buf = array("d")
         self._segments = 0
@@ -195,8 +196,8 @@ def _arc_points(p0: tuple[float, float], rx: float, ry: float, rotation: float, 
     x2, y2 = end
     if (x1, y1) == (x2, y2):
         return np.empty((0, 2))
-    if rx == 0 or ry == 0:
-        return np.array([end], dtype=float)
+    if not (rx * rx * ry * ry > 0 and math.isfinite(rx * ry)):
+        return np.array([end], dtype=float)  # a zero (or unusable) radius is a straight line (SVG 1.1 F.6.2)
     phi = math.radians(rotation % 360)
     cos_p, sin_p = math.cos(phi), math.sin(phi)
     dx, dy = (x1 - x2) / 2, (y1 - y2) / 2

@@ -1,0 +1,77 @@
+"""Line-us plans side by side with vpype's own ordering: the same samples, read and placed by a vpype pipeline
+(`read … lineus-fit`), then ordered by fabwire's optimiser (1 s budget) or by vpype's `linesort` (greedy, and
+`--two-opt`, also after `linemerge`) and costed by the same Line-us plan figures: pen-up travel from home and the
+estimated drawing time (fabwire also drops points closer than 0.05 mm, which the Line-us cannot draw apart:
+that, more than the order, is where its time estimate gains on dense curves)."""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+import vpype_cli
+
+from bench_lineus_plot import circles, hatching, sketch, stipple, text_page
+from common import Figure, cpu_seconds
+from fabwire.lineus.kinematics import UNITS_PER_MM
+from fabwire.lineus.plot import PlanFigures, PlanOptions
+from fabwire.vpype.passes import document_passes, plan_passes, total_figures
+
+BUDGET = 1.0
+T = TypeVar("T")
+VPYPE_ORDERINGS = {
+    "linesort": "linesort",
+    "linesort --two-opt": "linesort --two-opt",
+    "linemerge linesort --two-opt": "linemerge linesort --two-opt",
+}
+
+
+def _figures(document: Any, options: PlanOptions) -> PlanFigures:
+    return total_figures(plan_passes(document_passes(document), options))
+
+
+def _measured(func: Callable[[], T]) -> tuple[T, float]:
+    """`func()` and the CPU seconds it took."""
+    out: list[T] = []
+    cpu = cpu_seconds(lambda: out.append(func()))
+    return out[0], cpu
+
+
+def run() -> list[Figure]:
+    figures: list[Figure] = []
+    rng = np.random.default_rng(2024)
+    samples = {
+        "scribbles": sketch(rng, 800, 6),
+        "stipple": stipple(rng),
+        "circles": circles(rng),
+        "hatching": hatching(rng),
+        "text page": text_page(),
+    }
+    as_placed = PlanOptions(fit=False, optimize=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, text in samples.items():
+            path = Path(tmp) / f"{name.replace(' ', '_')}.svg"
+            path.write_text(text)
+            placed = vpype_cli.execute(f"read {path} lineus-fit")
+            fab, our_cpu = _measured(lambda doc=placed: _figures(doc, PlanOptions(fit=False, time_budget=BUDGET)))
+            for label, pipeline in VPYPE_ORDERINGS.items():
+                ordered, cpu = _measured(lambda pipe=pipeline, doc=placed: vpype_cli.execute(pipe, doc))
+                other = _figures(ordered, as_placed)
+                figures.append(Figure(f"{name}: pen-up travel, fabwire vs {label}", fab.pen_up_travel / UNITS_PER_MM,
+                                      "mm", f"<= {label}", fab.pen_up_travel <= other.pen_up_travel,
+                                      other.pen_up_travel / UNITS_PER_MM, label))
+                figures.append(Figure(f"{name}: est. time, fabwire vs {label}", fab.estimated_seconds, "s",
+                                      baseline=other.estimated_seconds, baseline_name=label))
+                if label == "linesort --two-opt":
+                    figures.append(Figure(f"{name}: ordering CPU, fabwire vs {label}", our_cpu, "s",
+                                          f"<= {BUDGET:g} s budget + 0.5", our_cpu <= BUDGET + 0.5, cpu, label))
+    return figures
+
+
+if __name__ == "__main__":
+    for figure in run():
+        ratio = f"  ({figure.ratio:.3f} × {figure.baseline_name})" if figure.ratio else ""
+        print(f"{figure.name:60s} {figure.value:10.2f} {figure.unit:3s} {figure.meets_target}{ratio}")

@@ -1,0 +1,183 @@
+"""`fabwire devices list|show|add|remove`: the named devices in devices.toml.
+
+Edits keep the rest of the file as the user wrote it (comments, order): `add` appends a section, `remove` cuts one,
+and the result is validated by the schema before it replaces the file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+import msgspec
+
+from fabwire.cli_support import App, pass_app
+from fabwire.config import SCHEMAS, NamedDevice, closest, config_path, load_devices, parse_devices, section_lines
+from fabwire.devices import KINDS
+from fabwire.errors import ConfigError, InputError
+
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def _toml_key(name: str) -> str:
+    return name if _BARE_KEY.match(name) else json.dumps(name)
+
+
+def _toml_value(value: Any) -> str:
+    """A scalar or list of the schema's types as TOML (JSON's string escapes are TOML's too)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return json.dumps(str(value), ensure_ascii=False)
+
+
+def _parse_setting(text: str) -> tuple[str, Any]:
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise InputError(f"--set takes KEY=VALUE, not {text!r}")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except (tomllib.TOMLDecodeError, RecursionError, ValueError):
+        value = raw.strip()  # a plain word: a string
+    return key, value
+
+
+def _write(path: Path, text: str) -> None:
+    """Validate, then replace the file atomically (a crash leaves the old or the new file, never half)."""
+    parse_devices(text, path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".devices-", suffix=".toml", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as stream:
+            stream.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _read(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return ""
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read config file {path}: {exc}") from exc
+
+
+def _row(device: NamedDevice) -> dict[str, Any]:
+    return {"name": device.name, "kind": device.kind.name, "url": device.settings.url, "default": device.default}
+
+
+def _find(devices: dict[str, NamedDevice], name: str, path: Path) -> NamedDevice:
+    if name not in devices:
+        raise ConfigError(f"no device named {name!r} in {path}{closest(name, devices)}")
+    return devices[name]
+
+
+@click.group()
+def devices() -> None:
+    """Named devices (devices.toml): -d NAME uses one, and its settings apply to every command."""
+
+
+@devices.command("list")
+@pass_app
+def list_cmd(app: App) -> None:
+    """List the configured devices."""
+    path = config_path()
+    found = load_devices(path)
+    rows = [_row(d) for d in found.values()]
+
+    def human() -> None:
+        if not rows:
+            app.output.out.print(f"no devices configured (add one with `fabwire devices add`; file {path})")
+            return
+        width = max(len(r["name"]) for r in rows)
+        for r in rows:
+            mark = "  (default)" if r["default"] else ""
+            app.output.out.print(f"{r['name']:<{width}}  {r['kind']:<6}  {r['url']}{mark}")
+
+    app.output.result(rows, human)
+
+
+@devices.command("show")
+@click.argument("name")
+@pass_app
+def show(app: App, name: str) -> None:
+    """Show every setting of device NAME (defaults included)."""
+    path = config_path()
+    device = _find(load_devices(path), name, path)
+    settings = msgspec.to_builtins(device.settings)
+    first = {"name": name, "kind": device.kind.name, "url": settings.pop("url"), "default": settings.pop("default")}
+    data = {**first, **settings}
+    lines = [f"{key} = {'(not set)' if value is None else _toml_value(value)}"
+             for key, value in data.items() if key != "name"]
+    app.output.result(data, "\n".join([f"[devices.{_toml_key(name)}]", *lines]))
+
+
+@devices.command("add")
+@click.argument("name")
+@click.argument("url")
+@click.option("--kind", "kind_name", required=True, type=click.Choice(sorted(KINDS)), help="The device kind.")
+@click.option("--default", "is_default", is_flag=True, help="Use it when -d is not given.")
+@click.option("--set", "settings", multiple=True, metavar="KEY=VALUE",
+              help="A setting of the kind, e.g. speed=50 or link=wifi (repeat).")
+@pass_app
+def add(app: App, name: str, url: str, kind_name: str, is_default: bool, settings: tuple[str, ...]) -> None:
+    """Name the device at URL (any address -d takes), with its settings."""
+    if not name or "\n" in name or len(name) > 64:
+        raise InputError("a device name is 1 to 64 characters on one line")
+    path = config_path()
+    text = _read(path)
+    existing = parse_devices(text, path) if text else {}
+    if name in existing:
+        raise ConfigError(f"{path} already has a device named {name!r}: remove it first")
+    values: dict[str, Any] = {"kind": kind_name, "url": url}
+    if is_default:
+        values["default"] = True
+    for item in settings:
+        key, value = _parse_setting(item)
+        if key in ("kind", "url", "default"):
+            raise InputError(f"give {key} as an argument or option, not with --set")
+        values[key] = value
+    schema = SCHEMAS[kind_name]
+    unknown = [k for k in values if k != "kind" and k not in schema.__struct_fields__]
+    if unknown:
+        raise InputError(f"{KINDS[kind_name].title} has no setting {unknown[0]!r}"
+                         f"{closest(unknown[0], schema.__struct_fields__)}")
+    section = f"[devices.{_toml_key(name)}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items())
+    separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
+    _write(path, text + separator + section)
+    app.output.result({"added": name, "file": str(path)}, f"added {name} to {path}")
+
+
+@devices.command("remove")
+@click.argument("name")
+@pass_app
+def remove(app: App, name: str) -> None:
+    """Forget device NAME (the rest of the file stays as it is)."""
+    path = config_path()
+    text = _read(path)
+    _find(parse_devices(text, path) if text else {}, name, path)
+    lines = text.splitlines(keepends=True)
+    headers = section_lines(text)
+    if name not in headers:
+        raise ConfigError(f"{name!r} is not written as a [devices.NAME] section in {path}: edit the file by hand")
+    start = headers[name] - 1
+    end = start + 1
+    while end < len(lines) and not lines[end].lstrip().startswith("["):
+        end += 1
+    while end < len(lines) and end > start + 1 and lines[end - 1].lstrip().startswith(("#", "\n")):
+        end -= 1  # comments just above the next section belong to it
+    _write(path, "".join(lines[:start] + lines[end:]))
+    app.output.result({"removed": name, "file": str(path)}, f"removed {name} from {path}")

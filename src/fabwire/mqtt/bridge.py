@@ -1,0 +1,385 @@
+"""The MQTT bridge of `fabwire serve --mqtt URL`: publishes each device's state, availability, events and Home
+Assistant discovery, and runs the commands sent to it (topic layout in `fabwire.mqtt.topics`).
+
+Several agents may share a broker and even a device: each claims the devices it monitors, and only a device's
+owner (see `fabwire.mqtt.fleet_view`) publishes it and runs its commands. The broker sets an agent's status to
+"offline" through the last will when the agent dies; a lost broker is retried with backoff, and everything is
+republished on reconnection and whenever Home Assistant announces itself online.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import secrets
+import socket
+from collections.abc import Awaitable, Callable
+from typing import Any, Protocol
+
+import aiomqtt
+from aiomqtt.exceptions import MqttConnectError
+
+from fabwire import __version__
+from fabwire.errors import LinkError
+from fabwire.mqtt.commands import CommandRunner
+from fabwire.mqtt.discovery import discovery_payload
+from fabwire.mqtt.fleet_view import FleetView
+from fabwire.mqtt.topics import (
+    HA_STATUS,
+    OFFLINE,
+    ONLINE,
+    OUTGOING_CALLS,
+    PREFIX,
+    Broker,
+    agent_topic,
+    claim_topic,
+    default_agent_id,
+    device_topic,
+    discovery_topic,
+    parse_broker,
+    split_device_topic,
+)
+
+log = logging.getLogger("fabwire.mqtt")
+BACKOFF = (0.5, 15.0)
+SYNC_TIMEOUT = 3.0
+"""Longest wait for the broker's retained claims before this agent decides what it owns."""
+DEVICE_SCAN_S = 1.0
+"""How often the agent's device list is compared with what was published (added and removed devices)."""
+
+
+class AgentLike(Protocol):
+    """What the bridge uses of `fabwire.agent.core.Agent`."""
+
+    @property
+    def state_dir(self) -> Any: ...
+
+    def devices(self) -> list[Any]: ...
+
+    def state(self, device_id: str) -> dict[str, Any]: ...
+
+    def subscribe(self, device_id: str | None = None) -> Any: ...
+
+    async def act(self, device_id: str, action: str, params: dict[str, Any]) -> dict[str, Any]: ...
+
+
+def _dump(value: Any) -> bytes:
+    return json.dumps(value, separators=(",", ":"), default=str).encode()
+
+
+class Bridge:
+    def __init__(self, agent: AgentLike, broker: Broker, agent_id: str, *,
+                 backoff: tuple[float, float] = BACKOFF) -> None:
+        self.agent = agent
+        self.broker = broker
+        self.agent_id = agent_id
+        self.backoff = backoff
+        self.view = FleetView()
+        self.known: dict[str, dict[str, Any]] = {}
+        """Devices this agent monitors and has claimed: id → DeviceInfo as a dict."""
+        self.owned: set[str] = set()
+        self.runner = CommandRunner(agent.act, agent_id)
+        self.states_published = 0
+        self.connected = asyncio.Event()
+        self._client: aiomqtt.Client | None = None
+        self._pending: dict[str, dict[str, Any]] = {}
+        self._availability: dict[str, str] = {}
+        """What this connection last published on each device's availability topic."""
+        self._dirty: asyncio.Queue[str] = asyncio.Queue()
+        """Devices whose newest state waits in `_pending`, oldest first (each at most once)."""
+        self._synced = asyncio.Event()
+        self._sync_token = ""
+        self._tasks: set[asyncio.Task[Any]] = set()
+
+    # ------------------------------------------------------------------------------------------ connection
+
+    async def run(self) -> None:
+        """Stay connected until cancelled; raises LinkError when the broker refuses the login."""
+        events = self.agent.subscribe(None)
+        delay = self.backoff[0]
+        try:
+            while True:
+                try:
+                    async with aiomqtt.Client(**self.broker.client_options(), identifier=f"fabwire-{self.agent_id}",
+                                              will=aiomqtt.Will(agent_topic(self.agent_id, "status"), OFFLINE,
+                                                                qos=1, retain=True)) as client:
+                        client.pending_calls_threshold = 10 * OUTGOING_CALLS  # its warning is for leaks
+                        delay = self.backoff[0]
+                        log.info("MQTT connected to %s as agent %s", self.broker.url, self.agent_id)
+                        await self._connected(client, events)
+                except MqttConnectError as exc:
+                    raise LinkError(f"MQTT broker {self.broker.url} refused the connection: {exc}") from None
+                except aiomqtt.MqttError as exc:
+                    log.warning("MQTT broker %s: %s; retrying in %.1f s", self.broker.url, exc, delay)
+                finally:
+                    self._client = None
+                    self.connected.clear()
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, self.backoff[1])
+        finally:
+            events.close()
+
+    async def _connected(self, client: aiomqtt.Client, events: Any) -> None:
+        self._client = client
+        self._synced.clear()
+        self.view = FleetView()
+        self.owned.clear()
+        self.known.clear()
+        self._availability.clear()
+        self._pending.clear()
+        self._dirty = asyncio.Queue()
+        me = self.agent_id
+        for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/device/+/claim/+", f"{PREFIX}/device/+/command",
+                      HA_STATUS, agent_topic(me, "sync")):
+            await client.subscribe(topic, qos=1)
+        await client.publish(agent_topic(me, "status"), ONLINE, qos=1, retain=True)
+        await client.publish(agent_topic(me, "info"), _dump({"agent": me, "host": socket.gethostname(),
+                                                             "version": __version__}), qos=1, retain=True)
+        self.known = self._current_devices()
+        for device in sorted(self.known):
+            await client.publish(claim_topic(device, me), b"1", qos=1, retain=True)
+        # Everything retained on the topics subscribed above reaches us before this echo: then ownership is known.
+        self._sync_token = secrets.token_hex(8)
+        await client.publish(agent_topic(me, "sync"), self._sync_token, qos=1)
+        workers = [asyncio.create_task(self._read(client)), asyncio.create_task(self._pump(events)),
+                   *(asyncio.create_task(self._publisher()) for _ in range(OUTGOING_CALLS)),
+                   asyncio.create_task(self._scan())]
+        try:
+            done, _ = await asyncio.wait(workers, return_when=asyncio.FIRST_EXCEPTION)
+            for task in done:
+                task.result()
+        except asyncio.CancelledError:
+            await self._goodbye(client)
+            raise
+        finally:
+            for task in workers:
+                task.cancel()
+                task.add_done_callback(_retrieve)
+            await asyncio.wait(workers, timeout=2.0)  # a worker still waiting ends when the client disconnects
+
+    async def _goodbye(self, client: aiomqtt.Client) -> None:
+        """A clean stop: the devices and the agent show offline (a clean disconnect sends no last will)."""
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(2.0):
+                for device in sorted(self.owned):
+                    await client.publish(device_topic(device, "availability"), OFFLINE, qos=1, retain=True)
+                await client.publish(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
+
+    async def _publish(self, topic: str, payload: str | bytes, *, retain: bool = True, qos: int = 1,
+                       properties: Any = None) -> None:
+        if self._client is None:
+            return
+        await self._client.publish(topic, payload, qos=qos, retain=retain, properties=properties)
+        # Python 3.11's wait_for (under aiomqtt's publish) can swallow a cancellation that lands as the broker
+        # acknowledges: honour it here, or a stopping bridge would wait for the next message forever.
+        task = asyncio.current_task()
+        if task is not None and task.cancelling():
+            raise asyncio.CancelledError
+
+    # ------------------------------------------------------------------------------------------ incoming
+
+    async def _read(self, client: aiomqtt.Client) -> None:
+        async for message in client.messages:
+            topic = message.topic.value
+            payload = message.payload if isinstance(message.payload, bytes) else str(message.payload or "").encode()
+            if topic == HA_STATUS:
+                if payload.strip() == ONLINE.encode():
+                    for device in sorted(self.owned):
+                        await self._publish_discovery(device)
+                continue
+            if topic == agent_topic(self.agent_id, "sync"):
+                if payload.decode("utf-8", "replace") == self._sync_token and not self._synced.is_set():
+                    self._synced.set()
+                    await self._reconcile_all()
+                    self.connected.set()
+                continue
+            parts = split_device_topic(topic)
+            if parts is not None and parts[1] == "command":
+                if parts[0] in self.known:
+                    self._spawn(self._command(parts[0], payload, message.properties))
+                continue
+            concerned = self.view.take(topic, payload)
+            if not self._synced.is_set():
+                continue
+            if concerned is not None:
+                await self._reconcile(concerned)
+            else:
+                await self._reconcile_all()
+
+    async def _command(self, device: str, payload: bytes, properties: Any) -> None:
+        await self.connected.wait()  # a command that comes while ownership is being settled waits for it
+        if device not in self.owned:
+            return
+        reply = await self.runner.handle(device, payload)
+        if reply is None:
+            return
+        body = _dump(reply)
+        await self._publish(device_topic(device, "reply"), body, retain=False)
+        response_topic = getattr(properties, "ResponseTopic", None) if properties is not None else None
+        if response_topic:
+            from paho.mqtt.packettypes import PacketTypes
+            from paho.mqtt.properties import Properties
+
+            answer = Properties(PacketTypes.PUBLISH)  # type: ignore[no-untyped-call]
+            correlation = getattr(properties, "CorrelationData", None)
+            if correlation:
+                answer.CorrelationData = correlation
+            await self._publish(str(response_topic), body, retain=False, properties=answer)
+
+    def _spawn(self, coro: Awaitable[None]) -> None:
+        task: asyncio.Task[None] = asyncio.ensure_future(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    # ------------------------------------------------------------------------------------------ ownership
+
+    async def _reconcile_all(self) -> None:
+        # Concurrently: the client bounds the publishes in flight, and a farm's worth of devices one round trip
+        # at a time would take seconds.
+        await asyncio.gather(*(self._reconcile(device) for device in sorted(set(self.known) | self.owned)))
+        await self._forget_stale_claims()
+
+    async def _reconcile(self, device: str) -> None:
+        """Take or hand over `device` as the ownership rule says."""
+        mine = device in self.known and self.view.owner(device, me=self.agent_id) == self.agent_id
+        if mine and device not in self.owned:
+            self.owned.add(device)
+            await self._publish_device(device)
+        elif not mine and device in self.owned:
+            self.owned.discard(device)
+            self._pending.pop(device, None)
+            self._availability.pop(device, None)
+            log.info("MQTT: %s is now published by agent %s", device, self.view.owner(device))
+
+    async def _forget_stale_claims(self) -> None:
+        """Claims this agent left on the broker for devices it no longer monitors (removed while it was away)."""
+        for device, view in list(self.view.devices.items()):
+            if self.agent_id in view.claims and device not in self.known:
+                await self._remove(device)
+
+    async def _publish_device(self, device: str) -> None:
+        info = self.known[device]
+        await self._publish(device_topic(device, "info"), _dump({**info, "agent": self.agent_id}))
+        await self._publish_discovery(device)
+        state = self.agent.state(device)
+        self._availability.pop(device, None)
+        await self._publish_state(device, state)
+
+    async def _publish_discovery(self, device: str) -> None:
+        await self._publish(discovery_topic(device), _dump(discovery_payload(self.known[device], self.agent_id)))
+
+    async def _remove(self, device: str) -> None:
+        """Clean up a device this agent stopped monitoring: its discovery and retained topics go unless another
+        online agent still claims it (that agent then takes over); this agent's claim goes in any case."""
+        others = [a for a in self.view.devices.get(device, _NO_VIEW).claims
+                  if a != self.agent_id and self.view.online(a)]
+        if not others:
+            await self._publish(discovery_topic(device), b"")
+            for leaf in ("state", "info", "availability"):
+                await self._publish(device_topic(device, leaf), b"")
+        self.owned.discard(device)
+        self._pending.pop(device, None)
+        self._availability.pop(device, None)
+        self.known.pop(device, None)
+        await self._publish(claim_topic(device, self.agent_id), b"")
+
+    # ------------------------------------------------------------------------------------------ outgoing
+
+    async def _scan(self) -> None:
+        """Claim new devices, clean up removed ones."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(SYNC_TIMEOUT):
+                await self._synced.wait()
+        if not self._synced.is_set():
+            log.warning("MQTT: the broker did not echo this agent's sync message; deciding ownership anyway")
+            self._synced.set()
+            await self._reconcile_all()
+            self.connected.set()
+        await self.connected.wait()
+        while True:
+            current = self._current_devices()
+            for device in sorted(set(self.known) - set(current)):
+                await self._remove(device)
+            for device, info in sorted(current.items()):
+                if device not in self.known:
+                    self.known[device] = info
+                    await self._publish(claim_topic(device, self.agent_id), b"1")
+                    await self._reconcile(device)
+                elif info != self.known[device]:
+                    self.known[device] = info
+                    if device in self.owned:
+                        await self._publish_device(device)
+            await asyncio.sleep(DEVICE_SCAN_S)
+
+    def _current_devices(self) -> dict[str, dict[str, Any]]:
+        return {info.id: info.to_dict() if hasattr(info, "to_dict") else dict(vars(info))
+                for info in self.agent.devices()}
+
+    async def _pump(self, events: Any) -> None:
+        """The agent's events → latest state per device (published by `_publisher`), availability, events."""
+        async for event in events:
+            device = event.get("device")
+            if device not in self.owned:
+                continue
+            kind = event.get("type")
+            if kind == "state":
+                if device not in self._pending:
+                    self._dirty.put_nowait(device)
+                self._pending[device] = event["state"]
+            elif kind in ("online", "offline"):
+                if kind == "online" and isinstance(event.get("info"), dict):
+                    self.known[device] = event["info"]
+                    await self._publish_device(device)
+                await self._set_availability(device, kind == "online")
+            else:
+                await self._publish(device_topic(device, "event"), _dump(event), retain=False)
+
+    async def _publisher(self) -> None:
+        """One of a pool that publishes the newest state of each changed device, longest-waiting device first. A
+        newer state replaces one still waiting, so a slow broker delays updates but never queues stale ones."""
+        while True:
+            device = await self._dirty.get()
+            state = self._pending.pop(device, None)
+            if state is not None and device in self.owned:
+                await self._publish_state(device, state)
+
+    async def _publish_state(self, device: str, state: dict[str, Any]) -> None:
+        """The state, and the availability when the state's `online` flag changed it."""
+        await self._set_availability(device, bool(state.get("online")))
+        # QoS 0: TCP delivers it while the connection lasts, a reconnection republishes every state, and a newer
+        # state follows within a poll; waiting for an acknowledgement per state would halve a farm's throughput.
+        await self._publish(device_topic(device, "state"), _dump(state), qos=0)
+        self.states_published += 1
+
+    async def _set_availability(self, device: str, online: bool) -> None:
+        value = ONLINE if online else OFFLINE
+        if self._availability.get(device) != value:
+            self._availability[device] = value
+            await self._publish(device_topic(device, "availability"), value)
+
+
+def _retrieve(task: asyncio.Task[Any]) -> None:
+    if not task.cancelled():
+        task.exception()
+
+
+class _NoView:
+    claims: frozenset[str] = frozenset()
+
+
+_NO_VIEW: Any = _NoView()
+
+
+async def run_bridge(agent: AgentLike, url: str, *, username: str | None = None, password: str | None = None,
+                     tls: bool = False, agent_id: str | None = None,
+                     on_bridge: Callable[[Bridge], None] | None = None) -> None:
+    """Bridge `agent` to the broker at `url` until cancelled. `agent_id` defaults to the host name plus a digest
+    of the agent's state directory (stable across restarts). Raises InputError for a bad URL, LinkError when the
+    broker refuses the login; a broker that is down or goes away is retried."""
+    broker = parse_broker(url, username=username, password=password, tls=tls)
+    bridge = Bridge(agent, broker, agent_id or default_agent_id(getattr(agent, "state_dir", None)))
+    if on_bridge is not None:
+        on_bridge(bridge)
+    await bridge.run()

@@ -1,0 +1,138 @@
+"""How a running print looks: one live panel on a terminal, plain lines in order elsewhere, timestamped JSON lines
+with --json."""
+
+from __future__ import annotations
+
+import datetime
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+from fabwire.console import Output
+from fabwire.xyz.status import PAUSED, PRINTING, Status
+
+if TYPE_CHECKING:  # rich is imported when a view is drawn, not when the CLI starts
+    from rich.console import Console
+    from rich.live import Live
+    from rich.panel import Panel
+
+ABSENT = "—"
+"""What a value the printer did not report shows as."""
+
+
+def now_iso() -> str:
+    """The current UTC time as ISO-8601 with milliseconds, e.g. 2026-01-02T03:04:05.678+00:00."""
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="milliseconds")
+
+
+def known(value: object, unit: str = "") -> str:
+    return ABSENT if value is None else f"{value}{unit}"
+
+
+def _minutes(value: int | None) -> str:
+    if value is None:
+        return ABSENT
+    hours, minutes = divmod(value, 60)
+    return f"{hours} h {minutes:02d} min" if hours else f"{minutes} min"
+
+
+def job_line(status: Status) -> str:
+    """One line for a log: state in words, temperatures, progress while a job runs."""
+    target = status.extruder_target
+    parts = [status.state_name, f"extruder {known(status.extruder, '°C')}" + (f"/{target}°C" if target else "")]
+    if status.bed is not None:
+        parts.append(f"bed {status.bed}°C")
+    if status.progress and status.state_code in (PRINTING, PAUSED):
+        left = status.progress.remaining_min
+        parts.append(f"{status.progress.percent}% ({ABSENT if left is None else left} min left)")
+    return ", ".join(parts)
+
+
+def _bed_target(status: Status) -> int | None:
+    value = (status.targets or {}).get("bed")
+    return int(value) if isinstance(value, str) and value.isdigit() else None
+
+
+def job_panel(status: Status, title: str, upload: tuple[int, int] | None = None) -> Panel:
+    """The live view of a job: state, a progress bar, temperatures with targets, elapsed and time left."""
+    from rich.console import Group
+    from rich.panel import Panel
+    from rich.progress_bar import ProgressBar
+    from rich.table import Table
+
+    table = Table.grid(padding=(0, 2))
+    table.add_column(style="bold")
+    table.add_column()
+    if upload is not None:
+        done, total = upload
+        table.add_row("Upload", Group(ProgressBar(total=max(total, 1), completed=done, width=40),
+                                      f"{done} of {total} bytes"))
+    table.add_row("State", status.state_name if status.state is not None else ABSENT)
+    progress = status.progress
+    percent = progress.percent if progress else None
+    if percent is not None:
+        table.add_row("Progress", Group(ProgressBar(total=100, completed=percent, width=40), f"{percent} %"))
+    table.add_row("Extruder", known(status.extruder, " °C") + f" → {known(status.extruder_target, ' °C')}")
+    if status.bed is not None or _bed_target(status) is not None:
+        table.add_row("Bed", known(status.bed, " °C") + f" → {known(_bed_target(status), ' °C')}")
+    table.add_row("Elapsed", _minutes(progress.elapsed_min if progress else None))
+    table.add_row("Time left", _minutes(progress.remaining_min if progress else None))
+    for word in status.error_words:
+        table.add_row("Error", str(word))
+    return Panel(table, title=title, expand=False)
+
+
+class JobView:
+    """Shows statuses as they come: a live panel when `console` is a terminal (and not --json), else one plain line
+    per change, or one JSON line per status with its time."""
+
+    def __init__(self, output: Output, console: Console, title: str) -> None:
+        self.output = output
+        self.console = console
+        self.title = title
+        self.live_mode = console.is_terminal and not output.json_mode
+        self._live: Live | None = None
+        self._last_line = ""
+        self._status = Status()
+        self._upload: tuple[int, int] | None = None
+
+    def __enter__(self) -> JobView:
+        if self.live_mode:
+            from rich.live import Live
+
+            self._live = Live(job_panel(self._status, self.title), console=self.console, auto_refresh=False,
+                              transient=False)
+            self._live.start()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self._live is not None:
+            self._live.stop()
+
+    def upload(self, done: int, total: int) -> None:
+        if self._live is not None:
+            self._upload = (done, total)
+            self._live.update(job_panel(self._status, self.title, self._upload), refresh=True)
+        elif done >= total and not self.output.json_mode:
+            self.console.print(f"uploaded {total} bytes")
+
+    def show(self, status: Status, extra: dict[str, Any] | None = None) -> None:
+        self._status = status
+        if self.output.json_mode:
+            self.output.event({"time": now_iso(), **(extra or {}), **status.to_dict()}, "")
+            return
+        if self._live is not None:
+            upload = self._upload if self._upload and self._upload[0] < self._upload[1] else None
+            self._live.update(job_panel(status, self.title, upload), refresh=True)
+            return
+        line = job_line(status)
+        if line != self._last_line:
+            self._last_line = line
+            self.console.print(line)
+
+    def note(self, text: str) -> None:
+        """A message between updates (link lost, reconnecting)."""
+        if self._live is not None:
+            self._live.console.print(text)
+        else:
+            self.output.note(text)

@@ -1,0 +1,178 @@
+"""The HTTP API against a running agent on real simulator processes."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from fabwire.samples import SAMPLE_GCODE, sample_path
+
+from .agenttools import device_of, summary, wait_for
+from .conftest import Bench, start_bench, stop_bench
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Bench]:
+    """One bench for this module: each test leaves the machines usable for the next, in any order."""
+    running = start_bench(Path(tmp_path_factory.mktemp("api")) / "state")
+    yield running
+    stop_bench(running)
+
+
+def _error(response: httpx.Response, status: int, exit_code: int) -> dict[str, Any]:
+    assert response.status_code == status, response.text
+    body = response.json()
+    assert set(body) == {"message", "exit_code", "error"}, body
+    assert body["exit_code"] == exit_code, body
+    assert body["message"], body
+    return dict(body)
+
+
+def test_devices_come_online_with_identity_and_state(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        devices = wait_for(lambda: (d := client.get("/api/v1/devices").json()) and all(x["state"]["online"] for x in d)
+                           and d, "all three devices online")
+        by_kind = {d["kind"]: d for d in devices}
+        assert set(by_kind) == {"xyz", "lineus", "mmu"}
+        printer = by_kind["xyz"]
+        assert printer["serial"]
+        assert printer["id"] == f"xyz-{printer['serial'].lower()}"
+        assert printer["model"] == "da Vinci mini w"
+        assert printer["name"] == "printer"
+        assert printer["address"] == bench.xyz.url
+        state = client.get(f"/api/v1/devices/{printer['id']}/state").json()
+        assert state["online"] is True
+        assert state["ts"].endswith("Z")
+        assert state["status"]["serial"] == printer["serial"]  # the `--json status` dict, as the CLI prints it
+        assert state["summary"]["state"] in ("idle", "printing", "done")
+        assert state["summary"]["extruder_temp_c"] is not None
+        mmu = by_kind["mmu"]
+        assert mmu["firmware"].startswith("3.0.4")
+        assert summary(client, mmu["id"])["filament_position"]
+
+
+def test_mmu_tool_change_through_the_api(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        mmu = device_of(client, "mmu")
+        wait_for(lambda: summary(client, mmu["id"])["state"] == "idle", "the MMU idle")
+        response = client.post(f"/api/v1/devices/{mmu['id']}/actions/tool_change", json={"slot": 0})
+        assert response.json() == {"started": "tool_change"}
+        done = wait_for(lambda: (s := summary(client, mmu["id"]))["active_slot"] == 0 and s["state"] == "idle"
+                        and "T0 finished" in s["state_text"] and s, "T0 finished")
+        assert done["finda"] is True
+        assert done["filament_position"] == "loaded past FINDA"
+        events = client.get(f"/api/v1/devices/{mmu['id']}/history").json()["events"]
+        progress = [e["event"]["name"] for e in events if e["type"] == "event" and e["event"]["event"] == "progress"]
+        assert "FEEDING_TO_FINDA" in progress
+
+
+def test_print_job_from_upload_to_done(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        printer = device_of(client, "xyz")
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle")
+        data = sample_path(SAMPLE_GCODE).read_bytes()
+        response = client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "square.gcode"},
+                               content=data, headers={"content-type": "application/octet-stream"})
+        assert response.status_code == 201, response.text
+        job = response.json()
+        assert job["device"] == printer["id"]
+        assert job["filename"] == "square.gcode"
+        assert job["size_bytes"] == len(data)
+        heating = wait_for(lambda: (s := summary(client, printer["id"]))["extruder_target_c"] and s,
+                           "the printer heating for the job")
+        assert heating["busy"] is True
+        wait_for(lambda: summary(client, printer["id"])["state"] == "printing", "the print under way")
+        actions = f"/api/v1/devices/{printer['id']}/actions"
+        assert client.post(f"{actions}/pause", json={}).json() == {"ok": True, "action": "pause"}
+        paused = wait_for(lambda: (s := summary(client, printer["id"]))["state"] == "paused" and s, "paused")
+        assert paused["actions"] == ["resume", "cancel"]
+        assert client.post(f"{actions}/resume", json={}).status_code == 200
+        # a second job while one runs is refused, with the CLI's input-error exit code
+        _error(client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "b.gcode"}, content=data),
+               400, 4)
+        final = wait_for(lambda: (j := client.get(f"/api/v1/jobs/{job['id']}").json())["state"] != "running"
+                         and j["state"] != "queued" and j, "the job ending", timeout=120)
+        assert final["state"] == "done", final
+        assert final["progress_percent"] == 100.0
+        history = client.get(f"/api/v1/devices/{printer['id']}/history").json()
+        temps = [s["extruder_temp_c"] for s in history["samples"] if s["extruder_temp_c"] is not None]
+        assert max(temps) > min(temps) + 50  # it heated up, and the history kept the curve
+        listed = client.get("/api/v1/jobs", params={"device": printer["id"]}).json()
+        assert [j["id"] for j in listed] == [job["id"]]
+
+
+def test_errors_are_json_with_the_cli_exit_code(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        _error(client.get("/api/v1/devices/nope/state"), 404, 4)
+        mmu = device_of(client, "mmu")
+        wait_for(lambda: summary(client, mmu["id"])["state"] == "idle", "the MMU idle")
+        base = f"/api/v1/devices/{mmu['id']}/actions"
+        assert "tool_change" in _error(client.post(f"{base}/fly", json={}), 400, 4)["message"]
+        assert "0 to 4" in _error(client.post(f"{base}/tool_change", json={"slot": 7}), 400, 4)["message"]
+        assert "number" in _error(client.post(f"{base}/tool_change", json={"slot": "x"}), 400, 4)["message"]
+        assert "slot" in _error(client.post(f"{base}/tool_change", json={}), 400, 4)["message"]
+        assert "colour" in _error(client.post(f"{base}/tool_change", json={"slot": 1, "colour": 2}), 400, 4)["message"]
+        # destructive actions need the confirmation the CLI asks for
+        assert "confirm" in _error(client.post(f"{base}/reset", json={}), 400, 4)["message"]
+        _error(client.post("/api/v1/jobs/0000/cancel", json={"confirm": True}), 404, 4)
+        _error(client.get("/api/v1/jobs", params={"limit": 0}), 422, 4)
+        _error(client.get("/api/v1/no-such-route"), 404, 4)
+        printer = device_of(client, "xyz")
+        assert ".gcode" in _error(client.post(f"/api/v1/devices/{printer['id']}/jobs",
+                                              params={"filename": "x.exe"}, content=b"G28\n"), 400, 4)["message"]
+
+
+def test_openapi_documents_every_route(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        spec = client.get("/api/v1/openapi.json").json()
+    paths = spec["paths"]
+    for path in ("/api/v1/devices", "/api/v1/devices/{device_id}/state", "/api/v1/devices/{device_id}/history",
+                 "/api/v1/devices/{device_id}/actions/{action}", "/api/v1/devices/{device_id}/jobs",
+                 "/api/v1/jobs", "/api/v1/jobs/{job_id}/cancel"):
+        assert path in paths, path
+    upload = paths["/api/v1/devices/{device_id}/jobs"]["post"]
+    assert "application/octet-stream" in upload["requestBody"]["content"]
+    assert "ErrorBody" in spec["components"]["schemas"]
+
+
+def test_devices_added_and_removed_at_run_time(bench: Bench, simulator: Any) -> None:
+    second = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "30")
+    with bench.agent.client() as client:
+        first = device_of(client, "xyz")
+        response = client.post("/api/v1/devices", json={"name": "second", "kind": "xyz", "address": second.url})
+        assert response.status_code == 201, response.text
+        added = response.json()
+        # both simulators report one serial number: the second is told apart by its address
+        assert added["id"] != first["id"]
+        assert added["id"].startswith("xyz-")
+        assert added["serial"] == first["serial"]
+        ids = [d["id"] for d in client.get("/api/v1/devices").json()]
+        assert len(ids) == len(set(ids)) == 4
+        _error(client.post("/api/v1/devices", json={"name": "again", "kind": "xyz", "address": second.url}), 400, 4)
+        _error(client.post("/api/v1/devices", json={"name": "bad name!", "kind": "xyz", "address": "x"}), 422, 4)
+        assert client.delete(f"/api/v1/devices/{added['id']}").status_code == 204
+        assert len(client.get("/api/v1/devices").json()) == 3
+
+
+def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        arm = device_of(client, "lineus")
+        wait_for(lambda: summary(client, arm["id"])["state"] == "idle", "the Line-us idle")
+        job = client.post(f"/api/v1/devices/{arm['id']}/actions/text",
+                          json={"text": "a longer line to cancel"}).json()["job"]
+        wait_for(lambda: summary(client, arm["id"])["state"] == "drawing", "the drawing under way")
+        assert "confirm" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={}), 400, 4)["message"]
+        assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "running"
+        cancelled = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True})
+        assert cancelled.json()["state"] == "cancelled", cancelled.text
+        record = client.get(f"/api/v1/jobs/{job['id']}").json()
+        assert record["state"] == "cancelled"
+        assert record["progress_percent"] < 100
+        idle = wait_for(lambda: (s := summary(client, arm["id"]))["state"] == "idle" and s, "the Line-us idle again")
+        assert idle["pen_down"] is False  # the pen was lifted
+        assert "not running" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True}),
+                                       400, 4)["message"]

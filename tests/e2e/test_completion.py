@@ -1,0 +1,36 @@
+"""`fabwire completion SHELL` prints a working script; completion offers commands and configured device names."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from clitools import cli_env, run_cli
+
+
+@pytest.mark.parametrize(("shell", "marker"), [("bash", "complete -o nosort -F"), ("zsh", "#compdef fabwire"),
+                                               ("fish", "complete --no-files --command fabwire")])
+def test_scripts_for_each_shell(shell: str, marker: str) -> None:
+    result = run_cli("completion", shell)
+    assert result.returncode == 0, result.stderr
+    assert marker in result.stdout
+    assert "_FABWIRE_COMPLETE" in result.stdout
+
+
+def complete(words: str, tmp_path: Path) -> list[str]:
+    config = tmp_path / "devices.toml"
+    config.write_text('[devices.office]\nkind = "xyz"\nurl = "10.0.0.5"\n[devices.basement]\nkind = "xyz"\n'
+                      'url = "10.0.0.6"\n[devices.bench]\nkind = "mmu"\nurl = "/dev/ttyACM0"\n')
+    env = cli_env()
+    env.update(FABWIRE_CONFIG=str(config), _FABWIRE_COMPLETE="bash_complete", COMP_WORDS=words,
+               COMP_CWORD=str(len(words.split()) - (0 if words.endswith(" ") else 1)))
+    result = run_cli(env=env)
+    assert result.returncode == 0, result.stderr
+    return [line.split(",", 1)[1] for line in result.stdout.splitlines()]
+
+
+def test_device_names_complete_for_their_kind(tmp_path: Path) -> None:
+    assert complete("fabwire xyz status -d b", tmp_path) == ["basement"]
+    assert complete("fabwire mmu -d b", tmp_path) == ["bench"]
+    assert complete("fabwire xyz st", tmp_path) == ["status"]

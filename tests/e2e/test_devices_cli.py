@@ -1,0 +1,71 @@
+"""`fabwire devices list|show|add|remove` edit devices.toml in place, validated, and the names work at once."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from clitools import cli_env, run_cli
+from fabwire.errors import ConfigError, InputError
+
+
+def env_for(path: Path) -> dict[str, str]:
+    env = cli_env()
+    env["FABWIRE_CONFIG"] = str(path)
+    return env
+
+
+def test_add_list_show_use_and_remove(tmp_path: Path) -> None:
+    path = tmp_path / "conf" / "devices.toml"
+    env = env_for(path)
+    assert run_cli("devices", "list", "--json", env=env).stdout.strip() == "[]"
+    added = run_cli("devices", "add", "bench", "sim://mmu?speed=50", "--kind", "mmu", "--default",
+                    "--set", "speed=50", "--set", 'accept=["3.0.4"]', env=env)
+    assert added.returncode == 0, added.stderr
+    assert run_cli("devices", "add", "arm", "sim://lineus?speed=inf", "--kind", "lineus", env=env).returncode == 0
+    rows = json.loads(run_cli("devices", "list", "--json", env=env).stdout)
+    assert rows == [{"name": "bench", "kind": "mmu", "url": "sim://mmu?speed=50", "default": True},
+                    {"name": "arm", "kind": "lineus", "url": "sim://lineus?speed=inf", "default": False}]
+    shown = json.loads(run_cli("devices", "show", "bench", "--json", env=env).stdout)
+    assert shown["speed"] == 50
+    assert shown["accept"] == ["3.0.4"]
+    assert shown["auto_retries"] == 3  # the schema's default, shown
+    version = run_cli("mmu", "version", "--json", env=env)  # the default MMU, at its configured speed
+    assert version.returncode == 0, version.stderr
+    assert run_cli("lineus", "-d", "arm", "position", env=env).returncode == 0
+    assert run_cli("devices", "remove", "bench", env=env).returncode == 0
+    assert [r["name"] for r in json.loads(run_cli("devices", "list", "--json", env=env).stdout)] == ["arm"]
+
+
+def test_edits_keep_the_users_comments(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    path.write_text("# my printers\n[devices.office]  # upstairs\nkind = \"xyz\"\nurl = \"10.0.0.5\"\n\n"
+                    "# the old one\n[devices.garage]\nkind = \"xyz\"\nurl = \"10.0.0.6\"\n")
+    env = env_for(path)
+    assert run_cli("devices", "add", "bench", "/dev/ttyACM0", "--kind", "xyz", env=env).returncode == 0
+    assert run_cli("devices", "remove", "office", env=env).returncode == 0
+    text = path.read_text()
+    assert text.startswith("# my printers\n")
+    assert "# the old one\n[devices.garage]" in text
+    assert "office" not in text
+    assert '[devices.bench]\nkind = "xyz"\nurl = "/dev/ttyACM0"\n' in text
+
+
+def test_bad_edits_are_refused_and_leave_the_file_alone(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    path.write_text('[devices.office]\nkind = "xyz"\nurl = "10.0.0.5"\ndefault = true\n')
+    before = path.read_text()
+    env = env_for(path)
+    second = run_cli("devices", "add", "garage", "10.0.0.6", "--kind", "xyz", "--default", env=env)
+    assert second.returncode == ConfigError.exit_code
+    assert "both the default" in second.stderr
+    typo = run_cli("devices", "add", "bench", "sim://mmu", "--kind", "mmu", "--set", "sped=5", env=env)
+    assert typo.returncode == InputError.exit_code
+    assert "no setting 'sped' (did you mean 'speed'?)" in typo.stderr
+    bad_value = run_cli("devices", "add", "bench", "sim://mmu", "--kind", "mmu", "--set", "speed=fast", env=env)
+    assert bad_value.returncode == ConfigError.exit_code
+    assert "'speed': expected `float`" in bad_value.stderr
+    gone = run_cli("devices", "remove", "ofice", env=env)
+    assert gone.returncode == ConfigError.exit_code
+    assert "(did you mean 'office'?)" in gone.stderr
+    assert path.read_text() == before

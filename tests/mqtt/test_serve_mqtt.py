@@ -1,0 +1,190 @@
+"""`fabwire serve --mqtt` as real processes: a simulator behind the agent, the broker in front, commands that move
+the simulated arm, the last will when an agent is killed, two agents on one device, and `fabwire fleet`."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import paho.mqtt.client as paho
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from mqtttools import Mosquitto
+
+from clitools import cli_env, run_cli
+
+pytestmark = pytest.mark.timeout(120)
+ANNOUNCEMENT = "fabwire agent listening on "
+
+
+class Agents:
+    """`fabwire serve` processes, killed at the end."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp_path = tmp_path
+        self.processes: list[subprocess.Popen[str]] = []
+
+    def start(self, name: str, broker: Mosquitto, *devices: str) -> subprocess.Popen[str]:
+        args = [sys.executable, "-m", "fabwire", "serve", "--listen", "127.0.0.1:0", "--state-dir",
+                str(self.tmp_path / name), "--mqtt", broker.url]
+        for device in devices:
+            args += ["--device", device]
+        process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env=cli_env(self.tmp_path))
+        self.processes.append(process)
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        assert line.startswith(ANNOUNCEMENT), line + (process.stderr.read() if process.stderr else "")
+        return process
+
+    def stop_all(self) -> None:
+        for process in self.processes:
+            if process.poll() is None:
+                process.kill()
+            process.wait(10)
+            for stream in (process.stdout, process.stderr):
+                if stream:
+                    stream.close()
+
+
+@pytest.fixture
+def agents(tmp_path: Path) -> Iterator[Agents]:
+    started = Agents(tmp_path)
+    yield started
+    started.stop_all()
+
+
+class Watch:
+    """A plain (blocking) MQTT client in its own thread: each topic's latest payload, and a way to publish."""
+
+    def __init__(self, broker: Mosquitto) -> None:
+        self.latest: dict[str, bytes] = {}
+        self.log: list[tuple[str, bytes]] = []
+        self.client = paho.Client(paho.CallbackAPIVersion.VERSION2)
+        self.client.on_message = self._message
+        self.client.connect("127.0.0.1", broker.port)
+        self.client.subscribe("fabwire/#", qos=1)
+        self.client.subscribe("homeassistant/#", qos=1)
+        self.client.loop_start()
+
+    def _message(self, client: Any, userdata: Any, message: Any) -> None:
+        self.latest[message.topic] = message.payload
+        self.log.append((message.topic, message.payload))
+
+    def until(self, predicate: Any, timeout: float = 30.0) -> Any:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            value = predicate(self)
+            if value:
+                return value
+            time.sleep(0.05)
+        raise AssertionError(f"not seen in {timeout} s; topics: {sorted(self.latest)}")
+
+    def json(self, topic: str) -> Any:
+        payload = self.latest.get(topic)
+        return json.loads(payload) if payload else None
+
+    def device_of_kind(self, kind: str) -> str | None:
+        for topic, payload in list(self.latest.items()):
+            info = json.loads(payload) if topic.endswith("/info") and payload else {}
+            if topic.startswith("fabwire/device/") and info.get("kind") == kind:
+                return topic.split("/")[2]
+        return None
+
+    def send(self, device: str, body: dict[str, Any]) -> None:
+        self.client.publish(f"fabwire/device/{device}/command", json.dumps(body), qos=1).wait_for_publish(10)
+
+    def close(self) -> None:
+        self.client.loop_stop()
+        self.client.disconnect()
+
+
+@pytest.fixture
+def watch(broker: Mosquitto) -> Iterator[Watch]:
+    w = Watch(broker)
+    yield w
+    w.close()
+
+
+def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto, agents: Agents, watch: Watch,
+                                                             simulator: Any, tmp_path: Path) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    agent = agents.start("a", broker, f"arm:lineus={sim.url}")
+    device = watch.until(lambda w: w.device_of_kind("lineus"))
+    discovery = watch.until(lambda w: w.json(f"homeassistant/device/fabwire_{device}/config"))
+    assert discovery["device"]["manufacturer"] == "Line-us"
+    watch.until(lambda w: w.latest.get(f"fabwire/device/{device}/availability") == b"online")
+    state = watch.until(lambda w: w.json(f"fabwire/device/{device}/state"))
+    assert state["kind"] == "lineus"
+    assert state["online"] is True
+    watch.send(device, {"action": "move", "params": {"x": 1200, "y": 150}, "id": "move-1"})
+    reply = watch.until(lambda w: w.json(f"fabwire/device/{device}/reply"))
+    assert reply["ok"], reply
+    assert reply["id"] == "move-1"
+    position = run_cli("--json", "lineus", "-d", sim.url, "position", env=cli_env(tmp_path))
+    assert position.returncode == 0, position.stderr
+    where = json.loads(position.stdout)
+    assert (round(where["x"]), round(where["y"])) == (1200, 150)
+    # The fleet as seen on the broker: the device and the agent that runs it.
+    fleet = run_cli("--json", "fleet", "--mqtt", broker.url, env=cli_env(tmp_path))
+    assert fleet.returncode == 0, fleet.stderr
+    rows = json.loads(fleet.stdout)["devices"]
+    assert [(r["device"], r["kind"], r["agent_online"]) for r in rows] == [(device, "lineus", True)]
+    agent_id = rows[0]["agent"]
+    # Killed without a goodbye: the broker's last will says the agent is offline.
+    os.kill(agent.pid, signal.SIGKILL)
+    watch.until(lambda w: w.latest.get(f"fabwire/agent/{agent_id}/status") == b"offline")
+    after = json.loads(run_cli("--json", "fleet", "--mqtt", broker.url, env=cli_env(tmp_path)).stdout)
+    assert [(r["agent"], r["agent_online"], r["availability"]) for r in after["devices"]] == [
+        (agent_id, False, "offline")]
+
+
+def test_two_agents_with_one_device_take_turns(broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any,
+                                               tmp_path: Path) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    first = agents.start("a", broker, f"arm:lineus={sim.url}")
+    second = agents.start("b", broker, f"arm:lineus={sim.url}")
+    device = watch.until(lambda w: w.device_of_kind("lineus"))
+    claims = watch.until(lambda w: (c := sorted(t.rsplit("/", 1)[1] for t, p in w.latest.items()
+                                               if t.startswith(f"fabwire/device/{device}/claim/") and p))
+                         and len(c) == 2 and c)
+    owner, standby = claims
+    watch.until(lambda w: (w.json(f"fabwire/device/{device}/info") or {}).get("agent") == owner)
+    watch.send(device, {"action": "pen_up", "id": "up-1"})
+    watch.until(lambda w: w.json(f"fabwire/device/{device}/reply"))
+    time.sleep(0.5)
+    replies = [json.loads(p) for t, p in watch.log if t == f"fabwire/device/{device}/reply"]
+    assert [r["agent"] for r in replies] == [owner]  # answered once, by the owner
+    fleet = json.loads(run_cli("--json", "fleet", "--mqtt", broker.url, env=cli_env(tmp_path)).stdout)
+    assert [(r["agent"], r["standby"]) for r in fleet["devices"]] == [(owner, [standby])]
+    # The owner dies; the standby agent takes the device over.
+    by_id = {"a": first, "b": second}
+    dying = next(p for name, p in by_id.items() if owner.endswith(_digest(tmp_path / name)))
+    dying.send_signal(signal.SIGKILL)
+    watch.until(lambda w: (w.json(f"fabwire/device/{device}/info") or {}).get("agent") == standby)
+    watch.until(lambda w: w.latest.get(f"fabwire/device/{device}/availability") == b"online")
+
+
+def _digest(state_dir: Path) -> str:
+    from fabwire.mqtt.topics import default_agent_id
+
+    return default_agent_id(state_dir).rsplit("-", 1)[1]
+
+
+def test_fleet_command_errors_are_one_line(tmp_path: Path) -> None:
+    bad = run_cli("fleet", "--mqtt", "http://nowhere", env=cli_env(tmp_path))
+    assert bad.returncode == 4
+    assert bad.stderr.strip().count("\n") == 0
+    from mqtttools import free_port
+
+    down = run_cli("fleet", "--mqtt", f"mqtt://127.0.0.1:{free_port()}", env=cli_env(tmp_path))
+    assert down.returncode == 8, down.stderr
+    assert "Traceback" not in down.stderr

@@ -1,0 +1,211 @@
+"""XYZ under hostile peers: deep structures and huge numbers at every parsing boundary, bounded simulator memory,
+and no success without the printer's word for it."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import struct
+import zlib
+from collections.abc import AsyncIterator, Callable
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fabwire.errors import DeviceError, LinkTimeout, RemoteProtocolError
+from fabwire.transport import Transport
+from fabwire.xyz import protocol as xp
+from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.protocol import Block, DeviceDecoder, Garbage, Link, Received
+from fabwire.xyz.sim import COMMAND_HISTORY, UPLOAD_HISTORY, XYZSimulator
+from fabwire.xyz.status import Status
+from fabwire.xyz.threew import write_3w
+from linktools import loopback_tcp
+
+GCODE = b";TIME:60\nG28\nG1 X10 Y10 E1 F1200\nM84\n"
+IDLE_STATUS = [b"b:21", b"d:0,0,0", b"e:0", b"f:1,200000", b"i:3FM1WPUS5SIM000001", b"j:9511,0", b"o:p8,t1,c1,a+",
+               b"p:dv1MW0A000", b"t:1,22,0", b"v:1.2.3", b"w:1,PMP6QTH64R1093", b"n:mini w"]
+
+HOSTILE_VALUES = st.one_of(
+    st.integers(1, 6000).map(lambda n: "[" * n + "]" * n),
+    st.integers(1, 6000).map(lambda n: '{"a":' * n + "1" + "}" * n),
+    st.integers(4000, 9000).map(lambda n: "9" * n),
+    st.text(max_size=200),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(["action=jog:", "upload=x.3w,", "firmware=x.bin,", "config=zoffset:set[", "config=energy:[",
+                        "config=life:[", "config=ssid:[a,b,", "config=pda:[", "query="]), HOSTILE_VALUES)
+def test_the_command_parser_turns_deep_and_huge_values_into_unknown_commands(verb: str, value: str) -> None:
+    command = xp.parse_command(verb + value)
+    assert isinstance(command, xp.Command)
+    decoder = DeviceDecoder()
+    events = decoder.feed(xp.PREFIX + (verb + value).encode() + b"\n", 0.0)
+    assert all(isinstance(event, Received | Garbage | Block) for event in events)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from("4OsGWZtjewfd"), HOSTILE_VALUES)
+def test_a_status_field_with_a_hostile_value_is_kept_raw(letter: str, value: str) -> None:
+    status = Status.parse([f"{letter}:{value}", "j:9511,0"])
+    assert status.state_code == 9511
+    assert isinstance(status.to_dict(), dict)
+    assert status.line(letter) is not None
+
+
+def test_an_upload_block_longer_than_any_printer_takes_is_refused_unbuffered() -> None:
+    decoder = DeviceDecoder()
+    decoder.feed(b"XYZv3/upload=a.3w,4000000000\n", 0.0)
+    assert decoder.uploading
+    events = decoder.feed(struct.pack(">II", 0, 3_000_000_000) + bytes(1000), 0.1)
+    assert [type(event) for event in events] == [Garbage]
+    assert not decoder.uploading
+
+
+async def _talk(sim: XYZSimulator, action: Callable[[Transport], object]) -> None:
+    async with asyncio.timeout(20), loopback_tcp(sim.serve) as link:
+        result = action(link)
+        if asyncio.iscoroutine(result):
+            await result
+
+
+async def _read_until(link: Transport, marker: bytes, limit: float = 5.0) -> bytes:
+    data = b""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(limit):
+            while marker not in data:
+                data += await link.read()
+    return data
+
+
+async def test_the_simulator_keeps_bounded_histories_and_drops_abandoned_uploads() -> None:
+    sim = XYZSimulator(speed=1000, gap=0.01)
+
+    async def flood(link: Transport) -> None:
+        await link.write(b"XYZv3/nonsense\r\n" * (COMMAND_HISTORY + 500))
+        await link.write(b"XYZv3/query=a\r\n")
+        await _read_until(link, b"$\n")
+
+    await _talk(sim, flood)
+    assert len(sim.commands) == COMMAND_HISTORY
+    block = b"\0" * 8192
+    for n in range(UPLOAD_HISTORY + 3):
+        async def abandon(link: Transport, n: int = n) -> None:
+            await link.write(f"XYZv3/upload=junk{n}.3w,{1 << 20}\r\n".encode())
+            await _read_until(link, b"ok")
+            await link.write(struct.pack(">II", 0, len(block)) + block + struct.pack(">I", zlib.crc32(block)))
+            await _read_until(link, b"ok")
+
+        await _talk(sim, abandon)
+    await asyncio.sleep(0.2)
+    assert len(sim.uploads) == UPLOAD_HISTORY
+    assert all(record.data == b"" and record.received == 8192 and not record.complete for record in sim.uploads)
+
+
+async def test_a_declared_size_over_the_cap_and_a_second_concurrent_upload_are_refused() -> None:
+    sim = XYZSimulator(speed=1000, gap=0.01, max_upload=1 << 20)
+    async with asyncio.timeout(20), loopback_tcp(sim.serve) as first, loopback_tcp(sim.serve) as second:
+        await first.write(b"XYZv3/upload=big.3w,4294967295\r\n")
+        assert b"E1$" in await _read_until(first, b"$")
+        await first.write(b"XYZv3/upload=a.3w,1000\r\n")
+        assert b"ok" in await _read_until(first, b"ok")
+        await second.write(b"XYZv3/upload=b.3w,1000\r\n")
+        assert b"E3$" in await _read_until(second, b"$")
+
+
+async def test_the_simulator_survives_a_handler_fault_and_keeps_answering() -> None:
+    sim = XYZSimulator(speed=1000, gap=0.01)
+
+    async def hostile(link: Transport) -> None:
+        await link.write(b"XYZv3/action=jog:" + b"[" * 3000 + b"\r\n")
+        await link.write(b"XYZv3/upload=x.3w," + b"9" * 5000 + b"\r\n")
+        await link.write(b"XYZv3/query=a\r\n")
+        assert b"j:9511" in await _read_until(link, b"$\n")
+
+    await _talk(sim, hostile)
+
+
+# ------------------------------------------------------------------------------------- lying printers
+
+
+@contextlib.asynccontextmanager
+async def fake_printer(answer: Callable[[bytes], bytes | None]) -> AsyncIterator[XYZPrinter]:
+    """A TCP peer that answers each command line with `answer(line)` and acknowledges every upload block."""
+
+    async def serve(link: Transport) -> None:
+        buffer = b""
+        with contextlib.suppress(Exception):
+            while True:
+                buffer += await link.read()
+                while True:
+                    if buffer.startswith(b"XYZv3/"):
+                        end = buffer.find(b"\n")
+                        if buffer.startswith(b"XYZv3/uploadDidFinish"):
+                            buffer = buffer[len(b"XYZv3/uploadDidFinish"):]
+                            await link.write(b"ok\nok\n")
+                            continue
+                        if end < 0:
+                            break
+                        line, buffer = buffer[:end].rstrip(b"\r"), buffer[end + 1:]
+                        reply = answer(line)
+                        if reply:
+                            await link.write(reply)
+                    elif len(buffer) >= 8:
+                        length = struct.unpack_from(">I", buffer, 4)[0]
+                        if len(buffer) < length + 12:
+                            break
+                        buffer = buffer[length + 12:]
+                        await link.write(b"ok\n")
+                    else:
+                        break
+
+    async with loopback_tcp(serve) as link:
+        printer = XYZPrinter(link, link=Link.WIFI, timeout=2.0)
+        printer.poll_interval = 0.01
+        try:
+            yield printer
+        finally:
+            await printer.close()
+
+
+def _idle_printer(line: bytes) -> bytes | None:
+    if line.startswith(b"XYZv3/query=a"):
+        return b"\n".join(IDLE_STATUS) + b"\n$\n"
+    if line.startswith(b"XYZv3/query="):
+        return b"o:p8,t1,c1,a+\n"
+    return b"ok \n" if line.startswith(b"XYZv3/upload=") else None
+
+
+async def test_a_printer_that_takes_the_file_but_never_starts_is_no_success() -> None:
+    async with asyncio.timeout(30), fake_printer(_idle_printer) as printer:
+        with pytest.raises(DeviceError, match="did not start the job"):
+            await printer.print_file(GCODE, wait=False, start_limit=0.3)
+
+
+async def test_a_reply_of_junk_lines_is_no_status() -> None:
+    def junk(line: bytes) -> bytes | None:
+        return b"".join(b"x:junk %d\n" % i for i in range(50)) + b"$\n" if b"query" in line else None
+
+    async with asyncio.timeout(30), fake_printer(junk) as printer:
+        with pytest.raises(RemoteProtocolError, match="no state"):
+            await printer.status()
+
+
+async def test_a_file_check_that_never_ends_is_reported_with_how_to_cancel() -> None:
+    sim = XYZSimulator(speed=1000, gap=0.01, faults=("stuck",))
+    clock = [0.0]
+    async with asyncio.timeout(30), loopback_tcp(sim.serve) as link:
+        printer = XYZPrinter(link, timeout=5.0, clock=lambda: clock[0])
+        printer.poll_interval = 0.01
+        try:
+            await printer.upload(write_3w(GCODE, "dv1MW0A000"), "part.3w")
+
+            def later(_status: Status) -> None:
+                clock[0] += 30.0
+
+            with pytest.raises(LinkTimeout, match="fabwire xyz cancel"):
+                await printer.follow_job(later)
+        finally:
+            await printer.close()

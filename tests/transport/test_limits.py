@@ -1,0 +1,99 @@
+"""Simulator listeners stay open to new clients: a connection limit that makes room, and an idle timeout."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+
+import pytest
+
+from fabwire.errors import LinkClosed
+from fabwire.transport import Transport, open_tcp, serve_tcp
+from fabwire.transport.limits import ConnectionLimits
+
+LIMIT = 10
+
+
+async def echo(link: Transport) -> None:
+    while True:
+        await link.write(await link.read())
+
+
+@contextlib.asynccontextmanager
+async def listening(limits: ConnectionLimits, handler: object = echo) -> AsyncIterator[int]:
+    server = await serve_tcp(handler, "127.0.0.1", 0, limits=limits)  # type: ignore[arg-type]
+    try:
+        yield int(server.sockets[0].getsockname()[1])
+    finally:
+        server.close()
+
+
+async def ask(link: Transport, data: bytes = b"ping") -> bytes:
+    await link.write(data)
+    return await link.read()
+
+
+async def closed_by_peer(link: Transport) -> bytes:
+    """Everything the peer sends until it closes the link."""
+    got = b""
+    with contextlib.suppress(LinkClosed):
+        while True:
+            got += await link.read()
+    return got
+
+
+async def test_at_the_limit_the_quietest_connection_makes_room() -> None:
+    async with asyncio.timeout(LIMIT), listening(ConnectionLimits(max_connections=2, busy_for=0)) as port:
+        quiet = await open_tcp("127.0.0.1", port)
+        talking = await open_tcp("127.0.0.1", port)
+        assert await ask(talking) == b"ping"
+        newcomer = await open_tcp("127.0.0.1", port)
+        assert await ask(newcomer) == b"ping"
+        assert await closed_by_peer(quiet) == b""
+        assert await ask(talking, b"still here") == b"still here"
+        for link in (quiet, talking, newcomer):
+            await link.close()
+
+
+async def test_when_every_connection_is_busy_a_newcomer_is_told_why() -> None:
+    async with asyncio.timeout(LIMIT), listening(ConnectionLimits(max_connections=1, busy_for=3600)) as port:
+        first = await open_tcp("127.0.0.1", port)
+        assert await ask(first) == b"ping"
+        refused = await open_tcp("127.0.0.1", port)
+        assert b"busy: all 1 connections are in use" in await closed_by_peer(refused)
+        assert await ask(first, b"served") == b"served"
+        await first.close()
+
+
+async def test_an_idle_connection_is_closed_and_an_active_one_is_not() -> None:
+    async with asyncio.timeout(LIMIT), listening(ConnectionLimits(idle_timeout=0.3)) as port:
+        idle = await open_tcp("127.0.0.1", port)
+        active = await open_tcp("127.0.0.1", port)
+        waiting = asyncio.ensure_future(closed_by_peer(idle))
+        while not waiting.done():
+            assert await ask(active) == b"ping"
+            await asyncio.sleep(0.05)
+        assert waiting.result() == b""
+        assert await ask(active, b"alive") == b"alive"
+        await active.close()
+        await idle.close()
+
+
+async def test_a_failing_handler_is_one_log_line(caplog: pytest.LogCaptureFixture) -> None:
+    async def broken(link: Transport) -> None:
+        await link.read()
+        raise RecursionError("maximum recursion depth exceeded")
+
+    with caplog.at_level(logging.WARNING, logger="fabwire.sim"):
+        async with asyncio.timeout(LIMIT), listening(ConnectionLimits(), broken) as port:
+            for _ in range(3):
+                link = await open_tcp("127.0.0.1", port)
+                await link.write(b"[[[[")
+                assert await closed_by_peer(link) == b""
+                await link.close()
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines
+    assert "failed: RecursionError" in lines[0]
+    assert len(lines) == 1  # rate-limited: the next two within a second are only counted

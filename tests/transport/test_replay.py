@@ -1,0 +1,40 @@
+"""`fabwire trace replay`: the host side of a capture, sent again, with each differing reply reported."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from clitools import run_cli, start_simulator
+from fabwire.transport.replay import exchanges
+from fabwire.transport.tap import TraceRecord
+
+
+def test_chunks_group_into_request_and_reply() -> None:
+    records = [TraceRecord(0, ">", b"XYZv3/"), TraceRecord(0, ">", b"query=a\r\n"), TraceRecord(0, "<", b"b:20\n"),
+               TraceRecord(0, "<", b"$\n"), TraceRecord(0, None, event="eof"), TraceRecord(0, ">", b"M114\x00")]
+    found = list(exchanges(records))
+    assert [(e.number, e.sent, e.expected) for e in found] == [
+        (1, b"XYZv3/query=a\r\n", b"b:20\n$\n"), (2, b"M114\x00", b"")]
+
+
+def test_replay_to_the_same_and_to_another_printer(tmp_path: Path) -> None:
+    mini = start_simulator("xyz", "--listen", "127.0.0.1:0")  # real time: nothing changes between the runs
+    nano = start_simulator("xyz", "--listen", "127.0.0.1:0", "--model", "nano", "--speed", "100")
+    trace = tmp_path / "status.jsonl"
+    try:
+        recorded = run_cli("xyz", "-d", mini.url, "status", "--trace", str(trace))
+        assert recorded.returncode == 0, recorded.stderr
+        same = run_cli("trace", "replay", str(trace), "--to", mini.url)
+        assert same.returncode == 0, same.stderr
+        assert same.stdout.strip() == "every reply matches the recording"
+        other = run_cli("--json", "trace", "replay", str(trace), "--to", nano.url, "--quiet", "0.5")
+        assert other.returncode == 1
+        differences = json.loads(other.stdout)
+        assert differences[0]["exchange"] == 1
+        assert differences[0]["sent"] == "XYZv3/query=a\r\n"
+        assert "dv1NX0A000" in differences[0]["got"]
+        assert "dv1NX0A000" not in differences[0]["expected"]
+    finally:
+        mini.stop()
+        nano.stop()
