@@ -165,3 +165,30 @@ def test_draw_over_tcp_then_resume_after_a_dropped_link(tmp_path: Path, simulato
 
     longest = max(float(np.hypot(*np.diff(line, axis=0).T).max()) for line in planned if len(line) > 1)
     assert ink(planned) - 1 <= ink(drawn) <= ink(planned) + longest + 1
+
+
+def test_progress_state_keeps_the_last_acknowledged_vertex(tmp_path: Path) -> None:
+    from fabwire.errors import InputError
+    from fabwire.lineus.draw_cli import DrawProgress
+
+    path = tmp_path / "state.json"
+    strokes = [[[900.0, 0.0], [1000.0, 0.0]], [[1100.0, 0.0], [1200.0, 0.0], [1300.0, 0.0], [1400.0, 0.0]]]
+    progress = DrawProgress(path, "k", strokes)
+    progress.reached(1, 2)  # stroke 2 drawn up to its third vertex
+    progress.save()
+    loaded = DrawProgress.load(path, "k")
+    assert loaded is not None
+    assert (loaded.done, loaded.point, loaded.complete) == (1, 2, False)
+    rest = loaded.remaining()
+    assert [s.tolist() for s in rest.strokes] == [[[1300.0, 0.0], [1400.0, 0.0]]]  # from where the pen was lifted
+    whole_stroke = DrawProgress(path, "k", strokes[1:]).remaining().figures().estimated_seconds
+    assert rest.figures().estimated_seconds < whole_stroke  # the time left counts only what is left
+    for damaged in ({"done": 1, "point": 4}, {"done": 2, "point": 1}, {"done": 1, "point": -1},
+                    {"done": 1, "point": "2"}):
+        path.write_text(json.dumps({"version": 1, "key": "k", "strokes": strokes, **damaged}))
+        with pytest.raises(InputError, match="damaged"):
+            DrawProgress.load(path, "k")
+    path.write_text(json.dumps({"version": 1, "key": "k", "strokes": strokes, "done": 2}))  # finished, older file
+    finished = DrawProgress.load(path, "k")
+    assert finished is not None
+    assert finished.complete
