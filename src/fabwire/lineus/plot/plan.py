@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from fabwire.errors import InputError
-from fabwire.lineus.kinematics import HOME, UNITS_PER_MM, MotionModel
+from fabwire.lineus.kinematics import HOME, UNITS_PER_MM, MotionModel, body_detour
 from fabwire.lineus.plot.fit import check_placed, fit_into_area, fit_scale, largest_box
 from fabwire.lineus.plot.geometry import (
     FloatArray,
@@ -93,16 +93,24 @@ class Plan:
 
     def moves(self, start: int = 0) -> Iterator[Move]:
         """The move stream from stroke `start` on: travel with the pen up, drop, draw, lift."""
-        for stroke in self.strokes[start:]:
-            yield MoveTo(float(stroke[0, 0]), float(stroke[0, 1]))
-            yield PenDown()
-            for x, y in stroke[1:].tolist():
-                yield MoveTo(x, y)
-            yield PenUp()
+        for index in range(start, len(self.strokes)):
+            yield from self.stroke_moves(index)
 
-    def stroke_moves(self, index: int) -> list[Move]:
-        """The moves of one stroke (travel to it included)."""
-        return list(Plan(self.strokes[index : index + 1]).moves())
+    def stroke_moves(self, index: int, *, from_point: int = 0, here: tuple[float, float] | None = None
+                     ) -> list[Move]:
+        """The moves of one stroke from its vertex `from_point` on, the pen-up travel to it included (from `here`,
+        by default the end of the stroke before). A hop that would cut the body notch goes round its corner:
+        firmware 1.0.1 does not keep the arm out of it."""
+        stroke = self.strokes[index]
+        if here is None:
+            here = self.origin if index == 0 else (float(self.strokes[index - 1][-1, 0]),
+                                                    float(self.strokes[index - 1][-1, 1]))
+        first = (float(stroke[from_point, 0]), float(stroke[from_point, 1]))
+        out: list[Move] = [MoveTo(x, y) for x, y in body_detour(here, first)]
+        out.append(PenDown())
+        out.extend(MoveTo(x, y) for x, y in stroke[from_point + 1 :].tolist())
+        out.append(PenUp())
+        return out
 
     def travel(self) -> list[FloatArray]:
         """The pen-up hops as two-point polylines, from the starting point on."""
