@@ -51,7 +51,7 @@ class PathBuilder:
 
     def __init__(self, matrix: FloatArray, tolerance: float) -> None:
         self.matrix = matrix
-        stretch = float(np.linalg.norm(matrix[:, :2], 2)) or 1.0
+        stretch = _largest_stretch(matrix) or 1.0
         self.user_tolerance = tolerance / stretch
         self.subpaths: list[Subpath] = []
         self.curved = False
@@ -184,6 +184,14 @@ class PathBuilder:
             self.subpaths.append(Subpath(out, closed, self._segments))
         self._buf = array("d")
         self._segments = 0
+
+
+def _largest_stretch(matrix: FloatArray) -> float:
+    """The largest singular value of the matrix's 2x2 part: how much it can lengthen any distance."""
+    (a, b, _), (c, d, _) = matrix.tolist()
+    half = (a * a + b * b + c * c + d * d) / 2
+    det = a * d - b * c
+    return math.sqrt(half + math.sqrt(max(0.0, half * half - det * det)))
 
 
 def _bezier_steps(ctrl: FloatArray, tolerance: float) -> int:
