@@ -137,6 +137,7 @@ class Session:
             delay = low
             self._set_info()
             self.online = True
+            log.info("%s online: %s %s", self.spec.name, self.info.model or self.spec.kind, self.spec.address)
             self._publish("online", info=self.info.to_dict())
             try:
                 await self._monitor()

@@ -22,7 +22,7 @@ import aiomqtt
 from aiomqtt.exceptions import MqttConnectError
 
 from fabwire import __version__
-from fabwire.errors import LinkError
+from fabwire.errors import FabwireError, LinkError
 from fabwire.mqtt.commands import CommandRunner
 from fabwire.mqtt.discovery import discovery_payload
 from fabwire.mqtt.fleet_view import FleetView
@@ -113,6 +113,8 @@ class Bridge:
                     raise LinkError(f"MQTT broker {self.broker.url} refused the connection: {exc}") from None
                 except aiomqtt.MqttError as exc:
                     log.warning("MQTT broker %s: %s; retrying in %.1f s", self.broker.url, exc, delay)
+                except FabwireError as exc:  # the agent changed under us (a device went away mid-publish)
+                    log.warning("MQTT bridge: %s; reconnecting in %.1f s", exc, delay)
                 finally:
                     self._client = None
                     self.connected.clear()
@@ -161,10 +163,15 @@ class Bridge:
 
     async def _goodbye(self, client: aiomqtt.Client) -> None:
         """A clean stop: the devices and the agent show offline (a clean disconnect sends no last will)."""
+        # The devices first: another agent takes them over when it sees this agent's status go offline, and its
+        # "online" must not be overtaken by this agent's "offline". Each step has its own time limit, so the
+        # status (which alone makes every device unavailable in Home Assistant) goes out in any case.
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
-                for device in sorted(self.owned):
-                    await client.publish(device_topic(device, "availability"), OFFLINE, qos=1, retain=True)
+                await asyncio.gather(*(client.publish(device_topic(device, "availability"), OFFLINE, qos=1,
+                                                      retain=True) for device in sorted(self.owned)))
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(2.0):
                 await client.publish(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
 
     async def _publish(self, topic: str, payload: str | bytes, *, retain: bool = True, qos: int = 1,
@@ -260,10 +267,13 @@ class Bridge:
                 await self._remove(device)
 
     async def _publish_device(self, device: str) -> None:
+        try:
+            state = self.agent.state(device)
+        except FabwireError:
+            return  # removed from the agent meanwhile: the next scan cleans it up
         info = self.known[device]
         await self._publish(device_topic(device, "info"), _dump({**info, "agent": self.agent_id}))
         await self._publish_discovery(device)
-        state = self.agent.state(device)
         self._availability.pop(device, None)
         await self._publish_state(device, state)
 
