@@ -76,6 +76,18 @@ def completion(shell: str) -> None:
     click.echo(complete(cli, {}, "fabwire", "_FABWIRE_COMPLETE").source())
 
 
+@cli.command()
+@click.argument("directory", type=click.Path(file_okay=False, path_type=Path), default=".")
+@click.option("--force", is_flag=True, help="Replace files of the same name.")
+@pass_app
+def samples(app: App, directory: Path, force: bool) -> None:
+    """Write the sample print and drawing the README's tour uses into DIRECTORY (default: here)."""
+    from fabwire.samples import write_samples
+
+    written = write_samples(directory, overwrite=force)
+    app.output.result([str(p) for p in written], "\n".join(f"wrote {p}" for p in written))
+
+
 @cli.group()
 def trace() -> None:
     """Read wire captures made with --trace."""

@@ -106,6 +106,14 @@ def config_path() -> Path:
     return user_config_path("fabwire", appauthor=False) / "devices.toml"
 
 
+def state_path() -> Path:
+    """Where fabwire keeps state between runs (drawing progress, the agent's history): the platform's state folder,
+    e.g. ~/.local/state/fabwire (honouring $XDG_STATE_HOME) on Linux."""
+    from platformdirs import user_state_path
+
+    return user_state_path("fabwire", appauthor=False)
+
+
 def closest(word: str, choices: object) -> str:
     """` (did you mean 'x'?)` for the nearest choice, or nothing."""
     import difflib

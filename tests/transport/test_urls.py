@@ -25,6 +25,8 @@ from fabwire.transport import Endpoint, parse_url
         ("serial:///dev/ttyUSB1", MMU, Endpoint("serial", path="/dev/ttyUSB1")),
         ("  /dev/pts/3 ", MMU, Endpoint("serial", path="/dev/pts/3")),
         ("sim://mmu", MMU, Endpoint("sim", host="mmu")),
+        ("COM3", MMU, Endpoint("serial", path="COM3")),
+        ("com12", XYZ, Endpoint("serial", path="com12")),
         ("sim://xyz?model=nano&speed=50", XYZ, Endpoint("sim", host="xyz", options={"model": "nano", "speed": "50"})),
         ("sim://", LINEUS, Endpoint("sim", host="lineus")),
     ],

@@ -10,6 +10,8 @@ from urllib.parse import parse_qsl, urlsplit
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError
 
+_WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
+"""`COM3`: a serial port on Windows (no host is called that)."""
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_-]{1,63})*\.?$")
 
 
@@ -90,7 +92,7 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
     text = text.strip()
     if not text:
         raise _bad(text, "it is empty")
-    if text.startswith("/"):
+    if text.startswith("/") or _WINDOWS_PORT.match(text):
         return Endpoint("serial", path=text)
     if "://" not in text:
         return _tcp(text, text, kind)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from fabwire import units
 from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
@@ -293,12 +294,9 @@ def set_cmd(dctx: DeviceContext, setting: str, value: str) -> None:
 @click.argument("value", required=False)
 @pass_device
 def zoffset(dctx: DeviceContext, value: str | None) -> None:
-    """Show the Z offset, set it (in 1/100 mm, e.g. 245 or -12), or nudge it one step: up / down."""
+    """Show the Z offset, set it (2.45mm, or whole 1/100 mm such as 245 or -12), or nudge it one step: up / down."""
     if value is not None and value not in ("up", "down"):
-        try:
-            number = int(value)
-        except ValueError:
-            raise InputError(f"z offset must be a whole number of 1/100 mm, or up/down, not {value!r}") from None
+        number = units.parse_zoffset(value)
 
     async def run(pr: XYZPrinter) -> int:
         if value is None:
@@ -309,7 +307,7 @@ def zoffset(dctx: DeviceContext, value: str | None) -> None:
         return await pr.set_zoffset(number)
 
     result = _with_printer(dctx, run)
-    dctx.output.result({"zoffset": result}, f"z offset {result} ({result / 100:.2f} mm)")
+    dctx.output.result({"zoffset": result}, f"z offset {units.zoffset(result)}")
 
 
 @xyz.command()

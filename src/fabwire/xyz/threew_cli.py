@@ -12,6 +12,7 @@ import click
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 from rich.table import Table
 
+from fabwire import units
 from fabwire.cli_support import App
 from fabwire.errors import InputError
 from fabwire.xyz import intake
@@ -24,7 +25,6 @@ from fabwire.xyz.threew import (
     ThreeWInfo,
     convert_3w_to_gcode,
     convert_gcode_file,
-    gcode_metadata,
     inspect_3w,
 )
 
@@ -52,13 +52,6 @@ def _progress(app: App, label: str, size: int) -> Iterator[ProgressCallback | No
         yield update
 
 
-def _duration(seconds: int | None) -> str:
-    if seconds is None:
-        return "?"
-    hours, rest = divmod(seconds, 3600)
-    return f"{hours}h {rest // 60:02d}m" if hours else f"{rest // 60}m {rest % 60:02d}s"
-
-
 def _model_data(model: PrinterModel | None) -> dict[str, Any] | None:
     if model is None:
         return None
@@ -79,8 +72,7 @@ def _info_data(info: ThreeWInfo) -> dict[str, Any]:
 
 
 def metadata_summary(info: ThreeWInfo) -> str:
-    filament = "?" if info.filament_mm is None else f"{info.filament_mm / 1000:.2f} m"
-    return (f"print time {_duration(info.print_time_s)}, filament {filament}, "
+    return (f"print time {units.duration(info.print_time_s)}, filament {units.filament(info.filament_mm)}, "
             f"{info.layers if info.layers is not None else '?'} layers")
 
 
@@ -200,7 +192,7 @@ def info(ctx: click.Context, file: Path) -> None:
         table.add_row("crc", f"{details.crc_stored:08x} {crc}")
         table.add_row("model", f"{model.name} ({model.model_number})" if model
                       else f"unknown (machine {details.machine!r})")
-        table.add_row("print time", _duration(details.print_time_s))
+        table.add_row("print time", units.duration(details.print_time_s))
         table.add_row("filament", "?" if details.filament_mm is None else f"{details.filament_mm:.2f} mm")
         table.add_row("layers", str(details.layers) if details.layers is not None else "?")
         for key, value in details.fields.items():
@@ -212,7 +204,7 @@ def info(ctx: click.Context, file: Path) -> None:
 
 
 def _gcode_info(app: App, plain: Path, file: Path) -> None:
-    stated, computed = gcode_metadata(plain)
+    stated, computed = intake.gcode_metadata(plain)
     final: GcodeMetadata = finish(stated, computed)
 
     def source(value: object) -> str:
@@ -224,5 +216,5 @@ def _gcode_info(app: App, plain: Path, file: Path) -> None:
             "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources}
     filament = f"{final.filament_mm:.2f} mm" if final.filament_mm is not None else "?"
     app.output.result(data, f"{file}: G-code from {stated.slicer or 'an unknown slicer'}; print time "
-                            f"{_duration(final.print_time_s)} ({sources['print_time_s']}), filament "
+                            f"{units.duration(final.print_time_s)} ({sources['print_time_s']}), filament "
                             f"{filament} ({sources['filament_mm']}), {final.layers} layers ({sources['layers']})")

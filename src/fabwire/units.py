@@ -1,0 +1,74 @@
+"""One style for numbers, units and codes, shared by every command.
+
+People read durations as `45s`, `3m 12s`, `1h 05m`; filament in metres (`0.05 m`); the z-offset in millimetres
+(`2.45 mm`); temperatures as `210 °C`; an absent value as `—`; an MMU error as its printer code, title and MMU code
+(`04101 FINDA DIDN'T TRIGGER (0x8001)`). JSON carries SI values with the unit in the key: `print_time_s`,
+`filament_m`, `zoffset_mm`, `extruder_c` (`json_key`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+from fabwire.errors import InputError
+
+ABSENT = "—"
+ZOFFSET_LIMIT_MM = 20.0
+"""The firmware's z-offset range is ±20.00 mm (sent in hundredths, ±2000)."""
+
+
+def duration(seconds: float | None) -> str:
+    """`45s`, `3m 12s`, `1h 05m` (seconds rounded); `—` when unknown."""
+    if seconds is None or not math.isfinite(seconds):
+        return ABSENT
+    total = max(0, round(seconds))
+    hours, rest = divmod(total, 3600)
+    minutes, secs = divmod(rest, 60)
+    if hours:
+        return f"{hours}h {minutes:02d}m"
+    return f"{minutes}m {secs:02d}s" if minutes else f"{secs}s"
+
+
+def filament(mm: float | None) -> str:
+    """A filament length given in mm, shown in metres with two decimals: `0.05 m`, `200.00 m`."""
+    return ABSENT if mm is None else f"{mm / 1000:.2f} m"
+
+
+def temperature(celsius: float | None) -> str:
+    return ABSENT if celsius is None else f"{celsius:g} °C"
+
+
+def zoffset(hundredths: int | None) -> str:
+    """The z-offset the firmware reports in 1/100 mm, in mm: `2.45 mm`."""
+    return ABSENT if hundredths is None else f"{hundredths / 100:.2f} mm"
+
+
+_ZOFFSET = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+))\s*(mm)?\s*$", re.IGNORECASE)
+
+
+def parse_zoffset(text: str) -> int:
+    """A z-offset typed by a person, in the firmware's hundredths: `2.45mm`, `2.45 mm` and `2.45` are mm;
+    a whole number without unit (`245`, `-12`) is hundredths, as the firmware and older fabwire take it.
+
+    Raises InputError for anything else or outside ±20 mm.
+    """
+    match = _ZOFFSET.match(text)
+    if not match:
+        raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not {text!r}")
+    number, unit = match.groups()
+    hundredths = round(float(number) * 100) if unit or "." in number else int(number)
+    if abs(hundredths) > ZOFFSET_LIMIT_MM * 100:
+        raise InputError(f"z offset {hundredths / 100:.2f} mm is outside ±{ZOFFSET_LIMIT_MM:g} mm")
+    return hundredths
+
+
+def mmu_error(printer_code: int | str | None, title: str, code: int) -> str:
+    """An MMU error the way Prusa's printers show it: `04101 FINDA DIDN'T TRIGGER (0x8001)`."""
+    prefix = "" if printer_code is None or printer_code == "" else f"{int(printer_code):05d} "
+    return f"{prefix}{title.upper()} (0x{code:04X})"
+
+
+def json_key(name: str, unit: str) -> str:
+    """The JSON key for a quantity: its name and SI unit, `print_time` + `s` → `print_time_s`."""
+    return f"{name}_{unit}"
