@@ -1,4 +1,5 @@
-"""Line-us link: client ↔ simulator command round trips on loopback TCP with motion delays off."""
+"""Line-us link: client ↔ simulator command round trips on loopback TCP with motion delays off, and G-code files
+read through the machine's interpreter (what `preview`/`draw` of a .gcode file and `files save` cost)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import time
 from common import Figure
 from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs
+from fabwire.lineus.interpreter import trace_text
 from fabwire.lineus.sim import LineUsSim, SimOptions
 from fabwire.transport import open_tcp, serve_tcp
 
@@ -17,6 +19,9 @@ OFFICIAL_MOVES = 2_000
 TRIALS = 5
 """Best of several runs: the machine is shared, and the least-disturbed run is the link's own speed."""
 TARGET = 5_000.0
+GCODE_LINES = 100_000
+GCODE_TARGET = 10_000.0
+"""Lines per second: a 100k-line drawing file previews in under 10 s on a loaded machine."""
 
 
 def _targets(count: int) -> list[tuple[float, float]]:
@@ -86,10 +91,23 @@ def _official_rate() -> float | None:
         loop.close()
 
 
+def _gcode_rate() -> float:
+    lines = ["G54 X0 Y0 S1"]
+    lines += [f"G01 X{1000 + i % 400} Y{-200 + (i % 300) * 0.5:.2f} Z{0 if i % 50 else 1000}"
+              for i in range(GCODE_LINES)]
+    text = "\n".join(lines)
+    start = time.perf_counter()
+    traced = trace_text(text)
+    elapsed = time.perf_counter() - start
+    assert traced.ink.strokes
+    return GCODE_LINES / elapsed
+
+
 def run() -> list[Figure]:
     official = max((rate for _ in range(TRIALS) if (rate := _official_rate()) is not None), default=None)
     serial = max(asyncio.run(_client_rate(lookahead=False)) for _ in range(TRIALS))
     pipelined = max(asyncio.run(_client_rate(lookahead=True)) for _ in range(TRIALS))
+    gcode = max(_gcode_rate() for _ in range(3))
     target = f"> {TARGET:,.0f}"
     return [
         Figure(f"lineus G01 round trips, one in flight (loopback TCP, speed inf, best of {TRIALS})", serial,
@@ -98,6 +116,8 @@ def run() -> list[Figure]:
         # so this figure is for comparison only.
         Figure(f"lineus G01 moves, look-ahead window 3 (best of {TRIALS})", pipelined, "moves/s", "", None,
                serial, "one in flight"),
+        Figure(f"lineus G-code file read through the interpreter ({GCODE_LINES:,} lines, best of 3)", gcode,
+               "lines/s", f"> {GCODE_TARGET:,.0f}", gcode > GCODE_TARGET),
     ]
 
 

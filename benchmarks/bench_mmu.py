@@ -155,8 +155,28 @@ def bench_tool_change() -> Figure:
                   "< 5", per_change_ms < 5)
 
 
+def bench_noisy_line() -> list[Figure]:
+    """The full client (asyncio, memory link with 1 % of bytes flipped both ways) on a fake clock."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    from robustness.fakeclock import run_on_fake_clock
+    from robustness.noisy_mmu import noisy_tool_changes
+
+    changes = 200
+    start = time.perf_counter()
+    report = run_on_fake_clock(noisy_tool_changes(changes, corrupt=0.01, seed=99))
+    wall = time.perf_counter() - start
+    share = report.completed / changes * 100
+    return [Figure("mmu: tool changes completed through 1 % byte corruption (both ways)", share, "%", ">= 99",
+                   share >= 99),
+            Figure("mmu: wall time per noisy tool change (fake clock, 1× MMU timing)", wall / changes * 1000,
+                   "ms", "< 300", wall / changes < 0.3)]
+
+
 def run() -> list[Figure]:
-    return [bench_encode(), *bench_decode(), bench_tool_change()]
+    return [bench_encode(), *bench_decode(), bench_tool_change(), *bench_noisy_line()]
 
 
 if __name__ == "__main__":

@@ -22,6 +22,11 @@ from fabwire.vpype.passes import document_passes, plan_passes, total_figures
 
 BUDGET = 1.0
 T = TypeVar("T")
+SAMPLES: tuple[tuple[str, Callable[[np.random.Generator], str]], ...] = (
+    ("scribbles", lambda rng: sketch(rng, 800, 6)), ("stipple", stipple), ("circles", circles),
+    ("hatching", hatching), ("text page", lambda rng: text_page()),
+)
+"""The planner benchmark's travel samples."""
 VPYPE_ORDERINGS = {
     "linesort": "linesort",
     "linesort --two-opt": "linesort --two-opt",
@@ -43,13 +48,7 @@ def _measured(func: Callable[[], T]) -> tuple[T, float]:
 def run() -> list[Figure]:
     figures: list[Figure] = []
     rng = np.random.default_rng(2024)
-    samples = {
-        "scribbles": sketch(rng, 800, 6),
-        "stipple": stipple(rng),
-        "circles": circles(rng),
-        "hatching": hatching(rng),
-        "text page": text_page(),
-    }
+    samples = {name: make(rng) for name, make in SAMPLES}
     as_placed = PlanOptions(fit=False, optimize=False)
     with tempfile.TemporaryDirectory() as tmp:
         for name, text in samples.items():

@@ -33,7 +33,8 @@ class Bench:
 
 
 def write_config(path: Path, sims: list[RunningSimulator]) -> Path:
-    """The bench as named devices; the MMU's heartbeat follows its simulator's speed-up."""
+    """The bench as named devices; the MMU's heartbeat follows its simulator's speed-up, and its errors wait for
+    a person (no automatic Retry)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(f"""
 [devices.printer]
@@ -48,6 +49,7 @@ url = "{sims[1].url}"
 kind = "mmu"
 url = "{sims[2].url}"
 speed = {SPEED}
+auto_retries = 0
 """, encoding="utf-8")
     return path
 

@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 
 from fabwire.samples import SAMPLE_GCODE, sample_path
 
 from .agenttools import device_of, summary, wait_for
-from .conftest import Bench
+from .conftest import Bench, start_bench, stop_bench
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Bench]:
+    """One bench for this module: each test leaves the machines usable for the next, in any order."""
+    running = start_bench(Path(tmp_path_factory.mktemp("api")) / "state")
+    yield running
+    stop_bench(running)
 
 
 def _error(response: httpx.Response, status: int, exit_code: int) -> dict[str, Any]:
@@ -37,7 +48,7 @@ def test_devices_come_online_with_identity_and_state(bench: Bench) -> None:
         assert state["online"] is True
         assert state["ts"].endswith("Z")
         assert state["status"]["serial"] == printer["serial"]  # the `--json status` dict, as the CLI prints it
-        assert state["summary"]["state"] == "idle"
+        assert state["summary"]["state"] in ("idle", "printing", "done")
         assert state["summary"]["extruder_temp_c"] is not None
         mmu = by_kind["mmu"]
         assert mmu["firmware"].startswith("3.0.4")
@@ -50,8 +61,8 @@ def test_mmu_tool_change_through_the_api(bench: Bench) -> None:
         wait_for(lambda: summary(client, mmu["id"])["state"] == "idle", "the MMU idle")
         response = client.post(f"/api/v1/devices/{mmu['id']}/actions/tool_change", json={"slot": 0})
         assert response.json() == {"started": "tool_change"}
-        done = wait_for(lambda: (s := summary(client, mmu["id"]))["active_slot"] == 0 and s["state"] == "idle" and s,
-                        "T0 finished")
+        done = wait_for(lambda: (s := summary(client, mmu["id"]))["active_slot"] == 0 and s["state"] == "idle"
+                        and "T0 finished" in s["state_text"] and s, "T0 finished")
         assert done["finda"] is True
         assert done["filament_position"] == "loaded past FINDA"
         events = client.get(f"/api/v1/devices/{mmu['id']}/history").json()["events"]
@@ -74,6 +85,12 @@ def test_print_job_from_upload_to_done(bench: Bench) -> None:
         heating = wait_for(lambda: (s := summary(client, printer["id"]))["extruder_target_c"] and s,
                            "the printer heating for the job")
         assert heating["busy"] is True
+        wait_for(lambda: summary(client, printer["id"])["state"] == "printing", "the print under way")
+        actions = f"/api/v1/devices/{printer['id']}/actions"
+        assert client.post(f"{actions}/pause", json={}).json() == {"ok": True, "action": "pause"}
+        paused = wait_for(lambda: (s := summary(client, printer["id"]))["state"] == "paused" and s, "paused")
+        assert paused["actions"] == ["resume", "cancel"]
+        assert client.post(f"{actions}/resume", json={}).status_code == 200
         # a second job while one runs is refused, with the CLI's input-error exit code
         _error(client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "b.gcode"}, content=data),
                400, 4)
@@ -137,5 +154,49 @@ def test_devices_added_and_removed_at_run_time(bench: Bench, simulator: Any) -> 
         assert len(ids) == len(set(ids)) == 4
         _error(client.post("/api/v1/devices", json={"name": "again", "kind": "xyz", "address": second.url}), 400, 4)
         _error(client.post("/api/v1/devices", json={"name": "bad name!", "kind": "xyz", "address": "x"}), 422, 4)
+        for path in ("/etc/passwd", "serial:///dev/../etc/shadow", "/dev/sda", "/dev/ttyS0/../../etc/passwd"):
+            refused = _error(client.post("/api/v1/devices", json={"name": "p", "kind": "xyz", "address": path}),
+                             400, 4)
+            assert "not a serial port" in refused["message"]
+        _error(client.post("/api/v1/devices", json={"name": "p", "kind": "mmu", "address": second.url,
+                                                     "options": {"sped": 3}}), 400, 4)
         assert client.delete(f"/api/v1/devices/{added['id']}").status_code == 204
         assert len(client.get("/api/v1/devices").json()) == 3
+
+
+def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        arm = device_of(client, "lineus")
+        wait_for(lambda: summary(client, arm["id"])["state"] == "idle", "the Line-us idle")
+        job = client.post(f"/api/v1/devices/{arm['id']}/actions/text",
+                          json={"text": "a longer line to cancel"}).json()["job"]
+        wait_for(lambda: summary(client, arm["id"])["state"] == "drawing", "the drawing under way")
+        assert "confirm" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={}), 400, 4)["message"]
+        assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "running"
+        cancelled = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True})
+        assert cancelled.json()["state"] == "cancelled", cancelled.text
+        record = client.get(f"/api/v1/jobs/{job['id']}").json()
+        assert record["state"] == "cancelled"
+        assert record["progress_percent"] < 100
+        idle = wait_for(lambda: (s := summary(client, arm["id"]))["state"] == "idle" and s, "the Line-us idle again")
+        assert idle["pen_down"] is False  # the pen was lifted
+        assert "not running" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True}),
+                                       400, 4)["message"]
+
+
+def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        printer = device_of(client, "xyz")
+        actions = f"/api/v1/devices/{printer['id']}/actions"
+        if summary(client, printer["id"])["state"] == "done":  # a finished print waits to be taken off the bed
+            assert client.post(f"{actions}/acknowledge", json={}).status_code == 200
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle")
+        job = client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "square.g"},
+                          content=sample_path(SAMPLE_GCODE).read_bytes()).json()
+        wait_for(lambda: summary(client, printer["id"])["state"] == "printing", "the print under way")
+        assert "confirm" in _error(client.post(f"{actions}/cancel", json={}), 400, 4)["message"]
+        cancelled = client.post(f"{actions}/cancel", json={"confirm": True})
+        assert cancelled.status_code == 200, cancelled.text
+        assert cancelled.json()["id"] == job["id"]
+        assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "cancelled"
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle after cancelling")

@@ -94,7 +94,9 @@ def test_session_through_the_cli(simulator, tmp_path: Path) -> None:
     sim.process.terminate()
     assert sim.process.wait(10) == 0
     assert sim.process.stderr is not None
-    assert "recorded 1 stroke(s)" in sim.process.stderr.read()
+    # The three `move --pen down` calls each put the pen down in one place (a dot; the next connection's homing
+    # lifts it), and the raw session drew one line.
+    assert "recorded 4 stroke(s)" in sim.process.stderr.read()
     svg = record.read_text()
     assert svg.startswith("<?xml")
     assert "1200" in svg
@@ -160,3 +162,159 @@ def test_firmware_update_needs_yes_and_reports_the_refusal() -> None:
     assert refused.returncode not in (0, 4)
     assert "update server unreachable" in refused.stderr
     assert "Traceback" not in refused.stderr
+
+
+DATA = Path(__file__).parent / "data"
+
+
+def _record_marks(path: Path) -> tuple[int, int]:
+    """(polylines, dots) in the strokes group of a recorded SVG."""
+    import xml.etree.ElementTree as ET
+
+    ns = {"svg": "http://www.w3.org/2000/svg"}
+    group = ET.parse(path).getroot().find("svg:g[@id='strokes']", ns)
+    assert group is not None
+    return len(group.findall("svg:polyline", ns)), len(group.findall("svg:circle", ns))
+
+
+def test_dots_reach_the_record(simulator, tmp_path: Path) -> None:
+    record = tmp_path / "rec.svg"
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--record", str(record))
+    drawn = run_cli("lineus", "-d", sim.url, "draw", str(DATA / "gcode" / "dots.gcode"), "--state",
+                    str(tmp_path / "s.json"))
+    assert drawn.returncode == 0, drawn.stderr
+    assert "recorded 4 stroke(s)" in sim.stop()
+    assert _record_marks(record) == (1, 3)
+
+
+def test_firmware1_never_gets_a_target_in_the_body_notch(simulator, tmp_path: Path) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--version", "1.0.1")
+    trace = tmp_path / "wire.jsonl"
+    moved = run_cli("--json", "lineus", "-d", sim.url, "--trace", str(trace), "move", "600", "-300", "--pen", "down")
+    assert moved.returncode == 0, moved.stderr
+    assert json.loads(moved.stdout)["z"] == 1000.0
+    assert "body notch" in moved.stderr
+    sent = [json.loads(line)["data"] for line in trace.read_text().splitlines() if '"dir": ">"' in line]
+    assert sent
+    assert all("X600" not in command for command in sent)
+    shell = run_cli("lineus", "-d", sim.url, "shell", input_text="move 1200 0 down\nG01 X650 Y-900 Z0\n")
+    assert shell.returncode == 0, shell.stderr
+    assert "body notch" in shell.stdout
+    assert "collision" not in sim.stop()
+
+
+def test_shell_keeps_one_connection(simulator, tmp_path: Path) -> None:
+    record = tmp_path / "rec.svg"
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--record", str(record))
+    script = "\n".join(["help", "move 1200 0 down", "move 1400 0", "position", "up", "M114", "speed 10 20",
+                        "G01 X1400 Y300 Z0", "m 1200 300", "home", "history", "quit", "move 1000 0 down"]) + "\n"
+    session = run_cli("lineus", "-d", sim.url, "shell", input_text=script)
+    assert session.returncode == 0, session.stderr
+    out = session.stdout.splitlines()
+    assert "X 1400  Y 0  Z 0  (pen down)" in out  # no homing between moves: one connection
+    assert "ok X:1400.00 Y:0.00 Z:1000.00" in out  # raw G-code gets the raw reply
+    assert "  12  quit" not in out
+    assert "   3  move 1400 0" in out
+    assert "Traceback" not in session.stderr
+    sim.stop()
+    assert _record_marks(record) == (2, 0)  # (1200,0)-(1400,0) and (1400,300)-(1200,300); nothing after quit
+    bad = run_cli("lineus", "-d", sim.url.replace("tcp://", ""), "shell", input_text="jump\n")
+    assert bad.returncode != 0
+
+
+def test_shell_reports_bad_lines_and_goes_on(simulator) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf")
+    session = run_cli("lineus", "-d", sim.url, "shell", input_text="fly 1 2\nmove 1200 abc\nG04 P1\nZ9\npos\n")
+    assert session.returncode == 4
+    assert session.stdout.strip().splitlines()[-1] == "X 1000  Y 1000  Z 1000  (pen up)"
+    errors = [line for line in session.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 4
+    assert any("G04" in line for line in errors)
+    assert "4 line(s) of the session failed" in session.stderr
+
+
+def test_preview_writes_gcode_that_files_save_accepts_and_draw_replays(simulator, tmp_path: Path) -> None:
+    svg = DATA / "svg" / "arcs.svg"
+    plan_gcode = tmp_path / "plan.gcode"
+    made = run_cli("lineus", "preview", str(svg), "-o", str(plan_gcode), "--pen-z", "300")
+    assert made.returncode == 0, made.stderr
+    lines = plan_gcode.read_text().splitlines()
+    assert lines[0] == "G01 Z1000"
+    assert "G01 Z300" in lines
+    record = tmp_path / "rec.svg"
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--record", str(record))
+    saved = run_cli("--json", "lineus", "-d", sim.url, "files", "save", str(plan_gcode), "5")
+    assert saved.returncode == 0, saved.stderr
+    assert json.loads(saved.stdout) == {"slot": 5, "lines": len(lines)}
+    replay = run_cli("--json", "lineus", "-d", sim.url, "draw", str(plan_gcode), "--state", str(tmp_path / "s.json"))
+    assert replay.returncode == 0, replay.stderr
+    sim.stop()
+    from fabwire.lineus.plot import plan_file
+
+    planned = plan_file(svg)
+    assert _record_marks(record) == (len(planned.strokes), 0)
+    assert json.loads(replay.stdout)["strokes"] == len(planned.strokes)
+
+
+def test_local_names_resolve_by_mdns_with_the_advertised_port(simulator) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--name", "mdns-bot", "--advertise")
+    where = run_cli("--json", "lineus", "-d", "mdns-bot.local", "position")
+    assert where.returncode == 0, where.stderr
+    assert json.loads(where.stdout)["x"] == 1000.0
+    missing = run_cli("lineus", "-d", "no-such-bot.local", "--timeout", "1", "position")
+    assert missing.returncode == 8
+    assert "no-such-bot.local" in missing.stderr
+    assert "Traceback" not in missing.stderr
+    sim.stop()
+
+
+def test_silent_robot_and_interrupted_draw_print_one_line(simulator, tmp_path: Path) -> None:
+    import contextlib
+    import signal
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    from clitools import cli_env
+
+    hello = b'hello VERSION:"3.2.0 Nov 17 2019 17:54:57" NAME:line-us SERIAL:123456\r\n\x00'
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+
+        def greet_then_nothing() -> None:
+            with contextlib.suppress(OSError):
+                conn, _ = listener.accept()
+                conn.sendall(hello)
+                while conn.recv(4096):
+                    pass
+
+        threading.Thread(target=greet_then_nothing, daemon=True).start()
+        silent = run_cli("lineus", "-d", f"127.0.0.1:{port}", "home", timeout=60)
+    assert silent.returncode == 9
+    assert len(silent.stderr.strip().splitlines()) == 1
+    assert "never retrieved" not in silent.stderr
+    assert "Traceback" not in silent.stderr
+
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0.5")
+    state = tmp_path / "state.json"
+    draw = subprocess.Popen([sys.executable, "-m", "fabwire", "lineus", "-d", sim.url, "draw",
+                             str(DATA / "svg" / "arcs.svg"), "--state", str(state)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (state.exists() and json.loads(state.read_text())["done"] >= 1):
+        time.sleep(0.05)  # the first stroke is done: the interrupt lands in a later one
+    time.sleep(0.3)
+    draw.send_signal(signal.SIGINT)
+    _, err = draw.communicate(timeout=60)
+    assert draw.returncode == 130
+    assert "interrupted" in err
+    assert "--resume" in err
+    assert "never retrieved" not in err
+    assert "Traceback" not in err
+    saved = json.loads(state.read_text())
+    assert saved["done"] >= 1
+    assert saved["done"] + (saved["point"] > 0) <= len(saved["strokes"])
+    sim.stop()

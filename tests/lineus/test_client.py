@@ -256,10 +256,92 @@ async def test_move_wait_is_sized_in_machine_units_under_g54(lineus_sim) -> None
     arm = await LineUs.open(running.address)
     try:
         await arm.move(1000, 0, 1000)
-        unscaled = arm._timeout_for(p.Move(900, 0))
+        unscaled = arm._timeout_for(arm._span(p.Move(900, 0))[0])
         await arm.set_origin(0, 0, 2.0)
         # Under scale 2 the drawing-unit move to X900 ends at machine X1800: eight times as far.
-        assert arm._timeout_for(p.Move(900, 0)) > unscaled
+        assert arm._span(p.Move(900, 0)) == (800, (1800, 0, 1000))
+        assert arm._timeout_for(arm._span(p.Move(900, 0))[0]) > unscaled
         assert await arm.move(900, 0) == Position(1800, 0, 1000)
     finally:
         await arm.close()
+
+
+def _zone_commands(received: object) -> list[str]:
+    """Move commands a simulator received whose machine target lies in the body notch (no G54 in use)."""
+    bad = []
+    for text in received:  # type: ignore[attr-defined]
+        command = p.parse_command(text)
+        if (isinstance(command, p.Move | p.RawMove) and command.x is not None and command.y is not None
+                and command.x < 700 and command.y < 0):
+            bad.append(text)
+    return bad
+
+
+async def test_firmware1_target_in_the_body_notch_is_clamped_with_the_pen_up(lineus_sim) -> None:
+    running = await lineus_sim(version=resolve_version("1.0.1"))
+    async with connected(running.port) as arm:
+        assert arm.guard_body
+        where = await arm.move(600, -300, 0)
+        assert where.z == 1000
+        assert where.x >= 700
+        assert where.y == -300
+        assert arm.notices
+        assert "body notch" in arm.notices[0]
+        reply = await arm.send(p.parse_command("G01 X650 Y-1000 Z0"))  # raw G-code goes through the same guard
+        assert reply.ok
+    assert _zone_commands(running.sim.received) == []
+    assert running.sim.arm.collisions == []
+
+
+async def test_firmware1_moves_across_the_notch_go_round_its_corner(lineus_sim) -> None:
+    running = await lineus_sim(version=resolve_version("1.0.1"))
+    async with connected(running.port) as arm:
+        await arm.move(550, 300, 0)
+        await arm.move(550, 100)  # pen down, still outside the notch
+        await arm.move(1000, -600)  # would cut the notch with the pen down
+        assert len(arm.notices) == 1
+        assert "cross the body notch" in arm.notices[0]
+        assert await arm.position() == Position(1000, -600, 0)  # the requested pen state at the end
+        await arm.set_origin(500, -500, 2.0)  # the same through G54: drawing (50, 300) is machine (600, 100)
+        await arm.move(50, 300, 1000)
+        await arm.move(250, 0)  # machine (1000, -500)
+    assert running.sim.arm.collisions == []
+    assert "G01 Z1000" in running.sim.received  # lifted before going round
+    corners = [text for text in running.sim.received if text.startswith("G01 X700.01 Y0.01")]
+    assert corners  # the first detour, in machine units
+    assert any(text.startswith("G01 X100.005 Y250.005") for text in running.sim.received)  # the second, via G54
+
+
+async def test_firmware3_keeps_out_of_the_notch_itself(lineus_sim) -> None:
+    running = await lineus_sim()
+    async with connected(running.port) as arm:
+        assert not arm.guard_body
+        assert await arm.move(600, -300, 0) == Position(700, -300, 1000)  # the firmware clamps
+        assert arm.notices == []
+    assert "G01 X600 Y-300 Z0" in running.sim.received
+
+
+async def test_a_reply_that_never_comes_leaves_no_unretrieved_exception(caplog) -> None:
+    import gc
+
+    hello = p.Hello("3.2.0", "line-us", "1").encode()
+    caplog.set_level("ERROR", logger="asyncio")
+    async with impostor(hello) as port, connected(port, reply_timeout=0.2, lookahead=True) as arm:
+        with pytest.raises(LinkTimeout):
+            await arm.run([p.GetPosition(), p.GetPosition(), p.GetPosition()])
+    gc.collect()
+    await asyncio.sleep(0)
+    assert not [r for r in caplog.records if "never retrieved" in r.getMessage()]
+
+
+async def test_saving_past_the_flash_reports_the_machines_answer(lineus_sim) -> None:
+    from fabwire.lineus.sim_handlers import FS_TOTAL
+
+    line = "G01 X1200 Y0 Z0\n"
+    running = await lineus_sim(files={1: line * ((FS_TOTAL - 1000) // len(line))})
+    async with connected(running.port) as arm:
+        with pytest.raises(DeviceError, match="file system full"):
+            await arm.save_drawing(2, ["G01 X1300 Y100 Z0"] * 200)
+        assert [d.slot for d in await arm.list_drawings()] == [1, 2]  # closed with what fitted
+        usage = await arm.storage()
+        assert usage["FSUsed"] <= usage["FSTotal"] == FS_TOTAL

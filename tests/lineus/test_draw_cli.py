@@ -137,13 +137,58 @@ def test_draw_over_tcp_then_resume_after_a_dropped_link(tmp_path: Path, simulato
     result = json.loads(second.stdout)
     assert result["resumed_at"] == saved["done"]
     assert result["drawn"] == len(saved["strokes"]) - saved["done"]
-    assert not state.exists()
+    assert "left" in second.stderr  # the resume says how long the rest takes
+    finished = json.loads(state.read_text())
+    assert finished["done"] == len(finished["strokes"])
+    # Resuming a finished drawing draws nothing and says so.
+    again = run_cli("--json", "lineus", "-d", sim.url, "draw", str(drawing), "--state", str(state), "--resume",
+                    env=env)
+    assert again.returncode == 0, again.stderr
+    assert json.loads(again.stdout) == {"file": str(drawing), "complete": True, "strokes": len(saved["strokes"]),
+                                        "drawn": 0}
+    told = run_cli("lineus", "-d", sim.url, "draw", str(drawing), "--state", str(state), "--resume", env=env)
+    assert "--restart" in told.stdout
+    both = run_cli("lineus", "-d", sim.url, "draw", str(drawing), "--resume", "--restart", env=env)
+    assert both.returncode == 4
     sim.process.terminate()  # the simulator writes its record on exit
     sim.process.wait(20)
     drawn = recorded_strokes(record)
     planned = [np.asarray(s) for s in saved["strokes"]]
-    # The stroke cut by the disconnect is drawn again in full: everything planned is on the paper, and nothing
-    # else is (the record keeps 0.1-unit precision).
+    # Everything planned is on the paper, and nothing else is (the record keeps 0.1-unit precision) ...
     planned_pts = resample(planned, 1.0)
     drawn_pts = resample(drawn, 1.0)
     assert hausdorff(planned_pts, drawn_pts) < 0.7  # sampling every unit: at most half a unit apart
+    # ... and the interrupted stroke carried on from its last acknowledged vertex instead of starting over: at most
+    # the one segment the arm finished while its reply was lost is inked twice.
+    def ink(lines: list[np.ndarray]) -> float:
+        return sum(float(np.hypot(*np.diff(line, axis=0).T).sum()) for line in lines if len(line) > 1)
+
+    longest = max(float(np.hypot(*np.diff(line, axis=0).T).max()) for line in planned if len(line) > 1)
+    assert ink(planned) - 1 <= ink(drawn) <= ink(planned) + longest + 1
+
+
+def test_progress_state_keeps_the_last_acknowledged_vertex(tmp_path: Path) -> None:
+    from fabwire.errors import InputError
+    from fabwire.lineus.draw_cli import DrawProgress
+
+    path = tmp_path / "state.json"
+    strokes = [[[900.0, 0.0], [1000.0, 0.0]], [[1100.0, 0.0], [1200.0, 0.0], [1300.0, 0.0], [1400.0, 0.0]]]
+    progress = DrawProgress(path, "k", strokes)
+    progress.reached(1, 2)  # stroke 2 drawn up to its third vertex
+    progress.save()
+    loaded = DrawProgress.load(path, "k")
+    assert loaded is not None
+    assert (loaded.done, loaded.point, loaded.complete) == (1, 2, False)
+    rest = loaded.remaining()
+    assert [s.tolist() for s in rest.strokes] == [[[1300.0, 0.0], [1400.0, 0.0]]]  # from where the pen was lifted
+    whole_stroke = DrawProgress(path, "k", strokes[1:]).remaining().figures().estimated_seconds
+    assert rest.figures().estimated_seconds < whole_stroke  # the time left counts only what is left
+    for damaged in ({"done": 1, "point": 4}, {"done": 2, "point": 1}, {"done": 1, "point": -1},
+                    {"done": 1, "point": "2"}):
+        path.write_text(json.dumps({"version": 1, "key": "k", "strokes": strokes, **damaged}))
+        with pytest.raises(InputError, match="damaged"):
+            DrawProgress.load(path, "k")
+    path.write_text(json.dumps({"version": 1, "key": "k", "strokes": strokes, "done": 2}))  # finished, older file
+    finished = DrawProgress.load(path, "k")
+    assert finished is not None
+    assert finished.complete

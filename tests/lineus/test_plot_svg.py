@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import gzip
 import math
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
 import pytest
+import svgelements as se
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
-from fabwire.lineus.plot import PlanOptions, parse_svg, plan_file, read_drawing
+from fabwire.lineus.plot import PlanOptions, parse_svg, plan_drawing, plan_file, read_drawing
 from fabwire.lineus.plot.svg import MAX_USE_COPIES
+from fabwire.lineus.plot.svgpath import PathBuilder, straight_path_data
 
 DATA = Path(__file__).parent / "data" / "svg"
 HEAD = '<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" '
@@ -293,3 +296,128 @@ def test_unsupported_features_are_named() -> None:
     assert "mask" in text
     assert "marker" in text
     assert "g > path" in text
+
+
+# -- hostile files -----------------------------------------------------------------------------------------------
+
+HOSTILE = {
+    "deep nesting": svg("<g>" * 3000 + '<path d="M0 0 L1 1" stroke="black"/>' + "</g>" * 3000),
+    "long use chain": svg('<defs><path id="u0" d="M0 0 L1 1" stroke="black"/>'
+                          + "".join(f'<use id="u{i}" href="#u{i - 1}"/>' for i in range(1, 1000))
+                          + '</defs><use href="#u999"/>'),
+    "clip cycle": svg('<clipPath id="a" clip-path="url(#b)"><rect width="5" height="5"/></clipPath>'
+                      '<clipPath id="b" clip-path="url(#a)"><rect width="5" height="5"/></clipPath>'
+                      '<path d="M0 0 L9 9" stroke="black" clip-path="url(#a)"/>'),
+    "clip chain": svg("".join(f'<clipPath id="c{i}" clip-path="url(#c{i + 1})"><rect width="50" height="50"/>'
+                              "</clipPath>" for i in range(3000))
+                      + '<path d="M0 0 L9 9" stroke="black" clip-path="url(#c0)"/>'),
+    "entity expansion": '<?xml version="1.0"?><!DOCTYPE s [<!ENTITY a "aaaaaaaaaa">'
+                        + "".join(f'<!ENTITY {n} "{("&" + p + ";") * 10}">' for p, n in zip("abcdef", "bcdefg",
+                                                                                             strict=True))
+                        + f']>{HEAD}><title>&g;</title></svg>',
+}
+
+
+@pytest.mark.parametrize("name", sorted(HOSTILE))
+def test_hostile_structures_are_refused_with_a_reason(name: str) -> None:
+    with pytest.raises(InputError, match=r"SVG text: \S"):
+        parse_svg(HOSTILE[name])
+
+
+@pytest.mark.parametrize(("body", "note"), [
+    (f'<path d="M0 0 L{"9" * 5000} 1" stroke="black"/>', "not finite"),
+    ('<path d="M0 0 L1 1" transform="scale(1e400)" stroke="black"/>', "transform that is not finite"),
+])
+def test_numbers_no_viewer_can_place_are_left_out_and_named(body: str, note: str) -> None:
+    drawing = parse_svg(svg(body + '<path d="M0 50 H9" stroke="black"/>'))
+    assert len(drawing.lines) == 1
+    assert any(note in n for n in drawing.notes)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.text(alphabet="MmLlHhVvCcSsQqTtAaZz0123456789.-+eE ,", max_size=60),
+       st.sampled_from(["", 'transform="rotate(30) scale(2 0)"', 'stroke-linecap="round"', 'clip-path="url(#c)"']))
+def test_any_path_data_reads_or_is_refused_cleanly(d: str, extra: str) -> None:
+    text = svg(f'<clipPath id="c"><circle cx="50" cy="50" r="40"/></clipPath><path d="{d}" stroke="black" {extra}/>')
+    try:
+        drawing = parse_svg(text)
+    except InputError:
+        return
+    for line in drawing.lines:
+        assert np.isfinite(line).all()
+        assert len(line) >= 1
+
+
+def test_switch_draws_its_first_qualifying_child() -> None:
+    text = svg('<switch><foreignObject requiredExtensions="http://www.w3.org/1999/xhtml"><p>x</p></foreignObject>'
+               '<path d="M0 0 H10" stroke="black"/><path d="M0 5 H10" stroke="black"/></switch>')
+    drawing = parse_svg(text)
+    assert boxes(drawing.lines) == [(0.0, 0.0, 10.0, 0.0)]
+    assert drawing.skipped == {}
+
+
+def test_memory_follows_the_geometry(tmp_path: Path) -> None:
+    # A long generated path: reading and planning hold a few hundred bytes per segment at most, not kilobytes.
+    count = 20_000
+    path = tmp_path / "long.svg"
+    steps = " ".join(f"L{i % 100} {(i * 7) % 100}" for i in range(count))
+    path.write_text(svg(f'<path d="M0 0 {steps}" stroke="black" fill="none"/>'))
+    tracemalloc.start()
+    try:
+        drawing = read_drawing(path)
+        read_peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        plan_drawing(drawing, PlanOptions(time_budget=0.05))
+        plan_peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert read_peak / count < 400
+    assert plan_peak / count < 400
+
+
+@st.composite
+def straight_command(draw: st.DrawFn) -> tuple[str, list[int]]:
+    """A straight-line path command, mostly with the right count of numbers, sometimes not."""
+    letter = draw(st.sampled_from("MmLlHhVvZz"))
+    arity = {"m": 2, "l": 2, "h": 1, "v": 1, "z": 0}[letter.lower()]
+    size = arity * draw(st.integers(1, 3)) if draw(st.integers(0, 9)) else draw(st.integers(0, 5))
+    return letter, draw(st.lists(st.integers(-50, 50), min_size=size, max_size=size))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(straight_command(), min_size=1, max_size=40), st.sampled_from([" ", ",", " , ", "\n"]),
+       st.booleans())
+def test_straight_path_reader_agrees_with_the_general_one(commands: list[tuple[str, list[int]]], sep: str,
+                                                          tidy: bool) -> None:
+    if tidy:  # what generators write: a fresh absolute moveto after every closepath
+        commands = [part for c in commands for part in ([c, ("M", [4, 8])] if c[0] in "Zz" else [c])]
+    d = " ".join(f"{c}{sep.join(str(v / 4) for v in values)}" for c, values in commands)
+    d = d + " " * max(0, 300 - len(d))  # long enough to take the array route
+    matrix = np.array([[2.0, 0.5, 3.0], [-0.5, 1.5, 7.0]])
+    fast = PathBuilder(matrix, 0.1)
+    taken = straight_path_data(fast, d)
+    general = PathBuilder(matrix, 0.1)
+    try:
+        se.SVGLexicalParser().parse(general, d)
+        general.end()
+    except ValueError:
+        general.subpaths = []
+        assert not taken or fast.subpaths == []
+        return
+    if not taken:
+        return
+    assert len(fast.subpaths) == len(general.subpaths)
+    for a, b in zip(fast.subpaths, general.subpaths, strict=True):
+        assert a.closed == b.closed
+        assert a.segments == b.segments
+        assert np.allclose(a.points, b.points)
+
+
+def test_straight_path_reader_takes_generated_paths() -> None:
+    d = "M0 0 " + " ".join(f"L{i % 100} {(i * 7) % 100}" for i in range(500)) + " Z M 5 5 h 10 v -3.5e1 l-2-2z"
+    builder = PathBuilder(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.1)
+    assert straight_path_data(builder, d)
+    first, second = builder.subpaths
+    assert first.closed
+    assert first.segments == 501
+    assert np.allclose(second.points, [(5, 5), (15, 5), (15, -30), (13, -32), (5, 5)])

@@ -368,3 +368,110 @@ async def test_in_process_simulator_url() -> None:
             assert (await arm.move(1200, 0)).x == 1200
         finally:
             await arm.close()
+
+
+async def test_dots_are_recorded(lineus_sim, raw_peer) -> None:
+    running = await lineus_sim()
+    peer = await raw_peer(running.port)
+    wires = (b"G01 X1000 Y0 Z1000", b"G01 Z0", b"G01 Z1000",  # down and up in one place
+             b"G01 X1200 Y0 Z0", b"G01 X1200 Y0 Z0", b"G01 Z1000",  # lands at the end of the hop, a stay in place
+             b"G01 X1300 Y0 Z300", b"G01 X1400 Y0 Z300", b"G01 Z1000",  # a line at a lighter pen
+             b"G01 X1500 Y100 Z0")  # left down at the end
+    for wire in wires:
+        assert (await peer.ask(wire + b"\x00")).startswith(b"ok")
+    assert running.sim.arm.strokes == [[(1000, 0)], [(1200, 0)], [(1300, 0), (1400, 0)], [(1500, 100)]]
+
+
+async def test_parameters_written_without_spaces(lineus_sim, raw_peer) -> None:
+    running = await lineus_sim()
+    peer = await raw_peer(running.port)
+    assert await peer.ask(b"G01X1200Y-10.5Z1000\x00") == b"ok X:1200.00 Y:-10.50 Z:1000.00\r\n\x00"
+    assert await peer.ask(b"G1 X1300Y0\x00") == b"ok X:1300.00 Y:0.00 Z:1000.00\r\n\x00"
+    assert (await peer.ask(b"G01 X1e3Y0\x00")).startswith(b"error")  # an exponent is not a parameter
+    assert (await peer.ask(b"M550 Pbot2\x00")).startswith(b"ok")  # M values are text: never split
+    assert running.sim.name == "bot2"
+
+
+async def test_firmware1_reaches_the_body_notch_and_records_the_collision(lineus_sim, raw_peer) -> None:
+    old = await lineus_sim(version=resolve_version("1.0.1"))
+    peer = await raw_peer(old.port)
+    assert await peer.ask(b"G01 X1200 Y-300 Z1000\x00") == b"ok X:1200 Y:-300 Z:1000\r\n\x00"
+    assert not old.sim.arm.collisions
+    assert await peer.ask(b"G01 X600 Y-300 Z0\x00") == b"ok X:600 Y:-300 Z:0\r\n\x00"  # no clamp: it goes there
+    [(x, y)] = old.sim.arm.collisions
+    assert 600 <= x < 700
+    assert y == -300
+    # Leaving it scrapes the body again, and a pen-up hop through the notch between two points outside it
+    # hits the body too; one that passes the notch's corner does not.
+    for wire in (b"G01 X600 Y200 Z1000\x00", b"G01 X800 Y-600 Z1000\x00", b"G01 X600 Y200\x00",
+                 b"G01 X1000 Y-600\x00"):
+        assert (await peer.ask(wire)).startswith(b"ok")
+    assert len(old.sim.arm.collisions) == 4
+    # Below x = 500 even firmware 1.0.1 clamps (and lifts the pen).
+    reply = await peer.ask(b"G01 X300 Y-100 Z0\x00")
+    assert reply.startswith(b"ok X:500 ")
+    assert reply.endswith(b" Z:1000\r\n\x00")
+    new = await lineus_sim()
+    peer3 = await raw_peer(new.port)
+    assert await peer3.ask(b"G01 X600 Y-300 Z0\x00") == b"ok X:700.00 Y:-300.00 Z:1000.00\r\n\x00"
+    assert not new.sim.arm.collisions
+
+
+async def test_clients_that_reset_before_the_hello_cost_a_few_log_lines(lineus_sim, raw_peer, caplog) -> None:
+    import socket
+    import struct
+
+    running = await lineus_sim()
+    caplog.set_level("DEBUG", logger="fabwire.lineus.sim")
+    loop = asyncio.get_running_loop()
+
+    def storm(count: int) -> None:
+        for _ in range(count):
+            with socket.create_connection(("127.0.0.1", running.port), timeout=5) as sock:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+
+    await loop.run_in_executor(None, storm, 60)
+    async with asyncio.timeout(10):
+        await running.sim.wait_idle()
+    peer = await raw_peer(running.port, read_hello=False)
+    assert (await peer.reply()).startswith(b"hello")  # still serving
+    went = [r for r in caplog.records if "went away" in r.getMessage()]
+    assert 1 <= len(went) <= 5  # rate-limited, one line each while the budget lasts
+    assert not [r for r in caplog.records if r.exc_info or r.levelno >= 40]
+
+
+def test_rate_limited_log_counts_what_it_holds_back(caplog) -> None:
+    import logging
+
+    from fabwire.lineus.sim import RateLimitedLog
+
+    caplog.set_level("INFO")
+    limited = RateLimitedLog(logging.getLogger("fabwire.test"), burst=2, window=10.0)
+    sent = [limited.note(f"client {n} went away", now=n * 0.1) for n in range(5)]
+    assert sent == [True, True, False, False, False]
+    assert limited.note("client 5 went away", now=11.0)
+    assert caplog.records[-1].getMessage() == "client 5 went away (3 similar message(s) suppressed)"
+
+
+async def test_stored_drawings_cannot_outgrow_the_flash(lineus_sim, raw_peer) -> None:
+    from fabwire.lineus.sim_handlers import FS_TOTAL
+
+    line = "G01 X1200 Y0 Z0\n"
+    big = line * ((FS_TOTAL - 2000) // len(line))  # leaves about 1.5 kB of flash
+    running = await lineus_sim(files={1: big})
+    peer = await raw_peer(running.port)
+    assert (await peer.ask(b"M28 S2\x00")).startswith(b"ok")
+    replies = [await peer.ask(b"G01 X1300 Y100 Z0\x00") for _ in range(200)]
+    refused = [r for r in replies if r.startswith(b"error")]
+    assert refused
+    assert refused[0] == b'error INFO:"file system full: 1953282 bytes of flash, line not stored"\r\n\x00'
+    assert replies.index(refused[0]) > 0
+    assert all(r.startswith(b"error") for r in replies[replies.index(refused[0]):])
+    assert (await peer.ask(b"M29\x00")).startswith(b"ok")
+    usage = dict(f.split(b":") for f in (await peer.ask(b"M39\x00"))[3:-3].split())
+    assert int(usage[b"FSUsed"]) <= FS_TOTAL
+    # Rewriting a drawing frees its old bytes first.
+    assert (await peer.ask(b"M28 S1\x00")).startswith(b"ok")
+    assert await peer.ask(b"G01 X1200 Y0 Z0\x00") == b"ok\r\n\x00"
+    assert (await peer.ask(b"M29\x00")).startswith(b"ok")
+    assert running.sim.files[1] == "G01 X1200 Y0 Z0\n"

@@ -65,7 +65,7 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", "finda-didnt-trigger:4")
     code, _, err = mmu(sim.url, "tool-change", "1")
     assert code == 7
-    assert "FINDA didn't trigger — check the filament path, then Retry" in err
+    assert "error: 04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the filament path" in err
     assert err.count("(retrying automatically)") == 3
     code, out, _ = mmu(sim.url, "status", json_mode=True)
     assert json.loads(out)["kind"] == "E"
@@ -73,8 +73,82 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     assert code == 7
     assert "the MMU is still busy with T1" in err
     assert "fabwire mmu button retry" in err
-    code, out, _ = mmu(sim.url, "button", "retry")
-    assert (code, out.strip()) == (0, "pressed Middle (retry)")
+    code, out, err = mmu(sim.url, "button", "retry")  # the fourth failure was the last: this Retry heals
+    assert (code, out.strip()) == (0, "retry: T1 finished"), err
+    code, out, err = mmu(sim.url, "button", "retry")
+    assert code == 4
+    assert "no error is pending: the MMU reports T1 finished" in err
+
+
+def test_retry_with_the_cause_still_there_says_so(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", "homing-failed:always")
+    code, _, err = mmu(sim.url, "button", "retry")  # the re-home stalls again
+    assert code == 7
+    assert "04115 SELECTOR CANNOT HOME (0x8087) during X0" in err
+    code, _, err = mmu(sim.url, "button", "continue")  # the printer's dialog offers Retry only
+    assert code == 4
+    assert "04115 SELECTOR CANNOT HOME (0x8087) offers Retry, not continue" in err
+
+
+def test_eject_waits_for_the_person(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
+    code, out, err = mmu(sim.url, "eject", "3")
+    assert (code, out.strip()) == (0, "E3: filament ejected — take it out, then `fabwire mmu button continue`"), err
+    code, out, err = mmu(sim.url, "status", json_mode=True)
+    assert (json.loads(out)["command"], json.loads(out)["kind"], json.loads(out)["value"]) == ("E3", "E", 0x800C)
+    code, out, err = mmu(sim.url, "button", "continue")
+    assert (code, out.strip()) == (0, "continue: E3 finished"), err
+    code, out, err = mmu(sim.url, "eject", "1", "--continue-after", "0.2")
+    assert (code, out.strip()) == (0, "E1 finished"), err
+    assert "continuing in 0.2 s" in err
+
+
+def test_reset_erase_needs_yes_and_registers_lists_all(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
+    code, _, err = mmu(sim.url, "reset", "--erase")
+    assert code == 4
+    assert "add --yes" in err
+    code, out, err = mmu(sim.url, "reset", "--erase", "--yes")
+    assert (code, out.strip()) == (0, "EEPROM erased and MMU reset; firmware 3.0.4+936 answering"), err
+    code, out, err = mmu(sim.url, "registers", json_mode=True)
+    rows = json.loads(out)
+    assert [r["address"] for r in rows] == list(range(0x24))
+    assert rows[0x22] == {"address": 0x22, "name": "bowden_length", "value": 360, "bits": 16, "access": "read/write",
+                          "meaning": "bowden tube length, mm (341-1000)"}
+    assert rows[0x04]["access"] == "read-only"
+    code, out, err = mmu(sim.url, "registers")
+    assert "0x22 bowden_length" in out
+
+
+def test_the_time_scale_comes_from_a_simulator_address() -> None:
+    done = run_cli("mmu", "-d", "sim://mmu?speed=50", "tool-change", "2", timeout=60)
+    assert (done.returncode, done.stdout.strip()) == (0, "T2 finished"), done.stderr
+    assert "faster than this host assumes" not in done.stderr
+
+
+def test_a_sped_up_mmu_without_speed_is_named_as_such(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "40")
+    done = run_cli("mmu", "-d", sim.url, "tool-change", "2", timeout=90)
+    assert "faster than this host assumes: its timing does not fit (give --speed" in done.stderr
+
+
+def test_a_device_that_never_answers_fails_in_five_seconds() -> None:
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    accepted: list[socket.socket] = []
+    threading.Thread(target=lambda: accepted.append(server.accept()[0]), daemon=True).start()
+    try:
+        done = run_cli("mmu", "-d", f"127.0.0.1:{server.getsockname()[1]}", "version", timeout=60)
+    finally:
+        server.close()
+        for conn in accepted:
+            conn.close()
+    assert done.returncode == 9
+    assert "did not complete the handshake within 5 s (no reply within 2 s, 2 times)" in done.stderr
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -99,14 +173,19 @@ def test_unreachable_mmu_is_a_link_error() -> None:
 
 def test_monitor_is_bounded_and_json(simulator: SimulatorStarter) -> None:
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
-    code, out, err = mmu(sim.url, "monitor", "--count", "3", json_mode=True)
+    code, out, err = mmu(sim.url, "monitor", "--count", "3", "--all", json_mode=True)
     assert code == 0, err
     lines = [json.loads(line) for line in out.splitlines()]
     assert len(lines) == 3
-    assert all(line["event"] == "status" for line in lines)
+    assert all(line["event"] == "status" and isinstance(line["time"], float) for line in lines)
+    code, out, err = mmu(sim.url, "monitor", "--count", "3", json_mode=True)  # nothing changes: one line, ends
+    assert code == 0, err
+    assert len(out.splitlines()) == 1
     code, out, _ = mmu(sim.url, "monitor", "--duration", "1")
     assert code == 0
-    assert out.startswith("status: X0 finished, FINDA off")
+    stamp, _, text = out.splitlines()[0].partition(" ")
+    assert len(stamp) == len("12:34:56.789")
+    assert text.startswith("status: X0 finished, FINDA off")
 
 
 def test_over_a_pty_with_trace(simulator: SimulatorStarter, tmp_path: Path) -> None:
@@ -124,7 +203,7 @@ def test_over_a_pty_with_trace(simulator: SimulatorStarter, tmp_path: Path) -> N
 
 def test_home_eject_cut_reset(simulator: SimulatorStarter) -> None:
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
-    for args, expected in ((("eject", "4"), "E4 finished"), (("cut", "0"), "K0 finished"),
+    for args, expected in ((("eject", "4", "--continue-after", "0"), "E4 finished"), (("cut", "0"), "K0 finished"),
                            (("home",), "H0 finished")):
         code, out, err = mmu(sim.url, *args)
         assert (code, out.strip()) == (0, expected), err

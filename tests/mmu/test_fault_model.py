@@ -58,7 +58,6 @@ def drive(w: Wire, limit: float = 200.0) -> str:
     """Poll like a printer, jumping the fake clock from one model event to the next, until the MMU reports an
     error, finishes, or waits for nothing but a person. Presses Continue on the eject's 'filament ejected'."""
     end = w.t + limit
-    last = ""
     while w.t < end:
         reply = w.send("Q0")
         if reply.endswith(" P1c"):
@@ -68,10 +67,9 @@ def drive(w: Wire, limit: float = 200.0) -> str:
         if reply.endswith(" E800c"):
             w.send("B1")
             continue
-        ended = " E" in reply or (" F" in reply and reply != "X0 F0") or (reply == "X0 F0" and last == "X0 F0")
-        if ended and (reply != "X0 F0" or w.sim.model.next_deadline() is None):
+        settled = reply != "X0 F0" or w.sim.model.next_deadline() is None  # X0 F0 also while the axes home
+        if (" E" in reply or " F" in reply) and settled:
             return reply
-        last = reply
         deadline = w.sim.model.next_deadline()
         if deadline is None:
             return reply

@@ -171,7 +171,7 @@ def test_silent_mmu_times_out_then_fails_after_ten_drop_outs() -> None:
     assert failed[0].info.meaning == "the MMU does not answer"
 
 
-def test_protocol_error_restarts_after_a_second_and_the_command_continues() -> None:
+def test_a_garbled_reply_costs_a_short_resync_not_a_handshake_and_the_command_continues() -> None:
     pair = _pair()
     pair.host.plan_command(ToolChange(1), pair.now)  # type: ignore[attr-defined]
     pair.run(lambda new: any(isinstance(e, h.ProgressChanged) for e in new))
@@ -187,10 +187,45 @@ def test_protocol_error_restarts_after_a_second_and_the_command_continues() -> N
     lost = [e for e in events if isinstance(e, h.LinkLost)]
     assert len(lost) == 1
     assert lost[0].reason.startswith("protocol error")
-    restart = [t for t, d, data in pair.wire if data == b"S0*c6\n"][-1]
-    bad = [t for t, d, data in pair.wire if d == "<" and data.startswith(b"T1 P")]
-    assert restart >= bad[0] + 1.0
+    bad = next(i for i, (_, d, data) in enumerate(pair.wire) if d == "<" and data.startswith(b"T1 Z"))
+    after = [(t, data) for t, d, data in pair.wire[bad + 1:] if d == ">"]
+    assert after[0] == (pair.wire[bad][0] + h.RESYNC_GAP, b"Q0*ea\n")  # asked again once the line was quiet
+    assert all(not data.startswith(b"S") for _, data in after)  # no new handshake: the link was fine
     assert events[-1] == h.CommandFinished("T1", 0)
+
+
+def test_a_lost_command_acknowledgement_is_looked_up_not_sent_twice() -> None:
+    pair = _pair()
+    pair.host.plan_command(ToolChange(2), pair.now)  # type: ignore[attr-defined]
+    dropped = [False]
+
+    def mangle(reply: bytes) -> bytes:
+        if not dropped[0] and reply.startswith(b"T2 A"):
+            dropped[0] = True
+            return b"T2 A*00\n"  # CRC broken: the host cannot know the MMU accepted it
+        return reply
+
+    events = pair.run(_ended, mangle=mangle)
+    sent = [data for _, d, data in pair.wire if d == ">" and data.startswith(b"T2")]
+    assert len(sent) == 1, sent  # the look-up found T2 running: no second T2
+    assert events[-1] == h.CommandFinished("T2", 0)
+
+
+def test_after_a_full_restart_the_host_adopts_the_running_command_and_its_error() -> None:
+    pair = _pair(faults=("fsensor-didnt-trigger:always",), auto_retries=0)
+    pair.host.plan_command(ToolChange(1), pair.now)  # type: ignore[attr-defined]
+    pair.run(lambda new: any(isinstance(e, h.ProgressChanged) for e in new))
+    cut_until = pair.now + 5.0
+
+    def cable_out(reply: bytes) -> bytes:  # 5 s without replies: the host gives up on the link and restarts it
+        return b"" if pair.now < cut_until else reply
+
+    events = pair.run(_ended, mangle=cable_out)
+    assert any(isinstance(e, h.LinkUp) for e in events)  # a new handshake happened
+    assert pair.host.busy  # type: ignore[attr-defined]
+    last = events[-1]
+    assert isinstance(last, h.ErrorRaised)
+    assert (last.code, last.command) == (0x8003, "T1")
 
 
 def test_interrupted_when_the_mmu_reboots_mid_command() -> None:

@@ -9,17 +9,16 @@ import zlib
 import numpy as np
 import pytest
 
-from fabwire.errors import FabwireError
 from fabwire.lineus.client import LineUs
 from fabwire.lineus.sim import LineUsSim, SimOptions
-from fabwire.mmu import MMU
-from fabwire.mmu.codes import FilamentState
-from fabwire.mmu.sim import MMUSimulator
-from fabwire.transport import FaultPlan, FaultyTransport, memory_pair, open_pty
+from fabwire.transport import memory_pair, open_pty
 from fabwire.transport.serial import open_serial
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.sim import XYZSimulator
+
+from .fakeclock import run_on_fake_clock
+from .noisy_mmu import noisy_tool_changes
 
 pytestmark = [pytest.mark.soak, pytest.mark.timeout(1800)]
 
@@ -46,33 +45,13 @@ async def test_ten_thousand_lineus_moves_land_where_sent() -> None:
             await task
 
 
-async def test_thousand_mmu_tool_changes_on_a_line_with_one_percent_corrupted_bytes() -> None:
-    sim = MMUSimulator(speed=100)
-    changes = 1000
-    failures: list[str] = []
-    async with asyncio.timeout(1500):
-        host, device = memory_pair("soak-mmu")
-        task = asyncio.create_task(sim.serve(device))
-        faulty = FaultyTransport(host, FaultPlan(corrupt=0.01, seed=99))
-        try:
-            async with MMU(faulty, time_scale=100, connect_timeout=30) as mmu:
-                for n in range(changes):
-                    slot = n % 5
-                    try:
-                        await mmu.tool_change(slot, timeout=60)
-                    except FabwireError as exc:
-                        failures.append(f"{type(exc).__name__}: {exc}")
-                        continue
-                    sim.model.advance(sim.now())
-                    assert sim.model.active_slot == slot
-                    assert sim.model.filament == FilamentState.IN_NOZZLE
-        finally:
-            await host.close()
-            task.cancel()
-            with contextlib.suppress(BaseException):
-                await task
-    assert faulty.corrupted > 0
-    assert len(failures) < changes // 10, failures[:5]
+def test_thousand_mmu_tool_changes_on_a_line_with_one_percent_corrupted_bytes() -> None:
+    """1 % of the bytes flipped both ways, MMU timing at 1×, on a fake clock (no real waits): ≥ 99 % of the changes
+    complete, and any other ends with the MMU's own error, never with the caller's timeout."""
+    report = run_on_fake_clock(noisy_tool_changes(1000, corrupt=0.01, seed=99))
+    assert report.corrupted > 10_000 * 0.5  # the line really was noisy (≈9 000 flipped bytes)
+    assert report.completed >= 990, report.failures[:5]
+    assert all("did not finish" not in failure for failure in report.failures), report.failures[:5]
 
 
 async def test_fifty_megabyte_upload_over_a_real_pty_arrives_identical() -> None:

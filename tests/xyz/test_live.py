@@ -100,3 +100,39 @@ def test_watch_reconnects_after_the_printer_goes_away_and_comes_back(simulator: 
     assert len(lines) == 5
     assert all(datetime.datetime.fromisoformat(line["time"]) for line in lines)
     assert "reconnecting in" in err
+
+
+def test_save_to_sd_reaches_the_printer_and_ctrl_c_while_following_says_it_keeps_printing(
+        simulator: SimulatorStarter, tmp_path: object) -> None:
+    import signal
+    from pathlib import Path
+
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1", "--store", str(Path(str(tmp_path)) / "sd"))
+    address = sim.url.removeprefix("tcp://")
+    gcode = Path(str(tmp_path)) / "part.gcode"
+    gcode.write_bytes(b";TIME:3600\nG28\n" + b"G1 X10 Y10 E1 F1200\n" * 200)
+    follow = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", address, "print", "--save-to-sd",
+                               "--name", "cube.3w", str(gcode)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env())
+    try:
+        assert follow.stderr is not None
+        seen = ""
+        while "uploaded" not in seen:  # plain lines: the upload is reported once the printer has the file
+            line = follow.stderr.readline()
+            assert line, "print ended before the upload finished"
+            seen += line
+        time.sleep(0.5)
+        follow.send_signal(signal.SIGINT)
+        _out, err = follow.communicate(timeout=30)
+    finally:
+        if follow.poll() is None:
+            follow.kill()
+            follow.wait()
+    assert follow.returncode == 130
+    assert "the printer keeps printing part.gcode" in err
+    assert f"fabwire xyz -d {address} cancel" in err
+    assert "Traceback" not in err
+    assert (Path(str(tmp_path)) / "sd" / "cube.3w").exists()  # uploaded under --name
+    status = subprocess.run([sys.executable, "-m", "fabwire", "--json", "xyz", "-d", address, "status"],
+                            capture_output=True, text=True, env=cli_env(), timeout=30)
+    assert json.loads(status.stdout)["state"] != 9511  # still printing (or heating) after the client left

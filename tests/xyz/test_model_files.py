@@ -11,7 +11,8 @@ import pytest
 
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.models import MODELS, PrinterModel, find_model, model_for_file_id, models_for_file_id
-from fabwire.xyz.printer import Printer, personality
+from fabwire.xyz.personas import personality
+from fabwire.xyz.printer import Printer
 from fabwire.xyz.sim import XYZSimulator
 from fabwire.xyz.threew import BODY_OFFSET, MAGIC, TAG_ECB, inspect_3w, read_3w, write_3w
 from linktools import loopback_tcp
@@ -84,3 +85,22 @@ def test_the_jr_line_and_the_nano_take_xyzprints_v5_files(number: str) -> None:
     verdict = Printer(personality(number)).check_file(data)
     assert verdict.ok, verdict.reason
     assert verdict.print_time == 60
+
+
+@pytest.mark.parametrize(("data", "reason"), [
+    (b"GCDE\x01\x00" + bytes(40), "binary G-code"),
+    (b"PK\x03\x04" + bytes(40), "zip archive"),
+    (b"G28\nG1 X1 Y1\n", "G-code text"),
+])
+def test_the_simulated_firmware_names_what_it_was_sent(data: bytes, reason: str) -> None:
+    verdict = Printer(personality("dv1MW0A000")).check_file(data)
+    assert not verdict.ok
+    assert verdict.reason.startswith(reason)
+
+
+def test_a_base64_3w_is_decoded_by_the_host_not_the_printer() -> None:
+    import base64
+
+    verdict = Printer(personality("dv1MW0A000")).check_file(base64.b64encode(write_3w(GCODE, "dv1MW0A000")))
+    assert not verdict.ok
+    assert "base64" in verdict.reason

@@ -9,7 +9,8 @@ import pytest
 from fabwire.errors import InputError
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import find_model
-from fabwire.xyz.printer import Printer, personality
+from fabwire.xyz.personas import personality
+from fabwire.xyz.printer import Printer
 from fabwire.xyz.threew import write_3w
 
 GCODE = b";TIME:600\n;LAYER_COUNT:3\n;Filament used: 0.25m\nG28\nG0 X10 Y10\nG1 X20 Y20 E1\nM84\n"

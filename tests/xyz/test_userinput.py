@@ -100,3 +100,15 @@ def test_cli_name_and_language_refusals_exit_4_without_a_printer(tmp_path: Path)
         result = run_cli("xyz", "-d", "127.0.0.1:9", *args)
         assert result.returncode == 4, (args, result.stderr)
         assert "Traceback" not in result.stderr
+
+
+async def test_save_to_sd_and_the_chosen_name_go_on_the_wire() -> None:
+    sim = XYZSimulator(speed=1000, gap=0.01)
+    async with asyncio.timeout(30), loopback_tcp(sim.serve) as link:
+        printer = XYZPrinter(link)
+        printer.poll_interval = 0.02
+        try:
+            await printer.print_file(GCODE, name="Cube_v2.3w", save_to_sd=True, wait=False)
+        finally:
+            await printer.close()
+    assert any(c.startswith("upload=Cube_v2.3w,") and c.endswith(",SaveToSD") for c in sim.commands)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import re
 from datetime import UTC, datetime, timedelta
 from importlib import resources
 from typing import Any
@@ -40,11 +41,28 @@ class NewDevice(BaseModel):
     name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
     kind: str = Field(pattern="^(xyz|lineus|mmu)$")
     address: str = Field(min_length=1, max_length=300, description="As for -d: host[:port], tcp://…, /dev/…")
-    options: dict[str, str | int | float | bool] = Field(default_factory=dict)
+    options: dict[str, str | int | float | bool | list[str]] = Field(
+        default_factory=dict, description="The kind's settings, as in devices.toml (timeout, speed, auto_retries …)")
 
 
 class Confirm(BaseModel):
     confirm: bool = False
+
+
+SERIAL_PORT = re.compile(r"^/dev/(tty[A-Za-z0-9_.-]+|cu\.[A-Za-z0-9_.-]+|serial/by-(id|path)/[A-Za-z0-9_.:+-]+)$")
+"""The only paths a device added over the API may name: serial ports (a request must not open any file)."""
+
+
+def checked_address(body: NewDevice) -> str:
+    """The address as the agent will open it; over the API, a path must be a serial port's."""
+    from fabwire.devices import KINDS as DEVICE_KINDS
+    from fabwire.transport.urls import parse_url
+
+    endpoint = parse_url(body.address, DEVICE_KINDS[body.kind])
+    if endpoint.scheme == "serial" and (not SERIAL_PORT.match(endpoint.path) or ".." in endpoint.path):
+        raise InputError(f"{endpoint.path!r} is not a serial port: over the API a device path must look like "
+                         "/dev/ttyACM0 or /dev/serial/by-id/…")
+    return endpoint.url
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 404, 409, 413, 503, 504)}
@@ -97,8 +115,8 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
     api = APIRouter(prefix="/api/v1", responses=ERRORS)
 
     def device_dict(device_id: str) -> dict[str, Any]:
-        session_info = next(d for d in agent.devices() if d.id == device_id)
-        return {**session_info.to_dict(), "state": agent.state(device_id)}
+        session = agent.session(device_id)
+        return {**session.info.to_dict(), "state": session.state}
 
     @api.get("/agent", summary="The agent itself: version, devices, and how punctual its polls are")
     async def about() -> dict[str, Any]:
@@ -110,12 +128,12 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
 
     @api.post("/devices", status_code=201, summary="Start monitoring a device")
     async def add_device(body: NewDevice) -> dict[str, Any]:
-        info = await agent.add_device(DeviceSpec(body.name, body.kind, body.address, body.options))  # type: ignore[arg-type]
+        spec = DeviceSpec(body.name, body.kind, checked_address(body), body.options)  # type: ignore[arg-type]
+        info = await agent.add_device(spec)
         return device_dict(info.id)
 
     @api.get("/devices/{device_id}", summary="One device and its latest state")
     async def device(device_id: str) -> dict[str, Any]:
-        agent.state(device_id)
         return device_dict(device_id)
 
     @api.delete("/devices/{device_id}", status_code=204, summary="Stop monitoring a device")
@@ -130,7 +148,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
     @api.get("/devices/{device_id}/history", summary="Samples (temperatures, progress, state) and events in a range")
     async def history(device_id: str, since: datetime | None = None, until: datetime | None = None,
                       limit: int = Query(2000, ge=1, le=20000)) -> dict[str, Any]:
-        agent.state(device_id)
+        agent.session(device_id)
         end = until or datetime.now(UTC)
         start = since or end - timedelta(hours=1)
         samples = await agent.history.samples(device_id, start.timestamp(), end.timestamp(), limit)
@@ -140,18 +158,13 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
 
     @api.get("/devices/{device_id}/drawing", summary="A Line-us job's planned strokes and the ink drawn so far")
     async def drawing(device_id: str) -> dict[str, Any]:
-        agent.state(device_id)
-        session = next(s for s in agent.sessions() if s.info.id == device_id)
-        return session.drawing
+        return agent.session(device_id).drawing
 
     @api.get("/devices/{device_id}/actions", summary="The actions of this kind of device, and those that apply now")
     async def actions(device_id: str) -> dict[str, Any]:
-        session = next((s for s in agent.sessions() if s.info.id == device_id), None)
-        if session is None:
-            agent.state(device_id)
-            raise AssertionError
+        session = agent.session(device_id)
         return {"actions": [a.to_dict() for a in session.driver.actions],
-                "applicable": agent.state(device_id)["summary"]["actions"]}
+                "applicable": session.state["summary"]["actions"]}
 
     @api.post("/devices/{device_id}/actions/{action}", summary="Run an action; long ones answer {started} at once")
     async def act(device_id: str, action: str, params: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -161,7 +174,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
     async def upload(device_id: str, request: Request, filename: str = UPLOAD_QUERY) -> dict[str, Any]:
-        agent.state(device_id)
+        agent.session(device_id)
         declared = request.headers.get("content-length", "")
         if declared.isdigit() and int(declared) > max_upload_bytes:
             raise UploadTooLarge(f"the upload is {int(declared):,} bytes; the limit is {max_upload_bytes:,}")

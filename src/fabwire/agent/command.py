@@ -35,7 +35,7 @@ def configured_devices(path: Path | None) -> list[DeviceSpec]:
     """The named devices of the config file, as specs the agent monitors."""
     from fabwire.config import load_devices
 
-    return [DeviceSpec(d.name, d.kind.name, d.endpoint.url, dict(d.options))  # type: ignore[arg-type]
+    return [DeviceSpec(d.name, d.kind.name, d.endpoint.url, d.options)  # type: ignore[arg-type]
             for d in load_devices(path).values()]
 
 
@@ -221,6 +221,6 @@ def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
     args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{speed:g}"],
             "mmu": ["--speed", f"{speed:g}", "--fault", FAULT]}
     sims = start_simulators([(kind, args[kind]) for _, kind in DEMO_DEVICES])
-    specs = [DeviceSpec(name, kind, sim.url, {"speed": speed} if kind == "mmu" else {})  # type: ignore[arg-type]
+    specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {})  # type: ignore[arg-type]
              for (name, kind), sim in zip(DEMO_DEVICES, sims, strict=True)]
     return sims, specs

@@ -66,7 +66,8 @@ class DeviceSpec:
     name: str
     kind: Kind
     address: str
-    options: Mapping[str, str | int | float | bool] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
+    """The kind's settings (`fabwire.config`: timeout, speed, auto_retries …), as in devices.toml."""
 
 
 _LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?::1\]?)(:|/|$))", re.IGNORECASE)
@@ -186,25 +187,28 @@ class Agent:
 
         `status` is exactly what the device's `--json status` prints (None before the first poll); `summary` is
         the same view for every kind, SI units in the key names (see `fabwire.agent.drivers.base.Summary`)."""
-        return self._session(device_id).state
+        return self.session(device_id).state
 
     def subscribe(self, device_id: str | None = None) -> Subscription:
         """Live events of one device (or all); iterate, and `aclose()` when done."""
         if device_id is not None:
-            self._session(device_id)
+            self.session(device_id)
         return Subscription(self, device_id)
 
     async def act(self, device_id: str, action: str, params: Mapping[str, Any]) -> dict[str, Any]:
         """Run an action (see `actions_for`); returns its result dict. Long ones (a tool change) run in the
         background and return `{"started": action}`; their end arrives as events."""
-        return await self._session(device_id).act(action, dict(params))
+        return await self.session(device_id).act(action, dict(params))
 
     async def add_device(self, spec: DeviceSpec) -> DeviceInfo:
         """Start monitoring; waits for the first connection attempt (bounded) so the id can use the serial."""
         from fabwire.agent.session import Session
+        from fabwire.config import validate_settings
+        from fabwire.devices import KINDS as DEVICE_KINDS
 
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
+        validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
         for session in self._sessions.values():
             if session.spec.address == spec.address and session.spec.kind == spec.kind:
                 raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
@@ -218,7 +222,7 @@ class Agent:
         return session.info
 
     async def remove_device(self, device_id: str) -> None:
-        session = self._session(device_id)
+        session = self.session(device_id)
         del self._sessions[device_id]
         await session.stop()
 
@@ -226,11 +230,11 @@ class Agent:
 
     async def start_job(self, device_id: str, filename: str, data: bytes) -> dict[str, Any]:
         """Store an upload under a generated name and start it on the device (print a G-code/.3w, draw an SVG)."""
-        return await self._session(device_id).start_job(filename, data)
+        return await self.session(device_id).start_job(filename, data)
 
     async def cancel_job(self, job_id: str, *, confirm: bool) -> dict[str, Any]:
         job = await self.jobs.get(job_id)
-        return await self._session(job["device"]).cancel_job(job_id, confirm=confirm)
+        return await self.session(job["device"]).cancel_job(job_id, confirm=confirm)
 
     def health(self) -> dict[str, Any]:
         """Counts and poll punctuality (a poll is late when it starts over half an interval after its slot)."""
@@ -253,7 +257,8 @@ class Agent:
         taken = set(self._sessions)
         return wanted if wanted not in taken else fallback
 
-    def _session(self, device_id: str) -> Session:
+    def session(self, device_id: str) -> Session:
+        """The session of a device; UnknownDevice if there is none."""
         try:
             return self._sessions[device_id]
         except KeyError:

@@ -1,4 +1,5 @@
-"""The one place the agent opens device clients: the library's `X.open`, with the per-device options applied."""
+"""The one place the agent opens device clients: through `X.open`, as the CLI and the library do, with the
+device's settings (`fabwire.config`) passed as options."""
 
 from __future__ import annotations
 
@@ -21,6 +22,6 @@ async def open_lineus(address: str, options: Options) -> LineUs:
 
 
 async def open_mmu(address: str, options: Options) -> MMU:
-    """The MMU's heartbeat and timeouts follow `speed` (a simulator's speed-up), as `fabwire mmu --speed` does;
-    the agent reports errors instead of retrying them on its own."""
-    return await MMU.open(address, **{"auto_retries": 0, **options})
+    """`speed` (a simulator's speed-up) scales the heartbeat and timeouts; `auto_retries=0` leaves every error
+    to the person at the dashboard."""
+    return await MMU.open(address, **options)

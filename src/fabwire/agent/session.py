@@ -25,6 +25,8 @@ log = logging.getLogger("fabwire.agent")
 LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
 """What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
 JOB_EVENT_EVERY_S = 0.5
+STOP_WAIT_S = 30.0
+"""How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
 
 def make_driver(spec: DeviceSpec, emit: Any) -> Driver:
@@ -80,6 +82,7 @@ class Session:
         self._last_job_event = 0.0
         self._reason = "not connected yet"
         self._stopping = False
+        self._cancelling = False
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -134,6 +137,7 @@ class Session:
             delay = low
             self._set_info()
             self.online = True
+            log.info("%s online: %s %s", self.spec.name, self.info.model or self.spec.kind, self.spec.address)
             self._publish("online", info=self.info.to_dict())
             try:
                 await self._monitor()
@@ -200,6 +204,8 @@ class Session:
         spec = self.driver.action(action)
         checked = checked_params(spec, params)
         self._require_online()
+        if action == "cancel" and self._job is not None:  # the print is this agent's job: end the job with it
+            return await self.cancel_job(self._job["id"], confirm=True)
         if spec.job:
             job = await self._start_job(action, None, None, checked)
             return {"started": action, "job": job}
@@ -250,13 +256,18 @@ class Session:
                 await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
             raise
         except (*LINK_FAILURES, FabwireError) as exc:
-            await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
-            self._publish("error", message=f"job {job['id']}: {exc}", exit_code=exit_code_of(exc), job=job["id"])
+            if self._cancelling:
+                await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
+            else:
+                await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
+                self._publish("error", message=f"job {job['id']}: {exc}", exit_code=exit_code_of(exc),
+                              job=job["id"])
         else:
             await self._job_changed(state="done", finished=now_iso(), progress_percent=100.0, time_left_s=0.0,
                                     message=message)
         finally:
             self._job = None
+            self._cancelling = False
             self._set_state(online=self.online, summary=None)
 
     async def _job_changed(self, **fields: Any) -> None:
@@ -293,14 +304,20 @@ class Session:
         if not confirm:
             raise InputError(f"cancelling job {job_id} stops it for good: send \"confirm\": true to go ahead")
         job = dict(self._job)
-        self._job_task.cancel()
-        with contextlib.suppress(BaseException):
-            await self._job_task
+        task = self._job_task
+        self._cancelling = True
         try:
-            await self.driver.stop_job()
+            await self.driver.stop_job()  # the machine stops; the job's own loop then winds down cleanly
+            _, pending = await asyncio.wait({task}, timeout=STOP_WAIT_S)
         except (*LINK_FAILURES, FabwireError) as exc:
             self._publish("error", message=f"stopping job {job_id}: {exc}", exit_code=exit_code_of(exc))
-        return {**job, "state": "cancelled"}
+            pending = {task}
+        if pending:  # it would not stop: cut it off, and start the link afresh (a command may be half-answered)
+            task.cancel()
+            with contextlib.suppress(BaseException):
+                await task
+            await self.driver.close()
+        return await self.agent.jobs.get(job_id)
 
 
 class _Handle:

@@ -18,6 +18,7 @@ from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import draw, preview, text
+from fabwire.lineus.shell import shell
 
 T = TypeVar("T")
 
@@ -30,7 +31,11 @@ def lineus() -> None:
 def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
     async def main() -> T:
         async with dctx.open(LineUs) as arm:
-            return await action(arm)
+            try:
+                return await action(arm)
+            finally:
+                for notice in arm.notices:
+                    dctx.output.note(notice)
 
     return asyncio.run(main())
 
@@ -147,20 +152,23 @@ def files_list(dctx: DeviceContext) -> None:
 @click.argument("slot", type=click.IntRange(1, 32))
 @pass_device
 def files_save(dctx: DeviceContext, gcode: Path, slot: int) -> None:
-    """Store a G-code FILE as drawing SLOT (M28 … M29); every line is checked first."""
+    """Store a G-code FILE as drawing SLOT (M28 … M29); every line is checked first.
+
+    Lines are read as the machine reads them (the interpreter `draw` and `preview` use too): comments are left
+    out, and a line the Line-us would refuse stops the upload before anything is sent."""
+    from fabwire.lineus.interpreter import read_program
+
     try:
-        text = gcode.read_text(encoding="ascii")
+        text = gcode.read_text(encoding="utf-8-sig")
     except (UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"{gcode}: cannot read as ASCII G-code: {exc}") from None
-    lines = [line.split(";", 1)[0].strip() for line in text.splitlines()]
-    lines = [line for line in lines if line]
+        raise InputError(f"{gcode}: cannot read as a text G-code file: {exc}") from None
+    program = read_program(text, name=str(gcode))
+    lines = [line.text for line in program.lines]
     if not lines:
         raise InputError(f"{gcode}: no G-code lines")
-    for number, line in enumerate(lines, 1):
-        try:
-            p.parse_command(line)
-        except Exception as exc:
-            raise InputError(f"{gcode}: line {number}: {exc}") from None
+    note = program.skipped_note()
+    if note is not None:
+        dctx.output.note(note.replace("skipped", "left out", 1))
     count = _with_arm(dctx, lambda arm: arm.save_drawing(slot, lines))
     dctx.output.result({"slot": slot, "lines": count}, f"stored {count} lines as drawing {slot}")
 
@@ -286,6 +294,7 @@ def discover(app: App, wait: float, interfaces: tuple[str, ...]) -> None:
 lineus.add_command(draw)
 lineus.add_command(text)
 lineus.add_command(preview)
+lineus.add_command(shell)
 
 
 # -- the simulator ---------------------------------------------------------------------------------------------------

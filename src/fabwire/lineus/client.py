@@ -11,6 +11,7 @@ import asyncio
 import collections
 import contextlib
 import dataclasses
+import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -22,14 +23,18 @@ from fabwire.devices import LINEUS
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
+from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
 from fabwire.opening import DeviceLink, DeviceTarget, Opening, SyncClient
 from fabwire.transport import Transport
 
 T = TypeVar("T")
+log = logging.getLogger("fabwire.lineus")
 
 HELLO_TIMEOUT = 10.0
 """The hello can take a few seconds while the arm waves."""
 REPLY_TIMEOUT = 5.0
+_CLEAR = (kin.X_MIN_LOWER + 0.01, 0.01)
+"""The body notch's corner with a hair's clearance, so rounding through G54 cannot put a point inside it."""
 LOOKAHEAD_WINDOW = 3
 
 
@@ -93,9 +98,18 @@ class LineUs:
         self._window = window if lookahead else 1
         self._slots = asyncio.Semaphore(self._window)
         self._waiting: collections.deque[tuple[str, asyncio.Future[p.Reply]]] = collections.deque()
-        self._planned: Position | None = None
-        self._origin = (0.0, 0.0, 1.0)
-        """This connection's G54 (x, y, scale), so a move's wait is sized in machine units."""
+        self.guard_body = hello.firmware_major <= 1
+        """Firmware 1.x lets the arm into the body notch (x < 700 below y = 0, README "CAUTION"): keep out of it
+        here, clamping targets and routing moves round the notch's corner with the pen lifted."""
+        self._interpreter = Interpreter(x_min_lower=kin.X_MIN_LOWER_FW1 if self.guard_body else kin.X_MIN_LOWER)
+        """This connection's G54 and the machine's area rule, so targets (and the wait for them) are known in
+        machine units as the firmware will see them."""
+        self._aim: Point3 = HOME3
+        """Where the last motion command sent will leave the arm."""
+        self._spans: dict[asyncio.Future[p.Reply], float] = {}
+        """Per move in flight: its longest axis travel in machine units (what its reply wait is sized by)."""
+        self.notices: list[str] = []
+        """What the client changed on the way (clamped targets, detours), for the caller to show."""
         self._failure: BaseException | None = None
         self._read_task = asyncio.create_task(self._read_loop(), name="lineus-replies") if lookahead else None
         """With one command in flight the waiting caller reads its own reply (no task hop per command)."""
@@ -142,9 +156,10 @@ class LineUs:
         """`async with LineUs.open("line-us.local") as arm` (or `await` it): the one way to open a Line-us.
 
         `target` and the common options are described in `fabwire.opening`; the arm's settings are
-        `fabwire.config.LineUsSettings` (lookahead, hello_timeout, reply_timeout).
+        `fabwire.config.LineUsSettings` (lookahead, hello_timeout, reply_timeout). A `name.local` address is
+        looked up by mDNS, with the port the machine advertises (`fabwire.lineus.link`).
         """
-        return Opening(LINEUS, target, options, cls._on_link)
+        return _LocalNameOpening(LINEUS, target, options, cls._on_link)
 
     @classmethod
     def open_sync(cls, target: DeviceTarget = None, **options: Any) -> LineUsSync:
@@ -208,6 +223,14 @@ class LineUs:
         except RemoteProtocolError as exc:
             self._fail(exc)
 
+    def _settled(self, future: asyncio.Future[p.Reply]) -> None:
+        """Free the command's slot and mark its exception retrieved: a reply nobody waits for any more (after a
+        timeout or an interrupt) must not end the program with "Future exception was never retrieved"."""
+        self._slots.release()
+        self._spans.pop(future, None)
+        if not future.cancelled():
+            future.exception()
+
     def _fail(self, exc: BaseException) -> None:
         if self._failure is None:
             self._failure = exc
@@ -217,7 +240,12 @@ class LineUs:
                 future.set_exception(exc)
 
     async def send(self, command: p.Command, *, timeout: float | None = None) -> p.Reply:
-        """Send one command and wait for its reply (ok or error: the reply is returned either way)."""
+        """Send one command and wait for its reply (ok or error: the reply is returned either way).
+
+        On firmware 1.x a move into (or through) the body notch is changed first: see `guard_body`."""
+        *before, command = self._guarded(command)
+        for step in before:
+            await self.request(step)
         future = await self._submit(command)
         return await self._await_reply(command, future, timeout)
 
@@ -230,9 +258,13 @@ class LineUs:
             raise self._failure
         await self._slots.acquire()
         future: asyncio.Future[p.Reply] = asyncio.get_running_loop().create_future()
-        future.add_done_callback(lambda _: self._slots.release())
+        future.add_done_callback(self._settled)
         text = command.text()
         self._waiting.append((text, future))
+        if isinstance(command, p.SetOrigin):
+            self._interpreter.set_origin(command)
+        elif isinstance(command, p.Move | p.Home | p.RawMove):
+            self._spans[future], self._aim = self._span(command)
         try:
             await self.transport.write(text.encode("ascii") + p.COMMAND_TERMINATOR)
         except LinkClosed as exc:
@@ -240,7 +272,7 @@ class LineUs:
         return future
 
     async def _await_reply(self, command: p.Command, future: asyncio.Future[p.Reply], timeout: float | None) -> p.Reply:
-        limit = timeout if timeout is not None else self._timeout_for(command)
+        limit = timeout if timeout is not None else self._timeout_for(self._spans.pop(future, None))
         try:
             async with asyncio.timeout(limit):
                 if self._read_task is None:
@@ -251,28 +283,21 @@ class LineUs:
             exc = LinkTimeout(f"no reply to {command.text()!r} within {limit:.1f} s: the Line-us may be wedged")
             self._fail(exc)
             raise exc from None
-        if command.moves and reply.ok:
-            with contextlib.suppress(RemoteProtocolError):
-                self._planned = Position.from_reply(reply)
         return reply
 
-    def _timeout_for(self, command: p.Command) -> float:
-        """Room for the move itself (and the one ahead of it with look-ahead) on top of the link's slack."""
-        if not command.moves:
-            return self.reply_timeout
-        start = self._planned or Position(kin.HOME[0], kin.HOME[1], kin.Z_UP)
-        if isinstance(command, p.Move | p.RawMove):
-            ox, oy, scale = self._origin if isinstance(command, p.Move) else (0.0, 0.0, 1.0)
-            end = (start.x if command.x is None else command.x * scale + ox,
-                   start.y if command.y is None else command.y * scale + oy,
-                   start.z if command.z is None else command.z)
-        else:
-            end = (kin.HOME[0], kin.HOME[1], kin.Z_UP)
-        if not all(math.isfinite(v) for v in end):
+    def _span(self, command: p.Move | p.Home | p.RawMove) -> tuple[float, Point3]:
+        """How far (longest axis, machine units) the move goes from where the moves sent so far leave the arm,
+        and where it ends."""
+        end = self._interpreter.motion(command, self._aim).target
+        return max(abs(end[0] - self._aim[0]), abs(end[1] - self._aim[1])), end
+
+    def _timeout_for(self, span: float | None) -> float:
+        """Room for a move spanning `span` units (and the one ahead of it with look-ahead) on top of the link's
+        slack; None for a command that does not move."""
+        if span is None:
             return self.reply_timeout
         # Bound the move by the smallest step the firmware allows (1 unit), in case G94 was set elsewhere,
         # and double it: the step period is modelled, not measured. With look-ahead the move ahead counts too.
-        span = max(abs(end[0] - start.x), abs(end[1] - start.y))
         worst = math.ceil(span) * self.model.step_time + 2 * self.model.pen_time
         return self.reply_timeout + (2 if self.lookahead else 1) * 2 * worst
 
@@ -282,7 +307,7 @@ class LineUs:
         replies = []
         window = self._window
         try:
-            for command in commands:
+            for command in (step for given in commands for step in self._guarded(given)):
                 futures.append((command, await self._submit(command)))
                 while futures and (futures[0][1].done() or len(futures) >= window):
                     done_cmd, done_future = futures.pop(0)
@@ -294,6 +319,48 @@ class LineUs:
                 if not future.done():
                     future.cancel()
         return replies
+
+    def _guarded(self, command: p.Command) -> list[p.Command]:
+        """The commands to send for `command`: itself, or on firmware 1.x (which lets the pen screw hit the body
+        in the notch x < 700 below y = 0) a target clamped out of the notch with the pen lifted, and a move that
+        would cross the notch split at its corner (700, 0) with the pen lifted over it."""
+        if not self.guard_body or not isinstance(command, p.Move | p.RawMove):
+            return [command]
+        scaled = isinstance(command, p.Move)
+        aim = self._aim
+        target = self._interpreter.motion(command, aim).target
+        out: list[p.Command] = []
+        x, y, z = target
+        if kin.in_body_zone(x, y):
+            safe = kin.clamp_target(x, y)
+            self._notice(f"({x:g}, {y:g}) is in the body notch that firmware {self.hello.version.split()[0]} does "
+                         f"not keep out of: moved to ({safe.x:g}, {safe.y:g}) with the pen lifted")
+            x, y, z = max(safe.x, _CLEAR[0]) if safe.y < 0 else safe.x, safe.y, kin.Z_UP
+            command = self._move_to(x, y, z, scaled, command)
+        if kin.crosses_body_zone((aim[0], aim[1]), (x, y)):
+            corner = _CLEAR
+            self._notice(f"the move from ({aim[0]:g}, {aim[1]:g}) to ({x:g}, {y:g}) would cross the body notch: "
+                         f"going round by {corner} with the pen lifted")
+            if aim[2] < kin.PEN_DOWN_BELOW:
+                out.append(p.Move(z=kin.Z_UP))
+            out.append(self._move_to(*corner, kin.Z_UP, scaled, command))
+            command = self._move_to(x, y, z, scaled, command)  # the pen as asked at the end (a drop lands there)
+        out.append(command)
+        return out
+
+    def _move_to(self, x: float, y: float, z: float, scaled: bool, like: p.Command) -> p.Command:
+        """A move to machine point (x, y, z) in the frame `like` uses (through this connection's G54 or not)."""
+        if not scaled:
+            return p.RawMove(x, y, z, like.keep if isinstance(like, p.RawMove) else None)
+        ox, oy, scale = self._interpreter.origin
+        if scale == 0:
+            raise InputError("cannot keep the arm out of the body notch while G54 scale is 0")
+        rapid = isinstance(like, p.Move) and like.rapid
+        return p.Move(round((x - ox) / scale, 6), round((y - oy) / scale, 6), z, rapid=rapid)
+
+    def _notice(self, text: str) -> None:
+        self.notices.append(text)
+        log.info("%s", text)
 
     # -- motion ---------------------------------------------------------------------------------------------------
 
@@ -334,7 +401,6 @@ class LineUs:
     async def set_origin(self, x: float = 0.0, y: float = 0.0, scale: float = 1.0) -> None:
         """G54 for this connection: machine = drawing × scale + (x, y)."""
         await self.request(p.SetOrigin(x, y, scale))
-        self._origin = (x, y, scale)
 
     async def set_speed(self, draw: float | None = None, travel: float | None = None) -> None:
         """G94: the largest interpolation step while drawing (S) and travelling (P); smaller is slower."""
@@ -448,6 +514,18 @@ class LineUs:
     async def firmware_update(self, *, confirm: bool = False) -> None:
         _guard(confirm, "a firmware update downloads new firmware and restarts the machine")
         await self.request(p.FirmwareUpdate(), timeout=120.0)
+
+
+class _LocalNameOpening(Opening[LineUs]):
+    """`LineUs.open` for an address, a configured name or the default device: a `.local` host is resolved by mDNS
+    before the link opens, so hosts without a system mDNS resolver reach the machine too."""
+
+    async def open(self) -> LineUs:
+        from fabwire.lineus.link import resolve_local
+
+        if self._target is None or isinstance(self._target, str):
+            self._target, self._options = await resolve_local(self._target, self._options)
+        return await super().open()
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ipaddress
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -36,37 +36,61 @@ async def discover(timeout: float = 3.0, *, interfaces: Sequence[str] | None = N
 
     `interfaces` limits the multicast sockets (e.g. ["127.0.0.1"]); default: all interfaces.
     """
+    found = await _browse(timeout, interfaces, lambda _: False)
+    return sorted(found, key=lambda f: (f.name, f.address, f.port))
+
+
+async def resolve(host: str, timeout: float = 3.0, *, interfaces: Sequence[str] | None = None) -> Found | None:
+    """The machine advertising itself as `host` (`name.local`, SRV target or instance name), by mDNS alone, so
+    `.local` names work on hosts without a system mDNS resolver; None if none answers within `timeout` s."""
+    wanted = host.lower().removesuffix(".").removesuffix(".local")
+    found = await _browse(timeout, interfaces, lambda f: f.name.lower() == wanted)
+    return next((f for f in found if f.name.lower() == wanted), None)
+
+
+async def _browse(timeout: float, interfaces: Sequence[str] | None, enough: Callable[[Found], bool]) -> list[Found]:
+    """Machines answering within `timeout` s; stops early once `enough(found)` holds for one of them."""
     from zeroconf import ServiceStateChange, Zeroconf
     from zeroconf.asyncio import AsyncServiceBrowser, AsyncServiceInfo, AsyncZeroconf
 
-    names: set[str] = set()
+    names: list[str] = []
 
     def on_change(zeroconf: Zeroconf, service_type: str, name: str, state_change: ServiceStateChange) -> None:
-        if state_change in (ServiceStateChange.Added, ServiceStateChange.Updated):
-            names.add(name)
+        if state_change in (ServiceStateChange.Added, ServiceStateChange.Updated) and name not in names:
+            names.append(name)
 
     azc = AsyncZeroconf(interfaces=list(interfaces)) if interfaces else AsyncZeroconf()
     found: dict[str, Found] = {}
+    asked: set[str] = set()
+    loop = asyncio.get_running_loop()
     try:
         browser = AsyncServiceBrowser(azc.zeroconf, [SERVICE_TYPE], handlers=[on_change])
         try:
-            await asyncio.sleep(timeout)
+            deadline = loop.time() + timeout
+            while loop.time() < deadline:
+                for name in [n for n in names if n not in asked]:
+                    asked.add(name)
+                    info = AsyncServiceInfo(SERVICE_TYPE, name)
+                    if await info.async_request(azc.zeroconf, 1000) and (entry := _entry(info, name)) is not None:
+                        found[name] = entry
+                        if enough(entry):
+                            return list(found.values())
+                await asyncio.sleep(0.05)
         finally:
             await browser.async_cancel()
-        for name in sorted(names):
-            info = AsyncServiceInfo(SERVICE_TYPE, name)
-            if not await info.async_request(azc.zeroconf, 1000):
-                continue
-            addresses = [str(ipaddress.ip_address(raw)) for raw in info.addresses if len(raw) == 4]
-            if not addresses or info.port is None:
-                continue
-            server = info.server or name
-            label = server.removesuffix(".").removesuffix(".local")
-            found[name] = Found(label, server, addresses[0], info.port)
     finally:
         with contextlib.suppress(Exception):
             await azc.async_close()
-    return sorted(found.values(), key=lambda f: (f.name, f.address, f.port))
+    return list(found.values())
+
+
+def _entry(info: ServiceInfo, name: str) -> Found | None:
+    addresses = [str(ipaddress.ip_address(raw)) for raw in info.addresses if len(raw) == 4]
+    if not addresses or info.port is None:
+        return None
+    server = info.server or name
+    label = server.removesuffix(".").removesuffix(".local")
+    return Found(label, server, addresses[0], info.port)
 
 
 class Advertiser:

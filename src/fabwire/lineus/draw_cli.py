@@ -81,6 +81,15 @@ def placement_options(func: F) -> F:
     return func
 
 
+RESTART = click.option("--restart", is_flag=True,
+                       help="Draw from the beginning, even when an earlier run finished or stopped part way.")
+
+
+def _one_start(resume: bool, restart: bool) -> None:
+    if resume and restart:
+        raise InputError("--resume and --restart exclude each other: carry on, or start over")
+
+
 PEN_Z = click.option("--pen-z", type=click.FloatRange(0, 499), default=0.0, show_default=True,
                      help="Pen-down height; about 300 presses less and smears less where the pen lands.")
 
@@ -120,18 +129,33 @@ def state_dir() -> Path:
 
 @dataclass
 class DrawProgress:
-    """Where a drawing got to: the planned strokes (so a resume draws exactly the same plan) and how many
-    are done."""
+    """Where a drawing got to: the planned strokes (so a resume draws exactly the same plan), how many are done,
+    and in the stroke after them the last vertex the Line-us acknowledged reaching with the pen down."""
 
     path: Path
     key: str
     strokes: list[list[list[float]]]
     done: int = 0
+    point: int = 0
+
+    @property
+    def complete(self) -> bool:
+        return self.done >= len(self.strokes)
+
+    def remaining(self) -> Plan:
+        """What is left to draw, as a plan (the interrupted stroke from its last acknowledged vertex)."""
+        rest = [np.asarray(s, dtype=float).reshape(-1, 2) for s in self.strokes[self.done :]]
+        if rest and self.point:
+            rest[0] = rest[0][self.point :]
+        return Plan(tuple(rest))
+
+    def reached(self, stroke: int, point: int) -> None:
+        self.done, self.point = stroke, point
 
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text(json.dumps({"version": STATE_VERSION, "key": self.key, "done": self.done,
+        tmp.write_text(json.dumps({"version": STATE_VERSION, "key": self.key, "done": self.done, "point": self.point,
                                    "strokes": self.strokes}), encoding="utf-8")
         tmp.replace(self.path)
 
@@ -152,9 +176,13 @@ class DrawProgress:
             raise InputError(f"resume state {path} belongs to a different drawing or different options")
         strokes = data.get("strokes")
         done = data.get("done")
-        if not isinstance(strokes, list) or not isinstance(done, int) or not 0 <= done <= len(strokes):
+        point = data.get("point", 0)
+        if (not isinstance(strokes, list) or not isinstance(done, int) or not 0 <= done <= len(strokes)
+                or not isinstance(point, int) or point < 0
+                or (point and (done >= len(strokes) or not isinstance(strokes[done], list)
+                               or point >= len(strokes[done])))):
             raise InputError(f"resume state {path} is damaged; delete it to start over")
-        return cls(path, key, strokes, done)
+        return cls(path, key, strokes, done, point)
 
 
 def _state_key(source: str, options: PlanOptions, extra: str = "") -> str:
@@ -171,19 +199,31 @@ def _plan_from_state(progress: DrawProgress) -> Plan:
 # -- drawing --------------------------------------------------------------------------------------------------------
 
 
-async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, pen_z: float = 0.0,
-                    on_stroke: Callable[[int], None] | None = None) -> None:
-    """Draw the plan's strokes from `start` on: lift, travel, drop (to `pen_z`), draw, lift; `on_stroke(i)` after
-    each one."""
-    await arm.pen_up()
+async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, point: int = 0, pen_z: float = 0.0,
+                    on_stroke: Callable[[int], None] | None = None,
+                    on_point: Callable[[int, int], None] | None = None) -> None:
+    """Draw the plan's strokes from `start` on (that one from its vertex `point`): lift, travel, drop (to
+    `pen_z`), draw, lift. `on_point(stroke, vertex)` after each acknowledged vertex with the pen down,
+    `on_stroke(i)` after each stroke."""
+    lifted = await arm.pen_up()
+    here = (lifted.x, lifted.y)
     for index in range(start, len(plan.strokes)):
-        for move in plan.stroke_moves(index):
+        vertex = point if index == start else 0
+        down = False
+        for move in plan.stroke_moves(index, from_point=vertex, here=here):
             if isinstance(move, MoveTo):
-                await arm.move(move.x, move.y)
+                reached = await arm.move(move.x, move.y)
+                here = (reached.x, reached.y)
+                if down:
+                    vertex += 1
+                    if on_point is not None:
+                        on_point(index, vertex)
             elif isinstance(move, PenDown):
                 await arm.pen_down(pen_z)
+                down = True
             elif isinstance(move, PenUp):
                 await arm.pen_up()
+                down = False
         if on_stroke is not None:
             on_stroke(index)
 
@@ -209,11 +249,12 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
                                 completed=sum(weights[: progress.done]))
 
             def done(index: int) -> None:
-                progress.done = index + 1
+                progress.reached(index + 1, 0)
                 progress.save()
                 bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
 
-            await send_plan(arm, plan, start=progress.done, pen_z=pen_z, on_stroke=done)
+            await send_plan(arm, plan, start=progress.done, point=progress.point, pen_z=pen_z, on_stroke=done,
+                            on_point=progress.reached)
         await arm.home()
     return total, time.monotonic() - began
 
@@ -224,9 +265,17 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
     progress: DrawProgress | None = DrawProgress.load(path, key) if resume else None
     if resume and progress is None:
         dctx.output.note(f"nothing to resume for {name}: starting from the beginning")
+    if progress is not None and progress.complete:
+        dctx.output.result(
+            {"file": name, "complete": True, "strokes": len(progress.strokes), "drawn": 0},
+            f"{name} is already drawn completely; use --restart to draw it again")
+        return
     if progress is not None:
         plan = _plan_from_state(progress)
-        dctx.output.note(f"resuming {name} at stroke {progress.done + 1} of {len(progress.strokes)}")
+        left = progress.remaining().figures().estimated_seconds
+        where = f" at its vertex {progress.point + 1}" if progress.point else ""
+        dctx.output.note(f"resuming {name} at stroke {progress.done + 1} of {len(progress.strokes)}{where}; "
+                         f"about {_duration(left)} left")
     else:
         progress = DrawProgress(path, key, [np.round(s, 3).tolist() for s in plan.strokes])
         plan = _plan_from_state(progress)
@@ -235,19 +284,25 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
     try:
         total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z))
     except (KeyboardInterrupt, LinkError, TimeoutError):
-        if progress.done:
-            dctx.output.note(f"stopped after stroke {progress.done} of {len(plan.strokes)}; "
+        if progress.done or progress.point:
+            progress.save()  # the last acknowledged vertex, so a resume carries on from exactly there
+            dctx.output.note(f"stopped in stroke {progress.done + 1} of {len(plan.strokes)}; "
                              f"run the same command with --resume to continue")
         elif first == 0:
             progress.clear()
         raise
-    progress.clear()
+    progress.save()  # complete: a --resume now says so instead of drawing over it
     figures = plan.figures()
     dctx.output.result(
         {"file": name, "strokes": total, "drawn": total - first, "resumed_at": first,
          "elapsed_seconds": round(elapsed, 2), "estimated_seconds": round(figures.estimated_seconds, 2)},
         f"drew {total - first} of {total} strokes in {elapsed:.1f} s",
     )
+
+
+def _duration(seconds: float) -> str:
+    minutes, rest = divmod(round(seconds), 60)
+    return f"{minutes} min {rest:02d} s" if minutes else f"{rest} s"
 
 
 def _placement_key(options: PlanOptions) -> str:
@@ -262,6 +317,7 @@ def _placement_key(options: PlanOptions) -> str:
 @click.option("--preview", "preview", type=click.Path(path_type=Path, dir_okay=False),
               help="Also write a picture of the plan (.svg or .png).")
 @click.option("--resume", is_flag=True, help="Continue an interrupted drawing of this file where it stopped.")
+@RESTART
 @click.option("--state", type=click.Path(path_type=Path, dir_okay=False),
               help="Progress file (default: one per drawing in the user's state directory).")
 @PEN_Z
@@ -269,8 +325,9 @@ def _placement_key(options: PlanOptions) -> str:
 @pass_device
 def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotate: float | None, full_area: bool,
          clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool, preview: Path | None, resume: bool,
-         state: Path | None, pen_z: float, dpi: float) -> None:
+         restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
     """Draw an SVG, SVGZ or Line-us G-code FILE ('-' reads it from standard input)."""
+    _one_start(resume, restart)
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
     drawing = read_drawing(file)
     key = _state_key(drawing.digest, options, _placement_key(options))
@@ -297,14 +354,16 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
 @click.option("--preview", "preview", type=click.Path(path_type=Path, dir_okay=False),
               help="Also write a picture of the plan (.svg or .png).")
 @click.option("--resume", is_flag=True, help="Continue an interrupted drawing of this text where it stopped.")
+@RESTART
 @click.option("--state", type=click.Path(path_type=Path, dir_okay=False), help="Progress file.")
 @PEN_Z
 @DPI
 @pass_device
 def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: bool | None, margin: float,
          rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
-         preview: Path | None, resume: bool, state: Path | None, pen_z: float, dpi: float) -> None:
+         preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
     """Write TEXT in a single-stroke font (\\n starts a new line)."""
+    _one_start(resume, restart)
     text = text.replace("\\n", "\n")
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
     key = _state_key(hashlib.sha256(text.encode()).hexdigest(), options,
@@ -325,20 +384,28 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
 @click.command("preview")
 @click.argument("file", type=click.Path(path_type=Path, dir_okay=False, allow_dash=True))
 @click.option("-o", "--output", "outputs", multiple=True, type=click.Path(path_type=Path, dir_okay=False),
-              help="Picture to write: .svg or .png (repeat for both).")
+              help="File to write: a picture (.svg, .png) or the plan as Line-us G-code (.gcode) for "
+                   "`files save` and `draw`; repeat for several.")
 @placement_options
 @click.option("--json", "json_output", is_flag=True, help="Print the plan figures as JSON.")
 @DPI
+@PEN_Z
 @pass_device
 def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: bool | None, margin: float,
             rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float,
-            json_output: bool, dpi: float) -> None:
+            json_output: bool, dpi: float, pen_z: float) -> None:
     """Plan FILE ('-' reads standard input) and write a picture of what the pen will do (pen-up travel dashed,
-    parts hidden by clip paths faint); no device needed."""
+    parts hidden by clip paths faint), or the plan as Line-us G-code; no device needed."""
+    from fabwire.lineus.plot.export import GCODE_SUFFIXES, write_gcode
+
     if json_output:
         dctx.output.json_mode = True
     plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area))
     for out in outputs:
-        write_drawing(out, plan.strokes, plan.travel(), title=Path(str(file)).name, hidden=plan.hidden,
-                      scale=dpi_scale(dpi))
+        if out.suffix.lower() in GCODE_SUFFIXES:
+            write_gcode(out, plan, pen_z=pen_z)
+        else:
+            write_drawing(out, plan.strokes, plan.travel(),
+                          title="standard input" if str(file) == "-" else file.name, hidden=plan.hidden,
+                          scale=dpi_scale(dpi))
     _report(dctx, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})

@@ -32,6 +32,9 @@ X_MIN_UPPER = 500.0
 """Body clearance for y >= 0."""
 X_MIN_LOWER = 700.0
 """Body clearance for y < 0."""
+X_MIN_LOWER_FW1 = X_MIN_UPPER
+"""Firmware 1.0.1 and older let the arm go to x >= 500 for y < 0 too, where the pen screw can hit the body
+(Line-us-Programming README, "CAUTION"); software must keep x >= 700 there itself."""
 
 _EPS = 1e-6
 _LIMIT = math.radians(JOINT_LIMIT_DEG)
@@ -56,9 +59,10 @@ Point = tuple[float, float]
 FloatArray = npt.NDArray[np.float64]
 
 
-def is_reachable(x: float, y: float) -> bool:
+def is_reachable(x: float, y: float, *, x_min_lower: float = X_MIN_LOWER) -> bool:
     """True if the pen can reach (x, y): the closed form of the documented drawing area.
 
+    `x_min_lower` is the body clearance below y = 0 (700; `X_MIN_LOWER_FW1` for what firmware 1.0.1 allows).
     Plain math rather than numpy: the simulator asks this once per move, where array set-up would dominate.
     It applies exactly the tests of `reachable_mask`.
     """
@@ -66,7 +70,7 @@ def is_reachable(x: float, y: float) -> bool:
     y = float(y)
     if not (math.isfinite(x) and math.isfinite(y)):
         return False
-    if x < (X_MIN_UPPER if y >= 0 else X_MIN_LOWER) - _EPS:
+    if x < (X_MIN_UPPER if y >= 0 else x_min_lower) - _EPS:
         return False
     r = math.hypot(x, y)
     if not r <= R_MAX + _EPS:
@@ -76,7 +80,8 @@ def is_reachable(x: float, y: float) -> bool:
     return phi - alpha <= _LIMIT + 1e-9 and phi + alpha >= -_LIMIT - 1e-9
 
 
-def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike, *, x_min_lower: float = X_MIN_LOWER
+                   ) -> npt.NDArray[np.bool_]:
     """`is_reachable` for whole arrays of points at once."""
     x = np.asarray(xs, dtype=float)
     y = np.asarray(ys, dtype=float)
@@ -87,20 +92,9 @@ def reachable_mask(xs: npt.ArrayLike, ys: npt.ArrayLike) -> npt.NDArray[np.bool_
     ok = r <= R_MAX + _EPS
     ok &= phi - alpha <= _LIMIT + 1e-9
     ok &= phi + alpha >= -_LIMIT - 1e-9
-    ok &= np.where(y >= 0, x >= X_MIN_UPPER - _EPS, x >= X_MIN_LOWER - _EPS)
+    ok &= np.where(y >= 0, x >= X_MIN_UPPER - _EPS, x >= x_min_lower - _EPS)
     ok &= np.isfinite(x) & np.isfinite(y)
     return np.asarray(ok, dtype=bool)
-
-
-def area_mask(xs: npt.ArrayLike, ys: npt.ArrayLike, *, full: bool = False) -> npt.NDArray[np.bool_]:
-    """Points inside the drawing area: the app area within reach, or with `full` the whole reachable area."""
-    ok = reachable_mask(xs, ys)
-    if not full:
-        x = np.asarray(xs, dtype=float)
-        y = np.asarray(ys, dtype=float)
-        x0, y0, x1, y1 = APP_AREA
-        ok &= (x >= x0 - _EPS) & (x <= x1 + _EPS) & (y >= y0 - _EPS) & (y <= y1 + _EPS)
-    return ok
 
 
 def outside_length(points: Sequence[Point] | FloatArray, *, step: float = 2.0) -> float:
@@ -211,10 +205,10 @@ def _circle_candidates(px: float, py: float, cx: float, cy: float, radius: float
     return [(cx + dx / d * radius, cy + dy / d * radius)]
 
 
-def _boundary_vertices() -> list[Point]:
+def _vertices(x_min_lower: float) -> list[Point]:
     """Corners of the area, where two boundary pieces meet."""
-    out: list[Point] = [(X_MIN_UPPER, 0.0), (X_MIN_LOWER, 0.0)]
-    for xl, (cx, cy) in ((X_MIN_UPPER, _CENTRE_UP), (X_MIN_LOWER, _CENTRE_DOWN)):
+    out: list[Point] = [(X_MIN_UPPER, 0.0), (x_min_lower, 0.0)]
+    for xl, (cx, cy) in ((X_MIN_UPPER, _CENTRE_UP), (x_min_lower, _CENTRE_DOWN)):
         h = math.sqrt(LINK**2 - (xl - cx) ** 2)
         out.extend([(xl, cy + h), (xl, cy - h)])
     for cx, cy in (_CENTRE_UP, _CENTRE_DOWN):
@@ -226,22 +220,22 @@ def _boundary_vertices() -> list[Point]:
     return out
 
 
-_VERTICES = _boundary_vertices()
+_VERTICES = _vertices(X_MIN_LOWER)
 
 
-def nearest_reachable(x: float, y: float) -> Point:
+def nearest_reachable(x: float, y: float, *, x_min_lower: float = X_MIN_LOWER) -> Point:
     """The reachable point closest to (x, y) (itself when already reachable)."""
-    if is_reachable(x, y):
+    if is_reachable(x, y, x_min_lower=x_min_lower):
         return (x, y)
-    cands: list[Point] = list(_VERTICES)
+    cands: list[Point] = list(_VERTICES) if x_min_lower == X_MIN_LOWER else list(_vertices(x_min_lower))
     cands += _circle_candidates(x, y, 0.0, 0.0, R_MAX)
     cands += _circle_candidates(x, y, *_CENTRE_UP, LINK)
     cands += _circle_candidates(x, y, *_CENTRE_DOWN, LINK)
-    cands += [(X_MIN_UPPER, max(y, 0.0)), (X_MIN_LOWER, min(y, 0.0)), (min(max(x, X_MIN_UPPER), X_MIN_LOWER), 0.0)]
+    cands += [(X_MIN_UPPER, max(y, 0.0)), (x_min_lower, min(y, 0.0)), (min(max(x, X_MIN_UPPER), x_min_lower), 0.0)]
     best: Point | None = None
     best_d = math.inf
     for cx, cy in cands:
-        if not is_reachable(cx, cy):
+        if not is_reachable(cx, cy, x_min_lower=x_min_lower):
             continue
         d = math.hypot(cx - x, cy - y)
         if d < best_d:
@@ -250,22 +244,54 @@ def nearest_reachable(x: float, y: float) -> Point:
     return best
 
 
-def clamp_target(x: float, y: float) -> Clamped:
+def clamp_target(x: float, y: float, *, x_min_lower: float = X_MIN_LOWER) -> Clamped:
     """Out-of-area handling: radially toward the origin beyond the outer radius, else to the nearest point.
 
     `clamped` (and so `lift_pen`) is True whenever the target was moved: the firmware then lifts the pen.
     """
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"target ({x}, {y}) is not a finite point")
-    if is_reachable(x, y):
+    if is_reachable(x, y, x_min_lower=x_min_lower):
         return Clamped(x, y, False)
     r = math.hypot(x, y)
     if r > R_MAX:
         rx, ry = x * R_MAX / r, y * R_MAX / r
-        if is_reachable(rx, ry):
+        if is_reachable(rx, ry, x_min_lower=x_min_lower):
             return Clamped(rx, ry, True)
-    nx, ny = nearest_reachable(x, y)
+    nx, ny = nearest_reachable(x, y, x_min_lower=x_min_lower)
     return Clamped(nx, ny, True)
+
+
+def in_body_zone(x: float, y: float) -> bool:
+    """True inside the body-clearance notch (x < 700 below y = 0) that firmware 1.0.1 does not keep out of."""
+    return x < X_MIN_LOWER - _EPS and y < 0
+
+
+def crosses_body_zone(a: Point, b: Point) -> bool:
+    """True if the straight move a-b passes through the body-clearance notch (ends included).
+
+    The notch is the quadrant x < 700, y < 0, so the part of a-b below y = 0 is tested at its own ends.
+    """
+    (ax, ay), (bx, by) = a, b
+    if ay >= 0 and by >= 0:
+        return False
+    if ay < 0 and by < 0:
+        return min(ax, bx) < X_MIN_LOWER - _EPS
+    t = ay / (ay - by)  # where the move crosses y = 0
+    cx = ax + (bx - ax) * t
+    below = ax if ay < 0 else bx
+    return min(cx, below) < X_MIN_LOWER - _EPS
+
+
+def body_detour(a: Point, b: Point) -> list[Point]:
+    """Waypoints after `a` up to `b` for a pen-up hop that keeps out of the body-clearance notch.
+
+    A hop between two points outside the notch can only cut it from the x < 700, y >= 0 side to the
+    x >= 700, y < 0 side; going by the notch's corner (700, 0) keeps each half on one safe side.
+    """
+    if not crosses_body_zone(a, b) or in_body_zone(*a) or in_body_zone(*b):
+        return [b]
+    return [(X_MIN_LOWER, 0.0), b]
 
 
 def _outer_meet(cx: float, cy: float) -> Point:

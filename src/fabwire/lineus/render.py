@@ -35,6 +35,8 @@ DASH = (30.0, 20.0)
 """Pen-up travel dash and gap, machine units."""
 SCALE_BAR = 10.0 * UNITS_PER_MM
 """The scale bar's length (10 mm)."""
+ROUND_JOINTS_UP_TO = 2_000
+"""Vertices of a stroke up to which its joints are drawn round."""
 LEGEND = "black: pen down · orange dashes: pen-up travel · grey: hidden by clip paths"
 
 STROKE_COLOUR = (20, 20, 20)
@@ -218,8 +220,10 @@ def _png_image(strokes: Sequence[FloatArray], travel: Sequence[FloatArray], hidd
         if len(s) == 1:
             (cx, cy), r = px(s)[:2], pen / 2
             draw.ellipse((cx - r, cy - r, cx + r, cy + r), fill=STROKE_COLOUR)
+        # Rounded joints cost a disc per vertex: worth it for ordinary strokes, not for one of 100,000 points.
+        joint = "curve" if len(s) <= ROUND_JOINTS_UP_TO else None
         for start in range(0, max(0, len(s) - 1), 10_000):  # long strokes in pieces: bounded memory
-            draw.line(px(s[start : start + 10_001]), fill=STROKE_COLOUR, width=pen, joint="curve")
+            draw.line(px(s[start : start + 10_001]), fill=STROKE_COLOUR, width=pen, joint=joint)
     image = image.resize(size, Image.Resampling.BOX)  # area average: smooth edges, no ringing
     draw = ImageDraw.Draw(image)
     text_px = max(9, round(size[0] / 60))

@@ -15,48 +15,29 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 from fabwire.errors import LinkClosed, RemoteProtocolError
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
+from fabwire.lineus.arm import Arm, Clock, Job
+from fabwire.lineus.interpreter import HOME3, Ink, Interpreter, Motion, Point3, read_program
+from fabwire.lineus.personality import DEFAULT_NAME, DEFAULT_SERIAL
+from fabwire.lineus.personality import VERSIONS as VERSIONS
+from fabwire.lineus.personality import SimOptions as SimOptions
+from fabwire.lineus.personality import resolve_version as resolve_version
+from fabwire.lineus.sim_handlers import FS_TOTAL, HANDLERS, ReplySource, Session, error_reply
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
 log = logging.getLogger("fabwire.lineus.sim")
 
-VERSIONS = {
-    "1": "1.0.1 Feb 11 2018 15:47:35",
-    "3": "3.2.0 Nov 17 2019 17:54:57",
-}
-DEFAULT_NAME = "line-us"
-DEFAULT_SERIAL = "123456"
 DEFAULT_ZMAP = (0.0, 100.0, 300.0, 200.0)
-FS_TOTAL = 1_953_282
 SYSTEM_FILES = (("/cal", 29), ("/key", 344))
 SAVE_BLOCKED = ("M30", "M171", "M374", "M997")
 """Codes the firmware refuses while an M28 recording is open."""
 
 HISTORY = 100_000
-"""Recent moves and messages kept for instrumentation (bounded, so a long-running simulator stays small)."""
-
-ReplyPolicy = Literal["complete", "accept"]
-Point3 = tuple[float, float, float]
-Point2 = tuple[float, float]
-
-
-def resolve_version(text: str) -> str:
-    """`1`, `1.0.1`, `3`, `3.x`, `3.2.0` → a full version string; anything else starting with a digit as given."""
-    short = text.strip()
-    if short in ("1", "1.x", "1.0.1"):
-        return VERSIONS["1"]
-    if short in ("3", "3.x", "3.2.0"):
-        return VERSIONS["3"]
-    if not short[:1].isdigit() or '"' in short or not short.isascii():
-        raise ValueError(f"a firmware version starts with its number (1.0.1, 3.2.0 …), got {text!r}")
-    return short
+"""Recent messages kept for instrumentation (bounded, so a long-running simulator stays small)."""
 
 
 def sample_drawing() -> str:
@@ -68,238 +49,31 @@ def sample_drawing() -> str:
     return "".join(line + "\n" for line in lines)
 
 
-@dataclass
-class SimOptions:
-    version: str = VERSIONS["3"]
-    name: str = DEFAULT_NAME
-    serial: str = DEFAULT_SERIAL
-    speed: float = 1.0
-    """Speed-up factor for motion; inf (or 0) runs moves with no delay."""
-    reply: ReplyPolicy = "complete"
-    step_time: float = 0.010
-    pen_time: float = 0.1
-    lookahead: bool | None = None
-    """Accept the next command while a move runs (firmware 3); None = from the version."""
-    decimals: bool | None = None
-    """Two-decimal coordinates in replies (firmware 3); None = from the version."""
+class RateLimitedLog:
+    """At most `burst` lines per `window` seconds; what was held back is counted in the next line that goes out, so
+    a storm of misbehaving clients costs a few lines, not one each (and never blocks on a full stderr pipe)."""
 
-    def __post_init__(self) -> None:
-        if self.speed == 0:
-            self.speed = math.inf
-        if not self.speed > 0:
-            raise ValueError(f"speed factor must be positive (or 0/inf for no delay), got {self.speed}")
-        if self.reply not in ("complete", "accept"):
-            raise ValueError("reply policy is 'complete' or 'accept'")
-        if not p.NAME_RE.fullmatch(self.name):
-            raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {self.name!r}")
-        if not self.serial.isascii() or not self.serial or any(c in self.serial for c in ' "'):
-            raise ValueError(f"bad serial {self.serial!r}")
+    def __init__(self, logger: logging.Logger, *, burst: int = 5, window: float = 10.0,
+                 level: int = logging.INFO) -> None:
+        self._log, self._burst, self._window, self._level = logger, burst, window, level
+        self._start = -math.inf
+        self._sent = 0
+        self.suppressed = 0
 
-    @property
-    def major(self) -> int:
-        return p.Hello(self.version, self.name, self.serial).firmware_major
-
-
-@dataclass(frozen=True, slots=True)
-class MoveRecord:
-    """One executed move, in model seconds since the simulator started."""
-
-    command: str
-    start: Point3
-    end: Point3
-    started: float
-    finished: float
-    clamped: bool
-
-
-@dataclass
-class _Job:
-    command: str
-    target: Point3
-    clamped: bool
-    rapid: bool
-    done: asyncio.Future[MoveRecord]
-    queued: float = 0.0
-
-
-@dataclass
-class _Session:
-    """What the firmware keeps per connection."""
-
-    origin: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    saving: int | None = None
-    saved: list[str] = field(default_factory=list)
-    backlog: int = 0
-    """Replies handed to the writer and not yet sent."""
-
-
-class Clock:
-    """Model time: wall time × speed, or (at infinite speed) time advanced only by the moves themselves."""
-
-    def __init__(self, speed: float) -> None:
-        self.speed = speed
-        self.instant = math.isinf(speed)
-        self._t0 = time.monotonic()
-        self._virtual = 0.0
-
-    def now(self) -> float:
-        if self.instant:
-            return self._virtual
-        return (time.monotonic() - self._t0) * self.speed
-
-    def advance(self, moment: float) -> None:
-        """At infinite speed, move model time on without waiting."""
-        self._virtual = max(self._virtual, moment)
-
-    async def sleep(self, seconds: float) -> None:
-        """Wait `seconds` of model time. Timers (unlike motion) still pass in real time at infinite speed,
-        so a periodic job cannot spin."""
-        await asyncio.sleep(seconds if self.instant else seconds / self.speed)
-
-    async def run_until(self, moment: float) -> None:
-        if self.instant:
-            self._virtual = max(self._virtual, moment)
-            await asyncio.sleep(0)
-            return
-        remaining = (moment - self.now()) / self.speed
-        if remaining > 0:
-            await asyncio.sleep(remaining)
-
-
-class Arm:
-    """The physical arm: one executing move and at most one waiting behind it."""
-
-    def __init__(self, clock: Clock, model: kin.MotionModel) -> None:
-        self.clock = clock
-        self.model = model
-        self.position: Point3 = (kin.HOME[0], kin.HOME[1], kin.Z_UP)
-        self.planned: Point3 = self.position
-        self.strokes: list[list[tuple[float, float]]] = []
-        self.travel: list[list[tuple[float, float]]] = []
-        self.moves: collections.deque[MoveRecord] = collections.deque(maxlen=HISTORY)
-        self._queue: asyncio.Queue[_Job] = asyncio.Queue(maxsize=1)
-        self._task: asyncio.Task[None] | None = None
-        self._busy_until = 0.0
-        self._moving = False
-
-    @property
-    def busy(self) -> bool:
-        return self._queue.qsize() > 0 or self.planned != self.position
-
-    async def submit(self, command: str, target: Point3, *, clamped: bool, rapid: bool) -> _Job:
-        """Queue a move once there is room; the job's `done` resolves when the arm has finished it."""
-        job = _Job(command, target, clamped, rapid, asyncio.get_running_loop().create_future(), self.clock.now())
-        if self.clock.instant and not self._moving and self._queue.empty():
-            # No motion delay and nothing ahead of it: the move is over as soon as it starts.
-            self.planned = target
-            began = max(self.clock.now(), self._busy_until)
-            finished = began + self.model.move_time(self.position, target)
-            self.clock.advance(finished)
-            self._complete(job, began, finished)
-            return job
-        if self._task is None or self._task.done():
-            self._task = asyncio.create_task(self._run(), name="lineus-arm")
-        await self._queue.put(job)
-        self.planned = target
-        return job
-
-    async def _run(self) -> None:
-        while True:
-            job = await self._queue.get()
-            self._moving = True
-            try:
-                duration = self.model.move_time(self.position, job.target)
-                # A move that was waiting behind the previous one starts the instant it ends (look-ahead).
-                began = self._busy_until if job.queued <= self._busy_until else self.clock.now()
-                finished = began + duration
-                await self.clock.run_until(finished)
-                self._complete(job, began, finished)
-            finally:
-                self._moving = False
-
-    def _complete(self, job: _Job, began: float, finished: float) -> None:
-        start = self.position
-        self._busy_until = finished
-        self._ink(start, job.target, job.rapid)
-        self.position = job.target
-        record = MoveRecord(job.command, start, job.target, began, finished, job.clamped)
-        self.moves.append(record)
-        if not job.done.done():
-            job.done.set_result(record)
-
-    def _ink(self, start: Point3, end: Point3, rapid: bool) -> None:
-        """Pen-up transitions happen before the XY motion and pen-down after it, so only a move that is
-        pen-down at both ends leaves ink."""
-        a, b = (start[0], start[1]), (end[0], end[1])
-        if a == b:
-            return
-        path = _joint_path(a, b) if rapid else [a, b]
-        if not (start[2] < kin.PEN_DOWN_BELOW and end[2] < kin.PEN_DOWN_BELOW):
-            self.travel.append(path)
-            return
-        if not rapid and min(a[0], b[0]) < kin.X_MIN_LOWER and min(a[1], b[1]) < 0:
-            # Both ends are reachable, but the line may cut the body notch (x < 700 below y = 0): the pen is
-            # lifted over the part it cannot reach.
-            pieces = _reachable_pieces(a, b)
-            if pieces != [[a, b]]:
-                log.info("lineus line (%g, %g)-(%g, %g) crosses the body clearance: pen lifted there", *a, *b)
-                self.strokes.extend(pieces)
-                return
-        if self.strokes and self.strokes[-1][-1] == a:
-            self.strokes[-1].extend(path[1:])
-        else:
-            self.strokes.append(path)
-
-    async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-
-
-def _reachable_pieces(a: Point2, b: Point2, step: float = 2.0) -> list[list[Point2]]:
-    """The parts of the segment a-b inside the drawing area, sampled every `step` units."""
-    n = max(1, math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / step))
-    points = [(a[0] + (b[0] - a[0]) * k / n, a[1] + (b[1] - a[1]) * k / n) for k in range(n + 1)]
-    inside = kin.reachable_mask([x for x, _ in points], [y for _, y in points])
-    pieces: list[list[Point2]] = []
-    run: list[Point2] = []
-    for point, ok in zip(points, inside, strict=True):
-        if ok:
-            run.append(point)
-        elif run:
-            pieces.append([run[0], run[-1]])
-            run = []
-    if run:
-        pieces.append([run[0], run[-1]])
-    pieces = [piece for piece in pieces if piece[0] != piece[1]]
-    if len(pieces) == 1 and pieces[0][0] == a and pieces[0][1] == b:
-        return [[a, b]]
-    return pieces
-
-
-def _joint_path(a: tuple[float, float], b: tuple[float, float], samples: int = 16) -> list[tuple[float, float]]:
-    """G00 runs each servo at full speed, so the pen sweeps a curve between the joint angles, not a line."""
-    try:
-        ja, jb = kin.inverse(*a), kin.inverse(*b)
-    except ValueError:
-        return [a, b]
-    out = []
-    for k in range(samples + 1):
-        t = k / samples
-        out.append(kin.forward(kin.Joints(ja.shoulder + (jb.shoulder - ja.shoulder) * t,
-                                          ja.elbow + (jb.elbow - ja.elbow) * t)))
-    out[0], out[-1] = a, b
-    return out
-
-
-def _error(text: str) -> p.Reply:
-    clean = "".join(ch if 32 <= ord(ch) < 127 and ch != '"' else "'" for ch in text)[:200]
-    return p.Reply(False, (("INFO", clean),))
-
-
-ReplySource = p.Reply | Callable[[], p.Reply] | _Job
-"""A reply now, one computed when its turn comes (M114), or a move's, due when the move ends."""
+    def note(self, message: str, now: float | None = None) -> bool:
+        """Log `message` unless the budget is spent; True if it went out."""
+        moment = time.monotonic() if now is None else now
+        if moment - self._start >= self._window:
+            self._start, self._sent = moment, 0
+        if self._sent >= self._burst:
+            self.suppressed += 1
+            return False
+        self._sent += 1
+        if self.suppressed:
+            message += f" ({self.suppressed} similar message(s) suppressed)"
+            self.suppressed = 0
+        self._log.log(self._level, "%s", message)
+        return True
 
 
 class LineUsSim:
@@ -309,7 +83,9 @@ class LineUsSim:
         self.options = options or SimOptions()
         self.name = self.options.name
         self.clock = Clock(self.options.speed)
-        self.arm = Arm(self.clock, kin.MotionModel(step_time=self.options.step_time, pen_time=self.options.pen_time))
+        guards = self.options.guards_body
+        self.arm = Arm(self.clock, kin.MotionModel(step_time=self.options.step_time, pen_time=self.options.pen_time),
+                       Ink(lift_over_notch=guards, detect_collisions=not guards))
         self.files: dict[int, str] = {1: sample_drawing()} if files is None else dict(files)
         self.known_wifi: dict[str, str] = {"fabwire-lab": "lab-password"}
         self.visible_wifi: list[str] = ["fabwire-lab", "neighbours-wifi"]
@@ -330,6 +106,7 @@ class LineUsSim:
         """Every message written, with the model time it went out (for tests and instrumentation)."""
         self.received: collections.deque[str] = collections.deque(maxlen=HISTORY)
         self._started = time.monotonic()
+        self._peer_log = RateLimitedLog(log)
         self.decimals = self.options.decimals if self.options.decimals is not None else self.options.major >= 3
         self.lookahead = self.options.lookahead if self.options.lookahead is not None else self.options.major >= 3
 
@@ -342,20 +119,29 @@ class LineUsSim:
     def hello(self) -> p.Hello:
         return p.Hello(self.options.version, self.name, self.options.serial)
 
+    def new_session(self) -> Session:
+        return Session(Interpreter(x_min_lower=self.options.x_min_lower))
+
     async def serve(self, transport: Transport) -> None:
-        """Run one connection until the client goes away; replies already owed are still sent."""
+        """Run one connection until the client goes away; replies already owed are still sent. A client that
+        goes away early (even before the hello) is a normal event: one rate-limited log line, no traceback."""
+        try:
+            await self._serve(transport)
+        except (LinkClosed, ConnectionError) as exc:
+            self._peer_log.note(f"lineus client {transport.peer} went away: {exc}")
+
+    async def _serve(self, transport: Transport) -> None:
         first = self.connections == 0 and not self.arm.busy
         self.connections += 1
         self._idle.clear()
-        session = _Session()
+        session = self.new_session()
         queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None] = asyncio.Queue()
         writer = asyncio.create_task(self._write_replies(transport, queue, session), name="lineus-replies")
         reader = p.CommandReader()
         try:
-            if first and self.arm.position != (kin.HOME[0], kin.HOME[1], kin.Z_UP):
+            if first and self.arm.position != HOME3:
                 # A fresh connection homes the arm (pen up) before the greeting, as the firmware does.
-                job = await self.arm.submit("connect", (kin.HOME[0], kin.HOME[1], kin.Z_UP), clamped=False,
-                                            rapid=False)
+                job = await self.arm.submit("connect", HOME3, clamped=False, rapid=False)
                 await job.done
             await self._send(transport, self.hello().encode())
             while not writer.done():
@@ -364,8 +150,8 @@ class LineUsSim:
                 except LinkClosed:
                     break
                 for item in reader.feed(data):
-                    action = self._dispatch(item, session) if isinstance(item, p.Line) else _error(item.reason)
-                    source = await self._start_move(action) if isinstance(action, _PendingMove) else action
+                    action = self._dispatch(item, session) if isinstance(item, p.Line) else error_reply(item.reason)
+                    source = await self._start_move(action) if isinstance(action, Motion) else action
                     if session.backlog == 0 and (ready := self._ready(source)) is not None:
                         await self._send(transport, ready)  # nothing owed before it: answer now
                         continue
@@ -387,7 +173,7 @@ class LineUsSim:
                     await writer
             if session.saving is not None:
                 self._close_file(session)
-            log.info("lineus client %s disconnected", transport.peer)
+            log.debug("lineus client %s disconnected", transport.peer)
 
     async def _send(self, transport: Transport, data: bytes) -> None:
         self.sent.append((self.clock.now(), data))
@@ -395,7 +181,7 @@ class LineUsSim:
 
     def _ready(self, source: ReplySource) -> bytes | None:
         """The reply's bytes if it is due now, None if it waits for its move."""
-        if isinstance(source, _Job):
+        if isinstance(source, Job):
             if not source.done.done():
                 return None
             x, y, z = source.done.result().end
@@ -404,12 +190,12 @@ class LineUsSim:
 
     async def _write_replies(
         self, transport: Transport, queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None],
-        session: _Session,
+        session: Session,
     ) -> None:
         """Writes each reply whole, in command order, as soon as it is due."""
         while (entry := await queue.get()) is not None:
             source, written = entry
-            if isinstance(source, _Job):
+            if isinstance(source, Job):
                 x, y, z = (await source.done).end
                 data = p.encode_position(x, y, z, self.decimals)
             else:
@@ -421,67 +207,59 @@ class LineUsSim:
 
     # -- commands -----------------------------------------------------------------------------------------------
 
-    def _dispatch(self, line: p.Line, session: _Session) -> ReplySource | _PendingMove:
+    def _dispatch(self, line: p.Line, session: Session) -> ReplySource | Motion:
         self.received.append(line.text)
         if session.saving is not None:
             return self._record(line.text, session)
         try:
             command = p.parse_command(line.text)
         except RemoteProtocolError as exc:
-            return _error(str(exc))
+            return error_reply(str(exc))
         if isinstance(command, p.Move | p.Home | p.RawMove):
-            return self._plan_move(command, session, line.text)
-        handler = _HANDLERS.get(type(command))
+            return self._motion(command, session, line.text)
+        handler = HANDLERS.get(type(command))
         if handler is None:
-            return _error(f"{command.text()} is not supported")
+            return error_reply(f"{command.text()} is not supported")
         try:
             return handler(self, command, session)
         except Exception as exc:  # a simulator bug must cost one reply, never the connection
             log.exception("lineus simulator failed on %r", line.text)
-            return _error(f"internal error: {exc}")
+            return error_reply(f"internal error: {exc}")
 
-    def _record(self, text: str, session: _Session) -> p.Reply:
+    def _record(self, text: str, session: Session) -> p.Reply:
         code = text.split(maxsplit=1)[0].upper() if text.split() else ""
         if code in ("M29",):
             self._close_file(session)
             return p.Reply(True)
         if code in SAVE_BLOCKED:
-            return _error(f"{code} is not allowed while saving a drawing")
+            return error_reply(f"{code} is not allowed while saving a drawing")
         if code == "M28":
-            return _error("already saving a drawing; send M29 first")
+            return error_reply("already saving a drawing; send M29 first")
+        size = len(text) + 1
+        if self.fs_used(but=session.saving) + session.saved_bytes + size > FS_TOTAL:
+            return error_reply(f"file system full: {FS_TOTAL} bytes of flash, line not stored")
         session.saved.append(text)
+        session.saved_bytes += size
         return p.Reply(True)
 
-    def _close_file(self, session: _Session) -> None:
+    def _close_file(self, session: Session) -> None:
         assert session.saving is not None
         self.files[session.saving] = "".join(line + "\n" for line in session.saved)
         self.last_saved = session.saving
-        session.saving, session.saved = None, []
+        session.saving, session.saved, session.saved_bytes = None, [], 0
 
     def position_reply(self, where: Point3) -> p.Reply:
         dec = self.decimals
         return p.Reply(True, tuple((axis, p.format_coordinate(v, dec)) for axis, v in zip("XYZ", where, strict=True)))
 
-    def _plan_move(self, command: p.Move | p.Home | p.RawMove, session: _Session, text: str) -> _PendingMove:
-        x0, y0, z0 = self.arm.planned
-        if isinstance(command, p.Home):
-            x, y, z = kin.HOME[0], kin.HOME[1], kin.Z_UP
-        else:
-            ox, oy, scale = session.origin if isinstance(command, p.Move) else (0.0, 0.0, 1.0)
-            x = x0 if command.x is None else command.x * scale + ox
-            y = y0 if command.y is None else command.y * scale + oy
-            z = z0 if command.z is None else command.z
-        if z < 0 or z > kin.Z_UP:
-            z = kin.Z_UP
-        clamp = kin.clamp_target(x, y)
-        if clamp.clamped:
-            log.info("lineus target (%g, %g) is outside the drawing area: moved to (%g, %g), pen lifted",
-                     x, y, clamp.x, clamp.y)
-            z = kin.Z_UP
-        rapid = isinstance(command, p.Move) and command.rapid
-        return _PendingMove(text, (clamp.x, clamp.y, z), clamp.clamped, rapid)
+    def _motion(self, command: p.Move | p.Home | p.RawMove, session: Session, text: str) -> Motion:
+        motion = session.interpreter.motion(command, self.arm.planned, text)
+        if motion.clamped:
+            log.info("lineus target of %r is outside the drawing area: moved to (%g, %g), pen lifted",
+                     text, motion.target[0], motion.target[1])
+        return motion
 
-    async def _start_move(self, pending: _PendingMove) -> ReplySource:
+    async def _start_move(self, pending: Motion) -> ReplySource:
         job = await self.arm.submit(pending.command, pending.target, clamped=pending.clamped, rapid=pending.rapid)
         if self.options.reply == "accept":
             return self.position_reply(job.target)
@@ -492,8 +270,10 @@ class LineUsSim:
     def file_listing(self) -> str:
         return "".join(f"/{slot:07d}.txt-{len(text.encode())};" for slot, text in sorted(self.files.items()))
 
-    def fs_used(self) -> int:
-        return sum(len(t.encode()) for t in self.files.values()) + sum(size for _, size in SYSTEM_FILES)
+    def fs_used(self, *, but: int | None = None) -> int:
+        """Flash bytes in use (leaving out drawing `but`, which an open M28 is rewriting)."""
+        drawings = sum(len(t.encode()) for slot, t in self.files.items() if slot != but)
+        return drawings + sum(size for _, size in SYSTEM_FILES)
 
     def diagnostics(self) -> p.Reply:
         used = self.fs_used()
@@ -564,19 +344,16 @@ class LineUsSim:
 
         Returns the modelled time spent; lines that are not moves or G54 are skipped, as the firmware's
         memory drawing only replays motion."""
-        session = _Session()
+        session = self.new_session()
         spent = 0.0
-        for raw in text.splitlines():
-            if spent >= limit or not raw.strip():
-                continue
-            try:
-                command = p.parse_command(raw.strip())
-            except RemoteProtocolError:
-                continue
+        for line in read_program(text, strict=False).lines:
+            if spent >= limit:
+                break
+            command = line.command
             if isinstance(command, p.SetOrigin):
-                session.origin = (command.x, command.y, command.scale)
+                session.interpreter.set_origin(command)
             elif isinstance(command, p.Move | p.Home | p.RawMove):
-                move = self._plan_move(command, session, raw.strip())
+                move = self._motion(command, session, line.text)
                 job = await self.arm.submit(move.command, move.target, clamped=move.clamped, rapid=move.rapid)
                 record = await job.done
                 spent += record.finished - record.started
@@ -592,189 +369,6 @@ class LineUsSim:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         await self.arm.close()
-
-
-@dataclass(frozen=True, slots=True)
-class _PendingMove:
-    command: str
-    target: Point3
-    clamped: bool
-    rapid: bool
-
-
-# -- non-movement commands -----------------------------------------------------------------------------------------
-
-Handler = Callable[[LineUsSim, p.Command, _Session], ReplySource]
-
-
-def _zmap(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.ZMap)
-    if c.clear:
-        sim.zmap = (0.0, 0.0, 0.0, 0.0)
-    elif c.corners is not None:
-        sim.zmap = c.corners
-    else:
-        return p.Reply(True, (("ZMap", ";".join(p.format_number(v) for v in sim.zmap)),))
-    return p.Reply(True)
-
-
-def _origin(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.SetOrigin)
-    s.origin = (c.x, c.y, c.scale)
-    return p.Reply(True)
-
-
-def _speed(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.SetSpeed)
-    model = sim.arm.model
-    sim.arm.model = dataclasses.replace(
-        model,
-        draw_step=c.draw if c.draw is not None else model.draw_step,
-        travel_step=c.travel if c.travel is not None else model.travel_step,
-    )
-    return p.Reply(True)
-
-
-def _list_files(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return p.Reply(True, (("FS", sim.file_listing()),))
-
-
-def _memory(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.MemoryDrawing)
-    sim.memory_mode = c.mode
-    return p.Reply(True)
-
-
-def _start_save(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.StartSave)
-    s.saving, s.saved = c.slot, []
-    sim.files[c.slot] = ""
-    return p.Reply(True)
-
-
-def _end_save(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return _error("M29 without M28: not saving a drawing")
-
-
-def _delete(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.DeleteFile)
-    if sim.files.pop(c.slot, None) is None:
-        return _error(f"no drawing {c.slot}")
-    return p.Reply(True)
-
-
-def _usage(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    used = sim.fs_used()
-    return p.Reply(True, (("FSUsed", str(used)), ("FSTotal", str(FS_TOTAL)), ("FSFree", str(FS_TOTAL - used)),
-                          ("FSPercent", str(used * 100 // FS_TOTAL))))
-
-
-def _demo(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.TimedDemo)
-    if c.drawing is not None and c.drawing not in sim.files:
-        return _error(f"no drawing {c.drawing}")
-    sim.set_demo((c.seconds, c.period, c.drawing) if c.period > 0 and c.seconds > 0 else None)
-    return p.Reply(True)
-
-
-def _position(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.GetPosition)
-
-    def report() -> p.Reply:
-        x, y, z = sim.arm.position
-        if not c.servos:
-            return sim.position_reply(sim.arm.position)
-        shoulder, elbow = kin.servo_angles(x, y)
-        pen = 45.0 + 90.0 * z / kin.Z_UP
-        return p.Reply(True, (("S", f"{shoulder:.2f}"), ("E", f"{elbow:.2f}"), ("P", f"{pen:.2f}")))
-
-    return report
-
-
-def _capabilities(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return p.Reply(True, (("CONNECTMODE", "ST"), ("MACHINENAME", sim.name)))
-
-
-def _diagnostics(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return sim.diagnostics()
-
-
-def _reserved(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return _error(f"{c.text()} is reserved for the factory")
-
-
-def _reset(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.FactoryReset)
-    sim.factory_reset(c.wipe_files)
-    return p.Reply(True)
-
-
-def _reverse(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    sim.servo_reverse = [1 - v for v in sim.servo_reverse]
-    return p.Reply(True)
-
-
-def _gestures(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.Gestures)
-    sim.gestures = c.on
-    return p.Reply(True)
-
-
-def _calibrate(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.SaveCalibration)
-    if c.clear:
-        sim.calibration = (0.0, 0.0, 0.0)
-    else:
-        x, y, _ = sim.arm.position
-        sim.calibration = (round((x - kin.HOME[0]) / 20, 5), round((y - kin.HOME[1]) / 20, 5), 0.0)
-    return p.Reply(True)
-
-
-def _name(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.MachineName)
-    if c.name is None:
-        return p.Reply(True, (("MACHINENAME", sim.name),))
-    sim.name = c.name
-    return p.Reply(True, (("MACHINENAME", sim.name),))
-
-
-def _startup(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.StartupMode)
-    sim.startup = (c.mode or sim.startup[0], c.ap_name or sim.startup[1])
-    return p.Reply(True)
-
-
-def _wifi(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.Wifi)
-    if c.ssid is None:
-        return sim.wifi_list()
-    if ":" in c.ssid:
-        return _error("an SSID with ':' cannot be listed")
-    sim.known_wifi[c.ssid] = c.password or ""
-    return p.Reply(True)
-
-
-def _forget(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    assert isinstance(c, p.ForgetWifi)
-    if c.ssid == "*":
-        sim.known_wifi.clear()
-    elif sim.known_wifi.pop(c.ssid, None) is None:
-        return _error(f"no stored network {c.ssid}")
-    return p.Reply(True)
-
-
-def _update(sim: LineUsSim, c: p.Command, s: _Session) -> ReplySource:
-    return _error("firmware update server unreachable")
-
-
-_HANDLERS: dict[type[p.Command], Handler] = {
-    p.ZMap: _zmap, p.SetOrigin: _origin, p.SetSpeed: _speed, p.ListFiles: _list_files, p.MemoryDrawing: _memory,
-    p.StartSave: _start_save, p.EndSave: _end_save, p.DeleteFile: _delete, p.StorageUsage: _usage,
-    p.TimedDemo: _demo, p.GetPosition: _position, p.Capabilities: _capabilities, p.Diagnostics: _diagnostics,
-    p.Reserved: _reserved, p.FactoryReset: _reset, p.ReverseServos: _reverse, p.Gestures: _gestures,
-    p.SaveCalibration: _calibrate, p.MachineName: _name, p.StartupMode: _startup, p.Wifi: _wifi,
-    p.ForgetWifi: _forget, p.FirmwareUpdate: _update,
-}
 
 
 # -- in-process registration --------------------------------------------------------------------------------

@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import sys
+import time
 from collections.abc import Awaitable, Callable
 from functools import update_wrapper
 from typing import Any, TypeVar
@@ -16,7 +18,7 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
-from fabwire.mmu.errors import describe_error
+from fabwire.mmu.errors import MMUError, describe_error
 from fabwire.mmu.faults import FAULT_NAMES, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
@@ -49,9 +51,9 @@ def describe(event: HostEvent) -> tuple[dict[str, Any], str]:
         info = event.info
         tail = " (retrying automatically)" if event.auto_retry else ""
         return ({"event": "error", "command": event.command, "code": f"{event.code:04x}", "name": info.name,
-                 "text": info.meaning, "action": info.action, "printer_code": info.printer_code,
-                 "auto_retry": event.auto_retry},
-                f"{event.command}: {info.meaning} — {info.action}{tail}")
+                 "printer_code": info.printer_code, "title": info.title, "text": info.meaning,
+                 "action": info.action, "auto_retry": event.auto_retry},
+                f"{event.command}: {info} — {info.meaning}; {info.action}{tail}")
     if isinstance(event, CommandFinished):
         words = "finished" if event.result == 0 else "cancelled"
         return ({"event": "finished", "command": event.command, "result": event.result}, f"{event.command}: {words}")
@@ -63,8 +65,9 @@ def describe(event: HostEvent) -> tuple[dict[str, Any], str]:
         return ({"event": "link-lost", "reason": event.reason, "drop_outs": event.drop_outs},
                 f"link lost ({event.reason}); restarting")
     if isinstance(event, LinkFailed):
-        return ({"event": "link-failed", "code": f"{event.code:04x}", "text": event.info.meaning,
-                 "detail": event.detail}, f"link failed: {event.info.meaning} — {event.info.action}")
+        return ({"event": "link-failed", "code": f"{event.code:04x}", "printer_code": event.info.printer_code,
+                 "text": event.info.meaning, "detail": event.detail},
+                f"link failed: {event.info} — {event.info.meaning}; {event.info.action}")
     if isinstance(event, ButtonPushed):
         name = codes.BUTTON_WORDS.get(event.button, str(event.button))
         return ({"event": "button", "command": event.command, "button": event.button},
@@ -88,7 +91,7 @@ def _slot_words(value: int | None, park: str) -> str:
     if value is None:
         return "unknown"
     if value == 0xFF:
-        return "homing"
+        return "position unknown"  # homing, or not moved since a reboot with filament loaded
     return park if value == 5 else f"slot {value}"
 
 
@@ -113,10 +116,12 @@ LINK_OPTIONS = (
 """The MMU's own link options: accepted anywhere on an `fabwire mmu` command line."""
 
 
-def with_mmu(check: Callable[[dict[str, Any]], None] | None = None) -> Callable[[Callable[..., Any]], Any]:
+def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
+             **open_options: Any) -> Callable[[Callable[..., Any]], Any]:
     """Open the link and the host logic around an `async def cmd(dctx, mmu, **options)`.
 
-    `check` validates the arguments first, so bad input fails before any byte is sent.
+    `check` validates the arguments first, so bad input fails before any byte is sent; `open_options` (such as
+    auto_retries=0 for commands that only look or answer) go to `MMU.open`.
     """
 
     def decorate(func: Callable[..., Awaitable[None]]) -> Callable[..., None]:
@@ -126,7 +131,7 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None) -> Callable[
                 check(kwargs)
 
             async def main() -> None:
-                async with dctx.open(MMU) as mmu:
+                async with dctx.open(MMU, **open_options) as mmu:
                     await func(dctx, mmu, *args, **kwargs)
 
             asyncio.run(main())
@@ -164,10 +169,42 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
             seen.append(data)
             dctx.output.note(text)
 
-    finished = await run(on_event=show, timeout=max_time)
+    try:
+        finished = await run(on_event=show, timeout=max_time)
+    except MMUError as error:
+        if dctx.output.json_mode or not (sys.stdin.isatty() and sys.stderr.isatty()):
+            raise
+        finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time)
+    factor = mmu_.logic.timing.too_fast
+    if factor is not None:
+        dctx.output.note(f"warning: the MMU moved {factor:.0f}× faster than this host assumes: its timing does not "
+                         f"fit (give --speed {factor:.0f}, or the device's speed)")
     words = "finished" if finished.result == 0 else "cancelled"
     dctx.output.result({"command": finished.command, "result": finished.result, "text": words, "events": seen},
                        f"{finished.command} {words}")
+
+
+async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, show: Callable[[HostEvent], None],
+                              max_time: float) -> CommandFinished:
+    """Offer the printer dialog's choices for the error, until the command ends or the person stops."""
+    while True:
+        info = error.info
+        choices = [c.label for c in info.choices if isinstance(c.button, int)]
+        if "Stop" not in choices:
+            choices.append("Stop")
+        dctx.output.note(f"{error}")
+        choice = await asyncio.to_thread(click.prompt, " / ".join(choices), type=click.Choice(
+            [c.lower() for c in choices], case_sensitive=False), err=True)
+        if choice.lower() == "stop":
+            raise error
+        try:
+            finished = await mmu_.answer(choice, on_event=show, timeout=max_time)
+        except MMUError as again:
+            error = again
+            continue
+        if finished is None:
+            raise error
+        return finished
 
 
 def _command_options(func: F) -> F:
@@ -203,11 +240,34 @@ async def unload(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 
 @mmu.command("eject")
 @click.argument("slot", type=int)
+@click.option("--continue-after", type=click.FloatRange(min=0.0), metavar="SECONDS",
+              help="Press Continue this many seconds after the filament is out (default: ask on a terminal, "
+                   "else leave the MMU waiting for `fabwire mmu button continue`).")
 @_command_options
 @with_mmu(_slot_arg)
-async def eject(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
-    """Eject filament SLOT (0-4) out of the MMU, then continue."""
-    await _command(dctx, mmu_, lambda **kw: mmu_.eject(slot, **kw), max_time)
+async def eject(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float, continue_after: float | None) -> None:
+    """Eject filament SLOT (0-4) out of the MMU; it waits for you to take the filament, then continues."""
+    try:
+        await mmu_.eject(slot, timeout=max_time, confirm_eject=False,
+                         on_event=lambda e: dctx.output.note(describe(e)[1]) if isinstance(e, ProgressChanged)
+                         else None)
+        raise InputError(f"E{slot} ended without ejecting")  # the MMU always stops at 'filament ejected'
+    except MMUError as error:
+        if error.info.code != 0x800C:
+            raise
+    if continue_after is None and not (sys.stdin.isatty() and sys.stderr.isatty()):
+        dctx.output.result({"command": f"E{slot}", "waiting": True, "printer_code": "04507"},
+                           f"E{slot}: filament ejected — take it out, then `fabwire mmu button continue`")
+        return
+    if continue_after is None:
+        await asyncio.to_thread(click.prompt, "Take the filament out of the MMU, then press Enter", default="",
+                                show_default=False, err=True)
+    else:
+        dctx.output.note(f"E{slot}: filament ejected — continuing in {continue_after:g} s")
+        await asyncio.sleep(continue_after)
+    finished = await mmu_.answer("continue", timeout=max_time)
+    dctx.output.result({"command": f"E{slot}", "result": 0, "text": "finished"}, f"E{slot} finished"
+                       if finished is not None else f"E{slot} continued")
 
 
 @mmu.command("cut")
@@ -228,7 +288,7 @@ async def home(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 
 
 @mmu.command("version")
-@with_mmu()
+@with_mmu(auto_retries=0)
 async def version(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show the MMU firmware version and build."""
     v = mmu_.version
@@ -238,7 +298,7 @@ async def version(dctx: DeviceContext, mmu_: MMU) -> None:
 
 
 @mmu.command("status")
-@with_mmu()
+@with_mmu(auto_retries=0)
 async def status(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show FINDA, filament sensor, slot, selector/idler, drive errors and the current command."""
     st = mmu_.status
@@ -269,7 +329,7 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
         ]
         if st.kind == "E":
             info = describe_error(st.value)
-            rows.append(("error", f"{info.meaning} — {info.action}"))
+            rows.append(("error", f"{info} — {info.meaning}; {info.action}"))
         for key, value in rows:
             out.print(f"{key:<13} {value}")
 
@@ -278,25 +338,70 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
 
 @mmu.command("button")
 @click.argument("button", type=click.Choice(["retry", "continue", "stop", "left", "middle", "right"]))
-@with_mmu()
-async def button(dctx: DeviceContext, mmu_: MMU, button: str) -> None:
-    """Press an MMU button from the printer (retry/continue = Middle, stop = Right)."""
-    await mmu_.press(button)
-    number = codes.BUTTON_ALIASES[button]
-    dctx.output.result({"button": button, "sent": number}, f"pressed {codes.BUTTON_WORDS[number]} ({button})")
+@click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+              help="Give up following the command after this many seconds.")
+@with_mmu(auto_retries=0)
+async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -> None:
+    """Answer the MMU's error as the printer's dialog does (retry, continue, stop) and follow the command to its
+    end; left/middle/right press a button as it is."""
+    if button in ("left", "middle", "right"):
+        await mmu_.press(button)
+        number = codes.BUTTON_ALIASES[button]
+        dctx.output.result({"button": button, "sent": number}, f"pressed {codes.BUTTON_WORDS[number]}")
+        return
+    pending = mmu_.status
+    finished = await mmu_.answer(button, timeout=max_time,
+                                 on_event=lambda e: dctx.output.note(describe(e)[1])
+                                 if isinstance(e, ProgressChanged | ErrorRaised) else None)
+    if finished is None:
+        dctx.output.result({"button": button, "command": pending.command, "result": None},
+                           f"{button}: left {pending.command} in its error")
+        return
+    words = "finished" if finished.result == 0 else "cancelled"
+    dctx.output.result({"button": button, "command": finished.command, "result": finished.result},
+                       f"{button}: {finished.command} {words}")
+
+
+def _erase_args(kwargs: dict[str, Any]) -> None:
+    if kwargs["erase"] and not kwargs["yes"]:
+        raise InputError("--erase wipes the MMU's EEPROM (loaded slot, drive-error count, bowden length, "
+                         "StallGuard thresholds): add --yes to do it")
 
 
 @mmu.command("reset")
-@with_mmu()
-async def reset(dctx: DeviceContext, mmu_: MMU) -> None:
+@click.option("--erase", is_flag=True, help="Also erase the MMU's EEPROM (X2a); needs --yes.")
+@click.option("--yes", is_flag=True, help="Confirm --erase.")
+@with_mmu(_erase_args, auto_retries=0)
+async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
     """Reboot the MMU (X0) and wait until it answers again."""
-    v = await mmu_.reset()
-    dctx.output.result({"version": str(v)}, f"MMU reset; firmware {v} answering")
+    v = await mmu_.reset(erase=erase)
+    words = "EEPROM erased and MMU reset" if erase else "MMU reset"
+    dctx.output.result({"version": str(v), "erased": erase}, f"{words}; firmware {v} answering")
+
+
+@mmu.command("registers")
+@with_mmu(auto_retries=0)
+async def registers(dctx: DeviceContext, mmu_: MMU) -> None:
+    """List every register with its address, name, value, size, access and meaning."""
+    version = mmu_.version.triple if mmu_.version else (3, 0, 4)
+    rows = []
+    for reg in codes.REGISTERS:
+        value = await mmu_.read_register(reg.address)
+        access = "read/write" if reg.writable(version) else "read-only"
+        rows.append({"address": reg.address, "name": reg.name, "value": value, "bits": reg.bits,
+                     "access": access, "meaning": reg.meaning})
+
+    def human() -> None:
+        for row in rows:
+            dctx.output.out.print(f"0x{row['address']:02x} {row['name']:<30} {row['value']:>6}  {row['bits']:>2}-bit "
+                                  f"{row['access']:<10}  {row['meaning']}", highlight=False)
+
+    dctx.output.result(rows, human)
 
 
 @mmu.command("read")
 @click.argument("register")
-@with_mmu(_register_arg)
+@with_mmu(_register_arg, auto_retries=0)
 async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
     """Read REGISTER (a name such as bowden_length, or an address like 0x22)."""
     reg = resolve_register(register)
@@ -308,7 +413,7 @@ async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
 @mmu.command("write")
 @click.argument("register")
 @click.argument("value")
-@with_mmu(_write_args)
+@with_mmu(_write_args, auto_retries=0)
 async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> None:
     """Write VALUE to REGISTER (by name or address)."""
     reg = resolve_register(register, for_write=True)
@@ -329,28 +434,33 @@ def _parse_value(text: str) -> int:
 
 
 @mmu.command("monitor")
-@click.option("--count", type=click.IntRange(min=1), help="Stop after this many events.")
+@click.option("--count", type=click.IntRange(min=1), help="Stop after this many status polls (shown or not).")
 @click.option("--duration", type=click.FloatRange(min=0.0), help="Stop after this many seconds.")
-@click.option("--changes", is_flag=True, help="Show a status poll only when something changed.")
-@with_mmu()
-async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: float | None,
-                  changes: bool) -> None:
-    """Show live events (status polls, progress, errors, buttons, link) until Ctrl-C, --count or --duration."""
-    shown = 0
+@click.option("--all", "every", is_flag=True, help="Show every status poll, not only the ones that changed.")
+@with_mmu(auto_retries=0)
+async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: float | None, every: bool) -> None:
+    """Show live events with timestamps (status changes, progress, errors, buttons, link) until Ctrl-C, --count
+    polls or --duration seconds."""
+    polls = 0
     last_status: Status | None = None
     with contextlib.suppress(TimeoutError):
         async with asyncio.timeout(duration):
             async for event in mmu_.events():
-                if isinstance(event, StatusUpdated):
-                    if changes and event.status == last_status:
-                        continue
-                    last_status = event.status
                 if isinstance(event, RegisterRead):
                     continue
+                if isinstance(event, StatusUpdated):
+                    polls += 1
+                    changed = event.status != last_status
+                    last_status = event.status
+                    if not (changed or every):
+                        if count is not None and polls >= count:
+                            break
+                        continue
                 data, text = describe(event)
-                dctx.output.event(data, text)
-                shown += 1
-                if count is not None and shown >= count:
+                stamp = time.time()
+                clock = time.strftime("%H:%M:%S", time.localtime(stamp)) + f".{int(stamp % 1 * 1000):03d}"
+                dctx.output.event({"time": round(stamp, 3), **data}, f"{clock} {text}")
+                if count is not None and polls >= count:
                     break
 
 

@@ -18,7 +18,7 @@ from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.mmu import codes
-from fabwire.mmu.errors import MMUError, format_error
+from fabwire.mmu.errors import MMUError, describe_error, format_error
 from fabwire.mmu.host import (
     INIT_REGISTERS,
     SUPPORTED,
@@ -45,6 +45,9 @@ from fabwire.transport import Transport
 
 log = logging.getLogger("fabwire.mmu")
 T = TypeVar("T")
+CONNECT_SECONDS = 5.0
+"""Default time for the handshake, in MMU seconds: an MMU that is up answers S0 at once; one that is booting
+needs ≈4 s (reference §1)."""
 EventCallback = Callable[[HostEvent], None]
 
 
@@ -112,8 +115,13 @@ class MMU:
         s = opened.settings
         assert isinstance(s, MMUSettings)
         accepted = {(int(a), int(b), int(c)) for a, b, c in (v.split(".") for v in s.accept)} or SUPPORTED
-        mmu = cls(transport, accepted=accepted, time_scale=s.speed, auto_retries=s.auto_retries,
-                  connect_timeout=s.connect_timeout or max(s.timeout, 30.0 / s.speed))
+        speed = s.speed
+        endpoint = opened.endpoint
+        if speed == 1.0 and endpoint is not None and endpoint.scheme == "sim" and "speed" in endpoint.options:
+            with contextlib.suppress(ValueError):
+                speed = float(endpoint.options["speed"])  # the simulator's own time scale
+        mmu = cls(transport, accepted=accepted, time_scale=speed, auto_retries=s.auto_retries,
+                  connect_timeout=s.connect_timeout or max(s.timeout, CONNECT_SECONDS / speed))
         mmu.owns_transport = True
         await mmu.connect()
         return mmu
@@ -143,10 +151,17 @@ class MMU:
             if self._failure is not None:
                 raise self._failure from None
             raise LinkTimeout(f"the MMU on {self.transport.peer or self.transport.url} did not complete the "
-                              f"handshake within {self.connect_timeout:g} s: check power and cable") from None
+                              f"handshake within {self.connect_timeout:g} s ({self._silence_words()}): "
+                              "check the address, power and cable") from None
         except BaseException:
             await self.close()
             raise
+
+    def _silence_words(self) -> str:
+        reason = self.logic.last_drop_out
+        if reason.startswith("timeout") or not reason:
+            return f"no reply within {self.logic.link_timeout:g} s, {max(1, self.logic.drop_outs)} times"
+        return f"its replies do not decode: {reason}"
 
     async def close(self) -> None:
         for task in self._tasks:
@@ -283,10 +298,21 @@ class MMU:
             raise DeviceError("busy", f"the MMU is still busy with {self.logic.command}",
                               action="let it finish, or answer its error (fabwire mmu button retry|continue|stop), "
                                      "or reset it")
-        expected = f"{request}"
+        outcome = self._command_outcome(str(request), confirm_eject)
+        try:
+            finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
+                                                            outcome, on_event, timeout)
+        except LinkTimeout:
+            self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
+            raise
+        return finished
+
+    def _command_outcome(self, expected: str | None,
+                         confirm_eject: bool) -> Callable[[HostEvent], CommandFinished | None]:
+        """What ends a command: its F (`expected`, or whichever the MMU runs when None), or an error."""
 
         def outcome(event: HostEvent) -> CommandFinished | None:
-            if isinstance(event, CommandFinished) and event.command == expected:
+            if isinstance(event, CommandFinished) and (expected is None or event.command == expected):
                 return event
             if isinstance(event, ErrorRaised) and not event.auto_retry:
                 if confirm_eject and event.code == 0x800C:
@@ -294,7 +320,7 @@ class MMU:
                     self._kick.set()
                     return None
                 self.logic.abandon()
-                raise error_for(event)
+                raise self._explained(error_for(event))
             if isinstance(event, CommandRejected):
                 raise DeviceError("rejected", f"the MMU rejected {event.command} {event.attempts} times "
                                   "(busy, in an error state, or the filament state does not allow it)",
@@ -307,13 +333,57 @@ class MMU:
                                   f"({event.detail})")
             return None
 
-        try:
-            finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
-                                                            outcome, on_event, timeout)
-        except LinkTimeout:
-            self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
-            raise
+        return outcome
+
+    def _explained(self, error: MMUError) -> MMUError:
+        """An error that a wrong time scale can cause says so when the MMU was seen moving too fast."""
+        factor = self.logic.timing.too_fast
+        if factor is not None:
+            error.args = (f"{error.args[0]} — but the MMU moved {factor:.0f}× faster than this host assumes: "
+                          f"its timing does not fit (give --speed {factor:.0f}, or the device's speed)",)
+        return error
+
+    async def follow(self, *, on_event: EventCallback | None = None, timeout: float | None = None,
+                     confirm_eject: bool = False) -> CommandFinished:
+        """Follow the command the MMU is running (as adopted from its Q0 answer) to its end."""
+        if not self.logic.busy:
+            status = self.status
+            raise DeviceError("idle", f"the MMU runs no command (it reports {status.command} {status.words})")
+        finished: CommandFinished = await self._operate(lambda now: None, self._command_outcome(None, confirm_eject),
+                                                        on_event, timeout)
         return finished
+
+    async def answer(self, choice: str, *, on_event: EventCallback | None = None,
+                     timeout: float | None = None) -> CommandFinished | None:
+        """Answer the MMU's pending error as the printer's dialog does (Retry, Continue, Stop…), then follow the
+        command to its end. None when the choice ends nothing (Stop). Raises DeviceError when no error is
+        pending or the dialog does not offer `choice`."""
+        word = self.status.value if self.status.kind == "E" else None
+        if word is None:
+            status = self.status
+            raise InputError(f"no error is pending: the MMU reports {status.command} {status.words}")
+        info = describe_error(word)
+        button = info.button_for(choice)
+        if button is None and choice.lower() == "stop":
+            self.logic.abandon()
+            return None
+        if not isinstance(button, int):
+            offered = ", ".join(c.label for c in info.choices)
+            then = "reset the MMU (fabwire mmu reset)" if button == "reset" else f"answer with one of: {offered}"
+            raise InputError(f"{info} offers {offered}, not {choice}: {then}")
+        command = self.status.command
+        await self.press(button, timeout=timeout)
+        await self.refresh(timeout=timeout)  # this poll may have been under way before the press: take the next
+        status = await self.refresh(timeout=timeout)  # a running command is adopted from this poll
+        while not self.logic.busy and status.command == command and status.kind in "PB":
+            status = await self.refresh(timeout=timeout)  # X0 (homing after boot) cannot be adopted: watch it
+        if self.logic.busy:
+            return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=False)
+        if status.kind == "E":
+            raise self._explained(MMUError(status.value, command=status.command))
+        if status.kind == "F" and status.command == command:
+            return CommandFinished(command, status.value)
+        return None
 
     async def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:
         return await self.run(ToolChange(check_slot(slot)), **kwargs)
@@ -394,14 +464,15 @@ class MMU:
         status: Status = await self._operate(lambda now: None, outcome, None, timeout)
         return status
 
-    async def reset(self, timeout: float | None = 30.0) -> codes.FirmwareVersion:
-        """Reboot the MMU (X0) and wait until the link is back."""
+    async def reset(self, timeout: float | None = 30.0, *, erase: bool = False) -> codes.FirmwareVersion:
+        """Reboot the MMU (X0; X2a with `erase`, which also wipes its EEPROM) and wait until the link is back."""
         self._ready.clear()
 
         def outcome(event: HostEvent) -> codes.FirmwareVersion | None:
             return event.version if isinstance(event, LinkUp) else None
 
-        version: codes.FirmwareVersion = await self._operate(self.logic.reset, outcome, None, timeout)
+        version: codes.FirmwareVersion = await self._operate(lambda now: self.logic.reset(now, erase=erase),
+                                                             outcome, None, timeout)
         return version
 
     async def events(self) -> AsyncIterator[HostEvent]:

@@ -1,22 +1,46 @@
 """The printer's side of the MMU3 link, as Prusa's printer firmware runs it — sans-IO, time as an input.
 
 `HostLogic` does the handshake (S0-S3 with a version check, init register writes, `f`), the Q0 heartbeat after
-1 s of silence with five register reads after each reply, the 2 s link timeout, restart after a protocol error,
-the drop-out filter, immediate re-send on `R`, `f` updates and bounded automatic Retry. It emits typed events;
-`fabwire.mmu.client` turns them into awaitable operations.
+1 s of silence with five register reads after each reply, the 2 s link timeout, the drop-out filter, `f` updates
+and bounded automatic Retry (reference §6). It emits typed events (`fabwire.mmu.events`); `fabwire.mmu.client`
+turns them into awaitable operations.
+
+Where the printer re-handshakes after every garbled reply or timeout, this host resynchronises: it waits for a
+short quiet gap, drains its decoder and asks again, keeping the handshake stage and the command it tracks; only
+a run of drop-outs with no good reply (as when the MMU reboots) restarts the handshake. A command whose
+acknowledgement was lost, or that the MMU rejected as busy, is looked up with Q0 first: when the MMU reports
+it running, the host adopts it instead of sending it again.
 """
 
 from __future__ import annotations
 
-import enum
 from collections import deque
 from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Literal
 
 from fabwire.errors import LocalProtocolError
 from fabwire.mmu import codes
-from fabwire.mmu.errors import ErrorInfo, describe_error
+from fabwire.mmu.errors import describe_error
+from fabwire.mmu.events import (
+    ButtonPushed,
+    ButtonSent,
+    CommandFinished,
+    CommandInterrupted,
+    CommandRejected,
+    ErrorRaised,
+    HostEvent,
+    Link,
+    LinkFailed,
+    LinkLost,
+    LinkUp,
+    ProgressChanged,
+    RegisterRead,
+    RegisterWritten,
+    Status,
+    StatusUpdated,
+)
+from fabwire.mmu.handshake import Handshake
 from fabwire.mmu.protocol import (
     Accepted,
     ButtonPress,
@@ -38,16 +62,29 @@ from fabwire.mmu.protocol import (
     encode_request,
     make_request,
 )
+from fabwire.mmu.timing import TimingCheck
+
+__all__ = [  # the events are re-exported: callers need them with the logic
+    "HEARTBEAT", "INIT_REGISTERS", "LINK_TIMEOUT", "POLL_REGISTERS", "SUPPORTED", "ButtonPushed", "ButtonSent",
+    "CommandFinished", "CommandInterrupted", "CommandRejected", "ErrorRaised", "FSensorMode", "HostEvent",
+    "HostLogic", "Link", "LinkFailed", "LinkLost", "LinkUp", "ProgressChanged", "RegisterRead", "RegisterWritten",
+    "Status", "StatusUpdated"
+]
 
 HEARTBEAT = 1.0
 LINK_TIMEOUT = 2.0
 DROP_OUT_LIMIT = 10
-VERSION_RETRIES = 6
 AUTO_RETRIES = 3
 REJECT_LIMIT = 20
 """Our bound on the firmware's resend-on-R loop, so a permanently busy MMU ends in a clear failure."""
 IMMEDIATE_RESENDS = 3
-"""Re-sends on R go out at once (as the printer does) this many times, then one per heartbeat."""
+"""Re-sends on R go out at once (after a Q0 look-up) this many times, then one per heartbeat."""
+RESYNC_GAP = 0.1
+"""Seconds of quiet after a garbled reply before draining and asking again (a reply is one burst of ≤14 bytes)."""
+RESTART_AFTER = 5
+"""Drop-outs in a row, with no good reply between them, after which the handshake starts again from S0."""
+SILENT_RESTART = 2
+"""Timeouts in a row with no byte at all between them (the MMU is rebooting: it is deaf for ≈4 s): start over."""
 POLL_REGISTERS = (0x08, 0x1B, 0x1C, 0x04, 0x1A)
 INIT_REGISTERS = ((0x0B, 5), (0x14, 20))
 SUPPORTED = frozenset({(3, 0, 2), (3, 0, 3), (3, 0, 4)})
@@ -56,148 +93,12 @@ BUSY_CODES = "KELMTUH"
 idle reply `H0 F0` as a protocol error; we include it so a Home does not trigger endless re-handshakes."""
 
 
-class Link(enum.Enum):
-    CONNECTING = "connecting"
-    READY = "ready"
-    RESTARTING = "restarting"
-    FAILED = "failed"
-    """Version mismatch: the link is stopped until `start` is called again."""
-
-
-@dataclass(frozen=True, slots=True)
-class Status:
-    command: str = ""
-    """The command the MMU echoes in Q0 replies, e.g. 'T1' (X0 after boot)."""
-    kind: str = ""
-    """'P' running, 'E' error, 'F' finished, 'B' button."""
-    value: int = 0
-    finda: bool | None = None
-    selector: int | None = None
-    idler: int | None = None
-    drive_errors: int | None = None
-    pulley: int | None = None
-
-    @property
-    def words(self) -> str:
-        if self.kind == "P":
-            return codes.progress_words(self.value)
-        if self.kind == "E":
-            return describe_error(self.value).meaning
-        if self.kind == "F":
-            return "finished" if self.value == 0 else "cancelled"
-        if self.kind == "B":
-            return f"{codes.BUTTON_WORDS.get(self.value, self.value)} button pressed"
-        return ""
-
-
-# ------------------------------------------------------------------------------------------------ events
-
-
-@dataclass(frozen=True, slots=True)
-class LinkUp:
-    version: codes.FirmwareVersion
-
-
-@dataclass(frozen=True, slots=True)
-class LinkLost:
-    reason: str
-    drop_outs: int
-
-
-@dataclass(frozen=True, slots=True)
-class LinkFailed:
-    """Surfaced after the drop-out filter (or at once for a version mismatch)."""
-
-    code: int
-    info: ErrorInfo
-    detail: str = ""
-
-
-@dataclass(frozen=True, slots=True)
-class ProgressChanged:
-    command: str
-    code: int
-
-    @property
-    def name(self) -> str:
-        return codes.progress_name(self.code)
-
-    @property
-    def words(self) -> str:
-        return codes.progress_words(self.code)
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorRaised:
-    command: str
-    code: int
-    info: ErrorInfo
-    auto_retry: bool
-    """The host is pressing Retry by itself; when False a person (or the caller) must act."""
-    retries_left: int
-
-
-@dataclass(frozen=True, slots=True)
-class CommandFinished:
-    command: str
-    result: int
-
-
-@dataclass(frozen=True, slots=True)
-class CommandRejected:
-    command: str
-    attempts: int
-
-
-@dataclass(frozen=True, slots=True)
-class CommandInterrupted:
-    """The MMU reported a different command finished (e.g. `X0 F0` after it rebooted)."""
-
-    command: str
-    reported: str
-
-
-@dataclass(frozen=True, slots=True)
-class ButtonPushed:
-    command: str
-    button: int
-
-
-@dataclass(frozen=True, slots=True)
-class RegisterRead:
-    address: int
-    value: int | None
-    """None when the MMU rejected the read."""
-
-
-@dataclass(frozen=True, slots=True)
-class RegisterWritten:
-    address: int
-    value: int
-    accepted: bool
-
-
-@dataclass(frozen=True, slots=True)
-class ButtonSent:
-    button: int
-
-
-@dataclass(frozen=True, slots=True)
-class StatusUpdated:
-    status: Status
-
-
-HostEvent = (LinkUp | LinkLost | LinkFailed | ProgressChanged | ErrorRaised | CommandFinished | CommandRejected
-             | CommandInterrupted | ButtonPushed | RegisterRead | RegisterWritten | ButtonSent | StatusUpdated)
-
 FSensorMode = Literal["auto", "manual"]
-
-
-@dataclass
-class _Handshake:
-    stage: int = 0
-    version: list[int] = field(default_factory=list)
-    retries: int = VERSION_RETRIES
+# In "auto" mode the host plays the printer's sensor: on while the MMU feeds to it, off once it unloads, retracts
+# or feeds to FINDA (so one missed poll cannot leave it stuck on).
+AUTO_FSENSOR_ON = frozenset({codes.Progress.FEEDING_TO_FSENSOR, codes.Progress.FEEDING_TO_NOZZLE})
+AUTO_FSENSOR_OFF = frozenset({codes.Progress.UNLOADING_TO_FINDA, codes.Progress.RETRACTING_FROM_FINDA,
+                              codes.Progress.FEEDING_TO_FINDA})
 
 
 class HostLogic:
@@ -216,23 +117,35 @@ class HostLogic:
         self.fsensor_mode = fsensor_mode
         self.heartbeat = HEARTBEAT / time_scale
         self.link_timeout = LINK_TIMEOUT / time_scale
+        self.resync_gap = RESYNC_GAP / time_scale
         self.auto_retries = auto_retries
         self.link = Link.CONNECTING
         self.version: codes.FirmwareVersion | None = None
         self.status = Status()
         self.drop_outs = 0
+        """Drop-outs since the last good reply (the printer's DropOutFilter)."""
+        self.timing = TimingCheck(time_scale)
+        self.last_drop_out = ""
+        self._now = 0.0
         self._decoder = ResponseDecoder()
         self._out = bytearray()
         self._events: list[HostEvent] = []
         self._inflight: Request | None = None
+        self._lost: Request | None = None
         self._last_activity = 0.0
-        self._scope: Literal["start", "idle", "command", "restart", "stopped"] = "stopped"
-        self._hs = _Handshake()
+        self._silent = 0
+        self._scope: Literal["start", "idle", "command", "resync", "stopped"] = "stopped"
+        self._resume: Literal["start", "idle", "command"] = "start"
+        self._hs = Handshake(self.accepted)
         self._startup: deque[Request] = deque()
         self._followups: deque[Request] = deque()
         self._planned: deque[Request] = deque()
         self._command: Request | None = None
-        self._command_sent = False
+        self._command_sent = self._own = False
+        """`_own`: sent by this host — only then does it press Retry by itself (not on someone else's error)."""
+        self._last_sent: Request | None = None
+        self._command_acked = False  # the MMU took it: it said A, or Q0 showed it running
+        self._probe = False  # ask Q0 before (re)sending the command: the MMU may already be running it
         self._rejects = 0
         self._fsensor_reported: int | None = None
         self._retries_left = auto_retries
@@ -258,8 +171,8 @@ class HostLogic:
     def next_deadline(self) -> float | None:
         if self._scope == "stopped":
             return None
-        if self._scope == "restart":
-            return self._last_activity + self.heartbeat
+        if self._scope == "resync":
+            return self._last_activity + (self.resync_gap if self.version is not None else self.heartbeat)
         if self._inflight is not None:
             return self._last_activity + self.link_timeout
         heartbeat = self._last_activity + self.heartbeat
@@ -285,9 +198,10 @@ class HostLogic:
     def receive(self, data: bytes, now: float) -> None:
         if not data or self._scope == "stopped":
             return
-        self._last_activity = now
-        if self._scope == "restart":
-            return  # drained when the restart happens
+        self._last_activity = self._now = now
+        self._silent = 0
+        if self._scope == "resync":
+            return  # the rest of a garbled burst: drained when the line goes quiet
         for event in self._decoder.feed(data):
             if isinstance(event, DecodeError):
                 if b"ok" in data:
@@ -296,21 +210,25 @@ class HostLogic:
                     self._protocol_error(now, event.reason)
                 return
             self._on_response(event, now)
-            if self._scope in ("restart", "stopped"):
+            if self._scope in ("resync", "stopped"):
                 return
         self._pump(now)
 
     def handle_timer(self, now: float) -> None:
         if self._scope == "stopped":
             return
-        if self._scope == "restart":
-            if now - self._last_activity >= self.heartbeat:
-                self._restart(now)
+        if self._scope == "resync":
+            deadline = self.next_deadline()
+            if deadline is not None and now >= deadline:
+                self._recover(now)
             return
         if self._inflight is not None:
-            if now - self._last_activity >= self.link_timeout:
-                self._drop_out(now, f"timeout: no reply within {self.link_timeout:.3g} s")
-                self._restart(now)
+            if now >= self._last_activity + self.link_timeout:
+                self._lost, self._inflight = self._inflight, None
+                self._resume = self._scope
+                self._silent += 1
+                self._drop_out(f"timeout: no reply within {self.link_timeout:.3g} s")
+                self._recover(now)
             return
         self._pump(now)
 
@@ -326,7 +244,9 @@ class HostLogic:
         self._rejects = 0
         self._resend_at = now
         self._command = request
-        self._command_sent = False
+        self._command_sent = self._command_acked = False
+        self._own = True
+        self._probe = False
         self._pump(now)
 
     def press(self, button: int, now: float) -> None:
@@ -346,12 +266,13 @@ class HostLogic:
         self.fsensor = state
         self._pump(now)
 
-    def reset(self, now: float) -> None:
-        """Reboot the MMU with X0; there is no reply, so the link times out and re-handshakes."""
+    def reset(self, now: float, erase: bool = False) -> None:
+        """Reboot the MMU with X0 (X2a also erases its EEPROM); no reply comes, so the link times out and
+        re-handshakes."""
         self._command = None
         self._followups.clear()
         self._planned.clear()
-        self._planned.appendleft(Reset(0))
+        self._planned.appendleft(Reset(42 if erase else 0))
         self._pump(now)
 
     def abandon(self) -> None:
@@ -361,7 +282,7 @@ class HostLogic:
         if self._scope == "command":
             self._scope = "idle"
 
-    # ----------------------------------------------------------------------------------------- internals
+    # ----------------------------------------------------------------------------------------- link
 
     def _send(self, request: Request, now: float, poll: bool = False) -> None:
         self._out += encode_request(request)
@@ -374,14 +295,23 @@ class HostLogic:
     def _restart(self, now: float) -> None:
         self._decoder.reset()
         self._inflight = None
+        self._lost = None
         self._followups.clear()
-        self._hs = _Handshake()
+        self._hs = Handshake(self.accepted)
         self._scope = "start"
         self.link = Link.CONNECTING if self.version is None else Link.RESTARTING
         self._announced = False
+        self._unsent(self._command is not None and not self._command_acked)
         self._send(Version(0), now)
 
-    def _drop_out(self, now: float, reason: str) -> None:
+    def _unsent(self, lost: bool) -> None:
+        """The command may never have reached the MMU: look it up with Q0 first, then send it again."""
+        if lost:
+            self._command_sent = False
+            self._probe = True
+
+    def _drop_out(self, reason: str) -> None:
+        self.last_drop_out = reason
         self.drop_outs += 1
         self._events.append(LinkLost(reason, self.drop_outs))
         if self.drop_outs % DROP_OUT_LIMIT == 0:
@@ -389,11 +319,38 @@ class HostLogic:
             self._events.append(LinkFailed(code, describe_error(code), reason))
 
     def _protocol_error(self, now: float, reason: str) -> None:
-        self._drop_out(now, f"protocol error: {reason}")
-        self._inflight = None
-        self._scope = "restart"
-        self.link = Link.RESTARTING
+        self._lost, self._inflight = self._inflight, None
+        if self._scope != "resync":
+            self._resume = self._scope  # type: ignore[assignment]
+        self._drop_out(f"protocol error: {reason}")
+        self._scope = "resync"
         self._last_activity = now
+
+    def _recover(self, now: float) -> None:
+        """After a drop-out: drain, then ask again where we were — or start over after a run of them."""
+        self._decoder.reset()
+        lost, self._lost = self._lost, None
+        self._unsent(lost is not None and lost is self._command)
+        rebooting = self._silent >= SILENT_RESTART or (lost is not None and lost.code == "X")
+        if (self.version is None and self._resume != "start") or self.drop_outs >= RESTART_AFTER or rebooting:
+            self._restart(now)
+            return
+        self._scope = self._resume
+        self._followups.clear()  # the next heartbeat polls again
+        if lost is not None:
+            if self._scope == "start":
+                self._send(lost, now)
+                return
+            if lost is self._command:
+                self._unsent(True)
+            elif lost.code == "f":
+                self._fsensor_reported = None
+            elif (lost.code in "RW" and not self._inflight_poll) or (lost.code == "B" and not self._retry_pending):
+                self._planned.appendleft(lost)  # asked for by the caller: ask again
+        if lost is not None and (lost.code == "Q" or self._scope == "command"):
+            self._send(Query(0), now)  # where is the MMU now?
+            return
+        self._pump(now)
 
     def _version_mismatch(self, detail: str) -> None:
         self._scope = "stopped"
@@ -408,6 +365,8 @@ class HostLogic:
         if self._scope == "start":
             if self._startup:
                 self._send(self._startup.popleft(), now)
+            elif now >= self._last_activity + self.heartbeat:
+                self._restart(now)  # nothing left to ask (its reply was lost between steps): start over
             return
         if self._planned and self._planned[0].code == "X":
             self._send(self._planned.popleft(), now)
@@ -415,18 +374,25 @@ class HostLogic:
         if self._scope == "command" and self._fsensor_reported != self.fsensor:
             self._send(FSensorState(self.fsensor), now)
             return
+        if self._planned and self._planned[0].code == "B":
+            self._send(self._planned.popleft(), now)  # a button answers an error: before the status reads
+            return
         if self._followups:
             self._send(self._followups.popleft(), now, poll=True)
             return
         if self._command is not None and not self._command_sent and now >= self._resend_at:
+            if self._probe:
+                self._send(Query(0), now)
+                return
             self._scope = "command"
             self._command_sent = True
+            self._last_sent = self._command
             self._send(self._command, now)
             return
         if self._planned:
             self._send(self._planned.popleft(), now)
             return
-        if now - self._last_activity >= self.heartbeat:
+        if now >= self._last_activity + self.heartbeat:
             self._send(Query(0), now)
 
     def _queue_reads(self, with_fsensor: bool) -> None:
@@ -434,53 +400,48 @@ class HostLogic:
             self._followups.append(FSensorState(self.fsensor))
         self._followups.extend(Read(a) for a in POLL_REGISTERS)
 
+    # ----------------------------------------------------------------------------------------- replies
+
     def _on_response(self, response: Response, now: float) -> None:
         sent = self._inflight
         if sent is None:
             self._protocol_error(now, "reply with no request outstanding")
             return
         self._inflight = None
+        if (sent.code == "Q") != (response.param in "PEFB"):
+            self._protocol_error(now, f"reply {response} does not answer {sent}")
+            return
         if self._scope == "start":
             self._on_startup_reply(sent, response, now)
-        elif sent.code == "Q":
+            return
+        if sent.code == "Q":
+            self.drop_outs = 0
             self._on_query_reply(response, now)
         elif not response.answers(sent):
             self._protocol_error(now, f"reply {response} does not answer {sent}")
         elif sent is self._command:
+            self.drop_outs = 0
             self._on_command_ack(response, now)
         else:
+            self.drop_outs = 0
             self._on_plain_reply(sent, response)
 
     def _on_startup_reply(self, sent: Request, response: Response, now: float) -> None:
-        hs = self._hs
         if sent.code == "S":
-            if not response.answers(sent) or not isinstance(response, Accepted):
-                self._send(sent, now)  # not the answer to what we asked: ask again, no penalty
-                return
-            self.drop_outs = 0
-            value = response.number
-            if hs.stage < 3:
-                wanted = {v[hs.stage] for v in self.accepted if list(v[: hs.stage]) == hs.version}
-                if value not in wanted:
-                    hs.retries -= 1
-                    if hs.retries <= 0:
-                        got = ".".join(str(v) for v in [*hs.version, value])
-                        self._version_mismatch(f"MMU firmware {got}… is not one of "
-                                               f"{', '.join('.'.join(map(str, v)) for v in sorted(self.accepted))}")
-                        return
-                    self._send(sent, now)
-                    return
-                hs.version.append(value)
-                hs.stage += 1
-                self._send(Version(hs.stage), now)
-                return
-            major, minor, revision = hs.version
-            self.version = codes.FirmwareVersion(major, minor, revision, value)
-            self._startup = deque(Write(a, v) for a, v in self.init_registers)
-            self._fsensor_reported = self.fsensor
-            self._startup.append(FSensorState(self.fsensor))
-            self._startup.append(Query(0))
-            self._send(self._startup.popleft(), now)
+            if response.answers(sent) and isinstance(response, Accepted):
+                self.drop_outs = 0
+            step = self._hs.step(response)
+            if isinstance(step, str):
+                self._version_mismatch(step)
+            elif isinstance(step, Version):
+                self._send(step, now)  # the next stage, or the same one asked again
+            else:
+                self.version = step
+                self._startup = deque(Write(a, v) for a, v in self.init_registers)
+                self._fsensor_reported = self.fsensor
+                self._startup.append(FSensorState(self.fsensor))
+                self._startup.append(Query(0))
+                self._send(self._startup.popleft(), now)
             return
         if sent.code == "Q":
             self._scope = "idle"
@@ -490,59 +451,53 @@ class HostLogic:
         self._pump(now)  # W and f replies are not checked during start-up
 
     def _on_query_reply(self, response: Response, now: float) -> None:
-        code = response.request_code
-        kind = response.param
+        code, kind = response.request_code, response.param
         self.status = replace(self.status, command=response.command, kind=kind, value=response.number)
         command = self._command
-        matches = command is not None and self._command_sent and response.answers(command)
-        if self._scope == "idle":
-            if code in BUSY_CODES and kind != "F":
-                if command is not None and not self._command_sent:
-                    self._queue_reads(False)  # ours goes out next; the MMU answers it with R while busy
-                    return
-                if not matches:
-                    command = self._command = make_request(code, response.request_value)
-                    self._command_sent = True
-                    matches = True
+        ours = command is not None and response.answers(command)
+        running = kind in "PEB"
+        if command is not None and not self._command_sent:
+            self._probe = False
+            if ours and running:
+                self._command_sent = self._command_acked = True  # the MMU runs it already (an earlier send)
                 self._scope = "command"
-            elif code in BUSY_CODES and matches:
+            else:
+                self._scope = "idle"
+                self._queue_reads(False)  # ours goes out next
+                return
+        elif command is None:
+            if code in BUSY_CODES and running:
+                self._command = make_request(code, response.request_value)  # adopt what the MMU is doing
+                self._command_sent = self._command_acked = True
+                self._own = self._command == self._last_sent  # ours from before (given up on, or a restart)
                 self._scope = "command"
-            elif code == "X":
-                if kind == "F" and command is not None and self._command_sent:
-                    self._interrupted(response)
-                elif kind == "P":
-                    self._progress(response.number)
-                elif kind == "E":
-                    self._error(response.number)
-                elif kind == "B":
-                    self._events.append(ButtonPushed(response.command, response.number))
-                self._queue_reads(False)
-                return
-            elif code not in BUSY_CODES:
-                self._protocol_error(now, f"unexpected Q0 reply {response}")
-                return
             else:
-                self._queue_reads(False)
+                self._scope = "idle"
+                if code == "X" or code in BUSY_CODES:
+                    self._report(response)
+                    self._queue_reads(False)
+                else:
+                    self._protocol_error(now, f"unexpected Q0 reply {response}")
                 return
-        # command scope
-        if isinstance(response, Finished):
-            if matches:
-                self._finished(response)
-            else:
-                self._interrupted(response)
-        elif not matches:
-            if command is not None and not self._command_sent:
-                self._queue_reads(True)  # still ours to send; the reply is about an older command
-                return
-            self._protocol_error(now, f"Q0 reply {response} is about another command than {command}")
+        elif not ours:
+            self._interrupted(response)  # the MMU rebooted or runs something else: ours is gone
+            self._queue_reads(False)
             return
-        elif isinstance(response, Processing):
+        if isinstance(response, Finished):
+            self._finished(response)
+            self._queue_reads(False)
+            return
+        self._scope = "command"
+        self._report(response)
+        self._queue_reads(True)
+
+    def _report(self, response: Response) -> None:
+        if isinstance(response, Processing):
             self._progress(response.number)
         elif isinstance(response, CommandError):
             self._error(response.number)
         elif isinstance(response, ButtonPressed):
             self._events.append(ButtonPushed(response.command, response.number))
-        self._queue_reads(True)
 
     def _progress(self, code: int) -> None:
         command = self.status.command
@@ -551,18 +506,23 @@ class HostLogic:
             self._retry_pending = False
             self._events.append(ProgressChanged(command, code))
         if self.fsensor_mode == "auto":
-            if code == codes.Progress.FEEDING_TO_FSENSOR:
+            if code in AUTO_FSENSOR_ON:
                 self.fsensor = int(codes.FSensor.AT_FSENSOR)
-            elif code == codes.Progress.UNLOADING_TO_FINDA:
+            elif code in AUTO_FSENSOR_OFF:
                 self.fsensor = int(codes.FSensor.NOT_PRESENT)
 
     def _error(self, code: int) -> None:
         if self._last_report == ("E", code) and not self._retry_acked:
+            middle = ButtonPress(int(codes.Button.MIDDLE))
+            if self._retry_pending and middle not in self._planned and self._inflight != middle:
+                self._planned.appendleft(middle)  # our Retry was lost on the line
             return
         self._last_report = ("E", code)
         self._retry_acked = False
+        if self.fsensor_mode == "auto" and code == 0x8004:
+            self.fsensor = int(codes.FSensor.NOT_PRESENT)  # the printer retracts to help the unload
         info = describe_error(code)
-        auto = info.retryable and self._retries_left > 0 and self._command is not None
+        auto = info.retryable and self._retries_left > 0 and self._command is not None and self._own
         if auto and not self._retry_pending:
             self._retry_pending = True
             self._planned.appendleft(ButtonPress(int(codes.Button.MIDDLE)))
@@ -584,6 +544,7 @@ class HostLogic:
 
     def _on_command_ack(self, response: Response, now: float) -> None:
         if isinstance(response, Accepted):
+            self._command_acked = True
             return
         if isinstance(response, Rejected):
             self._rejects += 1
@@ -594,12 +555,10 @@ class HostLogic:
                 self._scope = "idle"
                 self._events.append(CommandRejected(str(command), self._rejects))
                 return
-            assert self._command is not None
-            if self._rejects <= IMMEDIATE_RESENDS:
-                self._send(self._command, now)
-            else:
-                self._command_sent = False
-                self._resend_at = now + self.heartbeat
+            self._command_sent = False
+            self._probe = True  # busy — perhaps with ours, if an earlier send got through
+            self._resend_at = now if self._rejects <= IMMEDIATE_RESENDS else now + self.heartbeat
+            self._send(Query(0), now)
             return
         self._protocol_error(now, f"unexpected reply {response} to a command")
 
@@ -616,6 +575,7 @@ class HostLogic:
         elif sent.code == "W":
             self._events.append(RegisterWritten(sent.value, sent.value2, isinstance(response, Accepted)))
         elif sent.code == "B" and isinstance(response, Accepted):
+            self._last_report = None  # after a press, the same error again is news
             if sent.value == codes.Button.MIDDLE and self._retry_pending and self._retries_left > 0:
                 self._retries_left -= 1
                 self._retry_pending = False
@@ -624,8 +584,12 @@ class HostLogic:
 
     def _status_complete(self) -> None:
         r = self._reads
+        pulley = r.get(0x1A)
+        if pulley is not None and pulley >= 0x8000:
+            pulley -= 0x10000  # the firmware's int32 millimetres, truncated to 16 bits
         self.status = replace(self.status, finda=bool(r.get(0x08)), selector=r.get(0x1B), idler=r.get(0x1C),
-                              drive_errors=r.get(0x04), pulley=r.get(0x1A))
+                              drive_errors=r.get(0x04), pulley=pulley)
+        self.timing.observe(self._now, pulley)
         if not self._announced and self.version is not None:
             self._announced = True
             self.link = Link.READY

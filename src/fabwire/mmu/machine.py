@@ -91,6 +91,8 @@ class Machine:
         self.homing_until = {"selector": 0.0, "idler": 0.0}
         """When a homing already under way (boot) ends; a move that needs the axis waits for it."""
         self.pulley_mm = 0.0
+        self.pulley_move: tuple[float, float, float] | None = None
+        """(start, seconds, mm) of the pulley move under way: the position register follows it."""
         self.tip = 0.0
         self.finda_raw = False
         self.finda_since = now
@@ -222,6 +224,12 @@ class Machine:
     def _reg(self, address: int) -> int:
         return self.regs[address]
 
+    def _pulley_now(self) -> float:
+        if self.pulley_move is None:
+            return self.pulley_mm
+        start, seconds, mm = self.pulley_move
+        return self.pulley_mm + mm * (min(1.0, (self.now - start) / seconds) if seconds > 0 else 1.0)
+
     def read_register(self, address: int) -> int | None:
         """`MMU:src/registers.cpp`; None (→ `R`) for an address past the map."""
         if address >= codes.REGISTER_COUNT:
@@ -231,7 +239,7 @@ class Machine:
             0x00: fw.major, 0x01: fw.minor, 0x02: fw.revision, 0x03: fw.build,
             0x04: self.eeprom.drive_errors, 0x05: self.state, 0x06: self.error, 0x07: int(self.filament),
             0x08: int(self.finda), 0x09: int(self.fsensor), 0x0A: int(self.stealth),
-            0x1A: int(self.pulley_mm) & 0xFFFF,  # int32 millimetres truncated to 16 bits: negative wraps
+            0x1A: int(self._pulley_now()) & 0xFFFF,  # int32 millimetres truncated to 16 bits: negatives wrap
             0x1B: self.selector,
             0x1C: self.idler,
         }

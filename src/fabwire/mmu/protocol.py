@@ -17,47 +17,15 @@ from dataclasses import dataclass
 from typing import ClassVar, Final
 
 from fabwire.errors import LocalProtocolError, RemoteProtocolError
+from fabwire.mmu.crc import CRC_TABLE as CRC_TABLE  # re-exported: the codec is where callers look
+from fabwire.mmu.crc import crc8 as crc8
+from fabwire.mmu.crc import request_crc as request_crc
+from fabwire.mmu.crc import response_crc as response_crc
 
 REQUEST_CODES: Final = "QTLMUXPSBEWKFfHR"
 PARAM_CODES: Final = "ARPEFB"
 COMMAND_CODES: Final = "TLUEKHM"
 """Requests the MMU plans as a command (busy rule, `currentCommand` echo in Q0 replies)."""
-
-# ------------------------------------------------------------------------------------------------- CRC-8
-
-
-def _crc_table() -> tuple[int, ...]:
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table.append(crc)
-    return tuple(table)
-
-
-CRC_TABLE: Final = _crc_table()
-
-
-def crc8(data: bytes | bytearray, crc: int = 0) -> int:
-    """CRC-8/SMBUS: poly 0x07, init 0, no reflection, no final XOR."""
-    table = CRC_TABLE
-    for byte in data:
-        crc = table[crc ^ byte]
-    return crc
-
-
-def request_crc(code: str, value: int, value2: int = 0) -> int:
-    """The request CRC: over code, value and the 16-bit W word little-endian (0 for every other request)."""
-    t = CRC_TABLE
-    return t[t[t[t[ord(code)] ^ (value & 0xFF)] ^ (value2 & 0xFF)] ^ ((value2 >> 8) & 0xFF)]
-
-
-def response_crc(code: str, value: int, param: str, pvalue: int) -> int:
-    """The response CRC: the request CRC with value2 = 0, continued over param code and 16-bit value."""
-    t = CRC_TABLE
-    crc = t[request_crc(code, value) ^ ord(param)]
-    return t[t[crc ^ (pvalue & 0xFF)] ^ ((pvalue >> 8) & 0xFF)]
 
 
 # ---------------------------------------------------------------------------------------------- messages

@@ -165,7 +165,9 @@ class Scripts(Machine):
         yield from self._pulley_ready(progress)
         duration = self._pulley_time(mm, speed)
         start = self.now
+        self.pulley_move = (start, duration, mm)
         hit = yield Wait(progress, duration + extra, until)
+        self.pulley_move = None
         done = mm if not hit or duration == 0 else mm * min(1.0, (self.now - start) / duration)
         self.pulley_mm += done
         self.tip = max(0.0, self.tip + done)

@@ -22,7 +22,7 @@ import aiomqtt
 from aiomqtt.exceptions import MqttConnectError
 
 from fabwire import __version__
-from fabwire.errors import LinkError
+from fabwire.errors import FabwireError, LinkError
 from fabwire.mqtt.commands import CommandRunner
 from fabwire.mqtt.discovery import discovery_payload
 from fabwire.mqtt.fleet_view import FleetView
@@ -30,6 +30,7 @@ from fabwire.mqtt.topics import (
     HA_STATUS,
     OFFLINE,
     ONLINE,
+    OUTGOING_CALLS,
     PREFIX,
     Broker,
     agent_topic,
@@ -80,12 +81,14 @@ class Bridge:
         """Devices this agent monitors and has claimed: id → DeviceInfo as a dict."""
         self.owned: set[str] = set()
         self.runner = CommandRunner(agent.act, agent_id)
+        self.states_published = 0
         self.connected = asyncio.Event()
         self._client: aiomqtt.Client | None = None
         self._pending: dict[str, dict[str, Any]] = {}
         self._availability: dict[str, str] = {}
         """What this connection last published on each device's availability topic."""
-        self._wake = asyncio.Event()
+        self._dirty: asyncio.Queue[str] = asyncio.Queue()
+        """Devices whose newest state waits in `_pending`, oldest first (each at most once)."""
         self._synced = asyncio.Event()
         self._sync_token = ""
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -102,6 +105,7 @@ class Bridge:
                     async with aiomqtt.Client(**self.broker.client_options(), identifier=f"fabwire-{self.agent_id}",
                                               will=aiomqtt.Will(agent_topic(self.agent_id, "status"), OFFLINE,
                                                                 qos=1, retain=True)) as client:
+                        client.pending_calls_threshold = 10 * OUTGOING_CALLS  # its warning is for leaks
                         delay = self.backoff[0]
                         log.info("MQTT connected to %s as agent %s", self.broker.url, self.agent_id)
                         await self._connected(client, events)
@@ -109,6 +113,8 @@ class Bridge:
                     raise LinkError(f"MQTT broker {self.broker.url} refused the connection: {exc}") from None
                 except aiomqtt.MqttError as exc:
                     log.warning("MQTT broker %s: %s; retrying in %.1f s", self.broker.url, exc, delay)
+                except FabwireError as exc:  # the agent changed under us (a device went away mid-publish)
+                    log.warning("MQTT bridge: %s; reconnecting in %.1f s", exc, delay)
                 finally:
                     self._client = None
                     self.connected.clear()
@@ -124,6 +130,8 @@ class Bridge:
         self.owned.clear()
         self.known.clear()
         self._availability.clear()
+        self._pending.clear()
+        self._dirty = asyncio.Queue()
         me = self.agent_id
         for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/device/+/claim/+", f"{PREFIX}/device/+/command",
                       HA_STATUS, agent_topic(me, "sync")):
@@ -138,7 +146,8 @@ class Bridge:
         self._sync_token = secrets.token_hex(8)
         await client.publish(agent_topic(me, "sync"), self._sync_token, qos=1)
         workers = [asyncio.create_task(self._read(client)), asyncio.create_task(self._pump(events)),
-                   asyncio.create_task(self._publisher()), asyncio.create_task(self._scan())]
+                   *(asyncio.create_task(self._publisher()) for _ in range(OUTGOING_CALLS)),
+                   asyncio.create_task(self._scan())]
         try:
             done, _ = await asyncio.wait(workers, return_when=asyncio.FIRST_EXCEPTION)
             for task in done:
@@ -154,10 +163,15 @@ class Bridge:
 
     async def _goodbye(self, client: aiomqtt.Client) -> None:
         """A clean stop: the devices and the agent show offline (a clean disconnect sends no last will)."""
+        # The devices first: another agent takes them over when it sees this agent's status go offline, and its
+        # "online" must not be overtaken by this agent's "offline". Each step has its own time limit, so the
+        # status (which alone makes every device unavailable in Home Assistant) goes out in any case.
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
-                for device in sorted(self.owned):
-                    await client.publish(device_topic(device, "availability"), OFFLINE, qos=1, retain=True)
+                await asyncio.gather(*(client.publish(device_topic(device, "availability"), OFFLINE, qos=1,
+                                                      retain=True) for device in sorted(self.owned)))
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(2.0):
                 await client.publish(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
 
     async def _publish(self, topic: str, payload: str | bytes, *, retain: bool = True, qos: int = 1,
@@ -184,12 +198,13 @@ class Bridge:
                 continue
             if topic == agent_topic(self.agent_id, "sync"):
                 if payload.decode("utf-8", "replace") == self._sync_token and not self._synced.is_set():
-                    await self._reconcile_all()
                     self._synced.set()
+                    await self._reconcile_all()
+                    self.connected.set()
                 continue
             parts = split_device_topic(topic)
             if parts is not None and parts[1] == "command":
-                if parts[0] in self.owned:
+                if parts[0] in self.known:
                     self._spawn(self._command(parts[0], payload, message.properties))
                 continue
             concerned = self.view.take(topic, payload)
@@ -201,6 +216,9 @@ class Bridge:
                 await self._reconcile_all()
 
     async def _command(self, device: str, payload: bytes, properties: Any) -> None:
+        await self.connected.wait()  # a command that comes while ownership is being settled waits for it
+        if device not in self.owned:
+            return
         reply = await self.runner.handle(device, payload)
         if reply is None:
             return
@@ -225,8 +243,9 @@ class Bridge:
     # ------------------------------------------------------------------------------------------ ownership
 
     async def _reconcile_all(self) -> None:
-        for device in sorted(set(self.known) | self.owned):
-            await self._reconcile(device)
+        # Concurrently: the client bounds the publishes in flight, and a farm's worth of devices one round trip
+        # at a time would take seconds.
+        await asyncio.gather(*(self._reconcile(device) for device in sorted(set(self.known) | self.owned)))
         await self._forget_stale_claims()
 
     async def _reconcile(self, device: str) -> None:
@@ -248,10 +267,13 @@ class Bridge:
                 await self._remove(device)
 
     async def _publish_device(self, device: str) -> None:
+        try:
+            state = self.agent.state(device)
+        except FabwireError:
+            return  # removed from the agent meanwhile: the next scan cleans it up
         info = self.known[device]
         await self._publish(device_topic(device, "info"), _dump({**info, "agent": self.agent_id}))
         await self._publish_discovery(device)
-        state = self.agent.state(device)
         self._availability.pop(device, None)
         await self._publish_state(device, state)
 
@@ -282,9 +304,10 @@ class Bridge:
                 await self._synced.wait()
         if not self._synced.is_set():
             log.warning("MQTT: the broker did not echo this agent's sync message; deciding ownership anyway")
-            await self._reconcile_all()
             self._synced.set()
-        self.connected.set()
+            await self._reconcile_all()
+            self.connected.set()
+        await self.connected.wait()
         while True:
             current = self._current_devices()
             for device in sorted(set(self.known) - set(current)):
@@ -312,8 +335,9 @@ class Bridge:
                 continue
             kind = event.get("type")
             if kind == "state":
+                if device not in self._pending:
+                    self._dirty.put_nowait(device)
                 self._pending[device] = event["state"]
-                self._wake.set()
             elif kind in ("online", "offline"):
                 if kind == "online" and isinstance(event.get("info"), dict):
                     self.known[device] = event["info"]
@@ -323,18 +347,21 @@ class Bridge:
                 await self._publish(device_topic(device, "event"), _dump(event), retain=False)
 
     async def _publisher(self) -> None:
-        """Publishes the newest state of each device that changed; older states waiting are simply replaced, so a
-        slow broker delays updates but never lets them queue up stale."""
+        """One of a pool that publishes the newest state of each changed device, longest-waiting device first. A
+        newer state replaces one still waiting, so a slow broker delays updates but never queues stale ones."""
         while True:
-            await self._wake.wait()
-            self._wake.clear()
-            batch, self._pending = self._pending, {}
-            await asyncio.gather(*(self._publish_state(d, s) for d, s in batch.items() if d in self.owned))
+            device = await self._dirty.get()
+            state = self._pending.pop(device, None)
+            if state is not None and device in self.owned:
+                await self._publish_state(device, state)
 
     async def _publish_state(self, device: str, state: dict[str, Any]) -> None:
         """The state, and the availability when the state's `online` flag changed it."""
         await self._set_availability(device, bool(state.get("online")))
-        await self._publish(device_topic(device, "state"), _dump(state))
+        # QoS 0: TCP delivers it while the connection lasts, a reconnection republishes every state, and a newer
+        # state follows within a poll; waiting for an acknowledgement per state would halve a farm's throughput.
+        await self._publish(device_topic(device, "state"), _dump(state), qos=0)
+        self.states_published += 1
 
     async def _set_availability(self, device: str, online: bool) -> None:
         value = ONLINE if online else OFFLINE

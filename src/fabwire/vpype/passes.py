@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from fabwire.errors import InputError
-from fabwire.lineus import protocol as p
-from fabwire.lineus.kinematics import APP_AREA, Z_UP
-from fabwire.lineus.plot import MoveTo, PenDown, Plan, PlanFigures, PlanOptions, plan_lines
+from fabwire.lineus.kinematics import APP_AREA
+from fabwire.lineus.plot import Plan, PlanFigures, PlanOptions, plan_lines
+from fabwire.lineus.plot.export import gcode_lines
 from fabwire.lineus.plot.geometry import FloatArray, Polylines
 from fabwire.lineus.plot.intake import PAGE_ORIGIN, SVG_UNITS_PER_PX
 
@@ -152,14 +152,4 @@ def passes_key(passes: Sequence[Pass], options: PlanOptions, extra: str = "") ->
 def plan_gcode(plans: Sequence[PassPlan], *, pen_z: float = 0.0) -> list[str]:
     """Line-us G-code for the passes one after another: G01 moves with Z1000 (pen up) and `pen_z` (pen down),
     as the Line-us app saves drawings; no pen-change stop (G-code has none the firmware honours)."""
-    lines = [p.Move(z=Z_UP).text()]
-    for one in plans:
-        for move in one.plan.moves():
-            if isinstance(move, MoveTo):
-                command = p.Move(move.x, move.y)
-            elif isinstance(move, PenDown):
-                command = p.Move(z=pen_z)
-            else:
-                command = p.Move(z=Z_UP)
-            lines.append(command.text())
-    return lines
+    return gcode_lines(*(one.plan for one in plans), pen_z=pen_z)

@@ -1,8 +1,9 @@
-"""`XYZPrinter`: status, printing, job control and every maintenance flow of a da Vinci, over serial or Wi-Fi.
+"""`XYZPrinter`: status, printing and job control of a da Vinci over serial or Wi-Fi (its maintenance flows and
+settings come from `maintenance`).
 
 One command is in flight at a time; a background task reads the link so a lost connection is noticed at
-once and stale replies are dropped before each command. Flows are driven by polling the printer's state,
-which works the same on both link kinds (Wi-Fi printers send no progress lines).
+once and stale replies are dropped before each command. A job counts as started or done only when the printer's
+own status says so.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
 from fabwire.xyz import intake, userinput
 from fabwire.xyz import protocol as p
+from fabwire.xyz.maintenance import Maintenance
+from fabwire.xyz.maintenance import StatusCallback as StatusCallback  # also the sync client's
 from fabwire.xyz.models import PrinterModel, model_for_file_id
 from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
 from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
@@ -37,8 +40,6 @@ if TYPE_CHECKING:
 log = logging.getLogger("fabwire.xyz")
 T = TypeVar("T")
 UploadProgress = Callable[[int, int], None]
-StatusCallback = Callable[[Status], None]
-Prompt = Callable[[str], Awaitable[None]]
 
 REPLY_ERRORS = {
     0: "the printer refused the command",
@@ -52,9 +53,6 @@ FILE_CHECK_LIMIT = 120.0
 """Seconds of "checking file" (9520) after which a print is reported stuck (printers check in seconds)."""
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
-STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
-"""Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
-_PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
 _FIRMWARE_HEADER = re.compile(rb"([A-Za-z0-9]{10})\+([0-9][0-9A-Za-z.]*)")
 _MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
@@ -85,8 +83,9 @@ class UploadResult:
     seconds: float
 
 
-class XYZPrinter:
-    """Async client for one printer on an open transport."""
+class XYZPrinter(Maintenance):
+    """Async client for one printer on an open transport: status, printing and job control here, the maintenance
+    flows and settings from `Maintenance`."""
 
     poll_interval = 0.25
     upload_window = 8
@@ -545,202 +544,6 @@ class XYZPrinter:
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
             raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
         await self.request(p.PrintControl(op))
-
-    # --------------------------------------------------------------------------------------------- flows
-
-    async def _wait_state(self, done: Callable[[Status], bool], doing: str, limit: float,
-                          on_status: StatusCallback | None = None) -> Status:
-        end = self.clock() + limit
-        while True:
-            try:
-                status = await self.status()
-            except LinkTimeout:
-                status = self.last_status  # some firmware goes quiet mid-action; ask again
-            if on_status:
-                on_status(status)
-            for word in status.error_words:
-                raise DeviceError(f"0x{word.raw:08X}", word.meaning, action=f"while {doing}")
-            if done(status):
-                return status
-            if self.clock() > end:
-                raise LinkTimeout(f"the printer did not finish {doing} within {limit:g} s ({status.state_name})")
-            await asyncio.sleep(self.poll_interval)
-
-    async def home(self, *, limit: float = 120.0) -> Status:
-        await self.require_idle("home", p.Home())
-        await self.request(p.Home())
-        return await self._wait_state(lambda s: s.idle, "homing", limit)
-
-    async def jog(self, axis: str, distance: float, *, limit: float = 120.0) -> Status:
-        command = p.Jog(axis.lower(), distance)
-        await self.require_idle("jog", command)
-        await self.request(command)
-        return await self._wait_state(lambda s: s.idle, "jogging", limit)
-
-    async def _flow(self, flow: str, op: str) -> Reply:
-        reply = await self.request(p.Flow(flow, op))
-        for line in reply.lines:
-            stat = p.parse_stat_line(line)
-            if stat is not None and stat.stat == "fail":
-                status = await self.status()
-                words = status.error_words
-                meaning = words[0].meaning if words else f"the printer reports {flow} failed"
-                raise DeviceError(f"0x{words[0].raw:08X}" if words else flow, meaning, action=f"{flow} failed")
-        return reply
-
-    async def load_filament(self, ready: Prompt, *, on_status: StatusCallback | None = None,
-                            retry: bool = False, limit: float = 360.0) -> Status:
-        """Heat, feed, then `ready(...)` returns once filament comes out of the nozzle; we then stop feeding."""
-        await self.require_idle("load filament", p.Flow("load", "new"))
-        await self._flow("load", "retry" if retry else "new")
-        status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
-                                        on_status)
-        if status.idle:
-            return status  # the printer finished feeding on its own before anyone confirmed
-        try:
-            await ready("Filament is feeding: confirm when it comes out of the nozzle")
-        finally:
-            await self._flow("load", "cancel")
-        return await self._wait_state(lambda s: s.idle, "finishing the load", 30.0, on_status)
-
-    async def cancel_flow(self, flow: str) -> None:
-        """Stop a running load, unload or nozzle clean."""
-        await self.request(p.Flow(flow, "cancel"))
-
-    async def unload_filament(self, *, on_status: StatusCallback | None = None, retry: bool = False,
-                              limit: float = 360.0) -> Status:
-        await self.require_idle("unload filament", p.Flow("unload", "new"))
-        await self._flow("unload", "retry" if retry else "new")
-        await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
-        return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
-
-    async def clean_nozzle(self, ready: Prompt, *, on_status: StatusCallback | None = None,
-                           limit: float = 360.0) -> Status:
-        await self.require_idle("clean the nozzle", p.Flow("cleannozzle", "new"))
-        await self._flow("cleannozzle", "new")
-        await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit, on_status)
-        try:
-            await ready("The nozzle is hot: clean it, then confirm")
-        finally:
-            await self._flow("cleannozzle", "cancel")
-        return await self._wait_state(lambda s: s.idle, "finishing the nozzle clean", 30.0, on_status)
-
-    async def calibrate(self, prompt: Prompt, *, on_status: StatusCallback | None = None,
-                        limit: float = 240.0) -> tuple[int, ...]:
-        """Bed calibration with the detector; `prompt` asks the user to lower, then raise it."""
-        await self.require_idle("calibrate", p.Flow("calibratejr", "new"))
-        await self._flow("calibratejr", "new")
-        await self._wait_state(lambda s: s.state == (9535, 41), "starting calibration", limit, on_status)
-        await prompt("Lower the calibration detector, then confirm")
-        await self._flow("calibratejr", "detectorok")
-        await self._wait_state(lambda s: s.state == (9535, 44), "measuring the bed", limit, on_status)
-        reply = await self.request(p.Flow("calibratejr", "getdata"))
-        stat = p.parse_stat_line(reply.lines[0]) if reply.lines else None
-        values = stat.values if stat else ()
-        await prompt("Raise the calibration detector, then confirm")
-        await self._flow("calibratejr", "release")
-        await self._wait_state(lambda s: s.idle, "finishing calibration", 30.0, on_status)
-        return values
-
-    # -------------------------------------------------------------------------------------------- config
-
-    async def _supports(self, command: p.Command) -> None:
-        """Refuse, in words, what this model cannot do over XYZv3 (Wi-Fi printers would just stay silent)."""
-        if isinstance(command, _PRINTING_COMMANDS):
-            return
-        status = self.last_status if self.last_status.model_number else await self.status()
-        if status.model_number in STATUS_AND_UPLOAD_ONLY:
-            model = status.model
-            raise DeviceError("unsupported", f"the {model.name if model else status.model_number} takes only status "
-                              "queries and prints over XYZv3", action=f"cannot send {command.body!r}")
-
-    async def _config(self, command: p.Command) -> None:
-        await self._supports(command)
-        await self.request(command)
-
-    async def set_autolevel(self, on: bool) -> None:
-        await self._config(p.SetAutoLevel(on))
-
-    async def set_buzzer(self, on: bool) -> None:
-        await self._config(p.SetBuzzer(on))
-
-    async def zoffset(self) -> int:
-        await self._supports(p.GetZOffset())
-        reply = await self.request(p.GetZOffset())
-        if not reply.lines:
-            raise LinkTimeout("the printer sent no z offset")
-        return int(reply.lines[0])
-
-    async def set_zoffset(self, value: int) -> int:
-        await self._config(p.SetZOffset(value))
-        return value
-
-    async def nudge_zoffset(self, up: bool) -> int:
-        """One 0.01 mm step; returns the new offset as the next status reports it."""
-        await self._config(p.NudgeZOffset(up))
-        status = await self.status("z")
-        return status.zoffset if status.zoffset is not None else 0
-
-    async def set_name(self, name: str) -> None:
-        await self._config(p.SetName(userinput.printer_name(name)))
-
-    async def set_language(self, code: str) -> None:
-        await self._config(p.SetLanguage(userinput.language(code)))
-
-    async def set_energy(self, minutes: int) -> None:
-        await self._config(p.SetEnergy(minutes))
-
-    async def restore_defaults(self) -> None:
-        await self._config(p.RestoreDefaults())
-
-    async def wifi_info(self) -> Status:
-        return await self.status("4")
-
-    async def scan_wifi(self) -> list[dict[str, Any]]:
-        """The networks the printer can see (`query=W`; it takes a few seconds, as XYZware allows)."""
-        reply = await self.request(p.Query("W"), timeout=max(self.timeout, 5.0))
-        self.last_status = self.last_status.update(reply.lines)
-        return self.last_status.wifi_networks
-
-    async def tag_info(self) -> str:
-        """Firmware 3.x `config=taginfo`: the text between the braces of `taginfo:{…}`."""
-        reply = await self.request(p.TagInfo())
-        line = reply.lines[0] if reply.lines else ""
-        return line.removeprefix("taginfo:").strip("{}")
-
-    async def _raw(self, command: p.Signature | p.Uid) -> bytes:
-        reply = await self.request(command)
-        value = p.raw_reply_value(command, reply.lines[0]) if reply.lines else None
-        if value is None:
-            raise RemoteProtocolError(f"the printer answered {command.body!r} with {reply.lines[:1]!r}")
-        return value
-
-    async def signature(self) -> bytes:
-        """Firmware 3.x `config=signature:[get]`: 32 raw bytes (their use is not documented)."""
-        return await self._raw(p.Signature())
-
-    async def uid(self) -> bytes:
-        """Firmware 3.x `config=uid`: 4 raw bytes."""
-        return await self._raw(p.Uid())
-
-    async def sim_control(self, op: str) -> tuple[str, ...]:
-        """Drive a fabwire simulator's faults in-band (`fault:<name>:on|off`, `clear`, `faults`); a real printer
-        refuses it. Returns the faults now active."""
-        reply = await self.request(p.SimControl(op))
-        line = reply.lines[0] if reply.lines else ""
-        value = line.removeprefix("simctl:")
-        if not line.startswith("simctl:") or value.startswith("E"):
-            raise DeviceError("simctl", value[1:].strip() if value.startswith("E") else "not a fabwire simulator")
-        return tuple(f for f in value.split("+") if f)
-
-    async def join_wifi(self, ssid: str, password: str, channel: int = 0) -> None:
-        command = p.JoinWifi(userinput.ssid(ssid), userinput.wifi_password(password), channel)
-        await self._supports(command)
-        await self._config(p.LeaveWifi())
-        await self.request(command, timeout=25.0)
-
-    async def leave_wifi(self) -> None:
-        await self._config(p.LeaveWifi())
 
     async def upload_firmware(self, image: bytes, *, confirm: bool, progress: UploadProgress | None = None,
                               name: str = "temp.bin") -> UploadResult:

@@ -102,8 +102,14 @@ def _search(patterns: Iterable[tuple[str, re.Pattern[bytes]]], windows: Iterable
     return None
 
 
+def _comment_lines(window: bytes) -> bytes:
+    """The `;` comment lines of a piece of G-code (every pattern here reads comments; moves are most of a file)."""
+    return b"\n".join(line for line in window.split(b"\n") if line.lstrip(b" \t")[:1] == b";")
+
+
 def header_metadata(*windows: bytes) -> GcodeMetadata:
     """The values slicer comments state in the given pieces of a G-code (its head and its tail)."""
+    windows = tuple(_comment_lines(window) for window in windows)
     time_s: int | None = None
     filament: float | None = None
     layers: int | None = None

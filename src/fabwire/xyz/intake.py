@@ -13,14 +13,17 @@ import base64
 import binascii
 import contextlib
 import enum
+import os
 import re
 import tempfile
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path
 from typing import BinaryIO
 
 from fabwire.errors import InputError
+from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
 
 MAGIC = b"3DPFNKG13WTW"
 """The .3w signature (reference §5.1)."""
@@ -160,14 +163,19 @@ def refusal(kind: Kind, name: str, head: bytes = b"") -> InputError:
     return InputError(f"{name} is {what}{', ' if advice.startswith('not ') else ': '}{advice}")
 
 
-def sniff(path: Path) -> tuple[Kind, bytes]:
-    """(what the file is, its first bytes); an unreadable file is an InputError."""
+def open_input(path: Path) -> BinaryIO:
+    """The file opened for reading; an unreadable one is an InputError naming it."""
     try:
-        with Path(path).open("rb") as handle:
-            head = handle.read(SNIFF)
-            size = handle.seek(0, 2)
+        return Path(path).open("rb")
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror}") from exc
+
+
+def sniff(path: Path) -> tuple[Kind, bytes]:
+    """(what the file is, its first bytes); an unreadable file is an InputError."""
+    with open_input(path) as handle:
+        head = handle.read(SNIFF)
+        size = handle.seek(0, 2)
     return identify(head, size), head
 
 
@@ -205,11 +213,7 @@ def decode_base64(data: bytes, name: str) -> bytes:
 @contextlib.contextmanager
 def decoded_file(path: Path, kind: Kind) -> Iterator[BinaryIO]:
     """The file's own bytes, or for a base64 kind its decoded bytes (in a temporary file)."""
-    try:
-        handle = Path(path).open("rb")  # noqa: SIM115 - closed by the with below; opening errors get our message
-    except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror}") from exc
-    with handle:
+    with open_input(path) as handle:
         if not kind.base64:
             yield handle
             return
@@ -310,3 +314,147 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
 def has_commands(text: bytes) -> bool:
     """Whether normalised text holds a G/M/T command line."""
     return _COMMAND_LINE.search(text) is not None
+
+
+# ---------------------------------------------------------------------------- G-code → the text a .3w carries
+
+XYZ_VERSION = "18020109"
+"""`; version =` in the XYZ keys (miniMover's)."""
+HEAD_WINDOW = 1 << 18
+TAIL_WINDOW = 1 << 18
+"""Bytes at each end of a G-code searched for slicer comments (Cura states at the top, PrusaSlicer at the end)."""
+_FIRST_CODE_LINE = re.compile(rb"^[ \t]*[^;\s]", re.MULTILINE)
+_XYZ_KEY_LINE = re.compile(
+    rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
+)
+_G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
+_ODD_LINE_START = re.compile(rb"\n(?:[ \tNng]|G[ \t])")
+_G0_AT_LINE_START = re.compile(rb"\nG0(0?)(?![0-9.])")
+
+
+@dataclass(frozen=True, slots=True)
+class Prepared:
+    keys: bytes
+    """The XYZ key lines (XYZprint's order) that open the body."""
+    header: bytes
+    """The .3w header: the keys plus the slicer's leading comments when they fit, else the keys alone."""
+    metadata: GcodeMetadata
+    analysed: bool
+    """The moves were read once already to compute metadata (so progress counts two passes)."""
+
+
+def stream_size(src: BinaryIO) -> int:
+    here = src.tell()
+    end = src.seek(0, os.SEEK_END)
+    src.seek(here)
+    return end
+
+
+def _first_half(progress: Progress | None) -> Progress | None:
+    return None if progress is None else lambda done, total: progress(done // 2, total)
+
+
+def _second_half(progress: Progress | None) -> Progress | None:
+    return None if progress is None else lambda done, total: progress((total + done) // 2, total)
+
+
+def _head(src: BinaryIO, name: str) -> tuple[bytes, int]:
+    """(the normalised first CHUNK of the G-code, the file size); G-code without commands is refused."""
+    total = stream_size(src)
+    src.seek(0)
+    raw = src.read(CHUNK)
+    head = normalise(raw[:-1] if raw.endswith(b"\r") else raw, first=True)
+    if not head.strip():
+        raise InputError(f"{name} is empty G-code: nothing to convert")
+    if not has_commands(head[:HEAD_WINDOW]):
+        found = _FIRST_CODE_LINE.search(head)
+        if found is None and len(raw) == total:
+            raise InputError(f"{name} has no commands, only comments")
+        if found is not None and found.start() < HEAD_WINDOW:
+            raise InputError(f"{name} is text, not G-code: no G, M or T command in its first {HEAD_WINDOW} bytes")
+    return head, total
+
+
+def _leading_comments(head: bytes, room: int) -> bytes | None:
+    """The leading comment block without XYZ key lines, if it is within `room` bytes and ends inside `head`."""
+    found = _FIRST_CODE_LINE.search(head, 0, room + 1)
+    if found is None:
+        return None
+    return b"".join(line + b"\n" for line in head[:found.start()].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
+
+
+def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space: int,
+            progress: Progress | None) -> Prepared:
+    """The XYZ key lines and the .3w header for a G-code (its metadata read or computed); `header_space` is the
+    room the container has for the (padded) header."""
+    head, total = _head(src, name)
+    stated, computed = _metadata(src, name, head, total, _first_half(progress))
+    meta = finish(stated, computed)
+    safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
+    keys = (
+        f"; filename = {safe_name}\n"
+        f"; print_time = {meta.print_time_s}\n"
+        f"; machine = {file_id}\n"
+        f"; facets = {meta.facets}\n"
+        f"; total_layers = {meta.layers}\n"
+        f"; version = {XYZ_VERSION}\n"
+        f"; total_filament = {meta.filament_mm:.2f}\n"
+    ).encode()
+    comments = _leading_comments(head, header_space)
+    fits = comments is not None and (len(keys + comments) // 16 + 1) * 16 <= header_space  # with its PKCS#7 pad
+    header = keys + comments if comments is not None and fits else keys
+    return Prepared(keys, header, meta, computed is not None)
+
+
+def _metadata(
+    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
+) -> tuple[GcodeMetadata, GcodeMetadata | None]:
+    """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
+    tail = b""
+    if total > CHUNK:
+        src.seek(max(CHUNK, total - TAIL_WINDOW))
+        tail = normalise(src.read())
+    stated = header_metadata(head[:HEAD_WINDOW], tail)
+    if stated.complete:
+        return stated, None
+    analyzer = MoveAnalyzer()
+    for chunk in gcode_lines(src, name, progress, total):
+        analyzer.feed_chunk(chunk)
+    return stated, analyzer.result()
+
+
+def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
+    """What a G-code file's comments state, and what its moves say where the comments are silent."""
+    with open_input(path) as src:
+        head, total = _head(src, str(path))
+        return _metadata(src, str(path), head, total)
+
+
+def _process(chunk: bytes) -> bytes:
+    """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
+    text = b"\n" + chunk
+    if _ODD_LINE_START.search(text):
+        return _G0_WORD.sub(rb"\n\g<1>1", text)[1:]
+    # Every line starts with its command: plain replaces do the common spellings at memory speed.
+    text = text.replace(b"\nG0 ", b"\nG1 ")
+    if b"\nG0" in text:
+        text = _G0_AT_LINE_START.sub(rb"\nG\g<1>1", text)
+    return text[1:]
+
+
+def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progress | None) -> Iterator[bytes]:
+    """The body: the XYZ keys, the slicer's leading comments without XYZ key lines, then the processed code."""
+    yield prepared.keys
+    if prepared.analysed:
+        progress = _second_half(progress)
+    leading = True
+    for chunk in gcode_lines(src, name, progress, stream_size(src)):
+        if leading:
+            found = _FIRST_CODE_LINE.search(chunk)
+            end = len(chunk) if found is None else found.start()
+            yield b"".join(line + b"\n" for line in chunk[:end].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
+            if found is None:
+                continue
+            leading = False
+            chunk = chunk[end:]
+        yield _process(chunk)

@@ -15,8 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from fabwire.errors import InputError
+from fabwire.xyz import intake
 from fabwire.xyz import protocol as p
-from fabwire.xyz.models import FileFormat, PrinterModel, find_model
+from fabwire.xyz.models import FileFormat
+from fabwire.xyz.personas import Personality
 from fabwire.xyz.status import (
     CANCELLING,
     DOOR_OPEN,
@@ -32,7 +34,6 @@ from fabwire.xyz.status import (
     Cartridge,
     Lifetime,
     Network,
-    Nozzle,
     Packet,
     Progress,
     Status,
@@ -45,95 +46,6 @@ COOL_RATE = 1.5
 FLOW_TEMP = 200
 PRINT_TEMP = 210
 FAULTS = ("no-cartridge", "door-open", "file-rejected", "heater-failure", "link-drop", "stuck")
-
-
-@dataclass(frozen=True, slots=True)
-class Personality:
-    """What tells one model and firmware from another on the wire."""
-
-    model: PrinterModel
-    serial: str
-    firmware: tuple[str, ...]
-    name: str
-    order: str
-    """Status letters of a `query=a` reply, in the order this firmware sends them."""
-    nozzle: Nozzle
-    cartridge: str = "PMP6QTH64R1093"
-    zoffset: int = 245
-    calibration_tail: tuple[str, ...] = ()
-    substates: bool = True
-    """`j:9511,0` (True) or `j:9511` (1.0 Pro)."""
-    target_in_t: bool = True
-    """`t:1,22,0` (True) or `t:1,22` + an `O:` line (1.0 Pro)."""
-    settings: tuple[tuple[str, Any], ...] = (("fm", 0), ("fd", 0), ("sd", "yes"), ("button", "no"), ("buzzer", "on"))
-    accepts: tuple[FileFormat, ...] = ()
-    """File formats the firmware prints; empty = the model's own."""
-    accepts_gcode: bool = False
-    wifi_firmware: str = "5.0.9"
-    fw3: bool = False
-    """Firmware 3.x extras: `taginfo`, `uid`, `signature` and the `Z:` letter."""
-    old_states: bool = False
-    """`j:10` idle, `j:11` printing…: the pre-95xx state codes (1.1 Plus)."""
-    idle_errors: tuple[int, ...] = (0,)
-    """`e:` while nothing is wrong (`e:2` on the 1.1 Plus)."""
-    sensors: bool = True
-    """False: `b:--` and `t:1,--,--` (the 1.1 Plus reports no temperatures over XYZv3)."""
-    cartridge_tags: bool = True
-    """False: `w:1,--------------` and `f:1,0` always (no NFC cartridge reading)."""
-    packet_c: str = "1"
-    autolevel_in_o: bool = True
-    """`o:p8,t1,c1,a+` (True) or `o:p8,t1,c0` (1.1 Plus, no auto-level flag)."""
-    network_json: bool = True
-    """`4:{"wlan":{…}}` (True) or a bare `4:<ip>` (1.1 Plus)."""
-    lifetime_last: bool = True
-    status_and_upload_only: bool = False
-    """Its XYZv3 covers status and printing only; every other config/action is refused."""
-    ip: str = "192.168.1.118"
-    lifetime: tuple[int, int] = (301080, 28581)
-    """Machine and extruder lifetime minutes at power-on."""
-
-
-_SEED_ORDER = "bcdwefijLmopstvnXlzV4"
-
-
-def personality(model_text: str = "dv1MW0A000", *, serial: str | None = None) -> Personality:
-    """The personality shipped for a model; unknown models are an InputError naming the known ones."""
-    model = find_model(model_text)
-    if not model.v3_protocol:
-        raise InputError(f"{model.name} ({model.model_number}) does not speak XYZv3; it cannot be simulated here")
-    prefix = model.serial_prefixes[0] if model.serial_prefixes else "3FXXXX"
-    generated = f"{prefix}US5SIM{sum(model.model_number.encode()) % 1000000:06d}"[:18]
-    short = model.name.removeprefix("da Vinci ").strip()
-    number = model.model_number
-    if number == "dv1NX0A000":
-        return Personality(
-            model, serial or "3FNAXPUS5TH7CM0041", ("3.2.0",), "daVinci Nano", "bcdwefijLmopstvnXlz",
-            Nozzle("75", ("GB-0002-0000-TH-7CG-0270-185",)), cartridge="GB9XZTH988P001", zoffset=-469,
-            calibration_tail=("0.0", "0.0", "0.0"),
-            settings=(("fm", 0), ("fd", 1), ("sd", "yes"), ("button", "no"), ("buzzer", "on")),
-            accepts=(FileFormat.V2, FileFormat.V5), fw3=True,
-        )
-    if number in ("dvF1W0A000", "dvF1WSA000", "dv1SW0A000"):
-        return Personality(
-            model, serial or generated, ("1.3.8",), "daVinci Pro. 1w", "bdefijLmoOpstvwnlXzV4",
-            Nozzle("77", ("GB-0002-0000-TH-68T-0250-00001",)), substates=False, target_in_t=False,
-            settings=(("fm", 1), ("fd", 1), ("dr", {"top": "off", "front": "off"}), ("sd", "yes"), ("eh", "0"),
-                      ("of", "1")),
-            wifi_firmware="5.1.5",
-        )
-    if number == "dvF110B000":
-        return Personality(
-            model, serial or "3F11XPGBXTH5320151", ("1.1.0.19", "1.1.7.3", "N/A"), "da Vinci 1.1 Plus",
-            "4befijLnoptvw", Nozzle("1", ()), substates=False, old_states=True, idle_errors=(2,), sensors=False,
-            cartridge_tags=False, packet_c="0", autolevel_in_o=False, network_json=False, lifetime_last=False,
-            status_and_upload_only=True, settings=(), ip="192.168.1.126", lifetime=(69342, 21785),
-        )
-    order = _SEED_ORDER if model.wifi else _SEED_ORDER.replace("V4", "")
-    # XYZprint writes v5 files for the Jr line (a Jr. 1.0w file in the Rojman1984 samples; Jr 1.0 on firmware
-    # 2.4.8 per mwiens' converter), so their firmware takes both.
-    accepts = (FileFormat.V2, FileFormat.V5) if number.startswith(("dv1J", "dv2J")) and model.container == 2 else ()
-    return Personality(model, serial or generated, ("1.2.3",), short[:16], order,
-                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)), accepts=accepts)
 
 
 @dataclass
@@ -550,12 +462,14 @@ class Printer:
 
     def check_file(self, data: bytes) -> FileVerdict:
         """What the firmware decides in state 9520: can this model print these bytes?"""
-        from fabwire.xyz.threew import inspect_3w, is_3w
+        from fabwire.xyz.threew import inspect_3w
 
         if "file-rejected" in self.faults:
             return FileVerdict(False, reason="rejected on demand")
-        if not is_3w(data):
-            return FileVerdict(self.persona.accepts_gcode, reason="not a .3w file")
+        kind = intake.identify(data[:intake.SNIFF], len(data))  # the printer decodes no base64 (XYZware did)
+        if kind is not intake.Kind.THREEW:
+            accepted = kind is intake.Kind.GCODE and self.persona.accepts_gcode
+            return FileVerdict(accepted, reason=f"{kind.value}, not a .3w file")
         try:
             info = inspect_3w(data)
         except InputError as exc:
@@ -563,8 +477,7 @@ class Printer:
         fmt = FileFormat.V2_ZIP if info.zipped else FileFormat.V5 if info.container == 5 else FileFormat.V2
         accepts = self.persona.accepts or (self.persona.model.file_format,)
         machine = (info.machine or "").strip()
-        mine = {self.persona.model.file_id.lower(), self.persona.model.model_number.lower()}
-        if not info.crc_ok or fmt not in accepts or machine.lower() not in mine:
+        if not info.crc_ok or fmt not in accepts or machine.lower() != self.persona.model.file_id.lower():
             return FileVerdict(False, reason=f"{fmt.value} file for {machine or 'unknown machine'}")
         return FileVerdict(True, float(info.print_time_s or 60), float(info.filament_mm or 0.0))
 

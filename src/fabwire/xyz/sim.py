@@ -19,7 +19,8 @@ from pathlib import Path
 from fabwire.errors import InputError, LinkClosed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 from fabwire.xyz import protocol as p
-from fabwire.xyz.printer import FAULTS, FileVerdict, Printer, personality
+from fabwire.xyz.personas import personality
+from fabwire.xyz.printer import FAULTS, FileVerdict, Printer
 from fabwire.xyz.protocol import Block, DeviceDecoder, Garbage, Link, Received, UploadStalled
 
 log = logging.getLogger(__name__)

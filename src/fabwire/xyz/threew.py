@@ -24,7 +24,6 @@ from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
 
 from fabwire.errors import InputError
 from fabwire.xyz import intake
-from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
 from fabwire.xyz.models import PrinterModel, default_model, find_model, model_for_file_id
 
 MAGIC = intake.MAGIC
@@ -39,22 +38,11 @@ ZIP_MEMBER = "sample.gcode"
 GAP = 4684
 """Zero bytes before the tag in miniMover/XYZware files (XYZprint's compact layout uses 8)."""
 HEADER_OFFSET = {2: 68, 5: 80}
-XYZ_VERSION = "18020109"
 CHUNK = 1 << 22
-HEAD_WINDOW = 1 << 18
-TAIL_WINDOW = 1 << 18
 GCODE_SUFFIXES = (".gcode", ".gco", ".g")
 
-Progress = Callable[[int, int], None]
-"""Called with (bytes of input done, input size)."""
+Progress = intake.Progress
 
-_FIRST_CODE_LINE = re.compile(rb"^[ \t]*[^;\s]", re.MULTILINE)
-_XYZ_KEY_LINE = re.compile(
-    rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
-)
-_G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
-_ODD_LINE_START = re.compile(rb"\n(?:[ \tNng]|G[ \t])")
-_G0_AT_LINE_START = re.compile(rb"\nG0(0?)(?![0-9.])")
 _HEADER_FIELD = re.compile(rb"^[ \t]*;[ \t]*([A-Za-z_][A-Za-z0-9_ ]*?)[ \t]*=[ \t]*(.*?)[ \t\r]*$", re.MULTILINE)
 
 
@@ -148,136 +136,6 @@ def _resolve_model(model: PrinterModel | str | None) -> PrinterModel:
 
 
 # --------------------------------------------------------------------------------------------------------------------
-# G-code → processed text
-
-
-@dataclass(frozen=True, slots=True)
-class _Prepared:
-    keys: bytes
-    """The XYZ key lines (XYZprint's order) that open the body."""
-    header: bytes
-    """The .3w header: the keys plus the slicer's leading comments when they fit, else the keys alone."""
-    metadata: GcodeMetadata
-    analysed: bool
-    """The moves were read once already to compute metadata (so progress counts two passes)."""
-
-
-def _size(src: BinaryIO) -> int:
-    here = src.tell()
-    end = src.seek(0, os.SEEK_END)
-    src.seek(here)
-    return end
-
-
-def _first_half(progress: Progress | None) -> Progress | None:
-    return None if progress is None else lambda done, total: progress(done // 2, total)
-
-
-def _second_half(progress: Progress | None) -> Progress | None:
-    return None if progress is None else lambda done, total: progress((total + done) // 2, total)
-
-
-def _head(src: BinaryIO, name: str) -> tuple[bytes, int]:
-    """(the normalised first CHUNK of the G-code, the file size); G-code without commands is refused."""
-    total = _size(src)
-    src.seek(0)
-    raw = src.read(CHUNK)
-    head = intake.normalise(raw[:-1] if raw.endswith(b"\r") else raw, first=True)
-    if not head.strip():
-        raise InputError(f"{name} is empty G-code: nothing to convert")
-    if not intake.has_commands(head[:HEAD_WINDOW]):
-        found = _FIRST_CODE_LINE.search(head)
-        if found is None and len(raw) == total:
-            raise InputError(f"{name} has no commands, only comments")
-        if found is not None and found.start() < HEAD_WINDOW:
-            raise InputError(f"{name} is text, not G-code: no G, M or T command in its first {HEAD_WINDOW} bytes")
-    return head, total
-
-
-def _leading_comments(head: bytes, room: int) -> bytes | None:
-    """The leading comment block without XYZ key lines, if it is within `room` bytes and ends inside `head`."""
-    found = _FIRST_CODE_LINE.search(head, 0, room + 1)
-    if found is None:
-        return None
-    return b"".join(line + b"\n" for line in head[:found.start()].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
-
-
-def _prepare(src: BinaryIO, name: str, file_id: str, filename: str, container: int,
-             progress: Progress | None) -> _Prepared:
-    head, total = _head(src, name)
-    stated, computed = _metadata(src, name, head, total, _first_half(progress))
-    meta = finish(stated, computed)
-    safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
-    keys = (
-        f"; filename = {safe_name}\n"
-        f"; print_time = {meta.print_time_s}\n"
-        f"; machine = {file_id}\n"
-        f"; facets = {meta.facets}\n"
-        f"; total_layers = {meta.layers}\n"
-        f"; version = {XYZ_VERSION}\n"
-        f"; total_filament = {meta.filament_mm:.2f}\n"
-    ).encode()
-    space = BODY_OFFSET - _header_start(container)
-    comments = _leading_comments(head, space)
-    header = keys + comments if comments is not None and len(_pkcs7(keys + comments)) <= space else keys
-    return _Prepared(keys, header, meta, computed is not None)
-
-
-def _metadata(
-    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
-) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
-    tail = b""
-    if total > CHUNK:
-        src.seek(max(CHUNK, total - TAIL_WINDOW))
-        tail = intake.normalise(src.read())
-    stated = header_metadata(head[:HEAD_WINDOW], tail)
-    if stated.complete:
-        return stated, None
-    analyzer = MoveAnalyzer()
-    for chunk in intake.gcode_lines(src, name, progress, total):
-        analyzer.feed_chunk(chunk)
-    return stated, analyzer.result()
-
-
-def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """What a G-code file's comments state, and what its moves say where the comments are silent."""
-    with _open_input(path) as src:
-        head, total = _head(src, str(path))
-        return _metadata(src, str(path), head, total)
-
-
-def _process(chunk: bytes) -> bytes:
-    """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
-    text = b"\n" + chunk
-    if _ODD_LINE_START.search(text):
-        return _G0_WORD.sub(rb"\n\g<1>1", text)[1:]
-    # Every line starts with its command: plain replaces do the common spellings at memory speed.
-    text = text.replace(b"\nG0 ", b"\nG1 ")
-    if b"\nG0" in text:
-        text = _G0_AT_LINE_START.sub(rb"\nG\g<1>1", text)
-    return text[1:]
-
-
-def _processed(src: BinaryIO, name: str, prepared: _Prepared, progress: Progress | None) -> Iterator[bytes]:
-    """The body: the XYZ keys, the slicer's leading comments without XYZ key lines, then the processed code."""
-    yield prepared.keys
-    if prepared.analysed:
-        progress = _second_half(progress)
-    leading = True
-    for chunk in intake.gcode_lines(src, name, progress, _size(src)):
-        if leading:
-            found = _FIRST_CODE_LINE.search(chunk)
-            end = len(chunk) if found is None else found.start()
-            yield b"".join(line + b"\n" for line in chunk[:end].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
-            if found is None:
-                continue
-            leading = False
-            chunk = chunk[end:]
-        yield _process(chunk)
-
-
-# --------------------------------------------------------------------------------------------------------------------
 # Writing
 
 
@@ -362,12 +220,12 @@ def _write(
     zipped = model.zipped if zipped is None else zipped
     if container not in HEADER_OFFSET:
         raise InputError(f"unknown .3w container version {container}; use 2 or 5")
-    prepared = _prepare(src, name, model.file_id, filename, container, progress)
+    prepared = intake.prepare(src, name, model.file_id, filename, BODY_OFFSET - _header_start(container), progress)
     stored = _stored_header(container, prepared.header)
     tag = TAG_ZIP if zipped else TAG_ECB
     _preamble(container, tag, stored, 0)  # fail on an oversized header before writing the body
     out.seek(BODY_OFFSET)
-    body = _processed(src, name, prepared, progress)
+    body = intake.processed_body(src, name, prepared, progress)
     crc, size, plain = (_encrypt_zip if zipped else _encrypt_ecb)(body, out)
     out.seek(0)
     out.write(_preamble(container, tag, stored, crc))
@@ -424,13 +282,6 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
         raise
 
 
-def _open_input(src: Path) -> BinaryIO:
-    try:
-        return Path(src).open("rb")
-    except OSError as exc:
-        raise InputError(f"cannot read {src}: {exc.strerror}") from exc
-
-
 def convert_gcode_file(
     src: Path, dst: Path, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
     zipped: bool | None = None, progress: Progress | None = None,
@@ -440,7 +291,7 @@ def convert_gcode_file(
     kind, head = intake.sniff(src)
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, str(src), head)
-    with _open_input(src) as source, _atomic(dst) as out:
+    with intake.open_input(src) as source, _atomic(dst) as out:
         return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress)
 
 
@@ -605,7 +456,7 @@ def _decrypt_zip(
 
 
 def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: Progress | None) -> ThreeWInfo:
-    total = _size(src)
+    total = intake.stream_size(src)
     src.seek(0)
     pre = src.read(BODY_OFFSET)
     layout = _parse_layout(pre, name)

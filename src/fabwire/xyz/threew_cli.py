@@ -25,7 +25,6 @@ from fabwire.xyz.threew import (
     ThreeWInfo,
     convert_3w_to_gcode,
     convert_gcode_file,
-    gcode_metadata,
     inspect_3w,
 )
 
@@ -205,7 +204,7 @@ def info(ctx: click.Context, file: Path) -> None:
 
 
 def _gcode_info(app: App, plain: Path, file: Path) -> None:
-    stated, computed = gcode_metadata(plain)
+    stated, computed = intake.gcode_metadata(plain)
     final: GcodeMetadata = finish(stated, computed)
 
     def source(value: object) -> str:

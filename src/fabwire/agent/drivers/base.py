@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
 from fabwire.agent.core import DeviceSpec
-from fabwire.errors import InputError
+from fabwire.errors import FabwireError, InputError
 
 Emit = Callable[[dict[str, Any]], None]
 """Forwards a device's own event (an `"event"` payload) to the session."""
@@ -82,6 +82,10 @@ class Action:
                 "job": self.job,
                 "params": [{"name": p.name, "type": p.type, "doc": p.doc, "min": p.low, "max": p.high,
                             "choices": list(p.choices) or None} for p in self.params]}
+
+
+class JobStopped(FabwireError):
+    """A job ended because it was cancelled."""
 
 
 class JobHandle(Protocol):
@@ -164,12 +168,11 @@ class Driver(ABC):
         """Run a checked action (see `checked_params`)."""
 
     async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
-        """Run a stored upload (or a job action with `params`) to its end; returns the closing words.
-        Cancelled by cancelling the task, then `stop_job`."""
+        """Run a stored upload (or a job action with `params`) to its end; returns the closing words."""
         raise InputError(f"a {self.kind} takes no jobs")
 
-    async def stop_job(self) -> None:  # noqa: B027 - kinds without a device-side job have nothing to stop
-        """Tell the machine to stop the job the cancelled task was running (a print keeps going otherwise)."""
+    async def stop_job(self) -> None:  # noqa: B027 - kinds without jobs have nothing to stop
+        """Stop the running job on the machine; `run_job` then ends (raising JobStopped or returning)."""
 
     def action(self, name: str) -> Action:
         for action in self.actions:

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
-from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, Param, summary
+from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_lineus
 from fabwire.errors import InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
@@ -45,6 +45,7 @@ class LineUsDriver(Driver):
         self.drawing: str | None = None
         """Words for the drawing in progress: while it runs, polls read no position (the moves report it)."""
         self._progress: tuple[float, float | None] = (0.0, None)
+        self._stop = False
 
     def _client(self) -> LineUs:
         if self.arm is None:
@@ -71,7 +72,8 @@ class LineUsDriver(Driver):
         if not self.drawing:
             self.position = await self._client().position()
         pos = self.position
-        status = {"x": pos.x, "y": pos.y, "z": pos.z, "pen_down": pos.pen_down} if pos else None
+        # the shape `fabwire lineus position --json` prints
+        status = {"x": pos.x, "y": pos.y, "z": pos.z, "pen": "down" if pos.pen_down else "up"} if pos else None
         return status, self._summary()
 
     async def close(self) -> None:
@@ -124,14 +126,20 @@ class LineUsDriver(Driver):
             handle.stroke(_points(strokes[index]))
             handle.progress(self._progress[0], time_left_s=self._progress[1],
                             message=f"stroke {index + 1} of {len(strokes)}")
+            if self._stop:
+                raise JobStopped(f"stopped after stroke {index + 1} of {len(strokes)}")
 
+        self._stop = False
         try:
             await send_plan(arm, plan, on_stroke=drawn)
             self.position = await arm.home()
+        except JobStopped:
+            self.position = await arm.pen_up()
+            raise
         finally:
             self.drawing = None
         return f"drew {len(strokes)} strokes in {time.monotonic() - began:.0f} s"
 
     async def stop_job(self) -> None:
-        if self.arm is not None:
-            self.position = await self.arm.pen_up()
+        """Stop after the stroke being drawn (a move in flight cannot be called back) and lift the pen."""
+        self._stop = True

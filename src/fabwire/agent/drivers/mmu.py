@@ -106,7 +106,6 @@ class MMUDriver(Driver):
             if self._unsubscribe is not None:
                 self._unsubscribe()
             await mmu.close()
-            await mmu.transport.close()
 
     async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
         mmu = self._client()

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
-from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, Param, summary
+from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_xyz
 from fabwire.errors import InputError, LinkClosed
 from fabwire.xyz.client import XYZPrinter
@@ -137,8 +137,10 @@ class XYZDriver(Driver):
             handle.progress(percent, time_left_s=left, message=status.state_name)
 
         final = await printer.print_file(path, progress=uploaded, on_status=followed)
+        if final.state_code != PRINT_DONE:
+            raise JobStopped(f"the printer became {final.state_name} before the print finished")
         return f"{final.state_name} after {time.monotonic() - began:.0f} s"
 
     async def stop_job(self) -> None:
-        if self.printer is not None:
-            await self.printer.cancel()
+        """Cancel the print on the printer; following it then sees the printer go idle."""
+        await self._client().cancel()

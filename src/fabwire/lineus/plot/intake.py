@@ -143,7 +143,8 @@ def read_drawing(source: str | Path) -> Drawing:
             text = data.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
             raise InputError(f"{name}: not a text G-code file") from exc
-        drawing = Drawing(parse_gcode_text(text, name=name), "gcode", name, digest=digest)
+        notes: list[str] = []
+        drawing = Drawing(parse_gcode_text(text, name=name, notes=notes), "gcode", name, tuple(notes), digest=digest)
     if not drawing.lines:
         why = f" ({'; '.join(drawing.notes)})" if drawing.notes else ""
         raise InputError(f"{name}: the drawing is empty (nothing for the pen to draw){why}")

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from fabwire.errors import InputError
-from fabwire.lineus.kinematics import HOME, UNITS_PER_MM, MotionModel
+from fabwire.lineus.kinematics import HOME, UNITS_PER_MM, MotionModel, body_detour
 from fabwire.lineus.plot.fit import check_placed, fit_into_area, fit_scale, largest_box
 from fabwire.lineus.plot.geometry import (
     FloatArray,
@@ -93,16 +93,24 @@ class Plan:
 
     def moves(self, start: int = 0) -> Iterator[Move]:
         """The move stream from stroke `start` on: travel with the pen up, drop, draw, lift."""
-        for stroke in self.strokes[start:]:
-            yield MoveTo(float(stroke[0, 0]), float(stroke[0, 1]))
-            yield PenDown()
-            for x, y in stroke[1:].tolist():
-                yield MoveTo(x, y)
-            yield PenUp()
+        for index in range(start, len(self.strokes)):
+            yield from self.stroke_moves(index)
 
-    def stroke_moves(self, index: int) -> list[Move]:
-        """The moves of one stroke (travel to it included)."""
-        return list(Plan(self.strokes[index : index + 1]).moves())
+    def stroke_moves(self, index: int, *, from_point: int = 0, here: tuple[float, float] | None = None
+                     ) -> list[Move]:
+        """The moves of one stroke from its vertex `from_point` on, the pen-up travel to it included (from `here`,
+        by default the end of the stroke before). A hop that would cut the body notch goes round its corner:
+        firmware 1.0.1 does not keep the arm out of it."""
+        stroke = self.strokes[index]
+        if here is None:
+            here = self.origin if index == 0 else (float(self.strokes[index - 1][-1, 0]),
+                                                    float(self.strokes[index - 1][-1, 1]))
+        first = (float(stroke[from_point, 0]), float(stroke[from_point, 1]))
+        out: list[Move] = [MoveTo(x, y) for x, y in body_detour(here, first)]
+        out.append(PenDown())
+        out.extend(MoveTo(x, y) for x, y in stroke[from_point + 1 :].tolist())
+        out.append(PenUp())
+        return out
 
     def travel(self) -> list[FloatArray]:
         """The pen-up hops as two-point polylines, from the starting point on."""
@@ -193,6 +201,11 @@ def auto_rotation(polys: Polylines, options: PlanOptions) -> float:
     return 90.0 if turned > upright * 1.001 else 0.0
 
 
+def rotation_of(polys: Polylines, options: PlanOptions) -> float:
+    """The degrees `options` ask for: their own, or 0/90 chosen by `auto_rotation`."""
+    return auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+
+
 def _identity() -> FloatArray:
     return scale_translate(1.0, 0.0, 0.0)
 
@@ -213,7 +226,7 @@ def plan_lines(
     if options.margin_mm < 0:
         raise InputError(f"the margin must not be negative, got {options.margin_mm:g} mm")
     fit = fit_default if options.fit is None else options.fit
-    degrees = auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+    degrees = rotation_of(polys, options)
     matrix = _identity()
     if degrees % 360:
         matrix = _rotation_about_centre(polys, degrees)
@@ -244,7 +257,7 @@ def plan_drawing(drawing: Drawing, options: PlanOptions = PlanOptions()) -> Plan
     if fit and drawing.curved:
         polys = drawing.lines
         if options.rotate_auto or options.rotate_deg % 360:
-            degrees = auto_rotation(polys, options) if options.rotate_auto else options.rotate_deg
+            degrees = rotation_of(polys, options)
             polys = affine(polys, _rotation_about_centre(polys, degrees))
         scale, _ = fit_scale(polys, margin=options.margin_mm * UNITS_PER_MM, full=options.full_area)
         if drawing.tolerance * scale > FLATTEN_TOLERANCE * 1.001:
@@ -271,7 +284,7 @@ def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise InputError(f"the text size must be a positive number of mm, got {size_mm:g}")
     lines = text_lines(text, font=font, cap_height=size_mm * UNITS_PER_MM, notes=notes)
-    degrees = auto_rotation(lines, options) if options.rotate_auto else options.rotate_deg
+    degrees = rotation_of(lines, options)
     if degrees % 360:
         lines = affine(lines, _rotation_about_centre(lines, degrees))
     x0, y0, x1, y1 = bbox(lines)

@@ -210,8 +210,9 @@ class _Reader:
     def children(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
                  out: Polylines, depth: int, uses: tuple[str, ...]) -> None:
         kids: Iterator[ET.Element] = iter(el)
-        if local(el.tag) == "switch":  # the first child that qualifies; fabwire meets no test attributes
-            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE][:1])
+        if local(el.tag) == "switch":  # the first child that qualifies; no extension is supported (SVG 1.1 §5.8.2)
+            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE
+                         and not (k.get("requiredExtensions") or "").strip()][:1])
         for child in kids:
             self.element(child, style, matrix, viewport, out, depth + 1, uses)
 
@@ -225,7 +226,11 @@ class _Reader:
         style = inherit(parent, own)
         if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
             return
-        matrix = then(matrix, transform(el.get("transform")))
+        try:
+            matrix = then(matrix, transform(el.get("transform")))
+        except ValueError:
+            self.unsupported[f"<{tag}> elements with a transform that is not finite are left out"] += 1
+            return
         target: Polylines = []
         if tag in SHAPES:
             self.shape(el, tag, style, matrix, viewport, target)
@@ -336,6 +341,7 @@ class _Reader:
                 continue  # a lone moveto is never stroked
             pts = sub.points
             if not np.isfinite(pts).all():
+                self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
             if bool((pts == pts[0]).all()):
                 if dots:

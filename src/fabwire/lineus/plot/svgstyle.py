@@ -146,12 +146,15 @@ def length(value: str | None, relative_to: float, *, default: float = 0.0) -> fl
 
 
 def transform(value: str | None) -> FloatArray:
-    """The `transform` attribute as a 2x3 matrix (identity when absent or unreadable)."""
+    """The `transform` attribute as a 2x3 matrix (identity when absent); ValueError when it holds numbers that
+    are not finite, which no viewer can place."""
     if not value or not value.strip():
         return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     m = se.Matrix(value)
     out = np.array([[m.a, m.c, m.e], [m.b, m.d, m.f]], dtype=float)
-    return out if np.isfinite(out).all() else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    if not np.isfinite(out).all():
+        raise ValueError(f"transform {value.strip()[:60]!r} is not finite")
+    return out
 
 
 def translate(x: float, y: float) -> FloatArray:

@@ -1,0 +1,87 @@
+"""Firmware personalities of the simulated Line-us: the hello it sends and how each firmware generation behaves.
+
+Firmware 3 (3.2.0, Nov 2019) answers with two-decimal coordinates, buffers a few commands and keeps the pen out of
+the body notch (x >= 700 below y = 0). Firmware 1.0.1 (Feb 2018) answers in integers, must be sent one command at
+a time, and lets the arm go to x >= 500 below y = 0 too, where the pen screw can hit the body (Line-us-Programming
+README, "CAUTION"); the simulator follows it there and records the collision.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from fabwire.lineus import kinematics as kin
+from fabwire.lineus import protocol as p
+
+VERSIONS = {
+    "1": "1.0.1 Feb 11 2018 15:47:35",
+    "3": "3.2.0 Nov 17 2019 17:54:57",
+}
+DEFAULT_NAME = "line-us"
+DEFAULT_SERIAL = "123456"
+
+ReplyPolicy = Literal["complete", "accept"]
+
+
+def resolve_version(text: str) -> str:
+    """`1`, `1.0.1`, `3`, `3.x`, `3.2.0` → a full version string; anything else starting with a digit as given."""
+    short = text.strip()
+    if short in ("1", "1.x", "1.0.1"):
+        return VERSIONS["1"]
+    if short in ("3", "3.x", "3.2.0"):
+        return VERSIONS["3"]
+    if not short[:1].isdigit() or '"' in short or not short.isascii():
+        raise ValueError(f"a firmware version starts with its number (1.0.1, 3.2.0 …), got {text!r}")
+    return short
+
+
+def guards_body(firmware: tuple[int, ...]) -> bool:
+    """False for firmware 1.0.1 and older, which let the pen into the body notch (README "CAUTION")."""
+    return not firmware or firmware > (1, 0, 1)
+
+
+@dataclass
+class SimOptions:
+    version: str = VERSIONS["3"]
+    name: str = DEFAULT_NAME
+    serial: str = DEFAULT_SERIAL
+    speed: float = 1.0
+    """Speed-up factor for motion; inf (or 0) runs moves with no delay."""
+    reply: ReplyPolicy = "complete"
+    step_time: float = 0.010
+    pen_time: float = 0.1
+    lookahead: bool | None = None
+    """Accept the next command while a move runs (firmware 3); None = from the version."""
+    decimals: bool | None = None
+    """Two-decimal coordinates in replies (firmware 3); None = from the version."""
+
+    def __post_init__(self) -> None:
+        if self.speed == 0:
+            self.speed = math.inf
+        if not self.speed > 0:
+            raise ValueError(f"speed factor must be positive (or 0/inf for no delay), got {self.speed}")
+        if self.reply not in ("complete", "accept"):
+            raise ValueError("reply policy is 'complete' or 'accept'")
+        if not p.NAME_RE.fullmatch(self.name):
+            raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {self.name!r}")
+        if not self.serial.isascii() or not self.serial or any(c in self.serial for c in ' "'):
+            raise ValueError(f"bad serial {self.serial!r}")
+
+    @property
+    def firmware(self) -> tuple[int, ...]:
+        return p.Hello(self.version, self.name, self.serial).firmware
+
+    @property
+    def major(self) -> int:
+        return self.firmware[0] if self.firmware else 0
+
+    @property
+    def guards_body(self) -> bool:
+        return guards_body(self.firmware)
+
+    @property
+    def x_min_lower(self) -> float:
+        """Body clearance below y = 0 that this firmware enforces."""
+        return kin.X_MIN_LOWER if self.guards_body else kin.X_MIN_LOWER_FW1

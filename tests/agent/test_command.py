@@ -1,0 +1,74 @@
+"""`fabwire serve` as a command: the demo from one command, clean errors for bad options, a graceful stop."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+from clitools import cli_env, run_cli
+
+from .agenttools import start_agent, wait_for
+
+
+def test_demo_starts_three_simulators_and_stops_them(tmp_path: Path) -> None:
+    agent = start_agent(tmp_path / "state", "--demo", "--speed", "30")
+    try:
+        with agent.client() as client:
+            devices = wait_for(lambda: (d := client.get("/api/v1/devices").json()) and all(
+                x["state"]["online"] for x in d) and d, "the demo's machines online")
+            assert [d["kind"] for d in devices] == ["xyz", "lineus", "mmu"]
+            assert [d["name"] for d in devices] == ["printer", "line-us", "mmu"]
+            page = client.get("/")
+            assert page.status_code == 200
+            assert "<main id=\"devices\"" in page.text
+            assert client.get("/static/app.js").status_code == 200
+            ports = [int(d["address"].rsplit(":", 1)[1]) for d in devices]
+    finally:
+        code, stderr = agent.stop()
+    assert code == 0, stderr
+    assert "Traceback" not in stderr
+    import socket
+
+    for port in ports:  # the simulators went with the agent
+        with socket.socket() as sock:
+            assert sock.connect_ex(("127.0.0.1", port)) != 0
+
+
+def test_bad_options_are_one_line_errors(tmp_path: Path) -> None:
+    env = cli_env(tmp_path)
+    state = ["--state-dir", str(tmp_path / "state")]
+    cases = [
+        (["serve", "--device", "toaster=1.2.3.4", *state], 4, "--device takes KIND=ADDRESS"),
+        (["serve", "--listen", "127.0.0.1:99999", *state], 4, "port must be a number from 0 to 65535"),
+    ]
+    for args, code, words in cases:
+        result = run_cli(*args, env=env, timeout=60)
+        assert result.returncode == code, (args, result.stderr)
+        assert words in result.stderr
+        assert "Traceback" not in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+def test_a_port_in_use_is_said_plainly(tmp_path: Path) -> None:
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = run_cli("serve", "--listen", f"127.0.0.1:{port}", "--state-dir", str(tmp_path), env=cli_env(tmp_path))
+    assert result.returncode == 4
+    assert f"cannot listen on 127.0.0.1:{port}" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_mqtt_option_needs_the_bridge(tmp_path: Path) -> None:
+    if importlib.util.find_spec("fabwire.mqtt") is not None:  # the bridge is installed: it is what --mqtt runs
+        from fabwire.mqtt.bridge import run_bridge
+
+        assert callable(run_bridge)
+        return
+    result = run_cli("serve", "--mqtt", "mqtt://127.0.0.1:1", "--state-dir", str(tmp_path), env=cli_env(tmp_path),
+                     timeout=30)
+    assert result.returncode == 4
+    assert "MQTT support not installed: pip install 'fabwire[mqtt]'" in result.stderr

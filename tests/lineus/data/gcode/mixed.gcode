@@ -1,0 +1,22 @@
+; a converter's header, then a drawing that switches frames
+G54 X800 Y-200 S2
+G01 X100 Y100 Z1000      (drawing units: machine 1000, 0)
+G01 Z0
+G01 X200 Y100
+G40 X1400 Y-300 Z0       ; G40 ignores G54: machine units
+G01 X300 Y0 Z300
+G01 Z1000
+G28
+G01X150Y200Z0
+g1 x250 y200
+G01 Z1500
+G54 X1200 Y0 S-1
+G01 X100 Y100 Z1000
+G01 Z499
+G01 X300 Y100
+G01 Z500
+G00 X-300 Y-500 Z0
+G01 X-300 Y-200 Z0
+M114
+G94 S10
+G01 Z-100
