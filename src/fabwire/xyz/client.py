@@ -26,8 +26,8 @@ from fabwire.devices import XYZ
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
-from fabwire.xyz import intake, userinput
 from fabwire.xyz import protocol as p
+from fabwire.xyz import userinput
 from fabwire.xyz.maintenance import Maintenance
 from fabwire.xyz.maintenance import StatusCallback as StatusCallback  # also the sync client's
 from fabwire.xyz.models import PrinterModel, model_for_file_id
@@ -358,6 +358,7 @@ class XYZPrinter(Maintenance):
     def prepare(self, source: Path | bytes, model: PrinterModel, *, override: bool = False) -> bytes:
         """The bytes to upload: a .3w (binary or base64 text) as is if it suits `model`, G-code converted for
         `model`; any other kind of file is an InputError saying what it is."""
+        from fabwire.xyz import intake  # G-code scanning (numpy): loaded when a file is printed, not for a status
         from fabwire.xyz.threew import inspect_3w, write_3w
 
         data, name = _load_source(source)
@@ -456,6 +457,8 @@ class XYZPrinter(Maintenance):
         `name` is the upload name (default: a safe one derived from the file name). The job counts as started
         only when the printer says so (checking the file, printing, or a file error); a printer that stays idle
         for `start_limit` s is a DeviceError, never success."""
+        from fabwire.xyz import intake
+
         data, shown = _load_source(source)
         head = data[:intake.SNIFF]
         intake.require_printable(intake.identify(head, len(data)), shown, head)  # before disturbing the printer

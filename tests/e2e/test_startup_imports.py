@@ -1,0 +1,37 @@
+"""A status query imports only what it uses: no numpy, no rich with --json, no serial or pty support, no crypto."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from clitools import SimulatorStarter, cli_env
+
+HEAVY = {"numpy", "rich", "serialx", "termios", "cryptography", "svgelements", "PIL", "shapely", "zeroconf"}
+
+
+def imported_by(argv: list[str]) -> tuple[int, list[str]]:
+    code = ("import sys\nfrom fabwire.cli import main\nrc = main(" + repr(argv) + ")\n"
+            f"print(sorted({{m.split('.')[0] for m in sys.modules}} & {HEAVY!r}), file=sys.stderr)\n"
+            "sys.exit(rc)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=cli_env())
+    return result.returncode, json.loads(result.stderr.strip().splitlines()[-1].replace("'", '"'))
+
+
+def test_a_status_query_over_tcp_stays_lean(simulator: SimulatorStarter) -> None:
+    address = simulator("xyz", "--listen", "127.0.0.1:0").url
+    rc, heavy = imported_by(["xyz", "-d", address, "status", "--json"])
+    assert rc == 0
+    assert heavy == []
+    rc, heavy = imported_by(["xyz", "-d", address, "status"])
+    assert rc == 0
+    assert heavy == ["rich"]  # the panel
+
+
+def test_the_version_needs_no_cli() -> None:
+    code = "import sys\nsys.argv = ['fabwire', '--version']\nfrom fabwire.__main__ import run\ntry:\n    run()\n" \
+           "except SystemExit:\n    pass\nprint('click' in sys.modules, file=sys.stderr)\n"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=cli_env())
+    assert result.stdout.startswith("fabwire, version ")
+    assert result.stderr.strip() == "False"
