@@ -39,6 +39,21 @@ def temperature(celsius: float | None) -> str:
     return ABSENT if celsius is None else f"{celsius:g} °C"
 
 
+def heating(celsius: float | None, target: float | None) -> str:
+    """A temperature and the target it heads to, when there is one: `205 °C → 210 °C`."""
+    return temperature(celsius) + ("" if target is None else f" → {temperature(target)}")
+
+
+def minutes(whole_minutes: int | None) -> str:
+    """A time a machine reports in whole minutes, as a duration: `14m 00s`, `1h 05m`; `—` when unknown."""
+    return duration(None if whole_minutes is None else whole_minutes * 60)
+
+
+def known(value: object, unit: str = "") -> str:
+    """Any reported value as text with its unit, `—` when absent."""
+    return ABSENT if value is None else f"{value}{unit}"
+
+
 def zoffset(hundredths: int | None) -> str:
     """The z-offset the firmware reports in 1/100 mm, in mm: `2.45 mm`."""
     return ABSENT if hundredths is None else f"{hundredths / 100:.2f} mm"

@@ -45,9 +45,7 @@ def test_full_demo_writes_valid_files_and_stops_every_simulator(tmp_path: Path) 
     details = {s["step"]: s["detail"] for s in summary["steps"] if s["device"] == "mmu"}
     assert details["tool change T0"] == "finished"
     assert details["tool change T2"] == "finished"
-    recovered = [{"detail": details["tool change T1"]}]
-    assert "FINDA didn't trigger" in recovered[0]["detail"]
-    assert "Retry" in recovered[0]["detail"]
+    assert details["tool change T1"] == "recovered from 04101 FINDA DIDN'T TRIGGER (0x8001) by Retry"
     assert "pressing Retry" in done.stderr
     assert "print finished" in done.stderr
     pids = [s["pid"] for s in summary["simulators"]]
@@ -60,7 +58,8 @@ def test_only_mmu_runs_only_the_mmu_and_prints_a_table(tmp_path: Path) -> None:
     done = run_cli("demo", "--only", "mmu", "--out", str(out), "--speed", SPEED, timeout=90, env=cli_env(tmp_path))
     assert done.returncode == 0, done.stderr
     assert "tool change T2" in done.stderr
-    assert "FINDA didn't trigger" in done.stderr
+    assert ("the MMU stopped: 04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the "
+            "filament path, then Retry") in " ".join(done.stderr.split())
     assert "da Vinci" not in done.stderr
     assert "Line-us" not in done.stderr
     assert done.stdout == ""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 from clitools import cli_env, run_cli
+from fabwire import units
 from fabwire.lineus.client import LineUs
 from fabwire.lineus.draw_cli import send_plan
 from fabwire.lineus.plot import plan_file, plan_text
@@ -103,7 +105,9 @@ def test_dry_run_estimates_without_a_device(tmp_path: Path) -> None:
     assert (tmp_path / "use.png").exists()
     result = run_cli("lineus", "text", "Hi", "--dry-run", env=cli_env(tmp_path))
     assert result.returncode == 0, result.stderr
-    assert "estimated drawing time" in result.stdout
+    seconds = json.loads(run_cli("--json", "lineus", "text", "Hi", "--dry-run", env=cli_env(tmp_path)).stdout)
+    assert f"estimated drawing time {units.duration(seconds['estimated_seconds'])}\n" in result.stdout
+    assert re.search(r"^estimated drawing time (\d+m \d\ds|\d+s)$", result.stdout, re.MULTILINE), result.stdout
 
 
 def recorded_strokes(path: Path) -> list[np.ndarray]:
@@ -137,7 +141,8 @@ def test_draw_over_tcp_then_resume_after_a_dropped_link(tmp_path: Path, simulato
     result = json.loads(second.stdout)
     assert result["resumed_at"] == saved["done"]
     assert result["drawn"] == len(saved["strokes"]) - saved["done"]
-    assert "left" in second.stderr  # the resume says how long the rest takes
+    # the resume says how long the rest takes, in the shared duration style
+    assert re.search(r"; about (\d+m \d\ds|\d+s) left$", second.stderr, re.MULTILINE), second.stderr
     finished = json.loads(state.read_text())
     assert finished["done"] == len(finished["strokes"])
     # Resuming a finished drawing draws nothing and says so.

@@ -65,10 +65,16 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", "finda-didnt-trigger:4")
     code, _, err = mmu(sim.url, "tool-change", "1")
     assert code == 7
-    assert "error: 04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the filament path" in err
+    line = "04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the filament path, then Retry"
+    assert f"error: {line}\n" in err
+    assert err.count(f"{line} (retrying automatically)\n") == 3
     assert err.count("(retrying automatically)") == 3
     code, out, _ = mmu(sim.url, "status", json_mode=True)
     assert json.loads(out)["kind"] == "E"
+    assert json.loads(out)["text"] == "04101 FINDA DIDN'T TRIGGER (0x8001)"
+    code, out, _ = mmu(sim.url, "status")
+    assert "command       T1 04101 FINDA DIDN'T TRIGGER (0x8001)\n" in out
+    assert f"error         {line}\n" in out
     code, _, err = mmu(sim.url, "tool-change", "2")  # the MMU still waits in T1's error
     assert code == 7
     assert "the MMU is still busy with T1" in err

@@ -114,7 +114,7 @@ async def test_stuck_error_ends_in_a_clear_failure_then_manual_retry_works() -> 
     async with asyncio.timeout(LIMIT), over_memory(sim) as transport, MMU(transport, time_scale=SPEED) as mmu:
         with pytest.raises(DeviceError) as caught:
             await mmu.tool_change(1)
-        assert caught.value.code == "8003"
+        assert caught.value.code == "04103 FSENSOR DIDN'T TRIGG. (0x8003)"
         assert "sensor didn't trigger" in str(caught.value)
         assert "then Retry" in str(caught.value)
         assert sim.model.error == 0x8003  # the MMU waits for the user
@@ -148,7 +148,7 @@ async def test_version_mismatch_is_a_device_error() -> None:
         with pytest.raises(DeviceError) as caught:
             async with MMU(transport, time_scale=SPEED, accepted={(3, 0, 4)}):
                 pass
-        assert caught.value.code == "802c"
+        assert caught.value.code == "04504 MMU FW UPDATE NEEDED (0x802C)"
 
 
 async def test_reset_brings_the_link_back() -> None:

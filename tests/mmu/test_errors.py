@@ -69,8 +69,16 @@ def test_captured_words(line: str) -> None:
 def test_one_text_form_printer_code_first() -> None:
     assert format_error(0x8001) == "04101 FINDA DIDN'T TRIGGER (0x8001)"
     error = MMUError(0x8087, command="T1")
-    assert str(error).startswith("04115 SELECTOR CANNOT HOME (0x8087) during T1 — selector cannot home")
+    assert str(error) == ("04115 SELECTOR CANNOT HOME (0x8087) during T1 — selector cannot home; "
+                          "check nothing blocks the selector, then Retry")
+    assert error.code == "04115 SELECTOR CANNOT HOME (0x8087)"
     assert error.exit_code == 7
+    assert str(MMUError(0x802C, detail="MMU firmware 3.0.2")) == (
+        "04504 MMU FW UPDATE NEEDED (0x802C): MMU firmware 3.0.2 — MMU firmware version not supported; "
+        "update the MMU firmware")
+    assert describe_error(0x802E).explained(detail="link failed (no answer)") == (
+        "04401 MMU NOT RESPONDING (0x802E): link failed (no answer) — the MMU does not answer; "
+        "check the cable and the MMU's power, then reset the MMU")
 
 
 def test_combined_driver_words_name_every_flag_and_axis() -> None:

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from fabwire.xyz.cli import ABSENT, job_line, render_status
+from fabwire.units import ABSENT
+from fabwire.xyz.cli import job_line, render_status
 from fabwire.xyz.status import Status
 
 DATA = Path(__file__).parent / "data"
@@ -40,7 +41,7 @@ def test_a_state_without_substate_and_an_absent_extruder() -> None:
     plus = _status("plus_11.txt")
     assert job_line(plus) == f"idle, extruder {ABSENT}"
     assert re.search(f"Extruder +{ABSENT} ", _text(plus))
-    assert job_line(Status.parse(["j:9511,0", "t:1,215,220", "b:60"])) == "idle, extruder 215°C/220°C, bed 60°C"
+    assert job_line(Status.parse(["j:9511,0", "t:1,215,220", "b:60"])) == "idle, extruder 215 °C → 220 °C, bed 60 °C"
 
 
 @pytest.mark.parametrize("capture", CAPTURES)

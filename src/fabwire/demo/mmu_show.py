@@ -7,9 +7,10 @@ from collections.abc import Callable
 
 from fabwire.demo.context import DemoContext
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import DeviceError, LinkTimeout
+from fabwire.errors import LinkTimeout
 from fabwire.mmu.cli import describe, status_line
 from fabwire.mmu.client import MMU
+from fabwire.mmu.errors import MMUError
 from fabwire.mmu.host import ButtonPushed, CommandFinished, ErrorRaised, HostEvent, LinkLost, ProgressChanged
 from fabwire.transport import open_transport
 
@@ -50,8 +51,8 @@ async def _tool_change(ctx: DemoContext, mmu: MMU, slot: int, limit: float) -> N
         try:
             await mmu.tool_change(slot, on_event=_show(ctx), timeout=limit)
             step.detail = "finished"
-        except DeviceError as exc:
-            ctx.say(f"  [yellow]the MMU stopped[/yellow]: {exc.meaning} — {exc.action}")
+        except MMUError as exc:
+            ctx.say(f"  [yellow]the MMU stopped[/yellow]: {exc}")
             ctx.say("  pressing Retry (the MMU's middle button) from the host")
             finished = asyncio.Event()
             show = _show(ctx)
@@ -71,5 +72,5 @@ async def _tool_change(ctx: DemoContext, mmu: MMU, slot: int, limit: float) -> N
                     raise LinkTimeout(f"T{slot} did not finish within {limit:g} s after Retry") from None
             finally:
                 unsubscribe()
-            step.detail = f"recovered from {exc.code} ({exc.meaning.split(' (')[0]}) by Retry"
+            step.detail = f"recovered from {exc.info} by Retry"
         ctx.say(f"T{slot} finished: {status_line(mmu.status)}")

@@ -17,6 +17,7 @@ import click
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from fabwire import units
 from fabwire.cli_support import DeviceContext, pass_device
 from fabwire.errors import InputError, LinkError
 from fabwire.lineus.kinematics import UNITS_PER_MM
@@ -102,11 +103,10 @@ def _options(fit: bool | None, margin: float, rotate: float | None, clip: bool, 
 
 def figures_text(plan: Plan) -> str:
     f = plan.figures()
-    minutes, seconds = divmod(round(f.estimated_seconds), 60)
     lines = [
         f"strokes {f.strokes}, segments {f.segments}, pen lifts {f.pen_lifts}",
         f"pen down {f.pen_down_length / UNITS_PER_MM:.0f} mm, pen-up travel {f.pen_up_travel / UNITS_PER_MM:.0f} mm",
-        f"estimated drawing time {minutes} min {seconds:02d} s",
+        f"estimated drawing time {units.duration(f.estimated_seconds)}",
     ]
     return "\n".join(lines)
 
@@ -275,7 +275,7 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
         left = progress.remaining().figures().estimated_seconds
         where = f" at its vertex {progress.point + 1}" if progress.point else ""
         dctx.output.note(f"resuming {name} at stroke {progress.done + 1} of {len(progress.strokes)}{where}; "
-                         f"about {_duration(left)} left")
+                         f"about {units.duration(left)} left")
     else:
         progress = DrawProgress(path, key, [np.round(s, 3).tolist() for s in plan.strokes])
         plan = _plan_from_state(progress)
@@ -296,13 +296,8 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
     dctx.output.result(
         {"file": name, "strokes": total, "drawn": total - first, "resumed_at": first,
          "elapsed_seconds": round(elapsed, 2), "estimated_seconds": round(figures.estimated_seconds, 2)},
-        f"drew {total - first} of {total} strokes in {elapsed:.1f} s",
+        f"drew {total - first} of {total} strokes in {units.duration(elapsed)}",
     )
-
-
-def _duration(seconds: float) -> str:
-    minutes, rest = divmod(round(seconds), 60)
-    return f"{minutes} min {rest:02d} s" if minutes else f"{rest} s"
 
 
 def _placement_key(options: PlanOptions) -> str:

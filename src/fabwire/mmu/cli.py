@@ -18,7 +18,7 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
-from fabwire.mmu.errors import MMUError, describe_error
+from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error
 from fabwire.mmu.faults import FAULT_NAMES, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
@@ -42,6 +42,12 @@ from fabwire.simserve import serve, server_options
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def _error_fields(info: ErrorInfo) -> dict[str, Any]:
+    """An MMU error for JSON: `error` is its one text form, the rest its parts."""
+    return {"error": str(info), "code": f"{info.code:04x}", "name": info.name, "printer_code": info.printer_code,
+            "title": info.title, "text": info.meaning, "action": info.action}
+
+
 def describe(event: HostEvent) -> tuple[dict[str, Any], str]:
     """An event as a JSON-able dict and as one line of words."""
     if isinstance(event, ProgressChanged):
@@ -50,10 +56,8 @@ def describe(event: HostEvent) -> tuple[dict[str, Any], str]:
     if isinstance(event, ErrorRaised):
         info = event.info
         tail = " (retrying automatically)" if event.auto_retry else ""
-        return ({"event": "error", "command": event.command, "code": f"{event.code:04x}", "name": info.name,
-                 "printer_code": info.printer_code, "title": info.title, "text": info.meaning,
-                 "action": info.action, "auto_retry": event.auto_retry},
-                f"{event.command}: {info} — {info.meaning}; {info.action}{tail}")
+        return ({"event": "error", "command": event.command, **_error_fields(info), "auto_retry": event.auto_retry},
+                info.explained(command=event.command) + tail)
     if isinstance(event, CommandFinished):
         words = "finished" if event.result == 0 else "cancelled"
         return ({"event": "finished", "command": event.command, "result": event.result}, f"{event.command}: {words}")
@@ -65,9 +69,8 @@ def describe(event: HostEvent) -> tuple[dict[str, Any], str]:
         return ({"event": "link-lost", "reason": event.reason, "drop_outs": event.drop_outs},
                 f"link lost ({event.reason}); restarting")
     if isinstance(event, LinkFailed):
-        return ({"event": "link-failed", "code": f"{event.code:04x}", "printer_code": event.info.printer_code,
-                 "text": event.info.meaning, "detail": event.detail},
-                f"link failed: {event.info} — {event.info.meaning}; {event.info.action}")
+        return ({"event": "link-failed", **_error_fields(event.info), "detail": event.detail},
+                event.info.explained(detail=f"link failed ({event.detail})"))
     if isinstance(event, ButtonPushed):
         name = codes.BUTTON_WORDS.get(event.button, str(event.button))
         return ({"event": "button", "command": event.command, "button": event.button},
@@ -328,8 +331,7 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
             ("pulley", f"{st.pulley} mm"),
         ]
         if st.kind == "E":
-            info = describe_error(st.value)
-            rows.append(("error", f"{info} — {info.meaning}; {info.action}"))
+            rows.append(("error", describe_error(st.value).explained(command=st.command)))
         for key, value in rows:
             out.print(f"{key:<13} {value}")
 

@@ -18,7 +18,7 @@ from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.mmu import codes
-from fabwire.mmu.errors import MMUError, describe_error, format_error
+from fabwire.mmu.errors import MMUError, describe_error
 from fabwire.mmu.host import (
     INIT_REGISTERS,
     SUPPORTED,
@@ -181,9 +181,8 @@ class MMU:
         elif isinstance(event, LinkFailed) and event.code == 0x802C:
             self._fail(MMUError(0x802C, detail=event.detail))
         elif isinstance(event, LinkFailed) and not self._ready.is_set():
-            self._fail(LinkTimeout(f"{format_error(event.code)}: {event.info.meaning} on "
-                                   f"{self.transport.peer or self.transport.url} ({event.detail}) — "
-                                   f"{event.info.action}"))
+            where = self.transport.peer or self.transport.url
+            self._fail(LinkTimeout(event.info.explained(detail=f"no link to {where} ({event.detail})")))
 
     def _fail(self, exc: BaseException) -> None:
         if self._failure is None:
@@ -329,8 +328,7 @@ class MMU:
                 raise RemoteProtocolError(f"{event.command} was interrupted: the MMU reported {event.reported} "
                                           "(it probably rebooted)")
             if isinstance(event, LinkFailed):
-                raise LinkTimeout(f"{format_error(event.code)}: MMU link failed: {event.info.meaning} "
-                                  f"({event.detail})")
+                raise LinkTimeout(event.info.explained(detail=f"link failed ({event.detail})"))
             return None
 
         return outcome

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from fabwire import units
 from fabwire.errors import DeviceError
 
 RUNNING = 0x0000
@@ -190,7 +191,18 @@ class ErrorInfo:
         return None
 
     def __str__(self) -> str:
-        return f"{self.printer_code} {self.title} (0x{self.code:04X})"
+        return units.mmu_error(self.printer_code, self.title, self.code)
+
+    def explained(self, *, command: str = "", detail: str = "") -> str:
+        """The one line that tells a person about it, printer code first:
+        `04101 FINDA DIDN'T TRIGGER (0x8001) during T1: <detail> — FINDA didn't trigger; check the filament path,
+        then Retry`."""
+        text = str(self)
+        if command:
+            text += f" during {command}"
+        if detail:
+            text += f": {detail}"
+        return f"{text} — {self.meaning}; {self.action}"
 
 
 def _tmc_words(word: int) -> tuple[str, str]:
@@ -237,15 +249,10 @@ class MMUError(DeviceError):
 
     def __init__(self, word: int, *, command: str = "", detail: str = "") -> None:
         info = describe_error(word)
-        super().__init__(f"{word:04x}", info.meaning, action=info.action)
+        super().__init__(str(info), info.meaning, action=info.action)
         self.info = info
         self.command = command
-        text = str(info)
-        if command:
-            text += f" during {command}"
-        if detail:
-            text += f": {detail}"
-        self.args = (f"{text} — {info.meaning}; {info.action}",)
+        self.args = (info.explained(command=command, detail=detail),)
 
     def __str__(self) -> str:
         return str(self.args[0])

@@ -9,7 +9,7 @@ import enum
 from dataclasses import dataclass
 
 from fabwire.mmu import codes
-from fabwire.mmu.errors import ErrorInfo, describe_error
+from fabwire.mmu.errors import ErrorInfo, format_error
 
 
 class Link(enum.Enum):
@@ -38,7 +38,7 @@ class Status:
         if self.kind == "P":
             return codes.progress_words(self.value)
         if self.kind == "E":
-            return describe_error(self.value).meaning
+            return format_error(self.value)
         if self.kind == "F":
             return "finished" if self.value == 0 else "cancelled"
         if self.kind == "B":

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from fabwire.errors import InputError
-from fabwire.mmu.errors import TMC_FLAGS, TMC_WORDS, tmc_error
+from fabwire.mmu.errors import TMC_FLAGS, TMC_WORDS, format_error, tmc_error
 
 Recovery = Literal["retry", "reset"]
 AXES = ("pulley", "selector", "idler")
@@ -64,7 +64,7 @@ def _catalogue() -> dict[str, FaultKind]:
 
 
 FAULTS = _catalogue()
-FAULT_NAMES = {name: f"{kind.where} (E{kind.word:04x})" for name, kind in FAULTS.items()}
+FAULT_NAMES = {name: f"{kind.where}: {format_error(kind.word)}" for name, kind in FAULTS.items()}
 TMC_KINDS = sorted({name.split("-", 1)[1].rsplit("-", 1)[0] for name in FAULTS if name.startswith("tmc-")})
 
 

@@ -17,6 +17,7 @@ from typing import Any, TypeVar
 import click
 import vpype_cli
 
+from fabwire import units
 from fabwire.cli_support import App, DeviceContext
 from fabwire.devices import LINEUS
 from fabwire.errors import FabwireError, InputError
@@ -118,10 +119,9 @@ def _print_figures(plans: list[PassPlan], as_json: bool) -> None:
         click.echo("  " + figures_text(one.plan).replace("\n", "\n  "))
     if len(plans) > 1:
         f = total_figures(plans)
-        minutes, seconds = divmod(round(f.estimated_seconds), 60)
         click.echo(f"all {len(plans)} layers: pen down {f.pen_down_length / UNITS_PER_MM:.0f} mm, pen-up travel "
                    f"{f.pen_up_travel / UNITS_PER_MM:.0f} mm, {f.pen_lifts} pen lifts, {len(plans) - 1} pen "
-                   f"change(s), estimated {minutes} min {seconds:02d} s")
+                   f"change(s), estimated {units.duration(f.estimated_seconds)}")
 
 
 @processor("lineus-fit")
@@ -210,15 +210,14 @@ def lineus_draw(document: Any, device: str | None, timeout: float, clip: bool, n
         app.output.note(figures_text_all(plans))
         result = draw_passes(dctx, plans, key, state=state, resume=resume, pen_z=pen_z,
                              pen_change=None if no_pause else ask_on_stdin)
-        app.output.note(f"drew {result.drawn} of {result.strokes} strokes in {result.elapsed_seconds:.1f} s")
+        app.output.note(f"drew {result.drawn} of {result.strokes} strokes in {units.duration(result.elapsed_seconds)}")
     return document
 
 
 def figures_text_all(plans: list[PassPlan]) -> str:
     f = total_figures(plans)
-    minutes, seconds = divmod(round(f.estimated_seconds), 60)
     return (f"{len(plans)} layer(s), {f.strokes} strokes, pen down {f.pen_down_length / UNITS_PER_MM:.0f} mm, "
-            f"pen-up travel {f.pen_up_travel / UNITS_PER_MM:.0f} mm, estimated {minutes} min {seconds:02d} s")
+            f"pen-up travel {f.pen_up_travel / UNITS_PER_MM:.0f} mm, estimated {units.duration(f.estimated_seconds)}")
 
 
 @processor("lineus-gcode")

@@ -16,9 +16,10 @@ from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass
 from fabwire.devices import XYZ
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
 from fabwire.simserve import server_options
+from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
-from fabwire.xyz.live import ABSENT, JobView, known, now_iso
+from fabwire.xyz.live import JobView, now_iso
 from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
@@ -86,21 +87,21 @@ def render_status(status: Status) -> Panel:
     for word in status.error_words:
         table.add_row("Error", str(word))
     target = status.extruder_target
-    table.add_row("Extruder", known(status.extruder, " °C") + (f" → {target} °C" if target else ""))
+    table.add_row("Extruder", units.heating(status.extruder, target or None))
     if status.bed is not None:
-        table.add_row("Bed", f"{status.bed} °C")
+        table.add_row("Bed", units.temperature(status.bed))
     if status.progress and (status.progress.percent or status.progress.elapsed_min):
         left = status.progress.remaining_min
-        table.add_row("Job", f"{status.progress.percent} %, {status.progress.elapsed_min} min elapsed, "
-                      + ("time left unknown" if left is None else f"{left} min left"))
+        table.add_row("Job", f"{status.progress.percent} %, {units.minutes(status.progress.elapsed_min)} elapsed, "
+                      + ("time left unknown" if left is None else f"{units.minutes(left)} left"))
     cart = status.cartridge
     if cart is not None:
         fil = status.filament_mm
         text = "none" if not cart.present else f"{cart.fields[0]} {cart.colour or ''}".strip()
-        table.add_row("Filament", text + (f", {fil / 1000:.1f} m left" if fil is not None else ""))
+        table.add_row("Filament", text + (f", {units.filament(fil)} left" if fil is not None else ""))
     if status.nozzle:
         table.add_row("Nozzle", f"{known(status.nozzle.diameter_mm, ' mm')} (type {status.nozzle.kind})")
-    table.add_row("Z offset", f"{status.zoffset / 100:.2f} mm" if status.zoffset is not None else ABSENT)
+    table.add_row("Z offset", units.zoffset(status.zoffset))
     table.add_row("Auto-level", _bool(status.autolevel))
     table.add_row("Buzzer", _bool(status.buzzer))
     if status.network is not None:

@@ -7,6 +7,7 @@ import datetime
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
+from fabwire import units
 from fabwire.console import Output
 from fabwire.xyz.status import PAUSED, PRINTING, Status
 
@@ -15,35 +16,20 @@ if TYPE_CHECKING:  # rich is imported when a view is drawn, not when the CLI sta
     from rich.live import Live
     from rich.panel import Panel
 
-ABSENT = "—"
-"""What a value the printer did not report shows as."""
-
 
 def now_iso() -> str:
     """The current UTC time as ISO-8601 with milliseconds, e.g. 2026-01-02T03:04:05.678+00:00."""
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="milliseconds")
 
 
-def known(value: object, unit: str = "") -> str:
-    return ABSENT if value is None else f"{value}{unit}"
-
-
-def _minutes(value: int | None) -> str:
-    if value is None:
-        return ABSENT
-    hours, minutes = divmod(value, 60)
-    return f"{hours} h {minutes:02d} min" if hours else f"{minutes} min"
-
-
 def job_line(status: Status) -> str:
     """One line for a log: state in words, temperatures, progress while a job runs."""
     target = status.extruder_target
-    parts = [status.state_name, f"extruder {known(status.extruder, '°C')}" + (f"/{target}°C" if target else "")]
+    parts = [status.state_name, f"extruder {units.heating(status.extruder, target or None)}"]
     if status.bed is not None:
-        parts.append(f"bed {status.bed}°C")
+        parts.append(f"bed {units.temperature(status.bed)}")
     if status.progress and status.state_code in (PRINTING, PAUSED):
-        left = status.progress.remaining_min
-        parts.append(f"{status.progress.percent}% ({ABSENT if left is None else left} min left)")
+        parts.append(f"{status.progress.percent}% ({units.minutes(status.progress.remaining_min)} left)")
     return ", ".join(parts)
 
 
@@ -66,16 +52,16 @@ def job_panel(status: Status, title: str, upload: tuple[int, int] | None = None)
         done, total = upload
         table.add_row("Upload", Group(ProgressBar(total=max(total, 1), completed=done, width=40),
                                       f"{done} of {total} bytes"))
-    table.add_row("State", status.state_name if status.state is not None else ABSENT)
+    table.add_row("State", status.state_name if status.state is not None else units.ABSENT)
     progress = status.progress
     percent = progress.percent if progress else None
     if percent is not None:
         table.add_row("Progress", Group(ProgressBar(total=100, completed=percent, width=40), f"{percent} %"))
-    table.add_row("Extruder", known(status.extruder, " °C") + f" → {known(status.extruder_target, ' °C')}")
+    table.add_row("Extruder", units.heating(status.extruder, status.extruder_target))
     if status.bed is not None or _bed_target(status) is not None:
-        table.add_row("Bed", known(status.bed, " °C") + f" → {known(_bed_target(status), ' °C')}")
-    table.add_row("Elapsed", _minutes(progress.elapsed_min if progress else None))
-    table.add_row("Time left", _minutes(progress.remaining_min if progress else None))
+        table.add_row("Bed", units.heating(status.bed, _bed_target(status)))
+    table.add_row("Elapsed", units.minutes(progress.elapsed_min if progress else None))
+    table.add_row("Time left", units.minutes(progress.remaining_min if progress else None))
     for word in status.error_words:
         table.add_row("Error", str(word))
     return Panel(table, title=title, expand=False)

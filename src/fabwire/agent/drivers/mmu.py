@@ -68,7 +68,7 @@ class MMUDriver(Driver):
         if isinstance(event, StatusUpdated):
             return  # polled into the state each second
         if isinstance(event, LinkFailed):
-            self._failure = f"{event.info.meaning} ({event.detail})"
+            self._failure = event.info.explained(detail=event.detail)
         if isinstance(event, CommandFinished) and event.result == 0:
             code, value = event.command[:1], event.command[1:]
             if code in "TL" and value.isdigit():
@@ -86,7 +86,7 @@ class MMUDriver(Driver):
         busy = mmu.logic.busy
         error = describe_error(status.value) if status.kind == "E" else None
         if error is not None:
-            state, text = "error", f"{status.command}: {error.meaning} — {error.action}"
+            state, text = "error", error.explained(command=status.command)
             actions = ["retry" if error.retryable else "continue", "stop"]
         elif busy:
             state, text, actions = "busy", f"{status.command}: {status.words}", []
@@ -95,8 +95,8 @@ class MMUDriver(Driver):
                 list(IDLE_ACTIONS)
         active = self.active_slot if status.finda else None
         return status_dict(status), summary(
-            state=state, state_text=text, busy=busy, error=error.meaning if error else None,
-            error_code=f"{status.value:04x}" if error else None, active_slot=active,
+            state=state, state_text=text, busy=busy, error=str(error) if error else None,
+            error_code=f"0x{status.value:04X}" if error else None, active_slot=active,
             filament_position=_position_words(status.selector, status.finda), selector_slot=status.selector,
             idler_slot=status.idler, finda=status.finda, actions=actions)
 
