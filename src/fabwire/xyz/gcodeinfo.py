@@ -156,7 +156,8 @@ _PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
 _CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
 _AXIS_INDEX = np.full(256, -1, dtype=np.intp)
 _AXIS_INDEX[list(b"XYZEF")] = np.arange(5)
-_IS_AXIS = _AXIS_INDEX >= 0
+_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
+"""bytes.translate table: 1 for an axis letter, 0 for anything else (faster than a numpy lookup)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
 _NUMBER_CHARS = np.zeros(256, dtype=bool)
@@ -189,8 +190,8 @@ def _parse_numbers(text: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -
     first = data[at]
     signed = (first == 45) | (first == 43)
     mantissa = np.zeros(count, np.int64)
-    fraction = np.zeros(count, np.intp)
-    digits = np.zeros(count, np.intp)
+    fraction = np.zeros(count, np.int8)  # small counters: adding booleans to them costs less
+    digits = np.zeros(count, np.int8)
     dotted = np.zeros(count, bool)
     active = np.ones(count, bool)
     for column in range(_VALUE_WIDTH):
@@ -376,8 +377,8 @@ class MoveAnalyzer:
             if (odd < code_end[odd_line]).any():  # a comment in parentheses or a checksum
                 return False
         values = np.full((5, len(row_lines)), np.nan)
-        where = np.flatnonzero(_IS_AXIS[data[: len(text)]])
-        line = np.searchsorted(starts, where, side="right") - 1
+        where = np.flatnonzero(np.frombuffer(text.translate(_AXIS_FLAGS), dtype=np.bool_))
+        line = np.cumsum(data[: len(text)] == 10, dtype=np.int32)[where].astype(np.intp) - 1
         keep = (line >= 0) & is_row[np.maximum(line, 0)]
         where, line = where[keep], line[keep]
         keep = where < code_end[line]
@@ -436,7 +437,9 @@ class MoveAnalyzer:
         self.filament += float(np.sum(de))
         printing = (de > 0) & ((dx != 0) | (dy != 0)) & np.isfinite(z)
         if printing.any():
-            self.layer_heights.update(map(round, np.unique(z[printing] * 1000).tolist()))
+            heights = z[printing] * 1000
+            changes = np.flatnonzero(heights[1:] != heights[:-1]) + 1  # layers are runs: only run starts differ
+            self.layer_heights.update(map(round, heights[np.append(0, changes)].tolist()))
         self.pos = [float(x[-1]), float(y[-1]), float(z[-1])]
         self.e = float(e[-1])
         self.feed = float(feed[-1])
