@@ -228,3 +228,10 @@ def test_layers_are_the_distinct_printing_heights(heights: list[float]) -> None:
     """Heights revisited later (z hops back down, sequential printing) count once."""
     text = b"".join(b"G1 Z%r\nG1 X%d E%d\n" % (z, i % 2 + 1, i + 1) for i, z in enumerate(heights))
     assert analyse(text).layer_heights == {round(z * 1000) for z in heights}
+
+
+def test_a_chunk_without_its_last_newline_ends_its_last_line() -> None:
+    text = b"G1 X1 Y2 E1 F600\nG1 X5 Y2 E2\nG1 X5 Y9 E3"
+    cut, whole = analyse(text), analyse(text + b"\n")
+    assert (cut.pos, cut.e, cut.seconds, cut.layer_heights) == (whole.pos, whole.e, whole.seconds, {0})
+    assert (cut.pos, cut.e) == ([5.0, 9.0, 0.0], 3.0)

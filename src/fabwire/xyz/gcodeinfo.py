@@ -168,7 +168,8 @@ _MOVE_DIGIT = np.zeros(256, dtype=bool)
 _MOVE_DIGIT[list(b"0123")] = True
 _VALUE_WIDTH = 24
 _POWERS = 10.0 ** np.arange(_VALUE_WIDTH + 1)
-_PIECE = 1 << 20
+_PIECE = 1 << 18
+"""Bytes analysed at once: the per-word arrays of a piece this size stay in the CPU's cache."""
 
 
 def _ffill(values: NDArray[np.float64], start: float) -> NDArray[np.float64]:
@@ -250,11 +251,13 @@ class MoveAnalyzer:
         """Heights (in µm) at which extruding moves happened."""
 
     def feed_chunk(self, chunk: bytes) -> None:
-        """Analyse whole lines; `chunk` must start at a line start and end with a newline."""
+        """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
         start = 0
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             piece = chunk[start:end]
+            if not piece.endswith(b"\n"):  # the last line of a chunk without its newline
+                piece += b"\n"
             text = b"\n" + piece.upper()
             if not self._feed_arrays(text):
                 self.feed_lines(piece)
@@ -394,9 +397,9 @@ class MoveAnalyzer:
             known = ~np.isnan(numbers)
             if not known.all():  # bare letters are not words
                 axis, row, numbers = axis[known], row[known], numbers[known]
-            if len(row) and np.bincount(row * 5 + axis).max() > 1:
-                return False  # a letter repeats within a line
             values[axis, row] = numbers
+            if np.count_nonzero(values == values) < len(numbers):  # fewer cells than words (NaN != NaN)
+                return False  # a letter repeats within a line
         sets = is_set[row_lines]
         bounds = [0]
         bounds.extend(int(np.searchsorted(row_lines, control[0])) for control in controls)
