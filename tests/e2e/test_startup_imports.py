@@ -1,4 +1,5 @@
-"""A status query imports only what it uses: no numpy, no rich with --json, no serial or pty support, no crypto."""
+"""A status query imports only what it uses: no numpy, no rich with --json, no serial or pty support, no crypto,
+and none of the printer side (its command parser, the simulator) or the print-file tools."""
 
 from __future__ import annotations
 
@@ -9,11 +10,14 @@ import sys
 from clitools import SimulatorStarter, cli_env
 
 HEAVY = {"numpy", "rich", "serialx", "termios", "cryptography", "svgelements", "PIL", "shapely", "zeroconf"}
+PRINTER_SIDE = {"fabwire.xyz.device", "fabwire.xyz.printer", "fabwire.xyz.sim", "fabwire.xyz.threew",
+                "fabwire.xyz.gcodeinfo", "fabwire.xyz.intake"}
 
 
 def imported_by(argv: list[str]) -> tuple[int, list[str]]:
     code = ("import sys\nfrom fabwire.cli import main\nrc = main(" + repr(argv) + ")\n"
-            f"print(sorted({{m.split('.')[0] for m in sys.modules}} & {HEAVY!r}), file=sys.stderr)\n"
+            f"heavy = {{m.split('.')[0] for m in sys.modules}} & {HEAVY!r}\n"
+            f"print(sorted(heavy | (set(sys.modules) & {PRINTER_SIDE!r})), file=sys.stderr)\n"
             "sys.exit(rc)\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=cli_env())
     return result.returncode, json.loads(result.stderr.strip().splitlines()[-1].replace("'", '"'))

@@ -210,3 +210,28 @@ def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int],
     assert fast.filament == pytest.approx(slow.filament, rel=1e-9, abs=1e-9)
     assert fast.pos == pytest.approx(slow.pos, rel=1e-12, abs=1e-9)
     assert fast.e == pytest.approx(slow.e, rel=1e-12, abs=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.from_regex(r"\A[-+]?(?:[0-9]{1,20}\.?[0-9]{0,20}|\.[0-9]{1,20})\Z", fullmatch=True),
+                min_size=1, max_size=30))
+def test_array_numbers_equal_the_float_parser(numbers: list[str]) -> None:
+    text = "".join(f"G1 X{n} Y{n[::-1].strip('+-.') or '0'}\n" for n in numbers).encode()
+    analyzer = analyse(text)
+    last = numbers[-1]
+    assert analyzer.pos[:2] == [float(last), float(last[::-1].strip("+-.") or "0")]
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.sampled_from([0.2, 0.4, 0.6, 10.0, 0.2000001]), min_size=1, max_size=40))
+def test_layers_are_the_distinct_printing_heights(heights: list[float]) -> None:
+    """Heights revisited later (z hops back down, sequential printing) count once."""
+    text = b"".join(b"G1 Z%r\nG1 X%d E%d\n" % (z, i % 2 + 1, i + 1) for i, z in enumerate(heights))
+    assert analyse(text).layer_heights == {round(z * 1000) for z in heights}
+
+
+def test_a_chunk_without_its_last_newline_ends_its_last_line() -> None:
+    text = b"G1 X1 Y2 E1 F600\nG1 X5 Y2 E2\nG1 X5 Y9 E3"
+    cut, whole = analyse(text), analyse(text + b"\n")
+    assert (cut.pos, cut.e, cut.seconds, cut.layer_heights) == (whole.pos, whole.e, whole.seconds, {0})
+    assert (cut.pos, cut.e) == ([5.0, 9.0, 0.0], 3.0)

@@ -156,7 +156,8 @@ _PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
 _CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
 _AXIS_INDEX = np.full(256, -1, dtype=np.intp)
 _AXIS_INDEX[list(b"XYZEF")] = np.arange(5)
-_IS_AXIS = _AXIS_INDEX >= 0
+_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
+"""bytes.translate table: 1 for an axis letter, 0 for anything else (faster than a numpy lookup)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
 _NUMBER_CHARS = np.zeros(256, dtype=bool)
@@ -167,7 +168,8 @@ _MOVE_DIGIT = np.zeros(256, dtype=bool)
 _MOVE_DIGIT[list(b"0123")] = True
 _VALUE_WIDTH = 24
 _POWERS = 10.0 ** np.arange(_VALUE_WIDTH + 1)
-_PIECE = 1 << 20
+_PIECE = 1 << 18
+"""Bytes analysed at once: the per-word arrays of a piece this size stay in the CPU's cache."""
 
 
 def _ffill(values: NDArray[np.float64], start: float) -> NDArray[np.float64]:
@@ -189,8 +191,8 @@ def _parse_numbers(text: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -
     first = data[at]
     signed = (first == 45) | (first == 43)
     mantissa = np.zeros(count, np.int64)
-    fraction = np.zeros(count, np.intp)
-    digits = np.zeros(count, np.intp)
+    fraction = np.zeros(count, np.int8)  # small counters: adding booleans to them costs less
+    digits = np.zeros(count, np.int8)
     dotted = np.zeros(count, bool)
     active = np.ones(count, bool)
     for column in range(_VALUE_WIDTH):
@@ -249,11 +251,13 @@ class MoveAnalyzer:
         """Heights (in µm) at which extruding moves happened."""
 
     def feed_chunk(self, chunk: bytes) -> None:
-        """Analyse whole lines; `chunk` must start at a line start and end with a newline."""
+        """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
         start = 0
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             piece = chunk[start:end]
+            if not piece.endswith(b"\n"):  # the last line of a chunk without its newline
+                piece += b"\n"
             text = b"\n" + piece.upper()
             if not self._feed_arrays(text):
                 self.feed_lines(piece)
@@ -376,8 +380,8 @@ class MoveAnalyzer:
             if (odd < code_end[odd_line]).any():  # a comment in parentheses or a checksum
                 return False
         values = np.full((5, len(row_lines)), np.nan)
-        where = np.flatnonzero(_IS_AXIS[data[: len(text)]])
-        line = np.searchsorted(starts, where, side="right") - 1
+        where = np.flatnonzero(np.frombuffer(text.translate(_AXIS_FLAGS), dtype=np.bool_))
+        line = np.cumsum(data[: len(text)] == 10, dtype=np.int32)[where].astype(np.intp) - 1
         keep = (line >= 0) & is_row[np.maximum(line, 0)]
         where, line = where[keep], line[keep]
         keep = where < code_end[line]
@@ -393,9 +397,9 @@ class MoveAnalyzer:
             known = ~np.isnan(numbers)
             if not known.all():  # bare letters are not words
                 axis, row, numbers = axis[known], row[known], numbers[known]
-            if len(row) and np.bincount(row * 5 + axis).max() > 1:
-                return False  # a letter repeats within a line
             values[axis, row] = numbers
+            if np.count_nonzero(values == values) < len(numbers):  # fewer cells than words (NaN != NaN)
+                return False  # a letter repeats within a line
         sets = is_set[row_lines]
         bounds = [0]
         bounds.extend(int(np.searchsorted(row_lines, control[0])) for control in controls)
@@ -436,7 +440,9 @@ class MoveAnalyzer:
         self.filament += float(np.sum(de))
         printing = (de > 0) & ((dx != 0) | (dy != 0)) & np.isfinite(z)
         if printing.any():
-            self.layer_heights.update(map(round, np.unique(z[printing] * 1000).tolist()))
+            heights = z[printing] * 1000
+            changes = np.flatnonzero(heights[1:] != heights[:-1]) + 1  # layers are runs: only run starts differ
+            self.layer_heights.update(map(round, heights[np.append(0, changes)].tolist()))
         self.pos = [float(x[-1]), float(y[-1]), float(z[-1])]
         self.e = float(e[-1])
         self.feed = float(feed[-1])

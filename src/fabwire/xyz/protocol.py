@@ -4,6 +4,9 @@ and splitter). Time is always an argument; nothing here sleeps or reads a clock.
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from fabwire.xyz.commands import (
     CONTROL_VERB,
     DEFAULT_BLOCK_SIZE,
@@ -55,18 +58,6 @@ from fabwire.xyz.commands import (
     raw_reply_value,
     terminator,
 )
-from fabwire.xyz.device import (
-    Block,
-    DeviceDecoder,
-    DeviceEvent,
-    Garbage,
-    Received,
-    UploadStalled,
-    error_line,
-    parse_command,
-    reply_lines,
-    stat_line,
-)
 from fabwire.xyz.framing import (
     block_count,
     block_size_from_packet,
@@ -83,6 +74,20 @@ from fabwire.xyz.replies import (
     ReplyReader,
     parse_stat_line,
 )
+
+if TYPE_CHECKING:
+    from fabwire.xyz.device import (
+        Block,
+        DeviceDecoder,
+        DeviceEvent,
+        Garbage,
+        Received,
+        UploadStalled,
+        error_line,
+        parse_command,
+        reply_lines,
+        stat_line,
+    )
 
 __all__ = [
     "CONTROL_VERB",
@@ -157,3 +162,13 @@ __all__ = [
     "stat_line",
     "terminator",
 ]
+
+# The printer-side parser is for simulators only: a host client (`fabwire xyz status`) never builds it.
+_DEVICE_SIDE = frozenset({"Block", "DeviceDecoder", "DeviceEvent", "Garbage", "Received", "UploadStalled",
+                          "error_line", "parse_command", "reply_lines", "stat_line"})
+
+
+def __getattr__(name: str) -> Any:
+    if name in _DEVICE_SIDE:
+        return getattr(importlib.import_module("fabwire.xyz.device"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
