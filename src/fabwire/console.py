@@ -25,7 +25,9 @@ def _default(value: object) -> object:
 def _console(stderr: bool) -> Console:
     from rich.console import Console
 
-    return Console(stderr=True, highlight=False) if stderr else Console(highlight=False, soft_wrap=True)
+    # Markup and emoji codes off: device names, SSIDs and file names are printed as they are, never read as rich markup.
+    return Console(stderr=True, highlight=False, markup=False, emoji=False) if stderr else \
+        Console(highlight=False, soft_wrap=True, markup=False, emoji=False)
 
 
 class Output:

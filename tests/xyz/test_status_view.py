@@ -67,3 +67,14 @@ def test_json_values_and_units() -> None:
     assert data["block_size_bytes"] == 8192
     assert data["raw"]["z"] == "-12"
     assert data["model"] is None
+
+
+@pytest.mark.parametrize("hostile", ["[/]", "[bold]x[/bold]", ":smile:", "[link=file:///etc]n[/link]"])
+def test_what_the_printer_reports_is_printed_as_it_is_never_as_markup(hostile: str,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from fabwire.console import Output
+
+    status = Status.parse(["j:9511,0", f"n:{hostile}", f"i:{hostile}"])
+    Output().out.print(render_status(status))
+    printed = capsys.readouterr().out
+    assert printed.count(hostile) == 2, printed

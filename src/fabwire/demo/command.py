@@ -136,7 +136,7 @@ def _keep_running(ctx: DemoContext, sims: dict[str, SimulatorProcess], speed: fl
         session = ctx.out_dir / "lineus-session.png"
         sims["lineus"] = start_simulators([("lineus", _sim_args("lineus", speed, ctx.out_dir, session))])[0]
         ctx.say(f"(a fresh Line-us simulator records your session to {session} when it stops)")
-    ctx.say("\n[bold]The simulators are still running.[/bold] Try, in another terminal:")
+    ctx.say("\n[bold]The simulators are still running.[/bold] Try, in another terminal:", markup=True)
     for device in DEVICES:
         if device in sims:
             ctx.say("  " + EXAMPLES[device].format(url=sims[device].url, speed=speed))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from rich.console import Console
 from rich.rule import Rule
+from rich.text import Text
 
 from fabwire.demo.summary import Summary
 
@@ -22,7 +23,8 @@ class DemoContext:
     """Hide live progress bars (JSON mode keeps stderr to plain lines)."""
 
     def heading(self, text: str) -> None:
-        self.err.print(Rule(f"[bold]{text}[/bold]", align="left"))
+        self.err.print(Rule(Text(text, style="bold"), align="left"))
 
-    def say(self, text: str) -> None:
-        self.err.print(text)
+    def say(self, text: str, *, markup: bool = False) -> None:
+        """Print a line as it is; with `markup`, the demo's own rich markup is applied (escape what goes in it)."""
+        self.err.print(text, markup=markup)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TaskID, TextColumn
 
 from fabwire.demo.context import DemoContext
@@ -49,7 +50,7 @@ async def showcase(ctx: DemoContext, url: str) -> None:
     try:
         for name, plan in plans:
             with ctx.summary.step("lineus", f"draw {name}") as step:
-                ctx.say(f"[bold]{name}[/bold]: " + figures_text(plan).replace("\n", "; "))
+                ctx.say(f"[bold]{escape(name)}[/bold]: " + escape(figures_text(plan).replace("\n", "; ")), markup=True)
                 with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
                               console=ctx.err, disable=ctx.quiet_bars) as bar:
                     total = len(plan.strokes)

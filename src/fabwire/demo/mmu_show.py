@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 
+from rich.markup import escape
+
 from fabwire.demo.context import DemoContext
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import LinkTimeout
@@ -52,7 +54,7 @@ async def _tool_change(ctx: DemoContext, mmu: MMU, slot: int, limit: float) -> N
             await mmu.tool_change(slot, on_event=_show(ctx), timeout=limit)
             step.detail = "finished"
         except MMUError as exc:
-            ctx.say(f"  [yellow]the MMU stopped[/yellow]: {exc}")
+            ctx.say(f"  [yellow]the MMU stopped[/yellow]: {escape(str(exc))}", markup=True)
             ctx.say("  pressing Retry (the MMU's middle button) from the host")
             finished = asyncio.Event()
             show = _show(ctx)

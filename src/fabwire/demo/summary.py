@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from rich.table import Table
+from rich.text import Text
 
 
 @dataclass
@@ -83,7 +84,9 @@ class Summary:
         table.add_column("result")
         table.add_column("output")
         for step in self.steps:
-            result = ("ok" if step.ok else "[red]failed[/red]") + (f" — {step.detail}" if step.detail else "")
+            result = Text("ok") if step.ok else Text("failed", style="red")
+            if step.detail:
+                result.append(f" — {step.detail}")
             table.add_row(step.device, step.name, f"{step.seconds:.1f} s", result,
                           "\n".join(_shown(f) for f in step.files))
         return table

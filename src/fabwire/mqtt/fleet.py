@@ -55,7 +55,7 @@ def _table(rows: list[dict[str, Any]], agents: dict[str, str]) -> None:
             agent += " (offline)"
         table.add_row(row["device"], row["name"] or "", row["kind"] or "", row["model"] or "", agent,
                       row["availability"] or "", row["state"] or "", ", ".join(row["standby"]))
-    Console(highlight=False, soft_wrap=True).print(table)
+    Console(highlight=False, soft_wrap=True, markup=False, emoji=False).print(table)  # broker strings are not markup
 
 
 @click.command("fleet")
