@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import selectors
+import signal
 import subprocess
 import sys
 import time
@@ -36,9 +37,9 @@ class RunningAgent:
     def ws_url(self) -> str:
         return self.url.replace("http://", "ws://").rstrip("/") + "/api/v1/events"
 
-    def stop(self) -> tuple[int, str]:
+    def stop(self, sig: signal.Signals = signal.SIGTERM) -> tuple[int, str]:
         if self.process.poll() is None:
-            self.process.terminate()
+            self.process.send_signal(sig)
             try:
                 self.process.wait(20)
             except subprocess.TimeoutExpired:

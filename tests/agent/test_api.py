@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -200,3 +201,56 @@ def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
         assert cancelled.json()["id"] == job["id"]
         assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "cancelled"
         wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle after cancelling")
+
+
+@pytest.mark.parametrize(("name", "data", "says"), [
+    ("part.gcode", bytes(range(256)) * 8, "binary data"),
+    ("part.gcode", b"; only a comment\n", "no commands"),
+    ("part.3w", b"<svg xmlns='http://www.w3.org/2000/svg'/>", "SVG"),
+    ("a.svg", b"not svg", "a.svg"),
+    ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'></svg>", "empty"),
+    ("a.gcode", b"\xff\xfe\x00garbage", "a.gcode"),
+])
+def test_an_upload_no_intake_takes_is_refused_before_it_is_accepted(bench: Bench, name: str, data: bytes,
+                                                                      says: str) -> None:
+    with bench.agent.client() as client:
+        kind = "lineus" if name.startswith("a.") else "xyz"
+        device = wait_for(lambda: (d := device_of(client, kind))["state"]["online"] and d, f"the {kind} online")
+        body = _error(client.post(f"/api/v1/devices/{device['id']}/jobs", params={"filename": name}, content=data,
+                                  headers={"content-type": "application/octet-stream"}), 400, 4)
+        assert says in body["message"], body
+        assert name in body["message"], body
+        assert "uploads" not in body["message"], body
+        assert not re.search(r"(^|\s)/\w", body["message"]), body  # no path on the server
+        assert not [j for j in client.get("/api/v1/jobs", params={"device": device["id"]}).json()
+                    if j["filename"] == name and j["state"] == "failed"]
+
+
+def test_devices_answer_to_their_configured_name(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        mmu = wait_for(lambda: (d := device_of(client, "mmu"))["state"]["online"] and d, "the MMU online")
+        assert mmu["id"] != "mmu" or mmu["name"] == "mmu"
+        by_name = client.get("/api/v1/devices/printer").json()
+        assert by_name["id"] == device_of(client, "xyz")["id"]
+        assert client.get("/api/v1/devices/arm/state").json()["online"] is True
+        assert client.get("/api/v1/devices/arm/history").json()["device"] == device_of(client, "lineus")["id"]
+        assert "pen_up" in client.get("/api/v1/devices/arm/actions").json()["applicable"]
+        assert ".svg" in _error(client.post("/api/v1/devices/arm/jobs", params={"filename": "a.exe"},
+                                            content=b"x"), 400, 4)["message"]
+        unknown = _error(client.get("/api/v1/devices/desk"), 404, 4)["message"]
+        assert "printer" in unknown
+        assert "arm" in unknown
+
+
+def test_an_action_body_that_is_not_json_is_named_after_the_action_is_known(bench: Bench) -> None:
+    with bench.agent.client() as client:
+        mmu = wait_for(lambda: (d := device_of(client, "mmu"))["state"]["online"] and d, "the MMU online")
+        base = f"/api/v1/devices/{mmu['id']}/actions"
+        form = {"content-type": "application/x-www-form-urlencoded"}
+        assert "no action 'bogus'" in _error(client.post(f"{base}/bogus", content=b"{}", headers=form),
+                                             400, 4)["message"]
+        assert "no action 'bogus'" in _error(client.post(f"{base}/bogus", content=b"slot=1", headers=form),
+                                             400, 4)["message"]
+        message = _error(client.post(f"{base}/tool_change", content=b"slot=1", headers=form), 400, 4)["message"]
+        assert "Content-Type: application/json" in message
+        assert "object" in _error(client.post(f"{base}/tool_change", json=[1]), 400, 4)["message"]

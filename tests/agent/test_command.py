@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import signal
 from pathlib import Path
 
 from clitools import cli_env, run_cli
@@ -18,6 +19,8 @@ def test_demo_starts_three_simulators_and_stops_them(tmp_path: Path) -> None:
                 x["state"]["online"] for x in d) and d, "the demo's machines online")
             assert [d["kind"] for d in devices] == ["xyz", "lineus", "mmu"]
             assert [d["name"] for d in devices] == ["printer", "line-us", "mmu"]
+            # the simulators' ports change every run; the ids (and so the history and bookmarks) do not
+            assert [d["id"] for d in devices] == ["xyz-demo", "lineus-demo", "mmu-demo"]
             page = client.get("/")
             assert page.status_code == 200
             assert "<main id=\"devices\"" in page.text
@@ -72,3 +75,25 @@ def test_mqtt_option_needs_the_bridge(tmp_path: Path) -> None:
                      timeout=30)
     assert result.returncode == 4
     assert "MQTT support not installed: pip install 'fabwire[mqtt]'" in result.stderr
+
+
+def test_a_bad_listen_address_fails_before_any_token_is_made(tmp_path: Path) -> None:
+    state = tmp_path / "state"
+    for listen in ("nonsense", "nonsense.invalid:8765", "[::zz]:1"):
+        result = run_cli("serve", "--listen", listen, "--state-dir", str(state), env=cli_env(tmp_path), timeout=60)
+        assert result.returncode == 4, result.stderr
+        assert "cannot listen on" in result.stderr
+        assert "token" not in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+        assert not state.exists() or not any(state.iterdir())
+
+
+def test_ctrl_c_is_interrupted_and_a_service_stop_is_success(tmp_path: Path) -> None:
+    for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 0)):
+        agent = start_agent(tmp_path / sig.name)
+        with agent.client() as client:
+            assert client.get("/api/v1/devices").json() == []
+        returned, stderr = agent.stop(sig)
+        assert returned == code, stderr
+        assert "Traceback" not in stderr
+        assert ("interrupted" in stderr) is (sig == signal.SIGINT), stderr

@@ -90,6 +90,22 @@ def error_response(status: int, message: str, exit_code: int, error: str) -> JSO
     return JSONResponse({"message": message, "exit_code": exit_code, "error": error}, status_code=status)
 
 
+async def _json_object(request: Request) -> dict[str, Any]:
+    """The request body as a JSON object (empty body: {}); InputError for anything else, such as the form
+    encoding curl sends by default."""
+    raw = await request.body()
+    if not raw.strip():
+        return {}
+    try:
+        body = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise InputError("send the body as JSON: Content-Type: application/json, e.g. -d '{\"slot\": 1}'") \
+            from None
+    if not isinstance(body, dict):
+        raise InputError(f"the body must be a JSON object of parameters, not {type(body).__name__}")
+    return body
+
+
 def _iso(epoch: float) -> str:
     return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
@@ -148,7 +164,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
     @api.get("/devices/{device_id}/history", summary="Samples (temperatures, progress, state) and events in a range")
     async def history(device_id: str, since: datetime | None = None, until: datetime | None = None,
                       limit: int = Query(2000, ge=1, le=20000)) -> dict[str, Any]:
-        agent.session(device_id)
+        device_id = agent.session(device_id).info.id
         end = until or datetime.now(UTC)
         start = since or end - timedelta(hours=1)
         samples = await agent.history.samples(device_id, start.timestamp(), end.timestamp(), limit)
@@ -166,9 +182,12 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
         return {"actions": [a.to_dict() for a in session.driver.actions],
                 "applicable": session.state["summary"]["actions"]}
 
-    @api.post("/devices/{device_id}/actions/{action}", summary="Run an action; long ones answer {started} at once")
-    async def act(device_id: str, action: str, params: dict[str, Any] | None = None) -> dict[str, Any]:
-        return await agent.act(device_id, action, params or {})
+    @api.post("/devices/{device_id}/actions/{action}", summary="Run an action; long ones answer {started} at once",
+              openapi_extra={"requestBody": {"required": False, "content": {
+                  "application/json": {"schema": {"type": "object", "additionalProperties": True}}}}})
+    async def act(device_id: str, action: str, request: Request) -> dict[str, Any]:
+        agent.session(device_id).driver.action(action)  # an unknown action is the news, whatever the body
+        return await agent.act(device_id, action, await _json_object(request))
 
     @api.post("/devices/{device_id}/jobs", status_code=201, summary="Upload a file (request body) and start it",
               openapi_extra={"requestBody": {"required": True, "content": {
@@ -187,7 +206,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
 
     @api.get("/jobs", summary="Jobs, newest first (they survive a restart)")
     async def jobs(device: str | None = None, limit: int = Query(100, ge=1, le=1000)) -> list[dict[str, Any]]:
-        return await agent.jobs.list(device, limit)
+        return await agent.jobs.list(agent.resolve(device) if device else None, limit)
 
     @api.get("/jobs/{job_id}", summary="One job")
     async def job(job_id: str) -> dict[str, Any]:

@@ -114,29 +114,35 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
     if not demo:
         specs = configured_devices(config) + specs
     directory = state_dir or default_state_dir()
-    secret = None
-    if token or not local:
-        secret, created = load_or_create_token(directory)
-        if created:
-            click.echo(f"access token (shown once; kept in {directory}): {secret}", err=True)
-        else:
-            click.echo(f"access token: the one in {directory}", err=True)
-    _run(_serve(address.host, address.port, specs, directory, demo, speed, retention * 3600.0,
-                int(max_upload * 1024 * 1024), secret, bridge))
+    sock = _bind(address.host, address.port)  # a bad address fails before a token is made for it
+    try:
+        secret = None
+        if token or not local:
+            secret, created = load_or_create_token(directory)
+            if created:
+                click.echo(f"access token (shown once; kept in {directory}): {secret}", err=True)
+            else:
+                click.echo(f"access token: the one in {directory}", err=True)
+        interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0,
+                                  int(max_upload * 1024 * 1024), secret, bridge))
+    finally:
+        sock.close()
+    if interrupted:
+        raise KeyboardInterrupt  # after the clean shutdown: the CLI's "interrupted" exit code
 
 
-def _run(main: Coroutine[Any, Any, None]) -> None:
+def _run(main: Coroutine[Any, Any, bool]) -> bool:
     """On uvloop where it is installed: a bench of machines costs a fifth less CPU per poll."""
     try:
         import uvloop
     except ImportError:
-        asyncio.run(main)
-        return
-    uvloop.run(main)
+        return asyncio.run(main)
+    return uvloop.run(main)
 
 
-async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path, demo: bool, speed: float,
-                 retention_s: float, max_upload: int, secret: str | None, bridge: Any) -> None:
+async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, demo: bool, speed: float,
+                 retention_s: float, max_upload: int, secret: str | None, bridge: Any) -> bool:
+    """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
     from fabwire.agent.api import create_app
@@ -145,7 +151,6 @@ async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path,
     server_class = _server_class()
     simulators: list[Any] = []
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=max_upload)
-    sock = _bind(host, port)
     bridge_task: asyncio.Task[None] | None = None
     try:
         if demo:
@@ -168,13 +173,13 @@ async def _serve(host: str, port: int, specs: list[DeviceSpec], state_dir: Path,
         if bridge is not None:
             bridge_task = asyncio.create_task(_run_bridge(bridge(agent), server))
         await server.serve(sockets=[sock])
+        return bool(server.interrupted)
     finally:
         if bridge_task is not None:
             bridge_task.cancel()
             with contextlib.suppress(BaseException):
                 await bridge_task
         await agent.stop()
-        sock.close()
         if simulators:
             from fabwire.demo.runner import stop_all
 
@@ -185,20 +190,24 @@ def _server_class() -> Any:
     import uvicorn
 
     class Server(uvicorn.Server):
-        """SIGINT/SIGTERM end the agent gracefully with exit code 0 (uvicorn would re-raise the signal)."""
+        """SIGINT/SIGTERM end the agent gracefully (uvicorn would re-raise the signal); `interrupted` tells
+        SIGINT, which the CLI then reports as interrupted (130), from SIGTERM (exit code 0)."""
+
+        interrupted = False
 
         @contextlib.contextmanager
         def capture_signals(self) -> Iterator[None]:
             loop = asyncio.get_running_loop()
             for sig in (signal.SIGINT, signal.SIGTERM):
-                loop.add_signal_handler(sig, self._stop)
+                loop.add_signal_handler(sig, self._stop, sig)
             try:
                 yield
             finally:
                 for sig in (signal.SIGINT, signal.SIGTERM):
                     loop.remove_signal_handler(sig)
 
-        def _stop(self) -> None:
+        def _stop(self, sig: signal.Signals) -> None:
+            self.interrupted = self.interrupted or sig == signal.SIGINT
             self.force_exit = self.should_exit
             self.should_exit = True
 
@@ -221,6 +230,7 @@ def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
     args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{speed:g}"],
             "mmu": ["--speed", f"{speed:g}", "--fault", FAULT]}
     sims = start_simulators([(kind, args[kind]) for _, kind in DEMO_DEVICES])
-    specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {})  # type: ignore[arg-type]
+    specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {},  # type: ignore[arg-type]
+                        fixed_id=f"{kind}-demo")
              for (name, kind), sim in zip(DEMO_DEVICES, sims, strict=True)]
     return sims, specs

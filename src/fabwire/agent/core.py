@@ -68,6 +68,8 @@ class DeviceSpec:
     address: str
     options: Mapping[str, Any] = field(default_factory=dict)
     """The kind's settings (`fabwire.config`: timeout, speed, auto_retries …), as in devices.toml."""
+    fixed_id: str | None = None
+    """The id to use whatever the machine reports (the demo's simulators sit on a new port each run)."""
 
 
 _LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?::1\]?)(:|/|$))", re.IGNORECASE)
@@ -191,9 +193,15 @@ class Agent:
 
     def subscribe(self, device_id: str | None = None) -> Subscription:
         """Live events of one device (or all); iterate, and `aclose()` when done."""
-        if device_id is not None:
-            self.session(device_id)
-        return Subscription(self, device_id)
+        return Subscription(self, self.session(device_id).info.id if device_id is not None else None)
+
+    def resolve(self, device: str) -> str:
+        """The id of the device named or identified by `device`; as given when no current device matches
+        (a job list may ask about a device no longer monitored)."""
+        try:
+            return self.session(device).info.id
+        except UnknownDevice:
+            return device
 
     async def act(self, device_id: str, action: str, params: Mapping[str, Any]) -> dict[str, Any]:
         """Run an action (see `actions_for`); returns its result dict. Long ones (a tool change) run in the
@@ -223,7 +231,7 @@ class Agent:
 
     async def remove_device(self, device_id: str) -> None:
         session = self.session(device_id)
-        del self._sessions[device_id]
+        del self._sessions[session.info.id]
         await session.stop()
 
     # ------------------------------------------------------------------------------------------ jobs
@@ -258,12 +266,15 @@ class Agent:
         return wanted if wanted not in taken else fallback
 
     def session(self, device_id: str) -> Session:
-        """The session of a device; UnknownDevice if there is none."""
-        try:
+        """The session of a device addressed by its id or its configured name; UnknownDevice if there is none."""
+        if device_id in self._sessions:
             return self._sessions[device_id]
-        except KeyError:
-            raise UnknownDevice(f"no device {device_id!r} here (known: {', '.join(self._sessions) or 'none'})") \
-                from None
+        for session in self._sessions.values():
+            if session.spec.name == device_id:
+                return session
+        known = ", ".join(f"{s.spec.name} ({id_})" if s.spec.name and s.spec.name != id_ else id_
+                          for id_, s in self._sessions.items())
+        raise UnknownDevice(f"no device {device_id!r} here (known: {known or 'none'})")
 
     def sessions(self) -> list[Session]:
         return sorted(self._sessions.values(), key=lambda s: s.order)

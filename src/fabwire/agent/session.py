@@ -87,7 +87,7 @@ class Session:
     # ------------------------------------------------------------------------------------------ lifecycle
 
     async def start(self) -> None:
-        known = await self.agent.history.known_id(self.spec.kind, self.spec.address)
+        known = self.spec.fixed_id or await self.agent.history.known_id(self.spec.kind, self.spec.address)
         self._task = asyncio.create_task(self._run(), name=f"session-{self.spec.name}")
         if known is None:
             with contextlib.suppress(TimeoutError):
@@ -232,6 +232,7 @@ class Session:
             accepted = ", ".join(sorted(self.driver.job_types)) or "no files"
             raise InputError(f"a {self.spec.kind} job takes {accepted}, not {suffix or 'a file without extension'}")
         self._require_online()
+        await asyncio.to_thread(self.driver.check_upload, filename, data)
         return await self._start_job(job_type, filename, data, {})
 
     async def _start_job(self, job_type: str, filename: str | None, data: bytes | None,
@@ -259,8 +260,10 @@ class Session:
             if self._cancelling:
                 await self._job_changed(state="cancelled", finished=now_iso(), message="cancelled")
             else:
-                await self._job_changed(state="failed", finished=now_iso(), message=str(exc))
-                self._publish("error", message=f"job {job['id']}: {exc}", exit_code=exit_code_of(exc),
+                # the stored file's path is the agent's business: messages name the upload as it was sent
+                shown = str(exc).replace(str(path), job["filename"] or "the upload") if path else str(exc)
+                await self._job_changed(state="failed", finished=now_iso(), message=shown)
+                self._publish("error", message=f"job {job['id']}: {shown}", exit_code=exit_code_of(exc),
                               job=job["id"])
         else:
             await self._job_changed(state="done", finished=now_iso(), progress_percent=100.0, time_left_s=0.0,

@@ -358,7 +358,7 @@ def _second_half(progress: Progress | None) -> Progress | None:
     return None if progress is None else lambda done, total: progress((total + done) // 2, total)
 
 
-def _head(src: BinaryIO, name: str) -> tuple[bytes, int]:
+def check_gcode_head(src: BinaryIO, name: str) -> tuple[bytes, int]:
     """(the normalised first CHUNK of the G-code, the file size); G-code without commands is refused."""
     total = stream_size(src)
     src.seek(0)
@@ -387,7 +387,7 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
             progress: Progress | None) -> Prepared:
     """The XYZ key lines and the .3w header for a G-code (its metadata read or computed); `header_space` is the
     room the container has for the (padded) header."""
-    head, total = _head(src, name)
+    head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total, _first_half(progress))
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
@@ -426,7 +426,7 @@ def _metadata(
 def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """What a G-code file's comments state, and what its moves say where the comments are silent."""
     with open_input(path) as src:
-        head, total = _head(src, str(path))
+        head, total = check_gcode_head(src, str(path))
         return _metadata(src, str(path), head, total)
 
 

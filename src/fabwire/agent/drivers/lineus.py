@@ -14,6 +14,7 @@ from fabwire.errors import InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
 from fabwire.lineus.plot import Plan, PlanOptions
+from fabwire.lineus.plot.intake import drawing_from_bytes
 from fabwire.lineus.plot.plan import plan_file, plan_text
 
 PLAN_TIME_BUDGET = 0.3
@@ -95,6 +96,10 @@ class LineUsDriver(Driver):
             self.position = await arm.move(params["x"], params["y"])
         pos = self.position
         return {"ok": True, "action": action, "position": {"x": pos.x, "y": pos.y, "z": pos.z} if pos else None}
+
+    def check_upload(self, name: str, data: bytes) -> None:
+        """The drawing intake's refusal (not SVG, unreadable, nothing to draw) before the upload is accepted."""
+        drawing_from_bytes(name, data)
 
     async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
         arm = self._client()

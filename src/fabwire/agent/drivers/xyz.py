@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -10,6 +11,7 @@ from typing import Any, ClassVar
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_xyz
 from fabwire.errors import InputError, LinkClosed
+from fabwire.xyz import intake
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status
 
@@ -73,6 +75,14 @@ class XYZDriver(Driver):
         Action("unload_filament", "Heat and unload the filament.", background=True),
     )
     job_types: ClassVar[Mapping[str, str]] = {".gcode": "print", ".gco": "print", ".g": "print", ".3w": "print"}
+
+    def check_upload(self, name: str, data: bytes) -> None:
+        """The printer intake's refusal for what no printer takes (binary data, images, SVG, G-code without
+        commands), so a bad file is refused at upload rather than failing the job later."""
+        head = data[:intake.SNIFF]
+        kind = intake.require_printable(intake.identify(head, len(data)), name, head)
+        if kind is intake.Kind.GCODE:
+            intake.check_gcode_head(io.BytesIO(data), name)
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)

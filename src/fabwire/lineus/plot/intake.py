@@ -82,8 +82,6 @@ def _read_bytes(source: str | Path) -> tuple[str, bytes]:
             raise InputError(f"{name}: is a directory, not a drawing") from exc
         except OSError as exc:
             raise InputError(f"{name}: cannot read ({exc.strerror or exc})") from exc
-    if len(data) > MAX_INPUT:
-        raise InputError(f"{name}: larger than {MAX_INPUT >> 20} MB; refusing to read it")
     return name, data
 
 
@@ -134,6 +132,13 @@ def read_drawing(source: str | Path) -> Drawing:
     unknown or empty drawings.
     """
     name, raw = _read_bytes(source)
+    return drawing_from_bytes(name, raw)
+
+
+def drawing_from_bytes(name: str, raw: bytes) -> Drawing:
+    """`read_drawing` for bytes already in memory; `name` (its file name) picks the type and names it in errors."""
+    if len(raw) > MAX_INPUT:
+        raise InputError(f"{name}: larger than {MAX_INPUT >> 20} MB; refusing to read it")
     digest = hashlib.sha256(raw).hexdigest()
     data = _gunzip(name, raw) if raw[:2] == b"\x1f\x8b" else raw
     if _kind(name, data) == "svg":
