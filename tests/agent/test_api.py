@@ -206,6 +206,7 @@ def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
 @pytest.mark.parametrize(("name", "data", "says"), [
     ("part.gcode", bytes(range(256)) * 8, "binary data"),
     ("part.gcode", b"; only a comment\n", "no commands"),
+    ("part.gcode", b"G28\n" + b"G1 X1" * 300_000 + b"\nG28\n", "has a line of over"),
     ("part.3w", b"<svg xmlns='http://www.w3.org/2000/svg'/>", "SVG"),
     ("a.svg", b"not svg", "a.svg"),
     ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'></svg>", "empty"),

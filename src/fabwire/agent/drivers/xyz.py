@@ -83,6 +83,8 @@ class XYZDriver(Driver):
         kind = intake.require_printable(intake.identify(head, len(data)), name, head)
         if kind is intake.Kind.GCODE:
             intake.check_gcode_head(io.BytesIO(data), name)
+            for _ in intake.gcode_lines(io.BytesIO(data), name):  # a line no printer reads, however far down
+                pass
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
