@@ -17,6 +17,7 @@ import click
 
 from fabwire.cli_support import App
 from fabwire.errors import InputError
+from fabwire.logsink import log_in_background
 from fabwire.transport.base import Transport
 from fabwire.transport.limits import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS, ConnectionLimits
 from fabwire.transport.registry import DeviceServer
@@ -154,6 +155,7 @@ async def serve(
 
     The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS).
     """
+    log_in_background()  # a stderr nobody reads must not freeze the simulator
     settings = _settings()
     limits = ConnectionLimits(settings.max_connections, settings.idle_timeout)
     writer = TraceWriter.to_file(settings.trace, url=f"sim://{kind}", peer="clients") if settings.trace else None
