@@ -1,17 +1,42 @@
 """`python -m fabwire` and the console script."""
 
+import os
+import signal
 import sys
+
+_INTERRUPTED = b"fabwire: interrupted\n"
+_EXIT_INTERRUPTED = 130  # fabwire.errors.EXIT_INTERRUPTED, not imported: this must hold before any import
+
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    # Nothing has been printed or opened yet: leave at once rather than unwind half-done imports into a traceback.
+    os.write(2, _INTERRUPTED)
+    os._exit(_EXIT_INTERRUPTED)
+
+
+# Set on import: this module is only ever the entry point, and the CLI's imports come next.
+_catching = signal.getsignal(signal.SIGINT) is signal.default_int_handler  # an ignored Ctrl-C stays ignored
+if _catching:
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
 
 
 def run() -> None:
-    if sys.argv[1:] in (["--version"], ["-V"]):  # answered before click and the CLI are imported
-        from fabwire import __version__
+    try:
+        if sys.argv[1:] in (["--version"], ["-V"]):  # answered before click and the CLI are imported
+            from fabwire import __version__
 
-        sys.stdout.write(f"fabwire, version {__version__}\n")
-        sys.exit(0)
-    from fabwire.cli import main
+            sys.stdout.write(f"fabwire, version {__version__}\n")
+            code = 0
+        else:
+            from fabwire.cli import main
 
-    sys.exit(main())
+            if _catching:  # from here on commands clean up on KeyboardInterrupt (links, partial files)
+                signal.signal(signal.SIGINT, signal.default_int_handler)
+            code = main()
+    except KeyboardInterrupt:  # between the handler's return and main's own handling
+        sys.stderr.write(_INTERRUPTED.decode())
+        code = _EXIT_INTERRUPTED
+    sys.exit(code)
 
 
 if __name__ == "__main__":

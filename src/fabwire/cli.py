@@ -2,20 +2,37 @@
 
 from __future__ import annotations
 
+import itertools
 import sys
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from fabwire import __version__
-from fabwire.cli_support import DEVICE_OPTIONS, GLOBAL_OPTIONS, App, LazyGroup, configure_logging, pass_app
-from fabwire.errors import EXIT_INTERRUPTED, FabwireError
+from fabwire.cli_support import (
+    DEVICE_OPTIONS,
+    GLOBAL_OPTIONS,
+    LINK_OPTIONS,
+    App,
+    LazyGroup,
+    check_early_link_options,
+    configure_logging,
+    pass_app,
+)
+from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
 from fabwire.simserve import SERVE_OPTIONS
 
+if TYPE_CHECKING:
+    from fabwire.transport.tap import TraceRecord
+
 EXIT_LINK = 8
 EXIT_TIMEOUT = 9
+EXIT_REPLAY_DIFFERS = RemoteProtocolError.exit_code
+"""`trace replay`: the device did not answer as the recording says."""
 
 
 @click.group(
@@ -32,15 +49,18 @@ EXIT_TIMEOUT = 9
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )
 @click.version_option(__version__, "-V", "--version", prog_name="fabwire")
-def cli() -> None:
+@click.pass_context
+def cli(ctx: click.Context) -> None:
     """Talk to maker machines over their own wire protocols — or simulate them.
 
     Devices: xyz (XYZprinting da Vinci printers), lineus (Line-us drawing robot), mmu (Prusa MMU3).
-    Options such as -d, --json, --trace, --timeout and -v go before or after the subcommand.
+    Options such as -d, --json, --trace, --timeout, -v and a device's link options (the MMU's --speed)
+    go before or after the subcommand.
     """
+    check_early_link_options(ctx, ctx.invoked_subcommand)
 
 
-cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS))
+cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS, *itertools.chain(*LINK_OPTIONS.values())))
 cli.shared = GLOBAL_OPTIONS
 
 
@@ -99,15 +119,26 @@ def trace() -> None:
 @pass_app
 def trace_show(app: App, file: Path, no_time: bool) -> None:
     """Print a capture: `>` bytes to the device, `<` bytes from it, hexdump for binary (--json: one record a line)."""
-    from fabwire.transport.tap import read_trace
     from fabwire.transport.trace_show import render_trace
 
     if app.json:
-        for r in read_trace(file):
+        for r in _records(file):
             app.output.event({"t": r.t, "dir": r.direction, "data": r.data, "event": r.event or None}, "")
         return
-    for line in render_trace(read_trace(file), timestamps=not no_time):
+    for line in render_trace(_records(file), timestamps=not no_time):
         click.echo(line)
+
+
+def _records(file: Path) -> Iterator[TraceRecord]:
+    """The capture's records, streamed; a file with none is refused (InputError, exit 4) rather than shown empty."""
+    from fabwire.transport.tap import read_trace
+
+    empty = True
+    for record in read_trace(file):
+        empty = False
+        yield record
+    if empty:
+        raise InputError(f"{file} holds no trace records")
 
 
 @trace.command("replay")
@@ -123,12 +154,16 @@ def trace_replay(app: App, file: Path, address: str, quiet: float) -> int:
 
     from fabwire.transport import open_transport
     from fabwire.transport.replay import Difference, replay
-    from fabwire.transport.tap import escape_text, read_trace
+    from fabwire.transport.tap import escape_text
+
+    records = _records(file)
+    first = next(records)  # an empty or unreadable capture is refused before connecting
+    records = itertools.chain([first], records)
 
     async def main() -> list[Difference]:
         link = await open_transport(address, connect_timeout=app.timeout or 5.0)
         try:
-            return await replay(link, read_trace(file), quiet=quiet)
+            return await replay(link, records, quiet=quiet)
         finally:
             await link.close()
 
@@ -140,11 +175,14 @@ def trace_replay(app: App, file: Path, address: str, quiet: float) -> int:
         for d in found:
             click.echo(f"exchange {d.exchange.number}: sent {escape_text(d.exchange.sent)[:80]}")
             click.echo(f"  expected {escape_text(d.exchange.expected)[:200]}")
-            click.echo(f"  got      {escape_text(d.got)[:200]}  (differs from byte {d.offset})")
+            if d.got:
+                click.echo(f"  got      {escape_text(d.got)[:200]}  (differs from byte {d.offset})")
+            else:
+                click.echo(f"  got      no reply ({quiet:g} s of silence)")
 
     app.output.result([{"exchange": d.exchange.number, "sent": d.exchange.sent, "expected": d.exchange.expected,
                         "got": d.got, "offset": d.offset} for d in found], human)
-    return 0 if not found else 1
+    return 0 if not found else EXIT_REPLAY_DIFFERS
 
 
 def _fail(app: App, message: str, code: int) -> int:

@@ -48,6 +48,8 @@ class App:
     faults: FaultPlan | None = None
     link_options: dict[str, Any] = field(default_factory=dict)
     """A device's own link options given on the command line (e.g. the MMU's speed), by settings field name."""
+    early_link_options: dict[str, str] = field(default_factory=dict)
+    """Link options given before any subcommand: flag -> the device kind they belong to."""
     server_options: dict[str, Any] = field(default_factory=dict)
     """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simserve`."""
 
@@ -146,13 +148,51 @@ DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
 )
 
 
-def link_option(setting: str, *decls: str, **attrs: Any) -> OptionFactory:
-    """A device's own link option, stored under the name of its settings field (see `fabwire.config`)."""
+def link_option(kind: str, setting: str, *decls: str, **attrs: Any) -> OptionFactory:
+    """Device `kind`'s own link option, stored under the name of its settings field (see `fabwire.config`).
 
-    def store(app: App, value: Any) -> None:
-        app.link_options[setting] = list(value) if isinstance(value, tuple) else value
+    Given before the device's group (`fabwire --speed 20 mmu …`) it is remembered, so that a command line
+    where it would reach another device or a simulator is refused instead of silently ignored.
+    """
 
-    return lambda: click.Option([*decls, f"shared_{setting}"], expose_value=False, callback=_setter(store), **attrs)
+    def store(ctx: click.Context, param: click.Parameter, value: Any) -> None:
+        source = ctx.get_parameter_source(param.name or "")
+        if ctx.parent is None:
+            if source is not click.core.ParameterSource.COMMANDLINE:
+                return  # an environment default at the root would reach every device
+            _app(ctx).early_link_options[param.opts[0]] = kind
+        elif not _given(ctx, param):
+            return
+        _app(ctx).link_options[setting] = list(value) if isinstance(value, tuple) else value
+
+    factory: OptionFactory = lambda: click.Option(  # noqa: E731
+        [*decls, f"shared_{setting}"], expose_value=False, callback=store, **attrs)
+    factory.device_kind = kind  # type: ignore[attr-defined]
+    return factory
+
+
+LINK_OPTIONS: dict[str, tuple[OptionFactory, ...]] = {
+    "mmu": (
+        link_option("mmu", "speed", "--speed", type=click.FloatRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
+                    help="The MMU runs this many times faster than real time (a simulator's --speed); "
+                         "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
+        link_option("mmu", "accept", "--accept", multiple=True, metavar="X.Y.Z",
+                    help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4)."),
+    ),
+}
+"""Each device kind's own link options, accepted anywhere on the line: before its group, on it, or after."""
+
+
+def check_early_link_options(ctx: click.Context, subcommand: str | None) -> None:
+    """Refuse a device's link option given before a command that is not that device's group."""
+    for flag, kind in _app(ctx).early_link_options.items():
+        if subcommand == kind:
+            continue
+        if subcommand == "sim":
+            raise click.UsageError(f"{flag} before `sim` is a link option of `fabwire {kind}`; a simulator's "
+                                   f"own options go after its name (see `fabwire sim {kind} --help`)")
+        raise click.UsageError(f"{flag} is a link option of `fabwire {kind}`; it does not apply to "
+                               f"`fabwire {subcommand}`")
 
 
 def share_options(command: click.Command, factories: Sequence[OptionFactory]) -> None:

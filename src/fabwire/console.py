@@ -54,10 +54,20 @@ class Output:
         stream.write(text + "\n")
         stream.flush()
 
+    def _json_line(self, data: Any) -> None:
+        """One JSON document on a line of stdout, always valid UTF-8.
+
+        Names from the file system or a device may hold lone surrogates (undecodable bytes kept by
+        surrogateescape); those become `\\udcXX` JSON escapes instead of reaching stdout as raw bytes.
+        """
+        text = json.dumps(data, default=_default, ensure_ascii=False)
+        text = text.encode("utf-8", "backslashreplace").decode("utf-8")
+        self._line(sys.stdout, text)
+
     def result(self, data: Any, human: Callable[[], None] | str | None = None) -> None:
         """Print a command's result: `data` as one JSON document, or `human` for people."""
         if self.json_mode:
-            self._line(sys.stdout, json.dumps(data, default=_default, ensure_ascii=False))
+            self._json_line(data)
         elif callable(human):
             human()
         elif human is not None:
@@ -68,7 +78,7 @@ class Output:
     def event(self, data: dict[str, Any], human: str) -> None:
         """One item of a stream (monitor, progress): a JSON line per event, or a line of text."""
         if self.json_mode:
-            self._line(sys.stdout, json.dumps(data, default=_default, ensure_ascii=False))
+            self._json_line(data)
         else:
             self._line(sys.stdout, human)
 

@@ -31,11 +31,46 @@ def test_device_and_json_anywhere(args: list[str], tmp_path: Path) -> None:
     ["mmu", "--speed", "50", "-d", MMU_SIM, "version", "--json"],
     ["mmu", "version", "--speed", "50", "-d", MMU_SIM, "--json"],
     ["--json", "mmu", "-d", MMU_SIM, "version", "--speed", "50"],
-], ids=["group", "command", "split"])
+    ["--speed", "50", "mmu", "-d", MMU_SIM, "version", "--json"],
+    ["--accept", "3.0.4", "--json", "mmu", "--speed", "50", "-d", MMU_SIM, "version"],
+], ids=["group", "command", "split", "root", "root-and-group"])
 def test_a_device_link_option_anywhere(args: list[str], tmp_path: Path) -> None:
     result = run_cli(*args, env=cli_env(tmp_path))
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["major"] == 3
+
+
+@pytest.mark.parametrize("where", [0, 1, 4], ids=["root", "group", "command"])
+def test_a_link_option_before_the_device_group_reaches_the_link(where: int, tmp_path: Path) -> None:
+    command = ["mmu", "-d", MMU_SIM, "version"]
+    result = run_cli(*command[:where], "--accept", "3.0.2", *command[where:], env=cli_env(tmp_path))
+    assert result.returncode == 7  # the simulator's 3.0.4 is refused: the option was used
+    assert "MMU firmware 3.0.4" in result.stderr
+    assert "is not one of 3.0.2" in result.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--speed", "50", "xyz", "-d", XYZ_SIM, "status"], "--speed is a link option of `fabwire mmu`; it does not "
+                                                         "apply to `fabwire xyz`"),
+    (["--accept", "3.0.4", "lineus", "-d", "sim://lineus?speed=inf", "position"], "--accept is a link option of "
+                                                                                  "`fabwire mmu`"),
+    (["--speed", "50", "sim", "mmu", "--listen", "127.0.0.1:0"], "a simulator's own options go after its name"),
+])
+def test_a_link_option_before_another_command_says_where_it_belongs(args: list[str], message: str,
+                                                                    tmp_path: Path) -> None:
+    result = run_cli(*args, env=cli_env(tmp_path), timeout=30)
+    assert result.returncode == 2
+    assert message in result.stderr
+    assert "Traceback" not in result.stderr
+    assert result.stdout == ""
+
+
+def test_the_mmu_speed_from_the_environment_leaves_other_devices_alone(tmp_path: Path) -> None:
+    env = cli_env(tmp_path)
+    env["FABWIRE_MMU_SPEED"] = "50"
+    result = run_cli("xyz", "status", "-d", XYZ_SIM, "--json", env=env)
+    assert result.returncode == 0, result.stderr
+    assert "state" in json.loads(result.stdout) or "state_code" in json.loads(result.stdout)
 
 
 def test_the_last_occurrence_wins_and_verbose_adds_up(tmp_path: Path) -> None:

@@ -318,3 +318,20 @@ def test_silent_robot_and_interrupted_draw_print_one_line(simulator, tmp_path: P
     assert saved["done"] >= 1
     assert saved["done"] + (saved["point"] > 0) <= len(saved["strokes"])
     sim.stop()
+
+
+@pytest.mark.parametrize(("where", "reason"), [
+    ("missing/drawn.png", "No such file or directory"),
+    ("a-file/drawn.svg", "Not a directory"),
+    ("/proc/drawn.png", ""),  # a folder nobody can create files in, not even root
+], ids=["missing-folder", "folder-is-a-file", "read-only-folder"])
+def test_sim_record_path_that_cannot_be_written_is_refused_at_start(tmp_path: Path, where: str,
+                                                                   reason: str) -> None:
+    (tmp_path / "a-file").write_text("not a folder")
+    target = Path(where) if where.startswith("/") else tmp_path / where
+    result = run_cli("sim", "lineus", "--listen", "127.0.0.1:0", "--record", str(target), timeout=30)
+    assert result.returncode == 4
+    assert result.stderr.startswith(f"fabwire: error: --record {target}: cannot write there: {reason}")
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert "listening" not in result.stdout + result.stderr  # refused before serving anything
+    assert not target.exists()

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import socket
 from pathlib import Path
+
+import pytest
 
 from clitools import run_cli, start_simulator
 from fabwire.transport.replay import exchanges
@@ -29,7 +32,7 @@ def test_replay_to_the_same_and_to_another_printer(tmp_path: Path) -> None:
         assert same.returncode == 0, same.stderr
         assert same.stdout.strip() == "every reply matches the recording"
         other = run_cli("--json", "trace", "replay", str(trace), "--to", nano.url, "--quiet", "0.5")
-        assert other.returncode == 1
+        assert other.returncode == 6  # documented: the device broke the protocol (answered otherwise)
         differences = json.loads(other.stdout)
         assert differences[0]["exchange"] == 1
         assert differences[0]["sent"] == "XYZv3/query=a\r\n"
@@ -38,3 +41,28 @@ def test_replay_to_the_same_and_to_another_printer(tmp_path: Path) -> None:
     finally:
         mini.stop()
         nano.stop()
+
+
+def test_replay_to_a_silent_port_says_no_reply_came(tmp_path: Path) -> None:
+    trace = tmp_path / "wire.jsonl"
+    run = run_cli("lineus", "position", "-d", "sim://lineus?speed=inf", "--trace", str(trace))
+    assert run.returncode == 0, run.stderr
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(4)
+        port = silent.getsockname()[1]
+        result = run_cli("trace", "replay", str(trace), "--to", f"127.0.0.1:{port}", "--quiet", "0.2")
+    assert result.returncode == 6, result.stderr
+    assert "got      no reply (0.2 s of silence)" in result.stdout
+    assert "differs from byte" not in result.stdout
+
+
+@pytest.mark.parametrize("content", ["", "\n\n", "   \n"], ids=["empty", "blank-lines", "spaces"])
+@pytest.mark.parametrize("command", [["show"], ["show", "--json"], ["replay", "--to", "127.0.0.1:9"]])
+def test_a_capture_without_records_is_refused(tmp_path: Path, content: str, command: list[str]) -> None:
+    trace = tmp_path / "empty.jsonl"
+    trace.write_text(content)
+    result = run_cli("trace", command[0], str(trace), *command[1:])
+    assert result.returncode == 4
+    assert result.stderr.strip() == f"fabwire: error: {trace} holds no trace records"
+    assert result.stdout == ""

@@ -307,6 +307,19 @@ def _free_port(host: str) -> int:
         return int(sock.getsockname()[1])
 
 
+def _check_record_path(record: Path) -> None:
+    """Refuse (InputError, exit 4) a --record file the drawing could not be saved to when the simulator stops."""
+    import tempfile
+
+    if record.suffix.lower() not in (".svg", ".png"):
+        raise InputError(f"--record {record}: the file must end in .svg or .png")
+    try:  # a real file in the same folder: existence, permissions, read-only mounts, all at once
+        with tempfile.NamedTemporaryFile(dir=record.parent, prefix=f".{record.name}.", suffix=".probe"):
+            pass
+    except OSError as exc:
+        raise InputError(f"--record {record}: cannot write there: {exc.strerror or exc}") from None
+
+
 @click.command("lineus")
 @click.option("--listen", "listen", multiple=True, metavar="HOST:PORT",
               help="Serve on TCP (default 127.0.0.1:1337); repeat for several addresses.")
@@ -330,8 +343,8 @@ def sim_lineus(app: App, listen: tuple[str, ...], speed: float, version: str, na
     from fabwire.lineus.sim import LineUsSim, SimOptions, resolve_version
     from fabwire.simserve import parse_listen, serve
 
-    if record is not None and record.suffix.lower() not in (".svg", ".png"):
-        raise InputError(f"--record {record}: the file must end in .svg or .png")
+    if record is not None:
+        _check_record_path(record)
     try:
         options = SimOptions(version=resolve_version(version), name=name, serial=serial,
                              speed=math.inf if speed == 0 else speed,

@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import DeviceContext, device_group, link_option, pass_app, pass_device
+from fabwire.cli_support import LINK_OPTIONS, DeviceContext, device_group, pass_app, pass_device
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
@@ -109,14 +109,6 @@ def status_dict(status: Status) -> dict[str, Any]:
     return data
 
 
-LINK_OPTIONS = (
-    link_option("speed", "--speed", type=click.FloatRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
-                help="The MMU runs this many times faster than real time (a simulator's --speed); "
-                     "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
-    link_option("accept", "--accept", multiple=True, metavar="X.Y.Z",
-                help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4)."),
-)
-"""The MMU's own link options: accepted anywhere on an `fabwire mmu` command line."""
 
 
 def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
@@ -157,7 +149,7 @@ def _write_args(kwargs: dict[str, Any]) -> None:
     _parse_value(kwargs["value"])
 
 
-@device_group(MMU_KIND, "Drive a Prusa MMU3 over its serial protocol, as the printer does.", LINK_OPTIONS)
+@device_group(MMU_KIND, "Drive a Prusa MMU3 over its serial protocol, as the printer does.", LINK_OPTIONS["mmu"])
 def mmu() -> None:
     pass
 

@@ -1,0 +1,62 @@
+"""Every JSON line fabwire prints is valid UTF-8 JSON, whatever bytes the input names hold."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from clitools import cli_env
+from fabwire.console import Output
+
+SVG = ('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
+       '<path d="M1 1 L9 9"/></svg>')
+
+
+def test_preview_json_of_a_non_utf8_file_name_is_valid_utf8(tmp_path: Path) -> None:
+    raw = os.fsencode(tmp_path) + b"/bad\xffname\xc3.svg"
+    Path(os.fsdecode(raw)).write_text(SVG)
+    done = subprocess.run([sys.executable, "-m", "fabwire", "lineus", "preview", raw, "--json"],
+                          capture_output=True, timeout=60, env=cli_env(tmp_path))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout.decode("utf-8"))  # strict: raises on any raw 0xff
+    assert os.fsencode(data["file"]) == raw  # the escapes keep the exact bytes of the name
+
+
+def _printed(data: object, stream_event: bool) -> bytes:
+    buffer = io.BytesIO()
+    stdout = io.TextIOWrapper(buffer, encoding="utf-8", errors="surrogateescape", newline="\n")
+    saved, sys.stdout = sys.stdout, stdout
+    try:
+        out = Output(json_mode=True)
+        if stream_event:
+            out.event(data, "")  # type: ignore[arg-type]
+        else:
+            out.result(data)
+        stdout.flush()
+    finally:
+        sys.stdout = saved
+    return buffer.getvalue()
+
+
+names = st.one_of(st.text(), st.binary().map(os.fsdecode),
+                  st.text(st.characters(exclude_categories=())))  # lone surrogates included
+
+
+@settings(max_examples=300, deadline=None)
+@given(key=names, value=names, raw=st.binary(max_size=40), stream_event=st.booleans())
+def test_any_string_prints_as_one_valid_utf8_json_line(key: str, value: str, raw: bytes,
+                                                        stream_event: bool) -> None:
+    printed = _printed({"file": value, "names": {key: [value]}, "data": raw}, stream_event)
+    assert printed.endswith(b"\n")
+    assert printed.count(b"\n") == 1
+    data = json.loads(printed.decode("utf-8"))
+    assert data["file"] == value
+    assert data["names"] == {key: [value]}
+    assert data["data"] == raw.decode("latin-1")
