@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+import signal
 import socket
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
 import pytest
 
-from clitools import SimulatorStarter, run_cli
+from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.xyz.models import find_model
 from fabwire.xyz.threew import read_3w, write_3w
 
@@ -116,6 +119,31 @@ def test_flows_with_prompts(simulator: SimulatorStarter) -> None:
     assert no_answer.returncode == 4
     assert "no confirmation" in no_answer.stderr
     assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
+
+
+def test_unfinished_calibration_releases_the_printer(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "100")
+    dev = device(sim.url)
+    for answers in ("", "\n"):  # no confirmation to lower, then none to raise the detector
+        result = run_cli("--json", "xyz", "-d", dev, "calibrate", input_text=answers)
+        assert result.returncode == 4, result.stderr
+        assert "no confirmation" in result.stderr
+        assert "printer is idle again" in result.stderr
+        assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
+    proc = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", dev, "calibrate"], env=cli_env(),
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    seen = ""
+    while "press Enter" not in seen:
+        chunk = proc.stderr.read(1)
+        assert chunk, "the CLI ended before asking"
+        seen += chunk
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)  # stdin stays open: Ctrl-C must not wait for a line
+    assert proc.returncode == 130
+    assert "printer is idle again" in seen + err
+    assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
+    assert run_cli("xyz", "-d", dev, "home").returncode == 0
 
 
 def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Path) -> None:
