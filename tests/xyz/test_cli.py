@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -255,3 +256,45 @@ def test_wifi_scan_plus_limits_and_a_wrong_device(simulator: SimulatorStarter) -
     assert "not an XYZv3 printer" in wrong.stderr
     assert "SSH-2.0" in wrong.stderr
     assert "Traceback" not in wrong.stderr
+
+
+def _join_on_a_terminal(dev: str, ssid: str, typed: bytes) -> tuple[int, str]:
+    """`wifi join` with a pty as its stdin (the password prompt needs a terminal); returns exit code, stderr."""
+    master, slave = os.openpty()
+    try:
+        # a new session has no /dev/tty, so the prompt goes to stderr and the answer is read from the pty
+        proc = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", dev, "wifi", "join", ssid],
+                                env=cli_env(), stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                start_new_session=True)
+        assert proc.stderr is not None
+        seen = b""
+        while typed and b"Password" not in seen:
+            chunk = proc.stderr.read(1)
+            if not chunk:
+                break
+            seen += chunk
+        if b"Password" in seen:
+            os.write(master, typed)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        os.close(slave)
+        os.close(master)
+    return proc.returncode, (out + seen + err).decode()
+
+
+def test_wifi_join_password_comes_from_the_option_or_a_terminal(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
+    dev = device(sim.url)
+    no_terminal = run_cli("xyz", "-d", dev, "wifi", "join", "MYNET", input_text="")
+    assert no_terminal.returncode == 4
+    assert "no password given (use --password)" in no_terminal.stderr
+    assert "Warning" not in no_terminal.stderr
+    code, text = _join_on_a_terminal(dev, "", b"\n")
+    assert code == 4
+    assert "Wi-Fi network name" in text
+    assert "Password" not in text  # refused before asking
+    code, text = _join_on_a_terminal(dev, "MYNET", b"secret-key\n")
+    assert code == 0, text
+    assert "joining MYNET" in text
+    given = run_cli("xyz", "-d", dev, "wifi", "join", "MYNET", "--password", "")
+    assert given.returncode == 0, given.stderr

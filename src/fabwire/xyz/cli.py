@@ -413,12 +413,16 @@ def wifi_scan(dctx: DeviceContext) -> None:
 
 @wifi.command("join")
 @click.argument("ssid")
-@click.option("--password", prompt=True, hide_input=True, help="Network password.")
+@click.option("--password", help="Network password (empty for an open network); asked for on a terminal if left out.")
 @click.option("--channel", type=click.IntRange(0, 165), default=0, show_default=True)
 @pass_device
-def wifi_join(dctx: DeviceContext, ssid: str, password: str, channel: int) -> None:
+def wifi_join(dctx: DeviceContext, ssid: str, password: str | None, channel: int) -> None:
     """Join a Wi-Fi network (do this over USB)."""
     userinput.ssid(ssid)
+    if password is None:
+        if not sys.stdin.isatty():
+            raise InputError("no password given (use --password)")
+        password = str(click.prompt("Password", default="", hide_input=True, show_default=False))
     userinput.wifi_password(password)
     _with_printer(dctx, lambda pr: pr.join_wifi(ssid, password, channel))
     dctx.output.result({"ok": True, "ssid": ssid}, f"joining {ssid}")
