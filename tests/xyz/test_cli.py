@@ -189,6 +189,20 @@ def test_faulty_printers(simulator: SimulatorStarter, tmp_path: Path) -> None:
     assert unreachable.returncode == 8
 
 
+@pytest.mark.parametrize("fault", ["heater-failure", "file-rejected"])
+def test_a_failed_job_never_reads_finished(simulator: SimulatorStarter, tmp_path: Path, fault: str) -> None:
+    src = tmp_path / "part.gcode"
+    src.write_bytes(GCODE * 20)
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--fault", fault)
+    for json_flag in ((), ("--json",)):
+        result = run_cli(*json_flag, "xyz", "-d", device(sim.url), "print", str(src))
+        assert result.returncode == 7, result.stderr
+        assert "device error" in result.stderr
+        assert "print finished" not in result.stdout + result.stderr
+        assert "9509" not in result.stdout
+        run_cli("xyz", "-d", device(sim.url), "acknowledge")
+
+
 def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> None:
     port = free_port_on("127.0.0.2", "127.0.0.3")
     a = simulator("xyz", "--listen", f"127.0.0.2:{port}", "--model", "miniMaker")
