@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
 import socket
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
 import pytest
 
-from clitools import SimulatorStarter, run_cli
+from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.xyz.models import find_model
 from fabwire.xyz.threew import read_3w, write_3w
 
@@ -118,6 +122,31 @@ def test_flows_with_prompts(simulator: SimulatorStarter) -> None:
     assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
 
 
+def test_unfinished_calibration_releases_the_printer(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "100")
+    dev = device(sim.url)
+    for answers in ("", "\n"):  # no confirmation to lower, then none to raise the detector
+        result = run_cli("--json", "xyz", "-d", dev, "calibrate", input_text=answers)
+        assert result.returncode == 4, result.stderr
+        assert "no confirmation" in result.stderr
+        assert "printer is idle again" in result.stderr
+        assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
+    proc = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", dev, "calibrate"], env=cli_env(),
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    seen = ""
+    while "press Enter" not in seen:
+        chunk = proc.stderr.read(1)
+        assert chunk, "the CLI ended before asking"
+        seen += chunk
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)  # stdin stays open: Ctrl-C must not wait for a line
+    assert proc.returncode == 130
+    assert "printer is idle again" in seen + err
+    assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
+    assert run_cli("xyz", "-d", dev, "home").returncode == 0
+
+
 def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Path) -> None:
     sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
     dev = device(sim.url)
@@ -158,6 +187,20 @@ def test_faulty_printers(simulator: SimulatorStarter, tmp_path: Path) -> None:
     assert "did not receive the whole file" in result.stderr
     unreachable = run_cli("xyz", "-d", "127.0.0.1:1", "status")
     assert unreachable.returncode == 8
+
+
+@pytest.mark.parametrize("fault", ["heater-failure", "file-rejected"])
+def test_a_failed_job_never_reads_finished(simulator: SimulatorStarter, tmp_path: Path, fault: str) -> None:
+    src = tmp_path / "part.gcode"
+    src.write_bytes(GCODE * 20)
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--fault", fault)
+    for json_flag in ((), ("--json",)):
+        result = run_cli(*json_flag, "xyz", "-d", device(sim.url), "print", str(src))
+        assert result.returncode == 7, result.stderr
+        assert "device error" in result.stderr
+        assert "print finished" not in result.stdout + result.stderr
+        assert "9509" not in result.stdout
+        run_cli("xyz", "-d", device(sim.url), "acknowledge")
 
 
 def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> None:
@@ -227,3 +270,45 @@ def test_wifi_scan_plus_limits_and_a_wrong_device(simulator: SimulatorStarter) -
     assert "not an XYZv3 printer" in wrong.stderr
     assert "SSH-2.0" in wrong.stderr
     assert "Traceback" not in wrong.stderr
+
+
+def _join_on_a_terminal(dev: str, ssid: str, typed: bytes) -> tuple[int, str]:
+    """`wifi join` with a pty as its stdin (the password prompt needs a terminal); returns exit code, stderr."""
+    master, slave = os.openpty()
+    try:
+        # a new session has no /dev/tty, so the prompt goes to stderr and the answer is read from the pty
+        proc = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", dev, "wifi", "join", ssid],
+                                env=cli_env(), stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                start_new_session=True)
+        assert proc.stderr is not None
+        seen = b""
+        while typed and b"Password" not in seen:
+            chunk = proc.stderr.read(1)
+            if not chunk:
+                break
+            seen += chunk
+        if b"Password" in seen:
+            os.write(master, typed)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        os.close(slave)
+        os.close(master)
+    return proc.returncode, (out + seen + err).decode()
+
+
+def test_wifi_join_password_comes_from_the_option_or_a_terminal(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
+    dev = device(sim.url)
+    no_terminal = run_cli("xyz", "-d", dev, "wifi", "join", "MYNET", input_text="")
+    assert no_terminal.returncode == 4
+    assert "no password given (use --password)" in no_terminal.stderr
+    assert "Warning" not in no_terminal.stderr
+    code, text = _join_on_a_terminal(dev, "", b"\n")
+    assert code == 4
+    assert "Wi-Fi network name" in text
+    assert "Password" not in text  # refused before asking
+    code, text = _join_on_a_terminal(dev, "MYNET", b"secret-key\n")
+    assert code == 0, text
+    assert "joining MYNET" in text
+    given = run_cli("xyz", "-d", dev, "wifi", "join", "MYNET", "--password", "")
+    assert given.returncode == 0, given.stderr

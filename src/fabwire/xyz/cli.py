@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import sys
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -55,7 +57,21 @@ async def _ask(message: str) -> None:
     """Wait for Enter on stdin; end of input means nobody is there to confirm."""
     sys.stderr.write(f"{message} [press Enter] ")
     sys.stderr.flush()
-    line = await asyncio.to_thread(sys.stdin.readline)
+    loop = asyncio.get_running_loop()
+    answer: asyncio.Future[str] = loop.create_future()
+
+    def settle(line: str) -> None:
+        if not answer.done():
+            answer.set_result(line)
+
+    def read() -> None:
+        line = sys.stdin.readline()
+        with contextlib.suppress(RuntimeError):  # the loop is gone after Ctrl-C
+            loop.call_soon_threadsafe(settle, line)
+
+    # a daemon thread, so Ctrl-C does not wait for a line that may never come
+    threading.Thread(target=read, daemon=True).start()
+    line = await answer
     if not line:
         raise InputError("no confirmation on standard input; the step was stopped")
 
@@ -246,7 +262,8 @@ def _progress_note(dctx: DeviceContext) -> Callable[[Status], None]:
 @pass_device
 def calibrate(dctx: DeviceContext) -> None:
     """Level the bed with the detector (you lower and raise it when asked)."""
-    values = _with_printer(dctx, lambda pr: pr.calibrate(_ask, on_status=_progress_note(dctx)))
+    values = _with_printer(dctx, lambda pr: pr.calibrate(_ask, on_status=_progress_note(dctx),
+                                                         on_stop=dctx.output.note))
     dctx.output.result({"calibration": list(values)}, f"calibration values: {', '.join(map(str, values))}")
 
 
@@ -396,12 +413,16 @@ def wifi_scan(dctx: DeviceContext) -> None:
 
 @wifi.command("join")
 @click.argument("ssid")
-@click.option("--password", prompt=True, hide_input=True, help="Network password.")
+@click.option("--password", help="Network password (empty for an open network); asked for on a terminal if left out.")
 @click.option("--channel", type=click.IntRange(0, 165), default=0, show_default=True)
 @pass_device
-def wifi_join(dctx: DeviceContext, ssid: str, password: str, channel: int) -> None:
+def wifi_join(dctx: DeviceContext, ssid: str, password: str | None, channel: int) -> None:
     """Join a Wi-Fi network (do this over USB)."""
     userinput.ssid(ssid)
+    if password is None:
+        if not sys.stdin.isatty():
+            raise InputError("no password given (use --password)")
+        password = str(click.prompt("Password", default="", hide_input=True, show_default=False))
     userinput.wifi_password(password)
     _with_printer(dctx, lambda pr: pr.join_wifi(ssid, password, channel))
     dctx.output.result({"ok": True, "ssid": ssid}, f"joining {ssid}")

@@ -500,12 +500,12 @@ class XYZPrinter(Maintenance):
         checking_since: float | None = None
         while True:
             status = await self.status()
-            if on_status:
-                on_status(status)
             words = status.error_words
-            if words:
+            if words:  # raised before it is shown: a failed job's state (often 9509) must not read "finished"
                 word = words[0]
                 raise DeviceError(f"0x{word.raw:08X}", word.meaning, action="the job stopped")
+            if on_status:
+                on_status(status)
             if status.state_code == FILE_CHECK:
                 checking_since = self.clock() if checking_since is None else checking_since
                 if self.clock() - checking_since > FILE_CHECK_LIMIT:

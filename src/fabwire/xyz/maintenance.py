@@ -8,7 +8,7 @@ import asyncio
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
-from fabwire.errors import DeviceError, LinkTimeout, RemoteProtocolError
+from fabwire.errors import DeviceError, FabwireError, LinkTimeout, RemoteProtocolError
 from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
 from fabwire.xyz.protocol import Reply
@@ -114,21 +114,40 @@ class Maintenance:
         return await self._wait_state(lambda s: s.idle, "finishing the nozzle clean", 30.0, on_status)
 
     async def calibrate(self, prompt: Prompt, *, on_status: StatusCallback | None = None,
-                        limit: float = 240.0) -> tuple[int, ...]:
-        """Bed calibration with the detector; `prompt` asks the user to lower, then raise it."""
+                        on_stop: Callable[[str], None] | None = None, limit: float = 240.0) -> tuple[int, ...]:
+        """Bed calibration with the detector; `prompt` asks the user to lower, then raise it.
+
+        Returns the 9 bed readings. The flow has no cancel op: a host ends it with `calibratejr:release` at any
+        step (XYZware sends it before the detector is raised; the printer goes to 9511), so an unconfirmed or
+        interrupted calibration is released that way before the error (InputError, DeviceError, cancellation)
+        goes on. Source: miniMover/XYZware calibratejr sequence, state 9535,40-44."""
         await self.require_idle("calibrate", p.Flow("calibratejr", "new"))
         await self._flow("calibratejr", "new")
-        await self._wait_state(lambda s: s.state == (9535, 41), "starting calibration", limit, on_status)
-        await prompt("Lower the calibration detector, then confirm")
-        await self._flow("calibratejr", "detectorok")
-        await self._wait_state(lambda s: s.state == (9535, 44), "measuring the bed", limit, on_status)
-        reply = await self.request(p.Flow("calibratejr", "getdata"))
-        stat = p.parse_stat_line(reply.lines[0]) if reply.lines else None
-        values = stat.values if stat else ()
-        await prompt("Raise the calibration detector, then confirm")
+        try:
+            await self._wait_state(lambda s: s.state == (9535, 41), "starting calibration", limit, on_status)
+            await prompt("Lower the calibration detector, then confirm")
+            await self._flow("calibratejr", "detectorok")
+            await self._wait_state(lambda s: s.state == (9535, 44), "measuring the bed", limit, on_status)
+            reply = await self.request(p.Flow("calibratejr", "getdata"))
+            stat = p.parse_stat_line(reply.lines[0]) if reply.lines else None
+            values = stat.values if stat else ()
+            await prompt("Raise the calibration detector, then confirm")
+        except BaseException:
+            released = await self._release_calibration()
+            if released and on_stop is not None:
+                on_stop("calibration stopped: the detector flow was released and the printer is idle again")
+            raise
         await self._flow("calibratejr", "release")
         await self._wait_state(lambda s: s.idle, "finishing calibration", 30.0, on_status)
         return values
+
+    async def _release_calibration(self) -> bool:
+        """End a calibration flow early (`calibratejr:release`, back to 9511); False if the printer did not."""
+        try:
+            await self.request(p.Flow("calibratejr", "release"))
+            return (await self._wait_state(lambda s: s.idle, "stopping calibration", 30.0)).idle
+        except FabwireError:
+            return False
 
     # -------------------------------------------------------------------------------------------- config
 
