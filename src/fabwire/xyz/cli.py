@@ -206,7 +206,8 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
 
             return await printer.print_file(file, model=chosen, progress=uploaded,
                                             on_status=lambda st: view.show(st, {"event": "status"}),
-                                            wait=not no_wait, name=upload_name, save_to_sd=save_to_sd)
+                                            wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
+                                            on_note=view.note)
 
     try:
         final = _with_printer(dctx, run)
