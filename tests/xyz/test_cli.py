@@ -203,6 +203,23 @@ def test_a_failed_job_never_reads_finished(simulator: SimulatorStarter, tmp_path
         run_cli("xyz", "-d", device(sim.url), "acknowledge")
 
 
+def test_a_stuck_file_check_is_reported_while_waiting_and_in_printer_time(tmp_path: Path) -> None:
+    src = tmp_path / "part.gcode"
+    src.write_bytes(GCODE)
+    # 120 printer seconds of checking take about 1.2 s at speed 100: the limit follows the simulator's clock
+    result = run_cli("xyz", "-d", "sim://xyz?speed=100&fault=stuck", "print", str(src), timeout=50)
+    assert result.returncode == 9, result.stderr
+    assert "still checking the file" in result.stderr
+    assert "checking the file for over 120 s" in result.stderr
+
+
+@pytest.mark.parametrize("distance", ["nan", "inf", "-inf", "0", "301", "-1e9"])
+def test_a_jog_the_printer_cannot_make_is_bad_input(distance: str) -> None:
+    result = run_cli("xyz", "-d", "127.0.0.1:1", "jog", "x", distance)  # refused before any connection
+    assert result.returncode == 4, result.stderr
+    assert "jog distance" in result.stderr
+
+
 def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> None:
     port = free_port_on("127.0.0.2", "127.0.0.3")
     a = simulator("xyz", "--listen", f"127.0.0.2:{port}", "--model", "miniMaker")

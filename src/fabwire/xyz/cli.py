@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import sys
 import threading
 import time
@@ -21,6 +22,7 @@ from fabwire.simserve import server_options
 from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.commands import JOG_LIMIT
 from fabwire.xyz.live import JobView, now_iso
 from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
@@ -206,7 +208,8 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
 
             return await printer.print_file(file, model=chosen, progress=uploaded,
                                             on_status=lambda st: view.show(st, {"event": "status"}),
-                                            wait=not no_wait, name=upload_name, save_to_sd=save_to_sd)
+                                            wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
+                                            on_note=view.note)
 
     try:
         final = _with_printer(dctx, run)
@@ -242,6 +245,8 @@ _simple("acknowledge", "Confirm the finished print was removed (leave 'print fin
 @pass_device
 def jog(dctx: DeviceContext, axis: str, distance: float) -> None:
     """Move AXIS by DISTANCE mm (negative = towards the minimum)."""
+    if not (math.isfinite(distance) and 0 < abs(distance) <= JOG_LIMIT):
+        raise InputError(f"jog distance must be a non-zero number of mm up to {JOG_LIMIT}, not {distance:g}")
     _with_printer(dctx, lambda pr: pr.jog(axis.lower(), distance))
     dctx.output.result({"ok": True, "axis": axis, "distance": distance}, f"moved {axis} by {distance:g} mm")
 

@@ -49,8 +49,8 @@ REPLY_ERRORS = {
     7: "the printer is busy finishing a job",
 }
 TRANSIENT_RETRIES = 20
-FILE_CHECK_LIMIT = 120.0
-"""Seconds of "checking file" (9520) after which a print is reported stuck (printers check in seconds)."""
+FILE_CHECK_LIMIT = 120.0  # printer seconds of "checking file" (9520) before a print is stuck; real checks take seconds
+CHECKING_NOTE_EVERY = 15.0  # seconds between "still checking the file" notes
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
 _FIRMWARE_HEADER = re.compile(rb"([A-Za-z0-9]{10})\+([0-9][0-9A-Za-z.]*)")
@@ -73,6 +73,12 @@ def link_for_address(address: str) -> Link | None:
     if address.startswith("sim://"):
         return Link.WIFI if dict(parse_qsl(urlsplit(address).query)).get("link") == "wifi" else Link.SERIAL
     return None
+
+
+def time_scale_for(address: str) -> float:
+    """Printer seconds per wall second: N for an in-process `sim://xyz?speed=N`, else 1 (the wire does not tell)."""
+    speed = dict(parse_qsl(urlsplit(address).query)).get("speed", "1") if address.startswith("sim://") else "1"
+    return float(speed) if re.fullmatch(r"\d+(\.\d*)?", speed) and float(speed) > 0 else 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +105,7 @@ class XYZPrinter(Maintenance):
         self.timeout = timeout
         self.clock = clock
         self.reader = ReplyReader(self.link)
+        self.time_scale = time_scale_for(transport.url)  # printer seconds per wall second
         self.last_status: Status = Status()
         self.stats: deque[ActionStat] = deque(maxlen=200)
         self._wake = asyncio.Event()
@@ -140,6 +147,7 @@ class XYZPrinter(Maintenance):
         link = Link(settings.link) if settings.link != "auto" else link_for_address(address) if address else None
         client = cls(transport, link=link, timeout=settings.reply_timeout or max(settings.timeout, 2.0))
         client.address, client.settings = address, settings
+        client.time_scale = time_scale_for(address or transport.url)
         client.reopen = opened.reopen if address else None
         return client
 
@@ -451,7 +459,7 @@ class XYZPrinter(Maintenance):
     async def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
                          wait: bool = True, name: str | None = None, save_to_sd: bool = False,
-                         start_limit: float = 30.0) -> Status:
+                         start_limit: float = 30.0, on_note: Callable[[str], None] | None = None) -> Status:
         """Convert if needed, upload, start and (unless wait=False) follow the job to its end.
 
         `name` is the upload name (default: a safe one derived from the file name). The job counts as started
@@ -476,7 +484,7 @@ class XYZPrinter(Maintenance):
             on_status(status)
         if not wait:
             return status
-        return await self.follow_job(on_status)
+        return await self.follow_job(on_status, on_note=on_note)
 
     async def _await_job_start(self, limit: float = 30.0) -> Status:
         """The first status that shows the job under way; a printer still idle after `limit` s never took it."""
@@ -493,11 +501,13 @@ class XYZPrinter(Maintenance):
                                   action="nothing is printing; check the printer's screen and send the file again")
             await asyncio.sleep(self.poll_interval)
 
-    async def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None) -> Status:
-        """Poll until the job ends (9509 print done or back to idle); a printer error raises DeviceError, and so
-        does a file check (9520) that lasts over FILE_CHECK_LIMIT s."""
+    async def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None,
+                         on_note: Callable[[str], None] | None = None) -> Status:
+        """Poll until the job ends (9509 done or idle); a printer error is DeviceError, a file check (9520) over
+        FILE_CHECK_LIMIT printer seconds LinkTimeout, `on_note` told every CHECKING_NOTE_EVERY s meanwhile."""
         end = None if limit is None else self.clock() + limit
         checking_since: float | None = None
+        noted = 0  # notes given so far
         while True:
             status = await self.status()
             words = status.error_words
@@ -508,11 +518,16 @@ class XYZPrinter(Maintenance):
                 on_status(status)
             if status.state_code == FILE_CHECK:
                 checking_since = self.clock() if checking_since is None else checking_since
-                if self.clock() - checking_since > FILE_CHECK_LIMIT:
+                checking = (self.clock() - checking_since) * self.time_scale
+                if checking > FILE_CHECK_LIMIT:
                     raise LinkTimeout(f"the printer has been checking the file for over {FILE_CHECK_LIMIT:g} s "
                                       "(it usually takes seconds); stop it with `fabwire xyz cancel` or on its panel")
+                if on_note is not None and checking >= (noted + 1) * CHECKING_NOTE_EVERY:
+                    noted = int(checking // CHECKING_NOTE_EVERY)
+                    on_note(f"the printer is still checking the file ({checking:.0f} s; limit {FILE_CHECK_LIMIT:g} s)")
             else:
                 checking_since = None
+                noted = 0
             if status.state_code in (PRINT_DONE, IDLE):
                 return status
             if end is not None and self.clock() > end:
