@@ -72,7 +72,7 @@ class PlanFigures:
             "pen_down_length_mm": round(self.pen_down_length / UNITS_PER_MM, 2),
             "pen_up_travel_mm": round(self.pen_up_travel / UNITS_PER_MM, 2),
             "pen_lifts": self.pen_lifts,
-            "estimated_seconds": round(self.estimated_seconds, 2),
+            "estimated_s": round(self.estimated_seconds, 2),
         }
 
 
