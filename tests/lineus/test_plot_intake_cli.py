@@ -151,3 +151,13 @@ def test_an_oversized_drawing_is_refused_holding_no_more_than_the_limit(monkeypa
     finally:
         tracemalloc.stop()
     assert peak < limit * 1.5  # the limit and a piece or two: never the whole expansion, never a second copy
+
+
+@pytest.mark.parametrize(("text", "illegible"), [("hello world", False), ("a much longer line " * 4, True),
+                                                 ("x" * 3000, True), ("\n".join(["line of text"] * 6), False)])
+def test_text_fitted_too_small_to_read_is_called_out(tmp_path: Path, text: str, illegible: bool) -> None:
+    result = run_cli("lineus", "text", text, "--dry-run", env=cli_env(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert ("too small to read" in result.stderr) is illegible
+    if illegible:
+        assert result.stderr.count("\n") == 1  # one line of warning before the figures on stdout
