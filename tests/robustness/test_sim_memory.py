@@ -25,6 +25,7 @@ PAGE = os.sysconf("SC_PAGE_SIZE")
 GROWTH_LIMIT_MB = 16.0
 """What the last round may add over the second: history caps are reached during the first rounds."""
 TOTAL_LIMIT_MB = 150.0
+SOAK_MINUTES = float(os.environ.get("FABWIRE_SOAK_MINUTES", "5"))
 
 
 def rss_mb(pid: int) -> float:
@@ -135,7 +136,7 @@ def test_a_simulator_under_repeated_hostile_traffic_stays_the_same_size(simulato
 
 
 @pytest.mark.soak
+@pytest.mark.timeout(SOAK_MINUTES * 60 + 300)  # the rounds run for the minutes asked, then a last round and the checks
 @pytest.mark.parametrize("kind", sorted(ROUNDS))
 def test_soak_a_simulator_stays_the_same_size_for_minutes(simulator: SimulatorStarter, kind: str) -> None:
-    minutes = float(os.environ.get("FABWIRE_SOAK_MINUTES", "5"))
-    _check(kind, _run(simulator, kind, rounds=3, minutes=minutes))
+    _check(kind, _run(simulator, kind, rounds=3, minutes=SOAK_MINUTES))
