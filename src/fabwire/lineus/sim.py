@@ -39,7 +39,7 @@ SAVE_BLOCKED = ("M30", "M171", "M374", "M997")
 """Codes the firmware refuses while an M28 recording is open."""
 
 HISTORY = 100_000
-"""Recent messages kept for instrumentation (bounded, so a long-running simulator stays small)."""
+"""Recent messages, and points of ink, kept for instrumentation (bounded, so a long-running simulator stays small)."""
 INPUT_WINDOW = p.MAX_LINE
 """Bytes taken off a connection at a time. The robot reads a command only when its motion queue can take it, and
 what a client sent beyond that is lost when it disconnects; reading a small window keeps the simulator the same."""
@@ -95,7 +95,7 @@ class LineUsSim:
         self.clock = Clock(self.options.speed)
         guards = self.options.guards_body
         self.arm = Arm(self.clock, kin.MotionModel(step_time=self.options.step_time, pen_time=self.options.pen_time),
-                       Ink(lift_over_notch=guards, detect_collisions=not guards))
+                       Ink(lift_over_notch=guards, detect_collisions=not guards, keep=HISTORY))
         self.files: dict[int, str] = {1: sample_drawing()} if files is None else dict(files)
         self.known_wifi: dict[str, str] = {"fabwire-lab": "lab-password"}
         self.visible_wifi: list[str] = ["fabwire-lab", "neighbours-wifi"]
