@@ -4,6 +4,11 @@ One `LineUsSim` is one machine: an arm with a single motion queue (depth 1 behin
 every connection, stored drawings, name and Wi-Fi lists. Each connection keeps its own G54 transform and M28
 recording. Moves take the time `kinematics.MotionModel` gives them (divided by the speed factor), and by default
 a move's reply is held until the move has finished, as the firmware does.
+
+Like the robot, which takes a command off the socket only when its motion queue has room, a connection's commands
+are taken a small window at a time and each connection may owe only a few replies. A client that goes away takes
+the rest of what it sent with it: the move under way and the one queued behind it finish, and nothing else it sent
+delays the next client (Line-us-Programming README, "Timing": at most one outstanding command).
 """
 
 from __future__ import annotations
