@@ -28,8 +28,10 @@ def run() -> None:
             sys.stdout.write(f"fabwire, version {__version__}\n")
             code = 0
         else:
-            from fabwire.cli import main
+            from fabwire.importing import collection_paused
 
+            with collection_paused():
+                from fabwire.cli import main
             if _catching:  # from here on commands clean up on KeyboardInterrupt (links, partial files)
                 signal.signal(signal.SIGINT, signal.default_int_handler)
             code = main()

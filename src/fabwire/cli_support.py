@@ -15,15 +15,16 @@ import logging
 import os
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
-from dataclasses import dataclass, field
 from functools import update_wrapper
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import click
+import msgspec
 
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
+from fabwire.importing import collection_paused
 from fabwire.transport.faults import FaultPlan
 
 if TYPE_CHECKING:
@@ -35,22 +36,21 @@ T = TypeVar("T")
 OptionFactory = Callable[[], click.Option]
 
 
-@dataclass
-class App:
+class App(msgspec.Struct):
     """Options of the whole command line, filled in wherever they appear on it."""
 
-    output: Output = field(default_factory=Output)
+    output: Output = msgspec.field(default_factory=Output)
     verbose: int = 0
     debug: bool = False
     device: str | None = None
     trace: Path | None = None
     timeout: float | None = None
     faults: FaultPlan | None = None
-    link_options: dict[str, Any] = field(default_factory=dict)
+    link_options: dict[str, Any] = msgspec.field(default_factory=dict)
     """A device's own link options given on the command line (e.g. the MMU's speed), by settings field name."""
-    early_link_options: dict[str, str] = field(default_factory=dict)
+    early_link_options: dict[str, str] = msgspec.field(default_factory=dict)
     """Link options given before any subcommand: flag -> the device kind they belong to."""
-    server_options: dict[str, Any] = field(default_factory=dict)
+    server_options: dict[str, Any] = msgspec.field(default_factory=dict)
     """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simserve`."""
 
     @property
@@ -260,7 +260,8 @@ class LazyGroup(SharingGroup):
         if cmd_name in self._lazy and self._available(cmd_name):
             module_name, _, attr = self._lazy[cmd_name].partition(":")
             try:
-                command = getattr(importlib.import_module(module_name), attr)
+                with collection_paused():
+                    command = getattr(importlib.import_module(module_name), attr)
             except ImportError as exc:
                 from fabwire.extras import missing_extra
 
@@ -274,8 +275,7 @@ class LazyGroup(SharingGroup):
         return super().get_command(ctx, cmd_name)
 
 
-@dataclass
-class DeviceContext:
+class DeviceContext(msgspec.Struct):
     """A device group's view of the command line, read by its subcommands."""
 
     app: App

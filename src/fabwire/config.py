@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args, get_type_hints
 
@@ -73,8 +72,7 @@ SCHEMAS: dict[str, type[AnySettings]] = {"xyz": XYZSettings, "lineus": LineUsSet
 OptionValue = str | int | float | bool | list[str]
 
 
-@dataclass(frozen=True, slots=True)
-class NamedDevice:
+class NamedDevice(msgspec.Struct, frozen=True):
     name: str
     kind: DeviceKind
     endpoint: Endpoint
@@ -241,13 +239,12 @@ def load_devices(path: Path | None = None) -> dict[str, NamedDevice]:
     return parse_devices(text, path)
 
 
-@dataclass(frozen=True, slots=True)
-class Target:
+class Target(msgspec.Struct, frozen=True):
     """Where a command goes: the address, and the settings a named device carries."""
 
     endpoint: Endpoint
     name: str = ""
-    options: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, Any] = msgspec.field(default_factory=dict)
 
 
 def _looks_like_address(text: str) -> bool:

@@ -23,7 +23,10 @@ def _default(value: object) -> object:
 
 
 def _console(stderr: bool) -> Console:
-    from rich.console import Console
+    from fabwire.importing import collection_paused
+
+    with collection_paused():
+        from rich.console import Console
 
     # Markup and emoji codes off: device names, SSIDs and file names are printed as they are, never read as rich markup.
     return Console(stderr=True, highlight=False, markup=False, emoji=False) if stderr else \

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import msgspec
 
 
-@dataclass(frozen=True, slots=True)
-class DeviceKind:
+class DeviceKind(msgspec.Struct, frozen=True):
     name: str
     title: str
     default_port: int | None

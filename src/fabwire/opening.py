@@ -17,10 +17,11 @@ import logging
 import os
 import time
 from collections.abc import Awaitable, Callable, Coroutine, Generator
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Generic, Protocol, Self, TypeVar
+
+import msgspec
 
 from fabwire.config import AnySettings, Target, resolve_target, validate_settings
 from fabwire.devices import DeviceKind
@@ -44,8 +45,7 @@ C = TypeVar("C", bound=Closable)
 DeviceTarget = str | Endpoint | Transport | None
 
 
-@dataclass
-class DeviceLink:
+class DeviceLink(msgspec.Struct):
     """What a client needs to (re)open its link: the resolved address, its settings and the wrappers."""
 
     kind: DeviceKind
@@ -55,7 +55,7 @@ class DeviceLink:
     name: str = ""
     trace: Path | None = None
     faults: FaultPlan | None = None
-    _writer: TraceWriter | None = field(default=None, repr=False)
+    _writer: TraceWriter | None = None
 
     @property
     def timeout(self) -> float:

@@ -9,15 +9,14 @@ import logging
 import signal
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import click
+import msgspec
 
 from fabwire.cli_support import App
 from fabwire.errors import InputError
-from fabwire.logsink import log_in_background
 from fabwire.transport.base import Transport
 from fabwire.transport.limits import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS, ConnectionLimits
 from fabwire.transport.registry import DeviceServer
@@ -27,8 +26,7 @@ from fabwire.transport.tcp import serve_tcp
 sim_log = logging.getLogger("fabwire.sim")
 
 
-@dataclass(frozen=True, slots=True)
-class ListenAddress:
+class ListenAddress(msgspec.Struct, frozen=True):
     host: str
     port: int
 
@@ -72,8 +70,7 @@ def announce(where: str, kind: str, json_mode: bool) -> None:
     sys.stdout.flush()
 
 
-@dataclass
-class ServeSettings:
+class ServeSettings(msgspec.Struct):
     """The simulator command line's shared options (`fabwire sim KIND --max-connections … --trace …`)."""
 
     max_connections: int = DEFAULT_MAX_CONNECTIONS
@@ -155,6 +152,8 @@ async def serve(
 
     The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS).
     """
+    from fabwire.logsink import log_in_background  # only serving needs the writer thread
+
     log_in_background()  # a stderr nobody reads must not freeze the simulator
     settings = _settings()
     limits = ConnectionLimits(settings.max_connections, settings.idle_timeout)

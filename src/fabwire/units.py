@@ -30,6 +30,15 @@ def duration(seconds: float | None) -> str:
     return f"{minutes}m {secs:02d}s" if minutes else f"{secs}s"
 
 
+def elapsed(seconds: float | None) -> str:
+    """A measured time, which is often short: `40ms`, `7.6s`, then as `duration` from 10 s on."""
+    if seconds is None or not math.isfinite(seconds):
+        return ABSENT
+    if round(seconds * 1000) < 1000:
+        return f"{max(0, round(seconds * 1000))}ms"
+    return f"{seconds:.1f}s" if round(seconds, 1) < 10 else duration(seconds)
+
+
 def filament(mm: float | None) -> str:
     """A filament length given in mm, shown in metres with two decimals: `0.05 m`, `200.00 m`."""
     return ABSENT if mm is None else f"{mm / 1000:.2f} m"

@@ -5,14 +5,16 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from clitools import cli_env
+from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.console import Output
 
 SVG = ('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
@@ -60,3 +62,33 @@ def test_any_string_prints_as_one_valid_utf8_json_line(key: str, value: str, raw
     assert data["file"] == value
     assert data["names"] == {key: [value]}
     assert data["data"] == raw.decode("latin-1")
+
+
+NON_SI = re.compile(r"_(?:seconds|secs?|minutes|mins?|hours|millis|milliseconds|cm|m_left|percent_s)$")
+"""Key endings that would name a unit other than the SI one fabwire uses (`_s`, `_mm`, `_c`, `_percent`)."""
+
+
+def _keys(value: object) -> Iterator[str]:
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield key
+            yield from _keys(item)
+    elif isinstance(value, list):
+        for item in value:
+            yield from _keys(item)
+
+
+def test_json_keys_name_si_units(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    svg = tmp_path / "square.svg"
+    svg.write_text(SVG)
+    xyz = simulator("xyz", "--listen", "127.0.0.1:0").url
+    mmu = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "50").url
+    documents = []
+    for args in (("lineus", "preview", str(svg)), ("xyz", "-d", xyz, "status"), ("xyz", "-d", xyz, "zoffset"),
+                 ("xyz", "-d", xyz, "energy", "3"), ("mmu", "-d", mmu, "--speed", "50", "status")):
+        done = run_cli("--json", *args, env=cli_env(tmp_path))
+        assert done.returncode == 0, (args, done.stderr)
+        documents.append(json.loads(done.stdout))
+    keys = {key for document in documents for key in _keys(document)}
+    assert {"estimated_s", "elapsed_s", "zoffset_mm", "energy_saving_s", "extruder_c"} <= keys
+    assert sorted(k for k in keys if NON_SI.search(k)) == []

@@ -127,7 +127,7 @@ def test_a_config_error_is_one_line_with_the_fix(tmp_path: Path) -> None:
 def test_the_zoffset_is_typed_in_millimetres(tmp_path: Path) -> None:
     result = run_cli("xyz", "zoffset", "-0.12mm", "-d", XYZ_SIM, "--json", env=cli_env(tmp_path))
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout) == {"zoffset": -12}
+    assert json.loads(result.stdout) == {"zoffset_mm": -0.12}
     shown = run_cli("xyz", "zoffset", "2.45", "-d", XYZ_SIM, env=cli_env(tmp_path))
     assert shown.stdout.strip() == "z offset 2.45 mm"
     bad = run_cli("xyz", "zoffset", "2.45cm", "-d", XYZ_SIM, env=cli_env(tmp_path))

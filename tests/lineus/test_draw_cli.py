@@ -71,7 +71,7 @@ def test_preview_json_and_pictures(tmp_path: Path) -> None:
     assert figures["strokes"] == expected["strokes"]
     assert figures["segments"] == expected["segments"]
     assert figures["pen_down_length_mm"] == pytest.approx(expected["pen_down_length_mm"], rel=1e-3)
-    assert figures["estimated_seconds"] > 0
+    assert figures["estimated_s"] > 0
     assert ET.parse(svg_out).getroot().tag.endswith("svg")
     assert png_out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -106,7 +106,7 @@ def test_dry_run_estimates_without_a_device(tmp_path: Path) -> None:
     result = run_cli("lineus", "text", "Hi", "--dry-run", env=cli_env(tmp_path))
     assert result.returncode == 0, result.stderr
     seconds = json.loads(run_cli("--json", "lineus", "text", "Hi", "--dry-run", env=cli_env(tmp_path)).stdout)
-    assert f"estimated drawing time {units.duration(seconds['estimated_seconds'])}\n" in result.stdout
+    assert f"estimated drawing time {units.duration(seconds['estimated_s'])}\n" in result.stdout
     assert re.search(r"^estimated drawing time (\d+m \d\ds|\d+s)$", result.stdout, re.MULTILINE), result.stdout
 
 

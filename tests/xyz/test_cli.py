@@ -90,8 +90,11 @@ def test_settings_commands(simulator: SimulatorStarter) -> None:
     assert data["autolevel"] is False
     assert (data["zoffset_mm"], data["name"], data["language"]) == (-0.12, "Lab", "fr")
     assert data["raw"]["z"] == "-12"
+    energy = run_cli("--json", "xyz", "-d", dev, "energy", "6")
+    assert json.loads(energy.stdout) == {"energy_saving_s": 360}
+    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == "energy saving after 6m 00s idle\n"
     up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
-    assert json.loads(up.stdout) == {"zoffset": -11}
+    assert json.loads(up.stdout) == {"zoffset_mm": -0.11}
     refused = run_cli("xyz", "-d", dev, "restore-defaults")
     assert refused.returncode == 4
     assert "--yes" in refused.stderr

@@ -12,6 +12,8 @@ from typing import Any
 from rich.table import Table
 from rich.text import Text
 
+from fabwire import units
+
 
 @dataclass
 class Step:
@@ -76,7 +78,7 @@ class Summary:
         }
 
     def table(self) -> Table:
-        table = Table(title=f"fabwire demo — {self.total_seconds:.1f} s at speed ×{self.speed:g}",
+        table = Table(title=f"fabwire demo — {units.elapsed(self.total_seconds)} at speed ×{self.speed:g}",
                       title_justify="left")
         table.add_column("device", style="bold")
         table.add_column("step")
@@ -87,7 +89,7 @@ class Summary:
             result = Text("ok") if step.ok else Text("failed", style="red")
             if step.detail:
                 result.append(f" — {step.detail}")
-            table.add_row(step.device, step.name, f"{step.seconds:.1f} s", result,
+            table.add_row(step.device, step.name, units.elapsed(step.seconds), result,
                           "\n".join(_shown(f) for f in step.files))
         return table
 

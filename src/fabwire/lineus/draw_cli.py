@@ -295,7 +295,7 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
     figures = plan.figures()
     dctx.output.result(
         {"file": name, "strokes": total, "drawn": total - first, "resumed_at": first,
-         "elapsed_seconds": round(elapsed, 2), "estimated_seconds": round(figures.estimated_seconds, 2)},
+         "elapsed_s": round(elapsed, 2), "estimated_s": round(figures.estimated_seconds, 2)},
         f"drew {total - first} of {total} strokes in {units.duration(elapsed)}",
     )
 

@@ -4,12 +4,13 @@ and the port the machine advertises is used unless one was given."""
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import os
 import re
 import socket
 from pathlib import Path
 from typing import Any
+
+import msgspec
 
 from fabwire.config import resolve_target
 from fabwire.devices import LINEUS
@@ -33,7 +34,7 @@ async def local_endpoint(endpoint: Endpoint, *, port_given: bool, wait: float) -
         return endpoint
     found = await resolve(endpoint.host, wait)
     if found is not None:
-        return dataclasses.replace(endpoint, host=found.address, port=endpoint.port if port_given else found.port)
+        return msgspec.structs.replace(endpoint, host=found.address, port=endpoint.port if port_given else found.port)
     try:
         await asyncio.get_running_loop().getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_STREAM)
     except (socket.gaierror, UnicodeError):

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import asyncio
 import random
-from dataclasses import dataclass, field
 from typing import Literal
+
+import msgspec
 
 from fabwire.errors import InputError, LinkClosed
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
@@ -16,8 +17,7 @@ from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 Side = Literal["both", "write", "read"]
 
 
-@dataclass(frozen=True, slots=True)
-class FaultPlan:
+class FaultPlan(msgspec.Struct, frozen=True):
     """What to do to the bytes; every field off by default."""
 
     chunk: int = 0
@@ -35,7 +35,7 @@ class FaultPlan:
     side: Side = "both"
     """Which direction the faults apply to, seen from the wrapped end."""
     seed: int = 0
-    extra: dict[str, str] = field(default_factory=dict)
+    extra: dict[str, str] = msgspec.field(default_factory=dict)
 
     @classmethod
     def parse(cls, text: str) -> FaultPlan:

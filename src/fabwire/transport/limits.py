@@ -11,7 +11,8 @@ import asyncio
 import contextlib
 import logging
 import time
-from dataclasses import dataclass
+
+import msgspec
 
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 
@@ -23,8 +24,7 @@ BUSY_FOR = 1.0
 """A connection with traffic in the last second is busy: it is never closed to make room."""
 
 
-@dataclass(frozen=True, slots=True)
-class ConnectionLimits:
+class ConnectionLimits(msgspec.Struct, frozen=True):
     max_connections: int = DEFAULT_MAX_CONNECTIONS
     idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT
     """Seconds without traffic before a connection is closed; None keeps quiet connections open."""

@@ -13,10 +13,11 @@ import json
 import logging
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Literal
+
+import msgspec
 
 from fabwire.errors import InputError, LinkClosed
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
@@ -28,8 +29,7 @@ FROM_DEVICE: Direction = "<"
 wire_log = logging.getLogger("fabwire.wire")
 
 
-@dataclass(frozen=True, slots=True)
-class TraceRecord:
+class TraceRecord(msgspec.Struct, frozen=True):
     t: float
     direction: Direction | None
     data: bytes = b""

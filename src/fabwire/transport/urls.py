@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import ipaddress
 import re
-from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, urlsplit
+
+import msgspec
 
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError
@@ -15,15 +16,14 @@ _WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_-]{1,63})*\.?$")
 
 
-@dataclass(frozen=True, slots=True)
-class Endpoint:
+class Endpoint(msgspec.Struct, frozen=True):
     """A parsed device address."""
 
     scheme: str  # "tcp", "serial" or "sim"
     host: str = ""
     port: int = 0
     path: str = ""
-    options: dict[str, str] = field(default_factory=dict)
+    options: dict[str, str] = msgspec.field(default_factory=dict)
 
     @property
     def url(self) -> str:

@@ -330,7 +330,7 @@ def zoffset(dctx: DeviceContext, value: str | None) -> None:
         return await pr.set_zoffset(number)
 
     result = _with_printer(dctx, run)
-    dctx.output.result({"zoffset": result}, f"z offset {units.zoffset(result)}")
+    dctx.output.result({"zoffset_mm": result / 100}, f"z offset {units.zoffset(result)}")
 
 
 @xyz.command()
@@ -368,7 +368,7 @@ def language(dctx: DeviceContext, code: str) -> None:
 def energy(dctx: DeviceContext, minutes: int) -> None:
     """Set energy saving: minutes of idle before the lights go off (0-9)."""
     _with_printer(dctx, lambda pr: pr.set_energy(minutes))
-    dctx.output.result({"energy": minutes}, f"energy saving {minutes} min")
+    dctx.output.result({"energy_saving_s": minutes * 60}, f"energy saving after {units.minutes(minutes)} idle")
 
 
 @xyz.command("restore-defaults")

@@ -15,11 +15,12 @@ import re
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable
-from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self, TypeVar
 from urllib.parse import parse_qsl, urlsplit
+
+import msgspec
 
 from fabwire.config import XYZSettings
 from fabwire.devices import XYZ
@@ -81,8 +82,7 @@ def time_scale_for(address: str) -> float:
     return float(speed) if re.fullmatch(r"\d+(\.\d*)?", speed) and float(speed) > 0 else 1.0
 
 
-@dataclass(frozen=True, slots=True)
-class UploadResult:
+class UploadResult(msgspec.Struct, frozen=True):
     name: str
     size: int
     blocks: int

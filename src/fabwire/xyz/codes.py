@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import msgspec
 
 STATE_NAMES: dict[int, str] = {
     9500: "print initial", 9501: "print heating", 9502: "printing", 9503: "print calibrating",
@@ -84,8 +84,7 @@ HEATER_TIMEOUT = 0x40000101
 DOOR_OPEN = 0x0401
 
 
-@dataclass(frozen=True, slots=True)
-class ErrorWord:
+class ErrorWord(msgspec.Struct, frozen=True):
     """One `e:` value decoded: where (extruder 1/2 or machine), the code, its name and meaning."""
 
     raw: int

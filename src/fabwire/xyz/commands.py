@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import enum
 import re
-from dataclasses import dataclass
 from typing import ClassVar
+
+import msgspec
 
 from fabwire.errors import LocalProtocolError
 
@@ -46,8 +47,7 @@ class Expect(enum.Enum):
 # --------------------------------------------------------------------------------------------------- commands
 
 
-@dataclass(frozen=True, slots=True)
-class Command:
+class Command(msgspec.Struct, frozen=True):
     """A host → printer message; `body` is the text after `XYZv3/`."""
 
     expect: ClassVar[Expect] = Expect.NOTHING
@@ -66,8 +66,7 @@ class Command:
 _LETTERS = re.compile(r"^[A-Za-z0-9]+$")
 
 
-@dataclass(frozen=True, slots=True)
-class Query(Command):
+class Query(Command, frozen=True):
     """`query=<letters>`; `a` asks for everything."""
 
     letters: str = "a"
@@ -90,8 +89,7 @@ def _on_off(value: bool) -> str:
     return "on" if value else "off"
 
 
-@dataclass(frozen=True, slots=True)
-class SetAutoLevel(Command):
+class SetAutoLevel(Command, frozen=True):
     on: bool
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -100,8 +98,7 @@ class SetAutoLevel(Command):
         return f"config=autolevel:{_on_off(self.on)}"
 
 
-@dataclass(frozen=True, slots=True)
-class SetBuzzer(Command):
+class SetBuzzer(Command, frozen=True):
     on: bool
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -110,8 +107,7 @@ class SetBuzzer(Command):
         return f"config=buzzer:{_on_off(self.on)}"
 
 
-@dataclass(frozen=True, slots=True)
-class GetZOffset(Command):
+class GetZOffset(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.NUMBER
 
     @property
@@ -123,8 +119,7 @@ ZOFFSET_RANGE = range(-2000, 2001)
 """Z offset in 1/100 mm; ±20 mm is far beyond any real machine's travel."""
 
 
-@dataclass(frozen=True, slots=True)
-class SetZOffset(Command):
+class SetZOffset(Command, frozen=True):
     value: int
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -138,8 +133,7 @@ class SetZOffset(Command):
         return f"config=zoffset:set[{self.value}]"
 
 
-@dataclass(frozen=True, slots=True)
-class NudgeZOffset(Command):
+class NudgeZOffset(Command, frozen=True):
     """`action=zoffset:up|down`: one 1/100 mm step; the firmware sends no reply."""
 
     up: bool
@@ -149,8 +143,7 @@ class NudgeZOffset(Command):
         return f"action=zoffset:{'up' if self.up else 'down'}"
 
 
-@dataclass(frozen=True, slots=True)
-class RestoreDefaults(Command):
+class RestoreDefaults(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.ACK
 
     @property
@@ -161,8 +154,7 @@ class RestoreDefaults(Command):
 LANGUAGES = ("en", "fr", "it", "de", "es", "jp")
 
 
-@dataclass(frozen=True, slots=True)
-class SetLanguage(Command):
+class SetLanguage(Command, frozen=True):
     code: str
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -175,8 +167,7 @@ class SetLanguage(Command):
         return f"config=lang:[{self.code}]"
 
 
-@dataclass(frozen=True, slots=True)
-class SetEnergy(Command):
+class SetEnergy(Command, frozen=True):
     minutes: int
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -194,8 +185,7 @@ def _bracket_safe(what: str, text: str, limit: int) -> None:
         raise LocalProtocolError(f"{what} must be 1-{limit} printable characters without brackets")
 
 
-@dataclass(frozen=True, slots=True)
-class SetName(Command):
+class SetName(Command, frozen=True):
     name: str
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -209,8 +199,7 @@ class SetName(Command):
         return f"config=name:[{self.name}]"
 
 
-@dataclass(frozen=True, slots=True)
-class SetLife(Command):
+class SetLife(Command, frozen=True):
     value: int
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -219,8 +208,7 @@ class SetLife(Command):
         return f"config=life:[{self.value}]"
 
 
-@dataclass(frozen=True, slots=True)
-class JoinWifi(Command):
+class JoinWifi(Command, frozen=True):
     ssid: str
     password: str
     channel: int = 0
@@ -238,8 +226,7 @@ class JoinWifi(Command):
         return f"config=ssid:[{self.ssid},{self.password},{self.channel}]"
 
 
-@dataclass(frozen=True, slots=True)
-class LeaveWifi(Command):
+class LeaveWifi(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.ACK
 
     @property
@@ -247,8 +234,7 @@ class LeaveWifi(Command):
         return "config=disconnectap"
 
 
-@dataclass(frozen=True, slots=True)
-class PlaceObject(Command):
+class PlaceObject(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.ACK
 
     @property
@@ -259,8 +245,7 @@ class PlaceObject(Command):
 PRINT_OPS = ("pause", "resume", "cancel", "complete")
 
 
-@dataclass(frozen=True, slots=True)
-class PrintControl(Command):
+class PrintControl(Command, frozen=True):
     op: str
     expect: ClassVar[Expect] = Expect.ACK
 
@@ -276,8 +261,7 @@ class PrintControl(Command):
 UNLOCK_SEQUENCE = (("a", 1591), ("b", 4387), ("c", 7264), ("e", 8046))
 
 
-@dataclass(frozen=True, slots=True)
-class UnlockFilament(Command):
+class UnlockFilament(Command, frozen=True):
     """One of `config=pda:[1591]` … `pde:[8046]`, sent in that order."""
 
     slot: str
@@ -293,8 +277,7 @@ class UnlockFilament(Command):
         return f"config=pd{self.slot}:[{self.code}]"
 
 
-@dataclass(frozen=True, slots=True)
-class TagInfo(Command):
+class TagInfo(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.DATA
 
     @property
@@ -302,8 +285,7 @@ class TagInfo(Command):
         return "config=taginfo"
 
 
-@dataclass(frozen=True, slots=True)
-class Signature(Command):
+class Signature(Command, frozen=True):
     """Firmware 3.x: `signature:"<32 raw bytes>"` (no `$`); the bytes may contain `\n`, so they are read by count."""
 
     expect: ClassVar[Expect] = Expect.LINE
@@ -313,8 +295,7 @@ class Signature(Command):
         return "config=signature:[get]"
 
 
-@dataclass(frozen=True, slots=True)
-class Uid(Command):
+class Uid(Command, frozen=True):
     """Firmware 3.x: `uid:"<4 raw bytes>"` then `$`."""
 
     expect: ClassVar[Expect] = Expect.DATA
@@ -352,8 +333,7 @@ CONTROL_VERB = "simctl"
 sends it; a real printer rejects it like any unknown command, so it cannot change what real clients see."""
 
 
-@dataclass(frozen=True, slots=True)
-class SimControl(Command):
+class SimControl(Command, frozen=True):
     """`simctl=fault:<name>:on|off`, `simctl=clear` or `simctl=faults`; answered `simctl:<faults>` + `$`."""
 
     op: str
@@ -368,8 +348,7 @@ class SimControl(Command):
         return f"{CONTROL_VERB}={self.op}"
 
 
-@dataclass(frozen=True, slots=True)
-class Home(Command):
+class Home(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.ACTION
 
     @property
@@ -380,8 +359,7 @@ class Home(Command):
 JOG_LIMIT = 300
 
 
-@dataclass(frozen=True, slots=True)
-class Jog(Command):
+class Jog(Command, frozen=True):
     axis: str
     distance: float
     expect: ClassVar[Expect] = Expect.ACTION
@@ -407,8 +385,7 @@ FLOW_OPS: dict[str, tuple[str, ...]] = {
 }
 
 
-@dataclass(frozen=True, slots=True)
-class Flow(Command):
+class Flow(Command, frozen=True):
     """`action=<flow>:<op>` for load, unload, cleannozzle and calibratejr."""
 
     flow: str
@@ -435,8 +412,7 @@ class Flow(Command):
 _NAME = re.compile(r"^[^,\r\n\x00]{1,128}$")
 
 
-@dataclass(frozen=True, slots=True)
-class Upload(Command):
+class Upload(Command, frozen=True):
     """`upload=<name>,<size>[,SaveToSD]`: a print file follows in blocks."""
 
     name: str
@@ -455,8 +431,7 @@ class Upload(Command):
         return f"upload={self.name},{self.size}" + (",SaveToSD" if self.save_to_sd else "")
 
 
-@dataclass(frozen=True, slots=True)
-class FirmwareUpload(Command):
+class FirmwareUpload(Command, frozen=True):
     """`firmware=<name>,<size>[,Downgrade]`: size excludes the image's 16-byte header."""
 
     name: str
@@ -475,8 +450,7 @@ class FirmwareUpload(Command):
         return f"firmware={self.name},{self.size}" + (",Downgrade" if self.downgrade else "")
 
 
-@dataclass(frozen=True, slots=True)
-class UploadDidFinish(Command):
+class UploadDidFinish(Command, frozen=True):
     expect: ClassVar[Expect] = Expect.FINISH
 
     @property
@@ -484,8 +458,7 @@ class UploadDidFinish(Command):
         return "uploadDidFinish"
 
 
-@dataclass(frozen=True, slots=True)
-class UnknownCommand(Command):
+class UnknownCommand(Command, frozen=True):
     """Text the device could not make sense of (kept so the simulator can log or refuse it)."""
 
     text: str = ""

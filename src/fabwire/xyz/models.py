@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import enum
 import re
-from dataclasses import dataclass
+
+import msgspec
 
 from fabwire.errors import InputError
 
@@ -28,8 +29,7 @@ class FileFormat(enum.Enum):
         return self is FileFormat.V2_ZIP
 
 
-@dataclass(frozen=True, slots=True)
-class PrinterModel:
+class PrinterModel(msgspec.Struct, frozen=True):
     model_number: str
     """What the printer reports in the `p:` status line, e.g. `dv1MX0A000`."""
     name: str

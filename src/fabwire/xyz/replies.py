@@ -6,7 +6,8 @@ is always an argument."""
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+
+import msgspec
 
 from fabwire.errors import LocalProtocolError
 from fabwire.xyz.commands import (
@@ -25,8 +26,7 @@ from fabwire.xyz.commands import (
 )
 
 
-@dataclass(frozen=True, slots=True)
-class Reply:
+class Reply(msgspec.Struct, frozen=True):
     """A complete reply to `command`: its lines with `$`, `ok` and stray noise removed."""
 
     command: Command
@@ -34,30 +34,27 @@ class Reply:
     acked: bool = False
 
 
-@dataclass(frozen=True, slots=True)
-class ErrorReply:
+class ErrorReply(msgspec.Struct, frozen=True):
     """`E<n>$` in reply to `command`."""
 
     command: Command
     code: int
 
 
-@dataclass(frozen=True, slots=True)
-class NoReply:
+class NoReply(msgspec.Struct, frozen=True):
     """The reply did not finish before the deadline; `lines` holds what did arrive."""
 
     command: Command
     lines: tuple[str, ...] = ()
 
 
-@dataclass(frozen=True, slots=True)
-class ActionStat:
+class ActionStat(msgspec.Struct, frozen=True):
     """`<name>:{"stat":"<word>",…}`: progress of an action flow, solicited or not (serial only)."""
 
     name: str
     stat: str
     values: tuple[int, ...] = ()
-    extra: dict[str, str] = field(default_factory=dict, hash=False)
+    extra: dict[str, str] = msgspec.field(default_factory=dict)
 
 
 ReaderEvent = Reply | ErrorReply | NoReply | ActionStat
@@ -93,14 +90,13 @@ def parse_stat_line(line: str) -> ActionStat | None:
     return ActionStat(m[1], stat, tuple(values), extra)
 
 
-@dataclass
-class _Pending:
+class _Pending(msgspec.Struct):
     command: Command
     expect: Expect
     deadline: float
-    lines: list[str] = field(default_factory=list)
+    lines: list[str] = msgspec.field(default_factory=list)
     acked: bool = False
-    seen: set[str] = field(default_factory=set)
+    seen: set[str] = msgspec.field(default_factory=set)
     last_rx: float | None = None
 
 

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field, replace
 from typing import Any
+
+import msgspec
 
 from fabwire.errors import InputError
 from fabwire.xyz.codes import (
@@ -40,16 +41,14 @@ from fabwire.xyz.protocol import DEFAULT_BLOCK_SIZE, NO_CARTRIDGE_SERIAL, REMAIN
 # ------------------------------------------------------------------------------------------- value types
 
 
-@dataclass(frozen=True, slots=True)
-class Progress:
+class Progress(msgspec.Struct, frozen=True):
     percent: int
     elapsed_min: int
     remaining_min: int | None
     """None when the printer has no estimate (wire sentinel 71582788)."""
 
 
-@dataclass(frozen=True, slots=True)
-class Temperatures:
+class Temperatures(msgspec.Struct, frozen=True):
     """`t:<n>,a[,b]`: n=1 → extruder and its target; otherwise two extruders. None = `--`."""
 
     count: int
@@ -68,8 +67,7 @@ class Temperatures:
         return self.values[1] if self.count != 1 and len(self.values) > 1 else None
 
 
-@dataclass(frozen=True, slots=True)
-class Cartridge:
+class Cartridge(msgspec.Struct, frozen=True):
     """`w:<n>,<serial>[,x]`: n=1 → x is a default filament temperature; n=2 → x is the second spool."""
 
     count: int
@@ -99,8 +97,7 @@ class Cartridge:
         return CARTRIDGE_LENGTHS.get(serial[3:4]) if self.present else None
 
 
-@dataclass(frozen=True, slots=True)
-class Nozzle:
+class Nozzle(msgspec.Struct, frozen=True):
     kind: str
     serials: tuple[str, ...]
 
@@ -113,8 +110,7 @@ class Nozzle:
         return self.kind in ("L", "N", "H", "Q")
 
 
-@dataclass(frozen=True, slots=True)
-class Packet:
+class Packet(msgspec.Struct, frozen=True):
     """`o:p<k>,t<x>,c<y>[,a±]`."""
 
     k: int
@@ -127,16 +123,14 @@ class Packet:
         return block_size_from_packet(self.k)
 
 
-@dataclass(frozen=True, slots=True)
-class Lifetime:
+class Lifetime(msgspec.Struct, frozen=True):
     unknown: int
     machine_min: int
     extruder_min: int
     last_min: int | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class Network:
+class Network(msgspec.Struct, frozen=True):
     ip: str
     ssid: str | None = None
     channel: str | None = None
@@ -337,8 +331,7 @@ LETTERS: dict[str, tuple[str, Parser, Renderer]] = {
 # ----------------------------------------------------------------------------------------------- status
 
 
-@dataclass(frozen=True, slots=True)
-class Status:
+class Status(msgspec.Struct, frozen=True):
     """Everything the printer reported; a letter it did not send stays None."""
 
     bed: int | None = None
@@ -354,25 +347,25 @@ class Status:
     m: tuple[int, ...] | None = None
     name: str | None = None
     packet: Packet | None = None
-    targets: dict[str, Any] | None = field(default=None, hash=False)
+    targets: dict[str, Any] | None = None
     model_number: str | None = None
-    settings: dict[str, Any] | None = field(default=None, hash=False)
+    settings: dict[str, Any] | None = None
     temperatures: Temperatures | None = None
     firmware: tuple[str, ...] | None = None
     cartridge: Cartridge | None = None
     zoffset: int | None = None
-    last_used: dict[str, Any] | None = field(default=None, hash=False)
+    last_used: dict[str, Any] | None = None
     lifetime: Lifetime | None = None
     wifi_firmware: str | None = None
-    networks: Any = field(default=None, hash=False)
+    networks: Any = None
     nozzle: Nozzle | None = None
     network: Network | None = None
-    print_file: dict[str, Any] | None = field(default=None, hash=False)
+    print_file: dict[str, Any] | None = None
     order: tuple[str, ...] = ()
     """Letters in the order the printer sent them (rendering keeps it)."""
-    extra: dict[str, str] = field(default_factory=dict, hash=False)
+    extra: dict[str, str] = msgspec.field(default_factory=dict)
     """Letters this table does not know, raw."""
-    unparsed: dict[str, str] = field(default_factory=dict, hash=False)
+    unparsed: dict[str, str] = msgspec.field(default_factory=dict)
     """Known letters whose value did not parse, raw."""
     dashed: frozenset[str] = frozenset()
     """Letters reported as `--` (no such sensor, e.g. `b:--` on a printer without a heated bed)."""
@@ -412,7 +405,8 @@ class Status:
             except (ValueError, IndexError, TypeError, AttributeError, RecursionError, OverflowError):
                 unparsed[letter] = value  # a value from the wire that does not parse is kept raw, never raised
                 changes[attr] = None
-        return replace(self, order=tuple(order), extra=extra, unparsed=unparsed, dashed=frozenset(dashed), **changes)
+        return msgspec.structs.replace(self, order=tuple(order), extra=extra, unparsed=unparsed,
+                                       dashed=frozenset(dashed), **changes)
 
     # -- rendering
 
