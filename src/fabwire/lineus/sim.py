@@ -175,8 +175,8 @@ class LineUsSim:
                 self._idle.set()
             if not writer.done():
                 writer.cancel()
-                with contextlib.suppress(asyncio.CancelledError, LinkClosed):
-                    await writer
+            with contextlib.suppress(asyncio.CancelledError, LinkClosed):
+                await writer  # also collects a writer that ended when the client went away
             if session.saving is not None:
                 self._close_file(session)
             log.debug("lineus client %s disconnected", transport.peer)
