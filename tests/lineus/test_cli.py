@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from clitools import run_cli
+from clitools import cli_env, run_cli
 
 
 def cli(url: str, *args: str, json_out: bool = False):
@@ -242,14 +242,14 @@ def test_shell_speaks_json_lines(simulator) -> None:
     session = run_cli("--json", "lineus", "-d", sim.url, "shell", input_text=script)
     assert session.returncode == 4
     events = [json.loads(line) for line in session.stdout.splitlines()]
-    assert events[0] == {"line": "move 1200 0 down", "position": {"x": 1200, "y": 0, "z": 0, "pen_down": True}}
+    assert events[0] == {"line": "move 1200 0 down", "position": {"x": 1200, "y": 0, "z": 0, "pen": "down"}}
     assert events[1]["line"] == "M114"
     assert events[1]["reply"]["ok"] is True
     assert events[1]["reply"]["fields"]["X"] == "1200.00"
     assert events[2] == {"line": "fly", "error": "unknown command 'fly' (type help)"}
     assert events[3] == {"notice": "(5000, 5000) is outside the drawing area"}
     assert events[4]["line"] == "move 5000 5000"
-    assert events[4]["position"]["pen_down"] is False
+    assert events[4]["position"]["pen"] == "up"
     assert events[-1]["line"] == "help"
     assert "history" in events[-1]["text"]
 
@@ -421,3 +421,18 @@ def test_a_line_us_that_does_not_do_the_move_is_never_a_success(answer: Callable
         assert result.returncode == code, result.stderr
         assert result.stdout == ""
         assert result.stderr.splitlines() == [f"fabwire: error: {words}"]
+
+
+def test_text_from_standard_input_and_named_in_the_json(simulator, tmp_path: Path) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf")
+    env = cli_env(tmp_path)
+    piped = run_cli("--json", "lineus", "-d", sim.url, "text", "-", input_text="hi there\n", env=env)
+    assert piped.returncode == 0, piped.stderr
+    assert json.loads(piped.stdout)["text"] == "hi there"
+    typed = run_cli("--json", "lineus", "-d", sim.url, "text", "hi there", env=env)
+    assert json.loads(typed.stdout)["strokes"] == json.loads(piped.stdout)["strokes"]
+    again = run_cli("lineus", "-d", sim.url, "text", "-", "--resume", input_text="hi there", env=env)
+    assert again.stdout == "'hi there' has been drawn completely already; use --restart to draw it again\n"
+    too_long = run_cli("lineus", "-d", sim.url, "text", "-", input_text="x" * 70_000, env=env)
+    assert too_long.returncode == 4
+    assert too_long.stderr == "fabwire: error: the text on standard input is longer than 65536 characters\n"

@@ -16,7 +16,7 @@ from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass
 from fabwire.devices import LINEUS
 from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
-from fabwire.lineus.client import LineUs, Position
+from fabwire.lineus.client import LineUs
 from fabwire.lineus.draw_cli import draw, preview, text
 from fabwire.lineus.shell import shell
 
@@ -40,12 +40,6 @@ def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> 
     return asyncio.run(main())
 
 
-def _pos(position: Position) -> dict[str, Any]:
-    return {"x": position.x, "y": position.y, "z": position.z, "pen": "down" if position.pen_down else "up"}
-
-
-def _pos_text(position: Position) -> str:
-    return f"X {position.x:g}  Y {position.y:g}  Z {position.z:g}  (pen {'down' if position.pen_down else 'up'})"
 
 
 @lineus.command()
@@ -82,7 +76,7 @@ def position(dctx: DeviceContext, servos: bool) -> None:
         dctx.output.result(angles, "  ".join(f"{k} {v:.2f}" for k, v in angles.items()))
         return
     where = _with_arm(dctx, lambda arm: arm.position())
-    dctx.output.result(_pos(where), _pos_text(where))
+    dctx.output.result(where.as_dict(), where.text())
 
 
 @lineus.command()
@@ -90,7 +84,7 @@ def position(dctx: DeviceContext, servos: bool) -> None:
 def home(dctx: DeviceContext) -> None:
     """Send the arm home (1000, 1000), pen up."""
     where = _with_arm(dctx, lambda arm: arm.home())
-    dctx.output.result(_pos(where), _pos_text(where))
+    dctx.output.result(where.as_dict(), where.text())
 
 
 @lineus.command(context_settings={"ignore_unknown_options": True})
@@ -116,7 +110,7 @@ def move(dctx: DeviceContext, x: float, y: float, pen: str | None, z: float | No
     clamped = abs(where.x - x) > 0.01 or abs(where.y - y) > 0.01
     if clamped and not kin.is_reachable(x, y):
         dctx.output.note(f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
-    dctx.output.result({**_pos(where), "clamped": clamped}, _pos_text(where))
+    dctx.output.result({**where.as_dict(), "clamped": clamped}, where.text())
 
 
 @lineus.command()

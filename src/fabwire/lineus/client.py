@@ -48,6 +48,14 @@ class Position:
     def pen_down(self) -> bool:
         return self.z < kin.PEN_DOWN_BELOW
 
+    def as_dict(self) -> dict[str, float | str]:
+        """For JSON: machine units, and the pen as "up" or "down"."""
+        return {"x": self.x, "y": self.y, "z": self.z, "pen": "down" if self.pen_down else "up"}
+
+    def text(self) -> str:
+        """For people: `X 1200  Y 0  Z 0  (pen down)`."""
+        return f"X {self.x:g}  Y {self.y:g}  Z {self.z:g}  (pen {'down' if self.pen_down else 'up'})"
+
     @classmethod
     def from_reply(cls, reply: p.Reply) -> Position:
         fields = dict(reply.fields)

@@ -7,6 +7,7 @@ import asyncio
 import hashlib
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,6 +33,7 @@ from fabwire.lineus.plot import (
     plan_text,
     read_drawing,
 )
+from fabwire.lineus.plot.intake import STDIN
 from fabwire.lineus.plot.text import DEFAULT_FONT
 from fabwire.lineus.render import DEFAULT_DPI, dpi_scale, write_drawing
 
@@ -40,6 +42,9 @@ if TYPE_CHECKING:
 
 F = TypeVar("F", bound=Callable[..., Any])
 STATE_VERSION = 1
+
+MAX_TEXT = 65536
+"""Characters of text read from standard input at most (a page of text is a few thousand)."""
 
 
 def _rotation(ctx: click.Context, param: click.Parameter, value: str) -> float | None:
@@ -259,16 +264,20 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
     return total, time.monotonic() - began
 
 
-def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume: bool, name: str,
+def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume: bool, source: dict[str, str],
           pen_z: float) -> None:
+    """Draw `plan`, saving progress for --resume; `source` names what is drawn in the JSON result: {"file": path}
+    or {"text": text}."""
+    name = repr(source["text"]) if "text" in source else \
+        "standard input" if source["file"] == STDIN else source["file"]
     path = state or state_dir() / f"draw-{key[:24]}.json"
     progress: DrawProgress | None = DrawProgress.load(path, key) if resume else None
     if resume and progress is None:
         dctx.output.note(f"nothing to resume for {name}: starting from the beginning")
     if progress is not None and progress.complete:
         dctx.output.result(
-            {"file": name, "complete": True, "strokes": len(progress.strokes), "drawn": 0},
-            f"{name} is already drawn completely; use --restart to draw it again")
+            {**source, "complete": True, "strokes": len(progress.strokes), "drawn": 0},
+            f"{name} has been drawn completely already; use --restart to draw it again")
         return
     if progress is not None:
         plan = _plan_from_state(progress)
@@ -294,7 +303,7 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
     progress.save()  # complete: a --resume now says so instead of drawing over it
     figures = plan.figures()
     dctx.output.result(
-        {"file": name, "strokes": total, "drawn": total - first, "resumed_at": first,
+        {**source, "strokes": total, "drawn": total - first, "resumed_at": first,
          "elapsed_s": round(elapsed, 2), "estimated_s": round(figures.estimated_seconds, 2)},
         f"drew {total - first} of {total} strokes in {units.duration(elapsed)}",
     )
@@ -337,7 +346,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
     for note in plan.notes:
         dctx.output.note(note)
     dctx.output.note(figures_text(plan))
-    _draw(dctx, plan, key, state, resume, str(file), pen_z)
+    _draw(dctx, plan, key, state, resume, {"file": str(file)}, pen_z)
 
 
 @click.command("text")
@@ -357,8 +366,12 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
 def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: bool | None, margin: float,
          rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
          preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
-    """Write TEXT in a single-stroke font (\\n starts a new line)."""
+    """Write TEXT in a single-stroke font (\\n starts a new line; '-' reads the text from standard input)."""
     _one_start(resume, restart)
+    if text == STDIN:
+        text = sys.stdin.read(MAX_TEXT + 1).rstrip("\n")
+        if len(text) > MAX_TEXT:
+            raise InputError(f"the text on standard input is longer than {MAX_TEXT} characters")
     text = text.replace("\\n", "\n")
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
     key = _state_key(hashlib.sha256(text.encode()).hexdigest(), options,
@@ -373,7 +386,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
     for note in plan.notes:
         dctx.output.note(note)
     dctx.output.note(figures_text(plan))
-    _draw(dctx, plan, key, state, resume, repr(text), pen_z)
+    _draw(dctx, plan, key, state, resume, {"text": text}, pen_z)
 
 
 @click.command("preview")

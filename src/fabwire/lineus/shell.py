@@ -3,7 +3,7 @@
 Every other CLI call opens a new connection, and the firmware homes the arm on connect, so a series of `move`s
 bounces home between moves; here the arm stays where it was sent. Lines come from standard input (a terminal gets
 a prompt and line editing; a pipe works the same, line by line). With --json every line's outcome is one JSON
-object on stdout: `{"line", "position": {"x", "y", "z", "pen_down"}}`, `{"line", "reply": {"ok", "text", "fields"}}`,
+object on stdout: `{"line", "position": {"x", "y", "z", "pen"}}`, `{"line", "reply": {"ok", "text", "fields"}}`,
 `{"line", "text"}`, `{"line", "error"}` or `{"notice"}`; positions in machine units.
 """
 
@@ -121,9 +121,7 @@ class Session:
         self.emit({"line": self.line, "text": text}, text)
 
     def _show(self, where: Position) -> None:
-        self.emit({"line": self.line, "position": {"x": where.x, "y": where.y, "z": where.z,
-                                                     "pen_down": where.pen_down}},
-                  f"X {where.x:g}  Y {where.y:g}  Z {where.z:g}  (pen {'down' if where.pen_down else 'up'})")
+        self.emit({"line": self.line, "position": where.as_dict()}, where.text())
 
     def _notices(self) -> None:
         for notice in self.arm.notices[self.shown_notices :]:
