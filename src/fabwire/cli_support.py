@@ -13,6 +13,7 @@ import importlib
 import importlib.util
 import logging
 import os
+import re
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from functools import update_wrapper
@@ -24,6 +25,7 @@ import msgspec
 
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
+from fabwire.errors import InputError
 from fabwire.importing import collection_paused
 from fabwire.transport.faults import FaultPlan
 
@@ -239,8 +241,51 @@ def _needs_extra(name: str, missing: Exception) -> click.Command:
     return command
 
 
+NEGATIVE_NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+"""A token such as -5, -12, -0.5 or -1e3: a value for an argument, never an option name."""
+
+
+class NumberCommand(click.Command):
+    """A command whose arguments may be negative numbers (`xyz energy -5`, `zoffset -12`) anywhere on the line.
+
+    click reads every token that starts with `-` as an option; here the parser keeps tokens it does not know as
+    arguments, and every such token that is not a negative number is refused as click would ("No such option").
+    """
+
+    def make_parser(self, ctx: click.Context) -> Any:
+        parser = super().make_parser(ctx)
+        parser.ignore_unknown_options = True
+        return parser
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        options = {opt: param for param in self.get_params(ctx) if isinstance(param, click.Option)
+                   for opt in (*param.opts, *param.secondary_opts)}
+        takes_value = False
+        for token in args:
+            if token == "--":
+                break
+            if takes_value:
+                takes_value = False
+                continue
+            if not token.startswith("-") or token == "-" or NEGATIVE_NUMBER.fullmatch(token):
+                continue
+            name = token.partition("=")[0]
+            if name in options:
+                option = options[name]
+                takes_value = "=" not in token and not option.is_flag and not option.count
+                continue
+            if not token.startswith("--") and all(f"-{c}" in options and (options[f"-{c}"].is_flag
+                                                                         or options[f"-{c}"].count)
+                                                  for c in token[1:]):
+                continue  # a cluster of short flags such as -vv
+            ctx.fail(f"No such option: {name}")
+        return super().parse_args(ctx, args)
+
+
 class LazyGroup(SharingGroup):
     """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
+
+    command_class = NumberCommand
 
     def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
@@ -329,6 +374,28 @@ def device_group(kind: DeviceKind, help_text: str, link_options: Sequence[Option
         return group
 
     return decorate
+
+
+def on_terminal() -> bool:
+    """A person can answer: standard input and standard error are both a terminal."""
+    return sys.stdin.isatty() and sys.stderr.isatty()
+
+
+def confirm(action: str, yes: bool) -> None:
+    """Go ahead with a step that cannot be undone only when confirmed: `--yes`, or "y" typed on a terminal.
+
+    `action` says what the step does ("cancel the running print"). Raises InputError when nobody confirmed.
+    """
+    if yes:
+        return
+    if not on_terminal():
+        raise InputError(f"this would {action}: add --yes to confirm")
+    try:
+        agreed = click.confirm(f"{action[:1].upper()}{action[1:]}?", default=False, err=True)
+    except click.Abort:
+        agreed = False
+    if not agreed:
+        raise InputError(f"not confirmed; did not {action}")
 
 
 def run(coro: Coroutine[Any, Any, T]) -> T:

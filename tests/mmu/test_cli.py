@@ -214,6 +214,9 @@ def test_home_eject_cut_reset(simulator: SimulatorStarter) -> None:
         code, out, err = mmu(sim.url, *args)
         assert (code, out.strip()) == (0, expected), err
     code, out, err = mmu(sim.url, "reset")
+    assert (code, out) == (4, "")
+    assert err.strip() == "fabwire: error: this would reboot the MMU: add --yes to confirm"
+    code, out, err = mmu(sim.url, "reset", "--yes")
     assert (code, out.strip()) == (0, "MMU reset; firmware 3.0.4+936 answering"), err
 
 

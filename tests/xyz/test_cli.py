@@ -173,7 +173,11 @@ def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Pat
     assert busy.returncode == 7
     assert "busy" in busy.stderr
     assert "printing" in busy.stderr or "checking file" in busy.stderr
-    assert run_cli("xyz", "-d", dev, "cancel").returncode == 0
+    unconfirmed = run_cli("xyz", "-d", dev, "cancel")
+    assert unconfirmed.returncode == 4
+    assert unconfirmed.stderr.strip() == "fabwire: error: this would cancel the running print: add --yes to confirm"
+    assert status_json(dev)["state"] != 9511  # still printing
+    assert run_cli("xyz", "-d", dev, "cancel", "--yes").returncode == 0
     assert "Traceback" not in busy.stderr
 
 

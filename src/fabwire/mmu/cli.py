@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import LINK_OPTIONS, DeviceContext, device_group, pass_app, pass_device
+from fabwire.cli_support import LINK_OPTIONS, DeviceContext, confirm, device_group, on_terminal, pass_app, pass_device
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
@@ -167,7 +167,7 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
     try:
         finished = await run(on_event=show, timeout=max_time)
     except MMUError as error:
-        if dctx.output.json_mode or not (sys.stdin.isatty() and sys.stderr.isatty()):
+        if dctx.output.json_mode or not on_terminal():
             raise
         finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time)
     factor = mmu_.logic.timing.too_fast
@@ -250,7 +250,7 @@ async def eject(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float, cont
     except MMUError as error:
         if error.info.code != 0x800C:
             raise
-    if continue_after is None and not (sys.stdin.isatty() and sys.stderr.isatty()):
+    if continue_after is None and not on_terminal():
         dctx.output.result({"command": f"E{slot}", "waiting": True, "printer_code": "04507"},
                            f"E{slot}: filament ejected — take it out, then `fabwire mmu button continue`")
         return
@@ -356,18 +356,17 @@ async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -
                        f"{button}: {finished.command} {words}")
 
 
-def _erase_args(kwargs: dict[str, Any]) -> None:
-    if kwargs["erase"] and not kwargs["yes"]:
-        raise InputError("--erase wipes the MMU's EEPROM (loaded slot, drive-error count, bowden length, "
-                         "StallGuard thresholds): add --yes to do it")
+def _confirm_reset(kwargs: dict[str, Any]) -> None:
+    confirm("erase the MMU's EEPROM (loaded slot, drive-error count, bowden length, StallGuard thresholds) and "
+            "reboot it" if kwargs["erase"] else "reboot the MMU", kwargs["yes"])
 
 
 @mmu.command("reset")
-@click.option("--erase", is_flag=True, help="Also erase the MMU's EEPROM (X2a); needs --yes.")
-@click.option("--yes", is_flag=True, help="Confirm --erase.")
-@with_mmu(_erase_args, auto_retries=0)
+@click.option("--erase", is_flag=True, help="Also erase the MMU's EEPROM (X2a).")
+@click.option("--yes", is_flag=True, help="Reset without asking (needed when not on a terminal).")
+@with_mmu(_confirm_reset, auto_retries=0)
 async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
-    """Reboot the MMU (X0) and wait until it answers again."""
+    """Reboot the MMU (X0) and wait until it answers again (asks first on a terminal)."""
     v = await mmu_.reset(erase=erase)
     words = "EEPROM erased and MMU reset" if erase else "MMU reset"
     dctx.output.result({"version": str(v), "erased": erase}, f"{words}; firmware {v} answering")

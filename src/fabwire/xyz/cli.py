@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from fabwire import units
-from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, confirm, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
 from fabwire.simserve import server_options
@@ -233,13 +233,22 @@ def _simple(name: str, help_text: str, call: Callable[[XYZPrinter], Awaitable[An
 
 _simple("pause", "Pause the running print.", lambda pr: pr.pause(), "paused")
 _simple("resume", "Resume a paused print.", lambda pr: pr.resume(), "resumed")
-_simple("cancel", "Cancel the running print.", lambda pr: pr.cancel(), "cancelling")
 _simple("home", "Home all axes and wait until done.", lambda pr: pr.home(), "homed")
 _simple("acknowledge", "Confirm the finished print was removed (leave 'print finished').",
         lambda pr: pr.acknowledge(), "ready")
 
 
-@xyz.command(context_settings={"ignore_unknown_options": True})
+@xyz.command()
+@click.option("--yes", is_flag=True, help="Cancel without asking (needed when not on a terminal).")
+@pass_device
+def cancel(dctx: DeviceContext, yes: bool) -> None:
+    """Cancel the running print (asks first on a terminal)."""
+    confirm("cancel the running print", yes)
+    _with_printer(dctx, lambda pr: pr.cancel())
+    dctx.output.result({"ok": True, "command": "cancel"}, "cancelling")
+
+
+@xyz.command()
 @click.argument("axis", type=click.Choice(["x", "y", "z"], case_sensitive=False))
 @click.argument("distance", type=float)
 @pass_device
@@ -313,7 +322,7 @@ def set_cmd(dctx: DeviceContext, setting: str, value: str) -> None:
     dctx.output.result({setting: value}, f"{setting} {value}")
 
 
-@xyz.command(context_settings={"ignore_unknown_options": True})
+@xyz.command()
 @click.argument("value", required=False)
 @pass_device
 def zoffset(dctx: DeviceContext, value: str | None) -> None:
@@ -367,17 +376,17 @@ def language(dctx: DeviceContext, code: str) -> None:
 @pass_device
 def energy(dctx: DeviceContext, minutes: int) -> None:
     """Set energy saving: minutes of idle before the lights go off (0-9)."""
+    userinput.energy_minutes(minutes)
     _with_printer(dctx, lambda pr: pr.set_energy(minutes))
     dctx.output.result({"energy_saving_s": minutes * 60}, f"energy saving after {units.minutes(minutes)} idle")
 
 
 @xyz.command("restore-defaults")
-@click.option("--yes", is_flag=True, help="Really reset every setting.")
+@click.option("--yes", is_flag=True, help="Reset without asking (needed when not on a terminal).")
 @pass_device
 def restore_defaults(dctx: DeviceContext, yes: bool) -> None:
     """Reset the printer's settings to factory defaults."""
-    if not yes:
-        raise InputError("restore-defaults resets every setting: add --yes to confirm")
+    confirm("reset every setting of the printer to factory defaults", yes)
     _with_printer(dctx, lambda pr: pr.restore_defaults())
     dctx.output.result({"ok": True}, "settings restored to defaults")
 
@@ -443,12 +452,11 @@ def wifi_leave(dctx: DeviceContext) -> None:
 
 @xyz.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--yes", is_flag=True, help="Really flash this firmware.")
+@click.option("--yes", is_flag=True, help="Flash without asking (needed when not on a terminal).")
 @pass_device
 def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
     """Flash a firmware image (.bin with its `<model>+<version>` header). Can brick the printer."""
-    if not yes:
-        raise InputError("flashing firmware can brick the printer: add --yes to confirm")
+    confirm(f"flash {file.name} (a wrong image can brick the printer)", yes)
     image = file.read_bytes()
     result = _with_printer(dctx, lambda pr: pr.upload_firmware(image, confirm=True))
     dctx.output.result({"ok": True, "bytes": result.size}, f"sent {result.size} bytes of firmware")

@@ -195,7 +195,7 @@ class Maintenance:
         await self._config(p.SetLanguage(userinput.language(code)))
 
     async def set_energy(self, minutes: int) -> None:
-        await self._config(p.SetEnergy(minutes))
+        await self._config(p.SetEnergy(userinput.energy_minutes(minutes)))
 
     async def restore_defaults(self) -> None:
         await self._config(p.RestoreDefaults())
