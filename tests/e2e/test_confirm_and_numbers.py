@@ -74,7 +74,8 @@ def test_without_a_terminal_yes_is_needed(args: list[str], words: str) -> None:
     done = run_cli(*args, input_text="y\n")
     assert (done.returncode, done.stdout) == (4, "")
     assert len(done.stderr.strip().splitlines()) == 1
-    assert words in done.stderr and "add --yes" in done.stderr
+    assert words in done.stderr
+    assert "add --yes" in done.stderr
 
 
 @pytest.mark.parametrize(("args", "given"), [
