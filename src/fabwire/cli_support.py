@@ -241,45 +241,47 @@ def _needs_extra(name: str, missing: Exception) -> click.Command:
     return command
 
 
-NEGATIVE_NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
-"""A token such as -5, -12, -0.5 or -1e3: a value for an argument, never an option name."""
+NEGATIVE_NUMBER = re.compile(r"-(?:\.?\d.*|inf|infinity|nan)", re.IGNORECASE | re.DOTALL)
+"""A token such as -5, -0.12mm, -1e3 or -inf: a value for an argument (to be judged as one), never an option."""
 
 
 class NumberCommand(click.Command):
     """A command whose arguments may be negative numbers (`xyz energy -5`, `zoffset -12`) anywhere on the line.
 
-    click reads every token that starts with `-` as an option; here the parser keeps tokens it does not know as
-    arguments, and every such token that is not a negative number is refused as click would ("No such option").
+    click reads every token that starts with `-` as an option (and `-inf` as `-i -n f`). Here the line is sorted
+    first: options with their values, then `--`, then the arguments in their order, so a negative number is always
+    an argument; any other token that looks like an option and is not one is refused as click would.
     """
-
-    def make_parser(self, ctx: click.Context) -> Any:
-        parser = super().make_parser(ctx)
-        parser.ignore_unknown_options = True
-        return parser
 
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
         options = {opt: param for param in self.get_params(ctx) if isinstance(param, click.Option)
                    for opt in (*param.opts, *param.secondary_opts)}
-        takes_value = False
-        for token in args:
+
+        def flag(name: str) -> bool:
+            option = options.get(name)
+            return option is not None and (option.is_flag or option.count)
+
+        named: list[str] = []
+        positional: list[str] = []
+        tokens = iter(args)
+        for token in tokens:
             if token == "--":
+                positional.extend(tokens)
                 break
-            if takes_value:
-                takes_value = False
-                continue
             if not token.startswith("-") or token == "-" or NEGATIVE_NUMBER.fullmatch(token):
+                positional.append(token)
                 continue
+            named.append(token)
             name = token.partition("=")[0]
             if name in options:
-                option = options[name]
-                takes_value = "=" not in token and not option.is_flag and not option.count
+                if "=" not in token and not flag(name):
+                    named.extend([value] if (value := next(tokens, None)) is not None else [])  # its value, whatever it looks like
                 continue
-            if not token.startswith("--") and all(f"-{c}" in options and (options[f"-{c}"].is_flag
-                                                                         or options[f"-{c}"].count)
-                                                  for c in token[1:]):
-                continue  # a cluster of short flags such as -vv
+            if not token.startswith("--") and (token[:2] in options and not flag(token[:2])
+                                               or all(flag(f"-{c}") for c in token[1:])):
+                continue  # a short option with its value attached (-dHOST), or short flags together (-vv)
             ctx.fail(f"No such option: {name}")
-        return super().parse_args(ctx, args)
+        return super().parse_args(ctx, [*named, "--", *positional] if positional else named)
 
 
 class LazyGroup(SharingGroup):

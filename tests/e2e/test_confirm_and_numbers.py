@@ -116,7 +116,8 @@ def _probe(first: float, second: float, name: str | None, verbose: int) -> None:
     click.echo(repr((first, second, name, verbose)))
 
 
-numbers = st.floats(max_value=-1e-3, min_value=-1e6, allow_nan=False).map(repr) | st.integers(max_value=-1).map(str)
+numbers = (st.floats(max_value=-1e-3, min_value=-1e6, allow_nan=False).map(repr) | st.integers(max_value=-1).map(str)
+           | st.sampled_from(["-inf", "-Infinity", "-nan", "-1E3", "-.5"]))
 
 
 @settings(max_examples=60, deadline=None)

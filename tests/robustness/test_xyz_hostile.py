@@ -209,3 +209,56 @@ async def test_a_file_check_that_never_ends_is_reported_with_how_to_cancel() -> 
                 await printer.follow_job(later)
         finally:
             await printer.close()
+
+
+def _ignores_settings(line: bytes) -> bytes | None:
+    """A Wi-Fi printer that answers status queries with its unchanged settings and nothing else."""
+    if line.startswith(b"XYZv3/query=a"):
+        return b"\n".join([*IDLE_STATUS, b"z:245", b"l:en", b's:{"buzzer":"on"}']) + b"\n$\n"
+    if line.startswith(b"XYZv3/query="):
+        wanted = line.removeprefix(b"XYZv3/query=")
+        return b"".join(row + b"\n" for row in [*IDLE_STATUS, b"z:245", b"l:en", b's:{"buzzer":"on"}']
+                        if row[:1] in [bytes([c]) for c in wanted])
+    return None
+
+
+SETTINGS = [("set_autolevel", (False,)), ("set_buzzer", (False,)), ("set_zoffset", (120,)), ("set_name", ("Lab",)),
+            ("set_language", ("fr",)), ("nudge_zoffset", (True,)), ("nudge_zoffset", (False,))]
+
+
+@pytest.mark.parametrize(("method", "args"), SETTINGS)
+async def test_a_wifi_printer_that_ignores_a_setting_is_no_success(method: str, args: tuple[object, ...]) -> None:
+    ticks = iter(range(10_000))
+    async with asyncio.timeout(30), fake_printer(_ignores_settings) as printer:
+        printer.clock = lambda: float(next(ticks))  # each reading is a second later: the limit comes at once
+        with pytest.raises(DeviceError, match="did not apply"):
+            await getattr(printer, method)(*args)
+
+
+@pytest.mark.parametrize(("method", "args"), SETTINGS)
+async def test_a_wifi_printer_that_applies_a_setting_confirms_it_in_its_status(method: str,
+                                                                                args: tuple[object, ...]) -> None:
+    sim = XYZSimulator(speed=1000, gap=0.01)
+    async with asyncio.timeout(30), loopback_tcp(sim.serve) as link:
+        printer = XYZPrinter(link, link=Link.WIFI, timeout=5.0)
+        try:
+            before = (await printer.status()).zoffset
+            result = await getattr(printer, method)(*args)
+            status = await printer.status()
+        finally:
+            await printer.close()
+    if method == "nudge_zoffset":
+        assert before is not None
+        assert result == status.zoffset == before + (1 if args[0] else -1)
+    elif method == "set_zoffset":
+        assert result == status.zoffset == args[0]
+    else:
+        assert result is True
+    assert (status.autolevel, status.buzzer, status.zoffset, status.name, status.language) != (
+        True, True, 245, "mini w", "en")
+
+
+async def test_settings_without_a_status_field_are_sent_but_not_claimed_on_wifi() -> None:
+    async with asyncio.timeout(30), fake_printer(_ignores_settings) as printer:
+        assert await printer.set_energy(5) is False
+        assert await printer.restore_defaults() is False

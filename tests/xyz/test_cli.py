@@ -76,6 +76,11 @@ def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> 
     assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
     data = status_json(dev)
     assert (data["state"], data["substate"]) == (9511, 0)
+    piped = run_cli("xyz", "-d", dev, "print", "-", input_text=(GCODE * 50).decode())
+    assert piped.returncode == 0, piped.stderr
+    assert piped.stdout == "standard input: print finished\n"
+    assert (store / "stdin.3w").read_bytes() == write_3w(GCODE * 50, find_model("dv1MW0A000"), filename="stdin.3w")
+    assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
 
 
 def test_settings_commands(simulator: SimulatorStarter) -> None:
@@ -91,8 +96,9 @@ def test_settings_commands(simulator: SimulatorStarter) -> None:
     assert (data["zoffset_mm"], data["name"], data["language"]) == (-0.12, "Lab", "fr")
     assert data["raw"]["z"] == "-12"
     energy = run_cli("--json", "xyz", "-d", dev, "energy", "6")
-    assert json.loads(energy.stdout) == {"energy_saving_s": 360}
-    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == "energy saving after 6m 00s idle\n"
+    assert json.loads(energy.stdout) == {"energy_saving_s": 360, "confirmed": False}  # Wi-Fi: no reply, no field
+    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == ("energy saving after 6m 00s idle (sent; a printer on "
+                                                               "Wi-Fi does not confirm this setting)\n")
     up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
     assert json.loads(up.stdout) == {"zoffset_mm": -0.11}
     refused = run_cli("xyz", "-d", dev, "restore-defaults")

@@ -78,6 +78,9 @@ async def _ask(message: str) -> None:
         raise InputError("no confirmation on standard input; the step was stopped")
 
 
+_UNCONFIRMED = " (sent; a printer on Wi-Fi does not confirm this setting)"
+
+
 def _bool(value: bool | None) -> str:
     return ABSENT if value is None else "on" if value else "off"
 
@@ -181,7 +184,7 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
 
 
 @xyz.command("print")
-@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path, allow_dash=True))
 @click.option("--no-wait", is_flag=True, help="Return once the printer has started the job.")
 @click.option("--model", "model_text", metavar="MODEL", help="Convert for this model instead of the printer's own.")
 @click.option("--name", "upload_name", metavar="NAME",
@@ -191,17 +194,27 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
 @pass_device
 def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None, upload_name: str | None,
               save_to_sd: bool) -> None:
-    """Print a G-code (converted to the printer's .3w) or a .3w file."""
+    """Print a G-code (converted to the printer's .3w) or a .3w file ('-' reads it from standard input)."""
+    from fabwire.xyz import intake  # G-code scanning: loaded when a file is printed, not for a status
+
     model = _resolve_model(model_text)
     if upload_name is not None:
         userinput.upload_name(upload_name)
+    with intake.input_file(file) as (path, shown):
+        kind, head = intake.sniff(path, shown)
+        intake.require_printable(kind, shown, head)  # before the printer is reached
+        _print(dctx, path, Path(shown).name, no_wait, model, upload_name, save_to_sd)
+
+
+def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: PrinterModel | None,
+           upload_name: str | None, save_to_sd: bool) -> None:
     out = dctx.output
 
     started = [False]
 
     async def run(printer: XYZPrinter) -> Status:
         chosen = model or _resolve_model(printer.settings.model)
-        with JobView(out, out.err, file.name) as view:
+        with JobView(out, out.err, shown) as view:
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)
@@ -217,10 +230,10 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
         if not started[0]:
             raise
         where = f" -d {dctx.device}" if dctx.device else ""
-        raise FollowInterrupted(f"stopped following the print; the printer keeps printing {file.name}. Follow it with "
+        raise FollowInterrupted(f"stopped following the print; the printer keeps printing {shown}. Follow it with "
                           f"`fabwire xyz{where} status --watch`, stop it with `fabwire xyz{where} cancel`") from None
     out.result({"event": "done", "time": now_iso(), "state": final.state_code, "state_name": final.state_name},
-               f"{file.name}: {final.state_name}")
+               f"{shown}: {final.state_name}")
 
 
 def _simple(name: str, help_text: str, call: Callable[[XYZPrinter], Awaitable[Any]], done: str) -> None:
@@ -377,8 +390,9 @@ def language(dctx: DeviceContext, code: str) -> None:
 def energy(dctx: DeviceContext, minutes: int) -> None:
     """Set energy saving: minutes of idle before the lights go off (0-9)."""
     userinput.energy_minutes(minutes)
-    _with_printer(dctx, lambda pr: pr.set_energy(minutes))
-    dctx.output.result({"energy_saving_s": minutes * 60}, f"energy saving after {units.minutes(minutes)} idle")
+    confirmed = _with_printer(dctx, lambda pr: pr.set_energy(minutes))
+    dctx.output.result({"energy_saving_s": minutes * 60, "confirmed": confirmed},
+                       f"energy saving after {units.minutes(minutes)} idle{_UNCONFIRMED * (not confirmed)}")
 
 
 @xyz.command("restore-defaults")
@@ -387,8 +401,9 @@ def energy(dctx: DeviceContext, minutes: int) -> None:
 def restore_defaults(dctx: DeviceContext, yes: bool) -> None:
     """Reset the printer's settings to factory defaults."""
     confirm("reset every setting of the printer to factory defaults", yes)
-    _with_printer(dctx, lambda pr: pr.restore_defaults())
-    dctx.output.result({"ok": True}, "settings restored to defaults")
+    confirmed = _with_printer(dctx, lambda pr: pr.restore_defaults())
+    dctx.output.result({"ok": True, "confirmed": confirmed},
+                       f"settings restored to defaults{_UNCONFIRMED * (not confirmed)}")
 
 
 @xyz.group()

@@ -163,17 +163,42 @@ def refusal(kind: Kind, name: str, head: bytes = b"") -> InputError:
     return InputError(f"{name} is {what}{', ' if advice.startswith('not ') else ': '}{advice}")
 
 
-def open_input(path: Path) -> BinaryIO:
-    """The file opened for reading; an unreadable one is an InputError naming it."""
+def open_input(path: Path, name: str | None = None) -> BinaryIO:
+    """The file opened for reading; an unreadable one is an InputError naming it (`name`, default the path)."""
     try:
         return Path(path).open("rb")
     except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror}") from exc
+        raise InputError(f"cannot read {name or path}: {exc.strerror}") from exc
 
 
-def sniff(path: Path) -> tuple[Kind, bytes]:
-    """(what the file is, its first bytes); an unreadable file is an InputError."""
-    with open_input(path) as handle:
+STDIN = "-"
+"""The file name that means standard input."""
+STDIN_NAME = "standard input"
+
+
+@contextlib.contextmanager
+def input_file(path: Path) -> Iterator[tuple[Path, str]]:
+    """(a file to read, its name for messages): `path` itself, or for `-` standard input copied in CHUNK pieces to
+    a temporary file, so a piped G-code or .3w is read like any other file with memory bounded by CHUNK."""
+    if str(path) != STDIN:
+        yield path, str(path)
+        return
+    import sys
+
+    with tempfile.TemporaryDirectory() as scratch:
+        spooled = Path(scratch) / "stdin"
+        try:
+            with spooled.open("wb") as out:
+                while block := sys.stdin.buffer.read(CHUNK):
+                    out.write(block)
+        except OSError as exc:
+            raise InputError(f"cannot read {STDIN_NAME}: {exc.strerror or exc}") from exc
+        yield spooled, STDIN_NAME
+
+
+def sniff(path: Path, name: str | None = None) -> tuple[Kind, bytes]:
+    """(what the file is, its first bytes); an unreadable file is an InputError (naming `name` or `path`)."""
+    with open_input(path, name) as handle:
         head = handle.read(SNIFF)
         size = handle.seek(0, 2)
     return identify(head, size), head

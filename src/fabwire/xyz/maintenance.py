@@ -19,12 +19,28 @@ Prompt = Callable[[str], Awaitable[None]]
 STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
 """Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
 _PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
+CONFIRM_LIMIT = 5.0
+"""Seconds a Wi-Fi printer has to show a setting in its status (it does not answer settings there)."""
+_READBACK: dict[type[p.Command], tuple[str, Callable[[Any, Status], bool]]] = {
+    p.SetAutoLevel: ("o", lambda c, st: st.autolevel == c.on),
+    p.SetBuzzer: ("s", lambda c, st: st.buzzer == c.on),
+    p.SetZOffset: ("z", lambda c, st: st.zoffset == c.value),
+    p.SetName: ("n", lambda c, st: st.name is not None and st.name.strip() == c.name.strip()),
+    p.SetLanguage: ("l", lambda c, st: st.language == c.code),
+}
+"""Settings a Wi-Fi printer confirms only through its status: the letter that carries each, and when it shows it."""
+
+
+def _shown(status: Status, letter: str) -> str:
+    line = status.line(letter) if letter in status.order else None
+    return "(nothing)" if line is None else line[2:42]
 
 
 class Maintenance:
     """Flows and settings, on top of the client's requests and status queries."""
 
     poll_interval: float
+    link: p.Link
     clock: Callable[[], float]
     last_status: Status
     timeout: float
@@ -161,44 +177,82 @@ class Maintenance:
             raise DeviceError("unsupported", f"the {model.name if model else status.model_number} takes only status "
                               "queries and prints over XYZv3", action=f"cannot send {command.body!r}")
 
-    async def _config(self, command: p.Command) -> None:
+    async def _config(self, command: p.Command) -> bool:
+        """Send a setting; True once the printer confirmed it, False if it cannot (Wi-Fi, no status field).
+
+        On serial the `ok` is the confirmation. A Wi-Fi printer answers settings with nothing, so where the status
+        carries the value it is read back until it shows the new one; a printer that ignored the command is a
+        DeviceError, never success."""
         await self._supports(command)
         await self.request(command)
+        if command.expects(self.link) is not p.Expect.NOTHING:
+            return True
+        readback = _READBACK.get(type(command))
+        if readback is None:
+            return False
+        letter, applied = readback
+        await self._confirm(command, letter, lambda st: applied(command, st))
+        return True
 
-    async def set_autolevel(self, on: bool) -> None:
-        await self._config(p.SetAutoLevel(on))
+    async def _confirm(self, command: p.Command, letter: str, applied: Callable[[Status], bool]) -> Status:
+        """Poll status `letter` until `applied` holds (firmware applies some settings a moment late, SEED)."""
+        end = self.clock() + CONFIRM_LIMIT
+        while True:
+            status = await self.status(letter)
+            if applied(status):
+                return status
+            if self.clock() > end:
+                raise DeviceError("not applied", f"the printer did not apply {command.body!r}: its status still "
+                                  f"reads {letter}:{_shown(status, letter)} after {CONFIRM_LIMIT:g} s",
+                                  action="nothing was changed")
+            await asyncio.sleep(self.poll_interval)
 
-    async def set_buzzer(self, on: bool) -> None:
-        await self._config(p.SetBuzzer(on))
+    async def set_autolevel(self, on: bool) -> bool:
+        return await self._config(p.SetAutoLevel(on))
+
+    async def set_buzzer(self, on: bool) -> bool:
+        return await self._config(p.SetBuzzer(on))
 
     async def zoffset(self) -> int:
         await self._supports(p.GetZOffset())
         reply = await self.request(p.GetZOffset())
         if not reply.lines:
             raise LinkTimeout("the printer sent no z offset")
-        return int(reply.lines[0])
+        try:
+            return int(reply.lines[0])
+        except ValueError:
+            raise RemoteProtocolError(f"the printer answered 'zoffset:get' with {reply.lines[0][:40]!r}, not a "
+                                      "number") from None
 
     async def set_zoffset(self, value: int) -> int:
         await self._config(p.SetZOffset(value))
         return value
 
     async def nudge_zoffset(self, up: bool) -> int:
-        """One 0.01 mm step; returns the new offset as the next status reports it."""
-        await self._config(p.NudgeZOffset(up))
-        status = await self.status("z")
-        return status.zoffset if status.zoffset is not None else 0
+        """One 0.01 mm step; returns the new offset once the status reports it (a DeviceError if it never does)."""
+        command = p.NudgeZOffset(up)
+        await self._supports(command)
+        before = (await self.status("z")).zoffset
+        if before is None:
+            raise RemoteProtocolError("the printer reports no z offset (z:), so a step cannot be confirmed")
+        await self.request(command)
+        after = await self._confirm(command, "z", lambda st: st.zoffset == before + (1 if up else -1))
+        assert after.zoffset is not None  # checked by the predicate
+        return after.zoffset
 
-    async def set_name(self, name: str) -> None:
-        await self._config(p.SetName(userinput.printer_name(name)))
+    async def set_name(self, name: str) -> bool:
+        return await self._config(p.SetName(userinput.printer_name(name)))
 
-    async def set_language(self, code: str) -> None:
-        await self._config(p.SetLanguage(userinput.language(code)))
+    async def set_language(self, code: str) -> bool:
+        return await self._config(p.SetLanguage(userinput.language(code)))
 
-    async def set_energy(self, minutes: int) -> None:
-        await self._config(p.SetEnergy(userinput.energy_minutes(minutes)))
+    async def set_energy(self, minutes: int) -> bool:
+        """False: sent to a Wi-Fi printer, which neither answers nor reports energy saving in its status."""
+        return await self._config(p.SetEnergy(userinput.energy_minutes(minutes)))
 
-    async def restore_defaults(self) -> None:
-        await self._config(p.RestoreDefaults())
+    async def restore_defaults(self) -> bool:
+        """False: sent to a Wi-Fi printer, which does not confirm it."""
+        return await self._config(p.RestoreDefaults())
 
     async def wifi_info(self) -> Status:
         return await self.status("4")
