@@ -274,11 +274,12 @@ class NumberCommand(click.Command):
             named.append(token)
             name = token.partition("=")[0]
             if name in options:
-                if "=" not in token and not flag(name):
-                    named.extend([value] if (value := next(tokens, None)) is not None else [])  # its value, whatever it looks like
+                value = next(tokens, None) if "=" not in token and not flag(name) else None
+                if value is not None:
+                    named.append(value)  # the option's value, whatever it looks like
                 continue
-            if not token.startswith("--") and (token[:2] in options and not flag(token[:2])
-                                               or all(flag(f"-{c}") for c in token[1:])):
+            attached = token[:2] in options and not flag(token[:2])
+            if not token.startswith("--") and (attached or all(flag(f"-{c}") for c in token[1:])):
                 continue  # a short option with its value attached (-dHOST), or short flags together (-vv)
             ctx.fail(f"No such option: {name}")
         return super().parse_args(ctx, [*named, "--", *positional] if positional else named)
