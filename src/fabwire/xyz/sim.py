@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fabwire.errors import InputError, LinkClosed
+from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 from fabwire.xyz import protocol as p
 from fabwire.xyz.personas import personality
@@ -70,8 +71,7 @@ class XYZSimulator:
         clock: Callable[[], float] = time.monotonic, close_after_reply: bool | None = None, control: bool = True,
         max_upload: int = MAX_UPLOAD,
     ) -> None:
-        if speed <= 0:
-            raise InputError(f"speed must be positive, not {speed}")
+        speed = checked_speed(speed)
         self.printer = Printer(personality(model, serial=serial), state_file=state_file, faults=faults)
         self.speed = speed
         self.store = store
