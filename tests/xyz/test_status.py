@@ -179,7 +179,7 @@ _HOSTILE_TEXT = st.lists(st.sampled_from(['"\\ud800"', '"\\udfff x"', '"\\u001b[
                          max_size=8).map("".join)
 
 
-@given(st.sampled_from(sorted(LETTERS) + ["4", "s", "W", "n", "i"]), _HOSTILE_TEXT)
+@given(st.sampled_from(sorted(LETTERS)), _HOSTILE_TEXT)
 def test_what_a_status_keeps_can_always_be_written_and_never_drives_a_terminal(letter: str, value: str) -> None:
     status = Status.parse([f"{letter}:{value}", "j:9511,0"])
     shown = json.dumps(status.to_dict(), ensure_ascii=False)
