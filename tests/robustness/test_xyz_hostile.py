@@ -262,3 +262,41 @@ async def test_settings_without_a_status_field_are_sent_but_not_claimed_on_wifi(
     async with asyncio.timeout(30), fake_printer(_ignores_settings) as printer:
         assert await printer.set_energy(5) is False
         assert await printer.restore_defaults() is False
+
+
+async def test_a_setting_lost_with_the_link_is_sent_again_once_the_status_shows_it_missing() -> None:
+    """A Wi-Fi printer whose connection drops as a setting arrives: the client reconnects, sees the buzzer still
+    on, sends the setting again, and reports success only once the status shows it."""
+    buzzer = ["on"]
+    heard: list[bytes] = []
+
+    async def printer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        with contextlib.suppress(ConnectionError):
+            while line := await reader.readline():
+                heard.append(line.strip())
+                if line.startswith(b"XYZv3/config=buzzer:off"):
+                    if heard.count(line.strip()) == 1:
+                        writer.transport.abort()  # the first one is lost with the link
+                        return
+                    buzzer[0] = "off"
+                elif line.startswith(b"XYZv3/query="):
+                    letters = line.strip().removeprefix(b"XYZv3/query=")
+                    rows = [*IDLE_STATUS, b's:{"buzzer":"%s"}' % buzzer[0].encode()]
+                    if letters == b"a":
+                        writer.write(b"\n".join(rows) + b"\n$\n")
+                    else:
+                        writer.write(b"".join(r + b"\n" for r in rows if r[:1] in [bytes([c]) for c in letters]))
+                await writer.drain()
+        writer.close()
+
+    server = await asyncio.start_server(printer, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    try:
+        async with asyncio.timeout(30), await XYZPrinter.open(f"127.0.0.1:{port}", timeout=3.0) as client:
+            client.poll_interval = 0.01
+            assert await client.set_buzzer(False) is True
+            assert client.reconnects >= 1
+    finally:
+        server.close()
+    assert buzzer == ["off"]
+    assert heard.count(b"XYZv3/config=buzzer:off") == 2

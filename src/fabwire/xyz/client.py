@@ -119,6 +119,7 @@ class XYZPrinter(Maintenance):
         self.settings = XYZSettings()
         self.per_command = False
         """Open a new connection for every command (the 1.1 Plus hangs up after each reply)."""
+        self.reconnects = 0  # links opened again: a command sent just before one may never have arrived
         self._heard = False
         """Some reply made sense: the peer speaks XYZv3 (until then, stray text means a wrong device)."""
 
@@ -165,6 +166,7 @@ class XYZPrinter(Maintenance):
         self.transport = await (self.reopen() if self.reopen is not None else
                                 open_transport(self.address, XYZ, connect_timeout=self.timeout))
         self._lost = None
+        self.reconnects += 1
         self.reader = ReplyReader(self.link)
         self._start_pump()
 
@@ -595,5 +597,3 @@ def _load_source(source: Path | bytes) -> tuple[bytes, str]:
     if not data:
         raise InputError(f"{name} is empty")
     return data, name
-
-

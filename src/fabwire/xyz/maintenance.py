@@ -41,6 +41,7 @@ class Maintenance:
 
     poll_interval: float
     link: p.Link
+    reconnects: int
     clock: Callable[[], float]
     last_status: Status
     timeout: float
@@ -184,15 +185,35 @@ class Maintenance:
         carries the value it is read back until it shows the new one; a printer that ignored the command is a
         DeviceError, never success."""
         await self._supports(command)
-        await self.request(command)
-        if command.expects(self.link) is not p.Expect.NOTHING:
-            return True
         readback = _READBACK.get(type(command))
-        if readback is None:
-            return False
+        if command.expects(self.link) is not p.Expect.NOTHING or readback is None:
+            await self.request(command)
+            return command.expects(self.link) is not p.Expect.NOTHING
         letter, applied = readback
-        await self._confirm(command, letter, lambda st: applied(command, st))
+        await self._send_confirmed(command, letter, lambda st: applied(command, st))
         return True
+
+    async def _send_confirmed(self, command: p.Command, letter: str, applied: Callable[[Status], bool], *,
+                              repeatable: bool = True) -> Status:
+        """Send `command` and wait for its effect in status `letter`. A link opened again after the command went
+        out may have lost it: a `repeatable` setting is then sent again at once if the status lacks it; a step
+        (not repeatable) only after the status showed it missing for CONFIRM_LIMIT s, so it is never taken twice."""
+        reconnects = self.reconnects
+        await self.request(command)
+        if repeatable:
+            status = await self.status(letter)
+            if applied(status):
+                return status
+            if self.reconnects != reconnects:
+                await self.request(command)
+            return await self._confirm(command, letter, applied)
+        try:
+            return await self._confirm(command, letter, applied)
+        except DeviceError:
+            if self.reconnects == reconnects:
+                raise
+        await self.request(command)
+        return await self._confirm(command, letter, applied)
 
     async def _confirm(self, command: p.Command, letter: str, applied: Callable[[Status], bool]) -> Status:
         """Poll status `letter` until `applied` holds (firmware applies some settings a moment late, SEED)."""
@@ -235,8 +256,8 @@ class Maintenance:
         before = (await self.status("z")).zoffset
         if before is None:
             raise RemoteProtocolError("the printer reports no z offset (z:), so a step cannot be confirmed")
-        await self.request(command)
-        after = await self._confirm(command, "z", lambda st: st.zoffset == before + (1 if up else -1))
+        after = await self._send_confirmed(command, "z", lambda st: st.zoffset == before + (1 if up else -1),
+                                           repeatable=False)
         assert after.zoffset is not None  # checked by the predicate
         return after.zoffset
 
