@@ -61,8 +61,12 @@ def _drain(records: queue.Queue[logging.LogRecord], wait: float = 1.0) -> None:
         time.sleep(0.01)
 
 
-def log_in_background() -> None:
-    """For long-running servers (simulators, the agent): move the CLI's stderr log handler onto a writer thread."""
+def log_in_background(also: tuple[str, ...] = ()) -> None:
+    """For long-running servers (simulators, the agent): move the CLI's stderr log handler onto a writer thread.
+
+    The loggers named in `also` (a library's, such as uvicorn's) write through the same thread, in place of
+    whatever handlers they had.
+    """
     root = logging.getLogger("fabwire")
     for handler in list(root.handlers):
         if getattr(handler, "fabwire_cli", False) and isinstance(handler, logging.StreamHandler):
@@ -70,3 +74,7 @@ def log_in_background() -> None:
             background.fabwire_cli = True  # type: ignore[attr-defined]
             root.removeHandler(handler)
             root.addHandler(background)
+            for name in also:
+                other = logging.getLogger(name)
+                other.handlers = [background]
+                other.propagate = False

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import fcntl
 import importlib.util
 import signal
+import sys
+import termios
+import time
 from pathlib import Path
 
 from clitools import cli_env, run_cli
@@ -97,3 +101,23 @@ def test_ctrl_c_is_interrupted_and_a_service_stop_is_success(tmp_path: Path) -> 
         assert returned == code, stderr
         assert "Traceback" not in stderr
         assert ("interrupted" in stderr) is (sig == signal.SIGINT), stderr
+
+
+def _unread(fd: int) -> int:
+    return int.from_bytes(fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"), sys.byteorder)
+
+
+def test_a_verbose_agent_with_an_unread_stderr_keeps_serving(tmp_path: Path) -> None:
+    """-vv logs every byte on the demo machines' wires: far more than a pipe buffer holds, and nobody reads it."""
+    agent = start_agent(tmp_path / "state", "--demo", "--speed", "30", "-vv")
+    try:
+        assert agent.process.stderr is not None
+        fd = agent.process.stderr.fileno()
+        capacity = fcntl.fcntl(fd, fcntl.F_GETPIPE_SZ)
+        with agent.client() as client:
+            wait_for(lambda: _unread(fd) > capacity - 4096, "the agent's stderr pipe to fill", timeout=60.0, every=0.5)
+            for _ in range(10):  # its log has nowhere to go now: the agent must answer all the same
+                assert client.get("/api/v1/devices").status_code == 200
+                time.sleep(0.2)
+    finally:
+        agent.stop()

@@ -233,6 +233,24 @@ def test_shell_reports_bad_lines_and_goes_on(simulator) -> None:
     assert "4 line(s) of the session failed" in session.stderr
 
 
+def test_shell_speaks_json_lines(simulator) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf")
+    script = "move 1200 0 down\nM114\nfly\nmove 5000 5000\nhelp\n"
+    session = run_cli("--json", "lineus", "-d", sim.url, "shell", input_text=script)
+    assert session.returncode == 4
+    events = [json.loads(line) for line in session.stdout.splitlines()]
+    assert events[0] == {"line": "move 1200 0 down", "position": {"x": 1200, "y": 0, "z": 0, "pen_down": True}}
+    assert events[1]["line"] == "M114"
+    assert events[1]["reply"]["ok"] is True
+    assert events[1]["reply"]["fields"]["X"] == "1200.00"
+    assert events[2] == {"line": "fly", "error": "unknown command 'fly' (type help)"}
+    assert events[3] == {"notice": "(5000, 5000) is outside the drawing area"}
+    assert events[4]["line"] == "move 5000 5000"
+    assert events[4]["position"]["pen_down"] is False
+    assert events[-1]["line"] == "help"
+    assert "history" in events[-1]["text"]
+
+
 def test_preview_writes_gcode_that_files_save_accepts_and_draw_replays(simulator, tmp_path: Path) -> None:
     svg = DATA / "svg" / "arcs.svg"
     plan_gcode = tmp_path / "plan.gcode"

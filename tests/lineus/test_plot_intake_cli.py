@@ -7,6 +7,7 @@ import gzip
 import json
 import subprocess
 import sys
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,8 @@ import pytest
 from PIL import Image
 
 from clitools import cli_env, run_cli
-from fabwire.lineus.plot import PlanOptions, plan_file, plan_text, text_lines
+from fabwire.errors import InputError
+from fabwire.lineus.plot import PlanOptions, intake, plan_file, plan_text, text_lines
 
 DATA = Path(__file__).parent / "data" / "svg"
 
@@ -130,3 +132,32 @@ def test_preview_resolution(tmp_path: Path, dpi: str) -> None:
     with Image.open(out) as image:
         width_mm = image.size[0] / float(dpi) * 25.4
     assert 110 < width_mm < 125  # the machine's frame (body to outer reach) at paper size, whatever the dpi
+
+
+@pytest.mark.parametrize("packed", [False, True])
+def test_an_oversized_drawing_is_refused_holding_no_more_than_the_limit(monkeypatch: pytest.MonkeyPatch,
+                                                                        tmp_path: Path, packed: bool) -> None:
+    limit = 8 << 20
+    monkeypatch.setattr(intake, "MAX_INPUT", limit)
+    body = b"<svg xmlns='http://www.w3.org/2000/svg'>" + b" " * (32 << 20) + b"</svg>"
+    path = tmp_path / ("bomb.svgz" if packed else "big.svg")
+    path.write_bytes(gzip.compress(body, 1) if packed else body)
+    del body
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError, match=("expands to more than 8 MB" if packed else "larger than 8 MB")):
+            intake.read_drawing(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < limit * 1.5  # the limit and a piece or two: never the whole expansion, never a second copy
+
+
+@pytest.mark.parametrize(("text", "illegible"), [("hello world", False), ("a much longer line " * 4, True),
+                                                 ("x" * 3000, True), ("\n".join(["line of text"] * 6), False)])
+def test_text_fitted_too_small_to_read_is_called_out(tmp_path: Path, text: str, illegible: bool) -> None:
+    result = run_cli("lineus", "text", text, "--dry-run", env=cli_env(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert ("too small to read" in result.stderr) is illegible
+    if illegible:
+        assert result.stderr.count("\n") == 1  # one line of warning before the figures on stdout

@@ -354,6 +354,14 @@ def test_options_validation() -> None:
         SimOptions(name="bad name")
     with pytest.raises(ValueError, match="firmware version"):
         resolve_version("banana")
+    for never in ("9.9.9", "4.0.0", "0.9.1", "3.2.1"):
+        with pytest.raises(ValueError, match="never released"):
+            resolve_version(never)
+    for bad in ("3.2", "1.0.1\x00", "3.2.0\"x"):
+        with pytest.raises(ValueError, match="firmware version"):
+            resolve_version(bad)
+    assert resolve_version("2.0.2Beta6 Sep 14 2018 22:17:02") == "2.0.2Beta6 Sep 14 2018 22:17:02"
+    assert resolve_version("3.1.0") == "3.1.0"
     assert math.isinf(SimOptions(speed=0).speed)
 
 

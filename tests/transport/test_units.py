@@ -18,7 +18,8 @@ def test_durations(seconds: float | None, text: str) -> None:
 
 
 @pytest.mark.parametrize(("seconds", "text"), [
-    (0.0004, "0ms"), (0.04, "40ms"), (0.9994, "999ms"), (0.9996, "1.0s"), (1.0, "1.0s"), (9.96, "10s"), (7.64, "7.6s"), (10, "10s"), (75, "1m 15s"),
+    (0.0004, "0ms"), (0.04, "40ms"), (0.9994, "999ms"), (0.9996, "1.0s"), (1.0, "1.0s"), (9.96, "10s"),
+    (7.64, "7.6s"), (10, "10s"), (75, "1m 15s"),
     (None, "—"), (float("inf"), "—"), (-0.5, "0ms")])
 def test_measured_times_keep_their_short_digits(seconds: float | None, text: str) -> None:
     assert units.elapsed(seconds) == text

@@ -147,6 +147,9 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
 
     from fabwire.agent.api import create_app
     from fabwire.agent.auth import TokenGuard
+    from fabwire.logsink import log_in_background
+
+    log_in_background(also=("uvicorn",))  # a stderr nobody reads must not freeze the agent
 
     server_class = _server_class()
     simulators: list[Any] = []
@@ -165,7 +168,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         if secret is not None:
             app = TokenGuard(app, secret)
         server = server_class(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
-                                               ws="websockets-sansio"))
+                                               ws="websockets-sansio", log_config=None))
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")

@@ -9,6 +9,7 @@ README, "CAUTION"); the simulator follows it there and records the collision.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Literal
 
@@ -25,15 +26,26 @@ DEFAULT_SERIAL = "123456"
 ReplyPolicy = Literal["complete", "accept"]
 
 
+RELEASED = ((1, 0, 0), (3, 2, 0))
+"""The firmware releases known to exist: 1.0.x (2018) to 3.2.0 (Nov 2019), the last before the company closed."""
+_VERSION = re.compile(r"^(\d{1,3})\.(\d{1,3})\.(\d{1,3})(?=$|[ A-Za-z])")
+
+
 def resolve_version(text: str) -> str:
-    """`1`, `1.0.1`, `3`, `3.x`, `3.2.0` → a full version string; anything else starting with a digit as given."""
+    """`1`, `1.0.1`, `3`, `3.x`, `3.2.0` → a full version string; another release from 1.0.0 to 3.2.0 (such as
+    `2.0.2Beta6 Sep 14 2018`) as given. ValueError for anything else, a version never released included."""
     short = text.strip()
     if short in ("1", "1.x", "1.0.1"):
         return VERSIONS["1"]
     if short in ("3", "3.x", "3.2.0"):
         return VERSIONS["3"]
-    if not short[:1].isdigit() or '"' in short or not short.isascii():
+    match = _VERSION.match(short)
+    if match is None or '"' in short or not short.isascii() or not short.isprintable():
         raise ValueError(f"a firmware version starts with its number (1.0.1, 3.2.0 …), got {text!r}")
+    number = tuple(int(part) for part in match.groups())
+    if not RELEASED[0] <= number <= RELEASED[1]:
+        raise ValueError(f"Line-us firmware {match.group(0)} was never released: the releases run from 1.0.0 to "
+                         "3.2.0 (give 1.0.1 or 3.x)")
     return short
 
 

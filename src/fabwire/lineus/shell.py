@@ -2,7 +2,9 @@
 
 Every other CLI call opens a new connection, and the firmware homes the arm on connect, so a series of `move`s
 bounces home between moves; here the arm stays where it was sent. Lines come from standard input (a terminal gets
-a prompt and line editing; a pipe works the same, line by line).
+a prompt and line editing; a pipe works the same, line by line). With --json every line's outcome is one JSON
+object on stdout: `{"line", "position": {"x", "y", "z", "pen_down"}}`, `{"line", "reply": {"ok", "text", "fields"}}`,
+`{"line", "text"}`, `{"line", "error"}` or `{"notice"}`; positions in machine units.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import re
 import sys
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import click
 
@@ -38,9 +41,12 @@ _GCODE = re.compile(r"[GgMm]\d")
 @dataclass
 class Session:
     arm: LineUs
-    echo: Callable[[str], None]
+    emit: Callable[[dict[str, Any], str], None]
+    """Shows one outcome: as a JSON object (--json) or as its line of text."""
     history: list[str] = field(default_factory=list)
     shown_notices: int = 0
+    line: str = ""
+    """The input line being run."""
 
     async def run_line(self, line: str) -> bool:
         """Run one input line; False when the session should end."""
@@ -49,13 +55,14 @@ class Session:
         if not words:
             return True
         self.history.append(line)
+        self.line = line
         head = words[0].lower()
         if head in ("quit", "exit"):
             return False
         if head == "help":
-            self.echo(HELP)
+            self._say(HELP)
         elif head == "history":
-            self.echo("\n".join(f"{n:>4}  {text}" for n, text in enumerate(self.history, 1)))
+            self._say("\n".join(f"{n:>4}  {text}" for n, text in enumerate(self.history, 1)))
         elif _GCODE.match(words[0]):
             await self._gcode(line)
         else:
@@ -77,7 +84,8 @@ class Session:
         z = None if len(args) == 2 else kin.Z_UP if args[2].lower() == "up" else kin.Z_DOWN
         where = await self.arm.move(x, y, z)
         if not kin.is_reachable(x, y):
-            self.echo(f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
+            self.emit({"notice": f"({x:g}, {y:g}) is outside the drawing area"},
+                      f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
         self._show(where)
 
     def _pen(self, z: float) -> Callable[[list[str]], Awaitable[None]]:
@@ -98,7 +106,7 @@ class Session:
         if len(args) not in (1, 2):
             raise InputError("speed S [P]")
         await self.arm.set_speed(_number(args[0]), _number(args[1]) if len(args) == 2 else None)
-        self.echo("ok")
+        self._say("ok")
 
     async def _gcode(self, line: str) -> None:
         try:
@@ -106,14 +114,20 @@ class Session:
         except RemoteProtocolError as exc:
             raise InputError(f"not a Line-us command: {exc}") from None
         reply = await self.arm.send(command)
-        self.echo(reply.text())
+        self.emit({"line": self.line, "reply": {"ok": reply.ok, "text": reply.text(), "fields": reply.as_dict()}},
+                  reply.text())
+
+    def _say(self, text: str) -> None:
+        self.emit({"line": self.line, "text": text}, text)
 
     def _show(self, where: Position) -> None:
-        self.echo(f"X {where.x:g}  Y {where.y:g}  Z {where.z:g}  (pen {'down' if where.pen_down else 'up'})")
+        self.emit({"line": self.line, "position": {"x": where.x, "y": where.y, "z": where.z,
+                                                     "pen_down": where.pen_down}},
+                  f"X {where.x:g}  Y {where.y:g}  Z {where.z:g}  (pen {'down' if where.pen_down else 'up'})")
 
     def _notices(self) -> None:
         for notice in self.arm.notices[self.shown_notices :]:
-            self.echo(notice)
+            self.emit({"notice": notice}, notice)
         self.shown_notices = len(self.arm.notices)
 
 
@@ -147,21 +161,20 @@ def shell(dctx: DeviceContext) -> None:
     if interactive:
         import readline  # noqa: F401  (line editing and arrow-key history at the prompt)
 
-    def echo(text: str) -> None:
-        click.echo(text)
-
     async def main() -> int:
         failures = 0
         async with dctx.open(LineUs) as arm:
             hello = arm.hello
             dctx.output.note(f"connected to {hello.name} (firmware {hello.version.split()[0]}); type help")
-            session = Session(arm, echo)
+            session = Session(arm, dctx.output.event)
             while (line := await _read_line("lineus> " if interactive else None)) is not None:
                 try:
                     if not await session.run_line(line):
                         break
                 except (InputError, DeviceError) as exc:
                     failures += 1
+                    if dctx.output.json_mode:
+                        dctx.output.event({"line": line.strip(), "error": str(exc)}, "")
                     click.echo(f"error: {exc}", err=True)
         return failures
 

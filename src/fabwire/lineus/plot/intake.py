@@ -56,44 +56,39 @@ class Drawing:
         return _svg_drawing(self.name, self.data, self.digest, tolerance)
 
 
-def _read_limited(read: Callable[[int], bytes]) -> bytes:
-    """Up to MAX_INPUT + 1 bytes, read in pieces so memory follows what is there, not the limit."""
+def _read_limited(read: Callable[[int], bytes], refusal: str) -> bytes:
+    """At most MAX_INPUT bytes, read in pieces so memory follows what is there, not the limit; InputError(`refusal`)
+    as soon as there is more, before anything is copied (a gzip bomb costs the limit, not twice it)."""
     out = bytearray()
-    while len(out) <= MAX_INPUT:
-        piece = read(1 << 20)
-        if not piece:
-            break
+    while piece := read(min(1 << 20, MAX_INPUT + 1 - len(out))):
         out += piece
+        if len(out) > MAX_INPUT:
+            raise InputError(refusal)
     return bytes(out)
 
 
 def _read_bytes(source: str | Path) -> tuple[str, bytes]:
+    name = "standard input" if str(source) == STDIN else str(source)
+    too_big = f"{name}: larger than {MAX_INPUT >> 20} MB; refusing to read it"
     if str(source) == STDIN:
-        data = _read_limited(sys.stdin.buffer.read)
-        name = "standard input"
-    else:
-        name = str(source)
-        try:
-            with Path(source).open("rb") as fh:
-                data = _read_limited(fh.read)
-        except FileNotFoundError as exc:
-            raise InputError(f"{name}: no such file") from exc
-        except IsADirectoryError as exc:
-            raise InputError(f"{name}: is a directory, not a drawing") from exc
-        except OSError as exc:
-            raise InputError(f"{name}: cannot read ({exc.strerror or exc})") from exc
-    return name, data
+        return name, _read_limited(sys.stdin.buffer.read, too_big)
+    try:
+        with Path(source).open("rb") as fh:
+            return name, _read_limited(fh.read, too_big)
+    except FileNotFoundError as exc:
+        raise InputError(f"{name}: no such file") from exc
+    except IsADirectoryError as exc:
+        raise InputError(f"{name}: is a directory, not a drawing") from exc
+    except OSError as exc:
+        raise InputError(f"{name}: cannot read ({exc.strerror or exc})") from exc
 
 
 def _gunzip(name: str, data: bytes) -> bytes:
     try:
         with gzip.GzipFile(fileobj=io.BytesIO(data)) as fh:
-            out = _read_limited(fh.read)
+            return _read_limited(fh.read, f"{name}: expands to more than {MAX_INPUT >> 20} MB; refusing to read it")
     except (OSError, EOFError, zlib.error) as exc:
         raise InputError(f"{name}: not a readable gzip file ({exc})") from exc
-    if len(out) > MAX_INPUT:
-        raise InputError(f"{name}: expands to more than {MAX_INPUT >> 20} MB; refusing to read it")
-    return out
 
 
 def _kind(name: str, data: bytes) -> str:

@@ -271,6 +271,11 @@ def plan_file(path: str | Path, options: PlanOptions = PlanOptions()) -> Plan:
     return plan_drawing(read_drawing(path), options)
 
 
+LEGIBLE_CAP_MM = 2.0
+"""Capital height below which fitted text is called illegible: letters a few pen-line widths tall."""
+PEN_LINE_MM = 0.5
+
+
 def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float | None = None,
               font: str = DEFAULT_FONT) -> Plan:
     """Plan text in a single-stroke font: `size_mm` tall capitals centred in the area, or fitted to it.
@@ -280,7 +285,13 @@ def plan_text(text: str, options: PlanOptions = PlanOptions(), *, size_mm: float
     """
     notes: list[str] = []
     if size_mm is None:
-        return plan_lines(text_lines(text, font=font, notes=notes), options, fit_default=True, notes=notes)
+        plan = plan_lines(text_lines(text, font=font, notes=notes), options, fit_default=True, notes=notes)
+        cap_mm = plan.scale / UNITS_PER_MM  # the letters were made 1 machine unit tall before fitting
+        if cap_mm < LEGIBLE_CAP_MM:
+            plan = replace(plan, notes=(*plan.notes, (
+                f"the text fits the area only {cap_mm:.2g} mm tall, too small to read in a pen line about "
+                f"{PEN_LINE_MM} mm wide: break it into lines with \\n, or shorten it")))
+        return plan
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise InputError(f"the text size must be a positive number of mm, got {size_mm:g}")
     lines = text_lines(text, font=font, cap_height=size_mm * UNITS_PER_MM, notes=notes)
