@@ -342,3 +342,10 @@ def test_wifi_join_password_comes_from_the_option_or_a_terminal(simulator: Simul
     assert "joining MYNET" in text
     given = run_cli("xyz", "-d", dev, "wifi", "join", "MYNET", "--password", "")
     assert given.returncode == 0, given.stderr
+
+
+def test_an_endless_firmware_file_is_refused_after_a_bounded_read() -> None:
+    done = run_cli("xyz", "-d", "sim://xyz", "firmware", "--yes", "/dev/zero")
+    assert (done.returncode, done.stdout) == (4, "")
+    assert done.stderr.strip().splitlines() == [
+        "fabwire: error: /dev/zero is over 64 MiB: not a da Vinci firmware image"]

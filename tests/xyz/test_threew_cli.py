@@ -18,10 +18,10 @@ DATA = Path(__file__).parent / "data" / "threew"
 TV_INPUT = (DATA / "tv_input.gcode").read_bytes()
 
 
-def invoke(command, *args: str, json_mode: bool = False):  # type: ignore[no-untyped-def]
+def invoke(command, *args: str, json_mode: bool = False, input: bytes | None = None):  # type: ignore[no-untyped-def]
     app = App()
     app.output.json_mode = json_mode
-    return CliRunner().invoke(command, list(args), obj=app)
+    return CliRunner().invoke(command, list(args), obj=app, input=input)
 
 
 @pytest.fixture
@@ -200,4 +200,14 @@ def test_standard_input_that_cannot_be_converted_is_one_line_of_error(data: byte
     assert done.returncode == 4
     assert message in done.stderr.decode()
     assert len(done.stderr.decode().strip().splitlines()) == 1
+    assert not (tmp_path / "out.3w").exists()
+
+
+def test_standard_input_that_never_ends_is_cut_off(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from fabwire.xyz import intake
+
+    monkeypatch.setattr(intake, "MAX_STDIN", 1 << 20)
+    result = invoke(convert, "-", str(tmp_path / "out.3w"), input=b"G1 X1\n" * 400_000)
+    assert isinstance(result.exception, InputError)
+    assert str(result.exception).startswith("standard input is over")
     assert not (tmp_path / "out.3w").exists()

@@ -78,6 +78,8 @@ async def _ask(message: str) -> None:
         raise InputError("no confirmation on standard input; the step was stopped")
 
 
+FIRMWARE_LIMIT = 64 << 20
+"""Largest firmware image read (da Vinci images are a few MiB; an endless file such as /dev/zero is not one)."""
 _UNCONFIRMED = " (sent; a printer on Wi-Fi does not confirm this setting)"
 
 
@@ -472,7 +474,13 @@ def wifi_leave(dctx: DeviceContext) -> None:
 def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
     """Flash a firmware image (.bin with its `<model>+<version>` header). Can brick the printer."""
     confirm(f"flash {file.name} (a wrong image can brick the printer)", yes)
-    image = file.read_bytes()
+    try:
+        with file.open("rb") as handle:
+            image = handle.read(FIRMWARE_LIMIT + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read {file}: {exc.strerror}") from exc
+    if len(image) > FIRMWARE_LIMIT:
+        raise InputError(f"{file} is over {FIRMWARE_LIMIT >> 20} MiB: not a da Vinci firmware image")
     result = _with_printer(dctx, lambda pr: pr.upload_firmware(image, confirm=True))
     dctx.output.result({"ok": True, "bytes": result.size}, f"sent {result.size} bytes of firmware")
 

@@ -174,6 +174,8 @@ def open_input(path: Path, name: str | None = None) -> BinaryIO:
 STDIN = "-"
 """The file name that means standard input."""
 STDIN_NAME = "standard input"
+MAX_STDIN = 4 << 30
+"""Most bytes taken from standard input (a pipe may never end; a print file is far smaller)."""
 
 
 @contextlib.contextmanager
@@ -190,6 +192,8 @@ def input_file(path: Path) -> Iterator[tuple[Path, str]]:
         try:
             with spooled.open("wb") as out:
                 while block := sys.stdin.buffer.read(CHUNK):
+                    if out.tell() + len(block) > MAX_STDIN:
+                        raise InputError(f"{STDIN_NAME} is over {MAX_STDIN >> 30} GiB: not a print file that ends")
                     out.write(block)
         except OSError as exc:
             raise InputError(f"cannot read {STDIN_NAME}: {exc.strerror or exc}") from exc
