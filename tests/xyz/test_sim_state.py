@@ -88,3 +88,11 @@ def test_a_sim_url_with_an_impossible_speed_is_bad_input(url: str) -> None:
     assert done.returncode == 4
     assert done.stderr.strip().splitlines() == [
         f"fabwire: error: speed must be a number from 0.01 to 10000, not {float(url.split('=')[1])}"]
+
+
+@pytest.mark.parametrize("store", ["/dev/null", "/proc/no-such-dir/x"])
+def test_a_store_that_cannot_be_a_folder_is_bad_input(store: str) -> None:
+    done = run_cli("xyz", "-d", f"sim://xyz?store={store}", "status", timeout=60)
+    assert (done.returncode, done.stdout) == (4, "")
+    assert done.stderr.startswith(f"fabwire: error: cannot keep received files in '{store}': ")
+    assert done.stderr.count("\n") == 1

@@ -95,7 +95,11 @@ class XYZSimulator:
         self.connections = 0
         self.busy_replies = 0
         if store is not None:
-            store.mkdir(parents=True, exist_ok=True)
+            try:
+                store.mkdir(parents=True, exist_ok=True)
+            except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
+                raise InputError(f"cannot keep received files in {str(store)!r}: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
 
     # ------------------------------------------------------------------------------------- control API
 
