@@ -12,6 +12,7 @@ import asyncio
 import importlib
 import importlib.util
 import logging
+import math
 import os
 import re
 import sys
@@ -36,6 +37,18 @@ P = ParamSpec("P")
 T = TypeVar("T")
 
 OptionFactory = Callable[[], click.Option]
+
+
+class FiniteRange(click.FloatRange):
+    """A FloatRange that also refuses nan and ±inf (nan passes every comparison, inf makes a wait endless)."""
+
+    name = "finite float range"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return number
 
 
 class App(msgspec.Struct):
@@ -142,7 +155,7 @@ DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
     lambda: click.Option(["--trace", "shared_trace"], type=click.Path(dir_okay=False, path_type=Path),
                          expose_value=False, callback=_setter(lambda app, v: setattr(app, "trace", v)),
                          help="Record the wire to FILE."),
-    lambda: click.Option(["--timeout", "shared_timeout"], type=click.FloatRange(min=0.1), expose_value=False,
+    lambda: click.Option(["--timeout", "shared_timeout"], type=FiniteRange(min=0.1), expose_value=False,
                          callback=_setter(lambda app, v: setattr(app, "timeout", v)),
                          help="Seconds to wait for the link to open [default: 5, or the device's setting]."),
     lambda: click.Option(["--inject", "shared_inject"], metavar="FAULTS", hidden=True, expose_value=False,
@@ -175,7 +188,7 @@ def link_option(kind: str, setting: str, *decls: str, **attrs: Any) -> OptionFac
 
 LINK_OPTIONS: dict[str, tuple[OptionFactory, ...]] = {
     "mmu": (
-        link_option("mmu", "speed", "--speed", type=click.FloatRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
+        link_option("mmu", "speed", "--speed", type=FiniteRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
                     help="The MMU runs this many times faster than real time (a simulator's --speed); "
                          "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
         link_option("mmu", "accept", "--accept", multiple=True, metavar="X.Y.Z",

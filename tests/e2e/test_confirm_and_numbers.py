@@ -129,3 +129,18 @@ def test_negative_numbers_are_arguments_anywhere_and_option_values_stay_theirs(
     result = CliRunner().invoke(_probe, line)
     assert result.exit_code == 0, result.output
     assert result.output.strip() == repr((float(first), float(second), name, len(flags) - 1))
+
+
+@pytest.mark.parametrize("args", [
+    ["mmu", "-d", "sim://mmu?speed=100", "eject", "1", "--continue-after", "inf"],
+    ["mmu", "-d", "sim://mmu?speed=100", "monitor", "--duration", "nan"],
+    ["mmu", "-d", "sim://mmu?speed=100", "home", "--max-time", "nan"],
+    ["xyz", "-d", "sim://xyz", "status", "--watch", "--interval", "inf"],
+    ["xyz", "-d", "sim://xyz", "--timeout", "nan", "status"],
+    ["mmu", "-d", "sim://mmu", "--speed", "-inf", "status"],
+])
+def test_a_time_or_speed_that_is_not_a_finite_number_is_refused_before_anything_runs(args: list[str]) -> None:
+    done = run_cli(*args, timeout=60)
+    assert (done.returncode, done.stdout) == (2, "")
+    assert "is not a finite number" in done.stderr
+    assert "Traceback" not in done.stderr

@@ -12,7 +12,16 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import LINK_OPTIONS, DeviceContext, confirm, device_group, on_terminal, pass_app, pass_device
+from fabwire.cli_support import (
+    LINK_OPTIONS,
+    DeviceContext,
+    FiniteRange,
+    confirm,
+    device_group,
+    on_terminal,
+    pass_app,
+    pass_device,
+)
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
@@ -202,7 +211,7 @@ async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, s
 
 
 def _command_options(func: F) -> F:
-    return click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+    return click.option("--max-time", type=FiniteRange(min=0.1), default=600.0, show_default=True,
                         help="Give up if the command has not ended after this many seconds.")(func)
 
 
@@ -234,7 +243,7 @@ async def unload(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 
 @mmu.command("eject")
 @click.argument("slot", type=int)
-@click.option("--continue-after", type=click.FloatRange(min=0.0), metavar="SECONDS",
+@click.option("--continue-after", type=FiniteRange(min=0.0), metavar="SECONDS",
               help="Press Continue this many seconds after the filament is out (default: ask on a terminal, "
                    "else leave the MMU waiting for `fabwire mmu button continue`).")
 @_command_options
@@ -331,7 +340,7 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
 
 @mmu.command("button")
 @click.argument("button", type=click.Choice(["retry", "continue", "stop", "left", "middle", "right"]))
-@click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+@click.option("--max-time", type=FiniteRange(min=0.1), default=600.0, show_default=True,
               help="Give up following the command after this many seconds.")
 @with_mmu(auto_retries=0)
 async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -> None:
@@ -427,7 +436,7 @@ def _parse_value(text: str) -> int:
 
 @mmu.command("monitor")
 @click.option("--count", type=click.IntRange(min=1), help="Stop after this many status polls (shown or not).")
-@click.option("--duration", type=click.FloatRange(min=0.0), help="Stop after this many seconds.")
+@click.option("--duration", type=FiniteRange(min=0.0), help="Stop after this many seconds.")
 @click.option("--all", "every", is_flag=True, help="Show every status poll, not only the ones that changed.")
 @with_mmu(auto_retries=0)
 async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: float | None, every: bool) -> None:
@@ -458,7 +467,7 @@ async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: f
 
 @click.command("mmu")
 @server_options(None)
-@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.01), default=1.0, show_default=True,
               help="Run the machine this many times faster than real time.")
 @click.option("--fault", "faults", multiple=True, metavar="NAME[:N|:always]",
               help="Inject a fault (repeatable): " + ", ".join(sorted(n for n in FAULT_NAMES if

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from fabwire import units
-from fabwire.cli_support import App, DeviceContext, confirm, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
 from fabwire.simserve import server_options
@@ -136,7 +136,7 @@ def render_status(status: Status) -> Panel:
 @xyz.command()
 @click.option("--watch", is_flag=True, help="Keep polling and show live temperatures and progress (reconnects when "
                                             "the link is lost).")
-@click.option("--interval", type=click.FloatRange(min=0.05), default=1.0, show_default=True,
+@click.option("--interval", type=FiniteRange(min=0.05), default=1.0, show_default=True,
               help="Seconds between polls with --watch.")
 @click.option("--count", type=click.IntRange(min=1), help="With --watch: stop after N polls.")
 @pass_device
@@ -489,7 +489,7 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 @click.option("--host", "hosts", multiple=True, metavar="HOST", help="Probe this host on port 9100 (repeat).")
 @click.option("--subnet", metavar="CIDR", help="Probe every address in CIDR, e.g. 192.168.1.0/24.")
 @click.option("--port", type=click.IntRange(1, 65535), default=9100, show_default=True)
-@click.option("--probe-timeout", type=click.FloatRange(min=0.05), default=1.0, show_default=True)
+@click.option("--probe-timeout", type=FiniteRange(min=0.05), default=1.0, show_default=True)
 @click.option("--concurrency", type=click.IntRange(1, 1024), default=64, show_default=True)
 @pass_device
 def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
@@ -519,7 +519,7 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
 @server_options(XYZ.default_port)
 @click.option("--model", "model_text", default="dv1MW0A000", show_default=True,
               help="Model personality (model number or name, e.g. miniMaker, nano, 'mini w', 1.0 Pro).")
-@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.01), default=1.0, show_default=True,
               help="Time speed-up factor for heating, flows and prints.")
 @click.option("--fault", "faults", multiple=True, metavar="NAME",
               help="Start with a fault: no-cartridge, door-open, file-rejected, heater-failure, link-drop, stuck.")
