@@ -137,7 +137,7 @@ def test_negative_numbers_are_arguments_anywhere_and_option_values_stay_theirs(
     ["mmu", "-d", "sim://mmu?speed=100", "home", "--max-time", "nan"],
     ["xyz", "-d", "sim://xyz", "status", "--watch", "--interval", "inf"],
     ["xyz", "-d", "sim://xyz", "--timeout", "nan", "status"],
-    ["mmu", "-d", "sim://mmu", "--speed", "-inf", "status"],
+    ["mmu", "-d", "sim://mmu", "--speed", "inf", "status"],
 ])
 def test_a_time_or_speed_that_is_not_a_finite_number_is_refused_before_anything_runs(args: list[str]) -> None:
     done = run_cli(*args, timeout=60)
