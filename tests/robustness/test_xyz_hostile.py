@@ -338,3 +338,21 @@ async def test_printing_a_gcode_holds_the_same_memory_whatever_its_size(tmp_path
             finally:
                 tracemalloc.stop()
     assert peaks[1] - peaks[0] < 4 << 20, f"peaks {[p >> 20 for p in peaks]} MiB for 8 and 40 MiB files"
+
+
+@pytest.mark.parametrize(("state", "method"), [(b"j:9505,0", "pause"), (b"j:9505,0", "cancel"),
+                                               (b"j:9601,0", "resume"), (b"j:9509,0", "acknowledge")])
+async def test_a_wifi_printer_that_ignores_job_control_is_no_success(state: bytes, method: str) -> None:
+    def printer(line: bytes) -> bytes | None:
+        rows = [*(r for r in IDLE_STATUS if not r.startswith(b"j:")), state]
+        if line.startswith(b"XYZv3/query=a"):
+            return b"\n".join(rows) + b"\n$\n"
+        if line.startswith(b"XYZv3/query="):
+            return state + b"\n"
+        return None
+
+    ticks = iter(range(10_000))
+    async with asyncio.timeout(30), fake_printer(printer) as client:
+        client.clock = lambda: float(next(ticks))
+        with pytest.raises(DeviceError, match=r"did not apply 'config=print\["):
+            await getattr(client, method)()

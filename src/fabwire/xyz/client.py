@@ -557,7 +557,11 @@ class XYZPrinter(Maintenance):
                 raise InputError(f"nothing to cancel: no print is running (the printer is {state})")
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
             raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
-        await self.request(p.PrintControl(op))
+        command = p.PrintControl(op)
+        if command.expects(self.link) is not p.Expect.NOTHING:
+            await self.request(command)  # the printer's ok
+        else:  # a Wi-Fi printer answers nothing: its state leaving the one it was in is the evidence
+            await self._send_confirmed(command, "j", lambda st: st.state_code != status.state_code)
 
     async def upload_firmware(self, image: bytes, *, confirm: bool, progress: UploadProgress | None = None,
                               name: str = "temp.bin") -> UploadResult:
