@@ -356,3 +356,32 @@ async def test_a_wifi_printer_that_ignores_job_control_is_no_success(state: byte
         client.clock = lambda: float(next(ticks))
         with pytest.raises(DeviceError, match=r"did not apply 'config=print\["):
             await getattr(client, method)()
+
+
+@pytest.mark.parametrize("reply", [b"calibratejr:{}\n$\n", b"calibratejr:{1,2,3}\n$\n", b"junk\n$\n",
+                                   b'calibratejr:{"stat":"ok",' + b"9" * 5000 + b"}\n$\n"])
+async def test_a_calibration_without_nine_readings_is_no_result(reply: bytes) -> None:
+    """A printer that walks through the calibration states but answers `getdata` with anything but 9 readings."""
+    steps = iter([b"j:9535,41", b"j:9535,44"])
+    state = [b"j:9511,0"]
+
+    def printer(line: bytes) -> bytes | None:
+        if line.startswith(b"XYZv3/action=calibratejr:"):
+            op = line.removeprefix(b"XYZv3/action=calibratejr:")
+            if op in (b"new", b"detectorok"):
+                state[0] = next(steps)
+            elif op == b"release":
+                state[0] = b"j:9511,0"
+            return reply if op == b"getdata" else None
+        if line.startswith(b"XYZv3/query="):
+            rows = [*(r for r in IDLE_STATUS if not r.startswith(b"j:")), state[0]]
+            return b"\n".join(rows) + (b"\n$\n" if line.endswith(b"=a") else b"\n")
+        return None
+
+    async def confirm(message: str) -> None:
+        return None
+
+    async with asyncio.timeout(30), fake_printer(printer) as client:
+        with pytest.raises(RemoteProtocolError, match="not 9 bed readings"):
+            await client.calibrate(confirm)
+    assert state[0] == b"j:9511,0"  # the flow was released

@@ -19,6 +19,8 @@ Prompt = Callable[[str], Awaitable[None]]
 STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
 """Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
 _PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
+CALIBRATION_POINTS = 9
+"""`calibratejr:getdata` reports 9 bed readings (reference, calibrate bed; cf. `c:`)."""
 CONFIRM_LIMIT = 5.0
 """Seconds a Wi-Fi printer has to show a setting in its status (it does not answer settings there)."""
 _READBACK: dict[type[p.Command], tuple[str, Callable[[Any, Status], bool]]] = {
@@ -148,6 +150,10 @@ class Maintenance:
             reply = await self.request(p.Flow("calibratejr", "getdata"))
             stat = p.parse_stat_line(reply.lines[0]) if reply.lines else None
             values = stat.values if stat else ()
+            if len(values) != CALIBRATION_POINTS:
+                raise RemoteProtocolError(f"the printer answered 'calibratejr:getdata' with "
+                                          f"{(reply.lines or ['nothing'])[0][:60]!r}, not {CALIBRATION_POINTS} "
+                                          "bed readings")
             await prompt("Raise the calibration detector, then confirm")
         except BaseException:
             released = await self._release_calibration()

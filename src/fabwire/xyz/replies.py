@@ -61,7 +61,7 @@ ReaderEvent = Reply | ErrorReply | NoReply | ActionStat
 
 _ERROR = re.compile(r"^E(\d{1,10})\$?$")
 _STAT = re.compile(r"^([A-Za-z][A-Za-z0-9_]+):(\{.*\})$")
-_NUMBER = re.compile(r"^-?\d+$")
+_NUMBER = re.compile(r"-?\d{1,12}")  # fullmatch: a reading, never a 5000-digit int()
 
 
 def parse_stat_line(line: str) -> ActionStat | None:
@@ -81,7 +81,7 @@ def parse_stat_line(line: str) -> ActionStat | None:
                 stat = value
             else:
                 extra[key] = value
-        elif _NUMBER.match(part.strip()):
+        elif _NUMBER.fullmatch(part.strip()):
             values.append(int(part.strip()))
         elif part.strip():
             return None
@@ -275,7 +275,7 @@ class ReplyReader:
             else:
                 self.noise += 1
         elif p.expect is Expect.NUMBER:
-            if _NUMBER.match(line) and not p.lines:
+            if _NUMBER.fullmatch(line) and not p.lines:
                 p.lines.append(line)
             else:
                 self.noise += 1
