@@ -43,10 +43,12 @@ class DeviceError(FabwireError):
     exit_code = 7
 
     def __init__(self, code: int | str, meaning: str, *, action: str = "") -> None:
+        """`code` is the machine's own code for the error; a machine without codes (the Line-us answers a bare
+        `error`) gives "" and `meaning` alone is shown."""
         self.code = code
         self.meaning = meaning
         self.action = action
-        text = f"device error {code}: {meaning}"
+        text = f"device error {code}: {meaning}" if code != "" else meaning
         if action:
             text += f" — {action}"
         super().__init__(text)

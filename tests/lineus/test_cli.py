@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
+import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -353,3 +356,68 @@ def test_sim_record_path_that_cannot_be_written_is_refused_at_start(tmp_path: Pa
     assert len(result.stderr.strip().splitlines()) == 1
     assert "listening" not in result.stdout + result.stderr  # refused before serving anything
     assert not target.exists()
+
+
+HELLO = b'hello VERSION:"3.2.0 Nov 17 2019 17:54:57" NAME:line-us SERIAL:123456\r\n\0'
+
+
+class LyingLineUs:
+    """A TCP peer that greets like a Line-us and then answers every command the way `answer` says."""
+
+    def __init__(self, answer: Callable[[socket.socket, bytes], bool]) -> None:
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.address = f"127.0.0.1:{self.server.getsockname()[1]}"
+        self.answer = answer
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                peer, _ = self.server.accept()
+                threading.Thread(target=self._talk, args=(peer,), daemon=True).start()
+
+    def _talk(self, peer: socket.socket) -> None:
+        with peer, contextlib.suppress(OSError):
+            peer.sendall(HELLO)
+            buffered = b""
+            while data := peer.recv(4096):
+                buffered += data.replace(b"\n", b"\0")
+                *lines, buffered = buffered.split(b"\0")
+                for line in filter(None, (raw.strip() for raw in lines)):
+                    if not self.answer(peer, line):
+                        return
+
+
+def _refuse(peer: socket.socket, line: bytes) -> bool:
+    peer.sendall(b"error\r\n\0")
+    return True
+
+
+def _hang_up(peer: socket.socket, line: bytes) -> bool:
+    return False
+
+
+def _babble(peer: socket.socket, line: bytes) -> bool:
+    peer.sendall(b"banana split\r\n\0")
+    return True
+
+
+def _bare_ok(peer: socket.socket, line: bytes) -> bool:
+    peer.sendall(b"ok\r\n\0")
+    return True
+
+
+@pytest.mark.parametrize(("answer", "code", "words"), [
+    (_refuse, 7, "the Line-us refused 'G01 X1200 Y0'"),
+    (_hang_up, 8, "the Line-us closed the connection with 1 command(s) unanswered (first: 'G01 X1200 Y0')"),
+    (_babble, 6, "reply starts with 'banana', not ok/error/hello"),
+    (_bare_ok, 6, "reply 'ok' does not carry X, Y and Z"),
+])
+def test_a_line_us_that_does_not_do_the_move_is_never_a_success(answer: Callable[[socket.socket, bytes], bool],
+                                                                 code: int, words: str) -> None:
+    device = LyingLineUs(answer)
+    for args in (("move", "1200", "0"), ("--json", "move", "1200", "0")):
+        result = run_cli("--timeout", "5", "lineus", "-d", device.address, *args)
+        assert result.returncode == code, result.stderr
+        assert result.stdout == ""
+        assert result.stderr.splitlines() == [f"fabwire: error: {words}"]

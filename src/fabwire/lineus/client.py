@@ -217,7 +217,7 @@ class LineUs:
             if pending:
                 self._fail(LinkClosed(
                     f"the Line-us closed the connection with {len(pending)} command(s) unanswered "
-                    f"(first: {pending[0]!r}); the drawing was interrupted"))
+                    f"(first: {pending[0]!r})"))
             else:
                 self._fail(LinkClosed("the Line-us closed the connection"))
         except RemoteProtocolError as exc:
@@ -482,7 +482,7 @@ class LineUs:
             for line in lines:
                 reply = await self.send(_RawLine(line))
                 if not reply.ok:
-                    raise DeviceError("error", f"storing {line!r}: {reply.info or 'refused'}")
+                    raise DeviceError("", f"the Line-us refused to store {line!r}" + _why(reply))
         finally:
             if self._failure is None:
                 await self.request(p.EndSave())
@@ -545,8 +545,13 @@ def _guard(confirm: bool, what: str) -> None:
 
 def _checked(command: p.Command, reply: p.Reply) -> p.Reply:
     if not reply.ok:
-        raise DeviceError("error", f"{command.text()}: {reply.info or 'refused by the Line-us'}")
+        raise DeviceError("", f"the Line-us refused {command.text()!r}" + _why(reply))
     return reply
+
+
+def _why(reply: p.Reply) -> str:
+    """The reason a refusal gives, if any (firmware 3.x words it, 1.x answers a bare `error`)."""
+    return f": {reply.info}" if reply.info else ""
 
 
 class LineUsSync(SyncClient[LineUs]):
