@@ -227,3 +227,11 @@ def test_sim_refuses_unknown_fault_and_missing_address() -> None:
     done = run_cli("sim", "mmu")
     assert done.returncode == 4
     assert "--listen HOST:PORT" in done.stderr
+
+
+@pytest.mark.parametrize("value", ["0x" + "f" * 5000, "9" * 5000, "\u0661\u0662", "1_000"])
+def test_a_register_value_that_is_no_plain_number_is_one_line_of_bad_input(value: str) -> None:
+    done = run_cli("mmu", "-d", "sim://mmu?speed=50", "--speed", SPEED, "write", "cut_length", value, timeout=60)
+    assert (done.returncode, done.stdout) == (4, "")
+    assert done.stderr.count("\n") == 1
+    assert "register value must be a number" in done.stderr

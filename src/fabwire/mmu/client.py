@@ -62,8 +62,8 @@ def resolve_register(register: int | str, *, for_write: bool = False,
     found = codes.find_register(str(register)) if not isinstance(register, int) else (
         codes.REGISTERS[register] if 0 <= register < codes.REGISTER_COUNT else None)
     if found is None:
-        raise InputError(f"unknown MMU register {register!r}: use a name such as 'bowden_length' or an address "
-                         f"from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
+        raise InputError(f"unknown MMU register {str(register)[:40]!r}: use a name such as 'bowden_length' or an "
+                         f"address from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
     if for_write and not found.writable(version):
         raise InputError(f"register 0x{found.address:02x} ({found.name}) is read-only"
                          + (" on this firmware" if found.access is codes.Access.RW_304 else ""))
