@@ -144,3 +144,11 @@ def test_a_time_or_speed_that_is_not_a_finite_number_is_refused_before_anything_
     assert (done.returncode, done.stdout) == (2, "")
     assert "is not a finite number" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("value", ["9" * 5000, "9" * 5000 + "mm", "-" + "9" * 400 + ".5mm"])
+def test_a_z_offset_too_long_for_a_number_is_one_line_of_bad_input(value: str) -> None:
+    done = run_cli("xyz", "-d", "sim://xyz", "zoffset", value)
+    assert (done.returncode, done.stdout) == (4, "")
+    assert done.stderr.count("\n") == 1
+    assert done.stderr.startswith("fabwire: error: z offset ")
