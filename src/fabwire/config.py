@@ -232,17 +232,23 @@ def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
 def load_devices(path: Path | None = None) -> dict[str, NamedDevice]:
     """Read the config file; a missing file means no named devices, a malformed one is a ConfigError."""
     path = path or config_path()
+    text = read_config_text(path)
+    return parse_devices(text, path) if text else {}
+
+
+def read_config_text(path: Path) -> str:
+    """The config file's text ("" for a missing file), read with a bound; unreadable text is a ConfigError."""
     try:
         with path.open("rb") as handle:
             raw = handle.read(MAX_CONFIG_BYTES + 1)
         text = raw.decode("utf-8")
     except FileNotFoundError:
-        return {}
+        return ""
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in $FABWIRE_CONFIG
         raise ConfigError(f"cannot read config file {path}: {exc}") from exc
     if len(raw) > MAX_CONFIG_BYTES:
         raise ConfigError(f"{path}: over {MAX_CONFIG_BYTES >> 20} MiB, too large for a config file")
-    return parse_devices(text, path)
+    return text
 
 
 class Target(msgspec.Struct, frozen=True):
