@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -211,3 +212,16 @@ def test_standard_input_that_never_ends_is_cut_off(monkeypatch: pytest.MonkeyPat
     assert isinstance(result.exception, InputError)
     assert str(result.exception).startswith("standard input is over")
     assert not (tmp_path / "out.3w").exists()
+
+
+def test_file_names_that_are_not_utf8_convert_both_ways(gcode: Path, tmp_path: Path) -> None:
+    src = tmp_path / os.fsdecode(b"part\xff.gcode")
+    src.write_bytes(TV_INPUT)
+    out = tmp_path / os.fsdecode(b"out\xfe.3w")
+    done = run_cli("--json", "xyz", "convert", str(src), str(out), env=cli_env())
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["output"] == str(out)
+    assert read_3w(out).fields["filename"] == "out\ufffd.3w"  # the name's bytes kept, shown with a replacement
+    back = _piped("xyz", "convert", str(out), str(tmp_path / os.fsdecode(b"back\xfd.gcode")), data=b"")
+    assert back.returncode == 0, back.stderr
+    assert b"back\xfd.gcode" in back.stdout  # the name as the file system has it

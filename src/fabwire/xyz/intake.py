@@ -428,7 +428,7 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
         f"; total_layers = {meta.layers}\n"
         f"; version = {XYZ_VERSION}\n"
         f"; total_filament = {meta.filament_mm:.2f}\n"
-    ).encode()
+    ).encode("utf-8", "surrogateescape")  # a file name's undecodable bytes go into the header as they were
     comments = _leading_comments(head, header_space)
     fits = comments is not None and (len(keys + comments) // 16 + 1) * 16 <= header_space  # with its PKCS#7 pad
     header = keys + comments if comments is not None and fits else keys
