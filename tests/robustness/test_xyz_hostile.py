@@ -20,6 +20,7 @@ from fabwire.transport import Transport
 from fabwire.xyz import protocol as xp
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.protocol import Block, DeviceDecoder, Garbage, Link, Received
+from fabwire.xyz.replies import MAX_STATUS_LINES
 from fabwire.xyz.sim import COMMAND_HISTORY, UPLOAD_HISTORY, XYZSimulator
 from fabwire.xyz.status import Status
 from fabwire.xyz.threew import write_3w
@@ -385,3 +386,20 @@ async def test_a_calibration_without_nine_readings_is_no_result(reply: bytes) ->
         with pytest.raises(RemoteProtocolError, match="not 9 bed readings"):
             await client.calibrate(confirm)
     assert state[0] == b"j:9511,0"  # the flow was released
+
+
+def test_a_status_reply_that_never_ends_is_held_to_a_bounded_number_of_lines() -> None:
+    reader = xp.ReplyReader(Link.WIFI)
+    reader.send(xp.Query("a"), 0.0, 5.0)
+    tracemalloc.start()
+    try:
+        for _ in range(200):
+            reader.receive(b"".join(b"q:" + b"y" * 200 + b"\n" for _ in range(500)), 0.0)
+        grown = tracemalloc.get_traced_memory()[0]
+    finally:
+        tracemalloc.stop()
+    assert grown < 1 << 20  # 20 MB arrived
+    reader.receive(b"j:9511,0\n$\n", 0.0)
+    reply = reader.next_event(0.0)
+    assert isinstance(reply, xp.Reply)
+    assert len(reply.lines) == MAX_STATUS_LINES  # the first ones; the state line came too late to count

@@ -61,6 +61,8 @@ ReaderEvent = Reply | ErrorReply | NoReply | ActionStat
 
 _ERROR = re.compile(r"^E(\d{1,10})\$?$")
 _STAT = re.compile(r"^([A-Za-z][A-Za-z0-9_]+):(\{.*\})$")
+MAX_STATUS_LINES = 256
+"""Lines kept of one status reply: a full `query=a` is about 30, one per letter."""
 _NUMBER = re.compile(r"-?\d{1,12}")  # fullmatch: a reading, never a 5000-digit int()
 
 
@@ -266,7 +268,9 @@ class ReplyReader:
                 self.noise += 1
             return
         if p.expect is Expect.STATUS:
-            if len(line) >= 2 and line[1] == ":":
+            if len(p.lines) >= MAX_STATUS_LINES:
+                self.noise += 1  # a reply that never ends: keep the reader bounded, let the wait time out
+            elif len(line) >= 2 and line[1] == ":":
                 p.lines.append(line)
                 p.seen.add(line[0])
                 wanted = p.command.wanted if isinstance(p.command, Query) else frozenset()
