@@ -403,3 +403,20 @@ def test_a_status_reply_that_never_ends_is_held_to_a_bounded_number_of_lines() -
     reply = reader.next_event(0.0)
     assert isinstance(reply, xp.Reply)
     assert len(reply.lines) == MAX_STATUS_LINES  # the first ones; the state line came too late to count
+
+
+async def test_a_flows_later_lines_go_only_to_the_client_that_started_it() -> None:
+    """Two clients on serial framing: one homes, the other polls the moment the homing has ended; the homing's
+    `complete` line is the homing client's, and the poller's reply stays a status reply."""
+    clock = [0.0]
+    sim = XYZSimulator(speed=1, gap=0.01, link=Link.SERIAL, clock=lambda: clock[0])
+    async with asyncio.timeout(30), loopback_tcp(sim.serve) as homer, loopback_tcp(sim.serve) as poller:
+        await homer.write(b"XYZv3/action=home\n")
+        heard = await _read_until(homer, b"$\n")
+        assert heard.startswith(b'home:{"stat":"start"}')
+        clock[0] += 60.0  # the homing is over; the poller is the first to ask
+        await poller.write(b"XYZv3/query=j\n")
+        polled = await _read_until(poller, b"$\n")
+        while b'home:{"stat":"complete"}' not in heard:
+            heard += await _read_until(homer, b"$\n")
+    assert polled.startswith(b"j:9511")
