@@ -420,3 +420,27 @@ async def test_a_flows_later_lines_go_only_to_the_client_that_started_it() -> No
         while b'home:{"stat":"complete"}' not in heard:
             heard += await _read_until(homer, b"$\n")
     assert polled.startswith(b"j:9511")
+
+
+@pytest.mark.parametrize(("flow", "state"), [("load_filament", 9530), ("unload_filament", 9531),
+                                             ("clean_nozzle", 9536)])
+async def test_a_flow_stopped_while_the_printer_heats_is_cancelled_on_the_printer(flow: str, state: int) -> None:
+    sim = XYZSimulator(speed=1, gap=0.01)
+    async with asyncio.timeout(30), loopback_tcp(sim.serve) as link:
+        client = XYZPrinter(link, link=Link.WIFI, timeout=5.0)
+        client.poll_interval = 0.01
+
+        async def confirm(message: str) -> None:
+            await asyncio.sleep(3600)
+
+        try:
+            args = () if flow == "unload_filament" else (confirm,)
+            task = asyncio.create_task(getattr(client, flow)(*args))
+            while (await client.status()).state_code != state:
+                await asyncio.sleep(0.01)
+            task.cancel()  # what Ctrl-C does to the command
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert (await client.status()).idle  # not left heating
+        finally:
+            await client.close()

@@ -5,7 +5,8 @@ driven by polling the printer's state, which works the same on serial and Wi-Fi 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable
+import contextlib
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
 from fabwire.errors import DeviceError, FabwireError, LinkTimeout, RemoteProtocolError
@@ -100,8 +101,9 @@ class Maintenance:
         """Heat, feed, then `ready(...)` returns once filament comes out of the nozzle; we then stop feeding."""
         await self.require_idle("load filament", p.Flow("load", "new"))
         await self._flow("load", "retry" if retry else "new")
-        status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
-                                        on_status)
+        async with self._cancelled_if_stopped("load"):
+            status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
+                                            on_status)
         if status.idle:
             return status  # the printer finished feeding on its own before anyone confirmed
         try:
@@ -109,6 +111,17 @@ class Maintenance:
         finally:
             await self._flow("load", "cancel")
         return await self._wait_state(lambda s: s.idle, "finishing the load", 30.0, on_status)
+
+    @contextlib.asynccontextmanager
+    async def _cancelled_if_stopped(self, flow: str) -> AsyncIterator[None]:
+        """While the printer heats for a flow: an error, a timeout or Ctrl-C cancels the flow on the printer before
+        it goes on, so a stopped command never leaves the nozzle heating (`<flow>:cancel`, MM:v3)."""
+        try:
+            yield
+        except BaseException:
+            with contextlib.suppress(FabwireError):
+                await self.request(p.Flow(flow, "cancel"))
+            raise
 
     async def cancel_flow(self, flow: str) -> None:
         """Stop a running load, unload or nozzle clean."""
@@ -118,14 +131,17 @@ class Maintenance:
                               limit: float = 360.0) -> Status:
         await self.require_idle("unload filament", p.Flow("unload", "new"))
         await self._flow("unload", "retry" if retry else "new")
-        await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
-        return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
+        async with self._cancelled_if_stopped("unload"):
+            await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
+            return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
 
     async def clean_nozzle(self, ready: Prompt, *, on_status: StatusCallback | None = None,
                            limit: float = 360.0) -> Status:
         await self.require_idle("clean the nozzle", p.Flow("cleannozzle", "new"))
         await self._flow("cleannozzle", "new")
-        await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit, on_status)
+        async with self._cancelled_if_stopped("cleannozzle"):
+            await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit,
+                                   on_status)
         try:
             await ready("The nozzle is hot: clean it, then confirm")
         finally:
