@@ -434,10 +434,14 @@ async def test_a_flow_stopped_while_the_printer_heats_is_cancelled_on_the_printe
             await asyncio.sleep(3600)
 
         try:
-            args = () if flow == "unload_filament" else (confirm,)
-            task = asyncio.create_task(getattr(client, flow)(*args))
-            while (await client.status()).state_code != state:
-                await asyncio.sleep(0.01)
+            heating = asyncio.Event()
+
+            def seen(status: Status) -> None:
+                if status.state_code == state:
+                    heating.set()
+
+            task = asyncio.create_task(getattr(client, flow)(*args, on_status=seen))
+            await heating.wait()
             task.cancel()  # what Ctrl-C does to the command
             with pytest.raises(asyncio.CancelledError):
                 await task
