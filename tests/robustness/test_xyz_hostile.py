@@ -431,15 +431,16 @@ async def test_a_flow_stopped_while_the_printer_heats_is_cancelled_on_the_printe
         client.poll_interval = 0.01
 
         async def confirm(message: str) -> None:
-            await asyncio.sleep(3600)
+            await asyncio.Event().wait()  # nobody answers
 
+        heating = asyncio.Event()
+
+        def seen(status: Status) -> None:
+            if status.state_code == state:
+                heating.set()
+
+        args = () if flow == "unload_filament" else (confirm,)
         try:
-            heating = asyncio.Event()
-
-            def seen(status: Status) -> None:
-                if status.state_code == state:
-                    heating.set()
-
             task = asyncio.create_task(getattr(client, flow)(*args, on_status=seen))
             await heating.wait()
             task.cancel()  # what Ctrl-C does to the command
