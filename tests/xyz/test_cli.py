@@ -349,3 +349,29 @@ def test_an_endless_firmware_file_is_refused_after_a_bounded_read() -> None:
     assert (done.returncode, done.stdout) == (4, "")
     assert done.stderr.strip().splitlines() == [
         "fabwire: error: /dev/zero is over 64 MiB: not a da Vinci firmware image"]
+
+
+def test_a_name_the_printer_does_not_report_is_shown_absent_not_empty() -> None:
+    status = (b"j:9511,0\nb:20\np:dv1MW0A000\nt:1,22,0\no:p8,t1,c1,a+\n$\n")
+    with socket.create_server(("127.0.0.1", 0)) as server:
+
+        def printer() -> None:
+            for _ in range(2):
+                conn, _ = server.accept()
+                with conn:
+                    buffer = b""
+                    while chunk := conn.recv(4096):
+                        buffer += chunk
+                        while b"\n" in buffer:
+                            line, buffer = buffer.split(b"\n", 1)
+                            if line.startswith(b"XYZv3/query=a"):
+                                conn.sendall(status)
+                            elif line.startswith(b"XYZv3/query="):
+                                conn.sendall(b"j:9511,0\n")
+
+        threading.Thread(target=printer, daemon=True).start()
+        port = server.getsockname()[1]
+        shown = run_cli("xyz", "-d", f"127.0.0.1:{port}", "name", timeout=30)
+        data = run_cli("--json", "xyz", "-d", f"127.0.0.1:{port}", "name", timeout=30)
+    assert (shown.returncode, shown.stdout) == (0, "—\n"), shown.stderr
+    assert json.loads(data.stdout) == {"name": None}

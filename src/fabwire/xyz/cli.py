@@ -370,14 +370,14 @@ def name(dctx: DeviceContext, new: str | None) -> None:
     if new is not None:
         userinput.printer_name(new)
 
-    async def run(pr: XYZPrinter) -> str:
+    async def run(pr: XYZPrinter) -> str | None:
         if new is not None:
             await pr.set_name(new)
         st = await pr.status("n")
-        return st.name or ""
+        return st.name
 
     result = _with_printer(dctx, run)
-    dctx.output.result({"name": result}, result)
+    dctx.output.result({"name": result}, known(result))
 
 
 @xyz.command()
