@@ -37,6 +37,10 @@ class RemoteProtocolError(ProtocolError):
     exit_code = 6
 
 
+class DeviceBusy(InputError):
+    """The device is in the middle of something else (a job, a drawing): wait for it or cancel it first."""
+
+
 class DeviceError(FabwireError):
     """The machine reported an error code; `meaning` says it in words."""
 

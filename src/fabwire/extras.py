@@ -39,3 +39,13 @@ def missing_extra(exc: ImportError) -> MissingExtra | None:
     name = (getattr(exc, "name", None) or "").partition(".")[0]
     extra = EXTRA_OF.get(name)
     return MissingExtra(name, extra) if extra else None
+
+
+def first_missing(extra: str) -> MissingExtra | None:
+    """The MissingExtra for the first package of `extra` that is not installed, or None when all are."""
+    import importlib.util
+
+    for package, owner in EXTRA_OF.items():
+        if owner == extra and importlib.util.find_spec(package) is None:
+            return MissingExtra(package, extra)
+    return None

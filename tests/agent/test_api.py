@@ -92,9 +92,10 @@ def test_print_job_from_upload_to_done(bench: Bench) -> None:
         paused = wait_for(lambda: (s := summary(client, printer["id"]))["state"] == "paused" and s, "paused")
         assert paused["actions"] == ["resume", "cancel"]
         assert client.post(f"{actions}/resume", json={}).status_code == 200
-        # a second job while one runs is refused, with the CLI's input-error exit code
-        _error(client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "b.gcode"}, content=data),
-               400, 4)
+        # a second job while one runs is a conflict, with the CLI's input-error exit code
+        busy = _error(client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "b.gcode"},
+                                  content=data), 409, 4)
+        assert "is busy with job" in busy["message"]
         final = wait_for(lambda: (j := client.get(f"/api/v1/jobs/{job['id']}").json())["state"] != "running"
                          and j["state"] != "queued" and j, "the job ending", timeout=120)
         assert final["state"] == "done", final
@@ -172,6 +173,8 @@ def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
         job = client.post(f"/api/v1/devices/{arm['id']}/actions/text",
                           json={"text": "a longer line to cancel"}).json()["job"]
         wait_for(lambda: summary(client, arm["id"])["state"] == "drawing", "the drawing under way")
+        assert "busy" in _error(client.post(f"/api/v1/devices/{arm['id']}/actions/text", json={"text": "more"}),
+                                409, 4)["message"]
         assert "confirm" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={}), 400, 4)["message"]
         assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "running"
         cancelled = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True})

@@ -43,7 +43,7 @@ def test_local_addresses_are_qualified_by_host_and_serials_win() -> None:
 
 
 JOG = Action("jog", "Move one axis.", (Param("axis", "str", "x, y or z", choices=("x", "y", "z")),
-                                       Param("distance_mm", "float", "mm", -200, 200)))
+                                       Param("distance_mm", "float", "mm", -200, 200, nonzero=True)))
 
 
 def test_parameters_are_checked_by_type_range_and_name() -> None:
@@ -52,6 +52,9 @@ def test_parameters_are_checked_by_type_range_and_name() -> None:
                        ({"axis": "x", "distance_mm": 500}, "from -200 to 200"),
                        ({"axis": "x", "distance_mm": True}, "number"),
                        ({"axis": "x", "distance_mm": "1"}, "number"),
+                       ({"axis": "x", "distance_mm": float("nan")}, "finite number"),
+                       ({"axis": "x", "distance_mm": float("-inf")}, "finite number"),
+                       ({"axis": "x", "distance_mm": 0}, "must not be 0"),
                        ({"axis": "x"}, "needs the parameter 'distance_mm'"),
                        ({"axis": "x", "distance_mm": 1, "speed": 3}, "no parameter 'speed'")):
         with pytest.raises(InputError, match=re.escape(words)):

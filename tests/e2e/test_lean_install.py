@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
+from pathlib import Path
 
 from clitools import cli_env
 
@@ -40,3 +42,14 @@ def test_a_missing_drawing_stack_names_the_extra() -> None:
     printers = run_blocked(["svgelements", "HersheyFonts", "zeroconf", "PIL", "shapely"],
                            ["xyz", "-d", "sim://xyz?speed=1000", "status", "--json"])
     assert printers.returncode == 0, printers.stderr
+
+
+def test_the_demo_on_the_base_install_shows_what_it_drives(tmp_path: Path) -> None:
+    out = str(tmp_path / "demo")
+    asked = run_blocked(["shapely"], ["demo", "--only", "lineus", "--out", out])
+    assert asked.returncode == 3
+    assert "pip install 'fabwire[lineus]'" in asked.stderr
+    tour = run_blocked(["shapely"], ["--json", "demo", "--speed", "50", "--out", out])
+    assert tour.returncode == 0, tour.stderr
+    assert "leaving out the Line-us: this needs 'shapely'" in tour.stderr
+    assert {step["device"] for step in json.loads(tour.stdout)["steps"]} == {"all", "xyz", "mmu"}

@@ -40,6 +40,11 @@ class Raw:
         async with asyncio.timeout(timeout):
             return await self.reader.readuntil(TERM)
 
+    async def reply_line(self, timeout: float = 5.0) -> bytes:
+        """Up to the first `\\r\\n`: a greeting, or a refusal (which ends there, without the NUL)."""
+        async with asyncio.timeout(timeout):
+            return await self.reader.readuntil(b"\r\n")
+
     async def ask(self, data: bytes, timeout: float = 5.0) -> bytes:
         await self.send(data)
         return await self.reply(timeout)

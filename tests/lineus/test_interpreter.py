@@ -189,3 +189,37 @@ def test_any_program_reads_as_the_simulator_draws_it(text: str) -> None:
     assert len(got) == len(expected)
     for a, b in zip(got, expected, strict=True):
         assert np.allclose(a, b, atol=1e-3)
+
+
+def test_a_bounded_ink_record_drops_its_oldest_points_and_keeps_the_stroke_under_the_pen() -> None:
+    from fabwire.lineus.interpreter import TRIM_EVERY
+
+    keep = 50
+    ink = Ink(keep=keep)
+    ink.move((1000, 0, 1000), (1000, 0, 0))
+    for n in range(1, 2 * TRIM_EVERY):  # one long stroke, one point per move
+        ink.move((1000 + n - 1, 0, 0), (1000 + n, 0, 0))
+    ink.move((1000 + 2 * TRIM_EVERY - 1, 0, 0), (1200, 300, 1000))  # lift and travel
+    ink.move((1200, 300, 1000), (1200, 300, 0))
+    ink.move((1200, 300, 0), (1300, 300, 0))
+    held = sum(map(len, ink.strokes))
+    assert held <= keep + TRIM_EVERY
+    assert ink.dropped == 2 * TRIM_EVERY - held + 2  # the dropped and the held add up to every point drawn
+    assert ink.strokes[-1] == [(1200, 300), (1300, 300)]
+    assert ink.strokes[0][-1] == (1000 + 2 * TRIM_EVERY - 1, 0)  # the old stroke lost its start, not its end
+    for _ in range(TRIM_EVERY):  # dots, each its own stroke
+        ink.move((1300, 300, 0), (1300, 300, 1000))
+        ink.move((1300, 300, 1000), (1300, 300, 0))
+    assert sum(map(len, ink.strokes)) <= keep + TRIM_EVERY
+    assert ink.strokes[-1] == [(1300, 300)]
+
+
+def test_an_unbounded_ink_record_keeps_every_point() -> None:
+    from fabwire.lineus.interpreter import TRIM_EVERY
+
+    ink = Ink()
+    ink.move((1000, 0, 1000), (1000, 0, 0))
+    for n in range(1, 3 * TRIM_EVERY):
+        ink.move((1000 + n - 1, 0, 0), (1000 + n, 0, 0))
+    assert ink.strokes == [[(1000 + n, 0) for n in range(3 * TRIM_EVERY)]]
+    assert ink.dropped == 0

@@ -421,3 +421,30 @@ def test_straight_path_reader_takes_generated_paths() -> None:
     assert first.closed
     assert first.segments == 501
     assert np.allclose(second.points, [(5, 5), (15, 5), (15, -30), (13, -32), (5, 5)])
+
+
+# -- viewports of size zero ------------------------------------------------------------------------------------
+
+LINE = '<path d="M10 10 L90 90" stroke="black"/>'
+
+
+@pytest.mark.parametrize("attrs", ['width="0" height="100"', 'width="100" height="0px"', 'width="0" height="0"',
+                                   'width="100" height="100" viewBox="0 0 0 100"',
+                                   'width="100" height="100" viewBox="0,0,100,0"', 'viewBox="0 0 0 0"'])
+def test_a_root_viewport_of_size_zero_shows_nothing(attrs: str) -> None:
+    drawing = parse_svg(svg(LINE, attrs))
+    assert drawing.lines == []
+    assert drawing.notes == ["its width, height or viewBox size is 0, so a browser shows nothing of it"]
+
+
+@pytest.mark.parametrize("inner", ['<svg width="0">' + LINE + '</svg>', '<svg viewBox="0 0 100 0">' + LINE + "</svg>",
+                                   '<symbol id="s" viewBox="0 0 0 10">' + LINE + '</symbol><use xlink:href="#s"/>',
+                                   '<symbol id="s">' + LINE + '</symbol><use xlink:href="#s" height="0"/>'])
+def test_a_nested_viewport_of_size_zero_shows_nothing_and_the_rest_stays(inner: str) -> None:
+    lines = lines_of(svg(inner + '<path d="M10 90 L90 10" stroke="black"/>'))
+    assert boxes(lines) == [(10.0, 10.0, 90.0, 90.0)]
+    assert lines[0][0].tolist() == [10.0, 90.0]
+
+
+def test_a_negative_size_is_an_error_and_ignored_as_browsers_do() -> None:
+    assert len(lines_of(svg(LINE, 'width="-5" height="100"'))) == 1

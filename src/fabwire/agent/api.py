@@ -24,7 +24,15 @@ from fabwire import __version__
 from fabwire.agent.auth import SUBPROTOCOL
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
 from fabwire.agent.jobs import JobNotFound, UploadTooLarge
-from fabwire.errors import DeviceError, FabwireError, InputError, LinkError, LinkTimeout, RemoteProtocolError
+from fabwire.errors import (
+    DeviceBusy,
+    DeviceError,
+    FabwireError,
+    InputError,
+    LinkError,
+    LinkTimeout,
+    RemoteProtocolError,
+)
 
 STATIC = resources.files("fabwire.agent") / "static"
 UPLOAD_QUERY = Query(..., min_length=1, max_length=200, description="The file's name; only its extension is used "
@@ -73,7 +81,7 @@ def _status_for(exc: BaseException) -> int:
         return 404
     if isinstance(exc, UploadTooLarge):
         return 413
-    if isinstance(exc, DeviceError):
+    if isinstance(exc, DeviceError | DeviceBusy):
         return 409
     if isinstance(exc, LinkTimeout):
         return 504

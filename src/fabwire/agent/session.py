@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
 from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
-from fabwire.errors import FabwireError, InputError, LinkError
+from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError
 
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
@@ -238,7 +238,7 @@ class Session:
     async def _start_job(self, job_type: str, filename: str | None, data: bytes | None,
                          params: dict[str, Any]) -> dict[str, Any]:
         if self._job is not None:
-            raise InputError(f"{self.spec.name} is busy with job {self._job['id']}: cancel it or wait")
+            raise DeviceBusy(f"{self.spec.name} is busy with job {self._job['id']}: cancel it or wait")
         job = await self.agent.jobs.create(self.info.id, job_type, filename, data, params)
         self._job = job
         self.drawing = {"preview": [], "ink": []}

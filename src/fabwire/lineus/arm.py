@@ -111,6 +111,11 @@ class Arm:
     def busy(self) -> bool:
         return self._queue.qsize() > 0 or self.planned != self.position
 
+    @property
+    def has_room(self) -> bool:
+        """A move submitted now is taken without waiting."""
+        return not self._queue.full()
+
     async def submit(self, command: str, target: Point3, *, clamped: bool, rapid: bool) -> Job:
         """Queue a move once there is room; the job's `done` resolves when the arm has finished it."""
         job = Job(command, target, clamped, rapid, asyncio.get_running_loop().create_future(), self.clock.now())

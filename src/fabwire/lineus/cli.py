@@ -381,4 +381,5 @@ def sim_lineus(app: App, listen: tuple[str, ...], speed: float, version: str, na
     finally:
         if record is not None:
             written = sim.write_record(record)
-            app.output.note(f"recorded {len(sim.arm.strokes)} stroke(s) to {written}")
+            older = f" (the oldest {sim.arm.ink.dropped} point(s) were not kept)" if sim.arm.ink.dropped else ""
+            app.output.note(f"recorded {len(sim.arm.strokes)} stroke(s) to {written}{older}")

@@ -105,16 +105,30 @@ class Ink:
     1.0.1 goes into the notch, where the pen screw hits the body; each move that enters it is noted.
     """
 
-    def __init__(self, *, lift_over_notch: bool = False, detect_collisions: bool = False) -> None:
+    def __init__(self, *, lift_over_notch: bool = False, detect_collisions: bool = False,
+                 keep: int | None = None) -> None:
         self.strokes: list[list[Point2]] = []
         self.travel: list[list[Point2]] = []
         self.collisions: list[Point2] = []
         self.lift_over_notch = lift_over_notch
         self.detect_collisions = detect_collisions
+        self.keep = keep
+        """Points kept in `strokes` (and as many in `travel`), the oldest dropped first; None keeps every point."""
+        self.dropped = 0
+        """Points dropped to stay within `keep`."""
+        self._moves_since_trim = 0
         self._open = False
         """The last stroke is still under the pen."""
 
     def move(self, start: Point3, end: Point3, *, rapid: bool = False) -> None:
+        self._mark(start, end, rapid=rapid)
+        if self.keep is not None:
+            self._moves_since_trim += 1
+            if self._moves_since_trim >= TRIM_EVERY:
+                self._moves_since_trim = 0
+                self.dropped += _drop_oldest(self.strokes, self.keep) + _drop_oldest(self.travel, self.keep)
+
+    def _mark(self, start: Point3, end: Point3, *, rapid: bool) -> None:
         a, b = (start[0], start[1]), (end[0], end[1])
         down0, down1 = start[2] < kin.PEN_DOWN_BELOW, end[2] < kin.PEN_DOWN_BELOW
         path = joint_path(a, b) if rapid and a != b else [a, b]
@@ -154,6 +168,30 @@ class Ink:
             if kin.crosses_body_zone(a, b):
                 self.collisions.append(_first_in_zone(a, b))
                 return
+
+
+TRIM_EVERY = 1000
+"""Moves between two checks of a bounded record: it may exceed `keep` by what these moves add."""
+
+
+def _drop_oldest(lines: list[list[Point2]], keep: int) -> int:
+    """Drop the oldest polylines, or the start of the oldest, until `lines` holds at most `keep` points; returns
+    how many were dropped. The newest polyline keeps its end, so a stroke under the pen still joins on."""
+    excess = sum(map(len, lines)) - keep
+    dropped = 0
+    while excess > 0 and lines:
+        first = lines[0]
+        if len(first) <= excess and len(lines) > 1:
+            del lines[0]
+            taken = len(first)
+        else:
+            taken = min(excess, len(first) - 1)
+            del first[:taken]
+            if taken == 0:
+                break
+        excess -= taken
+        dropped += taken
+    return dropped
 
 
 def _first_in_zone(a: Point2, b: Point2, step: float = 1.0) -> Point2:

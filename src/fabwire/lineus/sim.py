@@ -4,6 +4,11 @@ One `LineUsSim` is one machine: an arm with a single motion queue (depth 1 behin
 every connection, stored drawings, name and Wi-Fi lists. Each connection keeps its own G54 transform and M28
 recording. Moves take the time `kinematics.MotionModel` gives them (divided by the speed factor), and by default
 a move's reply is held until the move has finished, as the firmware does.
+
+Like the robot, which takes a command off the socket only when its motion queue has room, a connection's commands
+are taken a small window at a time and each connection may owe only a few replies. A client that goes away takes
+the rest of what it sent with it: the move under way and the one queued behind it finish, and nothing else it sent
+delays the next client (Line-us-Programming README, "Timing": at most one outstanding command).
 """
 
 from __future__ import annotations
@@ -15,7 +20,9 @@ import dataclasses
 import logging
 import math
 import time
+from collections.abc import Coroutine
 from pathlib import Path
+from typing import Any, TypeVar
 
 from fabwire.errors import LinkClosed, RemoteProtocolError
 from fabwire.lineus import kinematics as kin
@@ -37,7 +44,15 @@ SAVE_BLOCKED = ("M30", "M171", "M374", "M997")
 """Codes the firmware refuses while an M28 recording is open."""
 
 HISTORY = 100_000
-"""Recent messages kept for instrumentation (bounded, so a long-running simulator stays small)."""
+"""Recent messages, and points of ink, kept for instrumentation (bounded, so a long-running simulator stays small)."""
+INPUT_WINDOW = p.MAX_LINE
+"""Bytes taken off a connection at a time. The robot reads a command only when its motion queue can take it, and
+what a client sent beyond that is lost when it disconnects; reading a small window keeps the simulator the same."""
+REPLIES_OWED = 16
+"""Replies a connection may owe before the simulator stops taking its commands (a client that does not read its
+replies stops being served, not the machine)."""
+
+T = TypeVar("T")
 
 
 def sample_drawing() -> str:
@@ -85,7 +100,7 @@ class LineUsSim:
         self.clock = Clock(self.options.speed)
         guards = self.options.guards_body
         self.arm = Arm(self.clock, kin.MotionModel(step_time=self.options.step_time, pen_time=self.options.pen_time),
-                       Ink(lift_over_notch=guards, detect_collisions=not guards))
+                       Ink(lift_over_notch=guards, detect_collisions=not guards, keep=HISTORY))
         self.files: dict[int, str] = {1: sample_drawing()} if files is None else dict(files)
         self.known_wifi: dict[str, str] = {"fabwire-lab": "lab-password"}
         self.visible_wifi: list[str] = ["fabwire-lab", "neighbours-wifi"]
@@ -135,7 +150,7 @@ class LineUsSim:
         self.connections += 1
         self._idle.clear()
         session = self.new_session()
-        queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None] = asyncio.Queue()
+        queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None] = asyncio.Queue(REPLIES_OWED)
         writer = asyncio.create_task(self._write_replies(transport, queue, session), name="lineus-replies")
         reader = p.CommandReader()
         try:
@@ -146,34 +161,69 @@ class LineUsSim:
             await self._send(transport, self.hello().encode())
             while not writer.done():
                 try:
-                    data = await transport.read()
+                    data = await transport.read(INPUT_WINDOW)
                 except LinkClosed:
                     break
-                for item in reader.feed(data):
-                    action = self._dispatch(item, session) if isinstance(item, p.Line) else error_reply(item.reason)
-                    source = await self._start_move(action) if isinstance(action, Motion) else action
-                    if session.backlog == 0 and (ready := self._ready(source)) is not None:
-                        await self._send(transport, ready)  # nothing owed before it: answer now
-                        continue
-                    session.backlog += 1
-                    written: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-                    await queue.put((source, written))
-                    if not self.lookahead:
-                        await asyncio.wait([written, writer], return_when=asyncio.FIRST_COMPLETED)
-            await queue.put(None)
-            with contextlib.suppress(LinkClosed):
-                await writer
+                if not await self._take(reader.feed(data), session, transport, queue, writer):
+                    break
+            if await self._unless_gone(queue.put(None), writer) is not None:
+                with contextlib.suppress(LinkClosed):
+                    await writer
         finally:
             self.connections -= 1
             if self.connections == 0:
                 self._idle.set()
             if not writer.done():
                 writer.cancel()
-                with contextlib.suppress(asyncio.CancelledError, LinkClosed):
-                    await writer
+            with contextlib.suppress(asyncio.CancelledError, LinkClosed):
+                await writer  # also collects a writer that ended when the client went away
             if session.saving is not None:
                 self._close_file(session)
             log.debug("lineus client %s disconnected", transport.peer)
+
+    async def _take(
+        self, items: list[p.Line | p.BadLine], session: Session, transport: Transport,
+        queue: asyncio.Queue[tuple[ReplySource, asyncio.Future[None]] | None], writer: asyncio.Task[None],
+    ) -> bool:
+        """Carry out one read's commands in order; False once the client has gone (the writer could not deliver a
+        reply), so what it sent and the machine had not yet taken dies with the connection, as on the robot."""
+        for item in items:
+            if writer.done():
+                return False
+            action = self._dispatch(item, session) if isinstance(item, p.Line) else error_reply(item.reason)
+            if not isinstance(action, Motion):
+                source = action
+            elif self.arm.has_room:
+                source = await self._start_move(action)
+            elif (started := await self._unless_gone(self._start_move(action), writer)) is not None:
+                source = started.result()
+            else:
+                return False
+            if session.backlog == 0 and (ready := self._ready(source)) is not None:
+                await self._send(transport, ready)  # nothing owed before it: answer now
+                continue
+            session.backlog += 1
+            written: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+            if not queue.full():
+                queue.put_nowait((source, written))
+            elif await self._unless_gone(queue.put((source, written)), writer) is None:
+                return False
+            if not self.lookahead:
+                await asyncio.wait([written, writer], return_when=asyncio.FIRST_COMPLETED)
+        return True
+
+    @staticmethod
+    async def _unless_gone(step: Coroutine[Any, Any, T], writer: asyncio.Task[None]) -> asyncio.Task[T] | None:
+        """`step` run to its end (its task, finished), or None with `step` abandoned if the client goes away while it
+        waits: a gone client's next move must not wait for the arm, nor its next reply for room to be owed."""
+        task = asyncio.ensure_future(step)
+        await asyncio.wait({task, writer}, return_when=asyncio.FIRST_COMPLETED)
+        if task.done():
+            return task
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        return None
 
     async def _send(self, transport: Transport, data: bytes) -> None:
         self.sent.append((self.clock.now(), data))

@@ -12,6 +12,7 @@ kind has no such thing, SI units in the names):
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -63,6 +64,8 @@ class Param:
     low: float | None = None
     high: float | None = None
     choices: tuple[str, ...] = ()
+    nonzero: bool = False
+    """A number that may not be 0 (a jog distance)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,8 +131,10 @@ def _coerce(action: str, param: Param, value: Any) -> Any:
         if not isinstance(value, bool):
             raise InputError(f"{where} must be true or false")
         return value
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{where} must be a number, not {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(f"{where} must be a finite number, not {value!r}")
+    if param.nonzero and value == 0:
+        raise InputError(f"{where} must not be 0")
     if param.type == "int" and value != int(value):
         raise InputError(f"{where} must be a whole number, not {value!r}")
     if (param.low is not None and value < param.low) or (param.high is not None and value > param.high):
@@ -182,4 +187,5 @@ class Driver(ABC):
         for action in self.actions:
             if action.name == name:
                 return action
-        raise InputError(f"a {self.kind} has no action {name!r} (it has {', '.join(a.name for a in self.actions)})")
+        names = ", ".join(a.name for a in self.actions)
+        raise InputError(f"{self.kind} devices have no action {name!r} (they have {names})")

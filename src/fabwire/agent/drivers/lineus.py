@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_lineus
-from fabwire.errors import InputError, LinkClosed
+from fabwire.errors import DeviceBusy, InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
 from fabwire.lineus.plot import Plan, PlanOptions
@@ -85,7 +85,7 @@ class LineUsDriver(Driver):
     async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
         arm = self._client()
         if self.drawing:
-            raise InputError(f"the Line-us is busy ({self.drawing}): cancel the job first")
+            raise DeviceBusy(f"the Line-us is busy ({self.drawing}): cancel the job first")
         if action == "home":
             self.position = await arm.home()
         elif action == "pen_up":
@@ -104,7 +104,7 @@ class LineUsDriver(Driver):
     async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
         arm = self._client()
         if self.drawing:
-            raise InputError(f"the Line-us is busy ({self.drawing})")
+            raise DeviceBusy(f"the Line-us is busy ({self.drawing})")
         options = PlanOptions(time_budget=PLAN_TIME_BUDGET)
         if job_type == "text":
             plan: Plan = await asyncio.to_thread(plan_text, params["text"], options)

@@ -13,6 +13,7 @@ from fabwire.agent.opening import open_xyz
 from fabwire.errors import InputError, LinkClosed
 from fabwire.xyz import intake
 from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.commands import JOG_LIMIT
 from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status
 
 PRINT_STATES = range(9500, 9511)
@@ -70,7 +71,8 @@ class XYZDriver(Driver):
         Action("acknowledge", "Acknowledge a finished print (the printer's OK button)."),
         Action("home", "Home all axes.", background=True),
         Action("jog", "Move one axis.", (Param("axis", "str", "x, y or z", choices=("x", "y", "z")),
-                                         Param("distance_mm", "float", "signed distance in mm", -200, 200)),
+                                         Param("distance_mm", "float", "signed distance in mm", -JOG_LIMIT, JOG_LIMIT,
+                                                               nonzero=True)),
                background=True),
         Action("unload_filament", "Heat and unload the filament.", background=True),
     )

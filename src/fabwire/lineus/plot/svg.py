@@ -34,6 +34,7 @@ from fabwire.lineus.plot.svgstyle import (
     local,
     own_style,
     paints,
+    renders_nothing,
     then,
     transform,
     translate,
@@ -107,6 +108,8 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None) -> 
     if tolerance is not None and not tolerance > 0:
         raise InputError(f"curve tolerance must be positive, got {tolerance}")
     root, name = _read_root(source)
+    if renders_nothing(root.get("width"), root.get("height"), root.get("viewBox")):
+        return SvgDrawing([], notes=["its width, height or viewBox size is 0, so a browser shows nothing of it"])
     box = view_box(root.get("viewBox"))
     width = length(root.get("width"), box[2] if box else 0.0, default=box[2] if box else 0.0)
     height = length(root.get("height"), box[3] if box else 0.0, default=box[3] if box else 0.0)
@@ -281,7 +284,7 @@ class _Reader:
         y = length(el.get("y"), vh) if el is placed_by else 0.0
         w = length(width if width is not None else el.get("width"), vw, default=vw)
         h = length(height if height is not None else el.get("height"), vh, default=vh)
-        if w <= 0 or h <= 0:
+        if w <= 0 or h <= 0 or renders_nothing(None, None, el.get("viewBox")):
             return
         box = view_box(el.get("viewBox"))
         inner = then(matrix, viewport_matrix(box, x, y, w, h, el.get("preserveAspectRatio")))

@@ -173,6 +173,21 @@ def view_box(value: str | None) -> tuple[float, float, float, float] | None:
     return (x, y, w, h) if w > 0 and h > 0 and np.isfinite([x, y, w, h]).all() else None
 
 
+def renders_nothing(width: str | None, height: str | None, view_box_value: str | None) -> bool:
+    """Whether a viewport's width, height or viewBox size is zero, which disables its rendering (SVG 1.1 §7.7,
+    §7.9, §14.3.3): a browser shows nothing of it. A negative one is an error and is ignored instead."""
+    sizes = [width, height]
+    if view_box_value:
+        sizes.extend(re.split(r"[\s,]+", view_box_value.strip())[2:4])
+    for text in sizes:
+        try:
+            if text is not None and float(text.strip().removesuffix("px")) == 0:
+                return True
+        except ValueError:
+            continue
+    return False
+
+
 def viewport_matrix(box: tuple[float, float, float, float] | None, x: float, y: float, width: float,
                     height: float, aspect: str | None) -> FloatArray:
     """Map a viewBox onto the viewport (x, y, width, height) as `preserveAspectRatio` says (SVG 1.1 §7.8)."""
