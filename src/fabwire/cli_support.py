@@ -12,7 +12,9 @@ import asyncio
 import importlib
 import importlib.util
 import logging
+import math
 import os
+import re
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from functools import update_wrapper
@@ -24,6 +26,7 @@ import msgspec
 
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
+from fabwire.errors import InputError
 from fabwire.importing import collection_paused
 from fabwire.transport.faults import FaultPlan
 
@@ -34,6 +37,18 @@ P = ParamSpec("P")
 T = TypeVar("T")
 
 OptionFactory = Callable[[], click.Option]
+
+
+class FiniteRange(click.FloatRange):
+    """A FloatRange that also refuses nan and ±inf (nan passes every comparison, inf makes a wait endless)."""
+
+    name = "finite float range"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return number
 
 
 class App(msgspec.Struct):
@@ -140,7 +155,7 @@ DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
     lambda: click.Option(["--trace", "shared_trace"], type=click.Path(dir_okay=False, path_type=Path),
                          expose_value=False, callback=_setter(lambda app, v: setattr(app, "trace", v)),
                          help="Record the wire to FILE."),
-    lambda: click.Option(["--timeout", "shared_timeout"], type=click.FloatRange(min=0.1), expose_value=False,
+    lambda: click.Option(["--timeout", "shared_timeout"], type=FiniteRange(min=0.1), expose_value=False,
                          callback=_setter(lambda app, v: setattr(app, "timeout", v)),
                          help="Seconds to wait for the link to open [default: 5, or the device's setting]."),
     lambda: click.Option(["--inject", "shared_inject"], metavar="FAULTS", hidden=True, expose_value=False,
@@ -173,7 +188,7 @@ def link_option(kind: str, setting: str, *decls: str, **attrs: Any) -> OptionFac
 
 LINK_OPTIONS: dict[str, tuple[OptionFactory, ...]] = {
     "mmu": (
-        link_option("mmu", "speed", "--speed", type=click.FloatRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
+        link_option("mmu", "speed", "--speed", type=FiniteRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
                     help="The MMU runs this many times faster than real time (a simulator's --speed); "
                          "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
         link_option("mmu", "accept", "--accept", multiple=True, metavar="X.Y.Z",
@@ -239,8 +254,54 @@ def _needs_extra(name: str, missing: Exception) -> click.Command:
     return command
 
 
+NEGATIVE_NUMBER = re.compile(r"-(?:\.?\d.*|inf|infinity|nan)", re.IGNORECASE | re.DOTALL)
+"""A token such as -5, -0.12mm, -1e3 or -inf: a value for an argument (to be judged as one), never an option."""
+
+
+class NumberCommand(click.Command):
+    """A command whose arguments may be negative numbers (`xyz energy -5`, `zoffset -12`) anywhere on the line.
+
+    click reads every token that starts with `-` as an option (and `-inf` as `-i -n f`). Here the line is sorted
+    first: options with their values, then `--`, then the arguments in their order, so a negative number is always
+    an argument; any other token that looks like an option and is not one is refused as click would.
+    """
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        options = {opt: param for param in self.get_params(ctx) if isinstance(param, click.Option)
+                   for opt in (*param.opts, *param.secondary_opts)}
+
+        def flag(name: str) -> bool:
+            option = options.get(name)
+            return option is not None and (option.is_flag or option.count)
+
+        named: list[str] = []
+        positional: list[str] = []
+        tokens = iter(args)
+        for token in tokens:
+            if token == "--":
+                positional.extend(tokens)
+                break
+            if not token.startswith("-") or token == "-" or NEGATIVE_NUMBER.fullmatch(token):
+                positional.append(token)
+                continue
+            named.append(token)
+            name = token.partition("=")[0]
+            if name in options:
+                value = next(tokens, None) if "=" not in token and not flag(name) else None
+                if value is not None:
+                    named.append(value)  # the option's value, whatever it looks like
+                continue
+            attached = token[:2] in options and not flag(token[:2])
+            if not token.startswith("--") and (attached or all(flag(f"-{c}") for c in token[1:])):
+                continue  # a short option with its value attached (-dHOST), or short flags together (-vv)
+            ctx.fail(f"No such option: {name}")
+        return super().parse_args(ctx, [*named, "--", *positional] if positional else named)
+
+
 class LazyGroup(SharingGroup):
     """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
+
+    command_class = NumberCommand
 
     def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
@@ -329,6 +390,28 @@ def device_group(kind: DeviceKind, help_text: str, link_options: Sequence[Option
         return group
 
     return decorate
+
+
+def on_terminal() -> bool:
+    """A person can answer: standard input and standard error are both a terminal."""
+    return sys.stdin.isatty() and sys.stderr.isatty()
+
+
+def confirm(action: str, yes: bool) -> None:
+    """Go ahead with a step that cannot be undone only when confirmed: `--yes`, or "y" typed on a terminal.
+
+    `action` says what the step does ("cancel the running print"). Raises InputError when nobody confirmed.
+    """
+    if yes:
+        return
+    if not on_terminal():
+        raise InputError(f"this would {action}: add --yes to confirm")
+    try:
+        agreed = click.confirm(f"{action[:1].upper()}{action[1:]}?", default=False, err=True)
+    except click.Abort:
+        agreed = False
+    if not agreed:
+        raise InputError(f"not confirmed; did not {action}")
 
 
 def run(coro: Coroutine[Any, Any, T]) -> T:

@@ -26,6 +26,8 @@ from fabwire.transport.urls import Endpoint, parse_url
 CONFIG_ENV = "FABWIRE_CONFIG"
 MAX_DEVICES = 10_000
 """A file with more devices than this is refused rather than parsed (a config, not a database)."""
+MAX_CONFIG_BYTES = 4 << 20
+"""A larger config file (or an endless one such as /dev/zero) is refused after reading this much."""
 
 Seconds = Annotated[float, msgspec.Meta(gt=0, le=86_400)]
 
@@ -60,7 +62,7 @@ class LineUsSettings(DeviceSettings, tag="lineus"):
 class MMUSettings(DeviceSettings, tag="mmu"):
     speed: Annotated[float, msgspec.Meta(gt=0, le=10_000)] = 1.0
     """The MMU runs this many times faster than real time (a simulator's --speed)."""
-    accept: list[Annotated[str, msgspec.Meta(pattern=r"^\d{1,3}\.\d{1,3}\.\d{1,3}$")]] = []
+    accept: list[Annotated[str, msgspec.Meta(pattern=r"^\d{1,3}\.\d{1,3}\.\d{1,3}\Z")]] = []
     """Firmware versions to accept, e.g. ["3.0.3"] (default: every supported one)."""
     connect_timeout: Seconds | None = None
     """Seconds for the handshake (default: 30 s of MMU time)."""
@@ -230,13 +232,23 @@ def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
 def load_devices(path: Path | None = None) -> dict[str, NamedDevice]:
     """Read the config file; a missing file means no named devices, a malformed one is a ConfigError."""
     path = path or config_path()
+    text = read_config_text(path)
+    return parse_devices(text, path) if text else {}
+
+
+def read_config_text(path: Path) -> str:
+    """The config file's text ("" for a missing file), read with a bound; unreadable text is a ConfigError."""
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as handle:
+            raw = handle.read(MAX_CONFIG_BYTES + 1)
+        text = raw.decode("utf-8")
     except FileNotFoundError:
-        return {}
-    except (OSError, UnicodeDecodeError) as exc:
+        return ""
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in $FABWIRE_CONFIG
         raise ConfigError(f"cannot read config file {path}: {exc}") from exc
-    return parse_devices(text, path)
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{path}: over {MAX_CONFIG_BYTES >> 20} MiB, too large for a config file")
+    return text
 
 
 class Target(msgspec.Struct, frozen=True):

@@ -18,7 +18,16 @@ import click
 import msgspec
 
 from fabwire.cli_support import App, pass_app
-from fabwire.config import SCHEMAS, NamedDevice, closest, config_path, load_devices, parse_devices, section_lines
+from fabwire.config import (
+    SCHEMAS,
+    NamedDevice,
+    closest,
+    config_path,
+    load_devices,
+    parse_devices,
+    read_config_text,
+    section_lines,
+)
 from fabwire.devices import KINDS
 from fabwire.errors import ConfigError, InputError
 
@@ -64,15 +73,6 @@ def _write(path: Path, text: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-
-
-def _read(path: Path) -> str:
-    try:
-        return path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        return ""
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read config file {path}: {exc}") from exc
 
 
 def _row(device: NamedDevice) -> dict[str, Any]:
@@ -137,8 +137,13 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     """Name the device at URL (any address -d takes), with its settings."""
     if not name or "\n" in name or len(name) > 64:
         raise InputError("a device name is 1 to 64 characters on one line")
+    for given in (name, url, *settings):
+        try:
+            given.encode("utf-8")
+        except UnicodeEncodeError:  # bytes that are not UTF-8 arrive as lone surrogates
+            raise InputError(f"{given[:40]!r} is not valid text (the config file is UTF-8)") from None
     path = config_path()
-    text = _read(path)
+    text = read_config_text(path)
     existing = parse_devices(text, path) if text else {}
     if name in existing:
         raise ConfigError(f"{path} already has a device named {name!r}: remove it first")
@@ -167,7 +172,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
 def remove(app: App, name: str) -> None:
     """Forget device NAME (the rest of the file stays as it is)."""
     path = config_path()
-    text = _read(path)
+    text = read_config_text(path)
     _find(parse_devices(text, path) if text else {}, name, path)
     lines = text.splitlines(keepends=True)
     headers = section_lines(text)

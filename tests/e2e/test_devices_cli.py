@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 from clitools import cli_env, run_cli
@@ -69,3 +70,19 @@ def test_bad_edits_are_refused_and_leave_the_file_alone(tmp_path: Path) -> None:
     assert gone.returncode == ConfigError.exit_code
     assert "(did you mean 'office'?)" in gone.stderr
     assert path.read_text() == before
+
+
+def test_an_endless_config_or_text_that_is_not_utf8_is_one_line_of_error(tmp_path: Path) -> None:
+    env = env_for(Path("/dev/zero"))
+    for args in (("devices", "list"), ("devices", "add", "z", "1.2.3.4", "--kind", "xyz"), ("devices", "remove", "z")):
+        done = run_cli(*args, env=env)
+        assert (done.returncode, done.stdout) == (ConfigError.exit_code, "")
+        assert done.stderr.strip().splitlines() == [
+            "fabwire: error: /dev/zero: over 4 MiB, too large for a config file"]
+    path = tmp_path / "devices.toml"
+    for args in (("b", "1.2.3.4", "--set", os.fsdecode(b"model=\xff")), (os.fsdecode(b"n\xff"), "1.2.3.4")):
+        done = run_cli("devices", "add", *args, "--kind", "xyz", env=env_for(path))
+        assert (done.returncode, done.stdout) == (InputError.exit_code, "")
+        assert done.stderr.count("\n") == 1
+        assert "is not valid text" in done.stderr
+        assert not path.exists()

@@ -214,6 +214,9 @@ def test_home_eject_cut_reset(simulator: SimulatorStarter) -> None:
         code, out, err = mmu(sim.url, *args)
         assert (code, out.strip()) == (0, expected), err
     code, out, err = mmu(sim.url, "reset")
+    assert (code, out) == (4, "")
+    assert err.strip() == "fabwire: error: this would reboot the MMU: add --yes to confirm"
+    code, out, err = mmu(sim.url, "reset", "--yes")
     assert (code, out.strip()) == (0, "MMU reset; firmware 3.0.4+936 answering"), err
 
 
@@ -224,3 +227,11 @@ def test_sim_refuses_unknown_fault_and_missing_address() -> None:
     done = run_cli("sim", "mmu")
     assert done.returncode == 4
     assert "--listen HOST:PORT" in done.stderr
+
+
+@pytest.mark.parametrize("value", ["0x" + "f" * 5000, "9" * 5000, "\u0661\u0662", "1_000"])
+def test_a_register_value_that_is_no_plain_number_is_one_line_of_bad_input(value: str) -> None:
+    done = run_cli("mmu", "-d", "sim://mmu?speed=50", "--speed", SPEED, "write", "cut_length", value, timeout=60)
+    assert (done.returncode, done.stdout) == (4, "")
+    assert done.stderr.count("\n") == 1
+    assert "register value must be a number" in done.stderr

@@ -224,3 +224,17 @@ def test_sync_facade() -> None:
         assert mmu.read_register(0x23) == 9
         assert mmu.unload().command == "U0"
         assert mmu.status.command in ("U0", "T4")
+
+
+async def test_a_write_the_mmu_accepts_but_does_not_carry_out_is_no_success() -> None:
+    """`W1b` with FINDA pressed: the firmware refuses the selector move silently and still answers `A`."""
+    sim = MMUSimulator(speed=SPEED)
+    async with asyncio.timeout(LIMIT), over_memory(sim) as transport, MMU(transport, time_scale=SPEED) as mmu:
+        assert await mmu.tool_change(1) == h.CommandFinished("T1", 0)  # loaded: FINDA is pressed
+        with pytest.raises(DeviceError, match=r"accepted 3 for register 0x1b \(selector_slot\) but it reads 1"):
+            await mmu.write_register("selector_slot", 3)
+        with pytest.raises(DeviceError, match="accepted 3 for register 0x07"):
+            await mmu.write_register(0x07, 3)  # not a filament state: ignored
+        await mmu.unload()
+        await mmu.write_register("selector_slot", 3)  # FINDA off: the selector moves, and reads 3
+        assert await mmu.read_register("selector_slot") == 3

@@ -169,3 +169,39 @@ def test_a_driver_error_is_checked_again_after_reset_at_the_next_move() -> None:
     assert drive(w) == "X0 F0"
     w.send("L2")
     assert drive(w) == "L2 E9040"
+
+
+def _idler_after_retry(w: Wire, fault: str, command: str) -> tuple[str, str, str]:
+    """(the error, the idler register just after Retry, the end) for `command` failing once on `fault`."""
+    w.sim.inject(fault)
+    assert w.send(command) == f"{command} A"
+    error = drive(w)
+    w.sim.clear_faults()
+    assert w.send("B1") == "B1 A"
+    w.t += 0.1
+    idler = w.send("R1c")
+    return error, idler, drive(w)
+
+
+@pytest.mark.parametrize(("fault", "phase", "error", "idler"), [
+    ("finda-didnt-trigger", "T", "T1 E8001", "R1c Aff"), ("fsensor-didnt-trigger", "T", "T1 E8003", "R1c Aff"),
+    ("fsensor-stuck", "U", "U0 E8004", "R1c A5"),  # filament still reaches the sensor: the idler may not home
+])
+def test_retry_in_a_tool_change_or_unload_invalidates_homing(fault: str, phase: str, error: str, idler: str) -> None:
+    w, command = prepared(phase)
+    failed, after_retry, end = _idler_after_retry(w, fault, command)
+    assert failed == error
+    assert after_retry == idler  # Aff: position unknown, the idler homes again before it moves
+    assert end == f"{command} F0"
+    assert w.send("R1c") == "R1c A5"
+
+
+def test_retry_in_a_load_keeps_the_homing() -> None:
+    w, command = prepared("L")
+    w.send("T0")  # a loaded slot: L1 then finds FINDA stuck on its retract
+    assert drive(w) == "T0 F0"
+    w.send("U0")
+    assert drive(w) == "U0 F0"
+    failed, idler, _ = _idler_after_retry(w, "finda-stuck", command)
+    assert failed == "L1 E8002"
+    assert idler == "R1c A5"  # load's recovery does not invalidate homing (reference §5.5)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from fabwire.config import load_devices, resolve_target
+from fabwire.config import MAX_CONFIG_BYTES, load_devices, resolve_target
 from fabwire.devices import LINEUS, MMU, XYZ
 from fabwire.errors import ConfigError
 from fabwire.transport import Endpoint
@@ -139,3 +139,18 @@ def test_section_lines_are_found_for_every_device(tmp_path: Path) -> None:
     devices = load_devices(write(tmp_path, text))
     assert len(devices) == 2000
     assert devices["p1999"].line == 1999 * 5 + 2
+
+
+def test_an_endless_or_oversized_config_is_refused_after_a_bounded_read(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="too large for a config file"):
+        load_devices(Path("/dev/zero"))
+    path = tmp_path / "big.toml"
+    path.write_text("# " + "x" * MAX_CONFIG_BYTES + "\n")
+    with pytest.raises(ConfigError, match="too large for a config file"):
+        load_devices(path)
+
+
+def test_a_version_with_a_trailing_line_break_is_not_a_version(tmp_path: Path) -> None:
+    path = write(tmp_path, "[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\naccept = [\"3.0.3\\n\"]\n")
+    with pytest.raises(ConfigError, match="accept"):
+        load_devices(path)

@@ -76,6 +76,11 @@ def test_status_print_and_store(simulator: SimulatorStarter, tmp_path: Path) -> 
     assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
     data = status_json(dev)
     assert (data["state"], data["substate"]) == (9511, 0)
+    piped = run_cli("xyz", "-d", dev, "print", "-", input_text=(GCODE * 50).decode())
+    assert piped.returncode == 0, piped.stderr
+    assert piped.stdout == "standard input: print finished\n"
+    assert (store / "stdin.3w").read_bytes() == write_3w(GCODE * 50, find_model("dv1MW0A000"), filename="stdin.3w")
+    assert run_cli("xyz", "-d", dev, "acknowledge").returncode == 0
 
 
 def test_settings_commands(simulator: SimulatorStarter) -> None:
@@ -91,8 +96,9 @@ def test_settings_commands(simulator: SimulatorStarter) -> None:
     assert (data["zoffset_mm"], data["name"], data["language"]) == (-0.12, "Lab", "fr")
     assert data["raw"]["z"] == "-12"
     energy = run_cli("--json", "xyz", "-d", dev, "energy", "6")
-    assert json.loads(energy.stdout) == {"energy_saving_s": 360}
-    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == "energy saving after 6m 00s idle\n"
+    assert json.loads(energy.stdout) == {"energy_saving_s": 360, "confirmed": False}  # Wi-Fi: no reply, no field
+    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == ("energy saving after 6m 00s idle (sent; a printer on "
+                                                               "Wi-Fi does not confirm this setting)\n")
     up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
     assert json.loads(up.stdout) == {"zoffset_mm": -0.11}
     refused = run_cli("xyz", "-d", dev, "restore-defaults")
@@ -173,7 +179,11 @@ def test_bad_input_and_printer_errors(simulator: SimulatorStarter, tmp_path: Pat
     assert busy.returncode == 7
     assert "busy" in busy.stderr
     assert "printing" in busy.stderr or "checking file" in busy.stderr
-    assert run_cli("xyz", "-d", dev, "cancel").returncode == 0
+    unconfirmed = run_cli("xyz", "-d", dev, "cancel")
+    assert unconfirmed.returncode == 4
+    assert unconfirmed.stderr.strip() == "fabwire: error: this would cancel the running print: add --yes to confirm"
+    assert status_json(dev)["state"] != 9511  # still printing
+    assert run_cli("xyz", "-d", dev, "cancel", "--yes").returncode == 0
     assert "Traceback" not in busy.stderr
 
 
@@ -332,3 +342,36 @@ def test_wifi_join_password_comes_from_the_option_or_a_terminal(simulator: Simul
     assert "joining MYNET" in text
     given = run_cli("xyz", "-d", dev, "wifi", "join", "MYNET", "--password", "")
     assert given.returncode == 0, given.stderr
+
+
+def test_an_endless_firmware_file_is_refused_after_a_bounded_read() -> None:
+    done = run_cli("xyz", "-d", "sim://xyz", "firmware", "--yes", "/dev/zero")
+    assert (done.returncode, done.stdout) == (4, "")
+    assert done.stderr.strip().splitlines() == [
+        "fabwire: error: /dev/zero is over 64 MiB: not a da Vinci firmware image"]
+
+
+def test_a_name_the_printer_does_not_report_is_shown_absent_not_empty() -> None:
+    status = (b"j:9511,0\nb:20\np:dv1MW0A000\nt:1,22,0\no:p8,t1,c1,a+\n$\n")
+    with socket.create_server(("127.0.0.1", 0)) as server:
+
+        def printer() -> None:
+            for _ in range(2):
+                conn, _ = server.accept()
+                with conn:
+                    buffer = b""
+                    while chunk := conn.recv(4096):
+                        buffer += chunk
+                        while b"\n" in buffer:
+                            line, buffer = buffer.split(b"\n", 1)
+                            if line.startswith(b"XYZv3/query=a"):
+                                conn.sendall(status)
+                            elif line.startswith(b"XYZv3/query="):
+                                conn.sendall(b"j:9511,0\n")
+
+        threading.Thread(target=printer, daemon=True).start()
+        port = server.getsockname()[1]
+        shown = run_cli("xyz", "-d", f"127.0.0.1:{port}", "name", timeout=30)
+        data = run_cli("--json", "xyz", "-d", f"127.0.0.1:{port}", "name", timeout=30)
+    assert (shown.returncode, shown.stdout) == (0, "—\n"), shown.stderr
+    assert json.loads(data.stdout) == {"name": None}

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fabwire.xyz.status import ErrorWord, Status
+from fabwire.xyz.status import LETTERS, ErrorWord, Status
 
 DATA = Path(__file__).parent / "data"
 
@@ -171,3 +172,25 @@ def test_parse_is_total(lines: list[str]) -> None:
     s.to_dict()
     assert isinstance(s.state_name, str)
     Status.parse(s.lines())
+
+
+_HOSTILE_TEXT = st.lists(st.sampled_from(['"\\ud800"', '"\\udfff x"', '"\\u001b[31m"', "\x1b]0;t\x07", "\x00", "\x9b2J",
+                                          '{"wlan":{"ssid":', "}", '"ok"', ",", "1e999", "[", "]", "\xff"]),
+                         max_size=8).map("".join)
+
+
+@given(st.sampled_from(sorted(LETTERS)), _HOSTILE_TEXT)
+def test_what_a_status_keeps_can_always_be_written_and_never_drives_a_terminal(letter: str, value: str) -> None:
+    status = Status.parse([f"{letter}:{value}", "j:9511,0"])
+    shown = json.dumps(status.to_dict(), ensure_ascii=False)
+    shown.encode("utf-8")  # no lone surrogate reached the output
+    assert not any(ch in shown for ch in "\x00\x07\x1b\x9b")
+    for attr in ("name", "serial", "language", "network"):
+        str(getattr(status, attr)).encode("utf-8")
+
+
+def test_a_lone_surrogate_in_a_json_field_keeps_the_line_raw() -> None:
+    status = Status.parse(['4:{"wlan":{"ip":"1.2.3.4","ssid":"\\ud800"}}'])
+    assert status.network is None
+    assert status.to_dict()["raw"]["4"] == '{"wlan":{"ip":"1.2.3.4","ssid":"\\ud800"}}'
+    assert Status.parse(["n:ab\x1b[2Jc"]).name == "ab\\x1b[2Jc"

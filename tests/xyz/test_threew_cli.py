@@ -1,6 +1,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,10 +19,10 @@ DATA = Path(__file__).parent / "data" / "threew"
 TV_INPUT = (DATA / "tv_input.gcode").read_bytes()
 
 
-def invoke(command, *args: str, json_mode: bool = False):  # type: ignore[no-untyped-def]
+def invoke(command, *args: str, json_mode: bool = False, input: bytes | None = None):  # type: ignore[no-untyped-def]
     app = App()
     app.output.json_mode = json_mode
-    return CliRunner().invoke(command, list(args), obj=app)
+    return CliRunner().invoke(command, list(args), obj=app, input=input)
 
 
 @pytest.fixture
@@ -165,3 +168,60 @@ def test_cli_subprocess_large_file_keeps_stdout_clean(tmp_path: Path) -> None:
     data = json.loads(done.stdout)
     assert data["bytes_written"] == (tmp_path / "big.3w").stat().st_size
     assert data["gcode_bytes"] > 9_000_000
+
+
+def _piped(*args: str, data: bytes) -> subprocess.CompletedProcess[bytes]:
+    return subprocess.run([sys.executable, "-m", "fabwire", *args], input=data, capture_output=True,
+                          env=cli_env(), timeout=120)
+
+
+def test_convert_and_info_read_standard_input_as_they_read_a_file(gcode: Path, tmp_path: Path) -> None:
+    (tmp_path / "piped").mkdir()
+    piped = _piped("xyz", "convert", "-", str(tmp_path / "piped" / "part.3w"), "-m", "mini w", data=TV_INPUT)
+    assert piped.returncode == 0, piped.stderr
+    assert invoke(convert, str(gcode), str(tmp_path / "part.3w"), "-m", "mini w").exit_code == 0
+    made = (tmp_path / "piped" / "part.3w").read_bytes()
+    assert read_3w(made).gcode == read_3w(tmp_path / "part.3w").gcode
+    shown = _piped("--json", "xyz", "info", "-", data=made)
+    assert shown.returncode == 0, shown.stderr
+    assert json.loads(shown.stdout)["machine"] == "dv1MW0A000"
+    back = _piped("xyz", "convert", "-", str(tmp_path / "back.gcode"), data=made)
+    assert back.returncode == 0, back.stderr
+    assert (tmp_path / "back.gcode").read_bytes() == read_3w(made).gcode
+
+
+@pytest.mark.parametrize(("data", "message"), [
+    (b"", "standard input is empty: nothing to print"),
+    (b"\x00\x01\x02junk", "standard input is binary data, not G-code or a .3w print file"),
+    (b"G28\n;" + b"x" * (2 << 20) + b"\nG1 X1\n", "has a line of over"),  # the streaming line limit holds
+])
+def test_standard_input_that_cannot_be_converted_is_one_line_of_error(data: bytes, message: str,
+                                                                      tmp_path: Path) -> None:
+    done = _piped("xyz", "convert", "-", str(tmp_path / "out.3w"), data=data)
+    assert done.returncode == 4
+    assert message in done.stderr.decode()
+    assert len(done.stderr.decode().strip().splitlines()) == 1
+    assert not (tmp_path / "out.3w").exists()
+
+
+def test_standard_input_that_never_ends_is_cut_off(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from fabwire.xyz import intake
+
+    monkeypatch.setattr(intake, "MAX_STDIN", 1 << 20)
+    result = invoke(convert, "-", str(tmp_path / "out.3w"), input=b"G1 X1\n" * 400_000)
+    assert isinstance(result.exception, InputError)
+    assert str(result.exception).startswith("standard input is over")
+    assert not (tmp_path / "out.3w").exists()
+
+
+def test_file_names_that_are_not_utf8_convert_both_ways(gcode: Path, tmp_path: Path) -> None:
+    src = tmp_path / os.fsdecode(b"part\xff.gcode")
+    src.write_bytes(TV_INPUT)
+    out = tmp_path / os.fsdecode(b"out\xfe.3w")
+    done = run_cli("--json", "xyz", "convert", str(src), str(out), env=cli_env())
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["output"] == str(out)
+    assert read_3w(out).fields["filename"] == "out\ufffd.3w"  # the name's bytes kept, shown with a replacement
+    back = _piped("xyz", "convert", str(out), str(tmp_path / os.fsdecode(b"back\xfd.gcode")), data=b"")
+    assert back.returncode == 0, back.stderr
+    assert b"back\xfd.gcode" in back.stdout  # the name as the file system has it

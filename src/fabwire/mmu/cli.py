@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
-import sys
 import time
 from collections.abc import Awaitable, Callable
 from functools import update_wrapper
@@ -13,7 +12,16 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import LINK_OPTIONS, DeviceContext, device_group, pass_app, pass_device
+from fabwire.cli_support import (
+    LINK_OPTIONS,
+    DeviceContext,
+    FiniteRange,
+    confirm,
+    device_group,
+    on_terminal,
+    pass_app,
+    pass_device,
+)
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
@@ -167,7 +175,7 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
     try:
         finished = await run(on_event=show, timeout=max_time)
     except MMUError as error:
-        if dctx.output.json_mode or not (sys.stdin.isatty() and sys.stderr.isatty()):
+        if dctx.output.json_mode or not on_terminal():
             raise
         finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time)
     factor = mmu_.logic.timing.too_fast
@@ -203,7 +211,7 @@ async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, s
 
 
 def _command_options(func: F) -> F:
-    return click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+    return click.option("--max-time", type=FiniteRange(min=0.1), default=600.0, show_default=True,
                         help="Give up if the command has not ended after this many seconds.")(func)
 
 
@@ -235,7 +243,7 @@ async def unload(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 
 @mmu.command("eject")
 @click.argument("slot", type=int)
-@click.option("--continue-after", type=click.FloatRange(min=0.0), metavar="SECONDS",
+@click.option("--continue-after", type=FiniteRange(min=0.0), metavar="SECONDS",
               help="Press Continue this many seconds after the filament is out (default: ask on a terminal, "
                    "else leave the MMU waiting for `fabwire mmu button continue`).")
 @_command_options
@@ -250,7 +258,7 @@ async def eject(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float, cont
     except MMUError as error:
         if error.info.code != 0x800C:
             raise
-    if continue_after is None and not (sys.stdin.isatty() and sys.stderr.isatty()):
+    if continue_after is None and not on_terminal():
         dctx.output.result({"command": f"E{slot}", "waiting": True, "printer_code": "04507"},
                            f"E{slot}: filament ejected — take it out, then `fabwire mmu button continue`")
         return
@@ -332,7 +340,7 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
 
 @mmu.command("button")
 @click.argument("button", type=click.Choice(["retry", "continue", "stop", "left", "middle", "right"]))
-@click.option("--max-time", type=click.FloatRange(min=0.1), default=600.0, show_default=True,
+@click.option("--max-time", type=FiniteRange(min=0.1), default=600.0, show_default=True,
               help="Give up following the command after this many seconds.")
 @with_mmu(auto_retries=0)
 async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -> None:
@@ -356,18 +364,17 @@ async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -
                        f"{button}: {finished.command} {words}")
 
 
-def _erase_args(kwargs: dict[str, Any]) -> None:
-    if kwargs["erase"] and not kwargs["yes"]:
-        raise InputError("--erase wipes the MMU's EEPROM (loaded slot, drive-error count, bowden length, "
-                         "StallGuard thresholds): add --yes to do it")
+def _confirm_reset(kwargs: dict[str, Any]) -> None:
+    confirm("erase the MMU's EEPROM (loaded slot, drive-error count, bowden length, StallGuard thresholds) and "
+            "reboot it" if kwargs["erase"] else "reboot the MMU", kwargs["yes"])
 
 
 @mmu.command("reset")
-@click.option("--erase", is_flag=True, help="Also erase the MMU's EEPROM (X2a); needs --yes.")
-@click.option("--yes", is_flag=True, help="Confirm --erase.")
-@with_mmu(_erase_args, auto_retries=0)
+@click.option("--erase", is_flag=True, help="Also erase the MMU's EEPROM (X2a).")
+@click.option("--yes", is_flag=True, help="Reset without asking (needed when not on a terminal).")
+@with_mmu(_confirm_reset, auto_retries=0)
 async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
-    """Reboot the MMU (X0) and wait until it answers again."""
+    """Reboot the MMU (X0) and wait until it answers again (asks first on a terminal)."""
     v = await mmu_.reset(erase=erase)
     words = "EEPROM erased and MMU reset" if erase else "MMU reset"
     dctx.output.result({"version": str(v), "erased": erase}, f"{words}; firmware {v} answering")
@@ -418,10 +425,9 @@ async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> No
 
 
 def _parse_value(text: str) -> int:
-    try:
-        number = int(text, 0)
-    except ValueError:
-        raise InputError(f"register value must be a number, not {text!r}") from None
+    number = codes.parse_word(text)
+    if number is None:
+        raise InputError(f"register value must be a number (decimal, or hex like 0x1f), not {text[:40]!r}")
     if not 0 <= number <= 0xFFFF:
         raise InputError(f"register value must be 0 to 65535, not {number}")
     return number
@@ -429,7 +435,7 @@ def _parse_value(text: str) -> int:
 
 @mmu.command("monitor")
 @click.option("--count", type=click.IntRange(min=1), help="Stop after this many status polls (shown or not).")
-@click.option("--duration", type=click.FloatRange(min=0.0), help="Stop after this many seconds.")
+@click.option("--duration", type=FiniteRange(min=0.0), help="Stop after this many seconds.")
 @click.option("--all", "every", is_flag=True, help="Show every status poll, not only the ones that changed.")
 @with_mmu(auto_retries=0)
 async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: float | None, every: bool) -> None:
@@ -460,7 +466,7 @@ async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: f
 
 @click.command("mmu")
 @server_options(None)
-@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.01), default=1.0, show_default=True,
               help="Run the machine this many times faster than real time.")
 @click.option("--fault", "faults", multiple=True, metavar="NAME[:N|:always]",
               help="Inject a fault (repeatable): " + ", ".join(sorted(n for n in FAULT_NAMES if

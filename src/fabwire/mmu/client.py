@@ -62,8 +62,8 @@ def resolve_register(register: int | str, *, for_write: bool = False,
     found = codes.find_register(str(register)) if not isinstance(register, int) else (
         codes.REGISTERS[register] if 0 <= register < codes.REGISTER_COUNT else None)
     if found is None:
-        raise InputError(f"unknown MMU register {register!r}: use a name such as 'bowden_length' or an address "
-                         f"from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
+        raise InputError(f"unknown MMU register {str(register)[:40]!r}: use a name such as 'bowden_length' or an "
+                         f"address from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
     if for_write and not found.writable(version):
         raise InputError(f"register 0x{found.address:02x} ({found.name}) is read-only"
                          + (" on this firmware" if found.access is codes.Access.RW_304 else ""))
@@ -72,6 +72,12 @@ def resolve_register(register: int | str, *, for_write: bool = False,
 
 def error_for(event: ErrorRaised) -> MMUError:
     return MMUError(event.code, command=event.command)
+
+
+MOVING_REGISTERS = frozenset({0x1B, 0x1C})
+"""Selector and idler slot: a write plans a move, which ends later."""
+MOVE_SETTLE = 10.0
+"""MMU seconds a written slot has to show: the longest selector move (1.8 s) after a homing (3-6 s), §5.5."""
 
 
 class MMU:
@@ -452,6 +458,22 @@ class MMU:
 
         await self._operate(lambda now: self.logic.write_register(found.address, value, now), outcome, None,
                             timeout)
+        await self._check_written(found, value, timeout)
+
+    async def _check_written(self, register: codes.Register, value: int, timeout: float | None) -> None:
+        """The MMU answers `A` even to a write it does not carry out (a selector move refused while FINDA is
+        pressed, reference §register 0x1b): the register is read back, and a value that never shows is a
+        DeviceError. Writes that move an axis get the time the move (and a homing before it) takes."""
+        settle = (MOVE_SETTLE if register.address in MOVING_REGISTERS else 0.0) / self.logic.timing.time_scale
+        end = self._clock() + settle
+        while True:
+            now = await self.read_register(register.address, timeout)
+            if now == value:
+                return
+            if self._clock() >= end:
+                raise DeviceError("not applied", f"the MMU accepted {value} for register 0x{register.address:02x} "
+                                  f"({register.name}) but it reads {now}", action="nothing was changed")
+            await asyncio.sleep(min(0.05, settle / 20))
 
     async def refresh(self, timeout: float | None = 10.0) -> Status:
         """Wait for the next heartbeat's status poll."""

@@ -6,6 +6,7 @@ Wire values are hex; the enums hold the numbers, `describe_*` turn them into wor
 from __future__ import annotations
 
 import enum
+import re
 from dataclasses import dataclass
 
 from fabwire.mmu.errors import ErrorInfo, describe_error, format_error  # noqa: F401  (error words: own module)
@@ -213,16 +214,25 @@ REGISTER_COUNT = len(REGISTERS)
 REGISTERS_BY_NAME = {r.name: r for r in REGISTERS}
 
 
+_WORD = re.compile(r"0x[0-9a-f]{1,8}|[0-9]{1,10}")
+
+
+def parse_word(text: str) -> int | None:
+    """A register address or value as a person types it: ASCII decimal, or hex with 0x (case-insensitive); None
+    for anything else (signs, underscores, other scripts' digits, a number too long to be a 16-bit word)."""
+    key = text.strip().lower()
+    if not _WORD.fullmatch(key):
+        return None
+    return int(key, 16) if key.startswith("0x") else int(key)
+
+
 def find_register(text: str) -> Register | None:
     """A register by name or by address (decimal, or hex with 0x)."""
     key = text.strip().lower().replace("-", "_")
     if key in REGISTERS_BY_NAME:
         return REGISTERS_BY_NAME[key]
-    try:
-        address = int(key, 0)
-    except ValueError:
-        return None
-    return REGISTERS[address] if 0 <= address < REGISTER_COUNT else None
+    address = parse_word(text)
+    return REGISTERS[address] if address is not None and 0 <= address < REGISTER_COUNT else None
 
 
 # ---------------------------------------------------------------------------------------------- versions

@@ -66,6 +66,16 @@ class Scripts(Machine):
         self.events.clear()
         yield from self._wait_user(word)
 
+    def _error_then_rehome(self, word: int) -> StepGen:
+        """The error path of T and U: on Middle the firmware also invalidates homing (reference §5.5), so each
+        axis that may home in this filament state homes again before it next moves (the idler unless filament
+        reaches the sensor, the selector only with no filament in it and FINDA off, §5.5 axes)."""
+        yield from self._error(word)
+        if self.filament < FilamentState.IN_FSENSOR:
+            self.homed["idler"] = False
+        if self.filament < FilamentState.IN_SELECTOR and not self.finda_raw:
+            self.homed["selector"] = False
+
     # ------------------------------------------------------------------------------------------------ axes
 
     def _set_position(self, axis: str, slot: int) -> None:
@@ -274,17 +284,17 @@ class Scripts(Machine):
                 if ok:
                     return None
                 code = 0x8002
-            yield from self._error(code)
+            yield from self._error_then_rehome(code)
             while True:
                 if self.finda_raw:
                     break  # restart the unload
                 if self.fsensor:
-                    yield from self._error(code)  # filament stuck in the extruder: stay in error
+                    yield from self._error_then_rehome(code)  # filament stuck in the extruder: stay in error
                     continue
                 result = yield from self._feed_to_finda(self.active_slot)
                 if result == "ok":
                     break
-                yield from self._error(0x8001 if result == "failed" else 0x800A)
+                yield from self._error_then_rehome(0x8001 if result == "failed" else 0x800A)
 
     # ---------------------------------------------------------------------------------------------- boot
 
@@ -316,7 +326,7 @@ class Scripts(Machine):
                 if result == "ok":
                     break
                 code = 0x8001 if result == "failed" else 0x800A
-                yield from self._error(code)
+                yield from self._error_then_rehome(code)
                 if code == 0x8001 and self.finda_raw:
                     restart = True
                     break
@@ -325,7 +335,7 @@ class Scripts(Machine):
             code = yield from self._feed_to_bondtech()
             if code == 0:
                 break
-            yield from self._error(code)
+            yield from self._error_then_rehome(code)
         self.eeprom.slot = slot
         self._finish()
 

@@ -18,6 +18,7 @@ from fabwire.mmu.faults import Fault, parse_fault
 from fabwire.mmu.machine import HistoryItem
 from fabwire.mmu.model import MMUModel
 from fabwire.mmu.protocol import Request, RequestDecoder, encode_response
+from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
 PENDING_LIMIT = 8
@@ -52,9 +53,7 @@ class MMUSimulator:
 
     def __init__(self, version: str = "3.0.4", *, speed: float = 1.0, faults: Iterable[str | Fault] = (),
                  clock: Callable[[], float] | None = None) -> None:
-        if not speed > 0:
-            raise InputError(f"speed must be positive, not {speed}")
-        self.speed = speed
+        self.speed = checked_speed(speed)
         self._clock = clock or time.monotonic
         self._t0 = self._clock()
         parsed = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)

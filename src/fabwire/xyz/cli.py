@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from fabwire import units
-from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
 from fabwire.simserve import server_options
@@ -78,6 +78,11 @@ async def _ask(message: str) -> None:
         raise InputError("no confirmation on standard input; the step was stopped")
 
 
+FIRMWARE_LIMIT = 64 << 20
+"""Largest firmware image read (da Vinci images are a few MiB; an endless file such as /dev/zero is not one)."""
+_UNCONFIRMED = " (sent; a printer on Wi-Fi does not confirm this setting)"
+
+
 def _bool(value: bool | None) -> str:
     return ABSENT if value is None else "on" if value else "off"
 
@@ -131,7 +136,7 @@ def render_status(status: Status) -> Panel:
 @xyz.command()
 @click.option("--watch", is_flag=True, help="Keep polling and show live temperatures and progress (reconnects when "
                                             "the link is lost).")
-@click.option("--interval", type=click.FloatRange(min=0.05), default=1.0, show_default=True,
+@click.option("--interval", type=FiniteRange(min=0.05), default=1.0, show_default=True,
               help="Seconds between polls with --watch.")
 @click.option("--count", type=click.IntRange(min=1), help="With --watch: stop after N polls.")
 @pass_device
@@ -181,7 +186,7 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
 
 
 @xyz.command("print")
-@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path, allow_dash=True))
 @click.option("--no-wait", is_flag=True, help="Return once the printer has started the job.")
 @click.option("--model", "model_text", metavar="MODEL", help="Convert for this model instead of the printer's own.")
 @click.option("--name", "upload_name", metavar="NAME",
@@ -191,17 +196,27 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
 @pass_device
 def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None, upload_name: str | None,
               save_to_sd: bool) -> None:
-    """Print a G-code (converted to the printer's .3w) or a .3w file."""
+    """Print a G-code (converted to the printer's .3w) or a .3w file ('-' reads it from standard input)."""
+    from fabwire.xyz import intake  # G-code scanning: loaded when a file is printed, not for a status
+
     model = _resolve_model(model_text)
     if upload_name is not None:
         userinput.upload_name(upload_name)
+    with intake.input_file(file) as (path, shown):
+        kind, head = intake.sniff(path, shown)
+        intake.require_printable(kind, shown, head)  # before the printer is reached
+        _print(dctx, path, Path(shown).name, no_wait, model, upload_name, save_to_sd)
+
+
+def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: PrinterModel | None,
+           upload_name: str | None, save_to_sd: bool) -> None:
     out = dctx.output
 
     started = [False]
 
     async def run(printer: XYZPrinter) -> Status:
         chosen = model or _resolve_model(printer.settings.model)
-        with JobView(out, out.err, file.name) as view:
+        with JobView(out, out.err, shown) as view:
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)
@@ -217,10 +232,10 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
         if not started[0]:
             raise
         where = f" -d {dctx.device}" if dctx.device else ""
-        raise FollowInterrupted(f"stopped following the print; the printer keeps printing {file.name}. Follow it with "
+        raise FollowInterrupted(f"stopped following the print; the printer keeps printing {shown}. Follow it with "
                           f"`fabwire xyz{where} status --watch`, stop it with `fabwire xyz{where} cancel`") from None
     out.result({"event": "done", "time": now_iso(), "state": final.state_code, "state_name": final.state_name},
-               f"{file.name}: {final.state_name}")
+               f"{shown}: {final.state_name}")
 
 
 def _simple(name: str, help_text: str, call: Callable[[XYZPrinter], Awaitable[Any]], done: str) -> None:
@@ -233,13 +248,22 @@ def _simple(name: str, help_text: str, call: Callable[[XYZPrinter], Awaitable[An
 
 _simple("pause", "Pause the running print.", lambda pr: pr.pause(), "paused")
 _simple("resume", "Resume a paused print.", lambda pr: pr.resume(), "resumed")
-_simple("cancel", "Cancel the running print.", lambda pr: pr.cancel(), "cancelling")
 _simple("home", "Home all axes and wait until done.", lambda pr: pr.home(), "homed")
 _simple("acknowledge", "Confirm the finished print was removed (leave 'print finished').",
         lambda pr: pr.acknowledge(), "ready")
 
 
-@xyz.command(context_settings={"ignore_unknown_options": True})
+@xyz.command()
+@click.option("--yes", is_flag=True, help="Cancel without asking (needed when not on a terminal).")
+@pass_device
+def cancel(dctx: DeviceContext, yes: bool) -> None:
+    """Cancel the running print (asks first on a terminal)."""
+    confirm("cancel the running print", yes)
+    _with_printer(dctx, lambda pr: pr.cancel())
+    dctx.output.result({"ok": True, "command": "cancel"}, "cancelling")
+
+
+@xyz.command()
 @click.argument("axis", type=click.Choice(["x", "y", "z"], case_sensitive=False))
 @click.argument("distance", type=float)
 @pass_device
@@ -313,13 +337,17 @@ def set_cmd(dctx: DeviceContext, setting: str, value: str) -> None:
     dctx.output.result({setting: value}, f"{setting} {value}")
 
 
-@xyz.command(context_settings={"ignore_unknown_options": True})
+@xyz.command()
 @click.argument("value", required=False)
 @pass_device
 def zoffset(dctx: DeviceContext, value: str | None) -> None:
     """Show the Z offset, set it (2.45mm, or whole 1/100 mm such as 245 or -12), or nudge it one step: up / down."""
     if value is not None and value not in ("up", "down"):
-        number = units.parse_zoffset(value)
+        try:
+            number = units.parse_zoffset(value)
+        except (ValueError, OverflowError):  # thousands of digits: too long for int() and float()
+            raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not "
+                             f"{value[:40]!r}…") from None
 
     async def run(pr: XYZPrinter) -> int:
         if value is None:
@@ -342,14 +370,14 @@ def name(dctx: DeviceContext, new: str | None) -> None:
     if new is not None:
         userinput.printer_name(new)
 
-    async def run(pr: XYZPrinter) -> str:
+    async def run(pr: XYZPrinter) -> str | None:
         if new is not None:
             await pr.set_name(new)
         st = await pr.status("n")
-        return st.name or ""
+        return st.name
 
     result = _with_printer(dctx, run)
-    dctx.output.result({"name": result}, result)
+    dctx.output.result({"name": result}, known(result))
 
 
 @xyz.command()
@@ -367,19 +395,21 @@ def language(dctx: DeviceContext, code: str) -> None:
 @pass_device
 def energy(dctx: DeviceContext, minutes: int) -> None:
     """Set energy saving: minutes of idle before the lights go off (0-9)."""
-    _with_printer(dctx, lambda pr: pr.set_energy(minutes))
-    dctx.output.result({"energy_saving_s": minutes * 60}, f"energy saving after {units.minutes(minutes)} idle")
+    userinput.energy_minutes(minutes)
+    confirmed = _with_printer(dctx, lambda pr: pr.set_energy(minutes))
+    dctx.output.result({"energy_saving_s": minutes * 60, "confirmed": confirmed},
+                       f"energy saving after {units.minutes(minutes)} idle{_UNCONFIRMED * (not confirmed)}")
 
 
 @xyz.command("restore-defaults")
-@click.option("--yes", is_flag=True, help="Really reset every setting.")
+@click.option("--yes", is_flag=True, help="Reset without asking (needed when not on a terminal).")
 @pass_device
 def restore_defaults(dctx: DeviceContext, yes: bool) -> None:
     """Reset the printer's settings to factory defaults."""
-    if not yes:
-        raise InputError("restore-defaults resets every setting: add --yes to confirm")
-    _with_printer(dctx, lambda pr: pr.restore_defaults())
-    dctx.output.result({"ok": True}, "settings restored to defaults")
+    confirm("reset every setting of the printer to factory defaults", yes)
+    confirmed = _with_printer(dctx, lambda pr: pr.restore_defaults())
+    dctx.output.result({"ok": True, "confirmed": confirmed},
+                       f"settings restored to defaults{_UNCONFIRMED * (not confirmed)}")
 
 
 @xyz.group()
@@ -443,13 +473,18 @@ def wifi_leave(dctx: DeviceContext) -> None:
 
 @xyz.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--yes", is_flag=True, help="Really flash this firmware.")
+@click.option("--yes", is_flag=True, help="Flash without asking (needed when not on a terminal).")
 @pass_device
 def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
     """Flash a firmware image (.bin with its `<model>+<version>` header). Can brick the printer."""
-    if not yes:
-        raise InputError("flashing firmware can brick the printer: add --yes to confirm")
-    image = file.read_bytes()
+    confirm(f"flash {file.name} (a wrong image can brick the printer)", yes)
+    try:
+        with file.open("rb") as handle:
+            image = handle.read(FIRMWARE_LIMIT + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read {file}: {exc.strerror}") from exc
+    if len(image) > FIRMWARE_LIMIT:
+        raise InputError(f"{file} is over {FIRMWARE_LIMIT >> 20} MiB: not a da Vinci firmware image")
     result = _with_printer(dctx, lambda pr: pr.upload_firmware(image, confirm=True))
     dctx.output.result({"ok": True, "bytes": result.size}, f"sent {result.size} bytes of firmware")
 
@@ -458,7 +493,7 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 @click.option("--host", "hosts", multiple=True, metavar="HOST", help="Probe this host on port 9100 (repeat).")
 @click.option("--subnet", metavar="CIDR", help="Probe every address in CIDR, e.g. 192.168.1.0/24.")
 @click.option("--port", type=click.IntRange(1, 65535), default=9100, show_default=True)
-@click.option("--probe-timeout", type=click.FloatRange(min=0.05), default=1.0, show_default=True)
+@click.option("--probe-timeout", type=FiniteRange(min=0.05), default=1.0, show_default=True)
 @click.option("--concurrency", type=click.IntRange(1, 1024), default=64, show_default=True)
 @pass_device
 def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
@@ -488,7 +523,7 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
 @server_options(XYZ.default_port)
 @click.option("--model", "model_text", default="dv1MW0A000", show_default=True,
               help="Model personality (model number or name, e.g. miniMaker, nano, 'mini w', 1.0 Pro).")
-@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.01), default=1.0, show_default=True,
               help="Time speed-up factor for heating, flows and prints.")
 @click.option("--fault", "faults", multiple=True, metavar="NAME",
               help="Start with a fault: no-cartridge, door-open, file-rejected, heater-failure, link-drop, stuck.")

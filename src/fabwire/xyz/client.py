@@ -11,13 +11,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import re
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Self, TypeVar
+from typing import TYPE_CHECKING, Any, BinaryIO, Self, TypeVar
 from urllib.parse import parse_qsl, urlsplit
 
 import msgspec
@@ -31,7 +32,7 @@ from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
 from fabwire.xyz.maintenance import Maintenance
 from fabwire.xyz.maintenance import StatusCallback as StatusCallback  # also the sync client's
-from fabwire.xyz.models import PrinterModel, model_for_file_id
+from fabwire.xyz.models import PrinterModel
 from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
 from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
 
@@ -55,7 +56,6 @@ CHECKING_NOTE_EVERY = 15.0  # seconds between "still checking the file" notes
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
 _FIRMWARE_HEADER = re.compile(rb"([A-Za-z0-9]{10})\+([0-9][0-9A-Za-z.]*)")
-_MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
 
 def link_for(transport: Transport) -> Link:
@@ -119,6 +119,7 @@ class XYZPrinter(Maintenance):
         self.settings = XYZSettings()
         self.per_command = False
         """Open a new connection for every command (the 1.1 Plus hangs up after each reply)."""
+        self.reconnects = 0  # links opened again: a command sent just before one may never have arrived
         self._heard = False
         """Some reply made sense: the peer speaks XYZv3 (until then, stray text means a wrong device)."""
 
@@ -165,6 +166,7 @@ class XYZPrinter(Maintenance):
         self.transport = await (self.reopen() if self.reopen is not None else
                                 open_transport(self.address, XYZ, connect_timeout=self.timeout))
         self._lost = None
+        self.reconnects += 1
         self.reader = ReplyReader(self.link)
         self._start_pump()
 
@@ -365,41 +367,37 @@ class XYZPrinter(Maintenance):
 
     def prepare(self, source: Path | bytes, model: PrinterModel, *, override: bool = False) -> bytes:
         """The bytes to upload: a .3w (binary or base64 text) as is if it suits `model`, G-code converted for
-        `model`; any other kind of file is an InputError saying what it is."""
-        from fabwire.xyz import intake  # G-code scanning (numpy): loaded when a file is printed, not for a status
-        from fabwire.xyz.threew import inspect_3w, write_3w
+        `model`; any other kind of file is an InputError saying what it is. (`print_file` streams from disk.)"""
+        from fabwire.xyz import printjob  # G-code scanning (numpy): loaded when a file is printed, not for a status
 
-        data, name = _load_source(source)
-        kind = intake.require_printable(intake.identify(data[:intake.SNIFF], len(data)), name, data[:intake.SNIFF])
-        data = intake.plain_bytes(data, name)
-        if kind.decoded is intake.Kind.THREEW:
-            info = inspect_3w(data)
-            machine = (info.machine or "").strip()
-            target = model_for_file_id(machine, model) if machine else None
-            if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
-                what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
-                raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; "
-                                 f"convert the G-code for this printer instead")
-            return data
-        if m := _MACHINE_LINE.search(intake.normalise(data[:16384], first=True)):
-            declared = m[1].decode("latin-1")
-            other = model_for_file_id(declared, model)
-            if not override and other is not None and other.file_id.lower() != model.file_id.lower():
-                raise InputError(f"{name} was sliced for {other.name} ({declared}), but the printer is a "
-                                 f"{model.name}; slice it for this printer or pass --model")
-        return write_3w(data, model, filename=userinput.derived_upload_name(name))
+        with printjob.ready_file(source, model, override=override) as ready:
+            return ready.read_bytes()
 
-    async def upload(self, data: bytes, name: str, *, progress: UploadProgress | None = None,
+    async def upload(self, data: bytes | Path, name: str, *, progress: UploadProgress | None = None,
                      firmware: bool = False, crc: bool = True, save_to_sd: bool = False) -> UploadResult:
-        """Send a file in blocks, each acknowledged; a link lost on the way is a LinkError, never success.
+        """Send a file (bytes, or a file read block by block) in blocks, each acknowledged; a link lost on the way
+        is a LinkError, never success. `name` is checked as user input (InputError); `save_to_sd` adds XYZware's
+        `,SaveToSD` flag."""
+        with contextlib.ExitStack() as stack:
+            if isinstance(data, Path):
+                try:
+                    handle = stack.enter_context(data.open("rb"))
+                except OSError as exc:
+                    raise InputError(f"cannot read {data}: {exc.strerror}") from exc
+                source: bytes | BinaryIO = handle
+                size = os.fstat(handle.fileno()).st_size
+            else:
+                source, size = data, len(data)
+            return await self._upload(source, size, name, progress, firmware, crc, save_to_sd)
 
-        `name` is checked as user input (InputError); `save_to_sd` adds XYZware's `,SaveToSD` flag."""
-        if not data:
+    async def _upload(self, data: bytes | BinaryIO, size: int, name: str, progress: UploadProgress | None,
+                      firmware: bool, crc: bool, save_to_sd: bool) -> UploadResult:
+        if not size:
             raise InputError("nothing to upload: the file is empty")
         name = userinput.upload_name(name)
         block = self.last_status.block_size if self.last_status.packet else (await self.status()).block_size
         command: p.Upload | p.FirmwareUpload = (
-            p.FirmwareUpload(name, len(data)) if firmware else p.Upload(name, len(data), save_to_sd))
+            p.FirmwareUpload(name, size) if firmware else p.Upload(name, size, save_to_sd))
         started = self.clock()
         sent = 0
         blocks = 0
@@ -423,19 +421,19 @@ class XYZPrinter(Maintenance):
                         for _ in range(await self._acks(acks, len(in_flight))):
                             sent += in_flight.popleft()
                         if progress is not None:
-                            progress(sent, len(data))
+                            progress(sent, size)
                 while in_flight:
                     for _ in range(await self._acks(acks, len(in_flight))):
                         sent += in_flight.popleft()
                     if progress is not None:
-                        progress(sent, len(data))
+                        progress(sent, size)
                 await self._request(p.UploadDidFinish(), self.timeout)
             except (LinkError, LinkTimeout) as exc:
-                raise LinkError(f"upload of {name} failed after {sent} of {len(data)} bytes: {exc}; "
+                raise LinkError(f"upload of {name} failed after {sent} of {size} bytes: {exc}; "
                                 "the printer did not receive the whole file") from exc
             finally:
                 self._start_pump()
-        return UploadResult(name, len(data), blocks, self.clock() - started)
+        return UploadResult(name, size, blocks, self.clock() - started)
 
     async def _acks(self, counter: p.AckCounter, most: int) -> int:
         """Wait for at least one block ack; return how many came (never more than `most`)."""
@@ -465,11 +463,9 @@ class XYZPrinter(Maintenance):
         `name` is the upload name (default: a safe one derived from the file name). The job counts as started
         only when the printer says so (checking the file, printing, or a file error); a printer that stays idle
         for `start_limit` s is a DeviceError, never success."""
-        from fabwire.xyz import intake
+        from fabwire.xyz import printjob
 
-        data, shown = _load_source(source)
-        head = data[:intake.SNIFF]
-        intake.require_printable(intake.identify(head, len(data)), shown, head)  # before disturbing the printer
+        printjob.check_source(source)  # before disturbing the printer
         name = userinput.upload_name(name) if name is not None else userinput.derived_upload_name(
             source.name if isinstance(source, Path) else None)
         status = await self.require_idle("print")
@@ -477,8 +473,8 @@ class XYZPrinter(Maintenance):
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
-        data = self.prepare(data if isinstance(source, bytes) else source, target, override=model is not None)
-        await self.upload(data, name, progress=progress, save_to_sd=save_to_sd)
+        with printjob.ready_file(source, target, override=model is not None) as ready:
+            await self.upload(ready, name, progress=progress, save_to_sd=save_to_sd)
         status = await self._await_job_start(start_limit)
         if on_status:
             on_status(status)
@@ -561,7 +557,11 @@ class XYZPrinter(Maintenance):
                 raise InputError(f"nothing to cancel: no print is running (the printer is {state})")
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
             raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
-        await self.request(p.PrintControl(op))
+        command = p.PrintControl(op)
+        if command.expects(self.link) is not p.Expect.NOTHING:
+            await self.request(command)  # the printer's ok
+        else:  # a Wi-Fi printer answers nothing: its state leaving the one it was in is the evidence
+            await self._send_confirmed(command, "j", lambda st: st.state_code != status.state_code)
 
     async def upload_firmware(self, image: bytes, *, confirm: bool, progress: UploadProgress | None = None,
                               name: str = "temp.bin") -> UploadResult:
@@ -580,20 +580,3 @@ class XYZPrinter(Maintenance):
                              f"not this {model.name} ({model.model_number})")
         await self.require_idle("update the firmware")
         return await self.upload(image[16:], name, progress=progress, firmware=True)
-
-
-def _load_source(source: Path | bytes) -> tuple[bytes, str]:
-    """The file's bytes and how to name it in messages; an unreadable or empty file is an InputError."""
-    if isinstance(source, Path):
-        try:
-            data = source.read_bytes()
-        except OSError as exc:
-            raise InputError(f"cannot read {source}: {exc.strerror}") from exc
-        name = source.name
-    else:
-        data, name = source, "the data"
-    if not data:
-        raise InputError(f"{name} is empty")
-    return data, name
-
-

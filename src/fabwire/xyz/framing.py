@@ -6,6 +6,7 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Iterator
+from typing import BinaryIO
 
 from fabwire.errors import LocalProtocolError
 from fabwire.xyz.commands import (
@@ -24,9 +25,14 @@ def encode_block(index: int, data: bytes, *, crc: bool = True) -> bytes:
     return struct.pack(">II", index, len(data)) + data + struct.pack(">I", trailer)
 
 
-def iter_blocks(data: bytes, block_size: int, *, crc: bool = True) -> Iterator[bytes]:
+def iter_blocks(data: bytes | BinaryIO, block_size: int, *, crc: bool = True) -> Iterator[bytes]:
+    """The framed upload blocks of `data`, or of a file read one block at a time (memory: one block)."""
     if block_size <= 0:
         raise LocalProtocolError("upload block size must be positive")
+    if not isinstance(data, bytes | bytearray | memoryview):
+        for index, chunk in enumerate(iter(lambda: data.read(block_size), b"")):
+            yield encode_block(index, chunk, crc=crc)
+        return
     view = memoryview(data)
     for index, start in enumerate(range(0, len(data), block_size)):
         yield encode_block(index, bytes(view[start : start + block_size]), crc=crc)

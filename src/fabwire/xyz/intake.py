@@ -163,17 +163,46 @@ def refusal(kind: Kind, name: str, head: bytes = b"") -> InputError:
     return InputError(f"{name} is {what}{', ' if advice.startswith('not ') else ': '}{advice}")
 
 
-def open_input(path: Path) -> BinaryIO:
-    """The file opened for reading; an unreadable one is an InputError naming it."""
+def open_input(path: Path, name: str | None = None) -> BinaryIO:
+    """The file opened for reading; an unreadable one is an InputError naming it (`name`, default the path)."""
     try:
         return Path(path).open("rb")
     except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror}") from exc
+        raise InputError(f"cannot read {name or path}: {exc.strerror}") from exc
 
 
-def sniff(path: Path) -> tuple[Kind, bytes]:
-    """(what the file is, its first bytes); an unreadable file is an InputError."""
-    with open_input(path) as handle:
+STDIN = "-"
+"""The file name that means standard input."""
+STDIN_NAME = "standard input"
+MAX_STDIN = 4 << 30
+"""Most bytes taken from standard input (a pipe may never end; a print file is far smaller)."""
+
+
+@contextlib.contextmanager
+def input_file(path: Path) -> Iterator[tuple[Path, str]]:
+    """(a file to read, its name for messages): `path` itself, or for `-` standard input copied in CHUNK pieces to
+    a temporary file, so a piped G-code or .3w is read like any other file with memory bounded by CHUNK."""
+    if str(path) != STDIN:
+        yield path, str(path)
+        return
+    import sys
+
+    with tempfile.TemporaryDirectory() as scratch:
+        spooled = Path(scratch) / "stdin"
+        try:
+            with spooled.open("wb") as out:
+                while block := sys.stdin.buffer.read(CHUNK):
+                    if out.tell() + len(block) > MAX_STDIN:
+                        raise InputError(f"{STDIN_NAME} is over {MAX_STDIN >> 30} GiB: not a print file that ends")
+                    out.write(block)
+        except OSError as exc:
+            raise InputError(f"cannot read {STDIN_NAME}: {exc.strerror or exc}") from exc
+        yield spooled, STDIN_NAME
+
+
+def sniff(path: Path, name: str | None = None) -> tuple[Kind, bytes]:
+    """(what the file is, its first bytes); an unreadable file is an InputError (naming `name` or `path`)."""
+    with open_input(path, name) as handle:
         head = handle.read(SNIFF)
         size = handle.seek(0, 2)
     return identify(head, size), head
@@ -399,7 +428,7 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
         f"; total_layers = {meta.layers}\n"
         f"; version = {XYZ_VERSION}\n"
         f"; total_filament = {meta.filament_mm:.2f}\n"
-    ).encode()
+    ).encode("utf-8", "surrogateescape")  # a file name's undecodable bytes go into the header as they were
     comments = _leading_comments(head, header_space)
     fits = comments is not None and (len(keys + comments) // 16 + 1) * 16 <= header_space  # with its PKCS#7 pad
     header = keys + comments if comments is not None and fits else keys

@@ -5,7 +5,8 @@ driven by polling the printer's state, which works the same on serial and Wi-Fi 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable
+import contextlib
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
 from fabwire.errors import DeviceError, FabwireError, LinkTimeout, RemoteProtocolError
@@ -19,12 +20,31 @@ Prompt = Callable[[str], Awaitable[None]]
 STATUS_AND_UPLOAD_ONLY = frozenset({"dvF110B000"})
 """Models whose XYZv3 covers status and printing only (the 1.1 Plus speaks the older protocol for the rest)."""
 _PRINTING_COMMANDS = (p.Query, p.Upload, p.UploadDidFinish, p.PrintControl, p.SimControl)
+CALIBRATION_POINTS = 9
+"""`calibratejr:getdata` reports 9 bed readings (reference, calibrate bed; cf. `c:`)."""
+CONFIRM_LIMIT = 5.0
+"""Seconds a Wi-Fi printer has to show a setting in its status (it does not answer settings there)."""
+_READBACK: dict[type[p.Command], tuple[str, Callable[[Any, Status], bool]]] = {
+    p.SetAutoLevel: ("o", lambda c, st: st.autolevel == c.on),
+    p.SetBuzzer: ("s", lambda c, st: st.buzzer == c.on),
+    p.SetZOffset: ("z", lambda c, st: st.zoffset == c.value),
+    p.SetName: ("n", lambda c, st: st.name is not None and st.name.strip() == c.name.strip()),
+    p.SetLanguage: ("l", lambda c, st: st.language == c.code),
+}
+"""Settings a Wi-Fi printer confirms only through its status: the letter that carries each, and when it shows it."""
+
+
+def _shown(status: Status, letter: str) -> str:
+    line = status.line(letter) if letter in status.order else None
+    return "(nothing)" if line is None else line[2:42]
 
 
 class Maintenance:
     """Flows and settings, on top of the client's requests and status queries."""
 
     poll_interval: float
+    link: p.Link
+    reconnects: int
     clock: Callable[[], float]
     last_status: Status
     timeout: float
@@ -81,8 +101,9 @@ class Maintenance:
         """Heat, feed, then `ready(...)` returns once filament comes out of the nozzle; we then stop feeding."""
         await self.require_idle("load filament", p.Flow("load", "new"))
         await self._flow("load", "retry" if retry else "new")
-        status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
-                                        on_status)
+        async with self._cancelled_if_stopped("load"):
+            status = await self._wait_state(lambda s: s.state == (9530, 12) or s.idle, "loading filament", limit,
+                                            on_status)
         if status.idle:
             return status  # the printer finished feeding on its own before anyone confirmed
         try:
@@ -90,6 +111,17 @@ class Maintenance:
         finally:
             await self._flow("load", "cancel")
         return await self._wait_state(lambda s: s.idle, "finishing the load", 30.0, on_status)
+
+    @contextlib.asynccontextmanager
+    async def _cancelled_if_stopped(self, flow: str) -> AsyncIterator[None]:
+        """While the printer heats for a flow: an error, a timeout or Ctrl-C cancels the flow on the printer before
+        it goes on, so a stopped command never leaves the nozzle heating (`<flow>:cancel`, MM:v3)."""
+        try:
+            yield
+        except BaseException:
+            with contextlib.suppress(FabwireError):
+                await self.request(p.Flow(flow, "cancel"))
+            raise
 
     async def cancel_flow(self, flow: str) -> None:
         """Stop a running load, unload or nozzle clean."""
@@ -99,14 +131,17 @@ class Maintenance:
                               limit: float = 360.0) -> Status:
         await self.require_idle("unload filament", p.Flow("unload", "new"))
         await self._flow("unload", "retry" if retry else "new")
-        await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
-        return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
+        async with self._cancelled_if_stopped("unload"):
+            await self._wait_state(lambda s: s.state == (9531, 22) or s.idle, "heating to unload", limit, on_status)
+            return await self._wait_state(lambda s: s.idle, "unloading filament", limit, on_status)
 
     async def clean_nozzle(self, ready: Prompt, *, on_status: StatusCallback | None = None,
                            limit: float = 360.0) -> Status:
         await self.require_idle("clean the nozzle", p.Flow("cleannozzle", "new"))
         await self._flow("cleannozzle", "new")
-        await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit, on_status)
+        async with self._cancelled_if_stopped("cleannozzle"):
+            await self._wait_state(lambda s: s.state == (9536, 52) or s.idle, "heating the nozzle", limit,
+                                   on_status)
         try:
             await ready("The nozzle is hot: clean it, then confirm")
         finally:
@@ -131,6 +166,10 @@ class Maintenance:
             reply = await self.request(p.Flow("calibratejr", "getdata"))
             stat = p.parse_stat_line(reply.lines[0]) if reply.lines else None
             values = stat.values if stat else ()
+            if len(values) != CALIBRATION_POINTS:
+                raise RemoteProtocolError(f"the printer answered 'calibratejr:getdata' with "
+                                          f"{(reply.lines or ['nothing'])[0][:60]!r}, not {CALIBRATION_POINTS} "
+                                          "bed readings")
             await prompt("Raise the calibration detector, then confirm")
         except BaseException:
             released = await self._release_calibration()
@@ -161,44 +200,102 @@ class Maintenance:
             raise DeviceError("unsupported", f"the {model.name if model else status.model_number} takes only status "
                               "queries and prints over XYZv3", action=f"cannot send {command.body!r}")
 
-    async def _config(self, command: p.Command) -> None:
+    async def _config(self, command: p.Command) -> bool:
+        """Send a setting; True once the printer confirmed it, False if it cannot (Wi-Fi, no status field).
+
+        On serial the `ok` is the confirmation. A Wi-Fi printer answers settings with nothing, so where the status
+        carries the value it is read back until it shows the new one; a printer that ignored the command is a
+        DeviceError, never success."""
         await self._supports(command)
+        readback = _READBACK.get(type(command))
+        if command.expects(self.link) is not p.Expect.NOTHING or readback is None:
+            await self.request(command)
+            return command.expects(self.link) is not p.Expect.NOTHING
+        letter, applied = readback
+        await self._send_confirmed(command, letter, lambda st: applied(command, st))
+        return True
+
+    async def _send_confirmed(self, command: p.Command, letter: str, applied: Callable[[Status], bool], *,
+                              repeatable: bool = True) -> Status:
+        """Send `command` and wait for its effect in status `letter`. A link opened again after the command went
+        out may have lost it: a `repeatable` setting is then sent again at once if the status lacks it; a step
+        (not repeatable) only after the status showed it missing for CONFIRM_LIMIT s, so it is never taken twice."""
+        reconnects = self.reconnects
         await self.request(command)
+        if repeatable:
+            status = await self.status(letter)
+            if applied(status):
+                return status
+            if self.reconnects != reconnects:
+                await self.request(command)
+            return await self._confirm(command, letter, applied)
+        try:
+            return await self._confirm(command, letter, applied)
+        except DeviceError:
+            if self.reconnects == reconnects:
+                raise
+        await self.request(command)
+        return await self._confirm(command, letter, applied)
 
-    async def set_autolevel(self, on: bool) -> None:
-        await self._config(p.SetAutoLevel(on))
+    async def _confirm(self, command: p.Command, letter: str, applied: Callable[[Status], bool]) -> Status:
+        """Poll status `letter` until `applied` holds (firmware applies some settings a moment late, SEED)."""
+        end = self.clock() + CONFIRM_LIMIT
+        while True:
+            status = await self.status(letter)
+            if applied(status):
+                return status
+            if self.clock() > end:
+                raise DeviceError("not applied", f"the printer did not apply {command.body!r}: its status still "
+                                  f"reads {letter}:{_shown(status, letter)} after {CONFIRM_LIMIT:g} s",
+                                  action="nothing was changed")
+            await asyncio.sleep(self.poll_interval)
 
-    async def set_buzzer(self, on: bool) -> None:
-        await self._config(p.SetBuzzer(on))
+    async def set_autolevel(self, on: bool) -> bool:
+        return await self._config(p.SetAutoLevel(on))
+
+    async def set_buzzer(self, on: bool) -> bool:
+        return await self._config(p.SetBuzzer(on))
 
     async def zoffset(self) -> int:
         await self._supports(p.GetZOffset())
         reply = await self.request(p.GetZOffset())
         if not reply.lines:
             raise LinkTimeout("the printer sent no z offset")
-        return int(reply.lines[0])
+        try:
+            return int(reply.lines[0])
+        except ValueError:
+            raise RemoteProtocolError(f"the printer answered 'zoffset:get' with {reply.lines[0][:40]!r}, not a "
+                                      "number") from None
 
     async def set_zoffset(self, value: int) -> int:
         await self._config(p.SetZOffset(value))
         return value
 
     async def nudge_zoffset(self, up: bool) -> int:
-        """One 0.01 mm step; returns the new offset as the next status reports it."""
-        await self._config(p.NudgeZOffset(up))
-        status = await self.status("z")
-        return status.zoffset if status.zoffset is not None else 0
+        """One 0.01 mm step; returns the new offset once the status reports it (a DeviceError if it never does)."""
+        command = p.NudgeZOffset(up)
+        await self._supports(command)
+        before = (await self.status("z")).zoffset
+        if before is None:
+            raise RemoteProtocolError("the printer reports no z offset (z:), so a step cannot be confirmed")
+        after = await self._send_confirmed(command, "z", lambda st: st.zoffset == before + (1 if up else -1),
+                                           repeatable=False)
+        assert after.zoffset is not None  # checked by the predicate
+        return after.zoffset
 
-    async def set_name(self, name: str) -> None:
-        await self._config(p.SetName(userinput.printer_name(name)))
+    async def set_name(self, name: str) -> bool:
+        return await self._config(p.SetName(userinput.printer_name(name)))
 
-    async def set_language(self, code: str) -> None:
-        await self._config(p.SetLanguage(userinput.language(code)))
+    async def set_language(self, code: str) -> bool:
+        return await self._config(p.SetLanguage(userinput.language(code)))
 
-    async def set_energy(self, minutes: int) -> None:
-        await self._config(p.SetEnergy(minutes))
+    async def set_energy(self, minutes: int) -> bool:
+        """False: sent to a Wi-Fi printer, which neither answers nor reports energy saving in its status."""
+        return await self._config(p.SetEnergy(userinput.energy_minutes(minutes)))
 
-    async def restore_defaults(self) -> None:
-        await self._config(p.RestoreDefaults())
+    async def restore_defaults(self) -> bool:
+        """False: sent to a Wi-Fi printer, which does not confirm it."""
+        return await self._config(p.RestoreDefaults())
 
     async def wifi_info(self) -> Status:
         return await self.status("4")

@@ -8,9 +8,8 @@ queued in `outbox`; the link decides whether to send them.
 from __future__ import annotations
 
 import hashlib
-import json
 import random
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +18,7 @@ from fabwire.xyz import intake
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import FileFormat
 from fabwire.xyz.personas import Personality
+from fabwire.xyz.simstate import Settings
 from fabwire.xyz.status import (
     CANCELLING,
     DOOR_OPEN,
@@ -46,42 +46,6 @@ COOL_RATE = 1.5
 FLOW_TEMP = 200
 PRINT_TEMP = 210
 FAULTS = ("no-cartridge", "door-open", "file-rejected", "heater-failure", "link-drop", "stuck")
-
-
-@dataclass
-class Settings:
-    """What a real printer keeps across power cycles (and the simulator in `--state FILE`)."""
-
-    name: str = ""
-    language: str = "en"
-    energy: int = 3
-    buzzer: bool = True
-    autolevel: bool = True
-    zoffset: int = 245
-    calibration: list[int] = field(default_factory=lambda: [336, 374, 377, 355, 373, 371, 364, 377, 356])
-    machine_min: int = 301080
-    extruder_min: int = 28581
-    filament_mm: int = 200000
-    ssid: str = "TUCKER_HOME"
-    ip: str = "192.168.1.118"
-
-    @classmethod
-    def load(cls, path: Path | None, defaults: Settings) -> Settings:
-        if path is None or not path.exists():
-            return defaults
-        try:
-            data = json.loads(path.read_text())
-            known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-            return replace(defaults, **known)
-        except (OSError, ValueError, TypeError) as exc:
-            raise InputError(f"cannot read simulator state {path}: {exc}") from exc
-
-    def save(self, path: Path | None) -> None:
-        if path is None:
-            return
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(json.dumps(asdict(self), indent=1))
-        tmp.replace(path)
 
 
 @dataclass

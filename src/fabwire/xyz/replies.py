@@ -61,7 +61,9 @@ ReaderEvent = Reply | ErrorReply | NoReply | ActionStat
 
 _ERROR = re.compile(r"^E(\d{1,10})\$?$")
 _STAT = re.compile(r"^([A-Za-z][A-Za-z0-9_]+):(\{.*\})$")
-_NUMBER = re.compile(r"^-?\d+$")
+MAX_STATUS_LINES = 256
+"""Lines kept of one status reply: a full `query=a` is about 30, one per letter."""
+_NUMBER = re.compile(r"-?\d{1,12}")  # fullmatch: a reading, never a 5000-digit int()
 
 
 def parse_stat_line(line: str) -> ActionStat | None:
@@ -81,7 +83,7 @@ def parse_stat_line(line: str) -> ActionStat | None:
                 stat = value
             else:
                 extra[key] = value
-        elif _NUMBER.match(part.strip()):
+        elif _NUMBER.fullmatch(part.strip()):
             values.append(int(part.strip()))
         elif part.strip():
             return None
@@ -266,7 +268,9 @@ class ReplyReader:
                 self.noise += 1
             return
         if p.expect is Expect.STATUS:
-            if len(line) >= 2 and line[1] == ":":
+            if len(p.lines) >= MAX_STATUS_LINES:
+                self.noise += 1  # a reply that never ends: keep the reader bounded, let the wait time out
+            elif len(line) >= 2 and line[1] == ":":
                 p.lines.append(line)
                 p.seen.add(line[0])
                 wanted = p.command.wanted if isinstance(p.command, Query) else frozenset()
@@ -275,7 +279,7 @@ class ReplyReader:
             else:
                 self.noise += 1
         elif p.expect is Expect.NUMBER:
-            if _NUMBER.match(line) and not p.lines:
+            if _NUMBER.fullmatch(line) and not p.lines:
                 p.lines.append(line)
             else:
                 self.noise += 1

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fabwire.errors import InputError, LinkClosed
+from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 from fabwire.xyz import protocol as p
 from fabwire.xyz.personas import personality
@@ -70,8 +71,7 @@ class XYZSimulator:
         clock: Callable[[], float] = time.monotonic, close_after_reply: bool | None = None, control: bool = True,
         max_upload: int = MAX_UPLOAD,
     ) -> None:
-        if speed <= 0:
-            raise InputError(f"speed must be positive, not {speed}")
+        speed = checked_speed(speed)
         self.printer = Printer(personality(model, serial=serial), state_file=state_file, faults=faults)
         self.speed = speed
         self.store = store
@@ -92,10 +92,16 @@ class XYZSimulator:
         self.commands: deque[str] = deque(maxlen=COMMAND_HISTORY)
         self.uploading: object | None = None
         """The connection whose upload is under way: a printer takes one file at a time."""
+        self.outbox_owner: object | None = None
+        """The connection that started the running flow: only it is sent the flow's later progress lines."""
         self.connections = 0
         self.busy_replies = 0
         if store is not None:
-            store.mkdir(parents=True, exist_ok=True)
+            try:
+                store.mkdir(parents=True, exist_ok=True)
+            except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
+                raise InputError(f"cannot keep received files in {str(store)!r}: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
 
     # ------------------------------------------------------------------------------------- control API
 
@@ -139,12 +145,15 @@ class XYZSimulator:
     async def serve(self, transport: Transport) -> None:
         """Run the device side of one connection until the peer goes away."""
         self.connections += 1
+        connection = _Connection(self, transport, self.link_for(transport))
         try:
-            await _Connection(self, transport, self.link_for(transport)).run()
+            await connection.run()
         except LinkClosed as exc:  # this side hung up (1.1 Plus style, or an injected link drop)
             log.info("connection closed: %s", exc)
         finally:
             self.connections -= 1
+            if self.outbox_owner is connection:
+                self.outbox_owner = None
 
 
 class _Connection:
@@ -210,8 +219,8 @@ class _Connection:
             elif isinstance(event, Garbage) and self.link is Link.SERIAL and event.raw.strip():
                 out += p.reply_lines([p.error_line(BAD_COMMAND_REPLY)], dollar=False)
         self.sim.sync()
-        if self.printer.outbox:
-            if self.link is Link.SERIAL:
+        if self.printer.outbox and self.sim.outbox_owner in (None, self):
+            if self.link is Link.SERIAL:  # a flow's later lines go to the client that started it, nobody else
                 for line in self.printer.outbox:
                     out += p.reply_lines([line], dollar=True)
             self.printer.outbox.clear()
@@ -250,6 +259,9 @@ class _Connection:
         if refusal is not None:
             answered = serial or command.expects(self.link) is not p.Expect.NOTHING
             return p.reply_lines([p.error_line(refusal)], dollar=False) if answered else b""
+        if isinstance(command, p.Flow | p.Home | p.Jog | p.PrintControl) and self.sim.outbox_owner is not self:
+            self.printer.outbox.clear()  # what is left belongs to the flow another client started
+            self.sim.outbox_owner = self
         lines = self.printer.execute(command)
         expect = command.expects(self.link)
         if expect is p.Expect.NOTHING or not lines:

@@ -8,6 +8,7 @@ writes with the same code. A line that does not parse is kept raw in `unparsed`;
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -247,14 +248,27 @@ def _fmt_lifetime(v: Lifetime) -> str:
 
 
 def _json_obj(text: str) -> dict[str, Any]:
-    value = json.loads(text)
+    value = _json_any(text)
     if not isinstance(value, dict):
         raise ValueError("expected a JSON object")
     return value
 
 
 def _json_any(text: str) -> Any:
-    return json.loads(text)
+    """A JSON value whose strings are all text: a `\\ud800` escape (a lone surrogate, which no output can
+    write) is a ValueError, so the line is kept raw like any other value that does not parse."""
+    value = json.loads(text)
+    json.dumps(value, ensure_ascii=False).encode("utf-8")  # UnicodeEncodeError (a ValueError) on a surrogate
+    return value
+
+
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+"""Control characters (C0 and C1, tab excepted) that a printer's text must not bring to a terminal."""
+
+
+def _visible(line: str) -> str:
+    """`line` with each control character written as `\\xNN` (an escape sequence could rewrite a terminal)."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m[0]):02x}", line) if _CONTROL.search(line) else line
 
 
 def _fmt_json(value: Any) -> str:
@@ -383,7 +397,7 @@ class Status(msgspec.Struct, frozen=True):
         extra = dict(self.extra)
         unparsed = dict(self.unparsed)
         dashed = set(self.dashed)
-        for line in lines:
+        for line in map(_visible, lines):
             if len(line) < 2 or line[1] != ":":
                 continue
             letter, value = line[0], line[2:]

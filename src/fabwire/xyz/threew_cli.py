@@ -90,7 +90,7 @@ def _size(path: Path) -> int:
 
 
 @click.command("convert")
-@click.argument("src", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("src", type=click.Path(dir_okay=False, path_type=Path, allow_dash=True))
 @click.argument("dst", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-m", "--model", "model_text", metavar="MODEL",
               help="Target printer for a .3w: model number, name or alias (default: miniMaker, or the source "
@@ -101,17 +101,19 @@ def _size(path: Path) -> int:
 @click.pass_context
 def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, file_format: str | None,
             zipped: bool | None) -> None:
-    """Convert G-code to a .3w print file or back; the direction follows the files' types.
+    """Convert G-code to a .3w print file or back; the direction follows the files' types ('-' reads SRC from
+    standard input).
 
     A .3w source with a .3w destination is re-targeted (e.g. for another model or format).
     """
     app = _app(ctx)
     container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
     writing = dst.suffix.lower() == ".3w"
-    kind, head = intake.sniff(src)
-    intake.require_printable(kind, str(src), head)
-    with intake.decoded_path(src, kind) as plain:
-        _convert(app, src, plain, kind.decoded, dst, writing, model_text, container, zipped)
+    with intake.input_file(src) as (path, shown):
+        kind, head = intake.sniff(path, shown)
+        intake.require_printable(kind, shown, head)
+        with intake.decoded_path(path, kind) as plain:
+            _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped)
 
 
 def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
@@ -161,20 +163,23 @@ def _report(app: App, direction: str, src: Path, dst: Path, info: ThreeWInfo) ->
 
 
 @click.command("info")
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path, allow_dash=True))
 @click.pass_context
 def info(ctx: click.Context, file: Path) -> None:
-    """Show what a .3w file holds (variant, CRC, model, print metadata), or what a G-code file would give."""
+    """Show what a .3w file holds (variant, CRC, model, print metadata), or what a G-code file would give ('-'
+    reads standard input)."""
     app = _app(ctx)
-    size = _size(file)
-    kind, head = intake.sniff(file)
-    intake.require_printable(kind, str(file), head)
-    with intake.decoded_path(file, kind) as plain:
-        if kind.decoded is intake.Kind.GCODE:
-            _gcode_info(app, plain, file)
-            return
-        with _progress(app, f"checking {file.name}", size) as progress:
-            details = inspect_3w(plain, progress)
+    with intake.input_file(file) as (path, shown):
+        file = Path(shown)
+        size = _size(path)
+        kind, head = intake.sniff(path, shown)
+        intake.require_printable(kind, shown, head)
+        with intake.decoded_path(path, kind) as plain:
+            if kind.decoded is intake.Kind.GCODE:
+                _gcode_info(app, plain, file)
+                return
+            with _progress(app, f"checking {file.name}", size) as progress:
+                details = inspect_3w(plain, progress)
     data = {"file": str(file), "size": size, **_info_data(details)}
 
     def human() -> None:

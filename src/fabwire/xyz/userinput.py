@@ -91,6 +91,17 @@ def language(code: str) -> str:
     return folded
 
 
+ENERGY_MINUTES = range(10)
+"""`config=energy:[N]` takes 0-9 minutes of idle (miniMover's xyzv3.cpp)."""
+
+
+def energy_minutes(minutes: int) -> int:
+    """Minutes of idle before the lights go off: a whole number 0-9."""
+    if minutes not in ENERGY_MINUTES:
+        raise InputError(f"energy saving takes 0-9 minutes, not {minutes}")
+    return minutes
+
+
 def _utf8(text: str, what: str) -> None:
     try:
         text.encode("utf-8")

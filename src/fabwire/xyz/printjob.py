@@ -1,0 +1,80 @@
+"""A file made ready for a printer: the .3w to upload, on disk, with memory bounded whatever the file's size.
+
+A .3w (binary or base64 text) that suits the printer is sent as it is (decoded to a temporary file when it is
+base64); G-code is converted for the printer's model into a temporary .3w by the streaming converter. Any other
+kind of file is an InputError saying what it is (fabwire.xyz.intake).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from fabwire.errors import InputError
+from fabwire.xyz import intake, userinput
+from fabwire.xyz.models import PrinterModel, model_for_file_id
+from fabwire.xyz.threew import convert_gcode_file, inspect_3w
+
+_MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
+
+
+def check_source(source: Path | bytes) -> str:
+    """How to name `source` in messages, once it is known to be printable (before any printer is disturbed)."""
+    with _on_disk(source) as (path, name):
+        kind, head = intake.sniff(path, name)
+        intake.require_printable(kind, name, head)
+    return name
+
+
+@contextlib.contextmanager
+def _on_disk(source: Path | bytes) -> Iterator[tuple[Path, str]]:
+    """(a file holding `source`, its name in messages); bytes are written to a temporary file."""
+    if isinstance(source, Path):
+        yield source, source.name
+        return
+    with tempfile.TemporaryDirectory() as scratch:
+        path = Path(scratch) / "data"
+        path.write_bytes(source)
+        yield path, "the data"
+
+
+@contextlib.contextmanager
+def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = False) -> Iterator[Path]:
+    """The .3w file to upload for `model`: the source itself when it is a .3w that suits the model (any .3w with
+    `override`), else a temporary one that lasts while the context does. Memory stays within the intake's and
+    the converter's bounds, not the file's size."""
+    with _on_disk(source) as (path, name), tempfile.TemporaryDirectory() as scratch:
+        kind, head = intake.sniff(path, name)
+        intake.require_printable(kind, name, head)
+        with intake.decoded_path(path, kind) as plain:
+            if kind.decoded is intake.Kind.THREEW:
+                _check_3w(plain, name, model, override)
+                yield plain
+                return
+            _check_gcode(plain, name, model, override)
+            target = Path(scratch) / userinput.derived_upload_name(name)
+            convert_gcode_file(plain, target, model)
+            yield target
+
+
+def _check_3w(path: Path, name: str, model: PrinterModel, override: bool) -> None:
+    machine = (inspect_3w(path).machine or "").strip()
+    target = model_for_file_id(machine, model) if machine else None
+    if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
+        what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
+        raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; "
+                         f"convert the G-code for this printer instead")
+
+
+def _check_gcode(path: Path, name: str, model: PrinterModel, override: bool) -> None:
+    with intake.open_input(path, name) as handle:
+        head = handle.read(16384)
+    if m := _MACHINE_LINE.search(intake.normalise(head, first=True)):
+        declared = m[1].decode("latin-1")
+        other = model_for_file_id(declared, model)
+        if not override and other is not None and other.file_id.lower() != model.file_id.lower():
+            raise InputError(f"{name} was sliced for {other.name} ({declared}), but the printer is a "
+                             f"{model.name}; slice it for this printer or pass --model")
