@@ -68,7 +68,8 @@ def zoffset(hundredths: int | None) -> str:
     return ABSENT if hundredths is None else f"{hundredths / 100:.2f} mm"
 
 
-_ZOFFSET = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+))\s*(mm)?\s*$", re.IGNORECASE)
+_ZOFFSET = re.compile(r"^\s*([+-]?(?:[0-9]{1,6}(?:\.[0-9]{0,6})?|\.[0-9]{1,6}))\s*(mm)?\s*$", re.IGNORECASE)
+"""ASCII digits, a few of them: int() of thousands of digits raises, and no z-offset needs more."""
 
 
 def parse_zoffset(text: str) -> int:
@@ -79,7 +80,8 @@ def parse_zoffset(text: str) -> int:
     """
     match = _ZOFFSET.match(text)
     if not match:
-        raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not {text!r}")
+        shown = text if len(text) <= 40 else text[:40] + "…"
+        raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not {shown!r}")
     number, unit = match.groups()
     hundredths = round(float(number) * 100) if unit or "." in number else int(number)
     if abs(hundredths) > ZOFFSET_LIMIT_MM * 100:

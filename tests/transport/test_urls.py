@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fabwire.devices import LINEUS, MMU, XYZ
 from fabwire.errors import InputError
@@ -64,3 +66,30 @@ def test_endpoint_url_is_canonical() -> None:
     assert parse_url("::1", LINEUS).url == "tcp://[::1]:1337"
     assert parse_url("/dev/ttyACM0", XYZ).url == "serial:///dev/ttyACM0"
     assert parse_url("sim://xyz?speed=5", XYZ).url == "sim://xyz?speed=5"
+
+
+@settings(max_examples=400, deadline=None)
+@given(text=st.one_of(
+    st.text(max_size=60),
+    st.builds(lambda host, port: f"{host}:{port}", st.sampled_from(["127.0.0.1", "host", "[::1]", "tcp://h"]),
+              st.one_of(st.integers(-10, 10**6).map(str), st.text(alphabet="0123456789٣²", min_size=1, max_size=30),
+                        st.just("9" * 5000))),
+))
+def test_any_address_text_parses_or_is_one_short_input_error(text: str) -> None:
+    message = ""
+    try:
+        endpoint = parse_url(text, XYZ)
+    except InputError as exc:
+        message = str(exc)
+    if message:
+        assert len(message) < 400
+        assert "\n" not in message
+    else:
+        assert endpoint.scheme != "tcp" or 1 <= endpoint.port <= 65535
+
+
+def test_a_port_of_thousands_of_digits_is_refused_briefly() -> None:
+    with pytest.raises(InputError, match=r"port '999999999999…' is too long to be a port"):
+        parse_url("127.0.0.1:" + "9" * 5000, XYZ)
+    with pytest.raises(InputError, match="port '٣' is not a number"):
+        parse_url("127.0.0.1:٣", XYZ)

@@ -37,15 +37,18 @@ class Endpoint(msgspec.Struct, frozen=True):
 
 
 def _bad(text: str, why: str) -> InputError:
+    shown = text if len(text) <= 80 else text[:60] + "…"
     return InputError(
-        f"malformed device address {text!r}: {why} "
+        f"malformed device address {shown!r}: {why} "
         "(use host, host:port, tcp://host:port, /dev/ttyX, serial:///dev/ttyX or sim://name)"
     )
 
 
 def _port(text: str, raw: str) -> int:
-    if not raw.isdigit():
-        raise _bad(text, f"port {raw!r} is not a number")
+    if not re.fullmatch(r"[0-9]{1,5}", raw):  # ASCII digits only, and few: int() of 5,000 digits raises
+        shown = raw if len(raw) <= 12 else raw[:12] + "…"
+        what = "too long to be a port" if raw.isascii() and raw.isdigit() else "not a number"
+        raise _bad(text, f"port {shown!r} is {what}")
     port = int(raw)
     if not 1 <= port <= 65535:
         raise _bad(text, f"port {port} is outside 1-65535")
