@@ -375,3 +375,20 @@ def test_a_name_the_printer_does_not_report_is_shown_absent_not_empty() -> None:
         data = run_cli("--json", "xyz", "-d", f"127.0.0.1:{port}", "name", timeout=30)
     assert (shown.returncode, shown.stdout) == (0, "—\n"), shown.stderr
     assert json.loads(data.stdout) == {"name": None}
+
+
+@pytest.mark.parametrize("where", [-1, -100, -2000])  # the checksummed body
+def test_a_damaged_print_file_is_refused_before_any_upload(simulator: SimulatorStarter, tmp_path: Path,
+                                                           where: int) -> None:
+    store = tmp_path / "store"
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000", "--store", str(store))
+    good = write_3w(GCODE * 50, find_model("dv1MW0A000"), filename="cube.3w")
+    damaged = bytearray(good)
+    damaged[where] ^= 0x01
+    path = tmp_path / "cube.3w"
+    path.write_bytes(bytes(damaged))
+    result = run_cli("xyz", "-d", device(sim.url), "print", str(path))
+    assert result.returncode == 4, result.stderr
+    assert result.stderr.startswith("fabwire: error: cube.3w is damaged: its stored checksum")
+    assert result.stderr.count("\n") == 1
+    assert not store.exists() or not list(store.iterdir())  # nothing reached the printer

@@ -61,7 +61,11 @@ def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = Fa
 
 
 def _check_3w(path: Path, name: str, model: PrinterModel, override: bool) -> None:
-    machine = (inspect_3w(path).machine or "").strip()
+    info = inspect_3w(path)
+    if not info.crc_ok:  # the printer would take the upload and then refuse the file (0x020D)
+        raise InputError(f"{name} is damaged: its stored checksum 0x{info.crc_stored:08x} does not match its "
+                         f"contents (0x{info.crc_computed:08x}); convert the G-code again")
+    machine = (info.machine or "").strip()
     target = model_for_file_id(machine, model) if machine else None
     if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
         what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
