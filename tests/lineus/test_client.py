@@ -11,8 +11,9 @@ import pytest
 
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, LocalProtocolError, RemoteProtocolError
 from fabwire.lineus import protocol as p
-from fabwire.lineus.client import LineUs, LineUsSync, Network, Position, StoredDrawing, parse_file_list
+from fabwire.lineus.client import LineUs, Network, Position, StoredDrawing, parse_file_list
 from fabwire.lineus.sim import LineUsSim, SimOptions, resolve_version
+from fabwire.lineus.sync import LineUsSync
 from fabwire.transport import FaultPlan, FaultyTransport, Transport, open_tcp, serve_tcp
 
 

@@ -10,8 +10,10 @@ from typing import Any
 import pytest
 
 from fabwire.errors import ConfigError, InputError
-from fabwire.lineus.client import LineUs, LineUsSync
-from fabwire.mmu.client import MMU, SyncMMU
+from fabwire.lineus.client import LineUs
+from fabwire.lineus.sync import LineUsSync
+from fabwire.mmu.client import MMU
+from fabwire.mmu.sync import SyncMMU
 from fabwire.transport import open_transport, serve_tcp
 from fabwire.transport.tap import read_trace
 from fabwire.xyz.client import XYZPrinter
@@ -111,9 +113,12 @@ def _operations(cls: type) -> set[str]:
 def test_sync_facades_are_typed_classes(client: type, facade: type) -> None:
     assert "__getattr__" not in vars(facade)
     spelled_out = {name for name in vars(facade) if not name.startswith("_")}
-    if facade is SyncXYZPrinter:  # the printer's facade covers every operation
-        assert _operations(client) <= spelled_out
-    assert spelled_out
+    assert _operations(client) <= spelled_out  # every operation, with its own signature
+    for name in _operations(client):
+        ours = inspect.signature(getattr(facade, name)).parameters
+        theirs = inspect.signature(getattr(client, name)).parameters
+        assert list(ours) == list(theirs), name
+        assert [q.default for q in ours.values()] == [q.default for q in theirs.values()], name
 
 
 def test_open_sync_runs_the_same_client() -> None:

@@ -16,7 +16,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Any, Self, TypeVar
+from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import LineUsSettings
 from fabwire.devices import LINEUS
@@ -24,8 +24,11 @@ from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, Rem
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
 from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
-from fabwire.opening import DeviceLink, DeviceTarget, Opening, SyncClient
+from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
+
+if TYPE_CHECKING:
+    from fabwire.lineus.sync import LineUsSync
 
 T = TypeVar("T")
 log = logging.getLogger("fabwire.lineus")
@@ -172,6 +175,8 @@ class LineUs:
     @classmethod
     def open_sync(cls, target: DeviceTarget = None, **options: Any) -> LineUsSync:
         """`with LineUs.open_sync("line-us.local") as arm: arm.move(1000, 0)` for plain scripts."""
+        from fabwire.lineus.sync import LineUsSync
+
         return LineUsSync(target, **options)
 
     @classmethod
@@ -560,49 +565,3 @@ def _checked(command: p.Command, reply: p.Reply) -> p.Reply:
 def _why(reply: p.Reply) -> str:
     """The reason a refusal gives, if any (firmware 3.x words it, 1.x answers a bare `error`)."""
     return f": {reply.info}" if reply.info else ""
-
-
-class LineUsSync(SyncClient[LineUs]):
-    """The same client for plain scripts: every call runs on a private event-loop thread."""
-
-    def __init__(self, target: DeviceTarget = None, **options: Any) -> None:
-        super().__init__(LineUs.open(target, **options), thread_name="fabwire-lineus")
-        self._arm = self.client
-
-    @property
-    def hello(self) -> p.Hello:
-        return self._arm.hello
-
-    @property
-    def arm(self) -> LineUs:
-        return self._arm
-
-    def move(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
-        return self._loop.call(self._arm.move(x, y, z))
-
-    def pen_up(self) -> Position:
-        return self._loop.call(self._arm.pen_up())
-
-    def pen_down(self, z: float = kin.Z_DOWN) -> Position:
-        return self._loop.call(self._arm.pen_down(z))
-
-    def home(self) -> Position:
-        return self._loop.call(self._arm.home())
-
-    def position(self) -> Position:
-        return self._loop.call(self._arm.position())
-
-    def set_speed(self, draw: float | None = None, travel: float | None = None) -> None:
-        self._loop.call(self._arm.set_speed(draw, travel))
-
-    def set_origin(self, x: float = 0.0, y: float = 0.0, scale: float = 1.0) -> None:
-        self._loop.call(self._arm.set_origin(x, y, scale))
-
-    def send(self, command: p.Command) -> p.Reply:
-        return self._loop.call(self._arm.send(command))
-
-    def list_drawings(self) -> list[StoredDrawing]:
-        return self._loop.call(self._arm.list_drawings())
-
-    def diagnostics(self) -> dict[str, str]:
-        return self._loop.call(self._arm.diagnostics())

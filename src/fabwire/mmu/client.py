@@ -1,4 +1,4 @@
-"""`MMU`: the host logic on a real link, as awaitable operations; `SyncMMU` for plain scripts.
+"""`MMU`: the host logic on a real link, as awaitable operations (`fabwire.mmu.sync.SyncMMU` for plain scripts).
 
     async with MMU(transport) as mmu:
         await mmu.tool_change(1, on_event=print)
@@ -12,7 +12,7 @@ import logging
 import time
 from collections.abc import AsyncIterator, Callable, Iterable
 from types import TracebackType
-from typing import Any, Self, TypeVar
+from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
@@ -40,8 +40,11 @@ from fabwire.mmu.host import (
     StatusUpdated,
 )
 from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload
-from fabwire.opening import DeviceLink, DeviceTarget, Opening, SyncClient
+from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
+
+if TYPE_CHECKING:
+    from fabwire.mmu.sync import SyncMMU
 
 log = logging.getLogger("fabwire.mmu")
 T = TypeVar("T")
@@ -114,6 +117,8 @@ class MMU:
     @classmethod
     def open_sync(cls, target: DeviceTarget = None, **options: Any) -> SyncMMU:
         """`with MMU.open_sync("sim://mmu", speed=50) as mmu: mmu.load(2)` for plain scripts."""
+        from fabwire.mmu.sync import SyncMMU
+
         return SyncMMU(target, **options)
 
     @classmethod
@@ -527,56 +532,3 @@ class MMU:
     @property
     def link_state(self) -> Link:
         return self.logic.link
-
-
-class SyncMMU(SyncClient[MMU]):
-    """The same operations, blocking, for scripts: `with MMU.open_sync("sim://mmu?speed=50") as mmu: mmu.load(2)`."""
-
-    def __init__(self, target: DeviceTarget = None, **options: Any) -> None:
-        super().__init__(MMU.open(target, **options), thread_name="fabwire-mmu")
-
-    @property
-    def mmu(self) -> MMU:
-        return self.client
-
-    def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:
-        result: CommandFinished = self._call(self.mmu.tool_change(slot, **kwargs))
-        return result
-
-    def load(self, slot: int, **kwargs: Any) -> CommandFinished:
-        result: CommandFinished = self._call(self.mmu.load(slot, **kwargs))
-        return result
-
-    def unload(self, **kwargs: Any) -> CommandFinished:
-        result: CommandFinished = self._call(self.mmu.unload(**kwargs))
-        return result
-
-    def eject(self, slot: int, **kwargs: Any) -> CommandFinished:
-        result: CommandFinished = self._call(self.mmu.eject(slot, **kwargs))
-        return result
-
-    def cut(self, slot: int, **kwargs: Any) -> CommandFinished:
-        result: CommandFinished = self._call(self.mmu.cut(slot, **kwargs))
-        return result
-
-    def home(self) -> CommandFinished:
-        result: CommandFinished = self._call(self.mmu.home())
-        return result
-
-    def press(self, button: int | str) -> None:
-        self._call(self.mmu.press(button))
-
-    def read_register(self, register: int | str) -> int:
-        value: int = self._call(self.mmu.read_register(register))
-        return value
-
-    def write_register(self, register: int | str, value: int) -> None:
-        self._call(self.mmu.write_register(register, value))
-
-    def reset(self) -> codes.FirmwareVersion:
-        version: codes.FirmwareVersion = self._call(self.mmu.reset())
-        return version
-
-    @property
-    def status(self) -> Status:
-        return self.mmu.status

@@ -58,18 +58,22 @@ class SyncXYZPrinter(SyncClient[XYZPrinter]):
     def prepare(self, source: Path | bytes, model: PrinterModel, *, override: bool = False) -> bytes:
         return self.client.prepare(source, model, override=override)
 
-    def upload(self, data: bytes, name: str, *, progress: UploadProgress | None = None, firmware: bool = False,
-               crc: bool = True) -> UploadResult:
-        return self._call(self.client.upload(data, name, progress=progress, firmware=firmware, crc=crc))
+    def upload(self, data: bytes | Path, name: str, *, progress: UploadProgress | None = None,
+               firmware: bool = False, crc: bool = True, save_to_sd: bool = False) -> UploadResult:
+        return self._call(self.client.upload(data, name, progress=progress, firmware=firmware, crc=crc,
+                                             save_to_sd=save_to_sd))
 
     def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                    progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
-                   wait: bool = True, name: str | None = None) -> Status:
+                   wait: bool = True, name: str | None = None, save_to_sd: bool = False,
+                   start_limit: float = 30.0, on_note: Callable[[str], None] | None = None) -> Status:
         return self._call(self.client.print_file(source, model=model, progress=progress, on_status=on_status,
-                                                 wait=wait, name=name))
+                                                 wait=wait, name=name, save_to_sd=save_to_sd,
+                                                 start_limit=start_limit, on_note=on_note))
 
-    def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None) -> Status:
-        return self._call(self.client.follow_job(on_status, limit=limit))
+    def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None,
+                   on_note: Callable[[str], None] | None = None) -> Status:
+        return self._call(self.client.follow_job(on_status, limit=limit, on_note=on_note))
 
     def pause(self) -> None:
         self._call(self.client.pause())
@@ -106,8 +110,9 @@ class SyncXYZPrinter(SyncClient[XYZPrinter]):
         return self._call(self.client.clean_nozzle(_async_prompt(ready), on_status=on_status, limit=limit))
 
     def calibrate(self, prompt: SyncPrompt, *, on_status: StatusCallback | None = None,
-                  limit: float = 240.0) -> tuple[int, ...]:
-        return self._call(self.client.calibrate(_async_prompt(prompt), on_status=on_status, limit=limit))
+                  on_stop: Callable[[str], None] | None = None, limit: float = 240.0) -> tuple[int, ...]:
+        return self._call(self.client.calibrate(_async_prompt(prompt), on_status=on_status, on_stop=on_stop,
+                                                limit=limit))
 
     def set_autolevel(self, on: bool) -> None:
         self._call(self.client.set_autolevel(on))
