@@ -27,6 +27,7 @@ from fabwire.config import (
     parse_devices,
     read_config_text,
     section_lines,
+    validate_settings,
 )
 from fabwire.devices import KINDS
 from fabwire.errors import ConfigError, InputError
@@ -64,12 +65,18 @@ def _parse_setting(text: str) -> tuple[str, Any]:
 def _write(path: Path, text: str) -> None:
     """Validate, then replace the file atomically (a crash leaves the old or the new file, never half)."""
     parse_devices(text, path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".devices-", suffix=".toml", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".devices-", suffix=".toml", dir=path.parent)
+    except OSError as exc:
+        raise ConfigError(f"cannot write the config file {path}: {exc.strerror or exc}") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as stream:
             stream.write(text)
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise ConfigError(f"cannot write the config file {path}: {exc.strerror or exc}") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -160,6 +167,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     if unknown:
         raise InputError(f"{KINDS[kind_name].title} has no setting {unknown[0]!r}"
                          f"{closest(unknown[0], schema.__struct_fields__)}")
+    validate_settings(KINDS[kind_name], {k: v for k, v in values.items() if k != "kind"}, what="setting")
     section = f"[devices.{_toml_key(name)}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items())
     separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
     _write(path, text + separator + section)
@@ -173,9 +181,10 @@ def remove(app: App, name: str) -> None:
     """Forget device NAME (the rest of the file stays as it is)."""
     path = config_path()
     text = read_config_text(path)
-    _find(parse_devices(text, path) if text else {}, name, path)
-    lines = text.splitlines(keepends=True)
     headers = section_lines(text)
+    if name not in headers:  # a section being removed may be the broken one: only an absent name is looked up
+        _find(parse_devices(text, path) if text else {}, name, path)
+    lines = text.splitlines(keepends=True)
     if name not in headers:
         raise ConfigError(f"{name!r} is not written as a [devices.NAME] section in {path}: edit the file by hand")
     start = headers[name] - 1

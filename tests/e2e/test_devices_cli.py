@@ -64,7 +64,7 @@ def test_bad_edits_are_refused_and_leave_the_file_alone(tmp_path: Path) -> None:
     assert typo.returncode == InputError.exit_code
     assert "no setting 'sped' (did you mean 'speed'?)" in typo.stderr
     bad_value = run_cli("devices", "add", "bench", "sim://mmu", "--kind", "mmu", "--set", "speed=fast", env=env)
-    assert bad_value.returncode == ConfigError.exit_code
+    assert bad_value.returncode == InputError.exit_code  # a bad --set is bad input, like a misspelt one
     assert "'speed': expected `float`" in bad_value.stderr
     gone = run_cli("devices", "remove", "ofice", env=env)
     assert gone.returncode == ConfigError.exit_code
@@ -86,3 +86,38 @@ def test_an_endless_config_or_text_that_is_not_utf8_is_one_line_of_error(tmp_pat
         assert done.stderr.count("\n") == 1
         assert "is not valid text" in done.stderr
         assert not path.exists()
+
+
+def test_a_bad_setting_is_refused_before_it_is_written(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    for setting, words in (("reply_timeout=-5", "'reply_timeout': expected `float` > 0.0"),
+                           ("reply_timout=5", "has no setting 'reply_timout' (did you mean 'reply_timeout'?)")):
+        refused = run_cli("devices", "add", "bad", "127.0.0.1", "--kind", "xyz", "--set", setting, env=env_for(path))
+        assert refused.returncode == InputError.exit_code
+        assert words in refused.stderr
+        assert "line" not in refused.stderr
+        assert not path.exists()
+
+
+def test_a_config_file_that_cannot_be_written_is_one_line_of_error(tmp_path: Path) -> None:
+    for path in (Path("/proc/nope/devices.toml"), Path("/proc/self/devices.toml")):
+        done = run_cli("devices", "add", "z", "127.0.0.1", "--kind", "xyz", env=env_for(path))
+        assert done.returncode == ConfigError.exit_code
+        assert done.stderr.startswith(f"fabwire: error: cannot write the config file {path}: ")
+        assert done.stderr.count("\n") == 1
+
+
+def test_the_broken_entry_itself_can_be_removed(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    path.write_text('[devices.good]\nkind = "xyz"\nurl = "127.0.0.1"\n\n'
+                    '[devices.bad]\nkind = "xyz"\nurl = "127.0.0.1"\ndefualt = true\n')
+    env = env_for(path)
+    broken = run_cli("devices", "list", env=env)
+    assert broken.returncode == ConfigError.exit_code
+    assert "line 5: device 'bad': unknown key 'defualt' (did you mean 'default'?)" in broken.stderr
+    assert run_cli("devices", "remove", "bad", env=env).returncode == 0
+    assert json.loads(run_cli("devices", "list", "--json", env=env).stdout) == [
+        {"name": "good", "kind": "xyz", "url": "127.0.0.1", "default": False}]
+    missing = run_cli("devices", "remove", "bda", env=env)
+    assert missing.returncode == ConfigError.exit_code
+    assert "no device named 'bda'" in missing.stderr
