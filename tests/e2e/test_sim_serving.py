@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import socket
+import threading
+import time
 from pathlib import Path
 
-from clitools import start_simulator
+import pytest
+
+from clitools import run_cli, start_simulator
+from fabwire.mmu.protocol import Query, encode_request
 from fabwire.transport.tap import read_trace
 
 
@@ -45,3 +51,36 @@ def test_options_go_before_or_after_the_kind_and_limits_apply(tmp_path: Path) ->
         stderr = sim.stop()
     assert "refused" in stderr
     assert stderr.count("\n") < 5
+
+
+KEEP_BUSY = {"xyz": b"XYZv3/query=j\r\n", "lineus": b"M114\x00", "mmu": encode_request(Query())}
+ASK = {"xyz": "status", "lineus": "position", "mmu": "status"}
+
+
+@pytest.mark.parametrize("kind", sorted(KEEP_BUSY))
+def test_a_client_turned_away_hears_that_the_simulator_is_busy(kind: str) -> None:
+    sim = start_simulator(kind, "--listen", "127.0.0.1:0", "--max-connections", "1", "--speed", "50")
+    host, _, port = sim.url.removeprefix("tcp://").rpartition(":")
+    stop = threading.Event()
+
+    def keep_busy() -> None:  # the one place stays taken by a client that keeps talking
+        with socket.create_connection((host, int(port)), timeout=10) as held:
+            held.settimeout(0.1)
+            while not stop.is_set():
+                with contextlib.suppress(OSError):
+                    held.sendall(KEEP_BUSY[kind])
+                    held.recv(65536)
+
+    holder = threading.Thread(target=keep_busy, daemon=True)
+    holder.start()
+    try:
+        time.sleep(0.5)
+        refused = run_cli("--timeout", "5", kind, "-d", sim.url, *(["--speed", "50"] if kind == "mmu" else []),
+                          ASK[kind])
+    finally:
+        stop.set()
+        holder.join(10)
+        sim.stop()
+    assert refused.returncode == 8, refused.stderr
+    assert refused.stderr == (f"fabwire: error: {host}:{port}: the {kind} simulator turned the connection away: "
+                              "all 1 of its connections are in use (its --max-connections); try again later\n")

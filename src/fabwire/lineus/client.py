@@ -26,6 +26,7 @@ from fabwire.lineus import protocol as p
 from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
+from fabwire.transport.limits import refusal
 
 if TYPE_CHECKING:
     from fabwire.lineus.sync import LineUsSync
@@ -138,7 +139,9 @@ class LineUs:
                 while True:
                     reader.feed(await transport.read())
                     pending = reader.pending
-                    if pending and not (pending[:5] == b"hello"[: len(pending[:5])]):
+                    if pending and pending[:5] != b"hello"[: len(pending[:5])]:
+                        if (busy := refusal(bytes(pending), where)) is not None:
+                            raise busy
                         raise RemoteProtocolError(
                             f"{where} is not a Line-us: it greeted with {pending[:40]!r} instead of 'hello …'")
                     message = reader.next_message()

@@ -42,6 +42,7 @@ from fabwire.mmu.host import (
 from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
+from fabwire.transport.limits import refusal
 
 if TYPE_CHECKING:
     from fabwire.mmu.sync import SyncMMU
@@ -218,6 +219,9 @@ class MMU:
         try:
             while True:
                 data = await self.transport.read(4096)
+                if self.version is None and (busy := refusal(data, self.transport.peer or "the MMU")) is not None:
+                    self._fail(busy)
+                    return
                 self.logic.receive(data, self._clock())
                 self._dispatch()
                 await self._flush()

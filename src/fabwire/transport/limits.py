@@ -10,10 +10,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
 import time
 
 import msgspec
 
+from fabwire.errors import LinkError
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 
 log = logging.getLogger("fabwire.sim")
@@ -29,6 +31,20 @@ class ConnectionLimits(msgspec.Struct, frozen=True):
     idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT
     """Seconds without traffic before a connection is closed; None keeps quiet connections open."""
     busy_for: float = BUSY_FOR
+
+
+_REFUSAL = re.compile(rb"([a-z]+ simulator) busy: all ([0-9]{1,6}) connections are in use")
+
+
+def refusal(data: bytes, peer: str) -> LinkError | None:
+    """The error to raise when `data` (what a peer sent first) is a simulator's refusal line, written by
+    `ConnectionPool.admit` below, or None. A client shows it instead of calling the peer the wrong device."""
+    found = _REFUSAL.search(data[:256])
+    if found is None:
+        return None
+    what, count = found[1].decode(), found[2].decode()
+    return LinkError(f"{peer}: the {what} turned the connection away: all {count} of its connections are in use "
+                     "(its --max-connections); try again later")
 
 
 class RateLimitedLog:

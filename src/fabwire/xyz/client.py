@@ -28,6 +28,7 @@ from fabwire.devices import XYZ
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
+from fabwire.transport.limits import refusal
 from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
 from fabwire.xyz.maintenance import Maintenance
@@ -295,6 +296,9 @@ class XYZPrinter(Maintenance):
         except (LinkClosed, LinkTimeout) as exc:
             sample = self.reader.noise_sample
             if sample is not None and not self._heard:
+                busy = refusal(sample.encode("latin-1", "replace"), self.transport.peer or self.transport.url)
+                if busy is not None:
+                    raise busy from exc
                 raise RemoteProtocolError(f"{self.transport.peer or self.transport.url} is not an XYZv3 printer: "
                                           f"it answered {sample!r}") from exc
             raise
