@@ -85,10 +85,14 @@ def test_json_keys_name_si_units(simulator: SimulatorStarter, tmp_path: Path) ->
     mmu = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "50").url
     documents = []
     for args in (("lineus", "preview", str(svg)), ("xyz", "-d", xyz, "status"), ("xyz", "-d", xyz, "zoffset"),
-                 ("xyz", "-d", xyz, "energy", "3"), ("mmu", "-d", mmu, "--speed", "50", "status")):
+                 ("xyz", "-d", xyz, "energy", "3"), ("xyz", "-d", xyz, "wifi", "info"),
+                 ("xyz", "-d", xyz, "wifi", "scan"), ("xyz", "-d", xyz, "jog", "x", "5"),
+                 ("mmu", "-d", mmu, "--speed", "50", "status")):
         done = run_cli("--json", *args, env=cli_env(tmp_path))
         assert done.returncode == 0, (args, done.stderr)
         documents.append(json.loads(done.stdout))
     keys = {key for document in documents for key in _keys(document)}
-    assert {"estimated_s", "elapsed_s", "zoffset_mm", "energy_saving_s", "extruder_c"} <= keys
+    assert {"estimated_s", "elapsed_s", "zoffset_mm", "energy_saving_s", "extruder_c", "rssi_dbm", "distance_mm",
+            "pulley_mm"} <= keys
     assert sorted(k for k in keys if NON_SI.search(k)) == []
+    assert not keys & {"rssi", "distance", "pulley", "zoffset", "energy"}  # quantities always carry their unit

@@ -244,7 +244,7 @@ def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> 
     found = run_cli("--json", "xyz", "discover", "--host", "127.0.0.2", "--host", "127.0.0.3", "--host", "127.0.0.4",
                     "--port", str(port), "--probe-timeout", "0.5")
     assert found.returncode == 0, found.stderr
-    addresses = {entry["address"]: entry["model"] for entry in json.loads(found.stdout)}
+    addresses = {entry["address"]: entry["model_number"] for entry in json.loads(found.stdout)}
     assert addresses == {f"127.0.0.2:{port}": "dv1MX0A000", f"127.0.0.3:{port}": "dv1NX0A000"}
     subnet = run_cli("--json", "xyz", "discover", "--subnet", "127.0.0.0/30", "--port", str(port),
                      "--probe-timeout", "0.5")

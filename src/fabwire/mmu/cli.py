@@ -113,6 +113,7 @@ def status_line(status: Status) -> str:
 
 def status_dict(status: Status) -> dict[str, Any]:
     data = dataclasses.asdict(status)
+    data["pulley_mm"] = data.pop("pulley")  # register 0x1A, in mm (the firmware's pulley position)
     data["text"] = status.words
     return data
 

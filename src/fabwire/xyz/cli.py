@@ -272,7 +272,7 @@ def jog(dctx: DeviceContext, axis: str, distance: float) -> None:
     if not (math.isfinite(distance) and 0 < abs(distance) <= JOG_LIMIT):
         raise InputError(f"jog distance must be a non-zero number of mm up to {JOG_LIMIT}, not {distance:g}")
     _with_printer(dctx, lambda pr: pr.jog(axis.lower(), distance))
-    dctx.output.result({"ok": True, "axis": axis, "distance": distance}, f"moved {axis} by {distance:g} mm")
+    dctx.output.result({"ok": True, "axis": axis, "distance_mm": distance}, f"moved {axis} by {distance:g} mm")
 
 
 def _progress_note(dctx: DeviceContext) -> Callable[[Status], None]:
@@ -419,8 +419,7 @@ def wifi_info(dctx: DeviceContext) -> None:
     """Show the printer's network address and SSID."""
     st = _with_printer(dctx, lambda pr: pr.wifi_info())
     net = st.network
-    data = {"ip": net.ip, "ssid": net.ssid, "rssi": net.rssi, "mac": net.mac, "connected": net.connected} \
-        if net else {"connected": False}
+    data = net.as_dict() if net else {"connected": False}
     human = (f"{net.ip} on {net.ssid or '?'} (signal {net.signal_percent if net.signal_percent is not None else '?'} %)"
              if net and net.connected else "not connected (or no Wi-Fi on this model)")
     dctx.output.result(data, human)
@@ -435,11 +434,25 @@ def wifi_scan(dctx: DeviceContext) -> None:
     def human() -> None:
         if not networks:
             dctx.output.out.print("no networks found (or no Wi-Fi on this model)")
-        for net in networks:
-            dctx.output.out.print(f"{net.get('ssid', '?'):<32} channel {net.get('channel', '?'):>3}  "
-                                  f"-{net.get('rssiValue', '?')} dBm  {net.get('security', '')}")
+        for net in found:
+            dbm = "?" if net["rssi_dbm"] is None else net["rssi_dbm"]
+            channel = "?" if net["channel"] is None else net["channel"]
+            dctx.output.out.print(f"{net['ssid'] or '?':<32} channel {channel:>3}  {dbm} dBm  {net['security']}")
 
-    dctx.output.result(networks, human)
+    found = [_scanned(net) for net in networks]
+    dctx.output.result(found, human)
+
+
+def _scanned(net: dict[str, Any]) -> dict[str, Any]:
+    """One network of a Wi-Fi scan for JSON: the firmware's strings typed, dBm negative as in `status`, and
+    the firmware's own fields kept under `raw`."""
+    def number(key: str) -> int | None:
+        text = str(net.get(key, "")).strip()
+        return int(text) if text.isascii() and text.isdigit() and len(text) < 6 else None
+
+    rssi = number("rssiValue")
+    return {"ssid": str(net.get("ssid", "")), "channel": number("channel"),
+            "rssi_dbm": None if rssi is None else -rssi, "security": str(net.get("security", "")), "raw": net}
 
 
 @wifi.command("join")
@@ -501,7 +514,7 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
     found = usb_printers()
     if targets:
         found += asyncio.run(probe_hosts(targets, port, timeout=probe_timeout, concurrency=concurrency))
-    data = [{"address": f.address, "model": f.model_number, "name": f.name, "serial": f.serial,
+    data = [{"address": f.address, "model_number": f.model_number, "model": f.name, "serial": f.serial,
              "detail": f.detail} for f in found]
 
     def human() -> None:

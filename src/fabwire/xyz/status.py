@@ -150,6 +150,11 @@ class Network(msgspec.Struct, frozen=True):
         dbm = -self.rssi
         return 100 if dbm >= -50 else 0 if dbm <= -100 else 2 * (dbm + 100)
 
+    def as_dict(self) -> dict[str, Any]:
+        """For JSON: the firmware's `rssiValue` (a positive number) as dBm, and as the percentage XYZware shows."""
+        return {"connected": self.connected, "ip": self.ip, "ssid": self.ssid, "mac": self.mac,
+                "rssi_dbm": -self.rssi if self.rssi is not None else None, "signal_percent": self.signal_percent}
+
 
 # ------------------------------------------------------------------------------------ parsers / renderers
 
@@ -566,9 +571,7 @@ class Status(msgspec.Struct, frozen=True):
             "filament_left_mm": self.filament_mm,
             "cartridge_present": cart.present if cart else None, "cartridge_colour": cart.colour if cart else None,
             "material": self.material_name, "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
-            "network": None if net is None else {
-                "connected": net.connected, "ip": net.ip, "ssid": net.ssid, "mac": net.mac,
-                "rssi_dbm": -net.rssi if net.rssi is not None else None, "signal_percent": net.signal_percent},
+            "network": None if net is None else net.as_dict(),
             "raw": {letter: line[2:] for letter in self.order if (line := self.line(letter)) is not None},
         }
 
