@@ -58,6 +58,13 @@ def minutes(whole_minutes: int | None) -> str:
     return duration(None if whole_minutes is None else whole_minutes * 60)
 
 
+def count(number: int | None, noun: str) -> str:
+    """`1 layer`, `12 layers`, `? layers` when unknown (nouns with a plain plural)."""
+    if number is None:
+        return f"? {noun}s"
+    return f"{number:,} {noun}" + ("" if number == 1 else "s")
+
+
 def known(value: object, unit: str = "") -> str:
     """Any reported value as text with its unit, `—` when absent."""
     return ABSENT if value is None else f"{value}{unit}"

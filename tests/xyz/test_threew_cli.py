@@ -8,10 +8,13 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from clitools import cli_env, run_cli
 from fabwire.cli_support import App
 from fabwire.errors import InputError
+from fabwire.xyz.intake import gcode_metadata as intake_metadata
 from fabwire.xyz.threew import read_3w
 from fabwire.xyz.threew_cli import convert, info
 
@@ -225,3 +228,47 @@ def test_file_names_that_are_not_utf8_convert_both_ways(gcode: Path, tmp_path: P
     back = _piped("xyz", "convert", str(out), str(tmp_path / os.fsdecode(b"back\xfd.gcode")), data=b"")
     assert back.returncode == 0, back.stderr
     assert b"back\xfd.gcode" in back.stdout  # the name as the file system has it
+
+
+@settings(max_examples=40, deadline=None)
+@given(axis=st.sampled_from("XYZE"), digits=st.integers(12, 400), header=st.booleans())
+def test_numbers_no_printer_reaches_are_refused_not_converted(tmp_path_factory: pytest.TempPathFactory, axis: str,
+                                                              digits: int, header: bool) -> None:
+    folder = tmp_path_factory.mktemp("absurd")
+    huge = "9" * digits
+    text = (f";TIME:{huge}\n" if header else "") + f"G28\nG1 X10 Y10 Z0.2 E1 F1200\nG1 {axis}{huge} F1200\nM84\n"
+    path = folder / "absurd.gcode"
+    path.write_text(text)
+    with pytest.raises(InputError, match="which no printer does: its numbers are far outside any da Vinci's"):
+        intake_metadata(path)
+
+
+def test_an_ordinary_long_print_is_not_called_absurd(tmp_path: Path) -> None:
+    path = tmp_path / "long.gcode"
+    layers = "".join(f"G1 Z{z / 10:.1f}\nG1 X180 Y180 E{z * 20}\nG1 X0 Y0 E{z * 20 + 10}\n" for z in range(1, 2000))
+    path.write_text("G28\nG1 F600\n" + layers)
+    _, computed = intake_metadata(path)
+    assert computed is not None
+    assert computed.print_time_s is not None
+    assert computed.print_time_s > 3600  # over an hour of real printing is believed
+
+
+@settings(max_examples=60, deadline=None)
+@given(line=st.sampled_from([";TIME:{n}", ";LAYER_COUNT:{n}", ";Filament used: {n}m",
+                             "; estimated printing time (normal mode) = {n}d 2h", "; total layers count = {n}",
+                             "; facets = {n}", "; filament used [mm] = {n}"]),
+       digits=st.integers(1, 5000))
+def test_any_stated_figure_is_believed_or_refused_never_a_crash(tmp_path_factory: pytest.TempPathFactory, line: str,
+                                                               digits: int) -> None:
+    path = tmp_path_factory.mktemp("stated") / "stated.gcode"
+    path.write_text(line.format(n="9" * digits) + "\nG28\nG1 X10 Y10 Z0.2 E1 F1200\n")
+    refusal = ""
+    try:
+        stated, _ = intake_metadata(path)
+    except InputError as exc:
+        refusal = str(exc)
+    if refusal:
+        assert "which no printer does" in refusal
+    else:
+        assert digits < 19
+        assert all(v is None or v < 10**18 for v in (stated.print_time_s, stated.layers, stated.facets))

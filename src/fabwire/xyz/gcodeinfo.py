@@ -81,11 +81,22 @@ _SLICER_NAMES = (
 )
 
 
+ABSURD = 10**18
+"""Stands for a stated number too long to be real (hundreds of digits): `intake` refuses the file for it."""
+
+
+def _whole(raw: bytes) -> int:
+    """A stated number rounded to a whole one; ABSURD for one with more digits than any real figure has."""
+    value = float(raw) if len(raw.partition(b".")[0]) <= 18 else math.inf
+    return round(value) if value < ABSURD else ABSURD
+
+
 def _duration(text: bytes, units: re.Pattern[bytes]) -> int | None:
     parts = units.findall(text)
     if not parts:
         return None
-    return round(sum(float(value) * _UNIT_SECONDS[unit.lower()] for value, unit in parts))
+    total = sum(float(value) * _UNIT_SECONDS[unit.lower()] for value, unit in parts)
+    return round(total) if total < ABSURD else ABSURD
 
 
 def _sum_numbers(text: bytes) -> float | None:
@@ -121,7 +132,7 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
         elif name == "simplify3d":
             time_s = _duration(raw, _S3D_DURATION)
         else:
-            time_s = round(float(raw))
+            time_s = _whole(raw)
     found = _search(_FILAMENT, windows)
     if found:
         name, raw = found
@@ -132,7 +143,7 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
             filament = _sum_numbers(raw)
     found = _search(_LAYERS, windows)
     if found:
-        layers = int(found[1])
+        layers = _whole(found[1])
     facets = _search((("xyz", _FACETS),), windows)
     slicer = None
     lowered = windows[0][:4096].lower() if windows else b""
@@ -140,7 +151,7 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
         if needle in lowered:
             slicer = name
             break
-    return GcodeMetadata(time_s, filament, layers, int(facets[1]) if facets else None, slicer)
+    return GcodeMetadata(time_s, filament, layers, _whole(facets[1]) if facets else None, slicer)
 
 
 # G-code as Marlin reads it: a word is a letter, optional blanks, then a decimal number without exponent (so
@@ -434,10 +445,11 @@ class MoveAnalyzer:
         feeds = values[4]
         feeds[feeds <= 0] = np.nan
         feed = _ffill(feeds, self.feed)
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        length = np.where(length > 0, length, np.abs(de))
-        self.seconds += float(np.sum(length * 60.0 / feed))
-        self.filament += float(np.sum(de))
+        with np.errstate(over="ignore", invalid="ignore"):  # absurd coordinates make inf: `absurd` reports it
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            length = np.where(length > 0, length, np.abs(de))
+            self.seconds += float(np.sum(length * 60.0 / feed))
+            self.filament += float(np.sum(de))
         printing = (de > 0) & ((dx != 0) | (dy != 0)) & np.isfinite(z)
         if printing.any():
             heights = z[printing] * 1000
@@ -446,6 +458,11 @@ class MoveAnalyzer:
         self.pos = [float(x[-1]), float(y[-1]), float(z[-1])]
         self.e = float(e[-1])
         self.feed = float(feed[-1])
+
+    @property
+    def absurd(self) -> bool:
+        """Whether the moves went beyond what a float holds (a coordinate of 1e309 mm): no print does."""
+        return not (math.isfinite(self.seconds) and math.isfinite(self.filament))
 
     def result(self) -> GcodeMetadata:
         """The totals; absurd coordinates (beyond what a float holds) leave time and filament unknown."""

@@ -22,6 +22,7 @@ from io import BytesIO
 from pathlib import Path
 from typing import BinaryIO
 
+from fabwire import units
 from fabwire.errors import InputError
 from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
 
@@ -444,12 +445,42 @@ def _metadata(
         src.seek(max(CHUNK, total - TAIL_WINDOW))
         tail = normalise(src.read())
     stated = header_metadata(head[:HEAD_WINDOW], tail)
+    _check_plausible(stated, name, "its comments state")
     if stated.complete:
         return stated, None
     analyzer = MoveAnalyzer()
     for chunk in gcode_lines(src, name, progress, total):
         analyzer.feed_chunk(chunk)
-    return stated, analyzer.result()
+    if analyzer.absurd:
+        raise InputError(f"{name}: its moves go further than a number can hold, which no printer does: its numbers "
+                         "are far outside any da Vinci's build volume, so this is not a print file")
+    computed = analyzer.result()
+    _check_plausible(computed, name, "its moves add up to")
+    return stated, computed
+
+
+MAX_PRINT_S = 90 * 86400
+"""Longest print time believed: the longest real jobs take days, not months."""
+MAX_FILAMENT_MM = 10_000_000.0
+"""Most filament believed: 10 km, fifty spools; a da Vinci cartridge holds 200-300 m."""
+
+
+MAX_COUNT = 100_000_000
+"""Most layers or facets believed (a 300 mm print at 0.01 mm is 30,000 layers)."""
+
+
+def _check_plausible(meta: GcodeMetadata, name: str, how: str) -> None:
+    """InputError when the figures say the file is no print at all: coordinates far outside any build volume
+    (a Z of 1e23 mm) add up to centuries of printing, and the printer would show that as its time left."""
+    too_long = meta.print_time_s is not None and meta.print_time_s > MAX_PRINT_S
+    too_much = meta.filament_mm is not None and not meta.filament_mm <= MAX_FILAMENT_MM
+    too_many = [f"{units.count(n, noun)}" for n, noun in ((meta.layers, "layer"), (meta.facets, "facet"))
+                if n is not None and n > MAX_COUNT]
+    if too_long or too_much or too_many:
+        what = (f"{units.duration(meta.print_time_s)} of printing" if too_long
+                else f"{units.filament(meta.filament_mm)} of filament" if too_much else too_many[0])
+        raise InputError(f"{name}: {how} {what}, which no printer does: its numbers are far outside any "
+                         "da Vinci's build volume, so this is not a print file")
 
 
 def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:

@@ -73,7 +73,7 @@ def _info_data(info: ThreeWInfo) -> dict[str, Any]:
 
 def metadata_summary(info: ThreeWInfo) -> str:
     return (f"print time {units.duration(info.print_time_s)}, filament {units.filament(info.filament_mm)}, "
-            f"{info.layers if info.layers is not None else '?'} layers")
+            f"{units.count(info.layers, 'layer')}")
 
 
 def _warn_crc(app: App, name: Path, info: ThreeWInfo) -> None:
@@ -219,7 +219,7 @@ def _gcode_info(app: App, plain: Path, file: Path) -> None:
                "layers": source(stated.layers)}
     data = {"file": str(file), "kind": "gcode", "slicer": stated.slicer, "print_time_s": final.print_time_s,
             "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources}
-    filament = f"{final.filament_mm:.2f} mm" if final.filament_mm is not None else "?"
     app.output.result(data, f"{file}: G-code from {stated.slicer or 'an unknown slicer'}; print time "
                             f"{units.duration(final.print_time_s)} ({sources['print_time_s']}), filament "
-                            f"{filament} ({sources['filament_mm']}), {final.layers} layers ({sources['layers']})")
+                            f"{units.filament(final.filament_mm)} ({sources['filament_mm']}), "
+                            f"{units.count(final.layers, 'layer')} ({sources['layers']})")
