@@ -62,7 +62,8 @@ class LineUsSettings(DeviceSettings, tag="lineus"):
 class MMUSettings(DeviceSettings, tag="mmu"):
     speed: Annotated[float, msgspec.Meta(gt=0, le=10_000)] = 1.0
     """The MMU runs this many times faster than real time (a simulator's --speed)."""
-    accept: list[Annotated[str, msgspec.Meta(pattern=r"^\d{1,3}\.\d{1,3}\.\d{1,3}\Z")]] = []
+    accept: list[Annotated[str, msgspec.Meta(pattern=r"^\d{1,3}\.\d{1,3}\.\d{1,3}\Z",
+                                             examples=["3.0.3"])]] = []
     """Firmware versions to accept, e.g. ["3.0.3"] (default: every supported one)."""
     connect_timeout: Seconds | None = None
     """Seconds for the handshake (default: 30 s of MMU time)."""
@@ -138,6 +139,13 @@ def section_lines(text: str) -> dict[str, int]:
     return lines
 
 
+def _example(schema: type[AnySettings], key: str) -> str:
+    """` (such as '3.0.3')` from the field's msgspec.Meta examples, or nothing."""
+    for meta in re.findall(r"examples=\[([^\]]*)\]", repr(get_type_hints(schema, include_extras=True).get(key))):
+        return f" (such as {meta.split(',')[0]})"
+    return ""
+
+
 def describe_problem(error: msgspec.ValidationError, schema: type[AnySettings]) -> str:
     """msgspec's message, in the file's terms: which key, and the valid one it most likely meant."""
     message = str(error)
@@ -151,6 +159,9 @@ def describe_problem(error: msgspec.ValidationError, schema: type[AnySettings]) 
         return what[0].lower() + what[1:]
     key = where.group(1)
     choices = get_args(get_type_hints(schema).get(key))
+    if "matching regex" in what:  # a pattern means nothing to a user: say what the value should look like
+        return f"{key!r}: {re.sub(r'matching regex .*', 'of the right form', what[0].lower() + what[1:])}" + \
+            _example(schema, key.partition("[")[0])
     bad = re.match(r"Invalid enum value (.*)", what)
     if bad and choices:
         word = bad.group(1).strip("'")

@@ -40,8 +40,9 @@ class Handshake:
         if value not in wanted:
             self.retries -= 1
             if self.retries <= 0:
-                got = ".".join(str(v) for v in [*self.version, value])
-                return (f"MMU firmware {got}… is not one of "
+                parts = [*self.version, value]
+                got = ".".join([*(str(v) for v in parts), *("x" * (3 - len(parts)))])
+                return (f"MMU firmware {got} is not one of "
                         f"{', '.join('.'.join(map(str, v)) for v in self.accepted)}")
             return self.request
         self.version.append(value)
