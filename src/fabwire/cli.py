@@ -5,7 +5,7 @@ from __future__ import annotations
 import itertools
 import sys
 import traceback
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -122,19 +122,20 @@ def trace_show(app: App, file: Path, no_time: bool) -> None:
     from fabwire.transport.trace_show import render_trace
 
     if app.json:
-        for r in _records(file):
+        for r in _records(file, app.output.note):
             app.output.event({"t": r.t, "dir": r.direction, "data": r.data, "event": r.event or None}, "")
         return
-    for line in render_trace(_records(file), timestamps=not no_time):
+    for line in render_trace(_records(file, app.output.note), timestamps=not no_time):
         click.echo(line)
 
 
-def _records(file: Path) -> Iterator[TraceRecord]:
-    """The capture's records, streamed; a file with none is refused (InputError, exit 4) rather than shown empty."""
+def _records(file: Path, note: Callable[[str], None]) -> Iterator[TraceRecord]:
+    """The capture's records, streamed; a file with none is refused (InputError, exit 4) rather than shown empty,
+    a last record cut off is a note."""
     from fabwire.transport.tap import read_trace
 
     empty = True
-    for record in read_trace(file):
+    for record in read_trace(file, on_cut=note):
         empty = False
         yield record
     if empty:
@@ -156,7 +157,7 @@ def trace_replay(app: App, file: Path, address: str, quiet: float) -> int:
     from fabwire.transport.replay import Difference, replay
     from fabwire.transport.tap import escape_text
 
-    records = _records(file)
+    records = _records(file, app.output.note)
     first = next(records)  # an empty or unreadable capture is refused before connecting
     records = itertools.chain([first], records)
 

@@ -91,6 +91,27 @@ def test_a_file_that_is_not_a_trace_is_a_clear_error(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
+@pytest.mark.parametrize("cut", [5, 20])
+async def test_a_capture_cut_off_mid_record_shows_what_it_holds(tmp_path: Path, cut: int) -> None:
+    path = tmp_path / "cap.jsonl"
+    await record(path, [b"S0*c6\n"], [b"S0 A3*22\n"])
+    whole = path.read_bytes()
+    path.write_bytes(whole[:-cut])  # the capturing process killed while writing its last line
+    result = run_cli("trace", "show", "--no-time", str(path))
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[:2] == [">S0*c6\\n", "<S0 A3*22\\n"]
+    assert result.stderr.endswith("the last record is cut off (the capture stopped while writing it)\n")
+    with pytest.raises(InputError, match="not a fabwire trace record"):  # the library call keeps it an error
+        list(read_trace(path))
+    middle = tmp_path / "middle.jsonl"
+    lines = whole.decode().splitlines(keepends=True)
+    middle.write_text("".join([*lines[:-2], lines[-2][:-cut] + "\n", lines[-1]]))
+    broken = run_cli("trace", "show", str(middle))  # damage inside the file is no cut-off end
+    assert broken.returncode == InputError.exit_code
+    path.write_bytes(whole[:-1])  # only the final newline missing: the record is whole
+    assert run_cli("trace", "show", str(path)).stderr == ""
+
+
 async def test_closing_a_tap_twice_records_one_close(tmp_path: Path) -> None:
     path = tmp_path / "cap.jsonl"
     host, _device = memory_pair()

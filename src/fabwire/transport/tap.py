@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Literal
@@ -92,10 +92,12 @@ MAX_TRACE_LINE = 16 << 20
 """A record holds one read or write (at most 64 KiB, a few times that as JSON); longer lines are not records."""
 
 
-def read_trace(path: str | Path) -> Iterator[TraceRecord]:
+def read_trace(path: str | Path, on_cut: Callable[[str], None] | None = None) -> Iterator[TraceRecord]:
     """Yield the records of a capture, reading one line at a time (memory stays that of one record).
 
-    Raises InputError naming the line for a malformed record, and for a file that cannot be read.
+    A last record cut off mid-line (the capturing process was killed while writing it) goes to `on_cut` as a
+    sentence, when given, after the whole records. Raises InputError naming the line for a malformed record
+    (the cut one too without `on_cut`), and for a file that cannot be read.
     """
     try:
         stream = open(path, encoding="utf-8", newline="\n")  # noqa: SIM115 - closed below
@@ -115,10 +117,21 @@ def read_trace(path: str | Path) -> Iterator[TraceRecord]:
             number += 1
             if len(line) > MAX_TRACE_LINE:
                 raise InputError(f"{path}, line {number}: longer than any trace record")
+            if on_cut is not None and not line.endswith("\n") and _cut_off(line):
+                on_cut(f"{path}, line {number}: the last record is cut off (the capture stopped while writing it)")
+                return
             if line.strip():
                 record = _parse_record(path, number, line)
                 if record is not None:
                     yield record
+
+
+def _cut_off(line: str) -> bool:
+    try:
+        json.loads(line)
+    except ValueError:
+        return True
+    return False
 
 
 def _parse_record(path: str | Path, number: int, line: str) -> TraceRecord | None:
