@@ -11,6 +11,8 @@ import httpx
 import pytest
 
 from fabwire.samples import SAMPLE_GCODE, sample_path
+from fabwire.xyz.models import find_model
+from fabwire.xyz.threew import write_3w
 
 from .agenttools import device_of, summary, wait_for
 from .conftest import Bench, start_bench, stop_bench
@@ -206,6 +208,10 @@ def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
         wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle after cancelling")
 
 
+DAMAGED_3W = bytes(b ^ (i == 9000) for i, b in enumerate(write_3w(b"G28\nG1 X10 Y10 E1\n" * 50,
+                                                                  find_model("dv1MW0A000"), filename="part.3w")))
+
+
 @pytest.mark.parametrize(("name", "data", "says"), [
     ("part.gcode", bytes(range(256)) * 8, "binary data"),
     ("part.gcode", b"; only a comment\n", "no commands"),
@@ -214,6 +220,11 @@ def test_cancelling_a_print_stops_the_printer(bench: Bench) -> None:
     ("a.svg", b"not svg", "a.svg"),
     ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'></svg>", "empty"),
     ("a.gcode", b"\xff\xfe\x00garbage", "a.gcode"),
+    ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'><path d='M1 1 L1e308 5' "
+              b"stroke='black'/></svg>", "not finite"),
+    ("part.gcode", b"G28\nG1 X10 Y10 E1 F1200\nG1 Z" + b"9" * 40 + b"\n", "not a print file"),
+    ("part.gcode", b";TIME:99999999999\nG28\nG1 X10 Y10 E1 F1200\n", "not a print file"),
+    ("part.3w", DAMAGED_3W, "is damaged"),
 ])
 def test_an_upload_no_intake_takes_is_refused_before_it_is_accepted(bench: Bench, name: str, data: bytes,
                                                                       says: str) -> None:

@@ -445,17 +445,17 @@ def _metadata(
         src.seek(max(CHUNK, total - TAIL_WINDOW))
         tail = normalise(src.read())
     stated = header_metadata(head[:HEAD_WINDOW], tail)
-    _check_plausible(stated, name, "its comments state")
+    _check_plausible(stated, name, "its comments state", "which no print takes")
     if stated.complete:
         return stated, None
     analyzer = MoveAnalyzer()
     for chunk in gcode_lines(src, name, progress, total):
         analyzer.feed_chunk(chunk)
     if analyzer.absurd:
-        raise InputError(f"{name}: its moves go further than a number can hold, which no printer does: its numbers "
-                         "are far outside any da Vinci's build volume, so this is not a print file")
+        raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
+                         "this is not a print file")
     computed = analyzer.result()
-    _check_plausible(computed, name, "its moves add up to")
+    _check_plausible(computed, name, "its moves add up to", "so its coordinates lie far beyond any printer's reach")
     return stated, computed
 
 
@@ -469,7 +469,7 @@ MAX_COUNT = 100_000_000
 """Most layers or facets believed (a 300 mm print at 0.01 mm is 30,000 layers)."""
 
 
-def _check_plausible(meta: GcodeMetadata, name: str, how: str) -> None:
+def _check_plausible(meta: GcodeMetadata, name: str, how: str, why: str) -> None:
     """InputError when the figures say the file is no print at all: coordinates far outside any build volume
     (a Z of 1e23 mm) add up to centuries of printing, and the printer would show that as its time left."""
     too_long = meta.print_time_s is not None and meta.print_time_s > MAX_PRINT_S
@@ -479,15 +479,25 @@ def _check_plausible(meta: GcodeMetadata, name: str, how: str) -> None:
     if too_long or too_much or too_many:
         what = (f"{units.duration(meta.print_time_s)} of printing" if too_long
                 else f"{units.filament(meta.filament_mm)} of filament" if too_much else too_many[0])
-        raise InputError(f"{name}: {how} {what}, which no printer does: its numbers are far outside any "
-                         "da Vinci's build volume, so this is not a print file")
+        raise InputError(f"{name}: {how} {what}, {why}; this is not a print file")
 
 
 def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """What a G-code file's comments state, and what its moves say where the comments are silent."""
     with open_input(path) as src:
-        head, total = check_gcode_head(src, str(path))
-        return _metadata(src, str(path), head, total)
+        return stream_metadata(src, str(path))
+
+
+def stream_metadata(src: BinaryIO, name: str) -> tuple[GcodeMetadata, GcodeMetadata | None]:
+    """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has
+    and for lines no printer reads."""
+    head, total = check_gcode_head(src, name)
+    stated, computed = _metadata(src, name, head, total)
+    if computed is None:  # the comments told everything: the lines are still each checked, however far down
+        src.seek(0)
+        for _ in gcode_lines(src, name):
+            pass
+    return stated, computed
 
 
 def _process(chunk: bytes) -> bytes:

@@ -16,7 +16,7 @@ from pathlib import Path
 from fabwire.errors import InputError
 from fabwire.xyz import intake, userinput
 from fabwire.xyz.models import PrinterModel, model_for_file_id
-from fabwire.xyz.threew import convert_gcode_file, inspect_3w
+from fabwire.xyz.threew import ThreeWInfo, convert_gcode_file, inspect_3w
 
 _MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
@@ -60,11 +60,17 @@ def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = Fa
             yield target
 
 
-def _check_3w(path: Path, name: str, model: PrinterModel, override: bool) -> None:
-    info = inspect_3w(path)
-    if not info.crc_ok:  # the printer would take the upload and then refuse the file (0x020D)
+def check_intact(info: ThreeWInfo, name: str) -> None:
+    """InputError for a .3w whose body does not match its stored checksum: the printer would take the upload and
+    then refuse the file (0x020D)."""
+    if not info.crc_ok:
         raise InputError(f"{name} is damaged: its stored checksum 0x{info.crc_stored:08x} does not match its "
                          f"contents (0x{info.crc_computed:08x}); convert the G-code again")
+
+
+def _check_3w(path: Path, name: str, model: PrinterModel, override: bool) -> None:
+    info = inspect_3w(path)
+    check_intact(info, name)
     machine = (info.machine or "").strip()
     target = model_for_file_id(machine, model) if machine else None
     if not override and (target is None or target.file_id.lower() != model.file_id.lower()):

@@ -15,7 +15,7 @@ from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
 from fabwire.lineus.plot import Plan, PlanOptions
 from fabwire.lineus.plot.intake import drawing_from_bytes
-from fabwire.lineus.plot.plan import plan_file, plan_text
+from fabwire.lineus.plot.plan import plan_drawing, plan_file, plan_text
 
 PLAN_TIME_BUDGET = 0.3
 """Seconds the stroke ordering may take (the agent plans while it keeps polling other machines)."""
@@ -98,8 +98,13 @@ class LineUsDriver(Driver):
         return {"ok": True, "action": action, "position": {"x": pos.x, "y": pos.y, "z": pos.z} if pos else None}
 
     def check_upload(self, name: str, data: bytes) -> None:
-        """The drawing intake's refusal (not SVG, unreadable, nothing to draw) before the upload is accepted."""
-        drawing_from_bytes(name, data)
+        """The drawing intake's and the planner's refusal (not SVG, unreadable, nothing to draw, coordinates no
+        arm can reach) before the upload is accepted, as `lineus draw` checks a file."""
+        try:
+            plan_drawing(drawing_from_bytes(name, data), PlanOptions(optimize=False))
+        except InputError as exc:
+            message = str(exc)
+            raise InputError(message if name in message else f"{name}: {message}") from None
 
     async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
         arm = self._client()

@@ -11,10 +11,11 @@ from typing import Any, ClassVar
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_xyz
 from fabwire.errors import InputError, LinkClosed
-from fabwire.xyz import intake
+from fabwire.xyz import intake, printjob
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.commands import JOG_LIMIT
 from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status
+from fabwire.xyz.threew import inspect_3w
 
 PRINT_STATES = range(9500, 9511)
 BUSY_STATES = frozenset({9513, 9514, 9515, 9516, 9530, 9531, 9532, 9534, 9535, 9536, 9537, 9538, 9540, 9700, 30})
@@ -83,10 +84,10 @@ class XYZDriver(Driver):
         commands), so a bad file is refused at upload rather than failing the job later."""
         head = data[:intake.SNIFF]
         kind = intake.require_printable(intake.identify(head, len(data)), name, head)
-        if kind is intake.Kind.GCODE:
-            intake.check_gcode_head(io.BytesIO(data), name)
-            for _ in intake.gcode_lines(io.BytesIO(data), name):  # a line no printer reads, however far down
-                pass
+        if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
+            intake.stream_metadata(io.BytesIO(data), name)
+        elif kind is intake.Kind.THREEW:
+            printjob.check_intact(inspect_3w(data), name)
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
