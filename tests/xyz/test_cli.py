@@ -392,3 +392,19 @@ def test_a_damaged_print_file_is_refused_before_any_upload(simulator: SimulatorS
     assert result.stderr.startswith("fabwire: error: cube.3w is damaged: its stored checksum")
     assert result.stderr.count("\n") == 1
     assert not store.exists() or not list(store.iterdir())  # nothing reached the printer
+
+
+def test_discover_takes_host_and_port_as_every_address_does(simulator: SimulatorStarter) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0")
+    address = device(sim.url)
+    port = address.rpartition(":")[2]
+    for args in (["--host", address], ["--host", "127.0.0.1", "--port", port], ["--host", f"tcp://{address}"]):
+        found = run_cli("--json", "xyz", "discover", *args)
+        assert found.returncode == 0, found.stderr
+        assert [(f["address"], f["model_number"]) for f in json.loads(found.stdout)] == [(address, "dv1MW0A000")]
+    serial = run_cli("xyz", "discover", "--host", "/dev/ttyUSB0")
+    assert (serial.returncode, serial.stderr) == (4, "fabwire: error: --host takes a host name or address, with an "
+                                                     "optional :PORT\n")
+    told = run_cli("-v", "xyz", "discover", "--host", "127.0.0.1:1")
+    assert told.returncode == 0
+    assert "127.0.0.1:1: no printer" in told.stderr

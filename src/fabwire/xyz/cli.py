@@ -499,7 +499,8 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 
 
 @xyz.command()
-@click.option("--host", "hosts", multiple=True, metavar="HOST", help="Probe this host on port 9100 (repeat).")
+@click.option("--host", "hosts", multiple=True, metavar="HOST[:PORT]",
+              help="Probe this host, on --port unless given (repeat).")
 @click.option("--subnet", metavar="CIDR", help="Probe every address in CIDR, e.g. 192.168.1.0/24.")
 @click.option("--port", type=click.IntRange(1, 65535), default=9100, show_default=True)
 @click.option("--probe-timeout", type=FiniteRange(min=0.05), default=1.0, show_default=True)
@@ -508,12 +509,19 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
              concurrency: int) -> None:
     """List XYZprinting USB serial ports and printers answering on TCP 9100."""
+    import msgspec
+
+    from fabwire.transport.urls import parse_url
     from fabwire.xyz.discovery import hosts_in, probe_hosts, usb_printers
 
-    targets = list(hosts) + (hosts_in(subnet) if subnet else [])
+    probed = msgspec.structs.replace(XYZ, default_port=port)  # a bare host is probed on --port
+    targets = [(e.host, e.port) for e in (parse_url(text, probed) for text in hosts)]
+    if any(not host for host, _ in targets):
+        raise InputError("--host takes a host name or address, with an optional :PORT")
+    targets += [(host, port) for host in (hosts_in(subnet) if subnet else [])]
     found = usb_printers()
     if targets:
-        found += asyncio.run(probe_hosts(targets, port, timeout=probe_timeout, concurrency=concurrency))
+        found += asyncio.run(probe_hosts(targets, timeout=probe_timeout, concurrency=concurrency))
     data = [{"address": f.address, "model_number": f.model_number, "model": f.name, "serial": f.serial,
              "detail": f.detail} for f in found]
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ipaddress
+import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -19,6 +20,8 @@ from fabwire.transport.tcp import open_tcp
 from fabwire.xyz import protocol as p
 from fabwire.xyz.protocol import Link, Reply, ReplyReader
 from fabwire.xyz.status import Status
+
+log = logging.getLogger("fabwire.xyz")
 
 XYZ_VID = 0x11F1
 USB_MODELS = {0x2519: "da Vinci nano", 0x2520: "da Vinci 1.0 Pro"}
@@ -74,9 +77,11 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | No
                         break
             finally:
                 await transport.close()
-    except (TimeoutError, FabwireError, OSError):
+    except (TimeoutError, FabwireError, OSError) as exc:
+        log.info("%s:%d: no printer (%s)", host, port, exc or "no answer in time")
         return None
     if not isinstance(event, Reply):
+        log.info("%s:%d: no printer (it answered %r)", host, port, event)
         return None
     status = Status.parse(event.lines)
     if status.model_number is None:
@@ -86,16 +91,16 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | No
                  status.state_name)
 
 
-async def probe_hosts(hosts: Iterable[str], port: int = PORT, *, timeout: float = 1.0,
+async def probe_hosts(targets: Iterable[tuple[str, int]], *, timeout: float = 1.0,
                       concurrency: int = 64) -> list[Found]:
-    """Probe many hosts at once, at most `concurrency` in flight."""
+    """Probe many (host, port) targets at once, at most `concurrency` in flight."""
     limit = asyncio.Semaphore(max(1, concurrency))
 
-    async def one(host: str) -> Found | None:
+    async def one(host: str, port: int) -> Found | None:
         async with limit:
             with contextlib.suppress(Exception):
                 return await probe(host, port, timeout)
             return None
 
-    results = await asyncio.gather(*(one(h) for h in hosts))
+    results = await asyncio.gather(*(one(host, port) for host, port in targets))
     return [r for r in results if r is not None]
