@@ -90,6 +90,10 @@ def parse_zoffset(text: str) -> int:
         shown = text if len(text) <= 40 else text[:40] + "…"
         raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not {shown!r}")
     number, unit = match.groups()
+    if not unit and "." not in number and 0 < abs(int(number)) < 10:
+        # 2 is far more likely a typo for 2 mm than a wish for 0.02 mm: too close to the bed to guess
+        raise InputError(f"z offset {number} is ambiguous: write {number}mm, or {int(number) / 100:.2f}mm for "
+                         "hundredths")
     hundredths = round(float(number) * 100) if unit or "." in number else int(number)
     if abs(hundredths) > ZOFFSET_LIMIT_MM * 100:
         raise InputError(f"z offset {hundredths / 100:.2f} mm is outside ±{ZOFFSET_LIMIT_MM:g} mm")

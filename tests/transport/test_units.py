@@ -53,7 +53,8 @@ def test_zoffset_accepts_millimetres_and_hundredths(text: str, hundredths: int) 
     assert units.parse_zoffset(text) == hundredths
 
 
-@pytest.mark.parametrize("text", ["", "mm", "2,45", "2.45 cm", "1e3", "20.01mm", "-2001", "nan", "up", "٣", "9" * 5000,
+@pytest.mark.parametrize("text", ["", "mm", "2,45", "2.45 cm", "1e3", "20.01mm", "-2001", "nan", "up", "٣", "2", "-5",
+                                  "+9", "9" * 5000,
                                   "1." + "0" * 5000, "9" * 400 + "mm"])
 def test_zoffset_refuses_anything_else(text: str) -> None:
     with pytest.raises(InputError, match="z offset"):
