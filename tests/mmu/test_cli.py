@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -54,6 +55,7 @@ def test_tool_change_prints_progress_in_words(simulator: SimulatorStarter) -> No
     assert status["finda"] is True
     assert status["filament_text"] == "in nozzle"
     assert status["slot"] == 2
+    assert (status["error_code"], status["error_text"]) == (1, "OK")  # register 0x06 after a command that ended well
     code, out, _ = mmu(sim.url, "unload", json_mode=True)
     result = json.loads(out)
     assert result["command"] == "U0"
@@ -183,7 +185,7 @@ def test_monitor_is_bounded_and_json(simulator: SimulatorStarter) -> None:
     assert code == 0, err
     lines = [json.loads(line) for line in out.splitlines()]
     assert len(lines) == 3
-    assert all(line["event"] == "status" and isinstance(line["time"], float) for line in lines)
+    assert all(line["event"] == "status" and datetime.fromisoformat(line["time"]).tzinfo is not None for line in lines)
     code, out, err = mmu(sim.url, "monitor", "--count", "3", json_mode=True)  # nothing changes: one line, ends
     assert code == 0, err
     assert len(out.splitlines()) == 1

@@ -7,6 +7,7 @@ import contextlib
 import dataclasses
 import time
 from collections.abc import Awaitable, Callable
+from datetime import UTC, datetime
 from functools import update_wrapper
 from typing import Any, TypeVar
 
@@ -26,7 +27,7 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import InputError
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
-from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error
+from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
 from fabwire.mmu.faults import FAULT_NAMES, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
@@ -301,6 +302,12 @@ async def version(dctx: DeviceContext, mmu_: MMU) -> None:
                         "version": str(v)}, f"MMU firmware {v}")
 
 
+def _error_register_words(value: int) -> str:
+    """Register 0x06 (the command's error code) in words: 0x0000 RUNNING and 0x0001 OK are no errors (reference
+    §4, ErrorCode)."""
+    return {0x0000: "running", 0x0001: "OK"}.get(value) or format_error(value)
+
+
 @mmu.command("status")
 @with_mmu(auto_retries=0)
 async def status(dctx: DeviceContext, mmu_: MMU) -> None:
@@ -313,7 +320,8 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
     slot = st.selector if st.selector is not None and st.selector < 5 else None
     data = {**status_dict(st), "fsensor": bool(fsensor), "filament": filament,
             "filament_text": codes.FILAMENT_WORDS.get(filament, str(filament)), "slot": slot,
-            "progress": progress, "progress_text": codes.progress_words(progress), "error": f"{error:04x}",
+            "progress": progress, "progress_text": codes.progress_words(progress), "error_code": error,
+            "error_text": _error_register_words(error),
             "version": str(mmu_.version)}
 
     def human() -> None:
@@ -460,7 +468,8 @@ async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: f
                 data, text = describe(event)
                 stamp = time.time()
                 clock = time.strftime("%H:%M:%S", time.localtime(stamp)) + f".{int(stamp % 1 * 1000):03d}"
-                dctx.output.event({"time": round(stamp, 3), **data}, f"{clock} {text}")
+                dctx.output.event({"time": datetime.fromtimestamp(stamp, UTC).isoformat(timespec="milliseconds"),
+                                   **data}, f"{clock} {text}")
                 if count is not None and polls >= count:
                     break
 
