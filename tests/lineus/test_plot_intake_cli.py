@@ -161,3 +161,14 @@ def test_text_fitted_too_small_to_read_is_called_out(tmp_path: Path, text: str, 
     assert ("too small to read" in result.stderr) is illegible
     if illegible:
         assert result.stderr.count("\n") == 1  # one line of warning before the figures on stdout
+
+
+@pytest.mark.parametrize("d", ["M1 1 L1e308 5", "M1 1 L5 -1e308", "M1e308 1e308 L1 1"])
+def test_coordinates_beyond_a_float_are_one_line_naming_the_file(tmp_path: Path, d: str) -> None:
+    path = tmp_path / "far.svg"
+    path.write_text(f"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'><path d='{d}' "
+                    "stroke='black'/></svg>")
+    result = run_cli("lineus", "preview", str(path), "-o", str(tmp_path / "far.png"), env=cli_env(tmp_path))
+    assert result.returncode == 4
+    assert result.stderr == f"fabwire: error: {path}: the drawing has coordinates that are not finite numbers " \
+                            "(beyond any page)\n"  # no numpy warning before it

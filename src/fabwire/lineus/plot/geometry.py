@@ -52,7 +52,8 @@ def affine(lines: Sequence[FloatArray], matrix: FloatArray) -> Polylines:
     """Apply a 2x3 affine matrix [[a, b, tx], [c, d, ty]] to every point."""
     lin = matrix[:, :2].T
     off = matrix[:, 2]
-    return [line @ lin + off for line in lines]
+    with np.errstate(over="ignore", invalid="ignore"):  # points beyond a float become inf: the planner refuses them
+        return [line @ lin + off for line in lines]
 
 
 def rotation(degrees: float) -> FloatArray:

@@ -221,8 +221,7 @@ def plan_lines(
     polys = [np.asarray(line, dtype=float).reshape(-1, 2) for line in lines if len(line)]
     if not polys:
         raise InputError("the drawing is empty (nothing for the pen to draw)")
-    if not all(bool(np.isfinite(p).all()) for p in polys):
-        raise InputError("the drawing has coordinates that are not finite numbers")
+    _check_finite(polys, "the drawing")
     if options.margin_mm < 0:
         raise InputError(f"the margin must not be negative, got {options.margin_mm:g} mm")
     fit = fit_default if options.fit is None else options.fit
@@ -250,9 +249,15 @@ def plan_lines(
                 hidden=tuple(affine(list(hidden), matrix)))
 
 
+def _check_finite(polys: Sequence[FloatArray], what: str) -> None:
+    if not all(bool(np.isfinite(p).all()) for p in polys):
+        raise InputError(f"{what} has coordinates that are not finite numbers (beyond any page)")
+
+
 def plan_drawing(drawing: Drawing, options: PlanOptions = PlanOptions()) -> Plan:
     """Plan a drawing read by `read_drawing`. A fitted SVG's curves are flattened again when fitting enlarges
     them, so the chord error on paper stays within FLATTEN_TOLERANCE whatever the page size and scale."""
+    _check_finite(drawing.lines, f"{drawing.name}: the drawing")
     fit = options.fit if options.fit is not None else drawing.kind == "svg"
     if fit and drawing.curved:
         polys = drawing.lines
