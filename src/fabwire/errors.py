@@ -75,3 +75,9 @@ class LinkTimeout(FabwireError, TimeoutError):
 
 
 EXIT_INTERRUPTED = 130
+
+
+class FollowInterrupted(FabwireError):
+    """Ctrl-C while following a job the machine has already taken (a print, a tool change): it goes on."""
+
+    exit_code = EXIT_INTERRUPTED

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
 from datetime import datetime
 from pathlib import Path
 
 import pytest
 
-from clitools import SimulatorStarter, run_cli
+from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.mmu import codes
 
 SPEED = "50"
@@ -237,3 +240,21 @@ def test_a_register_value_that_is_no_plain_number_is_one_line_of_bad_input(value
     assert (done.returncode, done.stdout) == (4, "")
     assert done.stderr.count("\n") == 1
     assert "register value must be a number" in done.stderr
+
+
+def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "2")  # slow enough to be mid-change
+    proc = subprocess.Popen([sys.executable, "-m", "fabwire", "mmu", "-d", sim.url, "--speed", "2", "tool-change",
+                             "3"], env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    seen = ""
+    while "T3:" not in seen:  # the first progress line: the MMU has taken the command
+        chunk = proc.stderr.read(1)
+        assert chunk, "the CLI ended before the tool change began"
+        seen += chunk
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130
+    assert err.splitlines()[-1] == (f"fabwire: error: stopped following T3; the MMU goes on with it. Follow it "
+                                    f"with `fabwire mmu -d {sim.url} monitor`")
+    assert "Traceback" not in err

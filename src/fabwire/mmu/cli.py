@@ -24,7 +24,7 @@ from fabwire.cli_support import (
     pass_device,
 )
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import InputError
+from fabwire.errors import FollowInterrupted, InputError
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
@@ -135,11 +135,25 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
             if check is not None:
                 check(kwargs)
 
+            running: list[str] = []
+
             async def main() -> None:
                 async with dctx.open(MMU, **open_options) as mmu:
-                    await func(dctx, mmu, *args, **kwargs)
+                    try:
+                        await func(dctx, mmu, *args, **kwargs)
+                    except asyncio.CancelledError:  # Ctrl-C: is the MMU in the middle of a command?
+                        if mmu.status.kind in ("P", "E") and mmu.status.command[:1] in "TLUEKCH":
+                            running.append(mmu.status.command)
+                        raise
 
-            asyncio.run(main())
+            try:
+                asyncio.run(main())
+            except KeyboardInterrupt:
+                if not running:
+                    raise
+                where = f" -d {dctx.device}" if dctx.device else ""
+                raise FollowInterrupted(f"stopped following {running[0]}; the MMU goes on with it. Follow it with "
+                                        f"`fabwire mmu{where} monitor`") from None
 
         return update_wrapper(wrapper, func)
 

@@ -17,7 +17,7 @@ import click
 from fabwire import units
 from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
-from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, LinkError, LinkTimeout
+from fabwire.errors import FollowInterrupted, InputError, LinkError, LinkTimeout
 from fabwire.simserve import server_options
 from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
@@ -33,12 +33,6 @@ if TYPE_CHECKING:
     from rich.panel import Panel
 
 T = TypeVar("T")
-
-
-class FollowInterrupted(FabwireError):
-    """Ctrl-C while following a print the printer has already taken: it goes on printing."""
-
-    exit_code = EXIT_INTERRUPTED
 
 
 @device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.",
