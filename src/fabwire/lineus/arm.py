@@ -19,8 +19,8 @@ from fabwire.lineus.interpreter import HOME3, Ink, Point2, Point3
 
 log = logging.getLogger("fabwire.lineus.sim")
 
-HISTORY = 100_000
-"""Recent moves kept for instrumentation (bounded, so a long-running simulator stays small)."""
+HISTORY = 10_000
+"""Recent moves kept for instrumentation (bounded and small, so a long-running simulator reaches its size soon)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -43,8 +43,11 @@ SYSTEM_FILES = (("/cal", 29), ("/key", 344))
 SAVE_BLOCKED = ("M30", "M171", "M374", "M997")
 """Codes the firmware refuses while an M28 recording is open."""
 
-HISTORY = 100_000
-"""Recent messages, and points of ink, kept for instrumentation (bounded, so a long-running simulator stays small)."""
+HISTORY = 10_000
+"""Recent messages kept for instrumentation: bounded and small, so a long-running simulator reaches its size within
+minutes (100,000 took hours of hostile traffic to fill, growing all the while)."""
+INK_POINTS = 100_000
+"""Points of ink kept for --record: a page of drawing."""
 INPUT_WINDOW = p.MAX_LINE
 """Bytes taken off a connection at a time. The robot reads a command only when its motion queue can take it, and
 what a client sent beyond that is lost when it disconnects; reading a small window keeps the simulator the same."""
@@ -100,7 +103,7 @@ class LineUsSim:
         self.clock = Clock(self.options.speed)
         guards = self.options.guards_body
         self.arm = Arm(self.clock, kin.MotionModel(step_time=self.options.step_time, pen_time=self.options.pen_time),
-                       Ink(lift_over_notch=guards, detect_collisions=not guards, keep=HISTORY))
+                       Ink(lift_over_notch=guards, detect_collisions=not guards, keep=INK_POINTS))
         self.files: dict[int, str] = {1: sample_drawing()} if files is None else dict(files)
         self.known_wifi: dict[str, str] = {"fabwire-lab": "lab-password"}
         self.visible_wifi: list[str] = ["fabwire-lab", "neighbours-wifi"]
