@@ -21,6 +21,7 @@ import msgspec
 
 from fabwire.devices import KINDS, DeviceKind
 from fabwire.errors import ConfigError, InputError
+from fabwire.files import read_bounded
 from fabwire.transport.urls import Endpoint, parse_url
 
 CONFIG_ENV = "FABWIRE_CONFIG"
@@ -250,16 +251,14 @@ def load_devices(path: Path | None = None) -> dict[str, NamedDevice]:
 def read_config_text(path: Path) -> str:
     """The config file's text ("" for a missing file), read with a bound; unreadable text is a ConfigError."""
     try:
-        with path.open("rb") as handle:
-            raw = handle.read(MAX_CONFIG_BYTES + 1)
-        text = raw.decode("utf-8")
+        raw = read_bounded(path, MAX_CONFIG_BYTES)
+        if raw is None:
+            raise ConfigError(f"{path}: over {MAX_CONFIG_BYTES >> 20} MiB, too large for a config file")
+        return raw.decode("utf-8")
     except FileNotFoundError:
         return ""
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: a NUL in $FABWIRE_CONFIG
         raise ConfigError(f"cannot read config file {path}: {exc}") from exc
-    if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError(f"{path}: over {MAX_CONFIG_BYTES >> 20} MiB, too large for a config file")
-    return text
 
 
 class Target(msgspec.Struct, frozen=True):

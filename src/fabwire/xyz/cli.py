@@ -18,6 +18,7 @@ from fabwire import units
 from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
 from fabwire.devices import XYZ
 from fabwire.errors import FollowInterrupted, InputError, LinkError, LinkTimeout
+from fabwire.files import read_bounded
 from fabwire.simserve import server_options
 from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
@@ -482,11 +483,10 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
     """Flash a firmware image (.bin with its `<model>+<version>` header). Can brick the printer."""
     confirm(f"flash {file.name} (a wrong image can brick the printer)", yes)
     try:
-        with file.open("rb") as handle:
-            image = handle.read(FIRMWARE_LIMIT + 1)
+        image = read_bounded(file, FIRMWARE_LIMIT)
     except OSError as exc:
         raise InputError(f"cannot read {file}: {exc.strerror}") from exc
-    if len(image) > FIRMWARE_LIMIT:
+    if image is None:
         raise InputError(f"{file} is over {FIRMWARE_LIMIT >> 20} MiB: not a da Vinci firmware image")
     result = _with_printer(dctx, lambda pr: pr.upload_firmware(image, confirm=True))
     dctx.output.result({"ok": True, "bytes": result.size}, f"sent {result.size} bytes of firmware")

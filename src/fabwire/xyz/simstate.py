@@ -11,6 +11,7 @@ from typing import Annotated, Literal
 import msgspec
 
 from fabwire.errors import InputError
+from fabwire.files import read_bounded
 from fabwire.xyz.userinput import LANGUAGES, PRINTER_NAME_LIMIT, SSID_LIMIT
 
 MAX_STATE_BYTES = 1 << 16
@@ -70,11 +71,10 @@ class Settings:
         if not path.exists():
             return defaults
         try:
-            with path.open("rb") as handle:
-                raw = handle.read(MAX_STATE_BYTES + 1)
+            raw = read_bounded(path, MAX_STATE_BYTES)
         except OSError as exc:
             raise InputError(f"cannot read simulator state {path}: {exc.strerror or exc}") from exc
-        if len(raw) > MAX_STATE_BYTES:
+        if raw is None:
             raise InputError(f"simulator state {path} is over {MAX_STATE_BYTES} bytes: not a state file")
         try:
             stored = msgspec.json.decode(raw, type=_Stored)
