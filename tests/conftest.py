@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
 
 from clitools import RunningSimulator, SimulatorStarter, start_simulator
+
+# CI runs the same examples every time, so a landing is never decided by chance; `HYPOTHESIS_PROFILE=hunt` searches
+# wider and at random for new counter-examples (add what it finds as an explicit case).
+settings.register_profile("ci", derandomize=True, database=None)
+settings.register_profile("hunt", max_examples=2000, deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
@@ -61,6 +61,9 @@ async def test_sim_url_options() -> None:
 
 @given(st.text(max_size=30) | st.from_regex(r"0x[0-9a-fA-F]{1,6000}", fullmatch=True)
        | st.from_regex(r"[0-9]{1,6000}", fullmatch=True))
+@example("4294967295")
+@example("0xFFFFFFFF")
+@example("5000000000")
 def test_a_typed_register_word_is_a_number_or_nothing(text: str) -> None:
     number = codes.parse_word(text)
     key = text.strip().lower()
@@ -71,7 +74,8 @@ def test_a_typed_register_word_is_a_number_or_nothing(text: str) -> None:
     assert number == int(key, 0 if key.startswith("0x") else 10)
 
 
-@pytest.mark.parametrize("text", ["0x-1", "1_0", "\u0663", "-1", "+5", "0x", "", "0b1", "1e3"])
+@pytest.mark.parametrize("text", ["0x-1", "1_0", "\u0663", "-1", "+5", "0x", "", "0b1", "1e3", "5000000000",
+                                  "0x100000000", "4294967296"])
 def test_words_python_reads_but_a_person_did_not_mean_are_refused(text: str) -> None:
     assert codes.parse_word(text) is None
     assert codes.find_register(text) is None

@@ -450,7 +450,8 @@ async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> No
 def _parse_value(text: str) -> int:
     number = codes.parse_word(text)
     if number is None:
-        raise InputError(f"register value must be a number (decimal, or hex like 0x1f), not {text[:40]!r}")
+        raise InputError(f"register value must be a number from 0 to 65535 (decimal, or hex like 0x1f), "
+                         f"not {text[:40]!r}")
     if not 0 <= number <= 0xFFFF:
         raise InputError(f"register value must be 0 to 65535, not {number}")
     return number

@@ -218,12 +218,14 @@ _WORD = re.compile(r"0x[0-9a-f]{1,8}|[0-9]{1,10}")
 
 
 def parse_word(text: str) -> int | None:
-    """A register address or value as a person types it: ASCII decimal, or hex with 0x (case-insensitive); None
-    for anything else (signs, underscores, other scripts' digits, a number too long to be a 16-bit word)."""
+    """A register address or value as a person types it: ASCII decimal, or hex with 0x (case-insensitive), as an
+    int from 0 to 2**32 - 1; None for anything else (signs, underscores, other scripts' digits, a number beyond 32
+    bits). The caller checks the register's own range, so 70000 can be refused as out of range, not as garbage."""
     key = text.strip().lower()
     if not _WORD.fullmatch(key):
         return None
-    return int(key, 16) if key.startswith("0x") else int(key)
+    number = int(key, 16) if key.startswith("0x") else int(key)
+    return number if number <= 0xFFFF_FFFF else None
 
 
 def find_register(text: str) -> Register | None:
