@@ -20,9 +20,11 @@ import numpy.typing as npt
 import svgelements as se
 
 from fabwire.lineus.plot.geometry import FloatArray
+from fabwire.lineus.plot.svgunits import FLOAT32_MAX
 
 MAX_CURVE_POINTS = 10_000
 """Chords for one curve segment at most: beyond any drawing that fits the Line-us area at 0.05 mm."""
+_MAYBE_LARGE = re.compile(r"\d{39}|[eE]\+?0*(?:3[89]|[4-9]\d|\d{3,})")
 _FLOAT = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -244,16 +246,37 @@ def _arc_points(p0: tuple[float, float], rx: float, ry: float, rotation: float, 
     return pts
 
 
+class PathDataError(ValueError):
+    """Path data in error for a reason the grammar alone does not show."""
+
+
 def path_data(builder: PathBuilder, d: str) -> None:
-    """Feed path data `d` to `builder`; ValueError where the data breaks the grammar (what precedes is kept,
-    as SVG 1.1 §F.2 error processing renders the path up to the error)."""
-    if len(d) > 256 and straight_path_data(builder, d):
-        return
-    lexer = se.SVGLexicalParser()
+    """Feed path data `d` to `builder`; ValueError where the data breaks the grammar or holds a number beyond
+    single precision, which browsers cannot read (what precedes is kept, as SVG 1.1 §F.2 error processing renders
+    the path up to the error)."""
+    cut = _first_number_beyond_single(d)
+    if cut is not None:
+        d = d[:cut]
     try:
-        lexer.parse(builder, d)
+        if not (len(d) > 256 and straight_path_data(builder, d)):
+            se.SVGLexicalParser().parse(builder, d)
+    except ValueError:
+        if cut is None:
+            raise
     finally:
         builder.end()
+    if cut is not None:
+        raise PathDataError("a number beyond what a browser can hold")
+
+
+def _first_number_beyond_single(d: str) -> int | None:
+    """Where the first number too large for single precision starts, or None (a cheap test rules most data out)."""
+    if not _MAYBE_LARGE.search(d):
+        return None
+    for match in _FLOAT.finditer(d):
+        if abs(float(match.group())) > FLOAT32_MAX:
+            return match.start()
+    return None
 
 
 def numbers(text: str) -> list[float]:
