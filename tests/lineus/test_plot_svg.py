@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from fabwire.errors import InputError
 from fabwire.lineus.plot import PlanOptions, parse_svg, plan_drawing, plan_file, read_drawing
 from fabwire.lineus.plot.svg import MAX_USE_COPIES
-from fabwire.lineus.plot.svgpath import PathBuilder, straight_path_data
+from fabwire.lineus.plot.svgpath import PathBuilder, straight_path_data, straight_paths
 
 DATA = Path(__file__).parent / "data" / "svg"
 HEAD = '<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" '
@@ -451,3 +451,37 @@ def test_a_nested_viewport_of_size_zero_shows_nothing_and_the_rest_stays(inner: 
 
 def test_a_negative_size_is_an_error_and_ignored_as_browsers_do() -> None:
     assert len(lines_of(svg(LINE, 'width="-5" height="100"'))) == 1
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.lists(straight_command(), min_size=1, max_size=12), min_size=2, max_size=8),
+       st.sampled_from([" ", ","]))
+def test_paths_read_together_match_each_read_alone(paths: list[list[tuple[str, list[int]]]], sep: str) -> None:
+    ds = ["M 3 4 " + " ".join(f"{c}{sep.join(str(v * 2.5) for v in values)}" for c, values in commands)
+          for commands in paths]
+    together = straight_paths(ds)
+    alone = []
+    for d in ds:
+        builder = PathBuilder(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), 0.1)
+        alone.append(builder.subpaths if straight_path_data(builder, d) else None)
+    if together is None:  # refused whole when any one is not for the straight reader
+        assert None in alone
+        return
+    assert None not in alone
+    for mine, theirs in zip(together, alone, strict=True):
+        assert [(s.closed, s.segments) for s in mine] == [(s.closed, s.segments) for s in theirs or []]
+        for a, b in zip(mine, theirs or [], strict=True):
+            assert np.array_equal(a.points, b.points)
+
+
+def test_many_short_paths_under_their_own_transforms_read_as_one_by_one() -> None:
+    body = "".join(f'<path d="M{i} 0 L{i} 10 h2 V{i % 7} Z" transform="rotate({i * 7} 50 50)" stroke="black"/>'
+                   for i in range(40))
+    body += '<path d="M5 5 l1e7 0" stroke="black"/><path d="M1 1 q 5 5 10 0" stroke="black"/>'
+    drawing = parse_svg(svg(body, 'width="300" height="300" viewBox="-100 -100 300 300"'), tolerance=0.01)
+    assert len(drawing.lines) == 42
+    for i, line in enumerate(drawing.lines[:40]):
+        a = math.radians(i * 7)
+        rotate = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        user = np.array([[i, 0], [i, 10], [i + 2, 10], [i + 2, i % 7], [i, 0]], dtype=float)
+        assert np.allclose(line, (user - 50) @ rotate.T + 150)

@@ -25,18 +25,20 @@ from shapely.geometry.base import BaseGeometry
 
 from fabwire.errors import InputError
 from fabwire.lineus.plot.clip import area_of_rings, cut
-from fabwire.lineus.plot.geometry import FloatArray, Polylines, bbox
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine
 from fabwire.lineus.plot.geometry import compose as then
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
     PathDataError,
     Subpath,
     ellipse,
+    is_straight,
     line,
     numbers,
     path_data,
     polyline,
     rect,
+    straight_paths,
 )
 from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, own_style, paints
 from fabwire.lineus.plot.svgunits import (
@@ -60,6 +62,8 @@ MAX_POINTS = 20_000_000
 """Points in one drawing: days of drawing for a Line-us, and about 320 MB of coordinates."""
 MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
+READ_AHEAD_CHARS = 100_000
+"""Path data up to this length is read ahead with all the others; longer data is read on its own, in place."""
 
 _CSS_TRANSFORM = re.compile(r"(?:^|;)\s*transform\s*:")
 
@@ -194,6 +198,7 @@ class _Reader:
         self.curved = False
         self.points = 0
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
+        self._read_ahead = self._read_straight_paths()
 
     # -- limits -----------------------------------------------------------------------------------------------
 
@@ -233,6 +238,17 @@ class _Reader:
             raise InputError(f"{self.name}: <use> elements copy its {direct:,} shapes more than {MAX_USE_COPIES:,} "
                              "times; refusing such an expansion")
 
+    def _read_straight_paths(self) -> dict[int, list[Subpath]]:
+        """The subpaths (in user units) of the file's short straight-line paths, read all at once: a generated
+        drawing of thousands of paths costs one array pass instead of thousands. Longer paths, curves and
+        anything unusual are read one by one where drawn."""
+        paths = [el for el in self.root.iter() if local(el.tag) == "path"
+                 and 0 < len(el.get("d") or "") <= READ_AHEAD_CHARS and is_straight(el.get("d") or "")]
+        if len(paths) < 2:
+            return {}
+        read = straight_paths([el.get("d") or "" for el in paths])
+        return {id(el): subs for el, subs in zip(paths, read, strict=True)} if read is not None else {}
+
     def own_transform(self, el: ET.Element) -> FloatArray:
         """The element's `transform`; one in error is ignored (with a note), as browsers ignore it."""
         value = el.get("transform")
@@ -247,11 +263,16 @@ class _Reader:
         """Cut the drawing to the page, (0, 0)-(width, height) px, as a browser shows no more of it."""
         if not self.lines:
             return
-        x0, y0, x1, y1 = bbox(self.lines)
-        if x0 >= 0 and y0 >= 0 and x1 <= width and y1 <= height:
+        starts = np.cumsum([0] + [len(line) for line in self.lines[:-1]])
+        points = np.concatenate(self.lines)
+        low = np.minimum.reduceat(points, starts)
+        high = np.maximum.reduceat(points, starts)
+        inside = (low >= 0).all(axis=1) & (high[:, 0] <= width) & (high[:, 1] <= height)
+        if inside.all():
             return
-        kept, hidden = cut(self.lines, shapely.box(0.0, 0.0, width, height))
-        self.lines = kept
+        crossing = np.flatnonzero(~inside).tolist()
+        kept, hidden = cut([self.lines[k] for k in crossing], shapely.box(0.0, 0.0, width, height))
+        self.lines = [line for line, keep in zip(self.lines, inside.tolist(), strict=True) if keep] + kept
         self.hidden.extend(hidden)
         self.unsupported[f"lines outside the {width:g} x {height:g} px page are hidden, as a browser hides them"] += 1
 
@@ -288,7 +309,9 @@ class _Reader:
         style = inherit(parent, own)
         if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
             return
-        matrix = then(matrix, self.own_transform(el))
+        own_matrix = self.own_transform(el)
+        if own_matrix is not IDENTITY:
+            matrix = then(matrix, own_matrix)
         if flattens(matrix):
             return  # scaled to a line or a point: nothing of it shows
         if _CSS_TRANSFORM.search(el.get("style") or ""):
@@ -361,6 +384,10 @@ class _Reader:
         out.extend(drawn)
 
     def subpaths(self, el: ET.Element, tag: str, matrix: FloatArray, viewport: tuple[float, float]) -> list[Subpath]:
+        ahead = self._read_ahead.pop(id(el), None) if tag == "path" else None
+        if ahead is not None:
+            placed = affine([sub.points for sub in ahead], matrix)
+            return [Subpath(points, sub.closed, sub.segments) for points, sub in zip(placed, ahead, strict=True)]
         builder = PathBuilder(matrix, self.tolerance)
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)

@@ -7,6 +7,7 @@ Sources: SVG 1.1 §6 (styling: presentation attributes < style sheets < the `sty
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import xml.etree.ElementTree as ET
@@ -126,10 +127,14 @@ def paints(style: dict[str, str], which: str) -> bool:
         return False
     if which == "stroke" and length(style.get("stroke-width"), 1.0, default=1.0) == 0:
         return False  # a negative width is in error: the initial 1 applies
-    if value.startswith("url("):
-        return True
+    return value.startswith("url(") or _opaque(value)
+
+
+@functools.lru_cache(maxsize=256)
+def _opaque(color: str) -> bool:
+    """Whether a colour puts ink on the page (its alpha is not 0); one that does not parse is taken as ink."""
     try:
-        return bool(se.Color(value).alpha != 0)
+        return bool(se.Color(color).alpha != 0)
     except (ValueError, TypeError):
         return True
 
