@@ -36,8 +36,8 @@ def drawn_box(text: str) -> tuple[float, ...] | None:
 @pytest.mark.parametrize(("attrs", "reason"), [
     ('width="0%" height="100"', "its width is 0"), ('width="100" height="0mm"', "its height is 0"),
     ('width="0em" height="0in"', "its width is 0"), ('width="1e-60" height="100"', "its width is 0"),
-    ('width="100" height="100" viewBox="0 0 100 -0"', "its viewBox its height is 0"),
-    ('width="100" height="100" viewBox="0,0,1e-50,100"', "its viewBox its width is 0"),
+    ('width="100" height="100" viewBox="0 0 100 -0"', "its viewBox height is 0"),
+    ('width="100" height="100" viewBox="0,0,1e-50,100"', "its viewBox width is 0"),
 ])
 def test_a_size_of_zero_in_any_unit_shows_nothing_and_says_which(attrs: str, reason: str) -> None:
     drawing = parse_svg(f"{HEAD}{attrs}>{CROSS}</svg>")
@@ -231,7 +231,7 @@ def test_view_box_reading_agrees_with_a_plain_model(parts: list[str], separator:
 
 
 @pytest.mark.parametrize(("attrs", "message"), [
-    ('width="100" height="100" viewBox="0 0 0 100"', "nothing to draw: its viewBox its width is 0, which disables "
+    ('width="100" height="100" viewBox="0 0 0 100"', "nothing to draw: its viewBox width is 0, which disables "
                                                      "rendering: a browser shows nothing"),
     ('width="0mm" height="100mm"', "nothing to draw: its width is 0, which disables rendering: a browser shows "
                                    "nothing"),

@@ -5,7 +5,10 @@ Rendering follows SVG 1.1 / SVG 2 as browsers do: `<symbol>`, `<defs>`, `<clipPa
 through `<use>` or as clips (§5.5, §5.6); `<use width height>` of a symbol or svg is a new viewport its viewBox
 maps onto (§7.8); `display="none"`, `visibility="hidden"` and `opacity="0"` hide (§6, §14.5); a lone moveto is
 never stroked, and a zero-length subpath only with round or square caps, as a dot (SVG 2 §13.6); clip paths cut
-the geometry (§14.3). What cannot be honoured (masks, markers, text) is named in `notes`, never drawn otherwise.
+the geometry (§14.3). A standalone document shows no more than its root's box when that has a definite size,
+so lines beyond it are cut away. Geometry attributes follow the browsers' error handling (see svgunits): an
+attribute in error is ignored, a size of zero shows nothing, a transform that flattens the plane hides. What
+cannot be honoured (masks, markers, text, CSS transforms) is named in `notes`, never drawn otherwise.
 """
 
 from __future__ import annotations

@@ -93,7 +93,7 @@ def read_view_box(value: str | None) -> ViewBox:
         if size < 0:
             return ViewBox(error=f"its {name} is negative")
     if w == 0 or h == 0:
-        return ViewBox(empty=True, error=f"its {'width' if w == 0 else 'height'} is 0")
+        return ViewBox(empty=True, error=f"{'width' if w == 0 else 'height'} is 0")
     return ViewBox((x, y, w, h))
 
 
