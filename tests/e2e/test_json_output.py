@@ -18,7 +18,7 @@ from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.console import Output
 
 SVG = ('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
-       '<path d="M1 1 L9 9"/></svg>')
+       '<path d="M1 1 L9 9" stroke="black"/></svg>')
 
 
 def test_preview_json_of_a_non_utf8_file_name_is_valid_utf8(tmp_path: Path) -> None:
