@@ -17,6 +17,7 @@ import msgspec
 
 from fabwire.cli_support import App
 from fabwire.errors import InputError
+from fabwire.lifeline import watch
 from fabwire.transport.base import Transport
 from fabwire.transport.limits import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS, ConnectionLimits
 from fabwire.transport.registry import DeviceServer
@@ -148,7 +149,8 @@ async def serve(
     default_port: int | None,
     json_mode: bool = False,
 ) -> None:
-    """Serve until SIGINT/SIGTERM. Each TCP connection and the pty each get their own `handler` call.
+    """Serve until SIGINT/SIGTERM, or until the parent that started this process ends (`fabwire.lifeline`).
+    Each TCP connection and the pty each get their own `handler` call.
 
     The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS).
     """
@@ -169,6 +171,7 @@ async def serve(
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    watch(lambda: loop.call_soon_threadsafe(stop.set))  # a parent that started us as its child: stop with it
     servers: list[asyncio.Server] = []
     tasks: list[asyncio.Future[None]] = []
     pty_device = None
