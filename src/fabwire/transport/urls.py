@@ -36,10 +36,15 @@ class Endpoint(msgspec.Struct, frozen=True):
         return f"sim://{self.host}" + (f"?{query}" if query else "")
 
 
+def _shown(value: str) -> str:
+    """`value` quoted for a message, clipped as written (an escaped character takes up to 10)."""
+    quoted = repr(value)
+    return quoted if len(quoted) <= 80 else quoted[:60] + "…"
+
+
 def _bad(text: str, why: str) -> InputError:
-    shown = text if len(text) <= 80 else text[:60] + "…"
     return InputError(
-        f"malformed device address {shown!r}: {why} "
+        f"malformed device address {_shown(text)}: {why} "
         "(use host, host:port, tcp://host:port, /dev/ttyX, serial:///dev/ttyX or sim://name)"
     )
 
@@ -62,7 +67,7 @@ def _check_host(text: str, host: str) -> str:
         ipaddress.ip_address(host)
     except ValueError:
         if not _HOSTNAME.match(host):
-            raise _bad(text, f"{host!r} is not a valid host name or IP address") from None
+            raise _bad(text, f"{_shown(host)} is not a valid host name or IP address") from None
     return host
 
 
@@ -120,6 +125,6 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
         try:
             options = dict(parse_qsl(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query)))
         except ValueError:
-            raise _bad(text, f"unreadable options {parts.query!r}") from None
+            raise _bad(text, f"unreadable options {_shown(parts.query)}") from None
         return Endpoint("sim", host=name, options=options)
-    raise _bad(text, f"unknown scheme {scheme!r}")
+    raise _bad(text, f"unknown scheme {_shown(scheme)}")
