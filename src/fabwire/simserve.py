@@ -19,7 +19,13 @@ from fabwire.cli_support import App
 from fabwire.errors import InputError
 from fabwire.lifeline import watch
 from fabwire.transport.base import Transport
-from fabwire.transport.limits import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS, ConnectionLimits
+from fabwire.transport.limits import (
+    DEFAULT_IDLE_TIMEOUT,
+    DEFAULT_MAX_CONNECTIONS,
+    ConnectionLimits,
+    Farewell,
+    plain_line,
+)
 from fabwire.transport.registry import DeviceServer
 from fabwire.transport.tap import FROM_DEVICE, TO_DEVICE, Direction, TapTransport, TraceWriter, escape_text
 from fabwire.transport.tcp import serve_tcp
@@ -148,11 +154,13 @@ async def serve(
     link: Path | None,
     default_port: int | None,
     json_mode: bool = False,
+    farewell: Farewell = plain_line,
 ) -> None:
     """Serve until SIGINT/SIGTERM, or until the parent that started this process ends (`fabwire.lifeline`).
     Each TCP connection and the pty each get their own `handler` call.
 
-    The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS).
+    The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS);
+    `farewell` words, in the device's protocol, why the limit closes a client (`fabwire.transport.limits`).
     """
     from fabwire.logsink import log_in_background  # only serving needs the writer thread
 
@@ -178,7 +186,8 @@ async def serve(
     try:
         for text in listen:
             address = parse_listen(text, default_port or 0)
-            server = await serve_tcp(handler, address.host, address.port, limits=limits, what=f"{kind} simulator")
+            server = await serve_tcp(handler, address.host, address.port, limits=limits, what=f"{kind} simulator",
+                                    farewell=farewell)
             servers.append(server)
             host, port = server.sockets[0].getsockname()[:2]
             shown = f"[{host}]" if ":" in host else host
