@@ -167,7 +167,8 @@ async def serve(
     log_in_background()  # a stderr nobody reads must not freeze the simulator
     settings = _settings()
     limits = ConnectionLimits(settings.max_connections, settings.idle_timeout)
-    writer = TraceWriter.to_file(settings.trace, url=f"sim://{kind}", peer="clients") if settings.trace else None
+    writer = (TraceWriter.to_file(settings.trace, url=f"sim://{kind}", peer="clients", device=kind)
+              if settings.trace else None)
     handler = observed(handler, writer)
     if not listen and not use_pty:
         if default_port is None:
