@@ -9,7 +9,7 @@ from urllib.parse import parse_qsl, urlsplit
 import msgspec
 
 from fabwire.devices import DeviceKind
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 
 _WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
 """`COM3`: a serial port on Windows (no host is called that)."""
@@ -36,24 +36,18 @@ class Endpoint(msgspec.Struct, frozen=True):
         return f"sim://{self.host}" + (f"?{query}" if query else "")
 
 
-def _shown(value: str) -> str:
-    """`value` quoted for a message, clipped as written (an escaped character takes up to 10)."""
-    quoted = repr(value)
-    return quoted if len(quoted) <= 80 else quoted[:60] + "…"
-
-
 def _bad(text: str, why: str) -> InputError:
     return InputError(
-        f"malformed device address {_shown(text)}: {why} "
+        f"malformed device address {excerpt(text, 60)}: {why} "
         "(use host, host:port, tcp://host:port, /dev/ttyX, serial:///dev/ttyX or sim://name)"
     )
 
 
 def _port(text: str, raw: str) -> int:
     if not re.fullmatch(r"[0-9]{1,5}", raw):  # ASCII digits only, and few: int() of 5,000 digits raises
-        shown = raw if len(raw) <= 12 else raw[:12] + "…"
+        shown = excerpt(raw, 12)
         what = "too long to be a port" if raw.isascii() and raw.isdigit() else "not a number"
-        raise _bad(text, f"port {shown!r} is {what}")
+        raise _bad(text, f"port {shown} is {what}")
     port = int(raw)
     if not 1 <= port <= 65535:
         raise _bad(text, f"port {port} is outside 1-65535")
@@ -67,7 +61,7 @@ def _check_host(text: str, host: str) -> str:
         ipaddress.ip_address(host)
     except ValueError:
         if not _HOSTNAME.match(host):
-            raise _bad(text, f"{_shown(host)} is not a valid host name or IP address") from None
+            raise _bad(text, f"{host!r} is not a valid host name or IP address") from None
     return host
 
 
@@ -125,6 +119,6 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
         try:
             options = dict(parse_qsl(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query)))
         except ValueError:
-            raise _bad(text, f"unreadable options {_shown(parts.query)}") from None
+            raise _bad(text, f"unreadable options {parts.query!r}") from None
         return Endpoint("sim", host=name, options=options)
-    raise _bad(text, f"unknown scheme {_shown(scheme)}")
+    raise _bad(text, f"unknown scheme {scheme!r}")
