@@ -44,6 +44,16 @@ def letter(reply: bytes, name: bytes) -> bytes:
     return found[1]
 
 
+def record(trace: Path, kind: str, *command: str) -> None:
+    """Capture `fabwire KIND -d SIM COMMAND…` against a simulator of its own, stopped afterwards."""
+    sim = start_simulator(kind, "--listen", "127.0.0.1:0", "--speed", "0" if kind == "lineus" else "1")
+    try:
+        recorded = run_cli(kind, "-d", sim.url, *command, "--trace", str(trace))
+        assert recorded.returncode == 0, recorded.stderr
+    finally:
+        sim.stop()
+
+
 def recorded_reply(trace: Path) -> bytes:
     lines = [json.loads(line) for line in trace.read_text().splitlines()[1:]]
     return b"".join(r["data"].encode("latin-1") for r in lines if r.get("dir") == "<")
@@ -51,12 +61,7 @@ def recorded_reply(trace: Path) -> bytes:
 
 def test_a_status_replayed_to_a_simulator_started_later_matches(tmp_path: Path) -> None:
     trace = tmp_path / "status.jsonl"
-    first = start_simulator("xyz", "--listen", "127.0.0.1:0")
-    try:
-        recorded = run_cli("xyz", "-d", first.url, "status", "--trace", str(trace))
-        assert recorded.returncode == 0, recorded.stderr
-    finally:
-        first.stop()
+    record(trace, "xyz", "status")
     assert trace_device(trace) == "xyz"
     uptime = letter(recorded_reply(trace), b"L")
     later = start_simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
@@ -85,16 +90,14 @@ def test_a_status_replayed_to_a_simulator_started_later_matches(tmp_path: Path) 
 
 def test_a_real_field_that_differs_is_reported_where_it_differs(tmp_path: Path) -> None:
     trace = tmp_path / "status.jsonl"
+    record(trace, "xyz", "status")
+    zoffset = letter(recorded_reply(trace), b"z")
+    edited = trace.read_text().replace(f"z:{zoffset.decode()}\\n", f"z:{int(zoffset) + 1}\\n")
+    edited = re.sub(r"L:1,[0-9]+", "L:1,7", edited)  # a varying value of another length before it
+    assert edited != trace.read_text()
+    trace.write_text(edited)
     sim = start_simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1000")
     try:
-        recorded = run_cli("xyz", "-d", sim.url, "status", "--trace", str(trace))
-        assert recorded.returncode == 0, recorded.stderr
-        reply = recorded_reply(trace)
-        zoffset = letter(reply, b"z")
-        edited = trace.read_text().replace(f"z:{zoffset.decode()}\\n", f"z:{int(zoffset) + 1}\\n")
-        edited = re.sub(r"L:1,[0-9]+", "L:1,7", edited)  # a varying value of another length before it
-        assert edited != trace.read_text()
-        trace.write_text(edited)
         result = run_cli("--json", "trace", "replay", str(trace), "--to", sim.url, "--quiet", "1")
     finally:
         sim.stop()
@@ -110,12 +113,7 @@ def test_a_real_field_that_differs_is_reported_where_it_differs(tmp_path: Path) 
 
 def test_a_lineus_diagnostics_replay_ignores_the_clock(tmp_path: Path) -> None:
     trace = tmp_path / "info.jsonl"
-    first = start_simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
-    try:
-        recorded = run_cli("lineus", "-d", first.url, "info", "--trace", str(trace))
-        assert recorded.returncode == 0, recorded.stderr
-    finally:
-        first.stop()
+    record(trace, "lineus", "info")
     later = start_simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
     try:
         result = run_cli("--json", "trace", "replay", str(trace), "--to", later.url, "--quiet", "1")
