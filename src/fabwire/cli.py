@@ -22,6 +22,7 @@ from fabwire.cli_support import (
     configure_logging,
     pass_app,
 )
+from fabwire.devices import KINDS
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
 from fabwire.simserve import SERVE_OPTIONS
@@ -150,7 +151,7 @@ def _records(file: Path, note: Callable[[str], None]) -> Iterator[TraceRecord]:
               help="Seconds of silence that end a reply shorter than the recorded one.")
 @click.option("--strict", is_flag=True,
               help="Compare every byte, the values that vary by nature (uptime, clocks, temperatures) too.")
-@click.option("--protocol", type=click.Choice(["xyz", "lineus", "mmu"]),
+@click.option("--protocol", type=click.Choice(sorted(KINDS)),
               help="The capture's protocol, for a capture that does not name it (default: from the capture).")
 @pass_app
 def trace_replay(app: App, file: Path, address: str, quiet: float, strict: bool, protocol: str | None) -> int:

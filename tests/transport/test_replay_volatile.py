@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import socket
+import subprocess
 import threading
 import time
 from pathlib import Path
@@ -213,11 +214,15 @@ def test_the_protocol_comes_from_the_capture_or_its_bytes(tmp_path: Path) -> Non
     assert sniff(b"GET / HTTP/1.1\r\n", b"HTTP/1.1 200 OK\r\n") is None
 
 
-def test_an_unknown_protocol_is_compared_byte_for_byte(tmp_path: Path) -> None:
-    trace = tmp_path / "other.jsonl"
+def replay_to_a_device_answering(tmp_path: Path, exchanges: list[tuple[bytes, bytes]], answers: dict[bytes, bytes],
+                                 *options: str) -> subprocess.CompletedProcess[str]:
+    """Write a capture of `exchanges` (sent, reply) that names no protocol, and replay it to a device on loopback
+    that answers each `\\n`-ended request line found in `answers`, and nothing else."""
+    trace = tmp_path / "capture.jsonl"
     writer = TraceWriter.to_file(trace, url="tcp://127.0.0.1:1", peer="p")
-    writer.chunk(">", b"HELLO?\n")
-    writer.chunk("<", b"L:1,5\n")
+    for sent, reply in exchanges:
+        writer.chunk(">", sent)
+        writer.chunk("<", reply)
     writer.close()
     with socket.socket() as server:
         server.bind(("127.0.0.1", 0))
@@ -226,15 +231,37 @@ def test_an_unknown_protocol_is_compared_byte_for_byte(tmp_path: Path) -> None:
 
         def answer() -> None:
             conn, _ = server.accept()
+            buffered = b""
             with conn:
-                conn.recv(100)
-                conn.sendall(b"L:1,6\n")
-                conn.recv(100)
+                while chunk := conn.recv(100):
+                    buffered += chunk
+                    *lines, buffered = buffered.split(b"\n")
+                    for line in lines:
+                        conn.sendall(answers.get(line + b"\n", b""))
 
         helper = threading.Thread(target=answer, daemon=True)
         helper.start()
-        result = run_cli("trace", "replay", str(trace), "--to", f"127.0.0.1:{port}", "--quiet", "0.5")
+        result = run_cli("trace", "replay", str(trace), "--to", f"127.0.0.1:{port}", "--quiet", "0.5", *options)
         helper.join(30)
+    return result
+
+
+def test_an_unknown_protocol_is_compared_byte_for_byte(tmp_path: Path) -> None:
+    result = replay_to_a_device_answering(tmp_path, [(b"HELLO?\n", b"L:1,5\n")], {b"HELLO?\n": b"L:1,6\n"})
     assert result.returncode == 6
     assert "(differs from byte 4)" in result.stdout
     assert result.stdout.splitlines()[-1].startswith("ignored: nothing (the capture's protocol is unknown")
+
+
+def test_the_protocol_can_be_named_for_a_capture_that_does_not_tell(tmp_path: Path) -> None:
+    """A capture that starts mid-conversation (no handshake to recognise) replays by the protocol named."""
+    exchanges = [(b"\n", b""), (b"Q0*ea\n", b"T1 P5*af\n")]
+    answers = {b"Q0*ea\n": b"T1 P6*3c\n"}
+    unknown = replay_to_a_device_answering(tmp_path, exchanges, answers)
+    assert unknown.returncode == 6, unknown.stdout
+    named = replay_to_a_device_answering(tmp_path, exchanges, answers, "--protocol", "mmu")
+    assert named.returncode == 0, named.stdout
+    assert named.stdout.splitlines() == [
+        "every reply matches the recording",
+        "ignored: P (a running command's progress) in exchange 2 — mmu values that vary by nature (--strict "
+        "compares them)"]
