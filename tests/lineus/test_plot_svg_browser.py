@@ -36,6 +36,8 @@ CASES = {
                         '<path d="M50 50 L190 190" stroke="black" stroke-width="2"/>'),
     "nested viewport in %": ('width="200" height="200"',
                              f'<svg x="50%" y="25%" width="25%" height="25%" viewBox="0 0 50 50">{LINE}</svg>'),
+    "use x beyond a float": ('width="200" height="200"',
+                             f'<defs><g id="p">{LINE}</g></defs><use href="#p" x="1e400"/><use href="#p" y="-1e39"/>'),
     "use x y": ('width="200" height="200"', f'<defs><g id="p">{LINE}</g></defs><use href="#p" x="50" y="60"/>'),
     "fill without area": ('width="100" height="100"', '<path d="M10 10 L40 40" fill="black"/>'),
     "opacity 0 %": ('width="100" height="100"', f'<g opacity="0%">{LINE}</g>'),

@@ -113,6 +113,8 @@ def test_preserve_aspect_ratio_in_error_is_the_initial_value(aspect: str, expect
     ('<path d="M150 150 L190 190" stroke="black"/>', None),  # all beyond the page
     ('<g transform="skewX(90)"><path d="M10 10 L40 40" stroke="black"/></g>', None),  # sheared far away
     ('<defs><path id="p" d="M10 10 L40 40" stroke="black"/></defs><use href="#p" x="1e38"/>', None),
+    ('<defs><path id="p" d="M10 10 L40 40" stroke="black"/></defs><use href="#p" x="1e400"/>'
+     '<use href="#p" y="-1e39mm"/><path d="M0 0 L200 200" stroke="black"/>', (0, 0, 100, 100)),
 ])
 def test_the_page_shows_no_more_than_its_box(body: str, expected: tuple[float, ...] | None) -> None:
     text = f'{HEAD}width="100" height="100" overflow="visible">{body}</svg>'

@@ -46,6 +46,7 @@ from fabwire.lineus.plot.svgpath import (
 from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, own_style, paints
 from fabwire.lineus.plot.svgunits import (
     IDENTITY,
+    beyond_single,
     flattens,
     length,
     read_view_box,
@@ -350,6 +351,8 @@ class _Reader:
             return
         if ref in uses or depth > MAX_DEPTH:
             raise InputError(f"{self.name}: <use> refers back to itself through #{ref}")
+        if beyond_single(el.get("x")) or beyond_single(el.get("y")):
+            return  # placed at infinity: nothing of the copy is on the page
         vw, vh = viewport
         matrix = then(matrix, translate(length(el.get("x"), vw), length(el.get("y"), vh)))
         kind = local(target.tag)

@@ -60,6 +60,13 @@ def size_is_zero(value: str | None) -> bool:
     return match is not None and _single(match.group(1)) == 0
 
 
+def beyond_single(value: str | None) -> bool:
+    """Whether a length's number is beyond single precision: browsers hold it as infinite (a `<use>` placed
+    there shows nothing), where this reader's `length` would take it as absent."""
+    match = re.fullmatch(rf"\s*({_NUMBER})(?:{_UNITS})?\s*", value or "", re.IGNORECASE)
+    return match is not None and math.isinf(_single(match.group(1)))
+
+
 def _single(text: str) -> float:
     """A number as a browser holds it: rounded to single precision; inf when beyond it."""
     value = float(text)
