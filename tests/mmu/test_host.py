@@ -313,3 +313,25 @@ def test_time_scale_shrinks_every_timer() -> None:
     logic = h.HostLogic(time_scale=100)
     logic.start(0.0)
     assert logic.next_deadline() == pytest.approx(0.02)
+
+
+@pytest.mark.parametrize(("ask", "answered"), [
+    (lambda logic, now: logic.read_register(0x22, now), h.RegisterRead(0x22, 360)),
+    (lambda logic, now: logic.write_register(0x22, 400, now), h.RegisterWritten(0x22, 400, True)),
+    (lambda logic, now: logic.press(2, now), h.ButtonSent(2)),
+], ids=["read", "write", "button"])
+def test_a_request_in_flight_when_the_link_restarts_is_asked_again(ask: object, answered: object) -> None:
+    """The caller's read, write or button press is not dropped with the link: after the new handshake it is sent
+    again and answered (else the caller waits out its whole timeout)."""
+    pair = _pair()
+    assert callable(ask)
+    ask(pair.host, pair.now)
+    cut_until = pair.now + 5.0
+
+    def cable_out(reply: bytes) -> bytes:  # silent for 5 s: two timeouts in a row restart the handshake
+        return b"" if pair.now < cut_until else reply
+
+    handshakes = _lines(pair).count((">", "S0*c6"))
+    events = pair.run(lambda new: answered in new, mangle=cable_out, limit=60)
+    assert _lines(pair).count((">", "S0*c6")) > handshakes  # it was a full restart
+    assert events.count(answered) == 1

@@ -19,6 +19,7 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.mmu import codes
 from fabwire.mmu.errors import MMUError, describe_error
+from fabwire.mmu.evidence import end_state
 from fabwire.mmu.host import (
     INIT_REGISTERS,
     SUPPORTED,
@@ -39,7 +40,7 @@ from fabwire.mmu.host import (
     Status,
     StatusUpdated,
 )
-from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload
+from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload, make_request
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
@@ -319,6 +320,30 @@ class MMU:
         except LinkTimeout:
             self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
             raise
+        return await self._confirmed(request, finished, timeout)
+
+    async def _confirmed(self, request: Request | None, finished: CommandFinished,
+                         timeout: float | None) -> CommandFinished:
+        """`finished`, once the registers show the end state of `request` (`fabwire.mmu.evidence`); an MMU that
+        says `F0` but shows the state from before is a DeviceError, not a success."""
+        if request is None or finished.result != 0 or finished.command != str(request):
+            return finished
+        expects, settle = end_state(request)
+        end = self._clock() + settle / self.logic.timing.time_scale
+        while expects:
+            read: dict[int, int] = {}
+            for expect in expects:
+                if expect.address not in read:
+                    read[expect.address] = await self.read_register(expect.address, timeout or 10.0)
+            wrong = [e for e in expects if not e.holds(read[e.address])]
+            if not wrong:
+                break
+            if self._clock() >= end:
+                raise DeviceError("not done", f"the MMU reported {request} finished, but it shows "
+                                  + ", ".join(e.shown(read[e.address]) for e in wrong) + " (a finished "
+                                  + f"{request} leaves " + ", ".join(e.wanted for e in wrong) + ")",
+                                  action="the command did not take effect: check the MMU with `fabwire mmu status`")
+            await asyncio.sleep(min(0.05, settle / 20 / self.logic.timing.time_scale))
         return finished
 
     def _command_outcome(self, expected: str | None,
@@ -362,9 +387,10 @@ class MMU:
         if not self.logic.busy:
             status = self.status
             raise DeviceError("idle", f"the MMU runs no command (it reports {status.command} {status.words})")
+        request = self.logic.command
         finished: CommandFinished = await self._operate(lambda now: None, self._command_outcome(None, confirm_eject),
                                                         on_event, timeout)
-        return finished
+        return await self._confirmed(request, finished, timeout)
 
     async def answer(self, choice: str, *, on_event: EventCallback | None = None,
                      timeout: float | None = None) -> CommandFinished | None:
@@ -395,7 +421,9 @@ class MMU:
         if status.kind == "E":
             raise self._explained(MMUError(status.value, command=status.command))
         if status.kind == "F" and status.command == command:
-            return CommandFinished(command, status.value)
+            known = len(command) > 1 and command[0] in "TLUEKHM"
+            request = make_request(command[0], int(command[1:], 16)) if known else None
+            return await self._confirmed(request, CommandFinished(command, status.value), timeout)
         return None
 
     async def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:

@@ -331,6 +331,9 @@ class HostLogic:
         self._decoder.reset()
         lost, self._lost = self._lost, None
         self._unsent(lost is not None and lost is self._command)
+        if lost is not None and self._resume != "start" and (
+                (lost.code in "RW" and not self._inflight_poll) or (lost.code == "B" and not self._retry_pending)):
+            self._planned.appendleft(lost)  # asked for by the caller: ask again, after a restart too
         rebooting = self._silent >= SILENT_RESTART or (lost is not None and lost.code == "X")
         if (self.version is None and self._resume != "start") or self.drop_outs >= RESTART_AFTER or rebooting:
             self._restart(now)
@@ -345,8 +348,6 @@ class HostLogic:
                 self._unsent(True)
             elif lost.code == "f":
                 self._fsensor_reported = None
-            elif (lost.code in "RW" and not self._inflight_poll) or (lost.code == "B" and not self._retry_pending):
-                self._planned.appendleft(lost)  # asked for by the caller: ask again
         if lost is not None and (lost.code == "Q" or self._scope == "command"):
             self._send(Query(0), now)  # where is the MMU now?
             return
