@@ -170,3 +170,11 @@ def test_any_bytes_to_a_simulator_are_answered_or_ignored(data: bytes) -> None:
 
 def test_project_errors_share_one_base() -> None:
     assert issubclass(InputError, FabwireError)
+
+
+@pytest.mark.parametrize("port", ["9" * 5000, "\u0661\u0662", "65536", "-1", "1e3"])
+def test_a_listen_port_beyond_any_port_is_one_line_of_bad_input(port: str) -> None:
+    done = run_cli("sim", "mmu", "--listen", f"127.0.0.1:{port}", timeout=60)
+    assert done.returncode == 4, done.stderr
+    assert done.stderr.count("\n") == 1
+    assert "port must be a number from 0 to 65535" in done.stderr
