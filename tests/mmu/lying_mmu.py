@@ -1,7 +1,7 @@
 """MMUs that lie: they accept a command and report it finished (`F0`) without doing it, or do it to another slot.
 
 Run as a program it serves one on a loopback TCP port and prints `tcp://127.0.0.1:PORT` (for CLI tests):
-`python lying_mmu.py idle|other-slot SPEED`.
+`python lying_mmu.py idle|other-slot|no-reset SPEED`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import sys
 
 from fabwire.mmu.codes import Progress
 from fabwire.mmu.model import MMUModel
-from fabwire.mmu.protocol import Accepted, Response
+from fabwire.mmu.protocol import Accepted, Request, Response
 from fabwire.mmu.sim import MMUSimulator, firmware
 from fabwire.transport import serve_tcp
 
@@ -39,7 +39,17 @@ class OtherSlotLiar(MMUModel):
         return type(reply)(code, value, reply.value)
 
 
-LIARS: dict[str, type[MMUModel]] = {"idle": IdleLiar, "other-slot": OtherSlotLiar}
+class ResetDeafLiar(MMUModel):
+    """Ignores X (reset) requests: never reboots, yet answers the handshake that follows."""
+
+    def handle(self, request: Request, now: float) -> Response | None:
+        if request.code == "X":
+            self.advance(now)
+            return None
+        return super().handle(request, now)
+
+
+LIARS: dict[str, type[MMUModel]] = {"idle": IdleLiar, "other-slot": OtherSlotLiar, "no-reset": ResetDeafLiar}
 
 
 def lying_simulator(kind: str, speed: float) -> MMUSimulator:

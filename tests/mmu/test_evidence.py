@@ -96,3 +96,19 @@ def test_the_cli_exits_non_zero_when_the_mmu_only_says_finished(tmp_path: Path) 
         "fabwire: error: device error not done: the MMU reported T2 finished, but it shows FINDA off, filament at "
         "pulley, selector parked (a finished T2 leaves FINDA on, filament in the nozzle, selector at slot 2) — the "
         "command did not take effect: check the MMU with `fabwire mmu status`")
+
+
+async def test_an_mmu_that_ignores_the_reset_is_not_reported_reset() -> None:
+    sim = lying_simulator("no-reset", SPEED)
+    async with asyncio.timeout(LIMIT), loopback_tcp(sim.serve) as link, MMU(link, time_scale=SPEED) as mmu:
+        await mmu.tool_change(1)  # really done: the liar only ignores X
+        with pytest.raises(DeviceError, match="still reports T1 finished, not the start-up command X0"):
+            await mmu.reset()
+
+
+async def test_a_real_reset_reports_the_start_up_command() -> None:
+    sim = MMUSimulator(speed=SPEED)
+    async with asyncio.timeout(LIMIT), loopback_tcp(sim.serve) as link, MMU(link, time_scale=SPEED) as mmu:
+        await mmu.tool_change(1)
+        assert (await mmu.reset()).triple == (3, 0, 4)
+        assert mmu.status.command == "X0"

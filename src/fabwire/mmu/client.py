@@ -530,6 +530,10 @@ class MMU:
 
         version: codes.FirmwareVersion = await self._operate(lambda now: self.logic.reset(now, erase=erase),
                                                              outcome, None, timeout)
+        if self.status.command != "X0":  # a rebooted MMU reports its start-up command first (reference §5.2)
+            raise DeviceError("not reset", f"the MMU answers again but still reports {self.status.command} "
+                              f"{self.status.words}, not the start-up command X0: it did not reboot",
+                              action="power-cycle the MMU")
         return version
 
     async def events(self) -> AsyncIterator[HostEvent]:
