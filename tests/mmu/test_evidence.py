@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import subprocess
 import sys
 from collections.abc import Awaitable, Callable
@@ -14,6 +15,8 @@ from clitools import cli_env, run_cli
 from fabwire.errors import DeviceError
 from fabwire.mmu import MMU
 from fabwire.mmu import host as h
+from fabwire.mmu.errors import MMUError
+from fabwire.mmu.protocol import ToolChange
 from fabwire.mmu.sim import MMUSimulator
 from linktools import loopback_tcp
 
@@ -112,3 +115,36 @@ async def test_a_real_reset_reports_the_start_up_command() -> None:
         await mmu.tool_change(1)
         assert (await mmu.reset()).triple == (3, 0, 4)
         assert mmu.status.command == "X0"
+
+
+async def test_the_same_command_again_follows_the_one_the_mmu_is_running() -> None:
+    """A client that lost its link mid-command (or a new one) asks for the same tool change: it follows the one
+    the MMU runs to its end instead of refusing it as busy or sending it twice."""
+    sim = MMUSimulator(speed=SPEED)
+    async with loopback_tcp(sim.serve) as first, MMU(first, time_scale=SPEED) as mmu:
+        moving = asyncio.Event()
+        change = asyncio.create_task(mmu.tool_change(3, on_event=lambda e: isinstance(e, h.ProgressChanged)
+                                                     and moving.set()))
+        async with asyncio.timeout(LIMIT):
+            await moving.wait()
+        change.cancel()  # the link goes, the MMU goes on
+        with contextlib.suppress(asyncio.CancelledError):
+            await change
+    async with asyncio.timeout(LIMIT), loopback_tcp(sim.serve) as again, MMU(again, time_scale=SPEED) as mmu:
+        assert mmu.logic.command == ToolChange(3)  # adopted from the MMU's Q0 answer
+        assert await mmu.tool_change(3) == h.CommandFinished("T3", 0)
+    assert [x.kind for x in sim.history if x.command == "T3"].count("F") == 1  # it ran once
+
+
+async def test_following_a_command_that_waits_in_an_error_ends_at_once_with_the_error() -> None:
+    sim = MMUSimulator(speed=SPEED, faults=["fsensor-didnt-trigger:always"])
+    async with loopback_tcp(sim.serve) as first, MMU(first, time_scale=SPEED, auto_retries=0) as mmu:
+        with pytest.raises(MMUError, match=r"\(0x8003\)"):
+            await mmu.tool_change(1, timeout=LIMIT)
+    async with loopback_tcp(sim.serve) as again, MMU(again, time_scale=SPEED, auto_retries=0) as mmu:
+        assert mmu.status.kind == "E"
+        async with asyncio.timeout(5):  # not the caller's whole timeout: the error is already known
+            with pytest.raises(MMUError, match=r"\(0x8003\)"):
+                await mmu.follow(timeout=LIMIT)
+            with pytest.raises(MMUError, match=r"\(0x8003\)"):
+                await mmu.tool_change(1, timeout=LIMIT)

@@ -309,6 +309,8 @@ class MMU:
         """Run one command to its end; an error the host cannot retry away raises DeviceError."""
         if request.code in "TLEK":
             check_slot(request.value)
+        if self.logic.busy and self.logic.command == request:  # running already (an earlier link, another client)
+            return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=confirm_eject)
         if self.logic.busy:
             raise DeviceError("busy", f"the MMU is still busy with {self.logic.command}",
                               action="let it finish, or answer its error (fabwire mmu button retry|continue|stop), "
@@ -388,7 +390,15 @@ class MMU:
             status = self.status
             raise DeviceError("idle", f"the MMU runs no command (it reports {status.command} {status.words})")
         request = self.logic.command
-        finished: CommandFinished = await self._operate(lambda now: None, self._command_outcome(None, confirm_eject),
+        start: Callable[[float], None] = lambda now: None  # noqa: E731
+        status = self.status
+        if status.kind == "E" and status.command == str(request) and not self.logic.retrying:
+            # reported before we listened, and reported only once: waiting for it again would wait out `timeout`
+            if not (confirm_eject and status.value == 0x800C):
+                self.logic.abandon()
+                raise self._explained(MMUError(status.value, command=status.command))
+            start = lambda now: self.logic.press(int(codes.Button.MIDDLE), now)  # noqa: E731
+        finished: CommandFinished = await self._operate(start, self._command_outcome(None, confirm_eject),
                                                         on_event, timeout)
         return await self._confirmed(request, finished, timeout)
 

@@ -189,6 +189,11 @@ class HostLogic:
     def command(self) -> Request | None:
         return self._command
 
+    @property
+    def retrying(self) -> bool:
+        """This host's automatic Retry for the reported error is on its way."""
+        return self._retry_pending
+
     # ----------------------------------------------------------------------------------------- inputs
 
     def start(self, now: float) -> None:
