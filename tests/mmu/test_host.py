@@ -335,3 +335,17 @@ def test_a_request_in_flight_when_the_link_restarts_is_asked_again(ask: object, 
     events = pair.run(lambda new: answered in new, mangle=cable_out, limit=60)
     assert _lines(pair).count((">", "S0*c6")) > handshakes  # it was a full restart
     assert events.count(answered) == 1
+
+
+@pytest.mark.parametrize("junk", [b"ok\n", b"T1 Pok*00\n", b"\x00book\r\n"])
+def test_ok_in_line_noise_after_the_handshake_is_no_version_verdict(junk: bytes) -> None:
+    """Only an MMU that answers the handshake with 'ok' runs firmware 1.x; once the version is known, bytes that
+    happen to hold 'ok' are one garbled reply, resynchronised like any other."""
+    pair = _pair()
+    pair.host.read_register(0x22, pair.now)  # type: ignore[attr-defined]
+    pair.host.data_to_send()  # type: ignore[attr-defined]  # the read is in flight: its reply is replaced by junk
+    pair.host.receive(junk, pair.now)  # type: ignore[attr-defined]
+    events = pair.run(lambda new: h.RegisterRead(0x22, 360) in new, limit=30)
+    assert h.RegisterRead(0x22, 360) in events
+    assert not any(isinstance(e, h.LinkFailed) for e in events)
+    assert pair.host.link is h.Link.READY  # type: ignore[attr-defined]

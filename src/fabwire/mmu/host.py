@@ -209,7 +209,8 @@ class HostLogic:
             return  # the rest of a garbled burst: drained when the line goes quiet
         for event in self._decoder.feed(data):
             if isinstance(event, DecodeError):
-                if b"ok" in data:
+                # firmware 1.x answers the handshake 'ok'; once the version is known the two letters are noise
+                if b"ok" in data and self.version is None:
                     self._version_mismatch("the MMU answered 'ok': firmware 1.x")
                 else:
                     self._protocol_error(now, event.reason)
