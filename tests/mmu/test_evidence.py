@@ -1,4 +1,5 @@
-"""Success means the MMU shows it: an `F0` from an MMU whose registers contradict the command is an error."""
+"""Success means the MMU shows it (an `F0` its registers contradict is an error), and a failure is reported as soon
+as it is known: a command already running is followed, an error already shown or a dead driver ends the wait."""
 
 from __future__ import annotations
 
@@ -10,14 +11,17 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import pytest
+import serialx
 
 from clitools import cli_env, run_cli
-from fabwire.errors import DeviceError
+from fabwire.errors import DeviceError, LinkClosed
 from fabwire.mmu import MMU
 from fabwire.mmu import host as h
 from fabwire.mmu.errors import MMUError
 from fabwire.mmu.protocol import ToolChange
 from fabwire.mmu.sim import MMUSimulator
+from fabwire.transport import Transport, open_pty
+from fabwire.transport.serial import SerialTransport, open_serial
 from linktools import loopback_tcp
 
 from .lying_mmu import lying_simulator
@@ -148,3 +152,50 @@ async def test_following_a_command_that_waits_in_an_error_ends_at_once_with_the_
                 await mmu.follow(timeout=LIMIT)
             with pytest.raises(MMUError, match=r"\(0x8003\)"):
                 await mmu.tool_change(1, timeout=LIMIT)
+
+
+class _DriverFails(Transport):
+    """A real TCP link whose writes start failing the way a serial driver fails (not an OSError)."""
+
+    def __init__(self, inner: Transport) -> None:
+        self.inner, self.url, self.peer = inner, inner.url, inner.peer
+        self.broken = False
+
+    @property
+    def closed(self) -> bool:
+        return self.inner.closed
+
+    async def read(self, max_bytes: int = 4096) -> bytes:
+        return await self.inner.read(max_bytes)
+
+    async def write(self, data: bytes) -> None:
+        if self.broken:
+            raise serialx.SerialException("write failed: device reports readiness but returned no data")
+        await self.inner.write(data)
+
+    async def close(self) -> None:
+        await self.inner.close()
+
+
+async def test_a_link_that_fails_with_a_driver_error_ends_the_command_at_once() -> None:
+    sim = MMUSimulator(speed=SPEED)
+    async with loopback_tcp(sim.serve) as tcp:
+        link = _DriverFails(tcp)
+        async with MMU(link, time_scale=SPEED) as mmu:
+            link.broken = True
+            async with asyncio.timeout(5):  # not the command's own 600 s
+                with pytest.raises(LinkClosed, match="SerialException"):
+                    await mmu.refresh(timeout=600)
+
+
+async def test_a_serial_driver_error_is_a_lost_link() -> None:
+    device = open_pty()
+    link = await open_serial(device.path, 115200)
+    try:
+        assert isinstance(link, SerialTransport)
+        await device.close()  # the adapter is unplugged
+        with pytest.raises(LinkClosed):
+            async with asyncio.timeout(5):
+                await link.read()
+    finally:
+        await link.close()

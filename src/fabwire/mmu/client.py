@@ -245,6 +245,8 @@ class MMU:
                 await self._flush()
         except LinkClosed as exc:
             self._fail(exc)
+        except Exception as exc:  # a task that dies quietly would leave every operation waiting out its timeout
+            self._fail(LinkClosed(f"link to the MMU failed: {exc!r}"))
 
     async def _until(self, done: Callable[[], bool]) -> None:
         while not done():
