@@ -14,7 +14,7 @@ import pytest
 import serialx
 
 from clitools import cli_env, run_cli
-from fabwire.errors import DeviceError, LinkClosed
+from fabwire.errors import DeviceError, LinkClosed, LinkTimeout
 from fabwire.mmu import MMU
 from fabwire.mmu import host as h
 from fabwire.mmu.errors import MMUError
@@ -199,3 +199,17 @@ async def test_a_serial_driver_error_is_a_lost_link() -> None:
                 await link.read()
     finally:
         await link.close()
+
+
+@pytest.mark.parametrize("operation", ["read", "refresh", "press"])
+async def test_every_operation_ends_when_the_link_has_failed(operation: str) -> None:
+    """Ten drop-outs in a row end a register read, a status wait or a button press as they end a command, not
+    after the caller's whole timeout."""
+    sim = MMUSimulator(speed=SPEED)
+    async with loopback_tcp(sim.serve) as link, MMU(link, time_scale=SPEED) as mmu:
+        sim.model.booted_at = float("inf")  # its UART goes deaf, for good
+        calls = {"read": lambda: mmu.read_register(0x22, timeout=600), "refresh": lambda: mmu.refresh(timeout=600),
+                 "press": lambda: mmu.press(1, timeout=600)}
+        async with asyncio.timeout(10):
+            with pytest.raises(LinkTimeout, match="MMU NOT RESPONDING"):
+                await calls[operation]()

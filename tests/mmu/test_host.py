@@ -349,3 +349,24 @@ def test_ok_in_line_noise_after_the_handshake_is_no_version_verdict(junk: bytes)
     assert h.RegisterRead(0x22, 360) in events
     assert not any(isinstance(e, h.LinkFailed) for e in events)
     assert pair.host.link is h.Link.READY  # type: ignore[attr-defined]
+
+
+def test_a_reply_trickled_byte_by_byte_without_an_end_is_a_timeout() -> None:
+    """Each byte restarts the firmware's 2 s clock; a device that trickles digits of a never-ending line is still
+    a drop-out once the reply has taken two link timeouts, and the read is asked again."""
+    pair = _pair()
+    logic = pair.host
+    logic.read_register(0x22, pair.now)  # type: ignore[attr-defined]
+    assert logic.data_to_send() == b"R22*45\n"  # type: ignore[attr-defined]
+    now = pair.now
+    logic.receive(b"R22 A", now)  # type: ignore[attr-defined]
+    lost: list[object] = []
+    for _ in range(40):  # a digit every 0.5 s: never 2 s of silence
+        now += 0.5
+        logic.receive(b"0", now)  # type: ignore[attr-defined]
+        logic.handle_timer(now)  # type: ignore[attr-defined]
+        lost += [e for e in logic.events() if isinstance(e, h.LinkLost)]  # type: ignore[attr-defined]
+        if lost:
+            break
+    assert lost == [h.LinkLost("timeout: no complete reply within 4 s", 1)]
+    assert now - pair.now <= 4.5

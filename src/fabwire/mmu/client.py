@@ -273,6 +273,8 @@ class MMU:
                 return
             if value is not None:
                 result.append(value)
+            elif isinstance(event, LinkFailed):  # ten drop-outs in a row: no reply will come to this either
+                errors.append(LinkTimeout(event.info.explained(detail=f"link failed ({event.detail})")))
 
         self._listeners.append(listen)
         try:
