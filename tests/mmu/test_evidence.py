@@ -15,7 +15,7 @@ import serialx
 
 from clitools import cli_env, run_cli
 from fabwire.errors import DeviceError, LinkClosed, LinkTimeout
-from fabwire.mmu import MMU
+from fabwire.mmu import MMU, scripts
 from fabwire.mmu import host as h
 from fabwire.mmu.errors import MMUError
 from fabwire.mmu.protocol import ToolChange
@@ -213,3 +213,18 @@ async def test_every_operation_ends_when_the_link_has_failed(operation: str) -> 
         async with asyncio.timeout(10):
             with pytest.raises(LinkTimeout, match="MMU NOT RESPONDING"):
                 await calls[operation]()
+
+
+async def test_answering_an_error_whose_recovery_never_ends_gives_up_at_the_timeout(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Retry on a boot homing failure: the MMU re-homes under X0, which a host cannot adopt; when that homing never
+    ends, answering gives up after its timeout instead of watching for ever."""
+    sim = MMUSimulator(speed=SPEED, faults=["homing-failed"])
+    async with loopback_tcp(sim.serve) as link, MMU(link, time_scale=SPEED, auto_retries=0) as mmu:
+        async with asyncio.timeout(LIMIT):
+            while (mmu.status.command, mmu.status.kind) != ("X0", "E"):
+                await mmu.refresh()
+        monkeypatch.setattr(scripts, "HOMING_SECONDS", 1e9)  # the selector now homes for ever
+        async with asyncio.timeout(LIMIT):
+            with pytest.raises(LinkTimeout, match=r"still reports X0 .* 2 s after the retry press"):
+                await mmu.answer("retry", timeout=2)

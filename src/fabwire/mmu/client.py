@@ -428,7 +428,11 @@ class MMU:
         await self.press(button, timeout=timeout)
         await self.refresh(timeout=timeout)  # this poll may have been under way before the press: take the next
         status = await self.refresh(timeout=timeout)  # a running command is adopted from this poll
+        end = None if timeout is None else self._clock() + timeout
         while not self.logic.busy and status.command == command and status.kind in "PB":
+            if end is not None and self._clock() >= end:
+                raise LinkTimeout(f"the MMU still reports {status.command} {status.words} {timeout:g} s after "
+                                  f"the {choice} press")
             status = await self.refresh(timeout=timeout)  # X0 (homing after boot) cannot be adopted: watch it
         if self.logic.busy:
             return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=False)
