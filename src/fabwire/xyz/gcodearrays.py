@@ -17,9 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 AXES = b"XYZEF"
-_AXIS_CODES = bytes((AXES + AXES.lower()).find(byte) % len(AXES) + 1 if byte in AXES + AXES.lower() else 0
-                    for byte in range(256))
-"""bytes.translate table: 1 + the axis's index for an axis letter, 0 for anything else (faster than numpy)."""
+_AXIS_INDEX = np.full(256, -1, dtype=np.int8)
+_AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
+_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
+"""bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
 _DIGIT_OR_DOT = np.zeros(256, dtype=bool)
@@ -152,8 +153,7 @@ def scan(text: bytes) -> Scan | None:
         odd_line = np.searchsorted(newlines, odd) - 1
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
-    codes = np.frombuffer(text.translate(_AXIS_CODES), dtype=np.uint8)
-    where = np.flatnonzero(codes)
+    where = np.flatnonzero(np.frombuffer(text.translate(_AXIS_FLAGS), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of] & (where < code_end[line_of])
     where, line_of = where[keep], line_of[keep]
@@ -163,15 +163,13 @@ def scan(text: bytes) -> Scan | None:
         at += blank
         blank = (data[at] == 32) | (data[at] == 9)
     numbers = parse_numbers(text, data, at)
-    axis = codes[where]
+    axis = _AXIS_INDEX[data[where]]
     known = ~np.isnan(numbers)
     if not known.all():  # bare letters are not words
         axis, line_of, numbers = axis[known], line_of[known], numbers[known]
-    order = np.argsort(axis, kind="stable")
-    bounds = np.searchsorted(axis[order], np.arange(1, len(AXES) + 2, dtype=np.uint8))
     axes = []
     for k in range(len(AXES)):
-        picked = order[bounds[k]:bounds[k + 1]]
+        picked = np.flatnonzero(axis == k)
         lines = line_of[picked]
         if (lines[1:] == lines[:-1]).any():
             return None  # a letter repeats within a line
