@@ -233,17 +233,17 @@ class MoveAnalyzer:
         self.seconds = 0.0
         self.layer_heights: set[int] = set()
         """Heights (in µm) at which extruding moves happened."""
+        gcodearrays.reuse_freed_memory()
 
     def feed_chunk(self, chunk: bytes) -> None:
         """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
         start = 0
+        view = memoryview(chunk)
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
-            piece = chunk[start:end]
-            if not piece.endswith(b"\n"):  # the last line of a chunk without its newline
-                piece += b"\n"
-            if not self._feed_arrays(b"\n" + piece):
-                self.feed_lines(piece)
+            ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
+            if not self._feed_arrays(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD)))):
+                self.feed_lines(chunk[start:end] + ended)
             start = end
 
     def feed_lines(self, chunk: bytes) -> None:
@@ -316,16 +316,16 @@ class MoveAnalyzer:
         elif b"P" in words:
             self.seconds += words[b"P"] / 1000.0
 
-    def _feed_arrays(self, text: bytes) -> bool:
-        """Analyse `text` if it is plain enough for array operations, else leave the state alone and say False.
+    def _feed_arrays(self, padded: bytes) -> bool:
+        """Analyse a piece if it is plain enough for array operations, else leave the state alone and say False.
 
-        `text` starts with a newline and ends its last line.
+        `padded` starts with a newline, ends its last line and then has `gcodearrays.PAD` zero bytes.
         """
-        found = gcodearrays.scan(text)
+        found = gcodearrays.scan(padded)
         if found is None:
             return False
         start = [0] * len(found.axes)
-        for line, code, params in [*found.controls, (len(text), b"", b"")]:
+        for line, code, params in [*found.controls, (len(padded), b"", b"")]:
             ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
             self._segment([Words(w.lines[a:b], w.values[a:b], w.sets[a:b])
                            for w, a, b in zip(found.axes, start, ends, strict=True)])
