@@ -159,10 +159,14 @@ def scan(padded: bytes) -> Scan | None:
             controls.append((line, code, params))
     is_row = is_move | is_set
     code_end = newlines[1:]
+    inline_comments = False  # a `;` after the code of a move (comment lines are no moves)
     if b";" in padded:
         semis = np.flatnonzero(text == ord(";"))
-        semis = np.append(semis, size)
-        code_end = np.minimum(semis[np.searchsorted(semis, starts)], code_end)
+        semi_lines = np.searchsorted(newlines, semis) - 1
+        first = np.diff(semi_lines, prepend=-1) != 0  # the first `;` of each line ends its code
+        inline_comments = bool(is_row[semi_lines].any())
+        code_end = code_end.copy()
+        code_end[semi_lines[first]] = semis[first]
     if b"(" in padded or b"*" in padded:
         odd = np.flatnonzero(_NOT_CODE[text])
         odd_line = np.searchsorted(newlines, odd) - 1
@@ -170,7 +174,9 @@ def scan(padded: bytes) -> Scan | None:
             return None
     where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
-    keep = is_row[line_of] & (where < code_end[line_of])
+    keep = is_row[line_of]
+    if inline_comments:
+        keep &= where < code_end[line_of]
     where, line_of = where[keep], line_of[keep]
     at = where + 1
     blank = (data[at] == 32) | (data[at] == 9)
