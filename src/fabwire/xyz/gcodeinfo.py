@@ -74,8 +74,10 @@ _LAYERS = (
     ("prusaslicer", _first(rb"^;[ \t]*total layers count[ \t]*=[ \t]*([0-9]+)")),
 )
 _FACETS = _first(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)")
-_DURATION = re.compile(rb"([0-9.]+)[ \t]*(d|h|m|s)", re.IGNORECASE)
-_S3D_DURATION = re.compile(rb"([0-9.]+)[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
+_DECIMAL = rb"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
+"""A number as float() takes it (`1.2.3h` and `.h` are no durations)."""
+_DURATION = re.compile(_DECIMAL + rb"[ \t]*(d|h|m|s)", re.IGNORECASE)
+_S3D_DURATION = re.compile(_DECIMAL + rb"[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
 _UNIT_SECONDS = {b"d": 86400, b"h": 3600, b"m": 60, b"s": 1, b"hour": 3600, b"hr": 3600, b"minute": 60, b"min": 60,
                  b"second": 1, b"sec": 1}
 _SLICER_NAMES = (
@@ -103,8 +105,12 @@ def _duration(text: bytes, units: re.Pattern[bytes]) -> int | None:
 
 
 def _sum_numbers(text: bytes) -> float | None:
+    """The sum of the stated numbers; ABSURD when it is beyond a float (hundreds of digits)."""
     values = [float(v) for v in re.findall(rb"[0-9]+(?:\.[0-9]*)?", text)]
-    return round(sum(values), 6) if values else None
+    if not values:
+        return None
+    total = round(sum(values), 6)
+    return total if math.isfinite(total) else float(ABSURD)
 
 
 def _search(patterns: Iterable[tuple[str, re.Pattern[bytes]]], windows: Iterable[bytes]) -> tuple[str, bytes] | None:

@@ -9,6 +9,7 @@ bound memory.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import re
 import tempfile
@@ -97,12 +98,14 @@ class ThreeWFile(ThreeWInfo):
 
 
 def _float(text: str | None) -> float | None:
+    """A header field's number; None for a missing one, for text, and for `inf`/`nan` (no print takes for ever)."""
     if text is None:
         return None
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         return None
+    return value if math.isfinite(value) else None
 
 
 def _int(text: str | None) -> int | None:
