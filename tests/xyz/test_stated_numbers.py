@@ -1,8 +1,10 @@
-"""Numbers that .3w headers and slicer comments state are outside input: any text there gives a known value or
-none, never an exception the caller does not expect (the CLI's internal error, a simulator's dead handler)."""
+"""What .3w files and slicer comments state is outside input: any bytes there give a known value, none, or the
+one-line refusal for bad input, never an exception the caller does not expect (the CLI's internal error, a
+simulator's dead handler)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from io import BytesIO
 from pathlib import Path
@@ -11,10 +13,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clitools import run_cli
+from fabwire.errors import InputError
 from fabwire.xyz.gcodeinfo import header_metadata
 from fabwire.xyz.personas import personality
 from fabwire.xyz.printer import Printer
-from fabwire.xyz.threew import BODY_OFFSET, TAG_ECB, _encrypt_ecb, _preamble, _stored_header, read_3w
+from fabwire.xyz.threew import (
+    BODY_OFFSET,
+    TAG_ECB,
+    ZIP_CIPHER_PIECE,
+    ZIP_PIECE,
+    _cbc128,
+    _encrypt_ecb,
+    _pkcs7,
+    _preamble,
+    _stored_header,
+    _unpad,
+    read_3w,
+    write_3w,
+)
 
 FILE_ID = "dv1MX0A000"
 stated = st.one_of(
@@ -78,3 +94,34 @@ def test_info_and_convert_take_unreadable_durations(tmp_path: Path) -> None:
     shown = run_cli("xyz", "info", str(folder / "odd.3w"))
     assert shown.returncode == 0, shown.stderr
     assert "print time" in shown.stdout
+
+
+def _zipped_parts() -> tuple[bytes, bytes]:
+    """(the first 0x2000 bytes, the zip archive) of a zipped .3w."""
+    made = write_3w(b"G28\n" + b"".join(b"G1 X%d Y%d E%d\n" % (i, i % 7, i) for i in range(2000)), "dvF100B000")
+    body = made[BODY_OFFSET:]
+    pieces = [body[i:i + ZIP_CIPHER_PIECE] for i in range(0, len(body), ZIP_CIPHER_PIECE)]
+    return made[:BODY_OFFSET], b"".join(_unpad(_cbc128(piece, decrypt=True))[0] for piece in pieces)
+
+
+PREAMBLE, ARCHIVE = _zipped_parts()
+
+
+END_RECORD = ARCHIVE.rindex(b"PK\x05\x06")
+"""Where the archive's end record starts: its sizes and offsets are what a damaged archive gets wrong."""
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.one_of(st.integers(0, len(ARCHIVE) - 1), st.integers(END_RECORD, len(ARCHIVE) - 1)),
+                          st.binary(min_size=1, max_size=4)), min_size=1, max_size=4),
+       st.integers(4, len(ARCHIVE)))
+def test_a_damaged_zip_inside_a_3w_is_bad_input(changes: list[tuple[int, bytes]], keep: int) -> None:
+    """The archive itself damaged (then encrypted as the format wants), so the zip reader meets hostile offsets,
+    lengths and truncation, not only blocks that fail to decrypt."""
+    archive = bytearray(ARCHIVE[:keep])
+    for at, value in changes:
+        archive[at:at + len(value)] = value[:max(0, len(archive) - at)]
+    archive[:4] = b"PK\x03\x04"
+    body = b"".join(_cbc128(_pkcs7(bytes(archive[i:i + ZIP_PIECE]))) for i in range(0, len(archive), ZIP_PIECE))
+    with contextlib.suppress(InputError):  # anything else fails the test
+        read_3w(PREAMBLE + body)

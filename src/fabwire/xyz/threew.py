@@ -12,6 +12,7 @@ import contextlib
 import math
 import os
 import re
+import struct
 import tempfile
 import zipfile
 import zlib
@@ -444,18 +445,33 @@ def _decrypt_zip(
                 progress(done, total)
         scratch.seek(0)
         size = 0
-        try:
-            with zipfile.ZipFile(scratch) as archive:
-                members = archive.infolist()
-                if len(members) != 1:
-                    raise InputError(f"{name}: the zipped body holds {len(members)} files, expected exactly one")
-                with archive.open(members[0]) as member:
-                    while data := member.read(CHUNK):
-                        sink(data)
-                        size += len(data)
-        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as exc:
-            raise InputError(f"{name}: the zipped body is corrupt ({exc})") from exc
+        with _corrupt_zip(name):
+            archive = zipfile.ZipFile(scratch)
+        with archive:
+            members = archive.infolist()
+            if len(members) != 1:
+                raise InputError(f"{name}: the zipped body holds {len(members)} files, expected exactly one")
+            with _corrupt_zip(name):
+                member = archive.open(members[0])
+            with member:
+                while True:
+                    with _corrupt_zip(name):
+                        data = member.read(CHUNK)
+                    if not data:
+                        break
+                    sink(data)  # the output's own errors stay what they are
+                    size += len(data)
     return crc, size, pad_ok, True
+
+
+@contextlib.contextmanager
+def _corrupt_zip(name: str) -> Iterator[None]:
+    """What the zip reader raises on a damaged archive (offsets before its start make seek() fail with EINVAL,
+    bad lengths a struct error) as one InputError; it reads only the scratch copy, so these say nothing else."""
+    try:
+        yield
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, OSError, ValueError, struct.error) as exc:
+        raise InputError(f"{name}: the zipped body is corrupt ({exc})") from exc
 
 
 def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: Progress | None) -> ThreeWInfo:
