@@ -88,7 +88,7 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     parser does; longer numbers go to float() itself.
     """
     windows = np.ndarray(shape=(len(data) - 15,), dtype="V16", buffer=data, strides=(1,))[at]
-    low, high = np.ascontiguousarray(windows.view(np.uint64).reshape(-1, 2).T) ^ _ZEROS
+    low, high = np.ascontiguousarray(windows.view("<u8").reshape(-1, 2).T) ^ _ZEROS
     sign = low & _U(0xFF)
     negative = sign == _U(ord("-") ^ 0x30)
     signed = (negative | (sign == _U(ord("+") ^ 0x30))).astype(np.uint64)
