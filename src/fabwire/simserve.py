@@ -17,7 +17,7 @@ import click
 import msgspec
 
 from fabwire.cli_support import App
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 from fabwire.lifeline import watch
 from fabwire.transport.base import Transport
 from fabwire.transport.limits import (
@@ -51,7 +51,7 @@ def parse_listen(text: str, default_port: int) -> ListenAddress:
     if not port_text:
         return ListenAddress(host, default_port)
     if not re.fullmatch(r"[0-9]{1,5}", port_text) or int(port_text) > 65535:  # few ASCII digits: int() refuses 4,300
-        raise InputError(f"bad listen address {text[:60]!r}: port must be a number from 0 to 65535")
+        raise InputError(f"bad listen address {excerpt(text, 60)}: port must be a number from 0 to 65535")
     return ListenAddress(host, int(port_text))
 
 

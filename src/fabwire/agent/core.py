@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from fabwire import __version__
-from fabwire.errors import FabwireError, InputError
+from fabwire.errors import FabwireError, InputError, excerpt
 
 if TYPE_CHECKING:
     from fabwire.agent.session import Session
@@ -274,7 +274,7 @@ class Agent:
                 return session
         known = ", ".join(f"{s.spec.name} ({id_})" if s.spec.name and s.spec.name != id_ else id_
                           for id_, s in self._sessions.items())
-        raise UnknownDevice(f"no device {device_id!r} here (known: {known or 'none'})")
+        raise UnknownDevice(f"no device {excerpt(device_id, 60)} here (known: {known or 'none'})")
 
     def sessions(self) -> list[Session]:
         return sorted(self._sessions.values(), key=lambda s: s.order)

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import LineUsSettings
 from fabwire.devices import LINEUS
-from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
+from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
 from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
@@ -143,7 +143,7 @@ class LineUs:
                         if (busy := refusal(bytes(pending), where)) is not None:
                             raise busy
                         raise RemoteProtocolError(
-                            f"{where} is not a Line-us: it greeted with {pending[:40]!r} instead of 'hello …'")
+                            f"{where} is not a Line-us: it greeted with {excerpt(pending, 40)} instead of 'hello …'")
                     message = reader.next_message()
                     if message is None:
                         continue
@@ -496,7 +496,7 @@ class LineUs:
         lines = [line.strip() for line in gcode if line.strip()]
         for line in lines:
             if any(ch in line for ch in "\r\n\x00") or not line.isascii() or len(line) >= p.MAX_LINE:
-                raise InputError(f"line {line[:40]!r} cannot be stored: ASCII text under {p.MAX_LINE} characters")
+                raise InputError(f"line {excerpt(line, 40)} cannot be stored: ASCII text under {p.MAX_LINE} characters")
         await self.request(p.StartSave(slot))
         try:
             for line in lines:

@@ -24,7 +24,7 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from fabwire.errors import InputError, RemoteProtocolError
+from fabwire.errors import InputError, RemoteProtocolError, excerpt
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
 
@@ -299,14 +299,14 @@ def _refuse(name: str, number: int, line: str, why: str) -> None:
     code = p.command_code(line)
     where = f"{name}, line {number}"
     if code is None:
-        raise InputError(f"{where}: cannot read {line[:60]!r}: not a Line-us G-code line")
+        raise InputError(f"{where}: cannot read {excerpt(line, 60)}: not a Line-us G-code line")
     if code in OTHER_DIALECTS:
         raise InputError(f"{where}: {code} ({OTHER_DIALECTS[code]}) is not supported by the Line-us")
     if code in HARMLESS or (code.startswith("M") and why.startswith("unknown command")):
         return
     if why.startswith("unknown command"):
-        raise InputError(f"{where}: unknown command {code} in {line[:60]!r}")
-    raise InputError(f"{where}: cannot read parameters of {line[:60]!r}: {why}")
+        raise InputError(f"{where}: unknown command {code} in {excerpt(line, 60)}")
+    raise InputError(f"{where}: cannot read parameters of {excerpt(line, 60)}: {why}")
 
 
 @dataclass

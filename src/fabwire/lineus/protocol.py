@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from fabwire.errors import LocalProtocolError, RemoteProtocolError
+from fabwire.errors import LocalProtocolError, RemoteProtocolError, excerpt
 from fabwire.lineus.commands import (
     ALWAYS_QUOTED,
     COMMAND_TERMINATOR,
@@ -329,5 +329,5 @@ class ReplyReader:
         try:
             text = raw.decode("ascii")
         except UnicodeDecodeError:
-            raise RemoteProtocolError(f"reply is not ASCII text: {raw[:40]!r}") from None
+            raise RemoteProtocolError(f"reply is not ASCII text: {excerpt(raw, 40)}") from None
         return parse_message(text)

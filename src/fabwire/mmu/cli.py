@@ -24,7 +24,7 @@ from fabwire.cli_support import (
     pass_device,
 )
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import FollowInterrupted, InputError
+from fabwire.errors import FollowInterrupted, InputError, excerpt
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
@@ -455,7 +455,7 @@ def _parse_value(text: str) -> int:
     number = codes.parse_word(text)
     if number is None:
         raise InputError(f"register value must be a number from 0 to 65535 (decimal, or hex like 0x1f), "
-                         f"not {text[:40]!r}")
+                         f"not {excerpt(text, 40)}")
     if not 0 <= number <= 0xFFFF:
         raise InputError(f"register value must be 0 to 65535, not {number}")
     return number

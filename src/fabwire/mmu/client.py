@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
+from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes
 from fabwire.mmu.errors import MMUError, describe_error
 from fabwire.mmu.evidence import end_state
@@ -67,7 +67,7 @@ def resolve_register(register: int | str, *, for_write: bool = False,
     found = codes.find_register(str(register)) if not isinstance(register, int) else (
         codes.REGISTERS[register] if 0 <= register < codes.REGISTER_COUNT else None)
     if found is None:
-        raise InputError(f"unknown MMU register {str(register)[:40]!r}: use a name such as 'bowden_length' or an "
+        raise InputError(f"unknown MMU register {excerpt(str(register), 40)}: use a name such as 'bowden_length' or an "
                          f"address from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
     if for_write and not found.writable(version):
         raise InputError(f"register 0x{found.address:02x} ({found.name}) is read-only"

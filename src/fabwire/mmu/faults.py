@@ -15,7 +15,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 from fabwire.mmu.errors import TMC_FLAGS, TMC_WORDS, format_error, tmc_error
 
 Recovery = Literal["retry", "reset"]
@@ -90,12 +90,13 @@ def parse_fault(text: str) -> Fault:
     skip = 0
     if skip_text:
         if not _COUNT.fullmatch(skip_text.strip()):
-            raise InputError(f"fault skip after '@' must be a whole number below a billion, not {skip_text[:20]!r}")
+            raise InputError("fault skip after '@' must be a whole number below a billion, "
+                             f"not {excerpt(skip_text, 20)}")
         skip = int(skip_text)
     if name.startswith("tmc-") and name.removeprefix("tmc-") in TMC_KINDS:
         name += "-pulley"
     if name not in FAULTS:
-        raise InputError(f"unknown MMU fault {name[:40]!r}; known: {', '.join(sorted(FAULTS))}")
+        raise InputError(f"unknown MMU fault {excerpt(name, 40)}; known: {', '.join(sorted(FAULTS))}")
     count_text = count_text.strip()
     if not count_text:
         return Fault(name, skip=skip)
@@ -103,7 +104,7 @@ def parse_fault(text: str) -> Fault:
         return Fault(name, -1, skip)
     if not _COUNT.fullmatch(count_text) or int(count_text) < 1:
         raise InputError(f"fault count must be a positive number below a billion or 'always', "
-                         f"not {count_text[:20]!r}")
+                         f"not {excerpt(count_text, 20)}")
     return Fault(name, int(count_text), skip)
 
 

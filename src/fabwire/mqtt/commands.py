@@ -15,7 +15,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from fabwire.errors import FabwireError, InputError
+from fabwire.errors import FabwireError, InputError, excerpt
 
 ACTION_NAME = re.compile(r"[a-z][a-z0-9_]{0,63}")
 REMEMBERED = 4096
@@ -41,7 +41,7 @@ def parse_command(payload: bytes) -> Command:
         raise InputError("empty command")
     if not text.startswith("{"):
         if not ACTION_NAME.fullmatch(text):
-            raise InputError(f"a command is a JSON object or an action name, not {text[:40]!r}")
+            raise InputError(f"a command is a JSON object or an action name, not {excerpt(text, 40)}")
         return Command(text, {})
     try:
         data = json.loads(text)

@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from fabwire.errors import InputError, LinkClosed
+from fabwire.errors import InputError, LinkClosed, excerpt
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 
 Side = Literal["both", "write", "read"]
@@ -62,13 +62,13 @@ class FaultPlan(msgspec.Struct, frozen=True):
                 elif key == "side" and raw in ("both", "write", "read"):
                     values[key] = raw
                 else:
-                    raise InputError(f"unknown fault setting {key[:40]!r}")
+                    raise InputError(f"unknown fault setting {excerpt(key, 40)}")
             except ValueError:
-                raise InputError(f"fault setting {key[:40]!r} has a bad value {raw[:40]!r}") from None
+                raise InputError(f"fault setting {excerpt(key, 40)} has a bad value {excerpt(raw, 40)}") from None
         try:
             return msgspec.convert(values, cls)
         except msgspec.ValidationError as exc:  # nan fails every range check too
-            raise InputError(f"fault plan {text[:80]!r}: {exc}") from None
+            raise InputError(f"fault plan {excerpt(text, 80)}: {exc}") from None
 
 
 class FaultyTransport(Transport):

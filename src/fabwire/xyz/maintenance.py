@@ -9,7 +9,7 @@ import contextlib
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
-from fabwire.errors import DeviceError, FabwireError, LinkTimeout, RemoteProtocolError
+from fabwire.errors import DeviceError, FabwireError, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
 from fabwire.xyz.protocol import Reply
@@ -168,7 +168,7 @@ class Maintenance:
             values = stat.values if stat else ()
             if len(values) != CALIBRATION_POINTS:
                 raise RemoteProtocolError(f"the printer answered 'calibratejr:getdata' with "
-                                          f"{(reply.lines or ['nothing'])[0][:60]!r}, not {CALIBRATION_POINTS} "
+                                          f"{excerpt((reply.lines or ['nothing'])[0], 60)}, not {CALIBRATION_POINTS} "
                                           "bed readings")
             await prompt("Raise the calibration detector, then confirm")
         except BaseException:
@@ -264,7 +264,7 @@ class Maintenance:
         try:
             return int(reply.lines[0])
         except ValueError:
-            raise RemoteProtocolError(f"the printer answered 'zoffset:get' with {reply.lines[0][:40]!r}, not a "
+            raise RemoteProtocolError(f"the printer answered 'zoffset:get' with {excerpt(reply.lines[0], 40)}, not a "
                                       "number") from None
 
     async def set_zoffset(self, value: int) -> int:

@@ -26,7 +26,7 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import area_of_rings, cut
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine
 from fabwire.lineus.plot.geometry import compose as then
@@ -144,7 +144,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None) -> 
         tolerance = RELATIVE_TOLERANCE * math.hypot(width, height)
     reader = _Reader(root, name, tolerance)
     if vb.error:
-        reader.unsupported[f"the viewBox {root.get('viewBox', '')[:60]!r} is in error ({vb.error}): ignored, as "
+        reader.unsupported[f"the viewBox {excerpt(root.get('viewBox', ''), 60)} is in error ({vb.error}): ignored, as "
                            "browsers do"] += 1
     try:
         reader.check_expansion()
@@ -259,7 +259,7 @@ class _Reader:
         try:
             return transform(value)
         except ValueError as exc:
-            self.unsupported[f"the transform {(value or '')[:60]!r} on <{local(el.tag)}> is in error ({exc}): "
+            self.unsupported[f"the transform {excerpt((value or ''), 60)} on <{local(el.tag)}> is in error ({exc}): "
                              "ignored, as browsers do"] += 1
             return IDENTITY
 
@@ -376,7 +376,7 @@ class _Reader:
         if w <= 0 or h <= 0 or vb.empty:
             return
         if vb.error:
-            self.unsupported[f"the viewBox {el.get('viewBox', '')[:60]!r} on <{local(el.tag)}> is in error "
+            self.unsupported[f"the viewBox {excerpt(el.get('viewBox', ''), 60)} on <{local(el.tag)}> is in error "
                              f"({vb.error}): ignored, as browsers do"] += 1
         box = vb.box
         inner = then(matrix, viewport_matrix(box, x, y, w, h, el.get("preserveAspectRatio")))
