@@ -106,7 +106,7 @@ def test_a_real_field_that_differs_is_reported_where_it_differs(tmp_path: Path) 
     report = json.loads(result.stdout)
     [difference] = report["differences"]
     got = difference["got"].encode("latin-1")
-    offset = difference["offset"]
+    offset = difference["offset_bytes"]
     line_start = got.index(b"\nz:") + 1
     assert line_start + 2 <= offset < got.index(b"\n", line_start)  # in the z-offset line, not at L before it
     assert {"exchange": 1, "fields": ["L"]} in report["ignored"]

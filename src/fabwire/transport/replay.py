@@ -177,11 +177,11 @@ def report_lines(report: ReplayReport, quiet: float) -> Iterator[str]:
 
 def report_json(report: ReplayReport) -> dict[str, object]:
     """The report as data: `protocol` (None when unknown), `strict`, `differences` (exchange, sent, expected, got,
-    offset; bytes as latin-1 text by the caller's encoder) and `ignored` (exchange, fields)."""
+    offset_bytes; bytes as latin-1 text by the caller's encoder) and `ignored` (exchange, fields)."""
     return {
         "protocol": report.grammar.protocol if report.grammar is not None else None,
         "strict": report.strict,
         "differences": [{"exchange": d.exchange.number, "sent": d.exchange.sent, "expected": d.exchange.expected,
-                         "got": d.got, "offset": d.offset} for d in report.differences],
+                         "got": d.got, "offset_bytes": d.offset} for d in report.differences],
         "ignored": [{"exchange": i.exchange, "fields": list(i.fields)} for i in report.ignored],
     }
