@@ -21,6 +21,7 @@ from fabwire.cli_support import (
     check_early_link_options,
     configure_logging,
     pass_app,
+    uses_link_options,
 )
 from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
@@ -61,7 +62,7 @@ def cli(ctx: click.Context) -> None:
 
 
 cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS, *itertools.chain(*LINK_OPTIONS.values())))
-cli.shared = GLOBAL_OPTIONS
+cli.shared = (*GLOBAL_OPTIONS, *DEVICE_OPTIONS)
 
 
 @cli.group(
@@ -148,6 +149,7 @@ def _records(file: Path, note: Callable[[str], None]) -> Iterator[TraceRecord]:
               help="Where to send: host:port, tcp://…, /dev/tty…, or sim://KIND.")
 @click.option("--quiet", type=click.FloatRange(min=0.01), default=2.0, show_default=True,
               help="Seconds of silence that end a reply shorter than the recorded one.")
+@uses_link_options("timeout")
 @pass_app
 def trace_replay(app: App, file: Path, address: str, quiet: float) -> int:
     """Send the host side of a capture to ADDRESS and report each reply that differs from the recording."""
