@@ -5,9 +5,10 @@ from __future__ import annotations
 import itertools
 import sys
 import traceback
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 import click
 
@@ -23,7 +24,7 @@ from fabwire.cli_support import (
     pass_app,
     uses_link_options,
 )
-from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, RemoteProtocolError
+from fabwire.errors import EXIT_INTERRUPTED, ConfigWarning, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
 from fabwire.simserve import SERVE_OPTIONS
 
@@ -195,8 +196,23 @@ def _fail(app: App, message: str, code: int) -> int:
     return code
 
 
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: TextIO | None = None, line: str | None = None) -> None:
+    """fabwire's own warnings as one line on stderr, as its errors are; others as Python shows them."""
+    if issubclass(category, ConfigWarning):
+        click.echo(f"fabwire: warning: {message}", err=True)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: one line on stderr and a distinct exit code per error kind; a traceback only with --debug."""
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     app = App(debug="--debug" in (argv if argv is not None else sys.argv[1:]))
     configure_logging(0)
     try:
