@@ -85,3 +85,17 @@ class FollowInterrupted(FabwireError):
     """Ctrl-C while following a job the machine has already taken (a print, a tool change): it goes on."""
 
     exit_code = EXIT_INTERRUPTED
+
+
+def excerpt(value: str | bytes, limit: int = 40) -> str:
+    """`value` quoted with its escapes visible, as `repr` shows it, in at most about `limit` + 4 characters: a
+    message quoting outside text stays one short line however long or exotic that text is (`'\\U0001f600'` takes
+    12 characters for one). A cut is marked with `…` inside the quotes."""
+    shown = repr(value)
+    if len(shown) <= limit + 3:
+        return shown
+    cut = value[:limit]
+    while len(repr(cut)) > limit + 3:
+        cut = cut[:-1]
+    quoted = repr(cut)
+    return quoted[:-1] + "…" + quoted[-1]

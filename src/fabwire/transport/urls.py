@@ -9,7 +9,7 @@ from urllib.parse import parse_qsl, urlsplit
 import msgspec
 
 from fabwire.devices import DeviceKind
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 
 _WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
 """`COM3`: a serial port on Windows (no host is called that)."""
@@ -37,18 +37,17 @@ class Endpoint(msgspec.Struct, frozen=True):
 
 
 def _bad(text: str, why: str) -> InputError:
-    shown = text if len(text) <= 80 else text[:60] + "…"
     return InputError(
-        f"malformed device address {shown!r}: {why} "
+        f"malformed device address {excerpt(text, 60)}: {why} "
         "(use host, host:port, tcp://host:port, /dev/ttyX, serial:///dev/ttyX or sim://name)"
     )
 
 
 def _port(text: str, raw: str) -> int:
     if not re.fullmatch(r"[0-9]{1,5}", raw):  # ASCII digits only, and few: int() of 5,000 digits raises
-        shown = raw if len(raw) <= 12 else raw[:12] + "…"
+        shown = excerpt(raw, 12)
         what = "too long to be a port" if raw.isascii() and raw.isdigit() else "not a number"
-        raise _bad(text, f"port {shown!r} is {what}")
+        raise _bad(text, f"port {shown} is {what}")
     port = int(raw)
     if not 1 <= port <= 65535:
         raise _bad(text, f"port {port} is outside 1-65535")
