@@ -87,9 +87,11 @@ def completion(shell: str) -> None:
     """Print the completion script for SHELL; it completes commands, options and configured device names.
 
     \b
-    bash: fabwire completion bash > ~/.local/share/bash-completion/completions/fabwire
+    bash: mkdir -p ~/.local/share/bash-completion/completions
+          fabwire completion bash > ~/.local/share/bash-completion/completions/fabwire
     zsh:  fabwire completion zsh > "${fpath[1]}/_fabwire"
-    fish: fabwire completion fish > ~/.config/fish/completions/fabwire.fish
+    fish: mkdir -p ~/.config/fish/completions
+          fabwire completion fish > ~/.config/fish/completions/fabwire.fish
     """
     from click.shell_completion import get_completion_class
 
