@@ -5,15 +5,18 @@ from __future__ import annotations
 
 import json
 import random
+import tempfile
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from clitools import RunningSimulator, cli_env, run_cli, start_simulator
 from fabwire.config import resolve_target
-from fabwire.devices import XYZ
+from fabwire.devices import LINEUS, XYZ, DeviceKind
 from fabwire.errors import ConfigError, ConfigWarning
 
 OFFICE = '[devices.office]\nkind = "xyz"\nurl = "sim://xyz"\n'
@@ -108,3 +111,21 @@ def test_the_library_warns_and_uses_the_address(tmp_path: Path) -> None:
             resolve_target("office", XYZ, path)
         with pytest.raises(ConfigError, match="unknown key 'defualt'"):
             resolve_target(None, XYZ, path)
+
+
+hosts = st.one_of(st.ip_addresses(v=4).map(str),
+                  st.from_regex(r"\A[a-z][a-z0-9-]{0,15}(\.[a-z][a-z0-9-]{0,10}){1,3}\Z"))
+
+
+@settings(max_examples=200, deadline=None)
+@given(host=hosts, kind=st.sampled_from([XYZ, LINEUS]))
+def test_any_dotted_host_or_ip_is_an_address_past_a_broken_config(host: str, kind: DeviceKind) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "devices.toml"
+        path.write_text(OFFICE + "defualt = true\n")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            target = resolve_target(host, kind, path)
+    assert (target.endpoint.host, target.endpoint.port) == (host, kind.default_port)
+    assert [type(w.message) for w in caught] == [ConfigWarning]
+    assert "unknown key 'defualt'" in str(caught[0].message)
