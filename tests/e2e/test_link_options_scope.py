@@ -3,6 +3,8 @@ present or future, refuses them in one line with exit 2, wherever on the line th
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Iterator
 from pathlib import Path
 
 import click
@@ -48,6 +50,17 @@ def positions(path: tuple[str, ...], flag: str) -> list[list[str]]:
     return [[*path[:i], flag, value, *path[i:]] for i in range(len(path) + 1)]
 
 
+@pytest.fixture
+def cli_logging_restored() -> Iterator[None]:
+    """`main` in-process sets up fabwire's logging as the command line does: undone for the tests after this one."""
+    logger = logging.getLogger("fabwire")
+    level, handlers = logger.level, list(logger.handlers)
+    yield
+    logger.setLevel(level)
+    logger.handlers[:] = handlers
+
+
+@pytest.mark.usefixtures("cli_logging_restored")
 def test_every_command_that_opens_no_device_refuses_link_options_wherever_typed(
         capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)  # nothing a wrongly accepted command writes lands in the worktree
