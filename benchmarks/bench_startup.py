@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from common import Figure
+from fabwire.lifeline import spawn
 
 RUNS = 9
 RAW_CLIENT = """
@@ -58,8 +59,8 @@ def run() -> list[Figure]:
 
     compileall.compile_dir(Path(fabwire.__file__).parent, quiet=1)
     fabwire_cmd = fabwire_command()
-    sim = subprocess.Popen([*fabwire_cmd, "sim", "xyz", "--listen", "127.0.0.1:0"], stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True)
+    sim = spawn([*fabwire_cmd, "sim", "xyz", "--listen", "127.0.0.1:0"], stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL, text=True)
     try:
         assert sim.stdout is not None
         address = sim.stdout.readline().rsplit(" ", 1)[1].strip()

@@ -10,6 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from fabwire.lifeline import spawn
+
 STARTUP_TIMEOUT = 20.0
 
 
@@ -54,6 +56,8 @@ class RunningSimulator:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        if self.process.stdin is not None and not self.process.stdin.closed:
+            self.process.stdin.close()
         if self.process.stderr is None or self.process.stderr.closed:
             return self._stderr
         self._stderr = self.process.stderr.read()
@@ -65,10 +69,8 @@ class RunningSimulator:
 
 def start_simulator(*args: str, announcements: int = 1, env: dict[str, str] | None = None) -> RunningSimulator:
     """Start `fabwire sim ARGS` and wait until it has announced `announcements` places it serves on."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "fabwire", "sim", *args],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env or cli_env(),
-    )
+    process = spawn([sys.executable, "-m", "fabwire", "sim", *args],  # ends with the test run, however it ends
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env or cli_env())
     where: list[str] = []
     assert process.stdout is not None
 

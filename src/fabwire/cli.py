@@ -24,6 +24,7 @@ from fabwire.cli_support import (
     pass_app,
     uses_link_options,
 )
+from fabwire.devices import KINDS
 from fabwire.errors import EXIT_INTERRUPTED, ConfigWarning, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
 from fabwire.simserve import SERVE_OPTIONS
@@ -152,43 +153,45 @@ def _records(file: Path, note: Callable[[str], None]) -> Iterator[TraceRecord]:
               help="Where to send: host:port, tcp://…, /dev/tty…, or sim://KIND.")
 @click.option("--quiet", type=click.FloatRange(min=0.01), default=2.0, show_default=True,
               help="Seconds of silence that end a reply shorter than the recorded one.")
+@click.option("--strict", is_flag=True,
+              help="Compare every byte, the values that vary by nature (uptime, clocks, temperatures) too.")
+@click.option("--protocol", type=click.Choice(sorted(KINDS)),
+              help="The capture's protocol, for a capture that does not name it (default: from the capture).")
 @uses_link_options("timeout")
 @pass_app
-def trace_replay(app: App, file: Path, address: str, quiet: float) -> int:
-    """Send the host side of a capture to ADDRESS and report each reply that differs from the recording."""
+def trace_replay(app: App, file: Path, address: str, quiet: float, strict: bool, protocol: str | None) -> int:
+    """Send the host side of a capture to ADDRESS and report each reply that differs from the recording.
+
+    Values that vary by nature (an XYZ printer's power-on minutes and temperatures, a Line-us's clock, an MMU's
+    progress) are not compared, and are listed as ignored when they differed; --strict compares them too.
+    """
     import asyncio
 
     from fabwire.transport import open_transport
-    from fabwire.transport.replay import Difference, replay
-    from fabwire.transport.tap import escape_text
+    from fabwire.transport.replay import ReplayReport, replay, report_json, report_lines
+    from fabwire.transport.tap import trace_device
+    from fabwire.transport.volatile import GRAMMARS
 
     records = _records(file, app.output.note)
     first = next(records)  # an empty or unreadable capture is refused before connecting
     records = itertools.chain([first], records)
+    grammar = GRAMMARS.get(protocol or trace_device(file) or "")
 
-    async def main() -> list[Difference]:
+    async def main() -> ReplayReport:
         link = await open_transport(address, connect_timeout=app.timeout or 5.0)
         try:
-            return await replay(link, records, quiet=quiet)
+            return await replay(link, records, quiet=quiet, grammar=grammar, strict=strict)
         finally:
             await link.close()
 
-    found = asyncio.run(main())
+    report = asyncio.run(main())
 
     def human() -> None:
-        if not found:
-            click.echo("every reply matches the recording")
-        for d in found:
-            click.echo(f"exchange {d.exchange.number}: sent {escape_text(d.exchange.sent)[:80]}")
-            click.echo(f"  expected {escape_text(d.exchange.expected)[:200]}")
-            if d.got:
-                click.echo(f"  got      {escape_text(d.got)[:200]}  (differs from byte {d.offset})")
-            else:
-                click.echo(f"  got      no reply ({quiet:g} s of silence)")
+        for line in report_lines(report, quiet):
+            click.echo(line)
 
-    app.output.result([{"exchange": d.exchange.number, "sent": d.exchange.sent, "expected": d.exchange.expected,
-                        "got": d.got, "offset": d.offset} for d in found], human)
-    return 0 if not found else EXIT_REPLAY_DIFFERS
+    app.output.result(report_json(report), human)
+    return 0 if not report.differences else EXIT_REPLAY_DIFFERS
 
 
 def _fail(app: App, message: str, code: int) -> int:

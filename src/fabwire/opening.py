@@ -86,7 +86,8 @@ class DeviceLink(msgspec.Struct):
             transport = FaultyTransport(transport, self.faults)
         if self.trace is not None or logging.getLogger("fabwire.wire").isEnabledFor(logging.DEBUG):
             if self.trace is not None and self._writer is None:
-                self._writer = TraceWriter.to_file(self.trace, url=transport.url, peer=transport.peer)
+                self._writer = TraceWriter.to_file(self.trace, url=transport.url, peer=transport.peer,
+                                                   device=self.kind.name)
             transport = TapTransport(transport, self._writer)
         return transport
 

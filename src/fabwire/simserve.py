@@ -17,8 +17,15 @@ import msgspec
 
 from fabwire.cli_support import App
 from fabwire.errors import InputError
+from fabwire.lifeline import watch
 from fabwire.transport.base import Transport
-from fabwire.transport.limits import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS, ConnectionLimits
+from fabwire.transport.limits import (
+    DEFAULT_IDLE_TIMEOUT,
+    DEFAULT_MAX_CONNECTIONS,
+    ConnectionLimits,
+    Farewell,
+    plain_line,
+)
 from fabwire.transport.registry import DeviceServer
 from fabwire.transport.tap import FROM_DEVICE, TO_DEVICE, Direction, TapTransport, TraceWriter, escape_text
 from fabwire.transport.tcp import serve_tcp
@@ -147,17 +154,21 @@ async def serve(
     link: Path | None,
     default_port: int | None,
     json_mode: bool = False,
+    farewell: Farewell = plain_line,
 ) -> None:
-    """Serve until SIGINT/SIGTERM. Each TCP connection and the pty each get their own `handler` call.
+    """Serve until SIGINT/SIGTERM, or until the parent that started this process ends (`fabwire.lifeline`).
+    Each TCP connection and the pty each get their own `handler` call.
 
-    The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS).
+    The connection limit, idle timeout and trace file come from the `fabwire sim` command line (SERVE_OPTIONS);
+    `farewell` words, in the device's protocol, why the limit closes a client (`fabwire.transport.limits`).
     """
     from fabwire.logsink import log_in_background  # only serving needs the writer thread
 
     log_in_background()  # a stderr nobody reads must not freeze the simulator
     settings = _settings()
     limits = ConnectionLimits(settings.max_connections, settings.idle_timeout)
-    writer = TraceWriter.to_file(settings.trace, url=f"sim://{kind}", peer="clients") if settings.trace else None
+    writer = (TraceWriter.to_file(settings.trace, url=f"sim://{kind}", peer="clients", device=kind)
+              if settings.trace else None)
     handler = observed(handler, writer)
     if not listen and not use_pty:
         if default_port is None:
@@ -169,13 +180,15 @@ async def serve(
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    watch(lambda: loop.call_soon_threadsafe(stop.set))  # a parent that started us as its child: stop with it
     servers: list[asyncio.Server] = []
     tasks: list[asyncio.Future[None]] = []
     pty_device = None
     try:
         for text in listen:
             address = parse_listen(text, default_port or 0)
-            server = await serve_tcp(handler, address.host, address.port, limits=limits, what=f"{kind} simulator")
+            server = await serve_tcp(handler, address.host, address.port, limits=limits, what=f"{kind} simulator",
+                                    farewell=farewell)
             servers.append(server)
             host, port = server.sockets[0].getsockname()[:2]
             shown = f"[{host}]" if ":" in host else host

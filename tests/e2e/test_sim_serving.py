@@ -84,3 +84,36 @@ def test_a_client_turned_away_hears_that_the_simulator_is_busy(kind: str) -> Non
     assert refused.returncode == 8, refused.stderr
     assert refused.stderr == (f"fabwire: error: {host}:{port}: the {kind} simulator turned the connection away: "
                               "all 1 of its connections are in use (its --max-connections); try again later\n")
+
+
+FAREWELL = {"xyz": b"xyz simulator replaced this quiet connection: all 1 connections were in use\r\n",
+            "mmu": b"mmu simulator replaced this quiet connection: all 1 connections were in use\r\n",
+            "lineus": b'error INFO:"lineus simulator replaced this quiet connection: all 1 connections were in use"'
+                      b"\r\n\x00"}
+"""What each simulator tells a quiet client it closes to make room: a Line-us error reply; for the XYZv3 and MMU
+protocols, which have no error a client would show for it, the plain line their refusals use."""
+
+
+@pytest.mark.parametrize("kind", sorted(KEEP_BUSY))
+def test_the_quiet_client_replaced_is_told_why(kind: str) -> None:
+    sim = start_simulator(kind, "--listen", "127.0.0.1:0", "--max-connections", "1", "--speed", "50")
+    where = endpoint(sim.url)
+    try:
+        with socket.create_connection(where, timeout=10) as quiet:
+            if kind == "lineus":
+                assert quiet.recv(200).startswith(b"hello")
+            deadline = time.monotonic() + 60
+            while True:  # until the quiet one has been quiet long enough to give up its place
+                assert time.monotonic() < deadline, "the newcomer was never served"
+                with socket.create_connection(where, timeout=10) as newcomer:
+                    newcomer.sendall(KEEP_BUSY[kind])
+                    if b"busy: all 1 connections" not in newcomer.recv(4096):
+                        break
+                time.sleep(0.1)
+            said = b""
+            while chunk := quiet.recv(4096):
+                said += chunk
+    finally:
+        stderr = sim.stop()
+    assert said == FAREWELL[kind]
+    assert "closed the quietest connection" in stderr

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from fabwire.lineus.sim import LineUsSim, SimOptions
+from fabwire.lineus.sim import LineUsSim, SimOptions, farewell
 from fabwire.transport import serve_tcp
 
 TERM = b"\r\n\x00"
@@ -41,7 +41,7 @@ class Raw:
             return await self.reader.readuntil(TERM)
 
     async def reply_line(self, timeout: float = 5.0) -> bytes:
-        """Up to the first `\\r\\n`: a greeting, or a refusal (which ends there, without the NUL)."""
+        """Up to the first `\\r\\n`: a greeting, or a refusal."""
         async with asyncio.timeout(timeout):
             return await self.reader.readuntil(b"\r\n")
 
@@ -75,7 +75,7 @@ async def lineus_sim() -> AsyncIterator[SimStarter]:
     async def start(files: dict[int, str] | None = None, **options: Any) -> RunningSim:
         options.setdefault("speed", float("inf"))
         sim = LineUsSim(SimOptions(**options), files=files)
-        server = await serve_tcp(sim.serve, "127.0.0.1", 0)
+        server = await serve_tcp(sim.serve, "127.0.0.1", 0, farewell=farewell)
         servers.append(server)
         sims.append(sim)
         return RunningSim(sim, server.sockets[0].getsockname()[1])

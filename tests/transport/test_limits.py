@@ -9,9 +9,9 @@ from collections.abc import AsyncIterator
 
 import pytest
 
-from fabwire.errors import LinkClosed
+from fabwire.errors import LinkClosed, LinkError
 from fabwire.transport import Transport, open_tcp, serve_tcp
-from fabwire.transport.limits import ConnectionLimits, RateLimitedLog
+from fabwire.transport.limits import ConnectionLimits, RateLimitedLog, refusal
 
 LIMIT = 10
 
@@ -51,10 +51,43 @@ async def test_at_the_limit_the_quietest_connection_makes_room() -> None:
         assert await ask(talking) == b"ping"
         newcomer = await open_tcp("127.0.0.1", port)
         assert await ask(newcomer) == b"ping"
-        assert await closed_by_peer(quiet) == b""
+        farewell = await closed_by_peer(quiet)
+        assert farewell == b"simulator replaced this quiet connection: all 2 connections were in use\r\n"
         assert await ask(talking, b"still here") == b"still here"
         for link in (quiet, talking, newcomer):
             await link.close()
+    reason = refusal(farewell, "127.0.0.1:1337")
+    assert isinstance(reason, LinkClosed)
+    assert str(reason) == ("127.0.0.1:1337: the simulator closed this connection, quiet the longest of its 2, to "
+                           "serve a new client (its --max-connections); connect again to go on")
+
+
+async def test_each_protocol_words_the_farewell_in_its_own_form() -> None:
+    def framed(text: str) -> bytes:
+        return b"<" + text.encode() + b">"
+
+    async with asyncio.timeout(LIMIT):
+        server = await serve_tcp(echo, "127.0.0.1", 0, limits=ConnectionLimits(max_connections=1, busy_for=3600),
+                                 farewell=framed)
+        port = int(server.sockets[0].getsockname()[1])
+        try:
+            first = await open_tcp("127.0.0.1", port)
+            assert await ask(first) == b"ping"
+            refused = await open_tcp("127.0.0.1", port)
+            assert await closed_by_peer(refused) == (
+                b"<simulator busy: all 1 connections are in use, try again later>")
+            await first.close()
+            await refused.close()
+        finally:
+            server.close()
+
+
+def test_a_farewell_is_recognised_whatever_surrounds_it() -> None:
+    busy = refusal(b'error INFO:"xyz simulator busy: all 3 connections are in use, try again later"\r\n\0', "p")
+    assert type(busy) is LinkError
+    assert "turned the connection away: all 3 of its connections" in str(busy)
+    assert refusal(b"ok X:1000 Y:1000 Z:1000\r\n\0", "p") is None
+    assert refusal(b"simulator busy: all many connections", "p") is None
 
 
 async def test_when_every_connection_is_busy_a_newcomer_is_told_why() -> None:

@@ -33,7 +33,9 @@ def test_replay_to_the_same_and_to_another_printer(tmp_path: Path) -> None:
         assert same.stdout.strip() == "every reply matches the recording"
         other = run_cli("--json", "trace", "replay", str(trace), "--to", nano.url, "--quiet", "0.5")
         assert other.returncode == 6  # documented: the device broke the protocol (answered otherwise)
-        differences = json.loads(other.stdout)
+        report = json.loads(other.stdout)
+        assert report["protocol"] == "xyz"
+        differences = report["differences"]
         assert differences[0]["exchange"] == 1
         assert differences[0]["sent"] == "XYZv3/query=a\r\n"
         assert "dv1NX0A000" in differences[0]["got"]

@@ -1,4 +1,5 @@
-"""Simulators as real child processes (`python -m fabwire sim …`) on loopback TCP, always stopped afterwards."""
+"""Simulators as real child processes (`python -m fabwire sim …`) on loopback TCP, always stopped afterwards:
+by `stop_all`, or by their lifeline when this process ends without it (`fabwire.lifeline`)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import IO
 
 from fabwire.errors import FabwireError, LinkError
+from fabwire.lifeline import spawn
 
 STARTUP_TIMEOUT = 20.0
 STOP_TIMEOUT = 10.0
@@ -102,8 +104,10 @@ class SimulatorProcess:
         self._close_streams()
 
     def _close_streams(self) -> None:
-        if self.process.stdout is not None and not self.process.stdout.closed:
-            self.process.stdout.close()
+        for stream in (self.process.stdout, self.process.stdin):  # stdin: the child's lifeline, done with
+            if stream is not None and not stream.closed:
+                with contextlib.suppress(OSError):
+                    stream.close()
 
 
 def start_simulators(specs: Sequence[tuple[str, Sequence[str]]]) -> list[SimulatorProcess]:
@@ -115,8 +119,7 @@ def start_simulators(specs: Sequence[tuple[str, Sequence[str]]]) -> list[Simulat
             log = tempfile.TemporaryFile()  # noqa: SIM115 - closed by stop_all
             command = [sys.executable, "-m", "fabwire", "sim", device, "--listen", "127.0.0.1:0", *args]
             try:
-                process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=log,
-                                           env=_child_env())
+                process = spawn(command, stdout=subprocess.PIPE, stderr=log, env=_child_env())
             except OSError as exc:
                 log.close()
                 raise SimulatorFailed(f"cannot start the {device} simulator: {exc.strerror or exc}") from exc

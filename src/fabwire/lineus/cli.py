@@ -336,7 +336,7 @@ def sim_lineus(app: App, listen: tuple[str, ...], speed: float, version: str, na
                record: Path | None, advertise: bool) -> None:
     """A Line-us on TCP that the official clients cannot tell from the robot."""
     from fabwire.lineus.discovery import Advertiser
-    from fabwire.lineus.sim import LineUsSim, SimOptions, resolve_version
+    from fabwire.lineus.sim import LineUsSim, SimOptions, farewell, resolve_version
     from fabwire.simserve import parse_listen, serve
 
     if record is not None:
@@ -365,7 +365,7 @@ def sim_lineus(app: App, listen: tuple[str, ...], speed: float, version: str, na
             for adv in advertisers:
                 await adv.start()
             await serve("lineus", sim.serve, listen=tuple(addresses), use_pty=False, link=None,
-                        default_port=LINEUS.default_port, json_mode=app.json)
+                        default_port=LINEUS.default_port, json_mode=app.json, farewell=farewell)
         finally:
             for adv in advertisers:
                 with contextlib.suppress(Exception):

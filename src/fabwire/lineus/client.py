@@ -228,6 +228,10 @@ class LineUs:
             data = await self.transport.read()
             self._reader.feed(data)
             while (message := self._reader.next_message()) is not None:
+                if isinstance(message, p.Reply) and not message.ok and (
+                        gone := refusal(message.info.encode(), self.transport.peer or self.transport.url)):
+                    self._fail(gone)  # the simulator's connection limit closed us: its reason, not a reply's
+                    return
                 if not self._waiting:
                     raise RemoteProtocolError(f"unexpected message from the Line-us: {message.text()!r}")
                 _, future = self._waiting.popleft()

@@ -427,6 +427,13 @@ class LineUsSim:
 # -- in-process registration --------------------------------------------------------------------------------
 
 
+def farewell(reason: str) -> bytes:
+    """What the simulator sends a client its connection limit closes: an `error INFO:"reason"` reply, ended by
+    `\r\n\0` like every message (Line-us-Programming README, "Responses"; the INFO key is how clients show an
+    error's words, lineus.md 1.4), so a client waiting for a reply gets this one and shows why."""
+    return error_reply(reason).encode()
+
+
 def options_from(values: dict[str, str]) -> SimOptions:
     """`sim://lineus?speed=inf&version=1.0.1&name=bot&serial=42&reply=accept` options."""
     known = {"speed", "version", "name", "serial", "reply", "step_time"}

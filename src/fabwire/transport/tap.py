@@ -1,7 +1,8 @@
 """The trace tap: every chunk both ways, timestamped, as replayable JSONL.
 
 File format, one JSON object per line:
-  {"trace": "fabwire", "version": 1, "url": ..., "peer": ..., "started": ISO-8601}   (first line)
+  {"trace": "fabwire", "version": 1, "url": ..., "peer": ..., "started": ISO-8601, "device": kind}   (first line;
+   "device", the protocol spoken — xyz, lineus or mmu — is absent from older captures)
   {"t": seconds since start, "dir": ">" (to the device) or "<" (from it), "data": bytes as latin-1 text}
   {"t": ..., "event": "eof" | "close" | "error", "detail": ...}
 Latin-1 maps every byte to one code point, so JSON string escapes keep captures lossless and text stays readable.
@@ -44,7 +45,8 @@ class TraceWriter:
     that reconnects (a new link, a new tap) keeps one capture.
     """
 
-    def __init__(self, stream: IO[str], *, url: str, peer: str, path: Path | None = None) -> None:
+    def __init__(self, stream: IO[str], *, url: str, peer: str, path: Path | None = None,
+                 device: str | None = None) -> None:
         self._stream = stream
         self._path = path
         self._start = time.monotonic()
@@ -55,15 +57,17 @@ class TraceWriter:
             "peer": peer,
             "started": datetime.now(UTC).isoformat(timespec="milliseconds"),
         }
+        if device is not None:
+            header["device"] = device
         self._emit(header)
 
     @classmethod
-    def to_file(cls, path: str | Path, *, url: str, peer: str) -> TraceWriter:
+    def to_file(cls, path: str | Path, *, url: str, peer: str, device: str | None = None) -> TraceWriter:
         try:
             stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by close()
         except OSError as exc:
             raise InputError(f"cannot write trace file {path}: {exc.strerror}") from exc
-        return cls(stream, url=url, peer=peer, path=Path(path))
+        return cls(stream, url=url, peer=peer, path=Path(path), device=device)
 
     def _emit(self, obj: dict[str, object]) -> None:
         if self._stream.closed and self._path is not None:
@@ -124,6 +128,18 @@ def read_trace(path: str | Path, on_cut: Callable[[str], None] | None = None) ->
                 record = _parse_record(path, number, line)
                 if record is not None:
                     yield record
+
+
+def trace_device(path: str | Path) -> str | None:
+    """The device kind a capture's header names (`xyz`, `lineus`, `mmu`), or None when it names none. Reads the
+    first line only; a file that is no capture is left for `read_trace` to refuse."""
+    try:
+        with open(path, encoding="utf-8", newline="\n") as stream:
+            header = json.loads(stream.readline(MAX_TRACE_LINE + 1))
+    except (OSError, ValueError, RecursionError):
+        return None
+    device = header.get("device") if isinstance(header, dict) else None
+    return device if isinstance(device, str) else None
 
 
 def _cut_off(line: str) -> bool:

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import errno
 import socket
 from collections.abc import Awaitable, Callable
 
 from fabwire.errors import LinkError, LinkTimeout
 from fabwire.transport.base import StreamTransport, Transport
-from fabwire.transport.limits import ConnectionLimits, ConnectionPool, Watched
+from fabwire.transport.limits import ConnectionLimits, ConnectionPool, Farewell, Watched, plain_line
 
 ConnectionHandler = Callable[[Transport], Awaitable[None]]
 
@@ -57,12 +56,13 @@ async def open_tcp(host: str, port: int, *, timeout: float = DEFAULT_CONNECT_TIM
 
 
 async def serve_tcp(handler: ConnectionHandler, host: str, port: int, *, limits: ConnectionLimits | None = None,
-                    what: str = "simulator") -> asyncio.Server:
-    """Listen on host:port and run `handler` for each connection, within `limits` (see `transport.limits`).
+                    what: str = "simulator", farewell: Farewell = plain_line) -> asyncio.Server:
+    """Listen on host:port and run `handler` for each connection, within `limits` (see `transport.limits`);
+    a client the limits close is told why in the form `farewell` gives.
 
     The transport is closed after the handler; a handler's failure ends its connection with one log line.
     """
-    pool = ConnectionPool(limits or ConnectionLimits(), what)
+    pool = ConnectionPool(limits or ConnectionLimits(), what, farewell)
 
     async def on_connect(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         _nodelay(writer)
@@ -75,11 +75,12 @@ async def serve_tcp(handler: ConnectionHandler, host: str, port: int, *, limits:
                 await pool.serve(link, task)
             finally:
                 task.cancel()
-                with contextlib.suppress(asyncio.CancelledError, LinkError, ConnectionError):
-                    try:
-                        await task
-                    except Exception as exc:
-                        pool.log.warning("failed", f"{what}: the connection from {link.peer} failed: {exc!r}")
+                try:
+                    await task
+                except (asyncio.CancelledError, LinkError, ConnectionError):
+                    pass  # the client went, or the limits closed it (logged there)
+                except Exception as exc:
+                    pool.log.warning("failed", f"{what}: the connection from {link.peer} failed: {exc!r}")
         except asyncio.CancelledError:
             pass  # the server is shutting down; ending quietly spares asyncio's stream callback a traceback
         finally:
