@@ -48,12 +48,13 @@ def _poly(points: np.ndarray) -> str:
 
 
 def sketch(rng: np.random.Generator, paths: int, per_path: int) -> str:
-    """Random-walk scribbles scattered over the page: many short strokes, the worst case for travel."""
+    """Random-walk scribbles scattered over the page: many short strokes, the worst case for travel. Kept on the
+    page (a browser shows nothing beyond it, and neither does the plan)."""
     out = []
     for _ in range(paths):
         start = rng.uniform(20, 980, 2)
         steps = rng.normal(0, 4, (per_path, 2))
-        out.append(_poly(np.vstack([start, start + np.cumsum(steps, axis=0)])))
+        out.append(_poly(np.clip(np.vstack([start, start + np.cumsum(steps, axis=0)]), 0.0, 1000.0)))
     return _svg(out)
 
 

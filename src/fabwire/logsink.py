@@ -11,6 +11,7 @@ import atexit
 import logging
 import logging.handlers
 import queue
+import sys
 import threading
 import time
 from typing import TextIO
@@ -38,11 +39,28 @@ class DroppingQueueHandler(logging.handlers.QueueHandler):
             self.dropped += 1
 
 
+class _StreamWriter(logging.StreamHandler):  # type: ignore[type-arg]
+    """Writes lines to the stream until it is gone (the reader closed the pipe, the fd was closed), then drops
+    them quietly: a traceback about a dead stderr would only go to that same dead stderr, or into a host's."""
+
+    gone = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self.gone:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:  # noqa: N802 - logging's name
+        if isinstance(sys.exc_info()[1], OSError | ValueError):  # ValueError: write to a closed file
+            self.gone = True
+            return
+        super().handleError(record)
+
+
 def non_blocking_handler(stream: TextIO, formatter: logging.Formatter) -> logging.Handler:
     """A handler writing `formatter`'s lines to `stream` from a daemon thread; at exit, what is queued gets a
     moment to be written (a pipe nobody reads cannot hold the process)."""
     records: queue.Queue[logging.LogRecord] = queue.Queue(QUEUE_LINES)
-    writer = logging.StreamHandler(stream)
+    writer = _StreamWriter(stream)
     writer.setFormatter(formatter)
 
     def write_forever() -> None:

@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import re
 import signal
 import sys
 from collections.abc import Callable
@@ -49,8 +50,8 @@ def parse_listen(text: str, default_port: int) -> ListenAddress:
     host = host or "127.0.0.1"
     if not port_text:
         return ListenAddress(host, default_port)
-    if not port_text.isdigit() or int(port_text) > 65535:
-        raise InputError(f"bad listen address {text!r}: port must be a number from 0 to 65535")
+    if not re.fullmatch(r"[0-9]{1,5}", port_text) or int(port_text) > 65535:  # few ASCII digits: int() refuses 4,300
+        raise InputError(f"bad listen address {text[:60]!r}: port must be a number from 0 to 65535")
     return ListenAddress(host, int(port_text))
 
 

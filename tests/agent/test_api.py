@@ -218,10 +218,10 @@ DAMAGED_3W = bytes(b ^ (i == 9000) for i, b in enumerate(write_3w(b"G28\nG1 X10 
     ("part.gcode", b"G28\n" + b"G1 X1" * 300_000 + b"\nG28\n", "has a line of over"),
     ("part.3w", b"<svg xmlns='http://www.w3.org/2000/svg'/>", "SVG"),
     ("a.svg", b"not svg", "a.svg"),
-    ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'></svg>", "empty"),
+    ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'></svg>", "nothing to draw"),
     ("a.gcode", b"\xff\xfe\x00garbage", "a.gcode"),
     ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'><path d='M1 1 L1e308 5' "
-              b"stroke='black'/></svg>", "not finite"),
+              b"stroke='black'/></svg>", "beyond what a browser can hold"),
     ("part.gcode", b"G28\nG1 X10 Y10 E1 F1200\nG1 Z" + b"9" * 40 + b"\n", "not a print file"),
     ("part.gcode", b";TIME:99999999999\nG28\nG1 X10 Y10 E1 F1200\n", "not a print file"),
     ("part.3w", DAMAGED_3W, "is damaged"),

@@ -61,7 +61,8 @@ def test_upload_named_to_escape_lands_under_a_generated_name(bench: Bench) -> No
     uploads = bench.agent.state_dir / "uploads"
     with bench.agent.client() as client:
         lineus = wait_for(lambda: (d := device_of(client, "lineus"))["state"]["online"] and d, "the Line-us online")
-        svg = b'<svg xmlns="http://www.w3.org/2000/svg" width="20mm" height="20mm"><path d="M1 1 L19 19"/></svg>'
+        svg = (b'<svg xmlns="http://www.w3.org/2000/svg" width="20mm" height="20mm">'
+               b'<path d="M1 1 L19 19" stroke="black"/></svg>')
         response = client.post(f"/api/v1/devices/{lineus['id']}/jobs", params={"filename": "../../x.svg"},
                                content=svg)
         assert response.status_code == 201, response.text

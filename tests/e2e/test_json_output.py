@@ -18,7 +18,7 @@ from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.console import Output
 
 SVG = ('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
-       '<path d="M1 1 L9 9"/></svg>')
+       '<path d="M1 1 L9 9" stroke="black"/></svg>')
 
 
 def test_preview_json_of_a_non_utf8_file_name_is_valid_utf8(tmp_path: Path) -> None:
@@ -66,6 +66,9 @@ def test_any_string_prints_as_one_valid_utf8_json_line(key: str, value: str, raw
 
 NON_SI = re.compile(r"_(?:seconds|secs?|minutes|mins?|hours|millis|milliseconds|cm|m_left|percent_s)$")
 """Key endings that would name a unit other than the SI one fabwire uses (`_s`, `_mm`, `_c`, `_percent`)."""
+UNITLESS_BYTES = re.compile(r"(?:^|_)(?:size|gap|offset|length|bytes)$|^bytes_")
+"""A byte quantity without its unit last (`size`, `gap`, `header_offset`) or a unit without its quantity (`bytes`):
+byte counts are named `<quantity>_bytes`."""
 
 
 DEVICE_WORDS = {"raw", "fields", "machine_units"}
@@ -87,6 +90,10 @@ def _keys(value: object) -> Iterator[str]:
 def test_json_keys_name_si_units(simulator: SimulatorStarter, tmp_path: Path) -> None:
     svg = tmp_path / "square.svg"
     svg.write_text(SVG)
+    gcode = tmp_path / "part.gcode"
+    gcode.write_bytes(b"G28\nG1 Z0.2 F600\nG1 X10 Y5 E1\nG0 X0\n")
+    image = tmp_path / "image.bin"
+    image.write_bytes(b"dv1MW0A000+1.2.4" + bytes(2000))
     xyz = simulator("xyz", "--listen", "127.0.0.1:0").url
     mmu = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "50").url
     lineus = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf").url
@@ -94,9 +101,12 @@ def test_json_keys_name_si_units(simulator: SimulatorStarter, tmp_path: Path) ->
     for args in (("lineus", "preview", str(svg)), ("xyz", "-d", xyz, "status"), ("xyz", "-d", xyz, "zoffset"),
                  ("xyz", "-d", xyz, "energy", "3"), ("xyz", "-d", xyz, "wifi", "info"),
                  ("xyz", "-d", xyz, "wifi", "scan"), ("xyz", "-d", xyz, "jog", "x", "5"),
-                 ("mmu", "-d", mmu, "--speed", "50", "status"), ("lineus", "-d", lineus, "position"),
-                 ("lineus", "-d", lineus, "position", "--servos"), ("lineus", "-d", lineus, "move", "1200", "0"),
-                 ("lineus", "-d", lineus, "home"), ("lineus", "-d", lineus, "info")):
+                 ("mmu", "-d", mmu, "--speed", "50", "status"),
+                 ("xyz", "convert", str(gcode), str(tmp_path / "part.3w")), ("xyz", "info", str(tmp_path / "part.3w")),
+                 ("xyz", "info", str(gcode)), ("xyz", "-d", xyz, "firmware", "--yes", str(image)),
+                 ("lineus", "-d", lineus, "position"), ("lineus", "-d", lineus, "position", "--servos"),
+                 ("lineus", "-d", lineus, "move", "1200", "0"), ("lineus", "-d", lineus, "home"),
+                 ("lineus", "-d", lineus, "info")):
         done = run_cli("--json", *args, env=cli_env(tmp_path))
         assert done.returncode == 0, (args, done.stderr)
         documents.append(json.loads(done.stdout))
@@ -110,3 +120,5 @@ def test_json_keys_name_si_units(simulator: SimulatorStarter, tmp_path: Path) ->
     assert sorted(k for k in keys if NON_SI.search(k)) == []
     assert not keys & {"rssi", "distance", "pulley", "zoffset", "energy"}  # quantities always carry their unit
     assert sorted(k for k in keys if len(k) == 1) == []  # a firmware's letter (x, y, z, S …) names no unit
+    assert {"size_bytes", "gap_bytes", "header_offset_bytes", "written_bytes", "gcode_bytes"} <= keys
+    assert sorted(k for k in keys if (UNITLESS_BYTES.search(k) and not k.endswith("_bytes")) or k == "bytes") == []

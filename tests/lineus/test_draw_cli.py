@@ -80,7 +80,7 @@ def test_preview_json_and_pictures(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["preview", "{data}/truncated.svg"], "not a readable SVG"),
-        (["preview", "{data}/empty.svg"], "the drawing is empty"),
+        (["preview", "{data}/empty.svg"], "empty.svg: nothing to draw: no shape in it has a visible stroke or fill"),
         (["preview", "{data}/arcs.svg", "-o", "{tmp}/x.pdf"], ".svg or .png"),
         (["draw", "{tmp}/far.gcode", "--dry-run"], "outside the reachable area"),
         (["text", "Far too long a line", "--size", "50", "--dry-run"], "does not fit"),

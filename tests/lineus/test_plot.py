@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import sys
 from pathlib import Path
@@ -27,7 +28,7 @@ from fabwire.lineus.plot import (
     plan_text,
     text_lines,
 )
-from fabwire.lineus.plot.optimize import arrange, drop_fine_points, travel_length
+from fabwire.lineus.plot.optimize import arrange, drop_fine_points, orient_runs, travel_length
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_plot_support import segments, shape_distance
@@ -143,7 +144,7 @@ def random_segments_svg(rng: np.random.Generator, count: int) -> tuple[str, list
     """Separate lines and some chains that share ends, in a random order."""
     lines: list[np.ndarray] = []
     for _ in range(count):
-        a = rng.uniform(0, 400, 2).round(2)
+        a = rng.uniform(80, 320, 2).round(2)  # every line on the page: a browser shows no more than that
         b = (a + rng.uniform(-40, 40, 2)).round(2)
         lines.append(np.array([a, b]))
         if rng.random() < 0.3:  # a second line starting where this one ends
@@ -188,7 +189,7 @@ def test_improvement_never_loses_to_greedy_and_keeps_every_line() -> None:
 def test_huge_path_count(tmp_path: Path) -> None:
     rng = np.random.default_rng(11)
     n = 10000
-    pts = rng.uniform(0, 1000, (n, 2)).round(1)
+    pts = rng.uniform(0, 990, (n, 2)).round(1)
     body = "".join(f'<path d="M{x} {y}h3v2"/>' for x, y in pts)
     path = tmp_path / "huge.svg"
     path.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" width="1000" height="1000">'
@@ -345,3 +346,43 @@ def test_optimise_keeps_dots_and_closed_loops() -> None:
     dot = np.array([[1200.0, 200.0]])
     out = optimise([loop, dot], time_budget=0.1)
     assert sorted(len(x) for x in out) == [1, 4]
+
+
+def zigzag(x: float, y: float, count: int, mirrored: bool) -> list[np.ndarray]:
+    """A hatched patch of `count` lines 10 long, 2 apart, drawn as a zig-zag starting at its left (or right)."""
+    lines = [np.array([[x, y + 2 * k], [x + 10, y + 2 * k]]) for k in range(count)]
+    lines = [line if k % 2 == 0 else line[::-1] for k, line in enumerate(lines)]
+    return [line[::-1] for line in lines] if mirrored else lines
+
+
+def turned_way(run: list[np.ndarray], way: int) -> list[np.ndarray]:
+    """A run as drawn (0), backwards (1), mirrored (2) or mirrored backwards (3)."""
+    ordered = run[::-1] if way in (1, 3) else run
+    return [line[::-1] for line in ordered] if way in (1, 2) else list(ordered)
+
+
+def test_runs_are_turned_the_best_of_four_ways_for_their_order() -> None:
+    # Hatched patches drawn from awkward corners; the best of all 4^3 ways, found by trying each, is the answer.
+    runs = [zigzag(0, 0, 4, mirrored=False), zigzag(12, 0, 4, mirrored=False), zigzag(4, 14, 5, mirrored=True)]
+    lines = [line for run in runs for line in run]
+    def travel(ways: tuple[int, ...]) -> float:
+        return travel_length([line for run, way in zip(runs, ways, strict=True) for line in turned_way(run, way)],
+                             (10.0, -1.0))
+
+    best = min(travel(ways) for ways in itertools.product(range(4), repeat=3))
+    assert best < min(travel(ways) for ways in itertools.product(range(2), repeat=3)) - 10  # mirroring pays
+    turned = orient_runs(lines, [4, 4, 5], origin=(10.0, -1.0))
+    assert segments(turned, 6) == segments(lines, 6)  # every line drawn once, either way round
+    assert travel_length(turned, (10.0, -1.0)) == pytest.approx(best)
+    # Runs keep their order and their lines stay together.
+    assert [float(line[:, 0].min()) for line in turned] == [0.0] * 4 + [12.0] * 4 + [4.0] * 5
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_turning_runs_never_adds_travel(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    lines = [np.array([a, a + rng.normal(0, 20, 2)]) for a in rng.uniform(0, 300, (60, 2))]
+    sizes = [3, 1, 7, 12, 2, 20, 15]
+    turned = orient_runs(lines, sizes, origin=(0.0, 0.0))
+    assert segments(turned, 6) == segments(lines, 6)
+    assert travel_length(turned, (0.0, 0.0)) <= travel_length(lines, (0.0, 0.0)) + 1e-9

@@ -58,7 +58,7 @@ def test_gcode_from_standard_input_and_junk_refused(tmp_path: Path) -> None:
     assert "Traceback" not in err
     empty = run_bytes(tmp_path, b"", "lineus", "preview", "-")
     assert empty.returncode == 4
-    assert b"empty" in empty.stderr
+    assert b"standard input: nothing to draw: it has no pen-down moves" in empty.stderr
 
 
 def test_compressed_svg_through_the_cli(tmp_path: Path) -> None:
@@ -163,12 +163,14 @@ def test_text_fitted_too_small_to_read_is_called_out(tmp_path: Path, text: str, 
         assert result.stderr.count("\n") == 1  # one line of warning before the figures on stdout
 
 
-@pytest.mark.parametrize("d", ["M1 1 L1e308 5", "M1 1 L5 -1e308", "M1e308 1e308 L1 1"])
-def test_coordinates_beyond_a_float_are_one_line_naming_the_file(tmp_path: Path, d: str) -> None:
+@pytest.mark.parametrize("d", ["M1 1 L1e308 5", "M1 1 L5 -1e308", "M1e308 1e308 L1 1", "M1 1 L3.5e38 1"])
+def test_coordinates_beyond_a_browser_end_the_path_in_one_line_naming_the_file(tmp_path: Path, d: str) -> None:
+    # Browsers hold path numbers in single precision: one beyond it is an error, and the path is drawn up to it.
     path = tmp_path / "far.svg"
     path.write_text(f"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'><path d='{d}' "
                     "stroke='black'/></svg>")
     result = run_cli("lineus", "preview", str(path), "-o", str(tmp_path / "far.png"), env=cli_env(tmp_path))
     assert result.returncode == 4
-    assert result.stderr == f"fabwire: error: {path}: the drawing has coordinates that are not finite numbers " \
-                            "(beyond any page)\n"  # no numpy warning before it
+    assert result.stderr == f"fabwire: error: {path}: nothing to draw: no shape in it has a visible stroke or fill " \
+                            "(<path> data with an error (a number beyond what a browser can hold) is drawn up to the " \
+                            "error, as browsers do)\n"  # no numpy warning before it

@@ -313,3 +313,60 @@ def test_time_scale_shrinks_every_timer() -> None:
     logic = h.HostLogic(time_scale=100)
     logic.start(0.0)
     assert logic.next_deadline() == pytest.approx(0.02)
+
+
+@pytest.mark.parametrize(("ask", "answered"), [
+    (lambda logic, now: logic.read_register(0x22, now), h.RegisterRead(0x22, 360)),
+    (lambda logic, now: logic.write_register(0x22, 400, now), h.RegisterWritten(0x22, 400, True)),
+    (lambda logic, now: logic.press(2, now), h.ButtonSent(2)),
+], ids=["read", "write", "button"])
+def test_a_request_in_flight_when_the_link_restarts_is_asked_again(ask: object, answered: object) -> None:
+    """The caller's read, write or button press is not dropped with the link: after the new handshake it is sent
+    again and answered (else the caller waits out its whole timeout)."""
+    pair = _pair()
+    assert callable(ask)
+    ask(pair.host, pair.now)
+    cut_until = pair.now + 5.0
+
+    def cable_out(reply: bytes) -> bytes:  # silent for 5 s: two timeouts in a row restart the handshake
+        return b"" if pair.now < cut_until else reply
+
+    handshakes = _lines(pair).count((">", "S0*c6"))
+    events = pair.run(lambda new: answered in new, mangle=cable_out, limit=60)
+    assert _lines(pair).count((">", "S0*c6")) > handshakes  # it was a full restart
+    assert events.count(answered) == 1
+
+
+@pytest.mark.parametrize("junk", [b"ok\n", b"T1 Pok*00\n", b"\x00book\r\n"])
+def test_ok_in_line_noise_after_the_handshake_is_no_version_verdict(junk: bytes) -> None:
+    """Only an MMU that answers the handshake with 'ok' runs firmware 1.x; once the version is known, bytes that
+    happen to hold 'ok' are one garbled reply, resynchronised like any other."""
+    pair = _pair()
+    pair.host.read_register(0x22, pair.now)  # type: ignore[attr-defined]
+    pair.host.data_to_send()  # type: ignore[attr-defined]  # the read is in flight: its reply is replaced by junk
+    pair.host.receive(junk, pair.now)  # type: ignore[attr-defined]
+    events = pair.run(lambda new: h.RegisterRead(0x22, 360) in new, limit=30)
+    assert h.RegisterRead(0x22, 360) in events
+    assert not any(isinstance(e, h.LinkFailed) for e in events)
+    assert pair.host.link is h.Link.READY  # type: ignore[attr-defined]
+
+
+def test_a_reply_trickled_byte_by_byte_without_an_end_is_a_timeout() -> None:
+    """Each byte restarts the firmware's 2 s clock; a device that trickles digits of a never-ending line is still
+    a drop-out once the reply has taken two link timeouts, and the read is asked again."""
+    pair = _pair()
+    logic = pair.host
+    logic.read_register(0x22, pair.now)  # type: ignore[attr-defined]
+    assert logic.data_to_send() == b"R22*45\n"  # type: ignore[attr-defined]
+    now = pair.now
+    logic.receive(b"R22 A", now)  # type: ignore[attr-defined]
+    lost: list[object] = []
+    for _ in range(40):  # a digit every 0.5 s: never 2 s of silence
+        now += 0.5
+        logic.receive(b"0", now)  # type: ignore[attr-defined]
+        logic.handle_timer(now)  # type: ignore[attr-defined]
+        lost += [e for e in logic.events() if isinstance(e, h.LinkLost)]  # type: ignore[attr-defined]
+        if lost:
+            break
+    assert lost == [h.LinkLost("timeout: no complete reply within 4 s", 1)]
+    assert now - pair.now <= 4.5

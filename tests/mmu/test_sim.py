@@ -341,3 +341,14 @@ def test_undervoltage_panics_until_reset() -> None:
     assert w.send("Q0", 5.0) == "T0 E800d"
     w.send("X0")
     assert w.send("Q0", 4.5) == "X0 F0"  # the one failing check was used up: the reset cleared the panic
+
+
+def test_a_failed_load_verification_starts_over_with_the_unlimited_feed() -> None:
+    """L's verification feed fails (E8001, FINDA off): Middle restarts the whole load, not a retract of filament
+    that never reached FINDA (reference §5.5 LoadFilament)."""
+    w = Wire(faults=("finda-didnt-trigger@1",))  # the unlimited feed passes, the verification feed fails
+    w.send("L1")
+    assert w.run_until("L1 E8001", step=0.05)[-3:] == ["L1 P5", "L1 Pa", "L1 E8001"]
+    assert w.send("R8") == "R8 A0"
+    w.send("B1")
+    assert w.run_until("L1 F0", step=0.05) == ["L1 P5", "L1 P19", "L1 P5", "L1 P19", "L1 P2", "L1 F0"]

@@ -55,6 +55,9 @@ def test_an_error_is_offered_with_the_dialogs_choices_until_it_is_solved() -> No
         term.send("retry")  # the cause is gone now
         term.expect("T1 finished")
         assert term.seen.count(b"Retry / Stop") == 2
+        for block in term.seen.split(b"Retry / Stop")[:-1]:  # the error stands once above each prompt
+            lines = [line.strip() for line in block.splitlines()]
+            assert lines.count(lines[-1]) == 1, block.decode(errors="replace")[-600:]
     finally:
         code = term.close()
     assert code == 0

@@ -6,6 +6,8 @@ import asyncio
 import contextlib
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fabwire.errors import InputError, LinkClosed
 from fabwire.transport import FaultPlan, FaultyTransport, memory_pair
@@ -123,3 +125,27 @@ def test_plan_parses_from_text_and_rejects_nonsense() -> None:
     for bad in ("chunk", "chunk=x", "explode=1", "side=up"):
         with pytest.raises(InputError):
             FaultPlan.parse(bad)
+
+
+@pytest.mark.parametrize("text", ["delay=nan", "delay=1e308", "delay=-1", "corrupt=nan", "drop=2", "chunk=-1",
+                                  "silent_after=-3", "seed=" + "9" * 5000, "x" * 5000 + "=1", "side=sideways"])
+def test_a_fault_plan_out_of_range_is_one_input_error(text: str) -> None:
+    with pytest.raises(InputError) as caught:
+        FaultPlan.parse(text)
+    assert len(str(caught.value)) < 300
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=80) | st.lists(st.tuples(
+    st.sampled_from(["chunk", "delay", "drop", "corrupt", "silent_after", "disconnect_after", "seed", "side"]),
+    st.text(max_size=12) | st.floats().map(str) | st.integers().map(str)), max_size=5).map(
+        lambda items: ",".join(f"{k}={v}" for k, v in items)))
+def test_any_fault_plan_text_is_a_plan_in_range_or_one_input_error(text: str) -> None:
+    try:
+        plan = FaultPlan.parse(text)
+    except InputError:
+        return
+    assert 0 <= plan.drop <= 1
+    assert 0 <= plan.corrupt <= 1
+    assert 0 <= plan.delay <= 60
+    assert plan.chunk >= 0

@@ -8,6 +8,9 @@ import socket
 import subprocess
 import sys
 import threading
+import time
+
+import pytest
 
 from clitools import cli_env, start_simulator
 from fabwire.logsink import DroppingQueueHandler, non_blocking_handler
@@ -67,3 +70,25 @@ def test_the_last_lines_are_written_before_a_short_command_exits() -> None:
             "logging.getLogger('fabwire.x').warning('the last word')\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=cli_env())
     assert "the last word" in done.stderr
+
+
+def test_a_stderr_whose_reader_has_gone_costs_no_tracebacks(capfd: pytest.CaptureFixture[str]) -> None:
+    """`fabwire sim … 2>&1 | head -1`: once head exits, log lines are dropped without a word, not each followed by
+    a 'Logging error' traceback."""
+    read_end, write_end = os.pipe()
+    stream = os.fdopen(write_end, "w", buffering=1)
+    handler = non_blocking_handler(stream, logging.Formatter("%(message)s"))
+    logger = logging.getLogger("fabwire.test.logsink.gone")
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        os.close(read_end)  # the reader is gone
+        for n in range(50):
+            logger.warning("line %d", n)
+        deadline = time.monotonic() + 10
+        while handler.queue.qsize() and time.monotonic() < deadline:  # type: ignore[attr-defined]
+            time.sleep(0.01)
+        time.sleep(0.1)  # the last record is being written
+    finally:
+        logger.removeHandler(handler)
+    assert "Logging error" not in capfd.readouterr().err

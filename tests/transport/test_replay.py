@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import json
 import socket
+import tracemalloc
 from pathlib import Path
 
 import pytest
 
 from clitools import run_cli, start_simulator
 from fabwire.transport.replay import exchanges
-from fabwire.transport.tap import TraceRecord
+from fabwire.transport.tap import TraceRecord, TraceWriter, read_trace
 
 
 def test_chunks_group_into_request_and_reply() -> None:
@@ -68,3 +69,22 @@ def test_a_capture_without_records_is_refused(tmp_path: Path, content: str, comm
     assert result.returncode == 4
     assert result.stderr.strip() == f"fabwire: error: {trace} holds no trace records"
     assert result.stdout == ""
+
+
+def test_a_capture_that_never_got_a_reply_is_not_held_whole(tmp_path: Path) -> None:
+    """8 MB the host sent to a device that never answered: streamed in exchanges of about 1 MB, all bytes kept."""
+    trace = tmp_path / "silent.jsonl"
+    writer = TraceWriter.to_file(trace, url="tcp://127.0.0.1:1", peer="silent")
+    chunk = bytes(range(256)) * 16
+    for _ in range(2048):
+        writer.chunk(">", chunk)
+    writer.close()
+    tracemalloc.start()
+    try:
+        sizes = [len(e.sent) for e in exchanges(read_trace(trace))]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert sum(sizes) == 2048 * len(chunk)
+    assert max(sizes) <= (1 << 20) + len(chunk)
+    assert peak < 4 * (1 << 20), f"peak {peak} bytes for an 8 MB capture"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -150,3 +151,20 @@ def test_records_stream_before_a_later_bad_line(tmp_path: Path) -> None:
     assert next(records).data == b"M114\x00"
     with pytest.raises(InputError, match="line 3"):
         next(records)
+
+
+def test_a_capture_that_cannot_be_written_any_more_is_one_clear_error() -> None:
+    """The disk fills or the reader of a pipe goes away mid-session: the next record says so, naming the capture."""
+    read_end, write_end = os.pipe()
+    writer = TraceWriter(open(write_end, "w", encoding="utf-8"), url="tcp://127.0.0.1:1", peer="x")  # noqa: SIM115
+    os.close(read_end)
+    with pytest.raises(InputError, match="cannot write trace file stream: Broken pipe"):
+        writer.chunk(TO_DEVICE, b"Q0*ea\n")
+    writer.close()  # quietly: the failure was reported once
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_a_trace_on_a_full_disk_is_one_line_of_bad_input() -> None:
+    done = run_cli("mmu", "--trace", "/dev/full", "-d", "sim://mmu?speed=100", "--speed", "100", "version")
+    assert done.returncode == 4, done.stderr
+    assert done.stderr == "fabwire: error: cannot write trace file /dev/full: No space left on device\n"

@@ -169,7 +169,7 @@ def test_cli_subprocess_large_file_keeps_stdout_clean(tmp_path: Path) -> None:
     done = run_cli("--json", "xyz", "convert", str(big), str(tmp_path / "big.3w"), env=cli_env(tmp_path))
     assert done.returncode == 0, done.stderr
     data = json.loads(done.stdout)
-    assert data["bytes_written"] == (tmp_path / "big.3w").stat().st_size
+    assert data["written_bytes"] == (tmp_path / "big.3w").stat().st_size
     assert data["gcode_bytes"] > 9_000_000
 
 

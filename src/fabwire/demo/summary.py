@@ -73,7 +73,7 @@ class Summary:
             "seconds": round(self.total_seconds, 2),
             "steps": [{"device": s.device, "step": s.name, "seconds": round(s.seconds, 2), "ok": s.ok,
                        "detail": s.detail, "files": [str(f) for f in s.files]} for s in self.steps],
-            "files": [{"path": str(f), "bytes": f.stat().st_size if f.exists() else None} for f in self.files],
+            "files": [{"path": str(f), "size_bytes": f.stat().st_size if f.exists() else None} for f in self.files],
             "simulators": self.simulators,
         }
 

@@ -181,11 +181,13 @@ def mmu() -> None:
 async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[CommandFinished]],
                    max_time: float) -> None:
     seen: list[dict[str, Any]] = []
+    shown: list[str] = []
 
     def show(event: HostEvent) -> None:
         if isinstance(event, ProgressChanged | ErrorRaised | ButtonPushed | LinkLost):
             data, text = describe(event)
             seen.append(data)
+            shown.append(text)
             dctx.output.note(text)
 
     try:
@@ -193,7 +195,7 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
     except MMUError as error:
         if dctx.output.json_mode or not on_terminal():
             raise
-        finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time)
+        finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time, shown)
     factor = mmu_.logic.timing.too_fast
     if factor is not None:
         dctx.output.note(f"warning: the MMU moved {factor:.0f}× faster than this host assumes: its timing does not "
@@ -204,14 +206,16 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
 
 
 async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, show: Callable[[HostEvent], None],
-                              max_time: float) -> CommandFinished:
-    """Offer the printer dialog's choices for the error, until the command ends or the person stops."""
+                              max_time: float, shown: list[str]) -> CommandFinished:
+    """Offer the printer dialog's choices for the error, until the command ends or the person stops. `shown` is
+    what `show` printed, so an error already on the screen is not printed twice."""
     while True:
         info = error.info
         choices = [c.label for c in info.choices if isinstance(c.button, int)]
         if "Stop" not in choices:
             choices.append("Stop")
-        dctx.output.note(f"{error}")
+        if not shown or shown[-1] != str(error):
+            dctx.output.note(f"{error}")
         choice = await asyncio.to_thread(click.prompt, " / ".join(choices), type=click.Choice(
             [c.lower() for c in choices], case_sensitive=False), err=True)
         if choice.lower() == "stop":

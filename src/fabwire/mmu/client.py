@@ -19,6 +19,7 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError
 from fabwire.mmu import codes
 from fabwire.mmu.errors import MMUError, describe_error
+from fabwire.mmu.evidence import end_state
 from fabwire.mmu.host import (
     INIT_REGISTERS,
     SUPPORTED,
@@ -39,7 +40,7 @@ from fabwire.mmu.host import (
     Status,
     StatusUpdated,
 )
-from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload
+from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChange, Unload, make_request
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
@@ -244,6 +245,8 @@ class MMU:
                 await self._flush()
         except LinkClosed as exc:
             self._fail(exc)
+        except Exception as exc:  # a task that dies quietly would leave every operation waiting out its timeout
+            self._fail(LinkClosed(f"link to the MMU failed: {exc!r}"))
 
     async def _until(self, done: Callable[[], bool]) -> None:
         while not done():
@@ -270,6 +273,8 @@ class MMU:
                 return
             if value is not None:
                 result.append(value)
+            elif isinstance(event, LinkFailed):  # ten drop-outs in a row: no reply will come to this either
+                errors.append(LinkTimeout(event.info.explained(detail=f"link failed ({event.detail})")))
 
         self._listeners.append(listen)
         try:
@@ -308,6 +313,8 @@ class MMU:
         """Run one command to its end; an error the host cannot retry away raises DeviceError."""
         if request.code in "TLEK":
             check_slot(request.value)
+        if self.logic.busy and self.logic.command == request:  # running already (an earlier link, another client)
+            return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=confirm_eject)
         if self.logic.busy:
             raise DeviceError("busy", f"the MMU is still busy with {self.logic.command}",
                               action="let it finish, or answer its error (fabwire mmu button retry|continue|stop), "
@@ -319,6 +326,30 @@ class MMU:
         except LinkTimeout:
             self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
             raise
+        return await self._confirmed(request, finished, timeout)
+
+    async def _confirmed(self, request: Request | None, finished: CommandFinished,
+                         timeout: float | None) -> CommandFinished:
+        """`finished`, once the registers show the end state of `request` (`fabwire.mmu.evidence`); an MMU that
+        says `F0` but shows the state from before is a DeviceError, not a success."""
+        if request is None or finished.result != 0 or finished.command != str(request):
+            return finished
+        expects, settle = end_state(request)
+        end = self._clock() + settle / self.logic.timing.time_scale
+        while expects:
+            read: dict[int, int] = {}
+            for expect in expects:
+                if expect.address not in read:
+                    read[expect.address] = await self.read_register(expect.address, timeout or 10.0)
+            wrong = [e for e in expects if not e.holds(read[e.address])]
+            if not wrong:
+                break
+            if self._clock() >= end:
+                raise DeviceError("not done", f"the MMU reported {request} finished, but it shows "
+                                  + ", ".join(e.shown(read[e.address]) for e in wrong) + " (a finished "
+                                  + f"{request} leaves " + ", ".join(e.wanted for e in wrong) + ")",
+                                  action="the command did not take effect: check the MMU with `fabwire mmu status`")
+            await asyncio.sleep(min(0.05, settle / 20 / self.logic.timing.time_scale))
         return finished
 
     def _command_outcome(self, expected: str | None,
@@ -362,9 +393,18 @@ class MMU:
         if not self.logic.busy:
             status = self.status
             raise DeviceError("idle", f"the MMU runs no command (it reports {status.command} {status.words})")
-        finished: CommandFinished = await self._operate(lambda now: None, self._command_outcome(None, confirm_eject),
+        request = self.logic.command
+        start: Callable[[float], None] = lambda now: None  # noqa: E731
+        status = self.status
+        if status.kind == "E" and status.command == str(request) and not self.logic.retrying:
+            # reported before we listened, and reported only once: waiting for it again would wait out `timeout`
+            if not (confirm_eject and status.value == 0x800C):
+                self.logic.abandon()
+                raise self._explained(MMUError(status.value, command=status.command))
+            start = lambda now: self.logic.press(int(codes.Button.MIDDLE), now)  # noqa: E731
+        finished: CommandFinished = await self._operate(start, self._command_outcome(None, confirm_eject),
                                                         on_event, timeout)
-        return finished
+        return await self._confirmed(request, finished, timeout)
 
     async def answer(self, choice: str, *, on_event: EventCallback | None = None,
                      timeout: float | None = None) -> CommandFinished | None:
@@ -388,14 +428,20 @@ class MMU:
         await self.press(button, timeout=timeout)
         await self.refresh(timeout=timeout)  # this poll may have been under way before the press: take the next
         status = await self.refresh(timeout=timeout)  # a running command is adopted from this poll
+        end = None if timeout is None else self._clock() + timeout
         while not self.logic.busy and status.command == command and status.kind in "PB":
+            if end is not None and self._clock() >= end:
+                raise LinkTimeout(f"the MMU still reports {status.command} {status.words} {timeout:g} s after "
+                                  f"the {choice} press")
             status = await self.refresh(timeout=timeout)  # X0 (homing after boot) cannot be adopted: watch it
         if self.logic.busy:
             return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=False)
         if status.kind == "E":
             raise self._explained(MMUError(status.value, command=status.command))
         if status.kind == "F" and status.command == command:
-            return CommandFinished(command, status.value)
+            known = len(command) > 1 and command[0] in "TLUEKHM"
+            request = make_request(command[0], int(command[1:], 16)) if known else None
+            return await self._confirmed(request, CommandFinished(command, status.value), timeout)
         return None
 
     async def tool_change(self, slot: int, **kwargs: Any) -> CommandFinished:
@@ -502,6 +548,10 @@ class MMU:
 
         version: codes.FirmwareVersion = await self._operate(lambda now: self.logic.reset(now, erase=erase),
                                                              outcome, None, timeout)
+        if self.status.command != "X0":  # a rebooted MMU reports its start-up command first (reference §5.2)
+            raise DeviceError("not reset", f"the MMU answers again but still reports {self.status.command} "
+                              f"{self.status.words}, not the start-up command X0: it did not reboot",
+                              action="power-cycle the MMU")
         return version
 
     async def events(self) -> AsyncIterator[HostEvent]:

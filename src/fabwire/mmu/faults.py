@@ -11,6 +11,7 @@ after which the check runs again at boot or at the next move of that axis.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Literal
 
@@ -18,6 +19,8 @@ from fabwire.errors import InputError
 from fabwire.mmu.errors import TMC_FLAGS, TMC_WORDS, format_error, tmc_error
 
 Recovery = Literal["retry", "reset"]
+_COUNT = re.compile(r"[0-9]{1,9}")
+"""ASCII digits, few: `int()` also reads other scripts' digits and refuses more than 4,300 of them."""
 AXES = ("pulley", "selector", "idler")
 _AXIS_BITS = {"pulley": 0x0040, "selector": 0x0080, "idler": 0x0100}
 
@@ -86,20 +89,21 @@ def parse_fault(text: str) -> Fault:
     name = name.strip().lower().replace("_", "-")
     skip = 0
     if skip_text:
-        if not skip_text.strip().isdigit():
-            raise InputError(f"fault skip after '@' must be a whole number, not {skip_text!r}")
+        if not _COUNT.fullmatch(skip_text.strip()):
+            raise InputError(f"fault skip after '@' must be a whole number below a billion, not {skip_text[:20]!r}")
         skip = int(skip_text)
     if name.startswith("tmc-") and name.removeprefix("tmc-") in TMC_KINDS:
         name += "-pulley"
     if name not in FAULTS:
-        raise InputError(f"unknown MMU fault {name!r}; known: {', '.join(sorted(FAULTS))}")
+        raise InputError(f"unknown MMU fault {name[:40]!r}; known: {', '.join(sorted(FAULTS))}")
     count_text = count_text.strip()
     if not count_text:
         return Fault(name, skip=skip)
     if count_text in ("always", "-1"):
         return Fault(name, -1, skip)
-    if not count_text.isdigit() or int(count_text) < 1:
-        raise InputError(f"fault count must be a positive number or 'always', not {count_text!r}")
+    if not _COUNT.fullmatch(count_text) or int(count_text) < 1:
+        raise InputError(f"fault count must be a positive number below a billion or 'always', "
+                         f"not {count_text[:20]!r}")
     return Fault(name, int(count_text), skip)
 
 

@@ -41,6 +41,25 @@ from fabwire.mmu.events import (
     StatusUpdated,
 )
 from fabwire.mmu.handshake import Handshake
+from fabwire.mmu.linkrules import (
+    AUTO_FSENSOR_OFF,
+    AUTO_FSENSOR_ON,
+    AUTO_RETRIES,
+    BUSY_CODES,
+    DROP_OUT_LIMIT,
+    HEARTBEAT,
+    IMMEDIATE_RESENDS,
+    INIT_REGISTERS,
+    LINK_TIMEOUT,
+    POLL_REGISTERS,
+    REJECT_LIMIT,
+    REPLY_LIMIT,
+    RESTART_AFTER,
+    RESYNC_GAP,
+    SILENT_RESTART,
+    SUPPORTED,
+    FSensorMode,
+)
 from fabwire.mmu.protocol import (
     Accepted,
     ButtonPress,
@@ -70,36 +89,6 @@ __all__ = [  # the events are re-exported: callers need them with the logic
     "HostLogic", "Link", "LinkFailed", "LinkLost", "LinkUp", "ProgressChanged", "RegisterRead", "RegisterWritten",
     "Status", "StatusUpdated"
 ]
-
-HEARTBEAT = 1.0
-LINK_TIMEOUT = 2.0
-DROP_OUT_LIMIT = 10
-AUTO_RETRIES = 3
-REJECT_LIMIT = 20
-"""Our bound on the firmware's resend-on-R loop, so a permanently busy MMU ends in a clear failure."""
-IMMEDIATE_RESENDS = 3
-"""Re-sends on R go out at once (after a Q0 look-up) this many times, then one per heartbeat."""
-RESYNC_GAP = 0.1
-"""Seconds of quiet after a garbled reply before draining and asking again (a reply is one burst of ≤14 bytes)."""
-RESTART_AFTER = 5
-"""Drop-outs in a row, with no good reply between them, after which the handshake starts again from S0."""
-SILENT_RESTART = 2
-"""Timeouts in a row with no byte at all between them (the MMU is rebooting: it is deaf for ≈4 s): start over."""
-POLL_REGISTERS = (0x08, 0x1B, 0x1C, 0x04, 0x1A)
-INIT_REGISTERS = ((0x0B, 5), (0x14, 20))
-SUPPORTED = frozenset({(3, 0, 2), (3, 0, 3), (3, 0, 4)})
-BUSY_CODES = "KELMTUH"
-"""Echoed codes that mean 'the MMU is running a command'. The printer firmware leaves out H and then treats the
-idle reply `H0 F0` as a protocol error; we include it so a Home does not trigger endless re-handshakes."""
-
-
-FSensorMode = Literal["auto", "manual"]
-# In "auto" mode the host plays the printer's sensor: on while the MMU feeds to it, off once it unloads, retracts
-# or feeds to FINDA (so one missed poll cannot leave it stuck on).
-AUTO_FSENSOR_ON = frozenset({codes.Progress.FEEDING_TO_FSENSOR, codes.Progress.FEEDING_TO_NOZZLE})
-AUTO_FSENSOR_OFF = frozenset({codes.Progress.UNLOADING_TO_FINDA, codes.Progress.RETRACTING_FROM_FINDA,
-                              codes.Progress.FEEDING_TO_FINDA})
-
 
 class HostLogic:
     """Sans-IO printer-side protocol logic. Feed `receive`/`handle_timer` with `now`; read `data_to_send` and
@@ -133,6 +122,7 @@ class HostLogic:
         self._inflight: Request | None = None
         self._lost: Request | None = None
         self._last_activity = 0.0
+        self._sent_at = 0.0
         self._silent = 0
         self._scope: Literal["start", "idle", "command", "resync", "stopped"] = "stopped"
         self._resume: Literal["start", "idle", "command"] = "start"
@@ -174,7 +164,7 @@ class HostLogic:
         if self._scope == "resync":
             return self._last_activity + (self.resync_gap if self.version is not None else self.heartbeat)
         if self._inflight is not None:
-            return self._last_activity + self.link_timeout
+            return min(self._last_activity + self.link_timeout, self._sent_at + REPLY_LIMIT * self.link_timeout)
         heartbeat = self._last_activity + self.heartbeat
         if self._command is not None and not self._command_sent:
             return min(heartbeat, self._resend_at)
@@ -188,6 +178,11 @@ class HostLogic:
     @property
     def command(self) -> Request | None:
         return self._command
+
+    @property
+    def retrying(self) -> bool:
+        """This host's automatic Retry for the reported error is on its way."""
+        return self._retry_pending
 
     # ----------------------------------------------------------------------------------------- inputs
 
@@ -204,7 +199,8 @@ class HostLogic:
             return  # the rest of a garbled burst: drained when the line goes quiet
         for event in self._decoder.feed(data):
             if isinstance(event, DecodeError):
-                if b"ok" in data:
+                # firmware 1.x answers the handshake 'ok'; once the version is known the two letters are noise
+                if b"ok" in data and self.version is None:
                     self._version_mismatch("the MMU answered 'ok': firmware 1.x")
                 else:
                     self._protocol_error(now, event.reason)
@@ -223,11 +219,13 @@ class HostLogic:
                 self._recover(now)
             return
         if self._inflight is not None:
-            if now >= self._last_activity + self.link_timeout:
+            silent = now >= self._last_activity + self.link_timeout
+            if silent or now >= self._sent_at + REPLY_LIMIT * self.link_timeout:
                 self._lost, self._inflight = self._inflight, None
                 self._resume = self._scope
-                self._silent += 1
-                self._drop_out(f"timeout: no reply within {self.link_timeout:.3g} s")
+                self._silent += silent
+                self._drop_out(f"timeout: no reply within {self.link_timeout:.3g} s" if silent else
+                               f"timeout: no complete reply within {REPLY_LIMIT * self.link_timeout:.3g} s")
                 self._recover(now)
             return
         self._pump(now)
@@ -288,7 +286,7 @@ class HostLogic:
         self._out += encode_request(request)
         self._inflight = request
         self._inflight_poll = poll
-        self._last_activity = now
+        self._last_activity = self._sent_at = now
         if request.code == "f":
             self._fsensor_reported = request.value
 
@@ -331,6 +329,9 @@ class HostLogic:
         self._decoder.reset()
         lost, self._lost = self._lost, None
         self._unsent(lost is not None and lost is self._command)
+        if lost is not None and self._resume != "start" and (
+                (lost.code in "RW" and not self._inflight_poll) or (lost.code == "B" and not self._retry_pending)):
+            self._planned.appendleft(lost)  # asked for by the caller: ask again, after a restart too
         rebooting = self._silent >= SILENT_RESTART or (lost is not None and lost.code == "X")
         if (self.version is None and self._resume != "start") or self.drop_outs >= RESTART_AFTER or rebooting:
             self._restart(now)
@@ -345,8 +346,6 @@ class HostLogic:
                 self._unsent(True)
             elif lost.code == "f":
                 self._fsensor_reported = None
-            elif (lost.code in "RW" and not self._inflight_poll) or (lost.code == "B" and not self._retry_pending):
-                self._planned.appendleft(lost)  # asked for by the caller: ask again
         if lost is not None and (lost.code == "Q" or self._scope == "command"):
             self._send(Query(0), now)  # where is the MMU now?
             return

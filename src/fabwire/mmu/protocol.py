@@ -323,6 +323,9 @@ _NEWLINE: Final = (0x0A, 0x0D)
 _REQUEST_CODE_BYTES: Final = frozenset(REQUEST_CODES.encode())
 _PARAM_CODE_BYTES: Final = frozenset(PARAM_CODES.encode())
 _ERROR_SNIPPET = 32
+_MEMO_LINE = 24
+"""Longest line the fast path memoises: a well-formed message is at most 14 bytes (`T ff E ffff*ff`), and
+memoising long ones (legal: leading zeros) would let a peer fill the memo with 4096 lines of any size."""
 
 _FAST_REQUEST = re.compile(rb"([QTLMUXPSBEKFfHR])([0-9a-f]*)\*([0-9a-f]*)")
 _FAST_WRITE = re.compile(rb"W([0-9a-f]*) ([0-9a-f]*)\*([0-9a-f]*)")
@@ -394,7 +397,7 @@ class _Decoder:
                     message = memo.get(line)
                     if message is None:
                         message = self._fast(line)
-                        if message is not None:
+                        if message is not None and len(line) <= _MEMO_LINE:
                             if len(memo) >= _CACHE_LIMIT:
                                 memo.clear()
                             memo[line] = message

@@ -340,6 +340,9 @@ class Scripts(Machine):
         self._finish()
 
     def _load(self, slot: int) -> ScriptGen:
+        """Unlimited feed to FINDA, retract, then a limited feed and retract to verify. On Middle after an error
+        the firmware retracts again while FINDA is on and otherwise starts over with the unlimited feed
+        (reference §5.5 LoadFilament)."""
         while True:
             result = yield from self._feed_to_finda(slot, limited=False)
             if result == "stopped":
@@ -348,24 +351,34 @@ class Scripts(Machine):
                 yield from self._move_idler(5, P.DISENGAGING_IDLER)
                 self._finish(int(codes.Result.CANCELLED))
                 return
-            if result == "ok":
-                break
-            yield from self._error(0x800A)
-        while True:
-            ok = yield from self._retract_from_finda()
-            if not ok:
-                yield from self._error(0x8002)
-                continue
-            result = yield from self._feed_to_finda(slot)
             if result != "ok":
-                yield from self._error(0x8001 if result == "failed" else 0x800A)
+                yield from self._error(0x800A)
                 continue
-            ok = yield from self._retract_from_finda()
-            if ok:
+            verified = yield from self._verify_load(slot)
+            if verified:
                 break
-            yield from self._error(0x8002)
         yield from self._move_idler(5, P.DISENGAGING_IDLER)
         self._finish()
+
+    def _verify_load(self, slot: int) -> StepGen:
+        """Retract, feed to FINDA again (limited) and retract; False when an error sends the load back to its
+        unlimited feed (FINDA off after Middle)."""
+        while True:
+            ok = yield from self._retract_from_finda()
+            if ok:
+                result = yield from self._feed_to_finda(slot)
+                if result == "ok":
+                    ok = yield from self._retract_from_finda()
+                    if ok:
+                        return True
+                    code = 0x8002
+                else:
+                    code = 0x8001 if result == "failed" else 0x800A
+            else:
+                code = 0x8002
+            yield from self._error(code)
+            if not self.finda_raw:
+                return False
 
     def _unload(self) -> ScriptGen:
         yield from self._unload_sequence()

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import asyncio
 import random
-from typing import Literal
+import re
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -15,22 +16,24 @@ from fabwire.errors import InputError, LinkClosed
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 
 Side = Literal["both", "write", "read"]
+Count = Annotated[int, msgspec.Meta(ge=0)]
+Probability = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 
 
 class FaultPlan(msgspec.Struct, frozen=True):
     """What to do to the bytes; every field off by default."""
 
-    chunk: int = 0
+    chunk: Count = 0
     """Split each write (and each read handed up) into pieces of 1..chunk bytes."""
-    delay: float = 0.0
+    delay: Annotated[float, msgspec.Meta(ge=0.0, le=60.0)] = 0.0
     """Sleep up to this many seconds before each piece."""
-    drop: float = 0.0
+    drop: Probability = 0.0
     """Probability that a piece vanishes."""
-    corrupt: float = 0.0
+    corrupt: Probability = 0.0
     """Probability that a byte gets one bit flipped."""
-    silent_after: int | None = None
+    silent_after: Count | None = None
     """After this many bytes have passed, pass nothing more (the peer seems to hang)."""
-    disconnect_after: int | None = None
+    disconnect_after: Count | None = None
     """After this many bytes have passed, close the link."""
     side: Side = "both"
     """Which direction the faults apply to, seen from the wrapped end."""
@@ -39,7 +42,10 @@ class FaultPlan(msgspec.Struct, frozen=True):
 
     @classmethod
     def parse(cls, text: str) -> FaultPlan:
-        """Parse `chunk=1,delay=0.01,drop=0.05,corrupt=0.001,silent_after=100,disconnect_after=5000,seed=3`."""
+        """Parse `chunk=1,delay=0.01,drop=0.05,corrupt=0.001,silent_after=100,disconnect_after=5000,seed=3`.
+
+        Raises InputError for an unknown setting or a value out of its range (counts ≥ 0, probabilities 0-1,
+        delays 0-60 s)."""
         values: dict[str, object] = {}
         for item in filter(None, (part.strip() for part in text.split(","))):
             key, sep, raw = item.partition("=")
@@ -48,16 +54,21 @@ class FaultPlan(msgspec.Struct, frozen=True):
                 raise InputError(f"fault setting {item!r} needs a value (key=value)")
             try:
                 if key in ("chunk", "silent_after", "disconnect_after", "seed"):
+                    if not re.fullmatch(r"-?[0-9]{1,18}", raw.strip()):  # ASCII, few: int() refuses 4,300
+                        raise ValueError(raw)
                     values[key] = int(raw)
                 elif key in ("delay", "drop", "corrupt"):
                     values[key] = float(raw)
                 elif key == "side" and raw in ("both", "write", "read"):
                     values[key] = raw
                 else:
-                    raise InputError(f"unknown fault setting {key!r}")
+                    raise InputError(f"unknown fault setting {key[:40]!r}")
             except ValueError:
-                raise InputError(f"fault setting {key!r} has a bad value {raw!r}") from None
-        return cls(**values)  # type: ignore[arg-type]
+                raise InputError(f"fault setting {key[:40]!r} has a bad value {raw[:40]!r}") from None
+        try:
+            return msgspec.convert(values, cls)
+        except msgspec.ValidationError as exc:  # nan fails every range check too
+            raise InputError(f"fault plan {text[:80]!r}: {exc}") from None
 
 
 class FaultyTransport(Transport):

@@ -22,6 +22,9 @@ from fabwire.transport.volatile import ReplyGrammar, differing, mask, sniff
 
 MAX_REPLY = 1 << 20
 """A recorded reply longer than this is compared only up to here (a capture is read one exchange at a time)."""
+MAX_SENT = 1 << 20
+"""Bytes sent with no reply between them are cut into exchanges of about this size, so a capture of a device that
+never answered is not held whole."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,15 +63,16 @@ def exchanges(records: Iterable[TraceRecord]) -> Iterator[Exchange]:
     """Group a capture's chunks into request/reply exchanges, streaming."""
     sent: list[bytes] = []
     replies: list[bytes] = []
-    size = 0
+    size = sent_size = 0
     number = 0
     for record in records:
         if record.direction == TO_DEVICE:
-            if replies:
+            if replies or sent_size >= MAX_SENT:
                 number += 1
                 yield Exchange(number, b"".join(sent), b"".join(replies))
-                sent, replies, size = [], [], 0
+                sent, replies, size, sent_size = [], [], 0, 0
             sent.append(record.data)
+            sent_size += len(record.data)
         elif record.direction == FROM_DEVICE and size < MAX_REPLY:
             replies.append(record.data[: MAX_REPLY - size])
             size += len(replies[-1])

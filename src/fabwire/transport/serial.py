@@ -6,8 +6,25 @@ import errno
 
 import serialx
 
-from fabwire.errors import LinkError
-from fabwire.transport.base import StreamTransport
+from fabwire.errors import LinkClosed, LinkError
+from fabwire.transport.base import DEFAULT_READ_SIZE, StreamTransport
+
+
+class SerialTransport(StreamTransport):
+    """A serial stream whose driver errors (serialx raises its own SerialException, not an OSError) end the link
+    like any other loss: LinkClosed with the reason."""
+
+    async def read(self, max_bytes: int = DEFAULT_READ_SIZE) -> bytes:
+        try:
+            return await super().read(max_bytes)
+        except serialx.SerialException as exc:
+            raise LinkClosed(f"link to {self.peer} lost: {exc}") from exc
+
+    async def write(self, data: bytes) -> None:
+        try:
+            await super().write(data)
+        except serialx.SerialException as exc:
+            raise LinkClosed(f"link to {self.peer} lost while writing: {exc}") from exc
 
 
 def _explain(path: str, exc: OSError) -> str:
@@ -25,7 +42,7 @@ def _explain(path: str, exc: OSError) -> str:
     return f"cannot open serial port {path}: {exc.strerror or exc}"
 
 
-async def open_serial(path: str, baudrate: int) -> StreamTransport:
+async def open_serial(path: str, baudrate: int) -> SerialTransport:
     """Open `path` at `baudrate`, 8N1, no flow control, raw."""
     try:
         reader, writer = await serialx.open_serial_connection(path, baudrate=baudrate)
@@ -33,4 +50,4 @@ async def open_serial(path: str, baudrate: int) -> StreamTransport:
         raise LinkError(_explain(path, exc)) from exc
     except serialx.SerialException as exc:
         raise LinkError(f"cannot open serial port {path}: {exc}") from exc
-    return StreamTransport(reader, writer, url=f"serial://{path}", peer=path)
+    return SerialTransport(reader, writer, url=f"serial://{path}", peer=path)

@@ -10,6 +10,7 @@ Latin-1 maps every byte to one code point, so JSON string escapes keep captures 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import time
@@ -75,8 +76,11 @@ class TraceWriter:
                 self._stream = open(self._path, "a", encoding="utf-8")  # noqa: SIM115 - closed by close()
             except OSError as exc:
                 raise InputError(f"cannot write trace file {self._path}: {exc.strerror}") from exc
-        self._stream.write(json.dumps(obj, ensure_ascii=True) + "\n")
-        self._stream.flush()
+        try:
+            self._stream.write(json.dumps(obj, ensure_ascii=True) + "\n")
+            self._stream.flush()
+        except OSError as exc:  # a full disk, a vanished mount: the capture cannot go on, say where and why
+            raise InputError(f"cannot write trace file {self._path or 'stream'}: {exc.strerror or exc}") from exc
 
     def _now(self) -> float:
         return round(time.monotonic() - self._start, 6)
@@ -89,7 +93,8 @@ class TraceWriter:
 
     def close(self) -> None:
         if not self._stream.closed:
-            self._stream.close()
+            with contextlib.suppress(OSError):  # what is left after a failed write: that failure was reported
+                self._stream.close()
 
 
 MAX_TRACE_LINE = 16 << 20

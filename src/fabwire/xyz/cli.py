@@ -489,7 +489,7 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
     if image is None:
         raise InputError(f"{file} is over {FIRMWARE_LIMIT >> 20} MiB: not a da Vinci firmware image")
     result = _with_printer(dctx, lambda pr: pr.upload_firmware(image, confirm=True))
-    dctx.output.result({"ok": True, "bytes": result.size}, f"sent {result.size} bytes of firmware")
+    dctx.output.result({"ok": True, "size_bytes": result.size}, f"sent {result.size} bytes of firmware")
 
 
 @xyz.command()

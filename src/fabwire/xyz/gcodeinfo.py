@@ -14,6 +14,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from fabwire.xyz import gcodearrays
+from fabwire.xyz.gcodearrays import VALUE, Words
+
 DEFAULT_FACETS = 50
 DEFAULT_FEED_MM_MIN = 1500.0
 """Feed rate assumed for moves before the first F word."""
@@ -71,8 +74,10 @@ _LAYERS = (
     ("prusaslicer", _first(rb"^;[ \t]*total layers count[ \t]*=[ \t]*([0-9]+)")),
 )
 _FACETS = _first(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)")
-_DURATION = re.compile(rb"([0-9.]+)[ \t]*(d|h|m|s)", re.IGNORECASE)
-_S3D_DURATION = re.compile(rb"([0-9.]+)[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
+_DECIMAL = rb"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
+"""A number as float() takes it (`1.2.3h` and `.h` are no durations)."""
+_DURATION = re.compile(_DECIMAL + rb"[ \t]*(d|h|m|s)", re.IGNORECASE)
+_S3D_DURATION = re.compile(_DECIMAL + rb"[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
 _UNIT_SECONDS = {b"d": 86400, b"h": 3600, b"m": 60, b"s": 1, b"hour": 3600, b"hr": 3600, b"minute": 60, b"min": 60,
                  b"second": 1, b"sec": 1}
 _SLICER_NAMES = (
@@ -100,8 +105,12 @@ def _duration(text: bytes, units: re.Pattern[bytes]) -> int | None:
 
 
 def _sum_numbers(text: bytes) -> float | None:
+    """The sum of the stated numbers; ABSURD when it is beyond a float (hundreds of digits)."""
     values = [float(v) for v in re.findall(rb"[0-9]+(?:\.[0-9]*)?", text)]
-    return round(sum(values), 6) if values else None
+    if not values:
+        return None
+    total = round(sum(values), 6)
+    return total if math.isfinite(total) else float(ABSURD)
 
 
 def _search(patterns: Iterable[tuple[str, re.Pattern[bytes]]], windows: Iterable[bytes]) -> tuple[str, bytes] | None:
@@ -157,29 +166,12 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
 # G-code as Marlin reads it: a word is a letter, optional blanks, then a decimal number without exponent (so
 # `G1X10E5` is X10 E5 and `X1E5` is X1 E5); `;` ends the code of a line, `(...)` is a comment and `*` starts the
 # checksum. A command word opens the line, after blanks and an optional N line number.
-_VALUE = rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
-_NUMBER = re.compile(_VALUE)
 _COMMAND = re.compile(
     rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(?![0-9.])([^\n;]*)",
 )
-_WORD = re.compile(rb"([A-Z])[ \t]*(" + _VALUE + rb")")
+_WORD = re.compile(rb"([A-Z])[ \t]*(" + VALUE + rb")")
 _PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
-_CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
-_AXIS_INDEX = np.full(256, -1, dtype=np.intp)
-_AXIS_INDEX[list(b"XYZEF")] = np.arange(5)
-_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
-"""bytes.translate table: 1 for an axis letter, 0 for anything else (faster than a numpy lookup)."""
-_NOT_CODE = np.zeros(256, dtype=bool)
-_NOT_CODE[list(b"(*")] = True
-_NUMBER_CHARS = np.zeros(256, dtype=bool)
-_NUMBER_CHARS[list(b"0123456789.+-")] = True
-_DIGITS = np.zeros(256, dtype=bool)
-_DIGITS[list(b"0123456789.")] = True
-_MOVE_DIGIT = np.zeros(256, dtype=bool)
-_MOVE_DIGIT[list(b"0123")] = True
-_VALUE_WIDTH = 24
-_POWERS = 10.0 ** np.arange(_VALUE_WIDTH + 1)
-_PIECE = 1 << 18
+_PIECE = 1 << 20
 """Bytes analysed at once: the per-word arrays of a piece this size stay in the CPU's cache."""
 
 
@@ -191,41 +183,28 @@ def _ffill(values: NDArray[np.float64], start: float) -> NDArray[np.float64]:
     return np.where(index >= 0, values[np.maximum(index, 0)], start)
 
 
-def _parse_numbers(text: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
-    """The numbers `_NUMBER` matches at offsets `at` of `text` (viewed as `data`), as float() reads them (NaN
-    where there is none).
+def _axis(given: NDArray[np.float64], sets: NDArray[np.bool_], start: float,
+          absolute: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(position after each word, the move each word makes) for one axis's words in order; a G92 word moves
+    nothing and sets the position."""
+    if absolute:
+        delta = np.diff(given, prepend=start)
+        delta[sets] = 0.0
+        return given, delta
+    delta = np.where(sets, 0.0, given)
+    total = np.cumsum(delta)
+    if not sets.any():
+        return total + start, delta
+    base = np.where(sets, given - total, np.nan)
+    return total + _ffill(base, start), delta
 
-    Digits are accumulated column by column across all numbers at once: an exact integer mantissa divided by an
-    exact power of ten rounds the same way a float parser does, for up to 15 significant digits.
-    """
-    count = len(at)
-    first = data[at]
-    signed = (first == 45) | (first == 43)
-    mantissa = np.zeros(count, np.int64)
-    fraction = np.zeros(count, np.int8)  # small counters: adding booleans to them costs less
-    digits = np.zeros(count, np.int8)
-    dotted = np.zeros(count, bool)
-    active = np.ones(count, bool)
-    for column in range(_VALUE_WIDTH):
-        byte = first if column == 0 else data[at + column]
-        value = byte - np.uint8(48)  # wraps below '0', so one comparison finds the digits
-        is_digit = active & (value <= 9)
-        is_dot = active & (byte == 46) & ~dotted
-        active = is_digit | is_dot | (signed if column == 0 else False)
-        if not active.any():
-            break
-        mantissa = np.where(is_digit, mantissa * 10 + value, mantissa)
-        fraction += is_digit & dotted
-        digits += is_digit
-        dotted |= is_dot
-    parsed: NDArray[np.float64] = mantissa / _POWERS[np.minimum(fraction, _VALUE_WIDTH)]
-    parsed = np.where(first == 45, -parsed, parsed)
-    parsed[digits == 0] = np.nan
-    odd = np.flatnonzero((digits > 15) | active)
-    for i in odd:  # very long numbers: let the float parser have them
-        found = _NUMBER.match(text, int(at[i]))
-        parsed[i] = float(found.group(0)) if found else math.nan
-    return parsed
+
+def _runs(lines: NDArray[np.intp], values: NDArray[np.float64],
+          before: float) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """(first line, value) of each run of lines sharing the value set at its first line; `before` holds from 0."""
+    if len(lines) and lines[0] == 0:
+        return lines, values
+    return np.concatenate(([0], lines)), np.concatenate(([before], values))
 
 
 def _code(params: bytes) -> bytes:
@@ -260,18 +239,17 @@ class MoveAnalyzer:
         self.seconds = 0.0
         self.layer_heights: set[int] = set()
         """Heights (in µm) at which extruding moves happened."""
+        gcodearrays.reuse_freed_memory()
 
     def feed_chunk(self, chunk: bytes) -> None:
         """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
         start = 0
+        view = memoryview(chunk)
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
-            piece = chunk[start:end]
-            if not piece.endswith(b"\n"):  # the last line of a chunk without its newline
-                piece += b"\n"
-            text = b"\n" + piece.upper()
-            if not self._feed_arrays(text):
-                self.feed_lines(piece)
+            ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
+            if not self._feed_arrays(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD)))):
+                self.feed_lines(chunk[start:end] + ended)
             start = end
 
     def feed_lines(self, chunk: bytes) -> None:
@@ -344,119 +322,59 @@ class MoveAnalyzer:
         elif b"P" in words:
             self.seconds += words[b"P"] / 1000.0
 
-    def _feed_arrays(self, text: bytes) -> bool:
-        """Analyse `text` if it is plain enough for array operations, else leave the state alone and say False.
+    def _feed_arrays(self, padded: bytes) -> bool:
+        """Analyse a piece if it is plain enough for array operations, else leave the state alone and say False.
 
-        `text` is upper-cased, starts with a newline and every line starts with its command letter.
+        `padded` starts with a newline, ends its last line and then has `gcodearrays.PAD` zero bytes.
         """
-        data = np.frombuffer(text + bytes(_VALUE_WIDTH + 4), dtype=np.uint8)
-        newlines = np.flatnonzero(data[: len(text)] == 10)
-        starts = newlines[:-1] + 1
-        ends = newlines[1:]
-        if not len(starts):
-            return True
-        c0, c1, c2, c3 = (data[starts + i] for i in range(4))
-        blank1 = (c1 == 32) | (c1 == 9)
-        command = (c0 == ord("G")) | (c0 == ord("M"))
-        if ((c0 == 32) | (c0 == 9) | (c0 == ord("N")) | (command & (
-                blank1 | ((c1 == 48) & (c2 == 48) & (c3 - np.uint8(48) <= 9))))).any():
-            return False  # blanks or a number before the command, blanks inside it, or `G001`
-        is_move = (c0 == ord("G")) & (
-            (_MOVE_DIGIT[c1] & ~_DIGITS[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGITS[c3])
-        )
-        controls: list[tuple[int, bytes, bytes]] = []
-        is_set = np.zeros(len(starts), dtype=bool)
-        for control_line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
-            found = _CONTROL.match(text, int(starts[control_line]) - 1)
-            if found is None:
-                continue
-            code = b"G" + found.group(1) if found.group(1) else b"M" + found.group(2)
-            params = found.group(3)
-            if code == b"G92" and _WORD.search(params) and not re.search(rb"[^XYZE0-9.+\- \t]", params):
-                is_set[control_line] = True
-            else:
-                controls.append((control_line, code, params))
-        is_row = is_move | is_set
-        row_lines = np.flatnonzero(is_row)
-        if not len(row_lines) and not controls:
-            return True
-        row_of_line = np.full(len(starts), -1, dtype=np.int64)
-        row_of_line[row_lines] = np.arange(len(row_lines))
-        semis = np.flatnonzero(data[: len(text)] == ord(";"))
-        semis = np.append(semis, len(text))
-        code_end = np.minimum(semis[np.searchsorted(semis, starts)], ends)
-        if b"(" in text or b"*" in text:
-            odd = np.flatnonzero(_NOT_CODE[data[: len(text)]])
-            odd_line = np.searchsorted(starts, odd, side="right") - 1
-            if (odd < code_end[odd_line]).any():  # a comment in parentheses or a checksum
-                return False
-        values = np.full((5, len(row_lines)), np.nan)
-        where = np.flatnonzero(np.frombuffer(text.translate(_AXIS_FLAGS), dtype=np.bool_))
-        line = np.cumsum(data[: len(text)] == 10, dtype=np.int32)[where].astype(np.intp) - 1
-        keep = (line >= 0) & is_row[np.maximum(line, 0)]
-        where, line = where[keep], line[keep]
-        keep = where < code_end[line]
-        where, line = where[keep], line[keep]
-        if len(where):
-            at = where + 1
-            blank = (data[at] == 32) | (data[at] == 9)
-            while blank.any():  # blanks between a letter and its number
-                at += blank
-                blank = (data[at] == 32) | (data[at] == 9)
-            numbers = _parse_numbers(text, data, at)
-            axis, row = _AXIS_INDEX[data[where]], row_of_line[line]
-            known = ~np.isnan(numbers)
-            if not known.all():  # bare letters are not words
-                axis, row, numbers = axis[known], row[known], numbers[known]
-            values[axis, row] = numbers
-            if np.count_nonzero(values == values) < len(numbers):  # fewer cells than words (NaN != NaN)
-                return False  # a letter repeats within a line
-        sets = is_set[row_lines]
-        bounds = [0]
-        bounds.extend(int(np.searchsorted(row_lines, control[0])) for control in controls)
-        bounds.append(len(row_lines))
-        for i in range(len(bounds) - 1):
-            lo, hi = bounds[i], bounds[i + 1]
-            if hi > lo:
-                self._segment(values[:, lo:hi], sets[lo:hi])
-            if i < len(controls):
-                _line, code, params = controls[i]
+        found = gcodearrays.scan(padded)
+        if found is None:
+            return False
+        start = [0] * len(found.axes)
+        for line, code, params in [*found.controls, (len(padded), b"", b"")]:
+            ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
+            self._segment([Words(w.lines[a:b], w.values[a:b], w.sets[a:b])
+                           for w, a, b in zip(found.axes, start, ends, strict=True)])
+            if code:
                 self._command(code, params)
+            start = ends
         return True
 
-    def _axis(self, given: NDArray[np.float64], sets: NDArray[np.bool_], start: float,
-              absolute: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(position after each row, delta of each row) for one axis."""
-        if absolute:
-            after = _ffill(given, start)
-            delta = np.diff(after, prepend=start)
-            delta[sets] = 0.0
-            return after, delta
-        delta = np.where(sets, 0.0, np.nan_to_num(given))
-        total = np.cumsum(delta)
-        base = np.where(sets, given - total, np.nan)
-        return total + _ffill(base, start), delta
-
-    def _segment(self, values: NDArray[np.float64], sets: NDArray[np.bool_]) -> None:
-        (x, dx), (y, dy), (z, dz) = (
-            self._axis(values[k], sets, self.pos[k], self.absolute) for k in range(3)
-        )
-        e, de = self._axis(values[3], sets, self.e, self.absolute_e)
-        feeds = values[4]
-        feeds[feeds <= 0] = np.nan
-        feed = _ffill(feeds, self.feed)
+    def _segment(self, axes: list[Words]) -> None:
+        """The moves and G92s between two other commands: every axis's words, on lines counted from the piece's."""
+        given = [words for words in axes if len(words.lines)]
+        if not given:
+            return
+        first = min(int(words.lines[0]) for words in given)
+        count = max(int(words.lines[-1]) for words in given) + 1 - first
         with np.errstate(over="ignore", invalid="ignore"):  # absurd coordinates make inf: `absurd` reports it
+            moves = []
+            after: list[NDArray[np.float64]] = []
+            for k, words in enumerate(axes[:4]):
+                start, absolute = (self.e, self.absolute_e) if k == 3 else (self.pos[k], self.absolute)
+                positions, delta = _axis(words.values, words.sets, start, absolute)
+                move = np.zeros(count)
+                move[words.lines - first] = delta
+                moves.append(move)
+                after.append(positions)
+            dx, dy, dz, de = moves
             length = np.sqrt(dx * dx + dy * dy + dz * dz)
             length = np.where(length > 0, length, np.abs(de))
-            self.seconds += float(np.sum(length * 60.0 / feed))
-            self.filament += float(np.sum(de))
-        printing = (de > 0) & ((dx != 0) | (dy != 0)) & np.isfinite(z)
-        if printing.any():
-            heights = z[printing] * 1000
-            changes = np.flatnonzero(heights[1:] != heights[:-1]) + 1  # layers are runs: only run starts differ
-            self.layer_heights.update(map(round, heights[np.append(0, changes)].tolist()))
-        self.pos = [float(x[-1]), float(y[-1]), float(z[-1])]
-        self.e = float(e[-1])
+            feeds = axes[4]
+            valid = feeds.values > 0
+            runs, feed = _runs(feeds.lines[valid] - first, feeds.values[valid], self.feed)
+            self.seconds += float(np.sum(np.add.reduceat(length, runs) * 60.0 / feed))
+            self.filament += float(np.sum(moves[3]))
+            printing = (de > 0) & ((dx != 0) | (dy != 0))
+            if printing.any():
+                runs, heights = _runs(axes[2].lines - first, after[2], self.pos[2])
+                heights = heights[np.logical_or.reduceat(printing, runs)] * 1000
+                self.layer_heights.update(map(round, heights[np.isfinite(heights)].tolist()))
+        for k in range(3):
+            if len(after[k]):
+                self.pos[k] = float(after[k][-1])
+        if len(after[3]):
+            self.e = float(after[3][-1])
         self.feed = float(feed[-1])
 
     @property

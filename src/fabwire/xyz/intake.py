@@ -22,6 +22,8 @@ from io import BytesIO
 from pathlib import Path
 from typing import BinaryIO
 
+import numpy as np
+
 from fabwire import units
 from fabwire.errors import InputError
 from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
@@ -358,8 +360,11 @@ _XYZ_KEY_LINE = re.compile(
     rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
 )
 _G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
-_ODD_LINE_START = re.compile(rb"\n(?:[ \tNng]|G[ \t])")
-_G0_AT_LINE_START = re.compile(rb"\nG0(0?)(?![0-9.])")
+_ODD_FIRST = np.zeros(256, dtype=bool)
+_ODD_FIRST[list(b" \tNng")] = True
+"""A line starting with one of these needs the regular expression to find its command word."""
+_DIGIT_OR_DOT = np.zeros(256, dtype=bool)
+_DIGIT_OR_DOT[list(b"0123456789.")] = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -502,14 +507,21 @@ def stream_metadata(src: BinaryIO, name: str) -> tuple[GcodeMetadata, GcodeMetad
 
 def _process(chunk: bytes) -> bytes:
     """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
-    text = b"\n" + chunk
-    if _ODD_LINE_START.search(text):
-        return _G0_WORD.sub(rb"\n\g<1>1", text)[1:]
-    # Every line starts with its command: plain replaces do the common spellings at memory speed.
-    text = text.replace(b"\nG0 ", b"\nG1 ")
-    if b"\nG0" in text:
-        text = _G0_AT_LINE_START.sub(rb"\nG\g<1>1", text)
-    return text[1:]
+    if not chunk:
+        return chunk
+    data = np.frombuffer(chunk, dtype=np.uint8)
+    starts = np.insert(np.flatnonzero(data[:-1] == 10) + 1, 0, 0)
+    c0, c1, c2, c3 = (np.take(data, starts + i, mode="clip") for i in range(4))
+    if (_ODD_FIRST[c0] | ((c0 == 71) & ((c1 == 32) | (c1 == 9)))).any():  # blanks, line numbers or lower case
+        return _G0_WORD.sub(rb"\n\g<1>1", b"\n" + chunk)[1:]
+    # Every line starts with its command: the `0` of each G0/G00 becomes `1` in place.
+    g0 = (c0 == 71) & (c1 == 48)
+    ones = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT[c2]] + 1, starts[g0 & (c2 == 48) & ~_DIGIT_OR_DOT[c3]] + 2))
+    if not len(ones):
+        return chunk
+    out = bytearray(chunk)
+    np.frombuffer(out, dtype=np.uint8)[ones] = ord("1")
+    return bytes(out)
 
 
 def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progress | None) -> Iterator[bytes]:

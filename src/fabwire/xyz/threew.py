@@ -9,8 +9,10 @@ bound memory.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import re
+import struct
 import tempfile
 import zipfile
 import zlib
@@ -97,12 +99,14 @@ class ThreeWFile(ThreeWInfo):
 
 
 def _float(text: str | None) -> float | None:
+    """A header field's number; None for a missing one, for text, and for `inf`/`nan` (no print takes for ever)."""
     if text is None:
         return None
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         return None
+    return value if math.isfinite(value) else None
 
 
 def _int(text: str | None) -> int | None:
@@ -441,18 +445,33 @@ def _decrypt_zip(
                 progress(done, total)
         scratch.seek(0)
         size = 0
-        try:
-            with zipfile.ZipFile(scratch) as archive:
-                members = archive.infolist()
-                if len(members) != 1:
-                    raise InputError(f"{name}: the zipped body holds {len(members)} files, expected exactly one")
-                with archive.open(members[0]) as member:
-                    while data := member.read(CHUNK):
-                        sink(data)
-                        size += len(data)
-        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as exc:
-            raise InputError(f"{name}: the zipped body is corrupt ({exc})") from exc
+        with _corrupt_zip(name):
+            archive = zipfile.ZipFile(scratch)
+        with archive:
+            members = archive.infolist()
+            if len(members) != 1:
+                raise InputError(f"{name}: the zipped body holds {len(members)} files, expected exactly one")
+            with _corrupt_zip(name):
+                member = archive.open(members[0])
+            with member:
+                while True:
+                    with _corrupt_zip(name):
+                        data = member.read(CHUNK)
+                    if not data:
+                        break
+                    sink(data)  # the output's own errors stay what they are
+                    size += len(data)
     return crc, size, pad_ok, True
+
+
+@contextlib.contextmanager
+def _corrupt_zip(name: str) -> Iterator[None]:
+    """What the zip reader raises on a damaged archive (offsets before its start make seek() fail with EINVAL,
+    bad lengths a struct error) as one InputError; it reads only the scratch copy, so these say nothing else."""
+    try:
+        yield
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, OSError, ValueError, struct.error) as exc:
+        raise InputError(f"{name}: the zipped body is corrupt ({exc})") from exc
 
 
 def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: Progress | None) -> ThreeWInfo:

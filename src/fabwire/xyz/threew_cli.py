@@ -63,7 +63,7 @@ def _info_data(info: ThreeWInfo) -> dict[str, Any]:
     return {
         "variant": info.variant, "container": info.container, "tag": info.tag, "zipped": info.zipped,
         "header_encrypted": info.header_encrypted, "body_encrypted": info.body_encrypted,
-        "gap": info.gap, "header_offset": info.header_offset, "header_bytes": len(info.header),
+        "gap_bytes": info.gap, "header_offset_bytes": info.header_offset, "header_bytes": len(info.header),
         "crc_stored": f"{info.crc_stored:08x}", "crc_computed": f"{info.crc_computed:08x}", "crc_ok": info.crc_ok,
         "pad_ok": info.pad_ok, "machine": info.machine, "model": _model_data(info.model),
         "print_time_s": info.print_time_s, "filament_mm": info.filament_mm, "layers": info.layers,
@@ -152,13 +152,13 @@ def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, wri
 
 
 def _report(app: App, direction: str, src: Path, dst: Path, info: ThreeWInfo) -> None:
-    data = {"direction": direction, "source": str(src), "output": str(dst), "bytes_written": _size(dst),
+    data = {"direction": direction, "source": str(src), "output": str(dst), "written_bytes": _size(dst),
             **_info_data(info)}
     model = info.model.name if info.model else info.machine or "unknown model"
     if direction == "3w-to-gcode":
         text = f"wrote {dst} ({info.gcode_size} bytes of G-code) from a {info.variant} file for {model}; "
     else:
-        text = f"wrote {dst} for {model} ({info.variant}, {data['bytes_written']} bytes); "
+        text = f"wrote {dst} for {model} ({info.variant}, {data['written_bytes']} bytes); "
     app.output.result(data, text + metadata_summary(info))
 
 
@@ -180,7 +180,7 @@ def info(ctx: click.Context, file: Path) -> None:
                 return
             with _progress(app, f"checking {file.name}", size) as progress:
                 details = inspect_3w(plain, progress)
-    data = {"file": str(file), "size": size, **_info_data(details)}
+    data = {"file": str(file), "size_bytes": size, **_info_data(details)}
 
     def human() -> None:
         table = Table(show_header=False, box=None)

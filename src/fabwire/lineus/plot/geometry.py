@@ -70,7 +70,6 @@ def scale_translate(scale: float, dx: float, dy: float, *, flip_y: bool = False)
 
 def compose(second: FloatArray, first: FloatArray) -> FloatArray:
     """The 2x3 matrix doing `first` then `second`."""
-    a = np.vstack([second, [0.0, 0.0, 1.0]])
-    b = np.vstack([first, [0.0, 0.0, 1.0]])
-    out: FloatArray = (a @ b)[:2]
+    out: FloatArray = second[:, :2] @ first
+    out[:, 2] += second[:, 2]
     return out

@@ -42,6 +42,8 @@ class Drawing:
     notes: tuple[str, ...] = ()
     hidden: Polylines = field(default_factory=list)
     """Lines an SVG clip path hides, machine units."""
+    empty_reason: str = ""
+    """Why the file shows nothing at all, when the reader knows (an SVG viewport of size 0)."""
     data: bytes = b""
     curved: bool = False
     tolerance: float = FLATTEN_TOLERANCE
@@ -115,8 +117,8 @@ def _svg_drawing(name: str, data: bytes, digest: str, tolerance: float) -> Drawi
              for tag, count in sorted(drawing.skipped.items())]
     notes.extend(drawing.notes)
     m = scale_translate(SVG_UNITS_PER_PX, PAGE_ORIGIN[0], PAGE_ORIGIN[1], flip_y=True)
-    return Drawing(affine(drawing.lines, m), "svg", name, tuple(notes), affine(drawing.hidden, m), data,
-                   drawing.curved, tolerance, digest)
+    return Drawing(affine(drawing.lines, m), "svg", name, tuple(notes), affine(drawing.hidden, m),
+                   drawing.empty_reason, data, drawing.curved, tolerance, digest)
 
 
 def read_drawing(source: str | Path) -> Drawing:
@@ -146,7 +148,9 @@ def drawing_from_bytes(name: str, raw: bytes) -> Drawing:
         notes: list[str] = []
         drawing = Drawing(parse_gcode_text(text, name=name, notes=notes), "gcode", name, tuple(notes), digest=digest)
     if not drawing.lines:
-        why = f" ({'; '.join(drawing.notes)})" if drawing.notes else ""
-        raise InputError(f"{name}: the drawing is empty (nothing for the pen to draw){why}")
+        why = drawing.empty_reason or (
+            "no shape in it has a visible stroke or fill" if drawing.kind == "svg" else "it has no pen-down moves")
+        also = f" ({'; '.join(drawing.notes)})" if drawing.notes else ""
+        raise InputError(f"{name}: nothing to draw: {why}{also}")
     return drawing
 

@@ -497,4 +497,45 @@ def _reorder_runs(lines: Polylines, origin: tuple[float, float], time_budget: fl
             out.extend(line[::-1] for line in reversed(lines[a:b]))
         else:
             out.extend(lines[a:b])
-    return out if travel_length(out, origin) < travel_length(lines, origin) else lines
+    sizes = [runs[index][1] - runs[index][0] for index in order.tolist()]
+    candidates = [lines, out, orient_runs(lines, [b - a for a, b in runs], origin), orient_runs(out, sizes, origin)]
+    return min(candidates, key=lambda c: travel_length(c, origin))
+
+
+def orient_runs(lines: Polylines, sizes: Sequence[int], origin: tuple[float, float] = HOME) -> Polylines:
+    """The best way round for each run of consecutive lines (`sizes` long each), the runs' order kept: a run
+    may be drawn as it is, backwards, mirrored (every line reversed, same order) or both. Mirroring lets a
+    zig-zag hatch start at either corner of its side, which reversing alone cannot. Exact for the given order
+    (dynamic programming over the four ways of each run), counting the hops inside each run as well."""
+    if not lines:
+        return lines
+    starts = np.array([line[0] for line in lines])
+    ends = np.array([line[-1] for line in lines])
+    # Hops inside a run: end of k to start of k+1 as drawn, start of k to end of k+1 when mirrored.
+    as_drawn = np.concatenate([[0.0], np.cumsum(np.hypot(*(starts[1:] - ends[:-1]).T))])
+    mirrored = np.concatenate([[0.0], np.cumsum(np.hypot(*(ends[1:] - starts[:-1]).T))])
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    first, last = bounds[:-1], bounds[1:] - 1
+    inner = np.stack([as_drawn[last] - as_drawn[first]] * 2 + [mirrored[last] - mirrored[first]] * 2, axis=1)
+    # The four ways: as drawn, backwards, mirrored, mirrored backwards: where each enters and leaves.
+    entry = np.stack([starts[first], ends[last], ends[first], starts[last]], axis=1)
+    leave = np.stack([ends[last], starts[first], starts[last], ends[first]], axis=1)
+    cost = np.hypot(*(entry[0] - np.asarray(origin, dtype=float)).T) + inner[0]
+    choice = np.zeros((len(sizes), 4), dtype=np.int64)
+    for r in range(1, len(sizes)):
+        hop = np.hypot(entry[r][None, :, 0] - leave[r - 1][:, None, 0], entry[r][None, :, 1] - leave[r - 1][:, None, 1])
+        total = cost[:, None] + hop
+        choice[r] = np.argmin(total, axis=0)
+        cost = total[choice[r], np.arange(4)] + inner[r]
+    way = int(np.argmin(cost))
+    ways = [0] * len(sizes)
+    for r in range(len(sizes) - 1, -1, -1):
+        ways[r] = way
+        way = int(choice[r, way])
+    out: Polylines = []
+    for (a, b), way in zip(zip(first.tolist(), (last + 1).tolist(), strict=True), ways, strict=True):
+        run = lines[a:b]
+        if way in (1, 3):
+            run = run[::-1]
+        out.extend(line[::-1] for line in run) if way in (1, 2) else out.extend(run)
+    return out

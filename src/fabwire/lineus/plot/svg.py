@@ -5,13 +5,17 @@ Rendering follows SVG 1.1 / SVG 2 as browsers do: `<symbol>`, `<defs>`, `<clipPa
 through `<use>` or as clips (§5.5, §5.6); `<use width height>` of a symbol or svg is a new viewport its viewBox
 maps onto (§7.8); `display="none"`, `visibility="hidden"` and `opacity="0"` hide (§6, §14.5); a lone moveto is
 never stroked, and a zero-length subpath only with round or square caps, as a dot (SVG 2 §13.6); clip paths cut
-the geometry (§14.3). What cannot be honoured (masks, markers, text) is named in `notes`, never drawn otherwise.
+the geometry (§14.3). A standalone document shows no more than its root's box when that has a definite size,
+so lines beyond it are cut away. Geometry attributes follow the browsers' error handling (see svgunits): an
+attribute in error is ignored, a size of zero shows nothing, a transform that flattens the plane hides. What
+cannot be honoured (masks, markers, text, CSS transforms) is named in `notes`, never drawn otherwise.
 """
 
 from __future__ import annotations
 
 import io
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator
@@ -24,21 +28,31 @@ from shapely.geometry.base import BaseGeometry
 
 from fabwire.errors import InputError
 from fabwire.lineus.plot.clip import area_of_rings, cut
-from fabwire.lineus.plot.geometry import FloatArray, Polylines
-from fabwire.lineus.plot.svgpath import PathBuilder, Subpath, ellipse, line, numbers, path_data, polyline, rect
-from fabwire.lineus.plot.svgstyle import (
-    StyleSheet,
-    inherit,
-    iri,
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine
+from fabwire.lineus.plot.geometry import compose as then
+from fabwire.lineus.plot.svgpath import (
+    PathBuilder,
+    PathDataError,
+    Subpath,
+    ellipse,
+    is_straight,
+    line,
+    numbers,
+    path_data,
+    polyline,
+    rect,
+    straight_paths,
+)
+from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, own_style, paints
+from fabwire.lineus.plot.svgunits import (
+    IDENTITY,
+    beyond_single,
+    flattens,
     length,
-    local,
-    own_style,
-    paints,
-    renders_nothing,
-    then,
+    read_view_box,
+    size_is_zero,
     transform,
     translate,
-    view_box,
     viewport_matrix,
 )
 
@@ -52,6 +66,10 @@ MAX_POINTS = 20_000_000
 """Points in one drawing: days of drawing for a Line-us, and about 320 MB of coordinates."""
 MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
+READ_AHEAD_CHARS = 100_000
+"""Path data up to this length is read ahead with all the others; longer data is read on its own, in place."""
+
+_CSS_TRANSFORM = re.compile(r"(?:^|;)\s*transform\s*:")
 
 SHAPES = frozenset({"path", "rect", "circle", "ellipse", "line", "polyline", "polygon"})
 CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
@@ -73,6 +91,8 @@ class SvgDrawing:
     """The chord tolerance used, px."""
     size: tuple[float, float] = (0.0, 0.0)
     """The page's width and height, px."""
+    empty_reason: str = ""
+    """Why a browser shows nothing of the whole file, when that is known before drawing (a viewport of size 0)."""
 
 
 def _read_root(source: str | Path | bytes) -> tuple[ET.Element, str]:
@@ -108,23 +128,33 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None) -> 
     if tolerance is not None and not tolerance > 0:
         raise InputError(f"curve tolerance must be positive, got {tolerance}")
     root, name = _read_root(source)
-    if renders_nothing(root.get("width"), root.get("height"), root.get("viewBox")):
-        return SvgDrawing([], notes=["its width, height or viewBox size is 0, so a browser shows nothing of it"])
-    box = view_box(root.get("viewBox"))
-    width = length(root.get("width"), box[2] if box else 0.0, default=box[2] if box else 0.0)
-    height = length(root.get("height"), box[3] if box else 0.0, default=box[3] if box else 0.0)
+    vb = read_view_box(root.get("viewBox"))
+    for which in ("width", "height"):
+        if size_is_zero(root.get(which)):
+            return SvgDrawing([], empty_reason=f"its {which} is 0, which disables rendering: a browser shows nothing")
+    if vb.empty:
+        return SvgDrawing([], empty_reason=f"its viewBox {vb.error}, which disables rendering: a browser shows "
+                                           "nothing")
+    box = vb.box
+    page = _page_size(root.get("width"), root.get("height"))
+    width, height = page or (0.0, 0.0)
     if width <= 0 or height <= 0:
         width, height = (box[2], box[3]) if box else (1000.0, 1000.0)
     if tolerance is None:
         tolerance = RELATIVE_TOLERANCE * math.hypot(width, height)
     reader = _Reader(root, name, tolerance)
+    if vb.error:
+        reader.unsupported[f"the viewBox {root.get('viewBox', '')[:60]!r} is in error ({vb.error}): ignored, as "
+                           "browsers do"] += 1
     try:
         reader.check_expansion()
         matrix = viewport_matrix(box, 0.0, 0.0, width, height, root.get("preserveAspectRatio"))
         style = inherit({}, own_style(root, reader.sheet))
         if style.get("display") != "none" and _opacity(style) > 0:
-            reader.children(root, style, then(matrix, transform(root.get("transform"))),
+            reader.children(root, style, then(matrix, reader.own_transform(root)),
                             (box[2], box[3]) if box else (width, height), reader.lines, 0, ())
+        if page:  # a standalone document shows its root's box only, whatever its overflow
+            reader.clip_to_page(width, height)
     except RecursionError as exc:
         raise InputError(f"{name}: elements nested too deeply to read") from exc
     except (ValueError, TypeError, ZeroDivisionError, shapely.errors.ShapelyError) as exc:
@@ -134,10 +164,25 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None) -> 
 
 
 def _opacity(style: dict[str, str]) -> float:
-    try:
-        return float(style.get("opacity", "1"))
-    except ValueError:
-        return 1.0
+    return number(style.get("opacity"), 1.0)
+
+
+def _without_area(points: FloatArray) -> bool:
+    """Whether all points lie on one straight line (so a fill of them covers nothing)."""
+    spread = points - points[0]
+    far = spread[int(np.argmax(np.abs(spread).sum(axis=1)))]
+    cross = spread[:, 0] * far[1] - spread[:, 1] * far[0]
+    scale = float(np.abs(far).sum()) ** 2
+    return bool(np.abs(cross).max() <= 1e-12 * scale)
+
+
+def _page_size(width: str | None, height: str | None) -> tuple[float, float] | None:
+    """The root's width and height in px when both are definite lengths (not percentages of a window, not in
+    error, not negative): the page a browser clips the drawing to."""
+    if not width or not height or "%" in width + height:
+        return None
+    w, h = length(width, 0.0, default=-1.0), length(height, 0.0, default=-1.0)
+    return (w, h) if w > 0 and h > 0 else None
 
 
 class _Reader:
@@ -157,6 +202,7 @@ class _Reader:
         self.curved = False
         self.points = 0
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
+        self._read_ahead = self._read_straight_paths()
 
     # -- limits -----------------------------------------------------------------------------------------------
 
@@ -196,6 +242,44 @@ class _Reader:
             raise InputError(f"{self.name}: <use> elements copy its {direct:,} shapes more than {MAX_USE_COPIES:,} "
                              "times; refusing such an expansion")
 
+    def _read_straight_paths(self) -> dict[int, list[Subpath]]:
+        """The subpaths (in user units) of the file's short straight-line paths, read all at once: a generated
+        drawing of thousands of paths costs one array pass instead of thousands. Longer paths, curves and
+        anything unusual are read one by one where drawn."""
+        paths = [el for el in self.root.iter() if local(el.tag) == "path"
+                 and 0 < len(el.get("d") or "") <= READ_AHEAD_CHARS and is_straight(el.get("d") or "")]
+        if len(paths) < 2:
+            return {}
+        read = straight_paths([el.get("d") or "" for el in paths])
+        return {id(el): subs for el, subs in zip(paths, read, strict=True)} if read is not None else {}
+
+    def own_transform(self, el: ET.Element) -> FloatArray:
+        """The element's `transform`; one in error is ignored (with a note), as browsers ignore it."""
+        value = el.get("transform")
+        try:
+            return transform(value)
+        except ValueError as exc:
+            self.unsupported[f"the transform {(value or '')[:60]!r} on <{local(el.tag)}> is in error ({exc}): "
+                             "ignored, as browsers do"] += 1
+            return IDENTITY
+
+    def clip_to_page(self, width: float, height: float) -> None:
+        """Cut the drawing to the page, (0, 0)-(width, height) px, as a browser shows no more of it."""
+        if not self.lines:
+            return
+        starts = np.cumsum([0] + [len(line) for line in self.lines[:-1]])
+        points = np.concatenate(self.lines)
+        low = np.minimum.reduceat(points, starts)
+        high = np.maximum.reduceat(points, starts)
+        inside = (low >= 0).all(axis=1) & (high[:, 0] <= width) & (high[:, 1] <= height)
+        if inside.all():
+            return
+        crossing = np.flatnonzero(~inside).tolist()
+        kept, hidden = cut([self.lines[k] for k in crossing], shapely.box(0.0, 0.0, width, height))
+        self.lines = [line for line, keep in zip(self.lines, inside.tolist(), strict=True) if keep] + kept
+        self.hidden.extend(hidden)
+        self.unsupported[f"lines outside the {width:g} x {height:g} px page are hidden, as a browser hides them"] += 1
+
     def report(self) -> list[str]:
         notes = [f"{what} ({count}x)" if count > 1 else what for what, count in sorted(self.unsupported.items())]
         if self.sheet.ignored:
@@ -229,11 +313,13 @@ class _Reader:
         style = inherit(parent, own)
         if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
             return
-        try:
-            matrix = then(matrix, transform(el.get("transform")))
-        except ValueError:
-            self.unsupported[f"<{tag}> elements with a transform that is not finite are left out"] += 1
-            return
+        own_matrix = self.own_transform(el)
+        if own_matrix is not IDENTITY:
+            matrix = then(matrix, own_matrix)
+        if flattens(matrix):
+            return  # scaled to a line or a point: nothing of it shows
+        if _CSS_TRANSFORM.search(el.get("style") or ""):
+            self.unsupported["the CSS transform property is not applied (use the transform attribute)"] += 1
         target: Polylines = []
         if tag in SHAPES:
             self.shape(el, tag, style, matrix, viewport, target)
@@ -265,6 +351,8 @@ class _Reader:
             return
         if ref in uses or depth > MAX_DEPTH:
             raise InputError(f"{self.name}: <use> refers back to itself through #{ref}")
+        if beyond_single(el.get("x")) or beyond_single(el.get("y")):
+            return  # placed at infinity: nothing of the copy is on the page
         vw, vh = viewport
         matrix = then(matrix, translate(length(el.get("x"), vw), length(el.get("y"), vh)))
         kind = local(target.tag)
@@ -284,9 +372,13 @@ class _Reader:
         y = length(el.get("y"), vh) if el is placed_by else 0.0
         w = length(width if width is not None else el.get("width"), vw, default=vw)
         h = length(height if height is not None else el.get("height"), vh, default=vh)
-        if w <= 0 or h <= 0 or renders_nothing(None, None, el.get("viewBox")):
+        vb = read_view_box(el.get("viewBox"))
+        if w <= 0 or h <= 0 or vb.empty:
             return
-        box = view_box(el.get("viewBox"))
+        if vb.error:
+            self.unsupported[f"the viewBox {el.get('viewBox', '')[:60]!r} on <{local(el.tag)}> is in error "
+                             f"({vb.error}): ignored, as browsers do"] += 1
+        box = vb.box
         inner = then(matrix, viewport_matrix(box, x, y, w, h, el.get("preserveAspectRatio")))
         drawn: Polylines = []
         self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
@@ -298,6 +390,10 @@ class _Reader:
         out.extend(drawn)
 
     def subpaths(self, el: ET.Element, tag: str, matrix: FloatArray, viewport: tuple[float, float]) -> list[Subpath]:
+        ahead = self._read_ahead.pop(id(el), None) if tag == "path" else None
+        if ahead is not None:
+            placed = affine([sub.points for sub in ahead], matrix)
+            return [Subpath(points, sub.closed, sub.segments) for points, sub in zip(placed, ahead, strict=True)]
         builder = PathBuilder(matrix, self.tolerance)
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)
@@ -323,8 +419,9 @@ class _Reader:
                 line(builder, get("x1", vw), get("y1", vh), get("x2", vw), get("y2", vh))
             else:
                 polyline(builder, numbers(el.get("points") or ""), close=(tag == "polygon"))
-        except ValueError:
-            self.unsupported[f"<{tag}> data with an error is drawn up to the error (SVG error processing)"] += 1
+        except ValueError as exc:
+            why = f" ({exc})" if isinstance(exc, PathDataError) else ""
+            self.unsupported[f"<{tag}> data with an error{why} is drawn up to the error, as browsers do"] += 1
         self.curved = self.curved or builder.curved
         return builder.subpaths
 
@@ -346,6 +443,8 @@ class _Reader:
             if not np.isfinite(pts).all():
                 self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
+            if not stroke and _without_area(pts):
+                continue  # a fill with no area shows nothing
             if bool((pts == pts[0]).all()):
                 if dots:
                     out.append(pts[:1].copy())
@@ -375,7 +474,7 @@ class _Reader:
             user = pts @ inverse[:, :2].T + inverse[:, 2]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
-        matrix = then(matrix, transform(clip.get("transform")))
+        matrix = then(matrix, self.own_transform(clip))
         key = (id(clip), matrix.tobytes())
         if key in self._clips and not by_box:
             return self._clips[key]
@@ -399,7 +498,9 @@ class _Reader:
         style = inherit(base, own)
         if own.get("display", "").strip() == "none" or style.get("visibility", "visible").strip() != "visible":
             return empty
-        matrix = then(matrix, transform(child.get("transform")))
+        matrix = then(matrix, self.own_transform(child))
+        if flattens(matrix):
+            return empty
         if tag == "use":
             ref = self._href(child)
             target = self.ids.get(ref) if ref else None

@@ -20,9 +20,14 @@ import numpy.typing as npt
 import svgelements as se
 
 from fabwire.lineus.plot.geometry import FloatArray
+from fabwire.lineus.plot.svgunits import FLOAT32_MAX, IDENTITY
 
 MAX_CURVE_POINTS = 10_000
 """Chords for one curve segment at most: beyond any drawing that fits the Line-us area at 0.05 mm."""
+READ_TOGETHER_LARGEST = 1e6
+"""Paths read together hold no number beyond this: relative steps summed across them then stay exact to far
+below the pen's resolution (larger ones are read path by path)."""
+_MAYBE_LARGE = re.compile(r"\d{39}|[eE]\+?0*(?:3[89]|[4-9]\d|\d{3,})")
 _FLOAT = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -244,16 +249,38 @@ def _arc_points(p0: tuple[float, float], rx: float, ry: float, rotation: float, 
     return pts
 
 
+class PathDataError(ValueError):
+    """Path data in error for a reason the grammar alone does not show."""
+
+
 def path_data(builder: PathBuilder, d: str) -> None:
-    """Feed path data `d` to `builder`; ValueError where the data breaks the grammar (what precedes is kept,
-    as SVG 1.1 §F.2 error processing renders the path up to the error)."""
+    """Feed path data `d` to `builder`; ValueError where the data breaks the grammar or holds a number beyond
+    single precision, which browsers cannot read (what precedes is kept, as SVG 1.1 §F.2 error processing renders
+    the path up to the error)."""
     if len(d) > 256 and straight_path_data(builder, d):
         return
-    lexer = se.SVGLexicalParser()
+    cut = _first_number_beyond_single(d)
+    if cut is not None:
+        d = d[:cut]
     try:
-        lexer.parse(builder, d)
+        se.SVGLexicalParser().parse(builder, d)
+    except ValueError:
+        if cut is None:
+            raise
     finally:
         builder.end()
+    if cut is not None:
+        raise PathDataError("a number beyond what a browser can hold")
+
+
+def _first_number_beyond_single(d: str) -> int | None:
+    """Where the first number too large for single precision starts, or None (a cheap test rules most data out)."""
+    if not _MAYBE_LARGE.search(d):
+        return None
+    for match in _FLOAT.finditer(d):
+        if abs(float(match.group())) > FLOAT32_MAX:
+            return match.start()
+    return None
 
 
 def numbers(text: str) -> list[float]:
@@ -318,7 +345,6 @@ def line(builder: PathBuilder, x1: float, y1: float, x2: float, y2: float) -> No
 
 
 _STRAIGHT_ONLY = re.compile(r"[MmLlHhVvZz0-9eE.,+\-\s]*")
-_COMPACT_NUMBERS = re.compile(r"\.\d*\.|[eE][^-+0-9]|[eE]$")
 _M, _L, _H, _V, _Z = (ord(c) for c in "MLHVZ")
 _COMMANDS = np.zeros(256, dtype=bool)
 _COMMANDS[np.frombuffer(b"MmLlHhVvZz", dtype=np.uint8)] = True
@@ -330,22 +356,60 @@ def straight_path_data(builder: PathBuilder, d: str) -> bool:
     """Path data made only of straight segments (M L H V Z, either case), the bulk of generated drawings, read
     with array operations instead of one lexer call per number: same subpaths as the general reader, several
     times faster. Returns False, having built nothing, for anything it does not take on (curves, arcs, compact
-    number forms, relative commands right after a closepath, malformed data); the general reader does those."""
-    if not _STRAIGHT_ONLY.fullmatch(d) or _COMPACT_NUMBERS.search(d):
+    number forms, relative commands right after a closepath, numbers beyond single precision, malformed data);
+    the general reader does those."""
+    read = _straight_subpaths(d, builder.matrix)
+    if read is None:
         return False
+    builder.subpaths.extend(read[0])
+    return True
+
+
+def is_straight(d: str) -> bool:
+    """Whether path data holds only the characters of straight segments (the straight reader may take it)."""
+    return _STRAIGHT_ONLY.fullmatch(d) is not None
+
+
+def straight_paths(ds: list[str]) -> list[list[Subpath]] | None:
+    """Many path data strings, each starting with an absolute moveto, read in one pass of array operations (the
+    cost of a call is paid once, not per path): each one's subpaths in user units, as `straight_path_data` would
+    give them. None when any of them is not for the straight reader (then read each on its own)."""
+    if not ds or not all(d.lstrip()[:1] == "M" for d in ds):
+        return None
+    read = _straight_subpaths(" ".join(ds), IDENTITY, largest=READ_TOGETHER_LARGEST)
+    if read is None:
+        return None
+    subpaths, first_command = read
+    commands_before = np.cumsum([sum(d.count(c) for c in "MmLlHhVvZz") for d in ds])
+    owner = np.searchsorted(commands_before, first_command, side="right")
+    out: list[list[Subpath]] = [[] for _ in ds]
+    for sub, k in zip(subpaths, owner.tolist(), strict=True):
+        out[k].append(sub)
+    return out
+
+
+def _straight_subpaths(d: str, matrix: FloatArray, *, largest: float = FLOAT32_MAX,
+                       ) -> tuple[list[Subpath], npt.NDArray[np.int32]] | None:
+    """The subpaths of straight-only path data under `matrix`, with the index of the command each starts at;
+    None when the data is not for this reader or holds a number beyond `largest`."""
+    if not _STRAIGHT_ONLY.fullmatch(d):
+        return None
     text = np.frombuffer(re.sub(r"(?<=[0-9.])(?=[-+])", " ", d).encode("ascii"), dtype=np.uint8)
     is_cmd = _COMMANDS[text]
     blank = _SPACE[text] | is_cmd
     token_at = np.flatnonzero(~blank & np.concatenate([[True], blank[:-1]]))
     cmd_at = np.flatnonzero(is_cmd)
     if not len(cmd_at) or (len(token_at) and token_at[0] < cmd_at[0]):
-        return False
+        return None
     cleaned = np.where(blank, np.uint8(32), text).tobytes().decode("ascii")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a token it cannot read ends the array early: caught by the count below
-        values = np.fromstring(cleaned, dtype=float, sep=" ")
-    if len(values) != len(token_at):
-        return False
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a token it cannot read ends the array early: caught by the count below
+            values = np.fromstring(cleaned, dtype=float, sep=" ")
+    except ValueError:  # a compact number form such as 1.5.5 or 1e
+        return None
+    if len(values) != len(token_at) or (len(values) and float(np.abs(values).max()) > largest):
+        return None
     cmds = text[cmd_at]
     first = np.searchsorted(token_at, cmd_at)
     count = np.diff(np.append(first, len(values)))
@@ -353,14 +417,14 @@ def straight_path_data(builder: PathBuilder, d: str) -> bool:
     relative = cmds != upper
     pairs = (upper == _M) | (upper == _L)
     if upper[0] != _M or (count[pairs] % 2).any() or (count[pairs] == 0).any() or (count[upper == _Z] != 0).any():
-        return False
+        return None
     if ((count == 0) & ((upper == _H) | (upper == _V))).any():
-        return False
+        return None
     closes = np.flatnonzero(upper == _Z)
     after = closes + 1
     after = after[after < len(cmds)]
     if len(after) and (cmds[after] != _M).any():
-        return False
+        return None
     # One event per point: pairs for M/L, singles for H/V, none for Z (added below). Temporaries are dropped as
     # soon as they are used: a generated path can hold millions of points.
     per = np.where(pairs, count // 2, np.where(upper == _Z, 0, count))
@@ -370,7 +434,7 @@ def straight_path_data(builder: PathBuilder, d: str) -> bool:
     is_pair = pairs[group]
     starts = np.flatnonzero((kind == _M) & (offset == 0))
     if not len(starts) or starts[0] != 0:
-        return False
+        return None
     pos = first[group]
     pos += np.where(is_pair, 2 * offset, offset)
     del offset
@@ -387,29 +451,31 @@ def straight_path_data(builder: PathBuilder, d: str) -> bool:
     points[:, 0] = _carry(points[:, 0], ~rel & sets_x)
     points[:, 1] = _carry(points[:, 1], ~rel & sets_y)
     del rel, sets_x, sets_y
-    matrix = builder.matrix
-    with np.errstate(invalid="ignore", over="ignore"):
-        points @= matrix[:, :2].T
-        points += matrix[:, 2]
+    if matrix is not IDENTITY:
+        with np.errstate(invalid="ignore", over="ignore"):
+            points @= matrix[:, :2].T
+            points += matrix[:, 2]
     bounds = [*starts.tolist(), len(points)]
     closed_groups = set(closes.tolist())
     # A Z right after a subpath's last point closes it.
     last_group = group[np.array(bounds[1:]) - 1]
+    subpaths = []
     for k in range(len(starts)):
         a, b = bounds[k], bounds[k + 1]
         closed = int(last_group[k]) + 1 in closed_groups
         piece = points[a:b]
         if closed and not np.array_equal(points[a], points[b - 1]):
             piece = np.vstack([piece, points[a : a + 1]])
-        builder.subpaths.append(Subpath(piece, closed, (b - a - 1) + (1 if closed else 0)))
-    return True
+        subpaths.append(Subpath(piece, closed, (b - a - 1) + (1 if closed else 0)))
+    return subpaths, group[starts]
 
 
 def _carry(values: FloatArray, absolute: npt.NDArray[np.bool_]) -> FloatArray:
-    """Running coordinate: restart at each absolute value, add relative ones (an untouched axis adds 0)."""
-    total = np.cumsum(values)
+    """Running coordinate: restart at each absolute value, add relative ones (an untouched axis adds 0). Only
+    relative steps are summed, so a large absolute value never costs a later one its precision."""
+    total = np.cumsum(np.where(absolute, 0.0, values))
     anchor = np.where(absolute, np.arange(len(values)), -1)
     np.maximum.accumulate(anchor, out=anchor)
-    later = anchor > 0
-    total[later] -= total[anchor[later] - 1]
+    anchored = anchor >= 0
+    total[anchored] += values[anchor[anchored]] - total[anchor[anchored]]
     return total

@@ -1,20 +1,21 @@
 """The SVG style cascade a browser applies, reduced to the properties that decide what a pen draws: paint,
-opacity, visibility, display, line caps, clipping. Also lengths, transforms and viewBox → viewport mapping.
+opacity, visibility, display, line caps, clipping.
 
 Sources: SVG 1.1 §6 (styling: presentation attributes < style sheets < the `style` attribute; inheritance),
-§7.7-7.8 (viewBox, preserveAspectRatio), §7.10 (units), §11.2 (paint), CSS 2.1 §6.4.3 (specificity).
+§11.2 (paint), CSS 2.1 §6.4.3 (specificity).
 """
 
 from __future__ import annotations
 
+import functools
+import math
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
-import numpy as np
 import svgelements as se
 
-from fabwire.lineus.plot.geometry import FloatArray, compose
+from fabwire.lineus.plot.svgunits import length
 
 INHERITED = frozenset({
     "fill", "stroke", "fill-opacity", "stroke-opacity", "stroke-width", "stroke-linecap", "visibility",
@@ -106,6 +107,7 @@ def inherit(parent: dict[str, str], own: dict[str, str]) -> dict[str, str]:
 
 
 def number(value: str | None, default: float) -> float:
+    """A plain number or a percentage (as a fraction), such as an opacity; `default` when absent or in error."""
     if value is None:
         return default
     try:
@@ -113,7 +115,7 @@ def number(value: str | None, default: float) -> float:
         result = float(text[:-1]) / 100 if text.endswith("%") else float(text)
     except ValueError:
         return default
-    return result if np.isfinite(result) else default
+    return result if math.isfinite(result) else default
 
 
 def paints(style: dict[str, str], which: str) -> bool:
@@ -123,94 +125,18 @@ def paints(style: dict[str, str], which: str) -> bool:
         return False
     if number(style.get(f"{which}-opacity"), 1.0) <= 0:
         return False
-    if which == "stroke" and length(style.get("stroke-width"), 1.0, default=1.0) <= 0:
-        return False
-    if value.startswith("url("):
-        return True
+    if which == "stroke" and length(style.get("stroke-width"), 1.0, default=1.0) == 0:
+        return False  # a negative width is in error: the initial 1 applies
+    return value.startswith("url(") or _opaque(value)
+
+
+@functools.lru_cache(maxsize=256)
+def _opaque(color: str) -> bool:
+    """Whether a colour puts ink on the page (its alpha is not 0); one that does not parse is taken as ink."""
     try:
-        return bool(se.Color(value).alpha != 0)
+        return bool(se.Color(color).alpha != 0)
     except (ValueError, TypeError):
         return True
-
-
-def length(value: str | None, relative_to: float, *, default: float = 0.0) -> float:
-    """A length in user units (CSS px at 96 per inch); percentages of `relative_to`."""
-    if value is None or not value.strip():
-        return default
-    try:
-        result = se.Length(value.strip()).value(ppi=96.0, relative_length=relative_to, font_size=16.0)
-        result = float(result)
-    except (ValueError, TypeError, AttributeError, ZeroDivisionError):
-        return default
-    return result if np.isfinite(result) else default
-
-
-def transform(value: str | None) -> FloatArray:
-    """The `transform` attribute as a 2x3 matrix (identity when absent); ValueError when it holds numbers that
-    are not finite, which no viewer can place."""
-    if not value or not value.strip():
-        return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    m = se.Matrix(value)
-    out = np.array([[m.a, m.c, m.e], [m.b, m.d, m.f]], dtype=float)
-    if not np.isfinite(out).all():
-        raise ValueError(f"transform {value.strip()[:60]!r} is not finite")
-    return out
-
-
-def translate(x: float, y: float) -> FloatArray:
-    return np.array([[1.0, 0.0, x], [0.0, 1.0, y]])
-
-
-def view_box(value: str | None) -> tuple[float, float, float, float] | None:
-    """(min-x, min-y, width, height), or None when absent or not usable (width or height not positive)."""
-    if not value:
-        return None
-    parts = re.split(r"[\s,]+", value.strip())
-    try:
-        x, y, w, h = (float(p) for p in parts)
-    except ValueError:
-        return None
-    return (x, y, w, h) if w > 0 and h > 0 and np.isfinite([x, y, w, h]).all() else None
-
-
-def renders_nothing(width: str | None, height: str | None, view_box_value: str | None) -> bool:
-    """Whether a viewport's width, height or viewBox size is zero, which disables its rendering (SVG 1.1 §7.7,
-    §7.9, §14.3.3): a browser shows nothing of it. A negative one is an error and is ignored instead."""
-    sizes = [width, height]
-    if view_box_value:
-        sizes.extend(re.split(r"[\s,]+", view_box_value.strip())[2:4])
-    for text in sizes:
-        try:
-            if text is not None and float(text.strip().removesuffix("px")) == 0:
-                return True
-        except ValueError:
-            continue
-    return False
-
-
-def viewport_matrix(box: tuple[float, float, float, float] | None, x: float, y: float, width: float,
-                    height: float, aspect: str | None) -> FloatArray:
-    """Map a viewBox onto the viewport (x, y, width, height) as `preserveAspectRatio` says (SVG 1.1 §7.8)."""
-    if box is None:
-        return translate(x, y)
-    bx, by, bw, bh = box
-    sx, sy = width / bw, height / bh
-    words = (aspect or "xMidYMid meet").split()
-    align = words[0] if words else "xMidYMid"
-    if align != "none":
-        s = max(sx, sy) if "slice" in words[1:] else min(sx, sy)
-        sx = sy = s
-    tx, ty = x - bx * sx, y - by * sy
-    if align != "none":
-        if "xMid" in align:
-            tx += (width - bw * sx) / 2
-        elif "xMax" in align:
-            tx += width - bw * sx
-        if "YMid" in align:
-            ty += (height - bh * sy) / 2
-        elif "YMax" in align:
-            ty += height - bh * sy
-    return np.array([[sx, 0.0, tx], [0.0, sy, ty]])
 
 
 def iri(value: str | None) -> str | None:
@@ -219,8 +145,3 @@ def iri(value: str | None) -> str | None:
         return None
     match = _IRI.search(value)
     return match.group(1) if match else None
-
-
-def then(outer: FloatArray, inner: FloatArray) -> FloatArray:
-    """`inner` applied first, then `outer` (nested coordinate systems)."""
-    return compose(outer, inner)

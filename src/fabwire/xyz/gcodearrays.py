@@ -1,0 +1,201 @@
+"""G-code moves read into arrays: the X, Y, Z, E and F words of a piece of ordinary slicer output, found and parsed
+with whole-array operations instead of one line at a time.
+
+The rules are Marlin's (see `gcodeinfo`): a word is a letter, optional blanks, then a decimal number without exponent;
+`;` ends the code of a line; the first word wins when a letter repeats. Layouts these arrays do not cover (indented or
+numbered lines, lower-case command letters, `(...)` comments, checksums, repeated letters) are left to the
+line-by-line reader: `scan` says None for them.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+AXES = b"XYZEF"
+_AXIS_INDEX = np.full(256, -1, dtype=np.int8)
+_AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
+_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
+"""bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
+_NOT_CODE = np.zeros(256, dtype=bool)
+_NOT_CODE[list(b"(*")] = True
+_DIGIT_OR_DOT = np.zeros(256, dtype=bool)
+_DIGIT_OR_DOT[list(b"0123456789.")] = True
+_MOVE_DIGIT = np.zeros(256, dtype=bool)
+_MOVE_DIGIT[list(b"0123")] = True
+_ODD_FIRST = np.zeros(256, dtype=bool)
+_ODD_FIRST[list(b" \tNngm")] = True
+"""First bytes of a line that only the line reader understands: blanks, line numbers, lower-case commands."""
+
+VALUE = rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
+"""A word's number as Marlin reads it: decimal, no exponent."""
+_NUMBER = re.compile(VALUE)
+_CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
+_WORD = re.compile(rb"[A-Z][ \t]*" + _NUMBER.pattern)
+_SET_ONLY = re.compile(rb"[^XYZE0-9.+\- \t]")
+PAD = 32
+"""Zero bytes after the text, so reads of a number's 16 bytes never run past the buffer."""
+
+# Eight ASCII digits in one 64-bit word (first character in the lowest byte) are read with three multiply-add steps
+# ("SWAR"), and the digits before a non-digit are counted from a mask of non-digit bytes.
+_U = np.uint64
+_ZEROS = _U(0x3030303030303030)
+_LOW7 = _U(0x7F7F7F7F7F7F7F7F)
+_ABOVE_9 = _U(0x7676767676767676)
+_HIGH = _U(0x8080808080808080)
+_PAIRS = (_U(10), _U(8), _U(0x00FF00FF00FF00FF))
+_QUADS = (_U(100), _U(16), _U(0x0000FFFF0000FFFF))
+_OCTETS = (_U(10000), _U(32), _U(0x00000000FFFFFFFF))
+_SCALE = 10**8
+
+
+@functools.cache
+def reuse_freed_memory() -> None:
+    """Allocate and free one 16 MiB block, once per process.
+
+    glibc's malloc then raises its mmap threshold to that size and its trim threshold to twice it (the "dynamic
+    mmap threshold" of mallopt(3)), so the megabyte-sized temporary arrays of each piece reuse the heap instead of
+    being mapped, page-faulted in and returned afresh for every piece, which took as long as the arithmetic. Other
+    allocators are unaffected.
+    """
+    np.empty(16 << 20, dtype=np.uint8)
+
+
+def _digits_value(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
+    """The number that eight digit values (0-9, most significant in the lowest byte) spell."""
+    for factor, shift, mask in (_PAIRS, _QUADS, _OCTETS):
+        x = (x * factor + (x >> shift)) & mask
+    return x
+
+
+def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
+    """How many of the eight bytes (XORed with '0') are digits before the first non-digit (8 if all are)."""
+    non_digit = (((x & _LOW7) + _ABOVE_9) | x) & _HIGH
+    lowest = non_digit & (_U(0) - non_digit)
+    return np.bitwise_count(lowest - _U(1)).astype(np.uint64) >> _U(3)
+
+
+def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
+    """The numbers starting at offsets `at` of some text followed by PAD zero bytes (`padded`, and `data` viewing
+    it), as float() reads them; NaN where no number starts.
+
+    Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
+    parser does; longer numbers go to float() itself.
+    """
+    windows = np.ndarray(shape=(len(data) - 15,), dtype="V16", buffer=data, strides=(1,))[at]
+    low, high = np.ascontiguousarray(windows.view("<u8").reshape(-1, 2).T) ^ _ZEROS
+    sign = low & _U(0xFF)
+    negative = sign == _U(ord("-") ^ 0x30)
+    signed = (negative | (sign == _U(ord("+") ^ 0x30))).astype(np.uint64)
+    low &= ~(signed * _U(0xFF))  # a sign reads as a leading 0
+    whole_digits = _leading_digits(low)
+    after_dot = (whole_digits + _U(1)) * _U(8)
+    dotted = (low >> (after_dot - _U(8))) & _U(0xFF) == _U(ord(".") ^ 0x30)
+    fraction = (low >> after_dot) | (high << (_U(64) - after_dot))
+    fraction_digits = np.where(dotted, _leading_digits(fraction), _U(0))
+    fraction &= (_U(1) << (fraction_digits * _U(8))) - _U(1)
+    mantissa = _digits_value(low << ((_U(8) - whole_digits) * _U(8))) * _U(_SCALE) + _digits_value(fraction)
+    parsed: NDArray[np.float64] = mantissa.astype(np.float64) / _SCALE
+    np.negative(parsed, out=parsed, where=negative)
+    parsed[(whole_digits == signed) & (fraction_digits == 0)] = np.nan
+    for i in np.flatnonzero((whole_digits == 8) | (fraction_digits == 8)).tolist():  # long: the float parser's
+        found = _NUMBER.match(padded, int(at[i]))
+        parsed[i] = float(found.group(0)) if found else math.nan
+    return parsed
+
+
+@dataclass(frozen=True, slots=True)
+class Words:
+    """One axis's words in a piece, in order: the line each is on, its value, whether that line is a G92."""
+
+    lines: NDArray[np.intp]
+    values: NDArray[np.float64]
+    sets: NDArray[np.bool_]
+
+
+@dataclass(frozen=True, slots=True)
+class Scan:
+    """A piece read into arrays: the words of each of X, Y, Z, E, F on move (G0-G3) and plain G92 lines, and the
+    other commands that change the analysis (line, command, upper-cased parameters), in order."""
+
+    axes: tuple[Words, ...]
+    controls: list[tuple[int, bytes, bytes]]
+
+
+def scan(padded: bytes) -> Scan | None:
+    """The words of a piece of G-code (which starts with a newline and ends its last line) followed by PAD zero
+    bytes, or None for a layout only the line-by-line reader handles."""
+    size = len(padded) - PAD
+    data = np.frombuffer(padded, dtype=np.uint8)
+    text = data[:size]
+    newlines = np.flatnonzero(text == 10)
+    starts = newlines[:-1] + 1
+    if not len(starts):
+        return Scan(tuple(_NO_WORDS for _ in AXES), [])
+    c0, c1, c2, c3 = (data[starts + i] for i in range(4))
+    command = (c0 == ord("G")) | (c0 == ord("M"))
+    if (_ODD_FIRST[c0] | (command & (
+            (c1 == 32) | (c1 == 9) | ((c1 == 48) & (c2 == 48) & (c3 - np.uint8(48) <= 9))))).any():
+        return None  # blanks, a number or lower case before the command, blanks inside it, or `G001`
+    is_move = (c0 == ord("G")) & (
+        (_MOVE_DIGIT[c1] & ~_DIGIT_OR_DOT[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGIT_OR_DOT[c3])
+    )
+    controls: list[tuple[int, bytes, bytes]] = []
+    is_set = np.zeros(len(starts), dtype=bool)
+    for line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
+        found = _CONTROL.match(padded, int(newlines[line]))
+        if found is None:
+            continue
+        code = b"G" + found.group(1) if found.group(1) else b"M" + found.group(2)
+        params = found.group(3).upper()
+        if code == b"G92" and _WORD.search(params) and not _SET_ONLY.search(params):
+            is_set[line] = True
+        else:
+            controls.append((line, code, params))
+    is_row = is_move | is_set
+    code_end = newlines[1:]
+    inline_comments = False  # a `;` after the code of a move (comment lines are no moves)
+    if b";" in padded:
+        semis = np.flatnonzero(text == ord(";"))
+        semi_lines = np.searchsorted(newlines, semis) - 1
+        first = np.diff(semi_lines, prepend=-1) != 0  # the first `;` of each line ends its code
+        inline_comments = bool(is_row[semi_lines].any())
+        code_end = code_end.copy()
+        code_end[semi_lines[first]] = semis[first]
+    if b"(" in padded or b"*" in padded:
+        odd = np.flatnonzero(_NOT_CODE[text])
+        odd_line = np.searchsorted(newlines, odd) - 1
+        if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
+            return None
+    where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
+    line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
+    keep = is_row[line_of]
+    if inline_comments:
+        keep &= where < code_end[line_of]
+    where, line_of = where[keep], line_of[keep]
+    at = where + 1
+    blank = (data[at] == 32) | (data[at] == 9)
+    while blank.any():  # blanks between a letter and its number
+        at += blank
+        blank = (data[at] == 32) | (data[at] == 9)
+    numbers = parse_numbers(padded, data, at)
+    axis = _AXIS_INDEX[data[where]]
+    known = ~np.isnan(numbers)
+    if not known.all():  # bare letters are not words
+        axis, line_of, numbers = axis[known], line_of[known], numbers[known]
+    axes = []
+    for k in range(len(AXES)):
+        picked = np.flatnonzero(axis == k)
+        lines = line_of[picked]
+        if (lines[1:] == lines[:-1]).any():
+            return None  # a letter repeats within a line
+        axes.append(Words(lines, numbers[picked], is_set[lines]))
+    return Scan(tuple(axes), controls)
+
+
+_NO_WORDS = Words(np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0, dtype=bool))

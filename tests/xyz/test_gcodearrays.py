@@ -1,0 +1,108 @@
+"""The array reading of G-code against straightforward computations written out here, one line at a time."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fabwire.xyz.gcodearrays import PAD, parse_numbers
+from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+NUMBER = re.compile(rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.text(alphabet="0123456789.+-", max_size=24), min_size=1, max_size=40),
+       st.sampled_from([" ", "\n", "E", ";", ""]))
+def test_numbers_are_read_as_the_float_parser_reads_them(tokens: list[str], after: str) -> None:
+    text = b"\n" + "".join(f"X{token}{after}" for token in tokens).encode() + b"\n"
+    at = np.array([m.start() + 1 for m in re.finditer(rb"X", text)], dtype=np.intp)
+    parsed = parse_numbers(text, np.frombuffer(text + bytes(PAD), dtype=np.uint8), at)
+    for offset, value in zip(at.tolist(), parsed.tolist(), strict=True):
+        found = NUMBER.match(text, offset)
+        if found is None:
+            assert math.isnan(value)
+        else:
+            expected = float(found.group(0))
+            assert value == expected
+            assert math.copysign(1.0, value) == math.copysign(1.0, expected)
+
+
+def reference(text: str) -> tuple[float, float, set[int]]:
+    """(seconds, net filament, layer heights in µm) of plain G-code, one move at a time in Python floats."""
+    pos, e, feed = [0.0, 0.0, 0.0], 0.0, 1500.0
+    absolute, absolute_e = True, True
+    seconds = filament = 0.0
+    heights: set[int] = set()
+    for line in text.splitlines():
+        command, *words = line.split(";")[0].split() or [""]
+        given = {word[0]: float(word[1:]) for word in reversed(words)}  # the first of a letter wins
+        if command in ("G0", "G1"):
+            target = list(pos)
+            for k, axis in enumerate("XYZ"):
+                if axis in given:
+                    target[k] = given[axis] if absolute else pos[k] + given[axis]
+            new_e = e
+            if "E" in given:
+                new_e = given["E"] if absolute_e else e + given["E"]
+            if given.get("F", 0.0) > 0:
+                feed = given["F"]
+            delta = [t - p for t, p in zip(target, pos, strict=True)]
+            length = math.sqrt(sum(d * d for d in delta)) or abs(new_e - e)
+            seconds += length * 60.0 / feed
+            filament += new_e - e
+            if new_e > e and (delta[0] or delta[1]):
+                heights.add(round(target[2] * 1000))
+            pos, e = target, new_e
+        elif command == "G92":
+            for k, axis in enumerate("XYZ"):
+                pos[k] = given.get(axis, pos[k])
+            e = given.get("E", e)
+        elif command in ("G90", "G91"):
+            absolute = absolute_e = command == "G90"
+        elif command in ("M82", "M83"):
+            absolute_e = command == "M82"
+    return seconds, filament, heights
+
+
+def coordinate() -> st.SearchStrategy[str]:
+    return st.builds(lambda v, d: f"{v:.{d}f}", st.floats(-300, 300, allow_nan=False), st.integers(0, 5))
+
+
+@st.composite
+def program(draw: st.DrawFn) -> str:
+    """Slicer-like G-code: moves with any of X Y Z E F, position resets, mode switches, comments."""
+    lines = []
+    for _ in range(draw(st.integers(1, 30))):
+        kind = draw(st.sampled_from(["move"] * 6 + ["set", "mode", "comment"]))
+        if kind == "move":
+            letters = draw(st.lists(st.sampled_from("XYZEF"), unique=True, max_size=5))
+            words = [a + draw(st.integers(1, 9000).map(str) if a == "F" else coordinate()) for a in letters]
+            line = " ".join([draw(st.sampled_from(["G0", "G1"])), *words])
+            if draw(st.booleans()):
+                line += draw(st.sampled_from([" ; X9 E9", ";G92 E0"]))
+        elif kind == "set":
+            letters = draw(st.lists(st.sampled_from("XYZE"), unique=True, min_size=1, max_size=4))
+            line = " ".join(["G92", *(a + draw(coordinate()) for a in letters)])
+        elif kind == "mode":
+            line = draw(st.sampled_from(["G90", "G91", "M82", "M83"]))
+        else:
+            line = draw(st.sampled_from([";LAYER_CHANGE", ";Z:0.4", "; E5 X9 Y2", "M104 S200", "M106 S255"]))
+        lines.append(line + "\n")
+    return "".join(lines)
+
+
+@settings(max_examples=200, deadline=None)
+@given(program())
+def test_moves_add_up_as_a_line_by_line_computation_says(text: str) -> None:
+    analyzer = MoveAnalyzer()
+    analyzer.feed_chunk(text.encode())
+    seconds, filament, heights = reference(text)
+    assert analyzer.seconds == pytest.approx(seconds, rel=1e-9, abs=1e-9)
+    assert analyzer.filament == pytest.approx(filament, rel=1e-9, abs=1e-9)
+    assert analyzer.layer_heights == heights
