@@ -5,9 +5,10 @@ from __future__ import annotations
 import itertools
 import sys
 import traceback
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 import click
 
@@ -21,9 +22,10 @@ from fabwire.cli_support import (
     check_early_link_options,
     configure_logging,
     pass_app,
+    uses_link_options,
 )
 from fabwire.devices import KINDS
-from fabwire.errors import EXIT_INTERRUPTED, FabwireError, InputError, RemoteProtocolError
+from fabwire.errors import EXIT_INTERRUPTED, ConfigWarning, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
 from fabwire.simserve import SERVE_OPTIONS
 
@@ -62,7 +64,7 @@ def cli(ctx: click.Context) -> None:
 
 
 cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS, *itertools.chain(*LINK_OPTIONS.values())))
-cli.shared = GLOBAL_OPTIONS
+cli.shared = (*GLOBAL_OPTIONS, *DEVICE_OPTIONS)
 
 
 @cli.group(
@@ -86,9 +88,11 @@ def completion(shell: str) -> None:
     """Print the completion script for SHELL; it completes commands, options and configured device names.
 
     \b
-    bash: fabwire completion bash > ~/.local/share/bash-completion/completions/fabwire
+    bash: mkdir -p ~/.local/share/bash-completion/completions
+          fabwire completion bash > ~/.local/share/bash-completion/completions/fabwire
     zsh:  fabwire completion zsh > "${fpath[1]}/_fabwire"
-    fish: fabwire completion fish > ~/.config/fish/completions/fabwire.fish
+    fish: mkdir -p ~/.config/fish/completions
+          fabwire completion fish > ~/.config/fish/completions/fabwire.fish
     """
     from click.shell_completion import get_completion_class
 
@@ -153,6 +157,7 @@ def _records(file: Path, note: Callable[[str], None]) -> Iterator[TraceRecord]:
               help="Compare every byte, the values that vary by nature (uptime, clocks, temperatures) too.")
 @click.option("--protocol", type=click.Choice(sorted(KINDS)),
               help="The capture's protocol, for a capture that does not name it (default: from the capture).")
+@uses_link_options("timeout")
 @pass_app
 def trace_replay(app: App, file: Path, address: str, quiet: float, strict: bool, protocol: str | None) -> int:
     """Send the host side of a capture to ADDRESS and report each reply that differs from the recording.
@@ -196,8 +201,23 @@ def _fail(app: App, message: str, code: int) -> int:
     return code
 
 
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: TextIO | None = None, line: str | None = None) -> None:
+    """fabwire's own warnings as one line on stderr, as its errors are; others as Python shows them."""
+    if issubclass(category, ConfigWarning):
+        click.echo(f"fabwire: warning: {message}", err=True)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: one line on stderr and a distinct exit code per error kind; a traceback only with --debug."""
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     app = App(debug="--debug" in (argv if argv is not None else sys.argv[1:]))
     configure_logging(0)
     try:

@@ -1,244 +1,43 @@
-"""What every device's CLI shares: the app state, options accepted anywhere, opening devices, running async code.
-
-Shared options (`--json`, `-v`, `--debug`, `-d`, `--trace`, `--timeout` and each device's link options such as the
-MMU's `--speed`) are defined once here and attached to every command below the group that shares them, so
-`fabwire xyz status -d HOST --json` and `fabwire --json xyz -d HOST status` mean the same. Each occurrence
-stores its value on the one `App`; the last one on the line wins (`-v` adds up).
-"""
+"""What every device's CLI shares beyond its options (`fabwire.cli_options`): lazy groups, negative numbers as
+arguments, the device context and opening devices, confirmations, running async code."""
 
 from __future__ import annotations
 
 import asyncio
 import importlib
 import importlib.util
-import logging
-import math
 import os
 import re
 import sys
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from functools import update_wrapper
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import click
 import msgspec
 
+from fabwire.cli_options import ANY, OptionFactory, SharingGroup, app_of
+
+# the shared options, re-exported: every command imports what it uses from here
+from fabwire.cli_options import DEVICE_OPTIONS as DEVICE_OPTIONS
+from fabwire.cli_options import GLOBAL_OPTIONS as GLOBAL_OPTIONS
+from fabwire.cli_options import LINK_OPTIONS as LINK_OPTIONS
+from fabwire.cli_options import App as App
+from fabwire.cli_options import FiniteRange as FiniteRange
+from fabwire.cli_options import check_early_link_options as check_early_link_options
+from fabwire.cli_options import configure_logging as configure_logging
+from fabwire.cli_options import pass_app as pass_app
+from fabwire.cli_options import uses_link_options as uses_link_options
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError
 from fabwire.importing import collection_paused
-from fabwire.transport.faults import FaultPlan
 
 if TYPE_CHECKING:
     from fabwire.config import Target
 
 P = ParamSpec("P")
 T = TypeVar("T")
-
-OptionFactory = Callable[[], click.Option]
-
-
-class FiniteRange(click.FloatRange):
-    """A FloatRange that also refuses nan and ±inf (nan passes every comparison, inf makes a wait endless)."""
-
-    name = "finite float range"
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
-        number = super().convert(value, param, ctx)
-        if not math.isfinite(number):
-            self.fail(f"{value!r} is not a finite number.", param, ctx)
-        return number
-
-
-class App(msgspec.Struct):
-    """Options of the whole command line, filled in wherever they appear on it."""
-
-    output: Output = msgspec.field(default_factory=Output)
-    verbose: int = 0
-    debug: bool = False
-    device: str | None = None
-    trace: Path | None = None
-    timeout: float | None = None
-    faults: FaultPlan | None = None
-    link_options: dict[str, Any] = msgspec.field(default_factory=dict)
-    """A device's own link options given on the command line (e.g. the MMU's speed), by settings field name."""
-    early_link_options: dict[str, str] = msgspec.field(default_factory=dict)
-    """Link options given before any subcommand: flag -> the device kind they belong to."""
-    server_options: dict[str, Any] = msgspec.field(default_factory=dict)
-    """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simserve`."""
-
-    @property
-    def json(self) -> bool:
-        return self.output.json_mode
-
-
-def configure_logging(verbose: int) -> None:
-    """-v: connects, retries and state changes (INFO); -vv: also every byte on the wire (DEBUG)."""
-    root = logging.getLogger("fabwire")
-    if not any(getattr(h, "fabwire_cli", False) for h in root.handlers):
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s: %(message)s"))
-        handler.fabwire_cli = True  # type: ignore[attr-defined]
-        root.addHandler(handler)
-    root.setLevel(logging.WARNING if verbose <= 0 else logging.INFO if verbose == 1 else logging.DEBUG)
-
-
-def _app(ctx: click.Context) -> App:
-    app = ctx.find_object(App)
-    if app is None:
-        app = ctx.ensure_object(App)
-    return app
-
-
-def _given(ctx: click.Context, param: click.Parameter) -> bool:
-    source = ctx.get_parameter_source(param.name or "")
-    return source not in (None, click.core.ParameterSource.DEFAULT)
-
-
-def _setter(apply: Callable[[App, Any], None]) -> Callable[[click.Context, click.Parameter, Any], None]:
-    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> None:
-        if _given(ctx, param):
-            apply(_app(ctx), value)
-
-    return callback
-
-
-def _set_json(app: App, value: bool) -> None:
-    app.output.json_mode = app.output.json_mode or value
-
-
-def _add_verbose(app: App, value: int) -> None:
-    app.verbose += value
-    configure_logging(app.verbose)
-
-
-def _set_faults(app: App, value: str) -> None:
-    app.faults = FaultPlan.parse(value)
-
-
-def _device_names(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
-    """Shell completion for -d: the configured names (of the command's device kind, when known)."""
-    from fabwire.config import load_devices
-    from fabwire.errors import FabwireError
-
-    try:
-        devices = load_devices()
-    except FabwireError:
-        return []
-    kinds = set()
-    current: click.Context | None = ctx
-    while current is not None:
-        kinds.add(current.info_name)
-        current = current.parent
-    wanted = kinds & {"xyz", "lineus", "mmu"}
-    return sorted(name for name, device in devices.items()
-                  if name.startswith(incomplete) and (not wanted or device.kind.name in wanted))
-
-
-GLOBAL_OPTIONS: tuple[OptionFactory, ...] = (
-    lambda: click.Option(["--json", "shared_json"], is_flag=True, expose_value=False,
-                         callback=_setter(_set_json),
-                         help="Machine-readable results on stdout (text goes to stderr)."),
-    lambda: click.Option(["-v", "--verbose", "shared_verbose"], count=True, expose_value=False,
-                         callback=_setter(_add_verbose),
-                         help="Log connects, retries and state changes; -vv also every byte on the wire."),
-    lambda: click.Option(["--debug", "shared_debug"], is_flag=True, expose_value=False,
-                         callback=_setter(lambda app, v: setattr(app, "debug", app.debug or v)),
-                         help="Show tracebacks on errors."),
-)
-
-DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
-    lambda: click.Option(["-d", "--device", "shared_device"], metavar="DEVICE", expose_value=False,
-                         callback=_setter(lambda app, v: setattr(app, "device", v)), shell_complete=_device_names,
-                         help="Address (host[:port], tcp://…, /dev/tty…, sim://KIND) or a configured device name."),
-    lambda: click.Option(["--trace", "shared_trace"], type=click.Path(dir_okay=False, path_type=Path),
-                         expose_value=False, callback=_setter(lambda app, v: setattr(app, "trace", v)),
-                         help="Record the wire to FILE."),
-    lambda: click.Option(["--timeout", "shared_timeout"], type=FiniteRange(min=0.1), expose_value=False,
-                         callback=_setter(lambda app, v: setattr(app, "timeout", v)),
-                         help="Seconds to wait for the link to open [default: 5, or the device's setting]."),
-    lambda: click.Option(["--inject", "shared_inject"], metavar="FAULTS", hidden=True, expose_value=False,
-                         callback=_setter(_set_faults), help="Test aid: fault plan such as chunk=1,drop=0.01,seed=3."),
-)
-
-
-def link_option(kind: str, setting: str, *decls: str, **attrs: Any) -> OptionFactory:
-    """Device `kind`'s own link option, stored under the name of its settings field (see `fabwire.config`).
-
-    Given before the device's group (`fabwire --speed 20 mmu …`) it is remembered, so that a command line
-    where it would reach another device or a simulator is refused instead of silently ignored.
-    """
-
-    def store(ctx: click.Context, param: click.Parameter, value: Any) -> None:
-        source = ctx.get_parameter_source(param.name or "")
-        if ctx.parent is None:
-            if source is not click.core.ParameterSource.COMMANDLINE:
-                return  # an environment default at the root would reach every device
-            _app(ctx).early_link_options[param.opts[0]] = kind
-        elif not _given(ctx, param):
-            return
-        _app(ctx).link_options[setting] = list(value) if isinstance(value, tuple) else value
-
-    factory: OptionFactory = lambda: click.Option(  # noqa: E731
-        [*decls, f"shared_{setting}"], expose_value=False, callback=store, **attrs)
-    factory.device_kind = kind  # type: ignore[attr-defined]
-    return factory
-
-
-LINK_OPTIONS: dict[str, tuple[OptionFactory, ...]] = {
-    "mmu": (
-        link_option("mmu", "speed", "--speed", type=FiniteRange(min=0.01), envvar="FABWIRE_MMU_SPEED",
-                    help="The MMU runs this many times faster than real time (a simulator's --speed); "
-                         "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
-        link_option("mmu", "accept", "--accept", multiple=True, metavar="X.Y.Z",
-                    help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4)."),
-    ),
-}
-"""Each device kind's own link options, accepted anywhere on the line: before its group, on it, or after."""
-
-
-def check_early_link_options(ctx: click.Context, subcommand: str | None) -> None:
-    """Refuse a device's link option given before a command that is not that device's group."""
-    for flag, kind in _app(ctx).early_link_options.items():
-        if subcommand == kind:
-            continue
-        if subcommand == "sim":
-            raise click.UsageError(f"{flag} before `sim` is a link option of `fabwire {kind}`; a simulator's "
-                                   f"own options go after its name (see `fabwire sim {kind} --help`)")
-        raise click.UsageError(f"{flag} is a link option of `fabwire {kind}`; it does not apply to "
-                               f"`fabwire {subcommand}`")
-
-
-def share_options(command: click.Command, factories: Sequence[OptionFactory]) -> None:
-    """Attach shared options to `command` and everything under it, skipping names a command already uses."""
-    taken = {opt for param in command.params for opt in param.opts + param.secondary_opts}
-    for make in factories:
-        option = make()
-        if not taken.intersection(option.opts):
-            command.params.append(option)
-            taken.update(option.opts)
-    if isinstance(command, SharingGroup):
-        command.shared = tuple(dict.fromkeys((*command.shared, *factories)))
-    elif isinstance(command, click.Group):
-        for sub in command.commands.values():
-            share_options(sub, factories)
-
-
-class SharingGroup(click.Group):
-    """A group that hands its shared options (and a child group's own ones) to every command it resolves."""
-
-    shared: tuple[OptionFactory, ...] = ()
-
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        return self.share(super().get_command(ctx, cmd_name))
-
-    def share(self, command: click.Command | None) -> click.Command | None:
-        """Give a resolved child the shared options, once."""
-        if command is not None and not getattr(command, "_fabwire_shared", False):
-            share_options(command, (*self.shared, *getattr(command, "own_options", ())))
-            command._fabwire_shared = True  # type: ignore[attr-defined]
-        return command
 
 
 def _needs_extra(name: str, missing: Exception) -> click.Command:
@@ -247,7 +46,7 @@ def _needs_extra(name: str, missing: Exception) -> click.Command:
     def fail(args: tuple[str, ...]) -> None:
         raise missing
 
-    command = click.Command(name, callback=fail, help=f"(not installed: {missing})",
+    command = click.Command(name, callback=uses_link_options(ANY)(fail), help=f"(not installed: {missing})",
                             params=[click.Argument(["args"], nargs=-1)],
                             context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
     command.short_help = str(missing).split(": ", 1)[-1]
@@ -380,9 +179,10 @@ def device_group(kind: DeviceKind, help_text: str, link_options: Sequence[Option
 
     def decorate(func: Callable[..., None]) -> click.Group:
         @click.group(name=kind.name, help=help_text, cls=LazyGroup, lazy=lazy or {})
+        @uses_link_options(ANY)
         @click.pass_context
         def group(ctx: click.Context) -> None:
-            ctx.obj = DeviceContext(_app(ctx), kind)
+            ctx.obj = DeviceContext(app_of(ctx), kind)
             func()
 
         group.own_options = (*DEVICE_OPTIONS, *link_options)  # type: ignore[attr-defined]
@@ -431,5 +231,10 @@ def async_command(func: Callable[P, Awaitable[T]]) -> Callable[P, T]:
     return update_wrapper(wrapper, func)
 
 
-pass_device = click.make_pass_decorator(DeviceContext)
-pass_app = click.make_pass_decorator(App, ensure=True)
+_pass_device_context = click.make_pass_decorator(DeviceContext)
+
+
+def pass_device(func: Callable[..., T]) -> Callable[..., T]:
+    """Hand a command its `DeviceContext`; such a command opens a device, so it takes every link option."""
+    return uses_link_options(ANY)(_pass_device_context(func))
+

@@ -7,20 +7,23 @@
     link = "wifi"             # any setting of that kind (see XYZSettings, LineUsSettings, MMUSettings)
 
 Location: $FABWIRE_CONFIG, else the platform's config directory (platformdirs), e.g. ~/.config/fabwire/devices.toml.
-Every command and `X.open` apply a device's settings; options given explicitly win over the file.
+Every command and `X.open` apply a device's settings; options given explicitly win over the file. A file with a
+problem is a ConfigError for what needs it (a name, the default device) and only a ConfigWarning when the target is an
+address (see `resolve_target`).
 """
 
 from __future__ import annotations
 
 import os
 import re
+import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args, get_type_hints
 
 import msgspec
 
 from fabwire.devices import KINDS, DeviceKind
-from fabwire.errors import ConfigError, InputError
+from fabwire.errors import ConfigError, ConfigWarning, InputError
 from fabwire.files import read_bounded
 from fabwire.transport.urls import Endpoint, parse_url
 
@@ -276,19 +279,27 @@ def _looks_like_address(text: str) -> bool:
 def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = None) -> Target:
     """A -d value may name a configured device or be an address; no -d picks the kind's default device.
 
-    Raises ConfigError for a bad file, an unknown name that resembles a configured one, a name of another kind,
-    or no device at all; InputError for a malformed address.
+    Raises ConfigError for a bad file when the device is (or resembles) a name in it or no device is given, for an
+    unknown name that resembles a configured one, a name of another kind, or no device at all; InputError for a
+    malformed address. A bad file given an address is a ConfigWarning, and the address is used.
     """
     if device is not None and _looks_like_address(device):
         return Target(parse_url(device, kind))
-    devices = load_devices(path)
+    path = path or config_path()
+    try:
+        devices = load_devices(path)
+    except ConfigError as problem:
+        if device is None or _names_a_section(device, path):
+            raise
+        # one location for every caller, so a command that resolves twice warns once
+        warnings.warn(ConfigWarning(f"{problem}; the file is skipped and {device!r} taken as an address"), stacklevel=1)
+        return Target(parse_url(device, kind))
     if device is None:
         mine = [d for d in devices.values() if d.kind is kind]
         chosen = [d for d in mine if d.default] or (mine if len(mine) == 1 else [])
         if len(chosen) != 1:
             raise ConfigError(
-                f"no {kind.title} given: pass -d ADDRESS (or a name from {path or config_path()}), "
-                f"e.g. -d sim://{kind.name}"
+                f"no {kind.title} given: pass -d ADDRESS (or a name from {path}), e.g. -d sim://{kind.name}"
             )
         found = chosen[0]
     elif device in devices:
@@ -296,8 +307,24 @@ def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = Non
         if found.kind is not kind:
             raise ConfigError(f"device {device!r} is a {found.kind.title}, not a {kind.title}")
     else:
-        hint = "" if "." in device else closest(device, devices)
+        hint = _hint(device, devices)
         if hint:
             raise ConfigError(f"no device named {device!r}{hint}")
         return Target(parse_url(device, kind))
     return Target(found.endpoint, found.name, found.options)
+
+
+def _hint(device: str, names: object) -> str:
+    """` (did you mean 'x'?)` when `device` resembles a configured name; a dotted host name is never a name."""
+    return "" if "." in device else closest(device, names)
+
+
+def _names_a_section(device: str, path: Path) -> bool:
+    """Whether `device` may mean a device of a config file that did not load: it names or resembles one of its
+    `[devices.NAME]` sections, or the file cannot be read and `device` is a plain word rather than a dotted host
+    name or IP address."""
+    try:
+        names = section_lines(read_config_text(path))
+    except ConfigError:
+        return "." not in device
+    return device in names or bool(_hint(device, names))

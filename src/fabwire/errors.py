@@ -15,6 +15,10 @@ class ConfigError(FabwireError):
     exit_code = 3
 
 
+class ConfigWarning(UserWarning):
+    """The configuration file is wrong, but the command did not need it (it was given an address)."""
+
+
 class InputError(FabwireError):
     """A file or argument given by the user cannot be used (malformed, empty, out of range)."""
 

@@ -3,7 +3,9 @@
 People read durations as `45s`, `3m 12s`, `1h 05m`; filament in metres (`0.05 m`); the z-offset in millimetres
 (`2.45 mm`); temperatures as `210 °C`; an absent value as `—`; an MMU error as its printer code, title and MMU code
 (`04101 FINDA DIDN'T TRIGGER (0x8001)`). JSON carries SI values with the unit in the key: `print_time_s`,
-`filament_m`, `zoffset_mm`, `extruder_c` (`json_key`).
+`filament_m`, `zoffset_mm`, `extruder_c`, a Line-us pen at `x_mm`, `y_mm` (`json_key`). A device's own words and
+numbers as it reports them (firmware letters, the Line-us's machine units) appear only under `raw`, `fields` or
+`machine_units`.
 """
 
 from __future__ import annotations

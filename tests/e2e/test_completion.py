@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -34,3 +38,15 @@ def test_device_names_complete_for_their_kind(tmp_path: Path) -> None:
     assert complete("fabwire xyz status -d b", tmp_path) == ["basement"]
     assert complete("fabwire mmu -d b", tmp_path) == ["bench"]
     assert complete("fabwire xyz st", tmp_path) == ["status"]
+
+
+def test_the_readme_installs_bash_completion_as_typed_on_a_fresh_home(tmp_path: Path) -> None:
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    block, = (b for b in re.findall(r"```sh\n(.*?)```", readme, flags=re.DOTALL) if "completion bash" in b)
+    env = cli_env(tmp_path)
+    env["HOME"] = str(tmp_path)  # nothing under it yet: the folders the commands write to do not exist
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"  # `fabwire` as installed
+    ran = subprocess.run(["bash", "-e", "-c", block], capture_output=True, text=True, timeout=60, env=env)
+    assert ran.returncode == 0, ran.stderr
+    script = tmp_path / ".local/share/bash-completion/completions/fabwire"
+    assert "complete -o nosort -F" in script.read_text()

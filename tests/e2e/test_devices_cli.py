@@ -121,3 +121,16 @@ def test_the_broken_entry_itself_can_be_removed(tmp_path: Path) -> None:
     missing = run_cli("devices", "remove", "bda", env=env)
     assert missing.returncode == ConfigError.exit_code
     assert "no device named 'bda'" in missing.stderr
+
+
+def test_show_prints_the_entry_as_toml_that_reads_back(tmp_path: Path) -> None:
+    import tomllib
+
+    env = env_for(tmp_path / "devices.toml")
+    added = run_cli("devices", "add", "office", "192.168.1.50", "--kind", "xyz", "--set", "link=wifi", env=env)
+    assert added.returncode == 0, added.stderr
+    shown = run_cli("devices", "show", "office", env=env)
+    assert shown.returncode == 0, shown.stderr
+    entry = tomllib.loads(shown.stdout)["devices"]["office"]
+    assert entry == {"kind": "xyz", "url": "192.168.1.50", "default": False, "link": "wifi", "timeout": 5.0}
+    assert "# reply_timeout: not set" in shown.stdout.splitlines()

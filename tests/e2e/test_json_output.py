@@ -71,11 +71,17 @@ UNITLESS_BYTES = re.compile(r"(?:^|_)(?:size|gap|offset|length|bytes)$|^bytes_")
 byte counts are named `<quantity>_bytes`."""
 
 
+DEVICE_WORDS = {"raw", "fields", "machine_units"}
+"""Keys whose contents are a device's own words as it reports them (firmware letters, machine units): not named by
+fabwire, so not held to its naming."""
+
+
 def _keys(value: object) -> Iterator[str]:
     if isinstance(value, dict):
         for key, item in value.items():
             yield key
-            yield from _keys(item)
+            if key not in DEVICE_WORDS:
+                yield from _keys(item)
     elif isinstance(value, list):
         for item in value:
             yield from _keys(item)
@@ -90,20 +96,29 @@ def test_json_keys_name_si_units(simulator: SimulatorStarter, tmp_path: Path) ->
     image.write_bytes(b"dv1MW0A000+1.2.4" + bytes(2000))
     xyz = simulator("xyz", "--listen", "127.0.0.1:0").url
     mmu = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "50").url
+    lineus = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf").url
     documents = []
     for args in (("lineus", "preview", str(svg)), ("xyz", "-d", xyz, "status"), ("xyz", "-d", xyz, "zoffset"),
                  ("xyz", "-d", xyz, "energy", "3"), ("xyz", "-d", xyz, "wifi", "info"),
                  ("xyz", "-d", xyz, "wifi", "scan"), ("xyz", "-d", xyz, "jog", "x", "5"),
                  ("mmu", "-d", mmu, "--speed", "50", "status"),
                  ("xyz", "convert", str(gcode), str(tmp_path / "part.3w")), ("xyz", "info", str(tmp_path / "part.3w")),
-                 ("xyz", "info", str(gcode)), ("xyz", "-d", xyz, "firmware", "--yes", str(image))):
+                 ("xyz", "info", str(gcode)), ("xyz", "-d", xyz, "firmware", "--yes", str(image)),
+                 ("lineus", "-d", lineus, "position"), ("lineus", "-d", lineus, "position", "--servos"),
+                 ("lineus", "-d", lineus, "move", "1200", "0"), ("lineus", "-d", lineus, "home"),
+                 ("lineus", "-d", lineus, "info")):
         done = run_cli("--json", *args, env=cli_env(tmp_path))
         assert done.returncode == 0, (args, done.stderr)
         documents.append(json.loads(done.stdout))
+    shell = run_cli("--json", "lineus", "-d", lineus, "shell", input_text="move 1100 100 down\nhome\n",
+                    env=cli_env(tmp_path))
+    assert shell.returncode == 0, shell.stderr
+    documents += [json.loads(line) for line in shell.stdout.splitlines()]
     keys = {key for document in documents for key in _keys(document)}
     assert {"estimated_s", "elapsed_s", "zoffset_mm", "energy_saving_s", "extruder_c", "rssi_dbm", "distance_mm",
-            "pulley_mm"} <= keys
+            "pulley_mm", "x_mm", "y_mm", "s_deg", "machine_units"} <= keys
     assert sorted(k for k in keys if NON_SI.search(k)) == []
     assert not keys & {"rssi", "distance", "pulley", "zoffset", "energy"}  # quantities always carry their unit
+    assert sorted(k for k in keys if len(k) == 1) == []  # a firmware's letter (x, y, z, S …) names no unit
     assert {"size_bytes", "gap_bytes", "header_offset_bytes", "written_bytes", "gcode_bytes"} <= keys
     assert sorted(k for k in keys if (UNITLESS_BYTES.search(k) and not k.endswith("_bytes")) or k == "bytes") == []

@@ -33,19 +33,22 @@ def test_session_through_the_cli(simulator, tmp_path: Path) -> None:
     assert data["capabilities"] == {"CONNECTMODE": "ST", "MACHINENAME": "cli-bot"}
 
     moved = cli(url, "move", "1200", "0", "--pen", "down", json_out=True)
-    assert json.loads(moved.stdout) == {"x": 1200.0, "y": 0.0, "z": 0.0, "pen": "down", "clamped": False}
+    assert json.loads(moved.stdout) == {"x_mm": 60.0, "y_mm": 0.0, "pen": "down", "clamped": False,
+                                        "machine_units": {"x": 1200.0, "y": 0.0, "z": 0.0}}
     # Each CLI call is a new connection: the arm homes (pen up) before greeting, so this stroke starts from a drop.
     assert cli(url, "move", "1200", "-300", "--pen", "down").returncode == 0
     assert cli(url, "move", "1200", "300", "--pen", "down").returncode == 0
     clamped = cli(url, "move", "2500", "0", json_out=True)
-    assert json.loads(clamped.stdout)["x"] == 1950.0
+    assert json.loads(clamped.stdout)["x_mm"] == 97.5  # the edge of the area: 1950 units
     assert json.loads(clamped.stdout)["clamped"] is True
     assert "outside the drawing area" in clamped.stderr
 
     position = cli(url, "position")  # a new connection homes the arm first
     assert position.returncode == 0
     assert "X 1000  Y 1000  Z 1000  (pen up)" in position.stdout
-    assert "S 135.00  E 45.00" in cli(url, "home").stdout + cli(url, "position", "--servos").stdout
+    assert "S 135.00°  E 45.00°" in cli(url, "home").stdout + cli(url, "position", "--servos").stdout
+    angles = json.loads(cli(url, "position", "--servos", json_out=True).stdout)
+    assert (angles["s_deg"], angles["e_deg"]) == (135.0, 45.0)
 
     gcode = tmp_path / "square.gcode"
     gcode.write_text("; a square\nG54 X0 Y0 S1\nG01 X1100 Y0 Z1000\nG01 X1200 Y0 Z0 ; first side\n\nG01 Z1000\n")
@@ -136,7 +139,7 @@ def test_not_a_lineus_host(simulator) -> None:
 def test_in_process_simulator_url() -> None:
     done = run_cli("--json", "lineus", "-d", "sim://lineus?speed=inf", "move", "1300", "200")
     assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout)["x"] == 1300.0
+    assert json.loads(done.stdout)["machine_units"]["x"] == 1300.0
 
 
 def test_sim_rejects_bad_options(tmp_path: Path) -> None:
@@ -195,7 +198,7 @@ def test_firmware1_never_gets_a_target_in_the_body_notch(simulator, tmp_path: Pa
     trace = tmp_path / "wire.jsonl"
     moved = run_cli("--json", "lineus", "-d", sim.url, "--trace", str(trace), "move", "600", "-300", "--pen", "down")
     assert moved.returncode == 0, moved.stderr
-    assert json.loads(moved.stdout)["z"] == 1000.0
+    assert json.loads(moved.stdout)["machine_units"]["z"] == 1000.0
     assert "body notch" in moved.stderr
     sent = [json.loads(line)["data"] for line in trace.read_text().splitlines() if '"dir": ">"' in line]
     assert sent
@@ -242,7 +245,8 @@ def test_shell_speaks_json_lines(simulator) -> None:
     session = run_cli("--json", "lineus", "-d", sim.url, "shell", input_text=script)
     assert session.returncode == 4
     events = [json.loads(line) for line in session.stdout.splitlines()]
-    assert events[0] == {"line": "move 1200 0 down", "position": {"x": 1200, "y": 0, "z": 0, "pen": "down"}}
+    assert events[0] == {"line": "move 1200 0 down", "position": {
+        "x_mm": 60, "y_mm": 0, "pen": "down", "machine_units": {"x": 1200, "y": 0, "z": 0}}}
     assert events[1]["line"] == "M114"
     assert events[1]["reply"]["ok"] is True
     assert events[1]["reply"]["fields"]["X"] == "1200.00"
@@ -281,7 +285,7 @@ def test_local_names_resolve_by_mdns_with_the_advertised_port(simulator) -> None
     sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--name", "mdns-bot", "--advertise")
     where = run_cli("--json", "lineus", "-d", "mdns-bot.local", "position")
     assert where.returncode == 0, where.stderr
-    assert json.loads(where.stdout)["x"] == 1000.0
+    assert json.loads(where.stdout)["x_mm"] == 50.0
     missing = run_cli("lineus", "-d", "no-such-bot.local", "--timeout", "1", "position")
     assert missing.returncode == 8
     assert "no-such-bot.local" in missing.stderr

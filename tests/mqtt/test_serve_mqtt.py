@@ -132,7 +132,7 @@ def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto,
     position = run_cli("--json", "lineus", "-d", sim.url, "position", env=cli_env(tmp_path))
     assert position.returncode == 0, position.stderr
     where = json.loads(position.stdout)
-    assert (round(where["x"]), round(where["y"])) == (1200, 150)
+    assert (round(where["machine_units"]["x"]), round(where["machine_units"]["y"])) == (1200, 150)
     # The fleet as seen on the broker: the device and the agent that runs it.
     fleet = run_cli("--json", "fleet", "--mqtt", broker.url, env=cli_env(tmp_path))
     assert fleet.returncode == 0, fleet.stderr

@@ -19,6 +19,7 @@ from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs
 from fabwire.lineus.draw_cli import draw, preview, text
 from fabwire.lineus.shell import shell
+from fabwire.units import json_key
 
 T = TypeVar("T")
 
@@ -67,13 +68,14 @@ def info(dctx: DeviceContext) -> None:
 
 
 @lineus.command()
-@click.option("--servos", is_flag=True, help="Report servo angles (M114 S) instead of coordinates.")
+@click.option("--servos", is_flag=True, help="Report servo angles in degrees (M114 S) instead of coordinates.")
 @pass_device
 def position(dctx: DeviceContext, servos: bool) -> None:
     """Where the arm is (M114)."""
     if servos:
         angles = _with_arm(dctx, lambda arm: arm.servo_angles())
-        dctx.output.result(angles, "  ".join(f"{k} {v:.2f}" for k, v in angles.items()))
+        dctx.output.result({json_key(k.lower(), "deg"): v for k, v in angles.items()},
+                           "  ".join(f"{k} {v:.2f}°" for k, v in angles.items()))
         return
     where = _with_arm(dctx, lambda arm: arm.position())
     dctx.output.result(where.as_dict(), where.text())

@@ -27,6 +27,7 @@ from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
+from fabwire.units import json_key
 
 if TYPE_CHECKING:
     from fabwire.lineus.sync import LineUsSync
@@ -40,6 +41,8 @@ REPLY_TIMEOUT = 5.0
 _CLEAR = (kin.X_MIN_LOWER + 0.01, 0.01)
 """The body notch's corner with a hair's clearance, so rounding through G54 cannot put a point inside it."""
 LOOKAHEAD_WINDOW = 3
+MACHINE_UNITS = "machine_units"
+"""The JSON key under which the firmware's own coordinates are kept as it reports them."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,9 +55,14 @@ class Position:
     def pen_down(self) -> bool:
         return self.z < kin.PEN_DOWN_BELOW
 
-    def as_dict(self) -> dict[str, float | str]:
-        """For JSON: machine units, and the pen as "up" or "down"."""
-        return {"x": self.x, "y": self.y, "z": self.z, "pen": "down" if self.pen_down else "up"}
+    def as_dict(self) -> dict[str, Any]:
+        """For JSON: `x_mm`, `y_mm` from the centre of the servo shafts (20 machine units a mm: Line-us README
+        "Co-ordinate System", "100 units = 5mm"), `pen` "up" or "down", and under `machine_units` the firmware's own
+        `x`, `y` (what `move` takes) and `z`, the pen height from 0 (down) to 1000 (up), which is no length."""
+        return {json_key("x", "mm"): round(self.x / kin.UNITS_PER_MM, 3),
+                json_key("y", "mm"): round(self.y / kin.UNITS_PER_MM, 3),
+                "pen": "down" if self.pen_down else "up",
+                MACHINE_UNITS: {"x": self.x, "y": self.y, "z": self.z}}
 
     def text(self) -> str:
         """For people: `X 1200  Y 0  Z 0  (pen down)`."""

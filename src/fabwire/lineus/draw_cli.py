@@ -19,7 +19,8 @@ import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from fabwire import units
-from fabwire.cli_support import DeviceContext, pass_device
+from fabwire.cli_support import App, DeviceContext, pass_app, pass_device
+from fabwire.console import Output
 from fabwire.errors import InputError, LinkError
 from fabwire.lineus.kinematics import UNITS_PER_MM
 from fabwire.lineus.plot import (
@@ -116,11 +117,11 @@ def figures_text(plan: Plan) -> str:
     return "\n".join(lines)
 
 
-def _report(dctx: DeviceContext, plan: Plan, extra: dict[str, Any] | None = None) -> None:
+def _report(output: Output, plan: Plan, extra: dict[str, Any] | None = None) -> None:
     for note in plan.notes:
-        dctx.output.note(note)
+        output.note(note)
     data = {**plan.figures().as_dict(), **(extra or {})}
-    dctx.output.result(data, figures_text(plan))
+    output.result(data, figures_text(plan))
 
 
 # -- resume state ---------------------------------------------------------------------------------------------------
@@ -341,7 +342,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
         write_drawing(preview, plan.strokes, plan.travel(), title=Path(drawing.name).name, hidden=plan.hidden,
                       scale=dpi_scale(dpi))
     if dry_run:
-        _report(dctx, plan, {"file": str(file)})
+        _report(dctx.output, plan, {"file": str(file)})
         return
     for note in plan.notes:
         dctx.output.note(note)
@@ -381,7 +382,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
     if preview is not None:
         write_drawing(preview, plan.strokes, plan.travel(), title=text.splitlines()[0][:60], scale=dpi_scale(dpi))
     if dry_run:
-        _report(dctx, plan, {"text": text})
+        _report(dctx.output, plan, {"text": text})
         return
     for note in plan.notes:
         dctx.output.note(note)
@@ -398,8 +399,8 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
 @click.option("--json", "json_output", is_flag=True, help="Print the plan figures as JSON.")
 @DPI
 @PEN_Z
-@pass_device
-def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: bool | None, margin: float,
+@pass_app
+def preview(app: App, file: Path, outputs: tuple[Path, ...], fit: bool | None, margin: float,
             rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float,
             json_output: bool, dpi: float, pen_z: float) -> None:
     """Plan FILE ('-' reads standard input) and write a picture of what the pen will do (pen-up travel dashed,
@@ -407,7 +408,7 @@ def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: boo
     from fabwire.lineus.plot.export import GCODE_SUFFIXES, write_gcode
 
     if json_output:
-        dctx.output.json_mode = True
+        app.output.json_mode = True
     plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area))
     for out in outputs:
         if out.suffix.lower() in GCODE_SUFFIXES:
@@ -416,4 +417,4 @@ def preview(dctx: DeviceContext, file: Path, outputs: tuple[Path, ...], fit: boo
             write_drawing(out, plan.strokes, plan.travel(),
                           title="standard input" if str(file) == "-" else file.name, hidden=plan.hidden,
                           scale=dpi_scale(dpi))
-    _report(dctx, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})
+    _report(app.output, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})

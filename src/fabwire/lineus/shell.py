@@ -3,8 +3,8 @@
 Every other CLI call opens a new connection, and the firmware homes the arm on connect, so a series of `move`s
 bounces home between moves; here the arm stays where it was sent. Lines come from standard input (a terminal gets
 a prompt and line editing; a pipe works the same, line by line). With --json every line's outcome is one JSON
-object on stdout: `{"line", "position": {"x", "y", "z", "pen"}}`, `{"line", "reply": {"ok", "text", "fields"}}`,
-`{"line", "text"}`, `{"line", "error"}` or `{"notice"}`; positions in machine units.
+object on stdout: `{"line", "position": {...}}` (as `lineus position --json` prints it),
+`{"line", "reply": {"ok", "text", "fields"}}`, `{"line", "text"}`, `{"line", "error"}` or `{"notice"}`.
 """
 
 from __future__ import annotations

@@ -499,8 +499,8 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 @click.option("--port", type=click.IntRange(1, 65535), default=9100, show_default=True)
 @click.option("--probe-timeout", type=FiniteRange(min=0.05), default=1.0, show_default=True)
 @click.option("--concurrency", type=click.IntRange(1, 1024), default=64, show_default=True)
-@pass_device
-def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
+@pass_app
+def discover(app: App, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
              concurrency: int) -> None:
     """List XYZprinting USB serial ports and printers answering on TCP 9100."""
     import msgspec
@@ -521,11 +521,11 @@ def discover(dctx: DeviceContext, hosts: tuple[str, ...], subnet: str | None, po
 
     def human() -> None:
         if not found:
-            dctx.output.out.print("no printers found")
+            app.output.out.print("no printers found")
         for f in found:
-            dctx.output.out.print(f"{f.address}  {f.name or '?'}  {f.serial or ''}  {f.detail}")
+            app.output.out.print(f"{f.address}  {f.name or '?'}  {f.serial or ''}  {f.detail}")
 
-    dctx.output.result(data, human)
+    app.output.result(data, human)
 
 
 
