@@ -30,7 +30,7 @@ from fabwire.config import (
     validate_settings,
 )
 from fabwire.devices import KINDS
-from fabwire.errors import ConfigError, InputError
+from fabwire.errors import ConfigError, InputError, excerpt
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 
@@ -148,7 +148,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
         try:
             given.encode("utf-8")
         except UnicodeEncodeError:  # bytes that are not UTF-8 arrive as lone surrogates
-            raise InputError(f"{given[:40]!r} is not valid text (the config file is UTF-8)") from None
+            raise InputError(f"{excerpt(given, 40)} is not valid text (the config file is UTF-8)") from None
     path = config_path()
     text = read_config_text(path)
     existing = parse_devices(text, path) if text else {}

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import re
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 
 ABSENT = "—"
 ZOFFSET_LIMIT_MM = 20.0
@@ -89,8 +89,8 @@ def parse_zoffset(text: str) -> int:
     """
     match = _ZOFFSET.match(text)
     if not match:
-        shown = text if len(text) <= 40 else text[:40] + "…"
-        raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not {shown!r}")
+        raise InputError(f"z offset must be millimetres like 2.45mm (or whole hundredths like 245), not "
+                         f"{excerpt(text, 40)}")
     number, unit = match.groups()
     if not unit and "." not in number and 0 < abs(int(number)) < 10:
         # 2 is far more likely a typo for 2 mm than a wish for 0.02 mm: too close to the bed to guess

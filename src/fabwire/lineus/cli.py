@@ -138,7 +138,7 @@ def files() -> None:
 def files_list(dctx: DeviceContext) -> None:
     """List stored drawings (M20)."""
     drawings = _with_arm(dctx, lambda arm: arm.list_drawings())
-    rows = [{"slot": d.slot, "bytes": d.size, "path": d.path} for d in drawings]
+    rows = [{"slot": d.slot, "size_bytes": d.size, "path": d.path} for d in drawings]
     text = "\n".join(f"{d.slot:>3}  {d.size:>8} bytes  {d.path}" for d in drawings) or "no stored drawings"
     dctx.output.result(rows, text)
 

@@ -73,8 +73,7 @@ class LineUsDriver(Driver):
         if not self.drawing:
             self.position = await self._client().position()
         pos = self.position
-        # the shape `fabwire lineus position --json` prints
-        status = {"x": pos.x, "y": pos.y, "z": pos.z, "pen": "down" if pos.pen_down else "up"} if pos else None
+        status = pos.as_dict() if pos else None  # the shape `fabwire lineus position --json` prints
         return status, self._summary()
 
     async def close(self) -> None:
@@ -95,7 +94,7 @@ class LineUsDriver(Driver):
         elif action == "move":
             self.position = await arm.move(params["x"], params["y"])
         pos = self.position
-        return {"ok": True, "action": action, "position": {"x": pos.x, "y": pos.y, "z": pos.z} if pos else None}
+        return {"ok": True, "action": action, "position": pos.as_dict() if pos else None}
 
     def check_upload(self, name: str, data: bytes) -> None:
         """The drawing intake's and the planner's refusal (not SVG, unreadable, nothing to draw, coordinates no
