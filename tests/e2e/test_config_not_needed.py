@@ -70,14 +70,17 @@ def test_a_bare_address_works_past_a_broken_config_with_one_warning(
     assert warning.endswith(f"the file is skipped and '{host}' taken as an address")
 
 
-def test_a_bare_address_of_another_device_kind_warns_once(tmp_path: Path) -> None:
-    """The Line-us resolves its target for the link and for the greeting: still one warning line."""
+def test_a_bare_address_of_another_device_kind_warns_once(tmp_path: Path,
+                                                          bare_host_sim: tuple[str, RunningSimulator]) -> None:
+    """The Line-us resolves its target for the link and for the greeting: still one warning line. The host is the
+    printer simulator's own loopback address, where no Line-us port is open whatever else runs on the machine."""
     env, words = broken_config(tmp_path, "misspelt key")
-    result = run_cli("lineus", "position", "-d", "127.0.0.1", "--timeout", "2", env=env)
+    host, _ = bare_host_sim
+    result = run_cli("lineus", "position", "-d", host, "--timeout", "2", env=env)
     assert result.returncode == 8  # the address was tried: nothing of the Line-us listens there
     warning, error = result.stderr.splitlines()
     assert words in warning
-    assert error.startswith("fabwire: error: connection refused by 127.0.0.1:1337")
+    assert error.startswith(f"fabwire: error: connection refused by {host}:1337")
 
 
 @pytest.mark.parametrize("breakage", sorted(BROKEN))

@@ -122,7 +122,8 @@ def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto,
     discovery = watch.until(lambda w: w.json(f"homeassistant/device/fabwire_{device}/config"))
     assert discovery["device"]["manufacturer"] == "Line-us"
     watch.until(lambda w: w.latest.get(f"fabwire/device/{device}/availability") == b"online")
-    state = watch.until(lambda w: w.json(f"fabwire/device/{device}/state"))
+    # the first state may be published before the agent's first poll: wait for the one that says online
+    state = watch.until(lambda w: (s := w.json(f"fabwire/device/{device}/state")) and s["online"] and s)
     assert state["kind"] == "lineus"
     assert state["online"] is True
     watch.send(device, {"action": "move", "params": {"x": 1200, "y": 150}, "id": "move-1"})
