@@ -219,3 +219,21 @@ async def test_bad_url_and_refused_login_are_errors(tmp_path: Path) -> None:
                 await run_bridge(FakeAgent([]), locked.url, username="nobody", password="wrong")
     finally:
         await asyncio.to_thread(locked.stop)
+
+
+async def test_a_state_older_than_a_link_event_never_flips_availability_back(broker: Mosquitto) -> None:
+    agent = FakeAgent([PRINTER])
+    async with bridged(agent, broker), observing(broker, "fabwire/device/#") as seen:
+        topic = device_topic(PRINTER.id, "availability")
+        await seen.wait_for(lambda o: o.latest.get(topic) == b"online")
+        for _ in range(20):  # offline, then back: a state from the offline spell is queued behind the online event
+            stale = {**agent.states[PRINTER.id], "online": False}
+            agent.emit({"ts": "t", "device": PRINTER.id, "type": "offline", "reason": "link lost", "retry_in_s": 1})
+            agent.emit({"ts": "t", "device": PRINTER.id, "type": "state", "state": stale})
+            agent.emit({"ts": "t", "device": PRINTER.id, "type": "online", "info": None})
+            await asyncio.sleep(0.05)
+        agent.set_state(PRINTER.id, "idle")
+        await seen.wait_for(lambda o: o.json(device_topic(PRINTER.id, "state"))["online"] is True
+                            and o.latest.get(topic) == b"online")
+        flips = [payload for t, payload, _ in seen.log if t == topic]
+        assert flips == [b"online"] + [b"offline", b"online"] * 20, flips

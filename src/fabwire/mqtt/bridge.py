@@ -339,6 +339,9 @@ class Bridge:
                     self._dirty.put_nowait(device)
                 self._pending[device] = event["state"]
             elif kind in ("online", "offline"):
+                pending = self._pending.get(device)
+                if pending is not None and bool(pending.get("online")) != (kind == "online"):
+                    del self._pending[device]  # older than this event: publishing it would flip availability back
                 if kind == "online" and isinstance(event.get("info"), dict):
                     self.known[device] = event["info"]
                     await self._publish_device(device)
