@@ -10,6 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import click
+
 from fabwire.lifeline import spawn
 
 STARTUP_TIMEOUT = 20.0
@@ -90,3 +92,22 @@ def start_simulator(*args: str, announcements: int = 1, env: dict[str, str] | No
 
 
 SimulatorStarter = Callable[..., RunningSimulator]
+
+
+def leaf_commands() -> dict[tuple[str, ...], click.Command]:
+    """Every command that runs something (not a group), by its path under `fabwire`."""
+    from fabwire.cli import cli  # here: the simulators' harness above needs no CLI import
+
+    found: dict[tuple[str, ...], click.Command] = {}
+
+    def walk(command: click.Command, path: tuple[str, ...], ctx: click.Context) -> None:
+        if not isinstance(command, click.Group):
+            found[path] = command
+            return
+        for name in command.list_commands(ctx):
+            sub = command.get_command(ctx, name)
+            assert sub is not None, (*path, name)
+            walk(sub, (*path, name), click.Context(sub, parent=ctx, info_name=name))
+
+    walk(cli, (), click.Context(cli, info_name="fabwire"))
+    return found

@@ -18,6 +18,7 @@ from fabwire.cli_support import (
     GLOBAL_OPTIONS,
     LINK_OPTIONS,
     App,
+    FiniteRange,
     LazyGroup,
     check_early_link_options,
     configure_logging,
@@ -151,7 +152,7 @@ def _records(file: Path, note: Callable[[str], None]) -> Iterator[TraceRecord]:
 @click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--to", "address", required=True, metavar="ADDRESS",
               help="Where to send: host:port, tcp://…, /dev/tty…, or sim://KIND.")
-@click.option("--quiet", type=click.FloatRange(min=0.01), default=2.0, show_default=True,
+@click.option("--quiet", type=FiniteRange(min=0.01), default=2.0, show_default=True,
               help="Seconds of silence that end a reply shorter than the recorded one.")
 @click.option("--strict", is_flag=True,
               help="Compare every byte, the values that vary by nature (uptime, clocks, temperatures) too.")

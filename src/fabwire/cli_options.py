@@ -33,11 +33,17 @@ OptionFactory = Callable[[], click.Option]
 class FiniteRange(click.FloatRange):
     """A FloatRange that also refuses nan and ±inf (nan passes every comparison, inf makes a wait endless)."""
 
-    name = "finite float range"
+    name = "number"
+
+    def __init__(self, min: float | None = None, max: float | None = None, *, open_ended: bool = False,
+                 **kwargs: Any) -> None:
+        """`open_ended` also takes +inf, for a factor where it has a documented meaning ("no delay")."""
+        super().__init__(min, max, **kwargs)
+        self.open_ended = open_ended
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
         number = super().convert(value, param, ctx)
-        if not math.isfinite(number):
+        if not math.isfinite(number) and not (self.open_ended and number == math.inf):
             self.fail(f"{value!r} is not a finite number.", param, ctx)
         return number
 

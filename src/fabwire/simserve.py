@@ -16,7 +16,7 @@ from typing import Any
 import click
 import msgspec
 
-from fabwire.cli_support import App
+from fabwire.cli_support import App, FiniteRange
 from fabwire.errors import InputError, excerpt
 from fabwire.lifeline import watch
 from fabwire.transport.base import Transport
@@ -107,7 +107,7 @@ SERVE_OPTIONS = (
                          expose_value=False, callback=_store("max_connections"),
                          help=f"Clients served at once; at the limit a new one replaces the quietest "
                               f"[default: {DEFAULT_MAX_CONNECTIONS}]."),
-    lambda: click.Option(["--idle-timeout", "shared_idle_timeout"], type=click.FloatRange(min=0), expose_value=False,
+    lambda: click.Option(["--idle-timeout", "shared_idle_timeout"], type=FiniteRange(min=0), expose_value=False,
                          callback=_store("idle_timeout"),
                          help=f"Close a connection after this many seconds without traffic; 0 never "
                               f"[default: {DEFAULT_IDLE_TIMEOUT:g}]."),

@@ -10,8 +10,8 @@ from pathlib import Path
 import click
 import pytest
 
-from clitools import cli_env, run_cli
-from fabwire.cli import cli, main
+from clitools import cli_env, leaf_commands, run_cli
+from fabwire.cli import main
 
 LINK_FLAGS = {"-d": "sim://xyz", "--trace": "wire.jsonl", "--timeout": "3"}
 KNOWN_WITHOUT_DEVICE = {("xyz", "convert"), ("xyz", "info"), ("xyz", "discover"), ("lineus", "preview"),
@@ -19,23 +19,6 @@ KNOWN_WITHOUT_DEVICE = {("xyz", "convert"), ("xyz", "info"), ("xyz", "discover")
                         ("sim", "xyz"), ("completion",)}
 KNOWN_WITH_DEVICE = {("xyz", "status"), ("xyz", "wifi", "scan"), ("lineus", "draw"), ("lineus", "files", "list"),
                      ("mmu", "version")}
-
-
-def leaf_commands() -> dict[tuple[str, ...], click.Command]:
-    """Every command that runs something (not a group), by its path under `fabwire`."""
-    found: dict[tuple[str, ...], click.Command] = {}
-
-    def walk(command: click.Command, path: tuple[str, ...], ctx: click.Context) -> None:
-        if not isinstance(command, click.Group):
-            found[path] = command
-            return
-        for name in command.list_commands(ctx):
-            sub = command.get_command(ctx, name)
-            assert sub is not None, (*path, name)
-            walk(sub, (*path, name), click.Context(sub, parent=ctx, info_name=name))
-
-    walk(cli, (), click.Context(cli, info_name="fabwire"))
-    return found
 
 
 def shown_options(command: click.Command) -> set[str]:

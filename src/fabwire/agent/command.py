@@ -15,7 +15,7 @@ import click
 
 from fabwire.agent.auth import is_loopback, load_or_create_token
 from fabwire.agent.core import KINDS, Agent, DeviceSpec
-from fabwire.cli_support import App, pass_app
+from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import FabwireError, InputError
 from fabwire.simserve import parse_listen
 
@@ -83,11 +83,11 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 @click.option("--state-dir", type=click.Path(file_okay=False, path_type=Path),
               help="History, uploads and the access token (default: the platform's state directory).")
 @click.option("--demo", is_flag=True, help="Start the three simulators and monitor them.")
-@click.option("--speed", type=click.FloatRange(min=0.5), default=30.0, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.5), default=30.0, show_default=True,
               help="With --demo: simulated time runs this many times faster.")
-@click.option("--retention", type=click.FloatRange(min=0.01), default=24.0, show_default=True, metavar="HOURS",
+@click.option("--retention", type=FiniteRange(min=0.01), default=24.0, show_default=True, metavar="HOURS",
               help="Keep history this long.")
-@click.option("--max-upload", type=click.FloatRange(min=0.001), default=64.0, show_default=True, metavar="MB",
+@click.option("--max-upload", type=FiniteRange(min=0.001), default=64.0, show_default=True, metavar="MB",
               help="Largest upload accepted.")
 @click.option("--token/--no-token", "token", default=None,
               help="Require the access token (default: only when listening beyond loopback, where it is "

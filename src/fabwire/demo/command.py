@@ -11,7 +11,7 @@ from types import FrameType
 
 import click
 
-from fabwire.cli_support import App, pass_app
+from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.demo.context import DemoContext
 from fabwire.demo.runner import SimulatorProcess, start_simulators, stop_all
 from fabwire.demo.summary import Summary
@@ -63,7 +63,7 @@ def _terminate(signum: int, frame: FrameType | None) -> None:
 
 
 @click.command("demo")
-@click.option("--speed", type=click.FloatRange(min=0.5), default=DEFAULT_SPEED, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.5), default=DEFAULT_SPEED, show_default=True,
               help="Simulated time runs this many times faster than real time.")
 @click.option("--only", "only", multiple=True, type=click.Choice(DEVICES),
               help="Show only this device (repeatable).")

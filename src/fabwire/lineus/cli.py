@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import App, DeviceContext, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, device_group, pass_app, pass_device
 from fabwire.devices import LINEUS
 from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
@@ -90,10 +90,10 @@ def home(dctx: DeviceContext) -> None:
 
 
 @lineus.command(context_settings={"ignore_unknown_options": True})
-@click.argument("x", type=float)
-@click.argument("y", type=float)
+@click.argument("x", type=FiniteRange())
+@click.argument("y", type=FiniteRange())
 @click.option("--pen", type=click.Choice(["up", "down"]), help="Pen state for the move (default: unchanged).")
-@click.option("--z", "z", type=float, help="Explicit pen height 0 (down) … 1000 (up).")
+@click.option("--z", "z", type=FiniteRange(0, 1000), help="Explicit pen height 0 (down) … 1000 (up).")
 @pass_device
 def move(dctx: DeviceContext, x: float, y: float, pen: str | None, z: float | None) -> None:
     """Move the pen to machine coordinates X Y (G01); a target outside the area is clamped and the pen lifted.
@@ -273,7 +273,7 @@ def firmware_update(dctx: DeviceContext, yes: bool) -> None:
 
 
 @lineus.command()
-@click.option("--wait", type=click.FloatRange(min=0.1, max=60), default=3.0, show_default=True,
+@click.option("--wait", type=FiniteRange(min=0.1, max=60), default=3.0, show_default=True,
               help="Seconds to listen for answers.")
 @click.option("--interface", "interfaces", multiple=True, help="Only browse on this local address (repeatable).")
 @pass_app
@@ -319,8 +319,8 @@ def _check_record_path(record: Path) -> None:
 @click.command("lineus")
 @click.option("--listen", "listen", multiple=True, metavar="HOST:PORT",
               help="Serve on TCP (default 127.0.0.1:1337); repeat for several addresses.")
-@click.option("--speed", type=float, default=1.0, show_default=True,
-              help="Motion speed-up factor; inf or 0 = no motion delay.")
+@click.option("--speed", type=FiniteRange(min=0, open_ended=True), default=1.0, show_default=True,
+              help="Motion speed-up factor; 0 or inf = no motion delay.")
 @click.option("--version", "version", default="3.x", show_default=True,
               help="Firmware personality: 1.0.1 (integer replies, one command at a time) "
                    "or 3.x (decimals, look-ahead).")

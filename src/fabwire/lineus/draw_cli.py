@@ -19,7 +19,7 @@ import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from fabwire import units
-from fabwire.cli_support import App, DeviceContext, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, pass_app, pass_device
 from fabwire.console import Output
 from fabwire.errors import InputError, LinkError
 from fabwire.lineus.kinematics import UNITS_PER_MM
@@ -61,7 +61,7 @@ def _rotation(ctx: click.Context, param: click.Parameter, value: str) -> float |
     return degrees
 
 
-DPI = click.option("--dpi", type=click.FloatRange(10, 1200), default=DEFAULT_DPI, show_default=True,
+DPI = click.option("--dpi", type=FiniteRange(10, 1200), default=DEFAULT_DPI, show_default=True,
                    help="Resolution of PNG pictures, dots per inch of paper.")
 
 
@@ -70,7 +70,8 @@ def placement_options(func: F) -> F:
     options = [
         click.option("--fit/--no-fit", "fit", default=None,
                      help="Scale and centre into the drawing area (default: yes for SVG and text, no for G-code)."),
-        click.option("--margin", type=float, default=2.0, show_default=True, help="Empty border when fitting, mm."),
+        click.option("--margin", type=FiniteRange(min=0), default=2.0, show_default=True,
+                     help="Empty border when fitting, mm."),
         click.option("--rotate", default="0", show_default=True, callback=_rotation, metavar="DEGREES|auto",
                      help="Rotate the drawing by DEGREES counter-clockwise before placing it; 'auto' turns it by 90 "
                           "when that lets it be larger."),
@@ -80,7 +81,7 @@ def placement_options(func: F) -> F:
                                                   "refusing the drawing."),
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep the file's own line order and directions."),
-        click.option("--optimize-time", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
+        click.option("--optimize-time", type=FiniteRange(min=0.0), default=1.0, show_default=True,
                      help="Seconds the ordering may spend improving pen-up travel."),
     ]
     for option in reversed(options):
@@ -97,7 +98,7 @@ def _one_start(resume: bool, restart: bool) -> None:
         raise InputError("--resume and --restart exclude each other: carry on, or start over")
 
 
-PEN_Z = click.option("--pen-z", type=click.FloatRange(0, 499), default=0.0, show_default=True,
+PEN_Z = click.option("--pen-z", type=FiniteRange(0, 499), default=0.0, show_default=True,
                      help="Pen-down height; about 300 presses less and smears less where the pen lands.")
 
 
@@ -352,7 +353,8 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
 
 @click.command("text")
 @click.argument("text")
-@click.option("--size", type=float, help="Capital height in mm (default: as large as the area allows).")
+@click.option("--size", type=FiniteRange(min=0, min_open=True),
+              help="Capital height in mm (default: as large as the area allows).")
 @click.option("--font", default=DEFAULT_FONT, show_default=True, help="Hershey single-stroke font.")
 @placement_options
 @click.option("--dry-run", is_flag=True, help="Plan, preview and estimate only; no device needed.")

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from fabwire.cli_support import App, pass_app
+from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import InputError, LinkError
 from fabwire.mqtt.fleet_view import FleetView
 from fabwire.mqtt.topics import PREFIX, Broker, parse_broker
@@ -64,7 +64,7 @@ def _table(rows: list[dict[str, Any]], agents: dict[str, str]) -> None:
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", envvar="FABWIRE_MQTT_PASSWORD", help="MQTT password (or FABWIRE_MQTT_PASSWORD).")
 @click.option("--mqtt-tls", is_flag=True, help="Connect with TLS.")
-@click.option("--wait", type=click.FloatRange(min=0.1, max=60), default=1.0, show_default=True,
+@click.option("--wait", type=FiniteRange(min=0.1, max=60), default=1.0, show_default=True,
               help="Seconds to collect what the broker holds.")
 @pass_app
 def fleet(app: App, mqtt_url: str, mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool,

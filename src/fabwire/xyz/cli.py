@@ -260,7 +260,7 @@ def cancel(dctx: DeviceContext, yes: bool) -> None:
 
 @xyz.command()
 @click.argument("axis", type=click.Choice(["x", "y", "z"], case_sensitive=False))
-@click.argument("distance", type=float)
+@click.argument("distance", type=FiniteRange())
 @pass_device
 def jog(dctx: DeviceContext, axis: str, distance: float) -> None:
     """Move AXIS by DISTANCE mm (negative = towards the minimum)."""
