@@ -14,3 +14,11 @@ def read_bounded(path: Path, limit: int) -> bytes | None:
     with path.open("rb") as handle:
         raw = handle.read(limit + 1)
     return raw if len(raw) <= limit else None
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """True when both names lead to one existing file (links and relative spellings included)."""
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False

@@ -22,6 +22,7 @@ from fabwire import units
 from fabwire.cli_support import App, DeviceContext, FiniteRange, pass_app, pass_device
 from fabwire.console import Output
 from fabwire.errors import InputError, LinkError
+from fabwire.files import same_file
 from fabwire.lineus.kinematics import UNITS_PER_MM
 from fabwire.lineus.plot import (
     MoveTo,
@@ -411,6 +412,9 @@ def preview(app: App, file: Path, outputs: tuple[Path, ...], fit: bool | None, m
 
     if json_output:
         app.output.json_mode = True
+    for out in outputs:
+        if str(file) != "-" and same_file(out, file):
+            raise InputError(f"{out} is the drawing being previewed: name another output file")
     plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area))
     for out in outputs:
         if out.suffix.lower() in GCODE_SUFFIXES:

@@ -64,6 +64,11 @@ class TraceWriter:
 
     @classmethod
     def to_file(cls, path: str | Path, *, url: str, peer: str, device: str | None = None) -> TraceWriter:
+        """A writer to `path`, replacing an earlier capture there. Raises InputError for a file that cannot be
+        written, and for an existing non-empty file that is no capture (`--trace part.gcode` must not destroy the
+        G-code it was meant to go beside)."""
+        if not _replaceable(Path(path)):
+            raise InputError(f"{path} exists and is not a fabwire trace: not overwriting it (name another file)")
         try:
             stream = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by close()
         except OSError as exc:
@@ -133,6 +138,18 @@ def read_trace(path: str | Path, on_cut: Callable[[str], None] | None = None) ->
                 record = _parse_record(path, number, line)
                 if record is not None:
                     yield record
+
+
+def _replaceable(path: Path) -> bool:
+    """True for no file, an empty or special file (/dev/null, a pipe), or an earlier capture (its header line)."""
+    try:
+        if not path.is_file() or path.stat().st_size == 0:
+            return True
+        with open(path, "rb") as stream:
+            first = stream.readline(4096)
+    except OSError:
+        return True  # opening it for writing says what is wrong
+    return first.startswith((b'{"trace": "fabwire"', b'{"trace":"fabwire"'))
 
 
 def trace_device(path: str | Path) -> str | None:
