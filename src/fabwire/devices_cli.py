@@ -6,6 +6,7 @@ and the result is validated by the schema before it replaces the file.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import re
@@ -144,6 +145,9 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     """Name the device at URL (any address -d takes), with its settings."""
     if not name or "\n" in name or len(name) > 64:
         raise InputError("a device name is 1 to 64 characters on one line")
+    if _reads_as_address(name):
+        raise InputError(f"{excerpt(name, 64)} reads as an address, so as a name it would hide that address from "
+                         "-d: choose a name without ':', '/' or an IP address's form")
     for given in (name, url, *settings):
         try:
             given.encode("utf-8")
@@ -195,3 +199,14 @@ def remove(app: App, name: str) -> None:
         end -= 1  # comments just above the next section belong to it
     _write(path, "".join(lines[:start] + lines[end:]))
     app.output.result({"removed": name, "file": str(path)}, f"removed {name} from {path}")
+
+
+def _reads_as_address(name: str) -> bool:
+    """True for a name `-d` would otherwise take as an address: an IP address, host:port, a URL or a path."""
+    if ":" in name or "/" in name:
+        return True
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True

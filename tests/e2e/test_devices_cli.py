@@ -134,3 +134,15 @@ def test_show_prints_the_entry_as_toml_that_reads_back(tmp_path: Path) -> None:
     entry = tomllib.loads(shown.stdout)["devices"]["office"]
     assert entry == {"kind": "xyz", "url": "192.168.1.50", "default": False, "link": "wifi", "timeout": 5.0}
     assert "# reply_timeout: not set" in shown.stdout.splitlines()
+
+
+def test_a_name_that_reads_as_an_address_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    env = env_for(path)
+    for name in ("127.0.0.1", "::1", "10.0.0.5:9100", "tcp://office", "/dev/ttyUSB0"):
+        result = run_cli("devices", "add", name, "127.0.0.1:1", "--kind", "xyz", env=env)
+        assert result.returncode == InputError.exit_code, name
+        assert "reads as an address" in result.stderr
+    assert not path.exists()
+    kept = run_cli("devices", "add", "lab.mini", "127.0.0.1:9100", "--kind", "xyz", env=env)
+    assert kept.returncode == 0, kept.stderr
