@@ -558,7 +558,7 @@ class XYZPrinter(Maintenance):
             if op == "resume" and status.state_code == PRINTING:
                 raise InputError("the print is already running")
             if op == "cancel":
-                raise InputError(f"nothing to cancel: no print is running (the printer is {state})")
+                raise InputError(f"nothing to cancel: no print is running (the printer shows '{state}')")
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
             raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
         command = p.PrintControl(op)
