@@ -145,3 +145,11 @@ def test_the_zoffset_is_typed_in_millimetres(tmp_path: Path) -> None:
     bad = run_cli("xyz", "zoffset", "2.45cm", "-d", XYZ_SIM, env=cli_env(tmp_path))
     assert bad.returncode == 4
     assert "z offset must be millimetres" in bad.stderr
+
+
+@pytest.mark.parametrize(("typed", "meant"), [(["xzy"], "xyz"), (["sevre"], "serve"), (["lineus", "drw"], "draw"),
+                                              (["xyz", "stauts"], "status"), (["devics"], "devices")])
+def test_a_misspelt_command_gets_a_suggestion_at_every_level(typed: list[str], meant: str) -> None:
+    result = run_cli(*typed, timeout=60)
+    assert result.returncode == 2
+    assert f"Did you mean '{meant}'?" in result.stderr
