@@ -150,8 +150,33 @@ def _example(schema: type[AnySettings], key: str) -> str:
     return ""
 
 
+_TYPE_WORDS = {"float": "a number", "int": "a whole number", "str": "text", "bool": "true or false",
+               "array": "a list", "object": "a table", "null": "nothing"}
+_BOUND_WORDS = {"<=": "at most", ">=": "at least", "<": "below", ">": "above"}
+_EXPECTED = re.compile(r"[Ee]xpected `(\w+)`(?: (<=|>=|<|>) (\S+))?(?:, got `(\w+)`)?")
+
+
+def _plain(what: str) -> str:
+    """msgspec's "Expected `float` <= 10000.0, got `str`" as "expected a number at most 10000, not text"."""
+    def words(match: re.Match[str]) -> str:
+        wanted, bound, limit, got = match.groups()
+        text = "expected " + _TYPE_WORDS.get(wanted, wanted)
+        if bound:
+            text += f" {_BOUND_WORDS[bound]} {float(limit):g}"
+        if got:
+            text += f", not {_TYPE_WORDS.get(got, got)}"
+        return text
+
+    return _EXPECTED.sub(words, what)
+
+
 def describe_problem(error: msgspec.ValidationError, schema: type[AnySettings]) -> str:
-    """msgspec's message, in the file's terms: which key, and the valid one it most likely meant."""
+    """msgspec's message, in the file's terms and in words: which key, what it takes, and the valid key it most
+    likely meant."""
+    return _plain(_describe(error, schema))
+
+
+def _describe(error: msgspec.ValidationError, schema: type[AnySettings]) -> str:
     message = str(error)
     unknown = re.match(r"Object contains unknown field `([^`]*)`", message)
     if unknown:

@@ -52,7 +52,7 @@ def test_a_link_option_before_the_device_group_reaches_the_link(where: int, tmp_
 @pytest.mark.parametrize(("accept", "words"), [
     ("9.9.9", "MMU firmware 3.x.x is not one of 9.9.9"),  # the major part already differs: the rest is not read
     ("3.1.0", "MMU firmware 3.0.x is not one of 3.1.0"),
-    ("banana", "'accept[0]': expected `str` of the right form (such as '3.0.3')"),
+    ("banana", "'accept[0]': expected text of the right form (such as '3.0.3')"),
 ])
 def test_a_refused_firmware_or_a_malformed_version_is_said_plainly(accept: str, words: str, tmp_path: Path) -> None:
     result = run_cli("mmu", "-d", MMU_SIM, "--accept", accept, "version", env=cli_env(tmp_path))

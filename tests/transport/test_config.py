@@ -75,10 +75,10 @@ def test_device_of_another_kind_is_refused(tmp_path: Path) -> None:
         ("[devices.x]\nkind = 'xyz'\n", "line 1: device 'x': 'url' must be a non-empty string"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'ftp://a'\n", "unknown scheme"),
         ("[devices.x]\nkind = 'mmu'\nurl = 'a'\n", "no default TCP port"),
-        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefault = 'yes'\n", "'default': expected `bool`, got `str`"),
+        ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefault = 'yes'\n", "'default': expected true or false, not text"),
         ("[devices.x]\nkind = 'mmu'\nurl = '/x'\nspeeds = [1]\n", r"unknown key 'speeds' \(did you mean 'speed'\?\)"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefualt = 1\n", r"unknown key 'defualt' \(did you mean 'default'\?\)"),
-        ("[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nspeed = 0\n", "'speed': expected `float` > 0"),
+        ("[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nspeed = 0\n", "'speed': expected a number above 0"),
         ("[devices.x]\nkind = 'lineus'\nurl = 'a'\nlink = 'wifi'\n", "unknown key 'link'"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'a'\nlink = 'usb'\n", "'link': expected one of 'auto', 'serial', 'wifi'"),
         ("[device.x]\nkind = 'xyz'\n", r"unknown top-level key 'device' \(did you mean 'devices'\?\)"),
@@ -154,3 +154,18 @@ def test_a_version_with_a_trailing_line_break_is_not_a_version(tmp_path: Path) -
     path = write(tmp_path, "[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\naccept = [\"3.0.3\\n\"]\n")
     with pytest.raises(ConfigError, match="accept"):
         load_devices(path)
+
+
+@pytest.mark.parametrize(("schema_text", "words"), [
+    ("speed = 1e300", "'speed': expected a number at most 10000"),
+    ("speed = 'fast'", "'speed': expected a number, not text"),
+    ("auto_retries = -1", "'auto_retries': expected a whole number at least 0"),
+])
+def test_a_bad_setting_is_described_in_words_not_in_schema_types(tmp_path: Path, schema_text: str,
+                                                                 words: str) -> None:
+    path = tmp_path / "devices.toml"
+    path.write_text(f"[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\n{schema_text}\n")
+    with pytest.raises(ConfigError) as caught:
+        load_devices(path)
+    assert words in str(caught.value)
+    assert "`" not in str(caught.value)
