@@ -178,6 +178,9 @@ def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
         assert "busy" in _error(client.post(f"/api/v1/devices/{arm['id']}/actions/text", json={"text": "more"}),
                                 409, 4)["message"]
         assert "confirm" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={}), 400, 4)["message"]
+        for loose in ("yes", 1, "true"):  # only JSON true confirms
+            assert "confirm" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": loose}),
+                                       422, 4)["message"]
         assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "running"
         cancelled = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True})
         assert cancelled.json()["state"] == "cancelled", cancelled.text

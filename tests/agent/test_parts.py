@@ -191,7 +191,11 @@ async def test_token_guard_covers_the_api_but_not_the_page() -> None:
 
     guarded = TokenGuard(app, "s3cret")
     async with httpx.AsyncClient(transport=httpx.ASGITransport(app=guarded), base_url="http://agent") as client:
-        assert (await client.get("/api/v1/devices")).status_code == 401
-        assert (await client.get("/api/v1/devices", headers={"Authorization": "Bearer s3cre"})).status_code == 401
+        missing = await client.get("/api/v1/devices")
+        assert missing.status_code == 401
+        assert missing.json()["message"].startswith("this agent needs its access token")
+        wrong = await client.get("/api/v1/devices", headers={"Authorization": "Bearer s3cre"})
+        assert wrong.status_code == 401
+        assert wrong.json()["message"].startswith("the access token sent is not this agent's")
         assert (await client.get("/api/v1/devices", headers={"Authorization": "Bearer s3cret"})).text == "ok"
         assert (await client.get("/")).text == "ok"

@@ -17,7 +17,7 @@ from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisc
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, StrictBool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fabwire import __version__
@@ -54,7 +54,7 @@ class NewDevice(BaseModel):
 
 
 class Confirm(BaseModel):
-    confirm: bool = False
+    confirm: StrictBool = False  # "yes" or 1 is no confirmation: the actions' params take true only, too
 
 
 SERIAL_PORT = re.compile(r"^/dev/(tty[A-Za-z0-9_.-]+|cu\.[A-Za-z0-9_.-]+|serial/by-(id|path)/[A-Za-z0-9_.:+-]+)$")

@@ -81,11 +81,13 @@ class TokenGuard:
         self.token = token.encode()
 
     async def __call__(self, scope: Scope, receive: Any, send: Any) -> None:
+        presented = presented_token(scope) if scope["type"] in ("http", "websocket") else ""
         if scope["type"] in ("http", "websocket") and scope["path"].startswith("/api/") and \
-                not hmac.compare_digest(presented_token(scope).encode(), self.token):
-            body = json.dumps({"message": "this agent needs its access token: send the header "
-                                          "'Authorization: Bearer TOKEN' (the token is in the agent's state "
-                                          f"directory, file {TOKEN_FILE})",
+                not hmac.compare_digest(presented.encode(), self.token):
+            problem = ("the access token sent is not this agent's" if presented
+                       else "this agent needs its access token")
+            body = json.dumps({"message": f"{problem}: send the header 'Authorization: Bearer TOKEN' (the token is "
+                                          f"in the agent's state directory, file {TOKEN_FILE})",
                                "exit_code": 3, "error": "AccessDenied"}).encode()
             headers = [(b"content-type", b"application/json"), (b"www-authenticate", b"Bearer")]
             if scope["type"] == "http":
