@@ -7,6 +7,7 @@ import select
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import click
 import pytest
@@ -14,7 +15,7 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from clitools import cli_env, run_cli
+from clitools import SimulatorStarter, cli_env, run_cli
 from fabwire.cli_support import NumberCommand
 
 
@@ -47,8 +48,6 @@ def _on_a_terminal(args: list[str], answer: bytes) -> tuple[int, str, str]:
 
 
 @pytest.mark.parametrize(("args", "asked", "yes_code", "yes_says"), [
-    # an idle printer has nothing to cancel: the refusal shows the command reached it
-    (["xyz", "-d", "sim://xyz?speed=1000", "cancel"], "Cancel the running print?", 4, "nothing to cancel"),
     (["mmu", "-d", "sim://mmu?speed=100", "--speed", "100", "reset"], "Reboot the MMU?", 0, ""),
 ])
 def test_a_terminal_is_asked_and_no_means_nothing_is_done(args: list[str], asked: str, yes_code: int,
@@ -65,7 +64,6 @@ def test_a_terminal_is_asked_and_no_means_nothing_is_done(args: list[str], asked
 
 
 @pytest.mark.parametrize(("args", "words"), [
-    (["xyz", "-d", "sim://xyz", "cancel"], "cancel the running print"),
     (["xyz", "-d", "sim://xyz", "restore-defaults"], "reset every setting"),
     (["mmu", "-d", "sim://mmu", "reset"], "reboot the MMU"),
     (["mmu", "-d", "sim://mmu", "reset", "--erase"], "erase the MMU's EEPROM"),
@@ -152,3 +150,19 @@ def test_a_z_offset_too_long_for_a_number_is_one_line_of_bad_input(value: str) -
     assert (done.returncode, done.stdout) == (4, "")
     assert done.stderr.count("\n") == 1
     assert done.stderr.startswith("fabwire: error: z offset ")
+
+
+def test_cancel_asks_only_when_there_is_a_print_to_cancel(simulator: SimulatorStarter, tmp_path: Path) -> None:
+    idle = run_cli("xyz", "-d", "sim://xyz?speed=1000", "cancel")  # no terminal, no --yes: the state comes first
+    assert idle.returncode == 4
+    assert "nothing to cancel: no print is running" in idle.stderr
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "50")
+    job = tmp_path / "long.gcode"
+    job.write_bytes(b";TIME:1000000\nG28\nG1 X10 Y10 E1 F1200\n")
+    assert run_cli("xyz", "-d", sim.url, "print", "--no-wait", str(job), timeout=120).returncode == 0
+    code, out, tty = _on_a_terminal(["xyz", "-d", sim.url, "cancel"], b"n\n")
+    assert "Cancel the running print?" in tty
+    assert (code, out) == (4, ""), tty
+    assert "not confirmed" in tty
+    code, out, tty = _on_a_terminal(["xyz", "-d", sim.url, "cancel"], b"y\n")
+    assert code == 0, tty

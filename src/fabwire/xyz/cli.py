@@ -253,8 +253,7 @@ _simple("acknowledge", "Confirm the finished print was removed (leave 'print fin
 @pass_device
 def cancel(dctx: DeviceContext, yes: bool) -> None:
     """Cancel the running print (asks first on a terminal)."""
-    confirm("cancel the running print", yes)
-    _with_printer(dctx, lambda pr: pr.cancel())
+    _with_printer(dctx, lambda pr: pr.cancel(confirm=lambda: confirm("cancel the running print", yes)))
     dctx.output.result({"ok": True, "command": "cancel"}, "cancelling")
 
 

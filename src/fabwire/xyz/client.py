@@ -540,14 +540,16 @@ class XYZPrinter(Maintenance):
     async def resume(self) -> None:
         await self._job_control("resume", (PAUSED,))
 
-    async def cancel(self) -> None:
-        await self._job_control("cancel", (PRINTING, PAUSED, 9520))
+    async def cancel(self, *, confirm: Callable[[], None] | None = None) -> None:
+        """Stop the print for good. `confirm`, when given, runs once the printer shows a print to cancel and may
+        raise to go no further (the CLI's "Cancel the running print?" is asked only when there is one)."""
+        await self._job_control("cancel", (PRINTING, PAUSED, 9520), confirm)
 
     async def acknowledge(self) -> None:
         """Tell the printer the finished print was taken off the bed (leaves 'print finished')."""
         await self._job_control("complete", (PRINT_DONE,))
 
-    async def _job_control(self, op: str, states: tuple[int, ...]) -> None:
+    async def _job_control(self, op: str, states: tuple[int, ...], confirm: Callable[[], None] | None = None) -> None:
         """Send a job command if the printer's state allows it; otherwise an InputError in words (the host's own
         check: the firmware would only answer with a bare error code)."""
         status = await self.status()
@@ -561,6 +563,8 @@ class XYZPrinter(Maintenance):
                 raise InputError(f"nothing to cancel: no print is running (the printer shows '{state}')")
             wanted = {"resume": "paused", "complete": "showing a finished print"}.get(op, "printing")
             raise InputError(f"nothing to {op}: the printer is not {wanted} (it is {state})")
+        if confirm is not None:
+            confirm()
         command = p.PrintControl(op)
         if command.expects(self.link) is not p.Expect.NOTHING:
             await self.request(command)  # the printer's ok

@@ -81,8 +81,8 @@ class SyncXYZPrinter(SyncClient[XYZPrinter]):
     def resume(self) -> None:
         self._call(self.client.resume())
 
-    def cancel(self) -> None:
-        self._call(self.client.cancel())
+    def cancel(self, *, confirm: Callable[[], None] | None = None) -> None:
+        self._call(self.client.cancel(confirm=confirm))
 
     def acknowledge(self) -> None:
         self._call(self.client.acknowledge())
