@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 
 class FabwireError(Exception):
     """Base of everything fabwire raises on purpose."""
@@ -99,3 +101,13 @@ def excerpt(value: str | bytes, limit: int = 40) -> str:
         cut = cut[:-1]
     quoted = repr(cut)
     return quoted[:-1] + "…" + quoted[-1]
+
+
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+"""Control characters (C0 and C1, tab and newline excepted) that outside text must not bring to a terminal."""
+
+
+def visible(text: str) -> str:
+    """`text` with each control character written as `\\xNN`: text a device or a broker sent is shown, never
+    obeyed (an escape sequence could rewrite the terminal)."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m[0]):02x}", text) if _CONTROL.search(text) else text

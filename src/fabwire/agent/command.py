@@ -17,6 +17,7 @@ from fabwire.agent.auth import is_loopback, load_or_create_token
 from fabwire.agent.core import KINDS, Agent, DeviceSpec
 from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import FabwireError, InputError
+from fabwire.mqtt.options import BrokerURL
 from fabwire.simserve import parse_listen
 
 DEFAULT_PORT = 8765
@@ -92,7 +93,7 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 @click.option("--token/--no-token", "token", default=None,
               help="Require the access token (default: only when listening beyond loopback, where it is "
                    "always required).")
-@click.option("--mqtt", "mqtt_url", metavar="URL", help="Also publish to an MQTT broker (mqtt://host[:port]).")
+@click.option("--mqtt", "mqtt_url", type=BrokerURL(), help="Also publish to an MQTT broker (mqtt://host[:port]).")
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", help="MQTT password (or FABWIRE_MQTT_PASSWORD).", envvar="FABWIRE_MQTT_PASSWORD")
 @click.option("--mqtt-tls", is_flag=True, help="Connect to the broker with TLS.")

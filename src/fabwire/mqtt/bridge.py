@@ -2,9 +2,13 @@
 Assistant discovery, and runs the commands sent to it (topic layout in `fabwire.mqtt.topics`).
 
 Several agents may share a broker and even a device: each claims the devices it monitors, and only a device's
-owner (see `fabwire.mqtt.fleet_view`) publishes it and runs its commands. The broker sets an agent's status to
-"offline" through the last will when the agent dies; a lost broker is retried with backoff, and everything is
-republished on reconnection and whenever Home Assistant announces itself online.
+owner (see `fabwire.mqtt.fleet_view`) publishes it and runs its commands. Each agent proves it is alive with a
+heartbeat (and answers a ping with one at once); the broker sets an agent's status to "offline" through the last
+will when the agent dies. A lost broker is retried with backoff, and everything is republished on reconnection
+and whenever Home Assistant announces itself online.
+
+What arrives from the broker is outside input: commands wait in a bounded queue per device (a flood on one
+device neither starves another nor grows memory), and payloads are read within size and nesting limits.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import json
 import logging
 import secrets
 import socket
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
@@ -25,12 +30,15 @@ from fabwire import __version__
 from fabwire.errors import FabwireError, LinkError
 from fabwire.mqtt.commands import CommandRunner
 from fabwire.mqtt.discovery import discovery_payload
-from fabwire.mqtt.fleet_view import FleetView
+from fabwire.mqtt.fleet_view import STALE_CLAIM_S, FleetView
 from fabwire.mqtt.topics import (
     HA_STATUS,
+    HEARTBEAT,
+    HEARTBEAT_S,
     OFFLINE,
     ONLINE,
     OUTGOING_CALLS,
+    PING,
     PREFIX,
     Broker,
     agent_topic,
@@ -47,7 +55,38 @@ BACKOFF = (0.5, 15.0)
 SYNC_TIMEOUT = 3.0
 """Longest wait for the broker's retained claims before this agent decides what it owns."""
 DEVICE_SCAN_S = 1.0
-"""How often the agent's device list is compared with what was published (added and removed devices)."""
+"""How often the agent's device list is compared with what was published (added and removed devices), and the
+other agents' heartbeats with the clock."""
+PING_SETTLE_S = 1.0
+"""After the broker's retained topics, how long the other agents have to answer this agent's ping before it
+decides what it owns."""
+COMMAND_QUEUE = 32
+"""Commands waiting per device; one more is answered "busy" at once instead of being kept."""
+OVERFLOW_REPLIES = 64
+""""Busy" answers waiting to be published; beyond that a flood's commands are dropped unanswered."""
+PONG_INTERVAL_S = 0.5
+"""Pings are answered at most this often: a ping flood costs one heartbeat per interval."""
+
+
+class _QueueFullNotice(logging.Filter):
+    """Lets the MQTT client's "queue is full, discarding" warning through once a minute, not once per message."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._last = -60.0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if "queue is full" not in record.getMessage():
+            return True
+        now = time.monotonic()
+        if now - self._last < 60.0:
+            return False
+        self._last = now
+        return True
+
+
+CLIENT_LOG = logging.getLogger("fabwire.mqtt.client")
+CLIENT_LOG.addFilter(_QueueFullNotice())
 
 
 class AgentLike(Protocol):
@@ -92,6 +131,14 @@ class Bridge:
         self._synced = asyncio.Event()
         self._sync_token = ""
         self._tasks: set[asyncio.Task[Any]] = set()
+        self._commands: dict[str, asyncio.Queue[tuple[bytes, Any]]] = {}
+        """Per device: commands waiting for its worker (bounded by COMMAND_QUEUE)."""
+        self._overflow: asyncio.Queue[tuple[str, bytes, Any]] = asyncio.Queue(OVERFLOW_REPLIES)
+        self._beats = 0
+        self._last_pong = -PONG_INTERVAL_S
+        self._living: frozenset[str] = frozenset()
+        self.commands_refused = 0
+        """Commands answered "busy" or dropped because their device's queue was full."""
 
     # ------------------------------------------------------------------------------------------ connection
 
@@ -102,9 +149,9 @@ class Bridge:
         try:
             while True:
                 try:
+                    will = aiomqtt.Will(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
                     async with aiomqtt.Client(**self.broker.client_options(), identifier=f"fabwire-{self.agent_id}",
-                                              will=aiomqtt.Will(agent_topic(self.agent_id, "status"), OFFLINE,
-                                                                qos=1, retain=True)) as client:
+                                              logger=CLIENT_LOG, will=will) as client:
                         client.pending_calls_threshold = 10 * OUTGOING_CALLS  # its warning is for leaks
                         delay = self.backoff[0]
                         log.info("MQTT connected to %s as agent %s", self.broker.url, self.agent_id)
@@ -133,10 +180,12 @@ class Bridge:
         self._pending.clear()
         self._dirty = asyncio.Queue()
         me = self.agent_id
-        for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/device/+/claim/+", f"{PREFIX}/device/+/command",
-                      HA_STATUS, agent_topic(me, "sync")):
+        for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/{HEARTBEAT}", f"{PREFIX}/device/+/claim/+",
+                      f"{PREFIX}/device/+/command", HA_STATUS, PING, agent_topic(me, "sync")):
             await client.subscribe(topic, qos=1)
         await client.publish(agent_topic(me, "status"), ONLINE, qos=1, retain=True)
+        await self._heartbeat()
+        await client.publish(PING, me, qos=1)  # every live agent answers with a heartbeat before we decide
         await client.publish(agent_topic(me, "info"), _dump({"agent": me, "host": socket.gethostname(),
                                                              "version": __version__}), qos=1, retain=True)
         self.known = self._current_devices()
@@ -145,9 +194,12 @@ class Bridge:
         # Everything retained on the topics subscribed above reaches us before this echo: then ownership is known.
         self._sync_token = secrets.token_hex(8)
         await client.publish(agent_topic(me, "sync"), self._sync_token, qos=1)
+        self._commands.clear()
+        self._overflow = asyncio.Queue(OVERFLOW_REPLIES)
         workers = [asyncio.create_task(self._read(client)), asyncio.create_task(self._pump(events)),
                    *(asyncio.create_task(self._publisher()) for _ in range(OUTGOING_CALLS)),
-                   asyncio.create_task(self._scan())]
+                   asyncio.create_task(self._scan()), asyncio.create_task(self._heartbeats()),
+                   asyncio.create_task(self._refuse_overflow())]
         try:
             done, _ = await asyncio.wait(workers, return_when=asyncio.FIRST_EXCEPTION)
             for task in done:
@@ -156,6 +208,7 @@ class Bridge:
             await self._goodbye(client)
             raise
         finally:
+            workers += self._command_workers()
             for task in workers:
                 task.cancel()
                 task.add_done_callback(_retrieve)
@@ -191,6 +244,10 @@ class Bridge:
         async for message in client.messages:
             topic = message.topic.value
             payload = message.payload if isinstance(message.payload, bytes) else str(message.payload or "").encode()
+            if topic == PING:
+                if not message.retain:
+                    await self._pong()
+                continue
             if topic == HA_STATUS:
                 if payload.strip() == ONLINE.encode():
                     for device in sorted(self.owned):
@@ -199,21 +256,57 @@ class Bridge:
             if topic == agent_topic(self.agent_id, "sync"):
                 if payload.decode("utf-8", "replace") == self._sync_token and not self._synced.is_set():
                     self._synced.set()
-                    await self._reconcile_all()
-                    self.connected.set()
+                    self._spawn(self._settle())
                 continue
             parts = split_device_topic(topic)
             if parts is not None and parts[1] == "command":
-                if parts[0] in self.known:
-                    self._spawn(self._command(parts[0], payload, message.properties))
+                if parts[0] in self.known and not message.retain:  # a retained command would rerun on every start
+                    self._queue_command(parts[0], payload, message.properties)
                 continue
-            concerned = self.view.take(topic, payload)
+            concerned = self.view.take(topic, payload, now=time.monotonic(), retained=message.retain)
             if not self._synced.is_set():
                 continue
             if concerned is not None:
                 await self._reconcile(concerned)
             else:
                 await self._reconcile_all()
+
+    def _queue_command(self, device: str, payload: bytes, properties: Any) -> None:
+        """Into the device's bounded queue (its worker starts with the first command); a full queue's command is
+        answered "busy" through the bounded overflow queue, or dropped when that is full too."""
+        queue = self._commands.get(device)
+        if queue is None:
+            queue = self._commands[device] = asyncio.Queue(COMMAND_QUEUE)
+            self._spawn(self._run_commands(device, queue))
+        try:
+            queue.put_nowait((payload, properties))
+        except asyncio.QueueFull:
+            self.commands_refused += 1
+            with contextlib.suppress(asyncio.QueueFull):
+                self._overflow.put_nowait((device, payload, properties))
+
+    def _command_workers(self) -> list[asyncio.Task[Any]]:
+        return [task for task in self._tasks if not task.done()]
+
+    async def _run_commands(self, device: str, queue: asyncio.Queue[tuple[bytes, Any]]) -> None:
+        """One device's commands, one at a time in their order (long actions return once started)."""
+        while True:
+            payload, properties = await queue.get()
+            try:
+                await self._command(device, payload, properties)
+            except aiomqtt.MqttError:
+                raise  # the connection is going: the bridge reconnects and starts new workers
+            except Exception as exc:  # one command's failure must not leave the device's queue without a worker
+                log.error("MQTT: a command for %s failed: %s", device, str(exc) or type(exc).__name__)
+
+    async def _refuse_overflow(self) -> None:
+        while True:
+            device, payload, properties = await self._overflow.get()
+            await self.connected.wait()
+            if device in self.owned:
+                reply = self.runner.refuse(device, payload, f"busy: {COMMAND_QUEUE} commands for {device} are "
+                                                            "already waiting; send it again later")
+                await self._answer(device, reply, properties)
 
     async def _command(self, device: str, payload: bytes, properties: Any) -> None:
         await self.connected.wait()  # a command that comes while ownership is being settled waits for it
@@ -222,6 +315,9 @@ class Bridge:
         reply = await self.runner.handle(device, payload)
         if reply is None:
             return
+        await self._answer(device, reply, properties)
+
+    async def _answer(self, device: str, reply: dict[str, Any], properties: Any) -> None:
         body = _dump(reply)
         await self._publish(device_topic(device, "reply"), body, retain=False)
         response_topic = getattr(properties, "ResponseTopic", None) if properties is not None else None
@@ -240,6 +336,14 @@ class Bridge:
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
+    async def _settle(self) -> None:
+        """Decide ownership once the other agents had time to answer the ping (the broker's retained topics
+        are all in by now)."""
+        await asyncio.sleep(PING_SETTLE_S)
+        self._living = self.view.living(time.monotonic())
+        await self._reconcile_all()
+        self.connected.set()
+
     # ------------------------------------------------------------------------------------------ ownership
 
     async def _reconcile_all(self) -> None:
@@ -250,7 +354,8 @@ class Bridge:
 
     async def _reconcile(self, device: str) -> None:
         """Take or hand over `device` as the ownership rule says."""
-        mine = device in self.known and self.view.owner(device, me=self.agent_id) == self.agent_id
+        now = time.monotonic()
+        mine = device in self.known and self.view.owner(device, me=self.agent_id, now=now) == self.agent_id
         if mine and device not in self.owned:
             self.owned.add(device)
             await self._publish_device(device)
@@ -258,13 +363,46 @@ class Bridge:
             self.owned.discard(device)
             self._pending.pop(device, None)
             self._availability.pop(device, None)
-            log.info("MQTT: %s is now published by agent %s", device, self.view.owner(device))
+            log.info("MQTT: %s is now published by agent %s", device, self.view.owner(device, now=now))
 
     async def _forget_stale_claims(self) -> None:
-        """Claims this agent left on the broker for devices it no longer monitors (removed while it was away)."""
+        """Claims this agent left on the broker for devices it no longer monitors (removed while it was away),
+        and, on the devices it owns, claims nobody stands behind any more (see `FleetView.stale_claims`)."""
+        now = time.monotonic()
         for device, view in list(self.view.devices.items()):
             if self.agent_id in view.claims and device not in self.known:
                 await self._remove(device)
+            elif device in self.owned:
+                for agent in self.view.stale_claims(device, now):
+                    log.info("MQTT: clearing agent %s's claim on %s: no heartbeat for %.0f s", agent, device,
+                             STALE_CLAIM_S)
+                    await self._publish(claim_topic(device, agent), b"")
+
+    # ------------------------------------------------------------------------------------------ liveness
+
+    async def _heartbeat(self) -> None:
+        self._beats += 1
+        await self._publish(agent_topic(self.agent_id, HEARTBEAT), str(self._beats), retain=False)
+
+    async def _heartbeats(self) -> None:
+        while True:
+            await asyncio.sleep(HEARTBEAT_S)
+            await self._heartbeat()
+
+    async def _pong(self) -> None:
+        now = time.monotonic()
+        if now - self._last_pong >= PONG_INTERVAL_S:
+            self._last_pong = now
+            await self._heartbeat()
+
+    async def _check_liveness(self) -> None:
+        """Hand over or take devices when another agent's heartbeat came or went; clear dead claims."""
+        living = self.view.living(time.monotonic())
+        if living != self._living:
+            self._living = living
+            await self._reconcile_all()
+        else:
+            await self._forget_stale_claims()
 
     async def _publish_device(self, device: str) -> None:
         try:
@@ -305,10 +443,10 @@ class Bridge:
         if not self._synced.is_set():
             log.warning("MQTT: the broker did not echo this agent's sync message; deciding ownership anyway")
             self._synced.set()
-            await self._reconcile_all()
-            self.connected.set()
+            await self._settle()
         await self.connected.wait()
         while True:
+            await self._check_liveness()
             current = self._current_devices()
             for device in sorted(set(self.known) - set(current)):
                 await self._remove(device)

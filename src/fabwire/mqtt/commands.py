@@ -15,7 +15,9 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from fabwire.errors import FabwireError, InputError, excerpt
+from fabwire.errors import DeviceBusy, FabwireError, InputError, excerpt
+from fabwire.jsontext import parse_json
+from fabwire.mqtt.topics import MAX_COMMAND_BYTES
 
 ACTION_NAME = re.compile(r"[a-z][a-z0-9_]{0,63}")
 REMEMBERED = 4096
@@ -32,7 +34,9 @@ class Command:
 
 
 def parse_command(payload: bytes) -> Command:
-    """The command in a payload; InputError saying what is wrong with it."""
+    """The command in a payload of at most `MAX_COMMAND_BYTES`; InputError saying what is wrong with it."""
+    if len(payload) > MAX_COMMAND_BYTES:
+        raise InputError(f"a command is at most {MAX_COMMAND_BYTES} bytes, not {len(payload)}")
     try:
         text = payload.decode("utf-8").strip()
     except UnicodeDecodeError:
@@ -43,10 +47,7 @@ def parse_command(payload: bytes) -> Command:
         if not ACTION_NAME.fullmatch(text):
             raise InputError(f"a command is a JSON object or an action name, not {excerpt(text, 40)}")
         return Command(text, {})
-    try:
-        data = json.loads(text)
-    except ValueError as exc:
-        raise InputError(f"a command must be valid JSON ({exc})") from None
+    data = parse_json(text, what="a command")
     if not isinstance(data, dict):
         raise InputError("a command must be a JSON object")
     action, params = data.get("action"), data.get("params", {})
@@ -96,6 +97,14 @@ class CommandRunner:
         if key is not None:
             self._replies[key] = reply
         return reply
+
+    def refuse(self, device: str, payload: bytes, reason: str) -> dict[str, Any]:
+        """The reply to a command that is not run (its id and action echoed when the payload gives them)."""
+        try:
+            command: Command | None = parse_command(payload)
+        except InputError:
+            command = None
+        return self._reply(device, command, None, error=DeviceBusy(reason))
 
     def _reply(self, device: str, command: Command | None, result: dict[str, Any] | None, *,
                error: BaseException | None = None) -> dict[str, Any]:

@@ -4,18 +4,21 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from typing import Any
 
 import click
 
 from fabwire.cli_support import App, FiniteRange, pass_app
-from fabwire.errors import InputError, LinkError
+from fabwire.errors import InputError, LinkError, visible
 from fabwire.mqtt.fleet_view import FleetView
-from fabwire.mqtt.topics import PREFIX, Broker, parse_broker
+from fabwire.mqtt.options import BrokerURL
+from fabwire.mqtt.topics import HEARTBEAT, PING, PREFIX, Broker, parse_broker
 
 
 async def read_fleet(broker: Broker, *, settle_s: float = 1.0) -> FleetView:
-    """Collect the retained fleet topics for `settle_s` seconds after subscribing. LinkError when the broker
+    """Collect the retained fleet topics for `settle_s` seconds after subscribing, and the heartbeats the live
+    agents send in answer to a ping (read the result with `rows(time.monotonic())`). LinkError when the broker
     cannot be reached or refuses the login."""
     try:
         import aiomqtt
@@ -25,14 +28,16 @@ async def read_fleet(broker: Broker, *, settle_s: float = 1.0) -> FleetView:
     view = FleetView()
     try:
         async with aiomqtt.Client(**broker.client_options()) as client:
-            for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/info", f"{PREFIX}/device/+/claim/+",
-                          f"{PREFIX}/device/+/info", f"{PREFIX}/device/+/state", f"{PREFIX}/device/+/availability"):
+            for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/info", f"{PREFIX}/agent/+/{HEARTBEAT}",
+                          f"{PREFIX}/device/+/claim/+", f"{PREFIX}/device/+/info", f"{PREFIX}/device/+/state",
+                          f"{PREFIX}/device/+/availability"):
                 await client.subscribe(topic, qos=1)
+            await client.publish(PING, b"fleet", qos=1)
 
             async def collect() -> None:
                 async for message in client.messages:
                     payload = message.payload if isinstance(message.payload, bytes) else b""
-                    view.take(message.topic.value, payload)
+                    view.take(message.topic.value, payload, now=time.monotonic(), retained=message.retain)
 
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(settle_s):
@@ -40,6 +45,11 @@ async def read_fleet(broker: Broker, *, settle_s: float = 1.0) -> FleetView:
     except aiomqtt.MqttError as exc:
         raise LinkError(f"MQTT broker {broker.url}: {exc}") from None
     return view
+
+
+def _cell(value: Any) -> str:
+    """A broker's text as a table cell: shown, never obeyed by the terminal."""
+    return visible(str(value)).replace("\n", "\\n") if value else ""
 
 
 def _table(rows: list[dict[str, Any]], agents: dict[str, str]) -> None:
@@ -50,16 +60,16 @@ def _table(rows: list[dict[str, Any]], agents: dict[str, str]) -> None:
     for column in ("device", "name", "kind", "model", "agent", "availability", "state", "standby"):
         table.add_column(column)
     for row in rows:
-        agent = row["agent"] or "-"
+        agent = _cell(row["agent"]) or "-"
         if row["agent"] and not row["agent_online"]:
             agent += " (offline)"
-        table.add_row(row["device"], row["name"] or "", row["kind"] or "", row["model"] or "", agent,
-                      row["availability"] or "", row["state"] or "", ", ".join(row["standby"]))
+        table.add_row(*(_cell(row[key]) for key in ("device", "name", "kind", "model")), agent,
+                      _cell(row["availability"]), _cell(row["state"]), _cell(", ".join(row["standby"])))
     Console(highlight=False, soft_wrap=True, markup=False, emoji=False).print(table)  # broker strings are not markup
 
 
 @click.command("fleet")
-@click.option("--mqtt", "mqtt_url", required=True, envvar="FABWIRE_MQTT", metavar="URL",
+@click.option("--mqtt", "mqtt_url", required=True, envvar="FABWIRE_MQTT", type=BrokerURL(),
               help="The broker the agents publish to (mqtt://host[:port], mqtts:// for TLS).")
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", envvar="FABWIRE_MQTT_PASSWORD", help="MQTT password (or FABWIRE_MQTT_PASSWORD).")
@@ -72,5 +82,5 @@ def fleet(app: App, mqtt_url: str, mqtt_user: str | None, mqtt_password: str | N
     """List every device the fabwire agents on an MQTT broker publish, and the agent that runs each."""
     broker = parse_broker(mqtt_url, username=mqtt_user, password=mqtt_password, tls=mqtt_tls)
     view = asyncio.run(read_fleet(broker, settle_s=wait))
-    rows = view.rows()
+    rows = view.rows(time.monotonic())
     app.output.result({"agents": view.agents, "devices": rows}, lambda: _table(rows, view.agents))

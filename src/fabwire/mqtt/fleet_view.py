@@ -2,17 +2,36 @@
 device's retained info, state and availability. Every agent builds the same view from the same retained topics,
 so every agent agrees on who owns a device without talking to the others.
 
-Ownership rule: of the agents that claim a device and are online, the one whose id sorts first owns it. An agent
-whose broker connection dies is marked offline by its last will, and the next claimant takes over.
+Ownership rule: of the agents that claim a device and are alive, the one whose id sorts first owns it. Alive means
+provably so: the agent's retained status says "online" (the broker replaces it with "offline", the agent's last
+will, when its connection dies) AND a heartbeat from it arrived live within `HEARTBEAT_TTL_S`. A retained
+status and claim alone prove nothing (anyone with publish rights can leave them, and a crashed agent whose will
+was lost leaves them too), so such a claimant never wins, and its claim is cleared once it has stayed silent for
+`STALE_CLAIM_S`.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from fabwire.mqtt.topics import OFFLINE, ONLINE, split_agent_topic, split_device_topic
+from fabwire.errors import InputError
+from fabwire.jsontext import parse_json
+from fabwire.mqtt.topics import (
+    HEARTBEAT,
+    HEARTBEAT_S,
+    MAX_RETAINED_BYTES,
+    OFFLINE,
+    ONLINE,
+    split_agent_topic,
+    split_device_topic,
+)
+
+HEARTBEAT_TTL_S = 3 * HEARTBEAT_S + 1.0
+"""An agent whose last live heartbeat is older than this is not alive (three heartbeats missed, plus slack)."""
+STALE_CLAIM_S = 600.0
+"""A claimant not alive for this long has its retained claim cleared by the device's owner; a real agent
+republishes its claims whenever it connects, so only a dead or phantom claim goes for good."""
 
 
 @dataclass
@@ -25,8 +44,8 @@ class DeviceView:
 
 def _json(payload: bytes) -> dict[str, Any] | None:
     try:
-        value = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
+        value = parse_json(payload, what="a retained payload", max_bytes=MAX_RETAINED_BYTES)
+    except InputError:
         return None
     return value if isinstance(value, dict) else None
 
@@ -37,14 +56,25 @@ class FleetView:
     """Agent id → "online" | "offline"."""
     agent_info: dict[str, dict[str, Any]] = field(default_factory=dict)
     devices: dict[str, DeviceView] = field(default_factory=dict)
+    heartbeats: dict[str, float] = field(default_factory=dict)
+    """Agent id → when (the caller's monotonic clock) its last live heartbeat arrived."""
+    started: float | None = None
+    """When this view began to listen: the start of every claimant's silence that it has not heard from."""
 
-    def take(self, topic: str, payload: bytes) -> str | None:
+    def take(self, topic: str, payload: bytes, *, now: float = 0.0, retained: bool = False) -> str | None:
         """Fold one message in; returns the device id it concerned (None for agent topics or foreign ones).
-        Malformed payloads are ignored: the broker is shared, and anyone may publish nonsense on it."""
+        `now` is the caller's monotonic time and `retained` whether the broker replayed the message from its
+        store (a replayed heartbeat proves nothing). Malformed payloads are ignored: the broker is shared, and
+        anyone may publish nonsense on it."""
+        if self.started is None:
+            self.started = now
         agent_part = split_agent_topic(topic)
         if agent_part is not None:
             agent, leaf = agent_part
-            if leaf == "status":
+            if leaf == HEARTBEAT:
+                if not retained and "/" not in agent:
+                    self.heartbeats[agent] = now
+            elif leaf == "status":
                 text = payload.decode("utf-8", "replace").strip()
                 if text in (ONLINE, OFFLINE):
                     self.agents[agent] = text
@@ -80,32 +110,62 @@ class FleetView:
         return device
 
     def online(self, agent: str) -> bool:
+        """What the agent's retained status says (its own word, or its last will)."""
         return self.agents.get(agent) == ONLINE
 
-    def owner(self, device: str, *, me: str | None = None) -> str | None:
-        """The agent that publishes and commands `device`: the first, by id, of its online claimants (`me`
-        counts as online, and as a claimant, whatever the broker has echoed so far)."""
+    def alive(self, agent: str, now: float) -> bool:
+        """Online by its status and heard from live within `HEARTBEAT_TTL_S` of `now`."""
+        beat = self.heartbeats.get(agent)
+        return self.online(agent) and beat is not None and now - beat <= HEARTBEAT_TTL_S
+
+    def living(self, now: float) -> frozenset[str]:
+        """Every agent alive at `now` (compare two calls to see who came or went)."""
+        return frozenset(agent for agent in self.agents if self.alive(agent, now))
+
+    def stale_claims(self, device: str, now: float) -> list[str]:
+        """Claimants of `device` not alive and silent for at least `STALE_CLAIM_S` (since their last heartbeat,
+        or since this view began to listen if it never heard one): claims nobody stands behind."""
+        view = self.devices.get(device)
+        if view is None:
+            return []
+        stale = []
+        for agent in sorted(view.claims):
+            if self.alive(agent, now):
+                continue
+            since = self.heartbeats.get(agent, self.started if self.started is not None else now)
+            if now - since >= STALE_CLAIM_S:
+                stale.append(agent)
+        return stale
+
+    def owner(self, device: str, *, me: str | None = None, now: float | None = None) -> str | None:
+        """The agent that publishes and commands `device`: the first, by id, of its alive claimants (`me`
+        counts as alive, and as a claimant, whatever the broker has echoed so far). Without `now`, as a reader
+        that heard no heartbeats judges: by the agents' status alone."""
         view = self.devices.get(device)
         claims = set(view.claims) if view else set()
         if me is not None:
             claims.add(me)
-        live = sorted(a for a in claims if a == me or self.online(a))
+        live = sorted(a for a in claims if a == me or (self.online(a) if now is None else self.alive(a, now)))
         return live[0] if live else None
 
-    def rows(self) -> list[dict[str, Any]]:
-        """One row per device seen on the broker, for `fabwire fleet`."""
+    def rows(self, now: float | None = None) -> list[dict[str, Any]]:
+        """One row per device seen on the broker, for `fabwire fleet`; with `now`, agents count as online only
+        while alive (see `alive`)."""
+        def up(agent: str) -> bool:
+            return self.online(agent) if now is None else self.alive(agent, now)
+
         out = []
         for device, view in sorted(self.devices.items()):
             info = view.info or {}
             state = view.state or {}
             summary = state.get("summary") if isinstance(state.get("summary"), dict) else {}
-            owner = self.owner(device) or (info.get("agent") if isinstance(info.get("agent"), str) else None)
+            owner = self.owner(device, now=now) or (info.get("agent") if isinstance(info.get("agent"), str) else None)
             out.append({
                 "device": device, "name": info.get("name"), "kind": info.get("kind"), "model": info.get("model"),
                 "serial": info.get("serial"), "agent": owner,
-                "agent_online": bool(owner and self.online(owner)),
-                "standby": sorted(a for a in view.claims if a != owner and self.online(a)),
-                "availability": view.availability if owner and self.online(owner) else OFFLINE,
+                "agent_online": bool(owner and up(owner)),
+                "standby": sorted(a for a in view.claims if a != owner and up(a)),
+                "availability": view.availability if owner and up(owner) else OFFLINE,
                 "state": summary.get("state") if summary else None, "ts": state.get("ts"),
             })
         return out

@@ -2,6 +2,8 @@
 
     fabwire/agent/AGENT/status          "online" | "offline"  retained; the broker publishes "offline" (last will)
     fabwire/agent/AGENT/info            {"agent", "host", "version", "ts"}  retained
+    fabwire/agent/AGENT/heartbeat       a counter, every HEARTBEAT_S seconds and in answer to a ping (not retained)
+    fabwire/ping                        anyone asks every agent for a heartbeat now (not retained)
     fabwire/device/DEVICE/claim/AGENT   "1"  retained while AGENT monitors DEVICE (empty = released)
     fabwire/device/DEVICE/info          DeviceInfo + {"agent"}  retained, by the device's owner
     fabwire/device/DEVICE/state         the agent's state (`--json` schema, "ts", "online")  retained, by the owner
@@ -25,7 +27,7 @@ import urllib.parse
 from dataclasses import dataclass
 from typing import Any
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 
 PREFIX = "fabwire"
 DISCOVERY_PREFIX = "homeassistant"
@@ -35,6 +37,16 @@ OFFLINE = "offline"
 DEFAULT_PORT = 1883
 DEFAULT_TLS_PORT = 8883
 OUTGOING_CALLS = 128
+HEARTBEAT = "heartbeat"
+HEARTBEAT_S = 5.0
+"""Seconds between an agent's heartbeats: what proves a claimant alive (see `fabwire.mqtt.fleet_view`)."""
+PING = f"{PREFIX}/ping"
+MAX_COMMAND_BYTES = 64 * 1024
+"""Largest command payload run: a command is an action name and a few parameters."""
+MAX_RETAINED_BYTES = 1024 * 1024
+"""Largest retained info or state payload read from the broker (fabwire's own states are a few kilobytes)."""
+INCOMING_QUEUE = 4096
+"""Messages the MQTT client holds for the reader; a flood beyond it is dropped by the client, not kept."""
 
 
 def agent_topic(agent: str, leaf: str) -> str:
@@ -111,10 +123,20 @@ class Broker:
                                    # burst of states linear, while enough stay in flight per event-loop turn for
                                    # 500 states a second on a loaded machine (see bench_mqtt_fleet).
                                    "max_concurrent_outgoing_calls": OUTGOING_CALLS,
-                                   "max_inflight_messages": OUTGOING_CALLS}
+                                   "max_inflight_messages": OUTGOING_CALLS,
+                                   "max_queued_incoming_messages": INCOMING_QUEUE}
         if self.tls:
             options["tls_context"] = ssl.create_default_context()
         return options
+
+
+_USERINFO = re.compile(r"^(?P<head>\s*(?:[A-Za-z][A-Za-z0-9+.-]*://)?[^@/?#:]*):[^/?#]*@")
+
+
+def redact_password(url: str) -> str:
+    """`url` with the password of its `user:password@` part shown as `***`, for messages and logs (a service's
+    journal or a CI log must not keep it)."""
+    return _USERINFO.sub(lambda m: f"{m.group('head')}:***@", url, count=1)
 
 
 def parse_broker(url: str, *, username: str | None = None, password: str | None = None,
@@ -124,15 +146,16 @@ def parse_broker(url: str, *, username: str | None = None, password: str | None 
     text = url.strip()
     if "://" not in text:
         text = "mqtt://" + text
+    shown = excerpt(redact_password(url), 80)
     try:
         parts = urllib.parse.urlsplit(text)
         port = parts.port
     except ValueError as exc:
-        raise InputError(f"MQTT broker {url!r}: {exc}") from None
+        raise InputError(f"MQTT broker {shown}: {exc}") from None  # the parser's reason names the port, no more
     if parts.scheme not in ("mqtt", "mqtts", "tcp", "ssl") or not parts.hostname:
-        raise InputError(f"MQTT broker must look like mqtt://host[:port] or mqtts://host[:port], not {url!r}")
+        raise InputError(f"MQTT broker must look like mqtt://host[:port] or mqtts://host[:port], not {shown}")
     if parts.path not in ("", "/") or parts.query or parts.fragment:
-        raise InputError(f"MQTT broker {url!r}: a broker address has no path or query")
+        raise InputError(f"MQTT broker {shown}: a broker address has no path or query")
     secure = tls or parts.scheme in ("mqtts", "ssl")
     return Broker(parts.hostname, port or (DEFAULT_TLS_PORT if secure else DEFAULT_PORT),
                   username if username is not None else (urllib.parse.unquote(parts.username)

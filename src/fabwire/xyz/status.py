@@ -8,13 +8,12 @@ writes with the same code. A line that does not parse is kept raw in `unparsed`;
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import msgspec
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, visible
 from fabwire.xyz.codes import (
     CANCELLING,
     CARTRIDGE_LENGTHS,
@@ -267,15 +266,6 @@ def _json_any(text: str) -> Any:
     return value
 
 
-_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
-"""Control characters (C0 and C1, tab excepted) that a printer's text must not bring to a terminal."""
-
-
-def _visible(line: str) -> str:
-    """`line` with each control character written as `\\xNN` (an escape sequence could rewrite a terminal)."""
-    return _CONTROL.sub(lambda m: f"\\x{ord(m[0]):02x}", line) if _CONTROL.search(line) else line
-
-
 def _fmt_json(value: Any) -> str:
     return json.dumps(value, separators=(",", ":"))
 
@@ -402,7 +392,7 @@ class Status(msgspec.Struct, frozen=True):
         extra = dict(self.extra)
         unparsed = dict(self.unparsed)
         dashed = set(self.dashed)
-        for line in map(_visible, lines):
+        for line in map(visible, lines):
             if len(line) < 2 or line[1] != ":":
                 continue
             letter, value = line[0], line[2:]
