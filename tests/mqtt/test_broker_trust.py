@@ -317,3 +317,23 @@ def test_command_parsing_uses_the_same_bounds() -> None:
 def test_visible_text_has_no_control_characters(text: str) -> None:
     shown = visible(text)
     assert not any((ord(c) < 32 and c not in "\t\n") or 0x7F <= ord(c) <= 0x9F for c in shown)
+
+
+def incoming(topic: str) -> aiomqtt.Message:
+    return aiomqtt.Message(topic, b"x", qos=0, retain=False, mid=0, properties=None)
+
+
+async def test_the_incoming_queue_keeps_a_bounded_share_per_device() -> None:
+    queue = bridge_module.FairIncoming()
+    taken = 0
+    for _ in range(1000):
+        with contextlib.suppress(asyncio.QueueFull):
+            queue.put_nowait(incoming(device_topic("flooded", "command")))
+            taken += 1
+    assert taken == bridge_module.COMMAND_QUEUE
+    queue.put_nowait(incoming(device_topic("other", "command")))  # another device still gets through
+    queue.put_nowait(incoming(agent_topic("b", "status")))
+    assert queue.get_nowait().topic.value == device_topic("flooded", "command")
+    queue.put_nowait(incoming(device_topic("flooded", "command")))  # one taken out: one more fits
+    with pytest.raises(asyncio.QueueFull):
+        queue.put_nowait(incoming(device_topic("flooded", "command")))

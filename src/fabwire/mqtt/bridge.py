@@ -35,6 +35,7 @@ from fabwire.mqtt.topics import (
     HA_STATUS,
     HEARTBEAT,
     HEARTBEAT_S,
+    INCOMING_QUEUE,
     OFFLINE,
     ONLINE,
     OUTGOING_CALLS,
@@ -87,6 +88,50 @@ class _QueueFullNotice(logging.Filter):
 
 CLIENT_LOG = logging.getLogger("fabwire.mqtt.client")
 CLIENT_LOG.addFilter(_QueueFullNotice())
+
+
+class FairIncoming(asyncio.Queue[aiomqtt.Message]):
+    """The MQTT client's incoming queue, bounded per sender's target: at most COMMAND_QUEUE commands per device
+    and INCOMING_QUEUE messages in all wait for the reader. The client reads a burst off the socket before the
+    reader runs, so without this a flood at one device would push out another device's command, or grow
+    memory with everything the flood sent. The client drops (and logs) what does not fit."""
+
+    def __init__(self, maxsize: int = 0) -> None:
+        super().__init__(maxsize)
+        self._commands: dict[str, int] = {}
+        self._others = 0
+
+    @staticmethod
+    def _device_of_command(message: aiomqtt.Message) -> str | None:
+        parts = split_device_topic(message.topic.value)
+        return parts[0] if parts is not None and parts[1] == "command" else None
+
+    def put_nowait(self, item: aiomqtt.Message) -> None:
+        device = self._device_of_command(item)
+        if device is not None and self._commands.get(device, 0) >= COMMAND_QUEUE:
+            raise asyncio.QueueFull
+        if device is None and self._others >= INCOMING_QUEUE:
+            raise asyncio.QueueFull
+        super().put_nowait(item)
+
+    def _put(self, item: aiomqtt.Message) -> None:
+        device = self._device_of_command(item)
+        if device is None:
+            self._others += 1
+        else:
+            self._commands[device] = self._commands.get(device, 0) + 1
+        super()._put(item)
+
+    def _get(self) -> aiomqtt.Message:
+        item: aiomqtt.Message = super()._get()
+        device = self._device_of_command(item)
+        if device is None:
+            self._others -= 1
+        elif self._commands[device] > 1:
+            self._commands[device] -= 1
+        else:
+            del self._commands[device]
+        return item
 
 
 class AgentLike(Protocol):
@@ -151,7 +196,7 @@ class Bridge:
                 try:
                     will = aiomqtt.Will(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
                     async with aiomqtt.Client(**self.broker.client_options(), identifier=f"fabwire-{self.agent_id}",
-                                              logger=CLIENT_LOG, will=will) as client:
+                                              logger=CLIENT_LOG, will=will, queue_type=FairIncoming) as client:
                         client.pending_calls_threshold = 10 * OUTGOING_CALLS  # its warning is for leaks
                         delay = self.backoff[0]
                         log.info("MQTT connected to %s as agent %s", self.broker.url, self.agent_id)

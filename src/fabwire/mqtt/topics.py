@@ -45,8 +45,8 @@ MAX_COMMAND_BYTES = 64 * 1024
 """Largest command payload run: a command is an action name and a few parameters."""
 MAX_RETAINED_BYTES = 1024 * 1024
 """Largest retained info or state payload read from the broker (fabwire's own states are a few kilobytes)."""
-INCOMING_QUEUE = 4096
-"""Messages the MQTT client holds for the reader; a flood beyond it is dropped by the client, not kept."""
+INCOMING_QUEUE = 8192
+"""Messages the bridge's MQTT client holds for its reader; a flood beyond it is dropped, not kept."""
 
 
 def agent_topic(agent: str, leaf: str) -> str:
@@ -123,8 +123,7 @@ class Broker:
                                    # burst of states linear, while enough stay in flight per event-loop turn for
                                    # 500 states a second on a loaded machine (see bench_mqtt_fleet).
                                    "max_concurrent_outgoing_calls": OUTGOING_CALLS,
-                                   "max_inflight_messages": OUTGOING_CALLS,
-                                   "max_queued_incoming_messages": INCOMING_QUEUE}
+                                   "max_inflight_messages": OUTGOING_CALLS}
         if self.tls:
             options["tls_context"] = ssl.create_default_context()
         return options
