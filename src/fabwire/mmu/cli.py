@@ -142,8 +142,8 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                     try:
                         await func(dctx, mmu, *args, **kwargs)
                     except asyncio.CancelledError:  # Ctrl-C: is the MMU in the middle of a command?
-                        if mmu.status.kind in ("P", "E") and mmu.status.command[:1] in "TLUEKCH":
-                            running.append(mmu.status.command)
+                        if mmu.logic.status.kind in ("P", "E") and mmu.logic.status.command[:1] in "TLUEKCH":
+                            running.append(mmu.logic.status.command)
                         raise
 
             try:
@@ -314,8 +314,7 @@ async def home(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 @with_mmu(auto_retries=0)
 async def version(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show the MMU firmware version and build."""
-    v = mmu_.version
-    assert v is not None
+    v = await mmu_.version()
     dctx.output.result({"major": v.major, "minor": v.minor, "revision": v.revision, "build": v.build,
                         "version": str(v)}, f"MMU firmware {v}")
 
@@ -330,7 +329,8 @@ def _error_register_words(value: int) -> str:
 @with_mmu(auto_retries=0)
 async def status(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show FINDA, filament sensor, slot, selector/idler, drive errors and the current command."""
-    st = mmu_.status
+    st = await mmu_.status()
+    firmware = await mmu_.version()
     fsensor = await mmu_.read_register(0x09)
     filament = await mmu_.read_register(0x07)
     progress = await mmu_.read_register(0x05)
@@ -340,12 +340,12 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
             "filament_text": codes.FILAMENT_WORDS.get(filament, str(filament)), "slot": slot,
             "progress": progress, "progress_text": codes.progress_words(progress), "error_code": error,
             "error_text": _error_register_words(error),
-            "version": str(mmu_.version)}
+            "version": str(firmware)}
 
     def human() -> None:
         out = dctx.output.out
         rows = [
-            ("firmware", str(mmu_.version)),
+            ("firmware", str(firmware)),
             ("command", f"{st.command} {st.words}"),
             ("progress", codes.progress_words(progress)),
             ("FINDA", "on" if st.finda else "off"),
@@ -378,7 +378,7 @@ async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -
         number = codes.BUTTON_ALIASES[button]
         dctx.output.result({"button": button, "sent": number}, f"pressed {codes.BUTTON_WORDS[number]}")
         return
-    pending = mmu_.status
+    pending = await mmu_.status()
     finished = await mmu_.answer(button, timeout=max_time,
                                  on_event=lambda e: dctx.output.note(describe(e)[1])
                                  if isinstance(e, ProgressChanged | ErrorRaised) else None)
@@ -411,7 +411,7 @@ async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
 @with_mmu(auto_retries=0)
 async def registers(dctx: DeviceContext, mmu_: MMU) -> None:
     """List every register with its address, name, value, size, access and meaning."""
-    version = mmu_.version.triple if mmu_.version else (3, 0, 4)
+    version = (await mmu_.version()).triple
     rows = []
     for reg in codes.REGISTERS:
         value = await mmu_.read_register(reg.address)
@@ -446,9 +446,10 @@ async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> No
     """Write VALUE to REGISTER (by name or address)."""
     reg = resolve_register(register, for_write=True)
     number = _parse_value(value)
-    await mmu_.write_register(reg.address, number)
-    dctx.output.result({"address": reg.address, "name": reg.name, "value": number},
-                       f"0x{reg.address:02x} {reg.name} := {number}")
+    reads = await mmu_.write_register(reg.address, number)
+    kept = "" if reads == number else f" (the firmware keeps it as {reads})"
+    dctx.output.result({"address": reg.address, "name": reg.name, "value": number, "reads": reads},
+                       f"0x{reg.address:02x} {reg.name} := {number}{kept}")
 
 
 def _parse_value(text: str) -> int:

@@ -12,8 +12,8 @@ from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from typing import Protocol
 
-from fabwire.errors import InputError, LinkClosed
-from fabwire.mmu import codes
+from fabwire.errors import InputError, LinkClosed, excerpt
+from fabwire.mmu import codes, units
 from fabwire.mmu.faults import Fault, parse_fault
 from fabwire.mmu.machine import HistoryItem
 from fabwire.mmu.model import MMUModel
@@ -52,12 +52,18 @@ class MMUSimulator:
     """A whole MMU: control plane (faults, buttons) plus `serve(transport)`, one decoder per connection."""
 
     def __init__(self, version: str = "3.0.4", *, speed: float = 1.0, faults: Iterable[str | Fault] = (),
-                 clock: Callable[[], float] | None = None) -> None:
+                 clock: Callable[[], float] | None = None, arithmetic: str = units.DEFAULT_FLOAT) -> None:
+        """`arithmetic`: whose floating point the firmware's unit conversions use, "pc" (the firmware built for a
+        PC, as its own test runs do) or "avr" (the MMU board's 32-bit floats); see `fabwire.mmu.units`."""
         self.speed = checked_speed(speed)
+        if arithmetic not in units.FLOAT_FORMATS:
+            raise InputError(f"unknown MMU arithmetic {excerpt(arithmetic, 20)}; choose one of "
+                             f"{', '.join(units.FLOAT_FORMATS)}")
         self._clock = clock or time.monotonic
         self._t0 = self._clock()
         parsed = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)
-        self.model = MMUModel(firmware(version), faults=parsed, now=0.0)
+        self.model = MMUModel(firmware(version), faults=parsed, now=0.0,
+                              float_format=units.FLOAT_FORMATS[arithmetic])
         self._port = Port()
         """The line `receive`/`tick`/`exchange` use when no port is given (in-process and lockstep use)."""
         self._ports: list[Port] = [self._port]
@@ -117,15 +123,33 @@ class MMUSimulator:
     # ------------------------------------------------------------------------------------------ control
 
     def inject(self, fault: str | Fault) -> None:
+        """A cause appears: `NAME` stays until removed, `NAME:N` fails N checks (`fabwire.mmu.faults`)."""
+        self.model.advance(self.now())
         self.model.inject(fault)
 
+    def remove_cause(self, name: str | None = None) -> list[str]:
+        """The owner removes a cause (all when None); its error waits for Retry or a reset. Returns what was
+        there."""
+        self.model.advance(self.now())
+        return self.model.remove_cause(name)
+
     def clear_faults(self, name: str | None = None) -> None:
-        """Remove a fault's cause (all when None); the error it raised waits for Retry or a reset."""
-        self.model.clear_faults(name)
+        self.remove_cause(name)
+
+    def causes(self) -> dict[str, int]:
+        """The causes present: name → checks they will still fail (-1: until removed)."""
+        return self.model.causes()
 
     def press(self, button: int) -> None:
+        """A press on the MMU's own buttons: 0 Right, 1 Middle, 2 Left."""
         self.model.advance(self.now())
         self.model.press(button)
+
+    def power_cycle(self) -> None:
+        """Off and on again: the UART is deaf while it boots, the EEPROM and every cause stay."""
+        self.model.power_cycle(self.now())
+        for port in self._ports:
+            port.reset()
 
     @property
     def history(self) -> list[HistoryItem]:
