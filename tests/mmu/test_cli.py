@@ -258,3 +258,15 @@ def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on(simulator: SimulatorStarte
     assert err.splitlines()[-1] == (f"fabwire: error: stopped following T3; the MMU goes on with it. Follow it "
                                     f"with `fabwire mmu -d {sim.url} monitor`")
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(("slot", "code", "said"), [
+    ("T1", 0, "T1 finished"), ("t2", 0, "T2 finished"),
+    ("T9", 4, "filament slot must be 0 to 4, not 9"), ("x1", 2, "a tool is a slot number 0 to 4, or T0 to T4"),
+    ("T", 2, "a tool is a slot number"), ("T١", 2, "a tool is a slot number"),
+])
+def test_tool_change_takes_the_tool_as_mmu_people_write_it(slot: str, code: int, said: str) -> None:
+    done = run_cli("mmu", "-d", f"sim://mmu?speed={SPEED}", "--speed", SPEED, "tool-change", slot, timeout=60)
+    assert done.returncode == code, done.stderr
+    assert said in (done.stdout if code == 0 else done.stderr)
+    assert "Traceback" not in done.stderr

@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import json
+import sys
 import time
 from collections.abc import Awaitable, Callable
 from datetime import UTC, datetime
@@ -24,11 +26,11 @@ from fabwire.cli_support import (
     pass_device,
 )
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import FollowInterrupted, InputError, excerpt
+from fabwire.errors import FollowInterrupted, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
-from fabwire.mmu.faults import FAULT_NAMES, parse_fault
+from fabwire.mmu.faults import FAULT_NAMES, HANDS, PHYSICAL_BUTTONS, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
     ButtonSent,
@@ -46,7 +48,9 @@ from fabwire.mmu.host import (
     Status,
     StatusUpdated,
 )
-from fabwire.simserve import serve, server_options
+from fabwire.mmu.units import DEFAULT_FLOAT, FLOAT_FORMATS
+from fabwire.simserve import parse_listen, serve, server_options
+from fabwire.transport.tcp import serve_tcp
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -235,12 +239,27 @@ def _command_options(func: F) -> F:
                         help="Give up if the command has not ended after this many seconds.")(func)
 
 
+class ToolArgument(click.ParamType):
+    """A tool as MMU people type it: `1`, `T1` or `t1` (the printer's G-code and the wire both say T1)."""
+
+    name = "SLOT"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        if isinstance(value, int):
+            return value
+        text = str(value).strip()
+        digits = text[1:] if text[:1] in ("T", "t") else text
+        if not digits.isascii() or not digits.isdigit() or len(digits) > 3:
+            self.fail(f"a tool is a slot number 0 to 4, or T0 to T4, not {excerpt(text, 20)}", param, ctx)
+        return int(digits)
+
+
 @mmu.command("tool-change")
-@click.argument("slot", type=int)
+@click.argument("slot", type=ToolArgument())
 @_command_options
 @with_mmu(_slot_arg)
 async def tool_change(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
-    """Change to filament SLOT (0-4): unload what is loaded, feed SLOT to the nozzle."""
+    """Change to filament SLOT (0-4, or T0-T4): unload what is loaded, feed SLOT to the nozzle."""
     await _command(dctx, mmu_, lambda **kw: mmu_.tool_change(slot, **kw), max_time)
 
 
@@ -494,24 +513,116 @@ async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: f
                     break
 
 
+@mmu.command("hands")
+@click.argument("control")
+@click.argument("action", type=click.Choice(list(HANDS)))
+@click.argument("argument", required=False, default="")
+@click.option("--timeout", type=FiniteRange(min=0.1), default=5.0, show_default=True,
+              help="Seconds to wait for the simulator's answer.")
+@pass_app
+def hands(app: Any, control: str, action: str, argument: str, timeout: float) -> None:
+    """Act on a simulated MMU as its owner would: remove a cause (remove finda-stuck; remove alone removes
+    every cause), press one of its buttons (press left|middle|right), power-cycle it, inject a cause, or list the
+    causes present. CONTROL is the address `fabwire sim mmu --control HOST:PORT` printed; the simulator may
+    serve its MMU on TCP or on a pty."""
+    if action == "press" and argument.lower() not in PHYSICAL_BUTTONS:
+        raise InputError(f"press which button? left, middle or right, not {excerpt(argument, 20)}")
+    if action in ("remove", "inject") and argument:
+        parse_fault(argument)
+    address = parse_listen(control.removeprefix("tcp://"), 0)
+    if address.port == 0:
+        raise InputError(f"control address {excerpt(control, 60)} needs a port: HOST:PORT as the simulator printed")
+    answer = asyncio.run(_hands(address.host, address.port, f"{action} {argument}".strip(), timeout))
+    if not answer.pop("ok", False):
+        raise InputError(str(answer.get("error", "the simulator refused")))
+    app.output.result(answer, _hands_words(action, answer))
+
+
+async def _hands(host: str, port: int, line: str, timeout: float) -> dict[str, Any]:
+    try:
+        async with asyncio.timeout(timeout):
+            reader, writer = await asyncio.open_connection(host, port)
+            try:
+                writer.write(line.encode() + b"\n")
+                await writer.drain()
+                reply = await reader.readline()
+            finally:
+                writer.close()
+    except TimeoutError:
+        raise LinkTimeout(f"the simulator's control plane at {host}:{port} did not answer within {timeout:g} s") \
+            from None
+    except OSError as exc:
+        raise LinkClosed(f"no simulator control plane at {host}:{port} ({exc.strerror or exc}): give the address "
+                         "`fabwire sim mmu --control` printed") from None
+    try:
+        answer = json.loads(reply)
+    except ValueError:
+        raise RemoteProtocolError(f"{host}:{port} is not an MMU simulator's control plane: it answered "
+                                  f"{excerpt(reply.decode('utf-8', 'replace'), 40)!r}") from None
+    if not isinstance(answer, dict):
+        raise RemoteProtocolError(f"{host}:{port} answered {excerpt(str(answer), 40)}, not an object")
+    return answer
+
+
+def _hands_words(action: str, answer: dict[str, Any]) -> str:
+    causes = answer.get("causes", {})
+    present = ", ".join(n if left < 0 else f"{n} ({left} more checks)" for n, left in causes.items()) or "none"
+    if action == "remove":
+        return f"removed {', '.join(answer['removed'])}; causes present: {present}"
+    if action == "press":
+        return f"pressed {answer['pressed']} on the MMU"
+    if action == "power-cycle":
+        return f"MMU power-cycled; causes present: {present}"
+    if action == "inject":
+        return f"{answer['injected']} is there now; causes present: {present}"
+    return f"causes present: {present}"
+
+
 @click.command("mmu")
 @server_options(None)
 @click.option("--speed", type=FiniteRange(min=0.01), default=1.0, show_default=True,
               help="Run the machine this many times faster than real time.")
-@click.option("--fault", "faults", multiple=True, metavar="NAME[:N|:always]",
-              help="Inject a fault (repeatable): " + ", ".join(sorted(n for n in FAULT_NAMES if
-                                                                       not n.startswith("tmc-"))) +
+@click.option("--fault", "faults", multiple=True, metavar="NAME[:N]",
+              help="A cause present from power-on (repeatable); NAME stays until removed (`fabwire mmu hands`), "
+                   "NAME:N fails N checks: " + ", ".join(sorted(n for n in FAULT_NAMES if
+                                                                 not n.startswith("tmc-"))) +
                    ", tmc-KIND[-AXIS].")
 @click.option("--version", "fw_version", type=click.Choice(sorted(codes.FIRMWARES)), default="3.0.4",
-              show_default=True, help="Firmware personality.")
+              show_default=True, help="Firmware version: the MK3 printer firmware accepts only 3.0.2, the Buddy "
+                                      "firmware (MK4, MK3.5, XL) only 3.0.3, current Core One firmware 3.0.4.")
+@click.option("--control", metavar="HOST:PORT",
+              help="Also serve the control plane (`fabwire mmu hands`) on this TCP address (port 0: any free).")
+@click.option("--arithmetic", type=click.Choice(list(FLOAT_FORMATS)), default=DEFAULT_FLOAT, show_default=True,
+              help="Floating point of the firmware's unit conversions: pc (the firmware built for a PC) or avr "
+                   "(the MMU board's 32-bit floats); they differ on some register values.")
 @pass_app
 def sim_mmu(app: Any, listen: tuple[str, ...], use_pty: bool, link: Any, speed: float, faults: tuple[str, ...],
-            fw_version: str) -> None:
+            fw_version: str, control: str | None, arithmetic: str) -> None:
     """Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."""
     from fabwire.mmu.sim import MMUSimulator
 
     for fault in faults:
         parse_fault(fault)
-    simulator = MMUSimulator(fw_version, speed=speed, faults=faults)
-    asyncio.run(serve("mmu", simulator.serve, listen=listen, use_pty=use_pty, link=link, default_port=None,
-                      json_mode=app.json))
+    hands_at = parse_listen(control, 0) if control is not None else None
+    simulator = MMUSimulator(fw_version, speed=speed, faults=faults, arithmetic=arithmetic)
+
+    async def main() -> None:
+        server = None
+        if hands_at is not None:
+            server = await serve_tcp(simulator.serve_hands, hands_at.host, hands_at.port, what="MMU control plane")
+            host, port = server.sockets[0].getsockname()[:2]
+            shown = f"[{host}]" if ":" in host else host
+            where = f"tcp://{shown}:{port}"
+            if app.json:
+                sys.stdout.write(json.dumps({"simulator": "mmu", "control": where}) + "\n")
+            else:
+                sys.stdout.write(f"mmu simulator control on {where}\n")
+            sys.stdout.flush()
+        try:
+            await serve("mmu", simulator.serve, listen=listen, use_pty=use_pty, link=link, default_port=None,
+                        json_mode=app.json)
+        finally:
+            if server is not None:
+                server.close()
+
+    asyncio.run(main())

@@ -147,6 +147,17 @@ FAULT_NAMES = {name: f"{kind.where}: {format_error(kind.word)}" for name, kind i
 TMC_KINDS = sorted({name.split("-", 1)[1].rsplit("-", 1)[0] for name in FAULTS if name.startswith("tmc-")})
 
 
+HANDS = {
+    "remove": "remove a cause (NAME, or every cause): pull the filament out, free the jam, fix the supply",
+    "press": "press one of the MMU's own buttons: left, middle or right",
+    "power-cycle": "switch the MMU off and on (RAM lost; EEPROM and causes stay)",
+    "inject": "a cause appears: NAME (until removed) or NAME:N (fails N checks)",
+    "causes": "list the causes present",
+}
+"""The control plane: what the owner's hands can do to a running simulator (`MMUSimulator.hands`)."""
+PHYSICAL_BUTTONS = {"right": 0, "middle": 1, "left": 2}
+
+
 @dataclass(frozen=True, slots=True)
 class Fault:
     name: str

@@ -7,20 +7,22 @@ UART is deaf while booting. Model time = real time × speed, from an injectable 
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 from fabwire.errors import InputError, LinkClosed, excerpt
 from fabwire.mmu import codes, units
-from fabwire.mmu.faults import Fault, parse_fault
+from fabwire.mmu.faults import HANDS, PHYSICAL_BUTTONS, Fault, parse_fault
 from fabwire.mmu.machine import HistoryItem
 from fabwire.mmu.model import MMUModel
 from fabwire.mmu.protocol import Request, RequestDecoder, encode_response
 from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
+HANDS_LINE_LIMIT = 200
 PENDING_LIMIT = 8
 """Decoded requests waiting for the main loop; the real RX ring holds 32 bytes, so a flood loses messages."""
 
@@ -150,6 +152,58 @@ class MMUSimulator:
         self.model.power_cycle(self.now())
         for port in self._ports:
             port.reset()
+
+    def hands(self, action: str, argument: str = "") -> dict[str, Any]:
+        """One act of the owner's hands on the machine (`HANDS`), as a JSON-able answer; InputError for an unknown
+        action, button or cause, or for removing a cause that is not there."""
+        action = action.strip().lower()
+        argument = argument.strip()
+        if action == "remove":
+            name = parse_fault(argument).name if argument else None
+            removed = self.remove_cause(name)
+            if not removed:
+                present = ", ".join(self.causes()) or "none"
+                raise InputError(f"nothing to remove: {name or 'no cause'} is not present (present: {present})")
+            return {"removed": removed, "causes": self.causes()}
+        if action == "press":
+            button = PHYSICAL_BUTTONS.get(argument.lower())
+            if button is None:
+                raise InputError(f"press which button? left, middle or right, not {excerpt(argument, 20)}")
+            self.press(button)
+            return {"pressed": argument.lower()}
+        if action == "power-cycle":
+            self.power_cycle()
+            return {"power_cycled": True, "causes": self.causes()}
+        if action == "inject":
+            if not argument:
+                raise InputError("inject which cause? NAME (until removed) or NAME:N (fails N checks)")
+            self.inject(argument)
+            return {"injected": parse_fault(argument).name, "causes": self.causes()}
+        if action == "causes":
+            return {"causes": self.causes()}
+        raise InputError(f"unknown action {excerpt(action, 20)}; choose one of {', '.join(HANDS)}")
+
+    async def serve_hands(self, transport: Transport) -> None:
+        """The control plane on a connection: one action a line (`remove finda-stuck`, `press middle`,
+        `power-cycle`, `inject NAME[:N]`, `causes`), one JSON object a line back (`{"ok": true, …}` or
+        `{"ok": false, "error": …}`)."""
+        buffer = b""
+        try:
+            while True:
+                buffer += await transport.read(256)
+                while b"\n" in buffer:
+                    line, buffer = buffer.split(b"\n", 1)
+                    action, _, argument = line.decode("utf-8", "replace").strip().partition(" ")
+                    try:
+                        answer: dict[str, Any] = {"ok": True, **self.hands(action, argument)}
+                    except InputError as exc:
+                        answer = {"ok": False, "error": str(exc)}
+                    await transport.write(json.dumps(answer).encode() + b"\n")
+                if len(buffer) > HANDS_LINE_LIMIT:
+                    await transport.write(b'{"ok": false, "error": "line too long"}\n')
+                    return
+        except LinkClosed:
+            return
 
     @property
     def history(self) -> list[HistoryItem]:
