@@ -239,7 +239,7 @@ def _command_options(func: F) -> F:
                         help="Give up if the command has not ended after this many seconds.")(func)
 
 
-class ToolArgument(click.ParamType):
+class ToolArgument(click.ParamType[int]):
     """A tool as MMU people type it: `1`, `T1` or `t1` (the printer's G-code and the wire both say T1)."""
 
     name = "SLOT"
