@@ -26,7 +26,7 @@ from fabwire.cli_support import (
     pass_device,
 )
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import FollowInterrupted, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
+from fabwire.errors import EXIT_INTERRUPTED, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
@@ -140,14 +140,22 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                 check(kwargs)
 
             running: list[str] = []
+            past_sensor: list[str] = []
+
+            def watch(event: HostEvent) -> None:  # has the change got past the printer's filament sensor?
+                if isinstance(event, ProgressChanged) and event.code == codes.Progress.FEEDING_TO_NOZZLE:
+                    past_sensor.append(event.command)
 
             async def main() -> None:
                 async with dctx.open(MMU, **open_options) as mmu:
+                    mmu.subscribe(watch)
                     try:
                         await func(dctx, mmu, *args, **kwargs)
                     except asyncio.CancelledError:  # Ctrl-C: is the MMU in the middle of a command?
-                        if mmu.logic.status.kind in ("P", "E") and mmu.logic.status.command[:1] in "TLUEKCH":
-                            running.append(mmu.logic.status.command)
+                        status = mmu.logic.status
+                        if status.kind in ("P", "E") and status.command[:1] in "TLUEKH":
+                            running.append(status.command)
+                            running.append(status.words)
                         raise
 
             try:
@@ -155,9 +163,17 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
             except KeyboardInterrupt:
                 if not running:
                     raise
+                command, doing = running
                 where = f" -d {dctx.device}" if dctx.device else ""
-                raise FollowInterrupted(f"stopped following {running[0]}; the MMU goes on with it. Follow it with "
-                                        f"`fabwire mmu{where} monitor`") from None
+                dctx.output.note(f"stopped following {command} ({doing}); the MMU goes on with it. Follow it with "
+                                 f"`fabwire mmu{where} monitor`")
+                if command.startswith("T") and command not in past_sensor:
+                    info = describe_error(0x8003)
+                    dctx.output.note(f"warning: nothing reports the printer's filament sensor to the MMU now; unless a "
+                                     f"host does (`fabwire mmu{where} monitor` does), {command} will stop at {info} "
+                                     f"(Feeding to FSensor): then push the filament into the extruder and answer "
+                                     f"with `fabwire mmu{where} button retry`, or `fabwire mmu{where} reset`")
+                raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
 
         return update_wrapper(wrapper, func)
 
@@ -188,6 +204,8 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
     shown: list[str] = []
 
     def show(event: HostEvent) -> None:
+        if isinstance(event, ErrorRaised) and not event.auto_retry:
+            return  # the error the command ends in: said once, with what answers it, by whoever handles it
         if isinstance(event, ProgressChanged | ErrorRaised | ButtonPushed | LinkLost):
             data, text = describe(event)
             seen.append(data)
@@ -198,6 +216,8 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
         finished = await run(on_event=show, timeout=max_time)
     except MMUError as error:
         if dctx.output.json_mode or not on_terminal():
+            where = f" -d {dctx.device}" if dctx.device else ""
+            error.args = (f"{error}; answer it with {error.info.answers(f'fabwire mmu{where}')}",)
             raise
         finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time, shown)
     factor = mmu_.logic.timing.too_fast

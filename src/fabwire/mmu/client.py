@@ -320,9 +320,7 @@ class MMU:
         if self.logic.busy and self.logic.command == request:  # running already (an earlier link, another client)
             return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=confirm_eject)
         if self.logic.busy:
-            raise DeviceError("busy", f"the MMU is still busy with {self.logic.command}",
-                              action="let it finish, or answer its error (fabwire mmu button retry|continue|stop), "
-                                     "or reset it")
+            raise self.busy_error()
         outcome = self._command_outcome(str(request), confirm_eject)
         try:
             finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
@@ -331,6 +329,18 @@ class MMU:
             self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
             raise
         return await self._confirmed(request, finished, timeout)
+
+    def busy_error(self) -> DeviceError:
+        """Why a new command cannot start: the one the MMU runs, or the error it stopped in and what answers it
+        (reference §5.1: every command is refused until the running one ends or its error is answered)."""
+        status = self.logic.status
+        command = status.command if status.command[:1] in "TLUEKHM" else str(self.logic.command)
+        if status.kind == "E":
+            info = describe_error(status.value)
+            return DeviceError("stopped", f"the MMU stopped in {info} during {command}",
+                               action=f"answer it with {info.answers()}")
+        return DeviceError("busy", f"the MMU is still busy with {command} ({status.words})",
+                           action="let it finish (`fabwire mmu monitor`), or `fabwire mmu reset`")
 
     async def _confirmed(self, request: Request | None, finished: CommandFinished,
                          timeout: float | None) -> CommandFinished:
