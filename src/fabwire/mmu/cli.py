@@ -242,8 +242,11 @@ async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, s
             dctx.output.note(f"{error}")
         choice = await asyncio.to_thread(click.prompt, " / ".join(choices), type=click.Choice(
             [c.lower() for c in choices], case_sensitive=False), err=True)
-        if choice.lower() == "stop":
-            raise error
+        if choice.lower() == "stop":  # asked for: said as what it is, not as an error
+            where = f" -d {dctx.device}" if dctx.device else ""
+            dctx.output.note(f"stopped: {error.command or 'the MMU'} stays in {info}; answer it later with "
+                             f"{info.answers(f'fabwire mmu{where}')}")
+            raise click.exceptions.Exit(error.exit_code)
         try:
             finished = await mmu_.answer(choice, on_event=show, timeout=max_time)
         except MMUError as again:
@@ -486,7 +489,7 @@ async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> No
     reg = resolve_register(register, for_write=True)
     number = _parse_value(value)
     reads = await mmu_.write_register(reg.address, number)
-    kept = "" if reads == number else f" (the firmware keeps it as {reads})"
+    kept = "" if reads == number else f" (reads back {reads} through the firmware's units)"
     dctx.output.result({"address": reg.address, "name": reg.name, "value": number, "reads": reads},
                        f"0x{reg.address:02x} {reg.name} := {number}{kept}")
 
@@ -615,16 +618,20 @@ def _hands_words(action: str, answer: dict[str, Any]) -> str:
 @click.option("--arithmetic", type=click.Choice(list(FLOAT_FORMATS)), default=DEFAULT_FLOAT, show_default=True,
               help="Floating point of the firmware's unit conversions: pc (the firmware built for a PC) or avr "
                    "(the MMU board's 32-bit floats); they differ on some register values.")
+@click.option("--phantom-requests", is_flag=True,
+              help="A one-byte garbage line right after a request repeats that request, as the firmware's response "
+                   "decoder repeats a response (to test hosts; a real MMU does not).")
 @pass_app
 def sim_mmu(app: Any, listen: tuple[str, ...], use_pty: bool, link: Any, speed: float, faults: tuple[str, ...],
-            fw_version: str, control: str | None, arithmetic: str) -> None:
+            fw_version: str, control: str | None, arithmetic: str, phantom_requests: bool) -> None:
     """Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."""
     from fabwire.mmu.sim import MMUSimulator
 
     for fault in faults:
         parse_fault(fault)
     hands_at = parse_listen(control, 0) if control is not None else None
-    simulator = MMUSimulator(fw_version, speed=speed, faults=faults, arithmetic=arithmetic)
+    simulator = MMUSimulator(fw_version, speed=speed, faults=faults, arithmetic=arithmetic,
+                             phantom_requests=phantom_requests)
 
     async def main() -> None:
         server = None

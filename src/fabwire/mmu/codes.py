@@ -317,3 +317,7 @@ FIRMWARES = {
     "3.0.3": FirmwareVersion(3, 0, 3, 896),
     "3.0.4": FirmwareVersion(3, 0, 4, 936),
 }
+"""The versions a simulated MMU can report (S0-S3; builds = the firmware repository's commit count). A printer
+accepts exactly one: the MK3/MK3S firmware (Prusa-Firmware `mmu2_supported_version.h`) insists on 3.0.2, the
+Buddy firmware (MK4, MK3.5, XL: Prusa-Firmware-Buddy `mmu2_supported_version.h`) on 3.0.3, recent Core One
+firmware on 3.0.4 — pair `fabwire sim mmu --version` with the printer. 3.0.4 stays the default."""

@@ -143,7 +143,14 @@ def _catalogue() -> dict[str, FaultKind]:
 
 
 FAULTS = _catalogue()
-FAULT_NAMES = {name: f"{kind.where}: {format_error(kind.word)}" for name, kind in FAULTS.items()}
+LINE_FAULTS = {
+    "phantom-reply": "after a reply, a line of one garbage byte (`a\\n`): the firmware's response decoder would "
+                     "report the reply complete a second time (Prusa-Firmware-MMU protocol.cpp DecodeResponse, the "
+                     "first-field error path); a host must never act on that phantom",
+}
+"""Faults of the line rather than the machine: no error word, no check in the firmware; the count works the same
+(a bare name until removed, NAME:N for N replies)."""
+FAULT_NAMES = {name: f"{kind.where}: {format_error(kind.word)}" for name, kind in FAULTS.items()} | LINE_FAULTS
 TMC_KINDS = sorted({name.split("-", 1)[1].rsplit("-", 1)[0] for name in FAULTS if name.startswith("tmc-")})
 
 
@@ -183,8 +190,8 @@ def parse_fault(text: str) -> Fault:
         skip = int(skip_text)
     if name.startswith("tmc-") and name.removeprefix("tmc-") in TMC_KINDS:
         name += "-pulley"
-    if name not in FAULTS:
-        raise InputError(f"unknown MMU fault {excerpt(name, 40)}; known: {', '.join(sorted(FAULTS))}")
+    if name not in FAULTS and name not in LINE_FAULTS:
+        raise InputError(f"unknown MMU fault {excerpt(name, 40)}; known: {', '.join(sorted(FAULT_NAMES))}")
     count_text = count_text.strip()
     if not count_text:
         return Fault(name, skip=skip)

@@ -23,6 +23,8 @@ from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
 HANDS_LINE_LIMIT = 200
+PHANTOM_LINE = b"a\n"
+"""One garbage byte and a newline: what the `phantom-reply` fault sends after a reply."""
 PENDING_LIMIT = 8
 """Decoded requests waiting for the main loop; the real RX ring holds 32 bytes, so a flood loses messages."""
 
@@ -33,8 +35,8 @@ class Port:
     A real MMU has one UART. Over TCP every connection gets its own Port, so one client's stray or half-sent
     bytes never mix with another's requests; all ports drive the same machine, one request per tick."""
 
-    def __init__(self) -> None:
-        self.decoder = RequestDecoder()
+    def __init__(self, phantoms: bool = False) -> None:
+        self.decoder = RequestDecoder(phantoms=phantoms)
         self.pending: deque[Request] = deque()
         self.dropped = 0
 
@@ -54,9 +56,14 @@ class MMUSimulator:
     """A whole MMU: control plane (faults, buttons) plus `serve(transport)`, one decoder per connection."""
 
     def __init__(self, version: str = "3.0.4", *, speed: float = 1.0, faults: Iterable[str | Fault] = (),
-                 clock: Callable[[], float] | None = None, arithmetic: str = units.DEFAULT_FLOAT) -> None:
+                 clock: Callable[[], float] | None = None, arithmetic: str = units.DEFAULT_FLOAT,
+                 phantom_requests: bool = False) -> None:
         """`arithmetic`: whose floating point the firmware's unit conversions use, "pc" (the firmware built for a
-        PC, as its own test runs do) or "avr" (the MMU board's 32-bit floats); see `fabwire.mmu.units`."""
+        PC, as its own test runs do) or "avr" (the MMU board's 32-bit floats); see `fabwire.mmu.units`.
+        `phantom_requests`: a one-byte garbage line right after a request repeats that request, as the firmware's
+        response decoder repeats a response (`fabwire.mmu.protocol` `phantoms`): a host that sends such bytes can
+        be tested against it. The fault `phantom-reply` makes the simulator send such lines itself."""
+        self.phantom_requests = phantom_requests
         self.speed = checked_speed(speed)
         if arithmetic not in units.FLOAT_FORMATS:
             raise InputError(f"unknown MMU arithmetic {excerpt(arithmetic, 20)}; choose one of "
@@ -66,7 +73,7 @@ class MMUSimulator:
         parsed = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)
         self.model = MMUModel(firmware(version), faults=parsed, now=0.0,
                               float_format=units.FLOAT_FORMATS[arithmetic])
-        self._port = Port()
+        self._port = Port(phantom_requests)
         """The line `receive`/`tick`/`exchange` use when no port is given (in-process and lockstep use)."""
         self._ports: list[Port] = [self._port]
 
@@ -112,7 +119,12 @@ class MMUSimulator:
         if self.model.booting:  # X: the board resets, whatever was still queued on any line is lost
             for each in self._ports:
                 each.reset()
-        return b"" if reply is None else encode_response(reply)
+        if reply is None:
+            return b""
+        data = encode_response(reply)
+        if self.model.faults.hit("phantom-reply"):
+            data += PHANTOM_LINE
+        return data
 
     def exchange(self, data: bytes, now: float | None = None) -> bytes:
         """Receive `data` and run ticks until every complete request has been handled."""
@@ -218,7 +230,7 @@ class MMUSimulator:
     async def serve(self, transport: Transport) -> None:
         """Answer one connection until it closes. Every connection sees the same machine through its own
         decoder, so clients never corrupt each other's requests (replies go to whoever asked)."""
-        port = Port()
+        port = Port(self.phantom_requests)
         self._ports.append(port)
         try:
             while True:
@@ -242,7 +254,9 @@ def options_to_simulator(options: dict[str, str]) -> MMUSimulator:
     except ValueError:
         raise InputError(f"sim://mmu speed must be a number, not {speed_text!r}") from None
     faults = [f for f in options.get("fault", "").split(",") if f.strip()]
-    return MMUSimulator(options.get("version", "3.0.4"), speed=speed, faults=faults)
+    return MMUSimulator(options.get("version", "3.0.4"), speed=speed, faults=faults,
+                        arithmetic=options.get("arithmetic", units.DEFAULT_FLOAT),
+                        phantom_requests=options.get("phantom_requests", "") in ("1", "true", "yes"))
 
 
 async def _factory(options: dict[str, str]) -> Transport:
