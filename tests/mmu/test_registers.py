@@ -4,6 +4,7 @@ what a read then answers, and whether it can be written at all (`MMU:src/registe
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -160,3 +161,14 @@ def test_plain_settings_keep_the_low_bits(register: codes.Register, value: int) 
     w = booted()
     w.send(f"W{register.address:x} {value:x}")
     assert read(w, register.address) == value & ((1 << register.bits) - 1)
+
+
+PC_BUILD = Path(__file__).with_name("data") / "accel_pc_build.txt"
+
+
+def test_pc_arithmetic_matches_the_firmware_compiled_for_a_pc() -> None:
+    rows = [line.split() for line in PC_BUILD.read_text().splitlines() if not line.startswith("#")]
+    assert len(rows) > 6000
+    fmt = units.FLOAT_FORMATS["pc"]
+    wrong = [(a, v, r) for a, v, r in rows if units.readback(codes.REGISTERS[int(a, 16)], int(v), fmt) != int(r)]
+    assert wrong == []
