@@ -122,3 +122,10 @@ def test_no_control_plane_there() -> None:
     done = run_cli("mmu", "hands", "127.0.0.1:1", "causes")
     assert done.returncode != 0
     assert "no simulator control plane at 127.0.0.1:1" in done.stderr
+
+
+def test_the_mmu_port_is_not_the_control_plane(tcp_sim: tuple[str, str]) -> None:
+    device, _ = tcp_sim
+    done = run_cli("mmu", "hands", device, "causes", "--timeout", "1")  # the MMU ignores a line it cannot decode
+    assert done.returncode != 0
+    assert done.stderr.strip().endswith("did not answer within 1 s")

@@ -561,16 +561,23 @@ def hands(app: Any, control: str, action: str, argument: str, timeout: float) ->
     app.output.result(answer, _hands_words(action, answer))
 
 
+HANDS_REPLY_LIMIT = 64 * 1024
+"""Longest answer line `fabwire mmu hands` reads (the simulator's are short JSON objects)."""
+
+
 async def _hands(host: str, port: int, line: str, timeout: float) -> dict[str, Any]:
     try:
         async with asyncio.timeout(timeout):
-            reader, writer = await asyncio.open_connection(host, port)
+            reader, writer = await asyncio.open_connection(host, port, limit=HANDS_REPLY_LIMIT)
             try:
                 writer.write(line.encode() + b"\n")
                 await writer.drain()
                 reply = await reader.readline()
             finally:
                 writer.close()
+    except ValueError:  # no newline within the limit: not an MMU simulator's control plane
+        raise RemoteProtocolError(f"{host}:{port} is not an MMU simulator's control plane: it answered more "
+                                  f"than {HANDS_REPLY_LIMIT} bytes without a line end") from None
     except TimeoutError:
         raise LinkTimeout(f"the simulator's control plane at {host}:{port} did not answer within {timeout:g} s") \
             from None
