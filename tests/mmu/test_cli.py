@@ -313,3 +313,19 @@ def test_tool_change_takes_the_tool_as_mmu_people_write_it(slot: str, code: int,
     assert done.returncode == code, done.stderr
     assert said in (done.stdout if code == 0 else done.stderr)
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(("command", "seen", "sensor_on", "version", "stops"), [
+    ("T3", {5}, False, (3, 0, 4), [0x8003]),  # feeding: only the sensor report can end the bowden push
+    ("T3", set(), True, (3, 0, 4), [0x8004, 0x8003]),  # loaded: the unload waits for the sensor to go off first
+    ("T3", {3, 25, 5, 6, 28, 7}, True, (3, 0, 4), []),  # past the nozzle feed: nothing left to wait for
+    ("U0", set(), True, (3, 0, 4), [0x8004]),
+    ("U0", set(), True, (3, 0, 3), []),  # 3.0.3 unloads without waiting for the sensor
+    ("U0", set(), False, (3, 0, 4), []),
+    ("L1", set(), True, (3, 0, 4), []),
+])
+def test_which_sensor_step_a_command_will_stop_at(command: str, seen: set[int], sensor_on: bool,
+                                                  version: tuple[int, int, int], stops: list[int]) -> None:
+    from fabwire.mmu.cli import SENSOR_STEPS
+
+    assert [s.error for s in SENSOR_STEPS if s.ahead(command, seen, sensor_on, version)] == stops

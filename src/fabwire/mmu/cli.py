@@ -9,6 +9,7 @@ import json
 import sys
 import time
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import update_wrapper
 from typing import Any, TypeVar
@@ -125,6 +126,39 @@ def status_dict(status: Status) -> dict[str, Any]:
 
 
 
+@dataclass(frozen=True, slots=True)
+class SensorStep:
+    """A step of a command that waits for the printer's filament sensor: with no host reporting it (the person
+    stopped following the command) the MMU stops there with `error`."""
+
+    commands: str
+    error: int
+    past: int
+    """The progress code that shows the step is done."""
+    words: str
+    remedy: str
+    needs_sensor_on: bool
+    """The step waits for the sensor to go off, so only a sensor reported on can keep it waiting."""
+    since: tuple[int, int, int]
+    """First firmware version with the wait."""
+    source: str
+
+    def ahead(self, command: str, seen: set[int], sensor_on: bool, version: tuple[int, int, int]) -> bool:
+        return (command[:1] in self.commands and self.past not in seen and version >= self.since
+                and (sensor_on or not self.needs_sensor_on))
+
+
+SENSOR_STEPS = (
+    SensorStep("TUEK", 0x8004, codes.Progress.RETRACTING_FROM_FINDA, "Unloading to FINDA", "pull the filament out "
+               "of the extruder", True, (3, 0, 4), "MMU:src/logic/unload_to_finda.cpp UnloadToFinda::Step "
+               "(WaitingForFSensor: the sensor must go off within 4 s)"),
+    SensorStep("T", 0x8003, codes.Progress.FEEDING_TO_NOZZLE, "Feeding to FSensor", "push the filament into the "
+               "extruder", False, (3, 0, 0), "MMU:src/logic/feed_to_bondtech.cpp FeedToBondtech::Step "
+               "(PushingFilamentToFSensor: Failed once the pulley has pushed its whole move without the sensor)"),
+)
+"""In the order a command meets them."""
+
+
 def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
              **open_options: Any) -> Callable[[Callable[..., Any]], Any]:
     """Open the link and the host logic around an `async def cmd(dctx, mmu, **options)`.
@@ -140,11 +174,12 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                 check(kwargs)
 
             running: list[str] = []
-            past_sensor: list[str] = []
+            seen: dict[str, set[int]] = {}
+            stops: list[int] = []
 
-            def watch(event: HostEvent) -> None:  # has the change got past the printer's filament sensor?
-                if isinstance(event, ProgressChanged) and event.code == codes.Progress.FEEDING_TO_NOZZLE:
-                    past_sensor.append(event.command)
+            def watch(event: HostEvent) -> None:  # which of the sensor steps has the command got past?
+                if isinstance(event, ProgressChanged):
+                    seen.setdefault(event.command, set()).add(event.code)
 
             async def main() -> None:
                 async with dctx.open(MMU, **open_options) as mmu:
@@ -154,8 +189,11 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                     except asyncio.CancelledError:  # Ctrl-C: is the MMU in the middle of a command?
                         status = mmu.logic.status
                         if status.kind in ("P", "E") and status.command[:1] in "TLUEKH":
-                            running.append(status.command)
-                            running.append(status.words)
+                            running.extend((status.command, status.words))
+                            version = mmu.logic.version
+                            stops.extend(s.error for s in SENSOR_STEPS if s.ahead(
+                                status.command, seen.get(status.command, set()), bool(mmu.logic.fsensor),
+                                version.triple if version else (3, 0, 4)))
                         raise
 
             try:
@@ -167,12 +205,13 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                 where = f" -d {dctx.device}" if dctx.device else ""
                 dctx.output.note(f"stopped following {command} ({doing}); the MMU goes on with it. Follow it with "
                                  f"`fabwire mmu{where} monitor`")
-                if command.startswith("T") and command not in past_sensor:
-                    info = describe_error(0x8003)
+                if stops:
+                    info = describe_error(stops[0])
+                    step = next(s for s in SENSOR_STEPS if s.error == stops[0])
                     dctx.output.note(f"warning: nothing reports the printer's filament sensor to the MMU now; unless a "
                                      f"host does (`fabwire mmu{where} monitor` does), {command} will stop at {info} "
-                                     f"(Feeding to FSensor): then push the filament into the extruder and answer "
-                                     f"with `fabwire mmu{where} button retry`, or `fabwire mmu{where} reset`")
+                                     f"({step.words}): then {step.remedy} and answer with `fabwire mmu{where} "
+                                     f"button retry`, or `fabwire mmu{where} reset`")
                 raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
 
         return update_wrapper(wrapper, func)
