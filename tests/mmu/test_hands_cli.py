@@ -14,6 +14,8 @@ import pytest
 
 from clitools import RunningSimulator, cli_env, run_cli
 from fabwire.lifeline import spawn
+from fabwire.mmu.sim import MMUSimulator
+from linktools import loopback_tcp
 
 SPEED = "50"
 
@@ -129,3 +131,23 @@ def test_the_mmu_port_is_not_the_control_plane(tcp_sim: tuple[str, str]) -> None
     done = run_cli("mmu", "hands", device, "causes", "--timeout", "1")  # the MMU ignores a line it cannot decode
     assert done.returncode != 0
     assert done.stderr.strip().endswith("did not answer within 1 s")
+
+
+@pytest.mark.parametrize(("sent", "answer"), [
+    (b"causes\n", {"ok": True, "causes": {"finda-stuck": -1}}),
+    (b"\xff\xfe remove\n", {"ok": False, "error": "unknown action '\ufffd\ufffd'; choose one of remove, press, "
+                                                  "power-cycle, inject, causes"}),
+    (b"remove gremlins\n", None),
+    (b"x" * 300, {"ok": False, "error": "line too long"}),
+])
+async def test_the_control_plane_answers_every_line_in_one_json_line(sent: bytes, answer: object) -> None:
+    sim = MMUSimulator(faults=["finda-stuck"])
+    async with loopback_tcp(sim.serve_hands) as link:
+        await link.write(sent)
+        reply = json.loads(await link.read(4096))
+    if answer is None:
+        assert reply["ok"] is False
+        assert reply["error"].startswith("unknown MMU fault 'gremlins'")
+    else:
+        assert reply == answer
+    assert sim.causes() == {"finda-stuck": -1}  # nothing a bad line says changes the machine
