@@ -163,3 +163,30 @@ def test_the_host_retries_automatically_then_shows_the_error_screen(name: str) -
     logic.press(1, pair.now)
     done = pair.run(lambda new: any(isinstance(e, h.CommandFinished) for e in new))
     assert done[-1] == h.CommandFinished(str(request), 0)
+
+
+def test_a_press_on_the_mmu_answers_its_error_through_the_host() -> None:
+    """During T the printer is in charge: the MMU hands a press on its own buttons to the printer (`T1 B1`), and a
+    printer showing the MMU's error hands it back (MK3 mmu2.cpp CheckUserInput); when nothing is wrong it is
+    ignored."""
+    clock = [0.0]
+    sim = MMUSimulator(clock=lambda: clock[0])
+    logic = h.HostLogic(auto_retries=0)
+    pair = Lockstep(logic, sim)
+    pair.record = True
+    logic.start(0.0)
+    pair.run(lambda new: any(isinstance(e, h.LinkUp) for e in new))
+    logic.plan_command(ToolChange(1), pair.now)
+    pair.run(lambda new: any(isinstance(e, h.ProgressChanged) for e in new))
+    sim.hands("press", "middle")  # nothing is wrong: the press reaches the printer, which lets it be
+    events = pair.run(lambda new: any(isinstance(e, h.ButtonPushed) for e in new))
+    assert h.ButtonPushed("T1", 1) in events
+    sim.inject("fsensor-didnt-trigger")
+    events = pair.run(lambda new: any(isinstance(e, h.ErrorRaised) for e in new))
+    assert not any(isinstance(e, h.ButtonSent) for e in events)
+    sim.hands("remove", "fsensor-didnt-trigger")
+    sim.hands("press", "middle")
+    events = pair.run(lambda new: any(isinstance(e, h.CommandFinished) for e in new))
+    assert h.ButtonSent(1) in events
+    assert events[-1] == h.CommandFinished("T1", 0)
+    assert sim.progress_sequence("T1").count("E8003") == 1
