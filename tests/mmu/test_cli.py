@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 import signal
+import socket
 import subprocess
 import sys
+import time
 from datetime import datetime
 from pathlib import Path
 
@@ -71,7 +73,9 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     code, _, err = mmu(sim.url, "tool-change", "1")
     assert code == 7
     line = "04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the filament path, then Retry"
-    assert f"error: {line}\n" in err
+    answers = f"`fabwire mmu -d {sim.url} button retry`, or `fabwire mmu -d {sim.url} reset`"
+    assert err.endswith(f"error: {line}; answer it with {answers}\n")
+    assert err.count(line) == 4  # three automatic retries, then the error once, with what answers it
     assert err.count(f"{line} (retrying automatically)\n") == 3
     assert err.count("(retrying automatically)") == 3
     code, out, _ = mmu(sim.url, "status", json_mode=True)
@@ -82,8 +86,8 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     assert f"error         {line}\n" in out
     code, _, err = mmu(sim.url, "tool-change", "2")  # the MMU still waits in T1's error
     assert code == 7
-    assert "the MMU is still busy with T1" in err
-    assert "fabwire mmu button retry" in err
+    assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04101 FINDA DIDN'T TRIGGER "
+                           "(0x8001) during T1 — answer it with `fabwire mmu button retry`, or `fabwire mmu reset`")
     code, out, err = mmu(sim.url, "button", "retry")  # the fourth failure was the last: this Retry heals
     assert (code, out.strip()) == (0, "retry: T1 finished"), err
     code, out, err = mmu(sim.url, "button", "retry")
@@ -242,9 +246,22 @@ def test_a_register_value_that_is_no_plain_number_is_one_line_of_bad_input(value
     assert "register value must be a number" in done.stderr
 
 
-def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on(simulator: SimulatorStarter) -> None:
-    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "2")  # slow enough to be mid-change
-    proc = subprocess.Popen([sys.executable, "-m", "fabwire", "mmu", "-d", sim.url, "--speed", "2", "tool-change",
+def poll_until(url: str, reply: str, polls: int = 600) -> bool:
+    """Send Q0 over a plain socket (no sensor reports, no retries) until the MMU answers `reply`."""
+    host, port = url.removeprefix("tcp://").rsplit(":", 1)
+    with socket.create_connection((host, int(port)), timeout=10) as link, link.makefile("rwb") as line:
+        for _ in range(polls):
+            line.write(b"Q0*ea\n")
+            line.flush()
+            if line.readline().decode().startswith(reply + "*"):
+                return True
+            time.sleep(0.05)
+    return False
+
+
+def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on_and_where_it_will_stop(simulator: SimulatorStarter) -> None:
+    sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", "10")  # slow enough to be mid-change
+    proc = subprocess.Popen([sys.executable, "-m", "fabwire", "mmu", "-d", sim.url, "--speed", "10", "tool-change",
                              "3"], env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stderr is not None
     seen = ""
@@ -255,6 +272,60 @@ def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on(simulator: SimulatorStarte
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130
-    assert err.splitlines()[-1] == (f"fabwire: error: stopped following T3; the MMU goes on with it. Follow it "
-                                    f"with `fabwire mmu -d {sim.url} monitor`")
+    lines = err.splitlines()
+    assert "error:" not in err  # a stop the person asked for is no error
+    assert lines[-2].startswith("stopped following T3 (")
+    assert lines[-2].endswith(f"); the MMU goes on with it. Follow it with `fabwire mmu -d {sim.url} monitor`")
+    assert lines[-1] == (
+        "warning: nothing reports the printer's filament sensor to the MMU now; unless a host does (`fabwire mmu -d "
+        f"{sim.url} monitor` does), T3 will stop at 04103 FSENSOR DIDN'T TRIGG. (0x8003) (Feeding to FSensor): then "
+        f"push the filament into the extruder and answer with `fabwire mmu -d {sim.url} button retry`, or "
+        f"`fabwire mmu -d {sim.url} reset`")
     assert "Traceback" not in err
+    assert poll_until(sim.url, "T3 E8003")  # a bare status poll, as a printer that reports no sensor sends it
+    code, out, err = mmu(sim.url, "tool-change", "1")
+    assert (code, out) == (7, "")
+    assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04103 FSENSOR DIDN'T TRIGG. "
+                           "(0x8003) during T3 — answer it with `fabwire mmu button retry`, or `fabwire mmu reset`")
+    code, out, err = mmu(sim.url, "button", "retry")  # this host reports the sensor: the change completes
+    assert (code, out.strip()) == (0, "retry: T3 finished"), err
+
+
+def test_a_failed_change_says_its_error_once_with_what_answers_it() -> None:
+    url = "sim://mmu?speed=50&fault=fsensor-didnt-trigger"
+    done = run_cli("mmu", "-d", url, "--speed", SPEED, "tool-change", "2", timeout=60)
+    assert done.returncode == 7
+    final = ("04103 FSENSOR DIDN'T TRIGG. (0x8003) during T2 — printer filament sensor didn't trigger; check the "
+             "filament reached the extruder and the sensor works, then Retry")
+    assert done.stderr.count(final + "\n") == 0  # the automatic retries are marked, the end is said once
+    assert done.stderr.count(final + " (retrying automatically)") == 3
+    assert done.stderr.splitlines()[-1] == (f"fabwire: error: {final}; answer it with `fabwire mmu -d {url} button "
+                                            f"retry`, or `fabwire mmu -d {url} reset`")
+
+
+@pytest.mark.parametrize(("slot", "code", "said"), [
+    ("T1", 0, "T1 finished"), ("t2", 0, "T2 finished"),
+    ("T9", 4, "filament slot must be 0 to 4, not 9"), ("x1", 2, "a tool is a slot number 0 to 4, or T0 to T4"),
+    ("T", 2, "a tool is a slot number"), ("T١", 2, "a tool is a slot number"),
+])
+def test_tool_change_takes_the_tool_as_mmu_people_write_it(slot: str, code: int, said: str) -> None:
+    done = run_cli("mmu", "-d", f"sim://mmu?speed={SPEED}", "--speed", SPEED, "tool-change", slot, timeout=60)
+    assert done.returncode == code, done.stderr
+    assert said in (done.stdout if code == 0 else done.stderr)
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(("command", "seen", "sensor_on", "version", "stops"), [
+    ("T3", {5}, False, (3, 0, 4), [0x8003]),  # feeding: only the sensor report can end the bowden push
+    ("T3", set(), True, (3, 0, 4), [0x8004, 0x8003]),  # loaded: the unload waits for the sensor to go off first
+    ("T3", {3, 25, 5, 6, 28, 7}, True, (3, 0, 4), []),  # past the nozzle feed: nothing left to wait for
+    ("U0", set(), True, (3, 0, 4), [0x8004]),
+    ("U0", set(), True, (3, 0, 3), []),  # 3.0.3 unloads without waiting for the sensor
+    ("U0", set(), False, (3, 0, 4), []),
+    ("L1", set(), True, (3, 0, 4), []),
+])
+def test_which_sensor_step_a_command_will_stop_at(command: str, seen: set[int], sensor_on: bool,
+                                                  version: tuple[int, int, int], stops: list[int]) -> None:
+    from fabwire.mmu.cli import SENSOR_STEPS
+
+    assert [s.error for s in SENSOR_STEPS if s.ahead(command, seen, sensor_on, version)] == stops

@@ -49,7 +49,7 @@ async def test_sim_url_options() -> None:
     transport = await open_transport("sim://mmu?speed=100&version=3.0.3&fault=finda-didnt-trigger:always")
     async with asyncio.timeout(20):
         async with MMU(transport, time_scale=100, auto_retries=0) as mmu:
-            assert str(mmu.version) == "3.0.3+896"
+            assert str(await mmu.version()) == "3.0.3+896"
             with pytest.raises(MMUError, match=r"^04101 FINDA DIDN'T TRIGGER \(0x8001\) during T1"):
                 await mmu.tool_change(1, timeout=5)
     await transport.close()

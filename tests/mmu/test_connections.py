@@ -39,7 +39,7 @@ async def test_another_clients_stray_bytes_never_touch_this_clients_requests(noi
                     finished = await mmu.tool_change(slot, timeout=30)
                     assert finished.command == f"T{slot}"
                 assert mmu.logic.drop_outs == 0
-                assert mmu.status.kind != "E"
+                assert (await mmu.status()).kind != "E"
     finally:
         stop.set()
         sent = await pesterer

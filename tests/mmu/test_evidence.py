@@ -118,7 +118,7 @@ async def test_a_real_reset_reports_the_start_up_command() -> None:
     async with asyncio.timeout(LIMIT), loopback_tcp(sim.serve) as link, MMU(link, time_scale=SPEED) as mmu:
         await mmu.tool_change(1)
         assert (await mmu.reset()).triple == (3, 0, 4)
-        assert mmu.status.command == "X0"
+        assert (await mmu.status()).command == "X0"
 
 
 async def test_the_same_command_again_follows_the_one_the_mmu_is_running() -> None:
@@ -146,7 +146,7 @@ async def test_following_a_command_that_waits_in_an_error_ends_at_once_with_the_
         with pytest.raises(MMUError, match=r"\(0x8003\)"):
             await mmu.tool_change(1, timeout=LIMIT)
     async with loopback_tcp(sim.serve) as again, MMU(again, time_scale=SPEED, auto_retries=0) as mmu:
-        assert mmu.status.kind == "E"
+        assert (await mmu.status()).kind == "E"
         async with asyncio.timeout(5):  # not the caller's whole timeout: the error is already known
             with pytest.raises(MMUError, match=r"\(0x8003\)"):
                 await mmu.follow(timeout=LIMIT)
@@ -222,7 +222,7 @@ async def test_answering_an_error_whose_recovery_never_ends_gives_up_at_the_time
     sim = MMUSimulator(speed=SPEED, faults=["homing-failed"])
     async with loopback_tcp(sim.serve) as link, MMU(link, time_scale=SPEED, auto_retries=0) as mmu:
         async with asyncio.timeout(LIMIT):
-            while (mmu.status.command, mmu.status.kind) != ("X0", "E"):
+            while ((await mmu.status()).command, (await mmu.status()).kind) != ("X0", "E"):
                 await mmu.refresh()
         monkeypatch.setattr(scripts, "HOMING_SECONDS", 1e9)  # the selector now homes for ever
         async with asyncio.timeout(LIMIT):

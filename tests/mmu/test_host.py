@@ -106,7 +106,7 @@ def test_tool_change_reports_fsensor_and_polls_during_command() -> None:
 
 
 def test_injected_error_is_retried_automatically() -> None:
-    pair = _pair(faults=("finda-didnt-trigger",))
+    pair = _pair(faults=("finda-didnt-trigger:1",))
     events = _run(pair, ToolChange(2))
     errors = [e for e in events if isinstance(e, h.ErrorRaised)]
     assert [(e.code, e.auto_retry) for e in errors] == [(0x8001, True)]

@@ -70,6 +70,10 @@ def test_stop_leaves_the_error_and_fails() -> None:
         assert "04314 TMC DRIVER SHORTED (0x9080)" in term.seen.decode(errors="replace")
         assert b"Retry" not in term.seen.split(b"04314")[-1]  # a driver error offers no Retry
         term.send("stop")
+        shown = term.expect("stopped: T1 stays in 04314")
     finally:
         code = term.close()
     assert code == 7
+    after = shown.split("stopped: T1 stays in")[-1]
+    assert "error:" not in after  # a stop the person chose is not reported as an error
+    assert "answer it later with `fabwire mmu -d sim://mmu?speed=50&fault=tmc-short-selector reset`" in after

@@ -7,9 +7,10 @@ from fabwire.mmu.sim import MMUSimulator
 
 
 class Wire:
-    def __init__(self, version: str = "3.0.4", faults: tuple[str, ...] = (), booted: bool = True) -> None:
+    def __init__(self, version: str = "3.0.4", faults: tuple[str, ...] = (), booted: bool = True,
+                 arithmetic: str = "pc") -> None:
         self.t = 0.0
-        self.sim = MMUSimulator(version, faults=faults, clock=lambda: self.t)
+        self.sim = MMUSimulator(version, faults=faults, clock=lambda: self.t, arithmetic=arithmetic)
         if booted:
             self.t = 5.0
 

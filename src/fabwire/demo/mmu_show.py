@@ -29,8 +29,9 @@ async def showcase(ctx: DemoContext, url: str) -> None:
         with ctx.summary.step("mmu", "boot + handshake") as step:
             mmu = MMU(transport, time_scale=ctx.speed, auto_retries=0, connect_timeout=max(5.0, 30.0 / ctx.speed))
             await mmu.connect()
-            step.detail = f"firmware {mmu.version}"
-            ctx.say(f"link up: MMU firmware {mmu.version}; {status_line(mmu.status)}")
+            firmware = await mmu.version()
+            step.detail = f"firmware {firmware}"
+            ctx.say(f"link up: MMU firmware {firmware}; {status_line(await mmu.status())}")
         try:
             for slot in SLOTS:
                 await _tool_change(ctx, mmu, slot, limit)
@@ -75,4 +76,4 @@ async def _tool_change(ctx: DemoContext, mmu: MMU, slot: int, limit: float) -> N
             finally:
                 unsubscribe()
             step.detail = f"recovered from {exc.info} by Retry"
-        ctx.say(f"T{slot} finished: {status_line(mmu.status)}")
+        ctx.say(f"T{slot} finished: {status_line(await mmu.status())}")

@@ -5,8 +5,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import json
+import sys
 import time
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import update_wrapper
 from typing import Any, TypeVar
@@ -24,11 +27,11 @@ from fabwire.cli_support import (
     pass_device,
 )
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import FollowInterrupted, InputError, excerpt
+from fabwire.errors import EXIT_INTERRUPTED, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
-from fabwire.mmu.faults import FAULT_NAMES, parse_fault
+from fabwire.mmu.faults import FAULT_NAMES, HANDS, PHYSICAL_BUTTONS, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
     ButtonSent,
@@ -46,7 +49,9 @@ from fabwire.mmu.host import (
     Status,
     StatusUpdated,
 )
-from fabwire.simserve import serve, server_options
+from fabwire.mmu.units import DEFAULT_FLOAT, FLOAT_FORMATS
+from fabwire.simserve import parse_listen, serve, server_options
+from fabwire.transport.tcp import serve_tcp
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -121,6 +126,39 @@ def status_dict(status: Status) -> dict[str, Any]:
 
 
 
+@dataclass(frozen=True, slots=True)
+class SensorStep:
+    """A step of a command that waits for the printer's filament sensor: with no host reporting it (the person
+    stopped following the command) the MMU stops there with `error`."""
+
+    commands: str
+    error: int
+    past: int
+    """The progress code that shows the step is done."""
+    words: str
+    remedy: str
+    needs_sensor_on: bool
+    """The step waits for the sensor to go off, so only a sensor reported on can keep it waiting."""
+    since: tuple[int, int, int]
+    """First firmware version with the wait."""
+    source: str
+
+    def ahead(self, command: str, seen: set[int], sensor_on: bool, version: tuple[int, int, int]) -> bool:
+        return (command[:1] in self.commands and self.past not in seen and version >= self.since
+                and (sensor_on or not self.needs_sensor_on))
+
+
+SENSOR_STEPS = (
+    SensorStep("TUEK", 0x8004, codes.Progress.RETRACTING_FROM_FINDA, "Unloading to FINDA", "pull the filament out "
+               "of the extruder", True, (3, 0, 4), "MMU:src/logic/unload_to_finda.cpp UnloadToFinda::Step "
+               "(WaitingForFSensor: the sensor must go off within 4 s)"),
+    SensorStep("T", 0x8003, codes.Progress.FEEDING_TO_NOZZLE, "Feeding to FSensor", "push the filament into the "
+               "extruder", False, (3, 0, 0), "MMU:src/logic/feed_to_bondtech.cpp FeedToBondtech::Step "
+               "(PushingFilamentToFSensor: Failed once the pulley has pushed its whole move without the sensor)"),
+)
+"""In the order a command meets them."""
+
+
 def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
              **open_options: Any) -> Callable[[Callable[..., Any]], Any]:
     """Open the link and the host logic around an `async def cmd(dctx, mmu, **options)`.
@@ -136,14 +174,26 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                 check(kwargs)
 
             running: list[str] = []
+            seen: dict[str, set[int]] = {}
+            stops: list[int] = []
+
+            def watch(event: HostEvent) -> None:  # which of the sensor steps has the command got past?
+                if isinstance(event, ProgressChanged):
+                    seen.setdefault(event.command, set()).add(event.code)
 
             async def main() -> None:
                 async with dctx.open(MMU, **open_options) as mmu:
+                    mmu.subscribe(watch)
                     try:
                         await func(dctx, mmu, *args, **kwargs)
                     except asyncio.CancelledError:  # Ctrl-C: is the MMU in the middle of a command?
-                        if mmu.status.kind in ("P", "E") and mmu.status.command[:1] in "TLUEKCH":
-                            running.append(mmu.status.command)
+                        status = mmu.logic.status
+                        if status.kind in ("P", "E") and status.command[:1] in "TLUEKH":
+                            running.extend((status.command, status.words))
+                            version = mmu.logic.version
+                            stops.extend(s.error for s in SENSOR_STEPS if s.ahead(
+                                status.command, seen.get(status.command, set()), bool(mmu.logic.fsensor),
+                                version.triple if version else (3, 0, 4)))
                         raise
 
             try:
@@ -151,9 +201,18 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
             except KeyboardInterrupt:
                 if not running:
                     raise
+                command, doing = running
                 where = f" -d {dctx.device}" if dctx.device else ""
-                raise FollowInterrupted(f"stopped following {running[0]}; the MMU goes on with it. Follow it with "
-                                        f"`fabwire mmu{where} monitor`") from None
+                dctx.output.note(f"stopped following {command} ({doing}); the MMU goes on with it. Follow it with "
+                                 f"`fabwire mmu{where} monitor`")
+                if stops:
+                    info = describe_error(stops[0])
+                    step = next(s for s in SENSOR_STEPS if s.error == stops[0])
+                    dctx.output.note(f"warning: nothing reports the printer's filament sensor to the MMU now; unless a "
+                                     f"host does (`fabwire mmu{where} monitor` does), {command} will stop at {info} "
+                                     f"({step.words}): then {step.remedy} and answer with `fabwire mmu{where} "
+                                     f"button retry`, or `fabwire mmu{where} reset`")
+                raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
 
         return update_wrapper(wrapper, func)
 
@@ -184,6 +243,8 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
     shown: list[str] = []
 
     def show(event: HostEvent) -> None:
+        if isinstance(event, ErrorRaised) and not event.auto_retry:
+            return  # the error the command ends in: said once, with what answers it, by whoever handles it
         if isinstance(event, ProgressChanged | ErrorRaised | ButtonPushed | LinkLost):
             data, text = describe(event)
             seen.append(data)
@@ -194,6 +255,8 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
         finished = await run(on_event=show, timeout=max_time)
     except MMUError as error:
         if dctx.output.json_mode or not on_terminal():
+            where = f" -d {dctx.device}" if dctx.device else ""
+            error.args = (f"{error}; answer it with {error.info.answers(f'fabwire mmu{where}')}",)
             raise
         finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time, shown)
     factor = mmu_.logic.timing.too_fast
@@ -218,8 +281,11 @@ async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, s
             dctx.output.note(f"{error}")
         choice = await asyncio.to_thread(click.prompt, " / ".join(choices), type=click.Choice(
             [c.lower() for c in choices], case_sensitive=False), err=True)
-        if choice.lower() == "stop":
-            raise error
+        if choice.lower() == "stop":  # asked for: said as what it is, not as an error
+            where = f" -d {dctx.device}" if dctx.device else ""
+            dctx.output.note(f"stopped: {error.command or 'the MMU'} stays in {info}; answer it later with "
+                             f"{info.answers(f'fabwire mmu{where}')}")
+            raise click.exceptions.Exit(error.exit_code)
         try:
             finished = await mmu_.answer(choice, on_event=show, timeout=max_time)
         except MMUError as again:
@@ -235,12 +301,27 @@ def _command_options(func: F) -> F:
                         help="Give up if the command has not ended after this many seconds.")(func)
 
 
+class ToolArgument(click.ParamType[int]):
+    """A tool as MMU people type it: `1`, `T1` or `t1` (the printer's G-code and the wire both say T1)."""
+
+    name = "SLOT"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        if isinstance(value, int):
+            return value
+        text = str(value).strip()
+        digits = text[1:] if text[:1] in ("T", "t") else text
+        if not digits.isascii() or not digits.isdigit() or len(digits) > 3:
+            self.fail(f"a tool is a slot number 0 to 4, or T0 to T4, not {excerpt(text, 20)}", param, ctx)
+        return int(digits)
+
+
 @mmu.command("tool-change")
-@click.argument("slot", type=int)
+@click.argument("slot", type=ToolArgument())
 @_command_options
 @with_mmu(_slot_arg)
 async def tool_change(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float) -> None:
-    """Change to filament SLOT (0-4): unload what is loaded, feed SLOT to the nozzle."""
+    """Change to filament SLOT (0-4, or T0-T4): unload what is loaded, feed SLOT to the nozzle."""
     await _command(dctx, mmu_, lambda **kw: mmu_.tool_change(slot, **kw), max_time)
 
 
@@ -314,8 +395,7 @@ async def home(dctx: DeviceContext, mmu_: MMU, max_time: float) -> None:
 @with_mmu(auto_retries=0)
 async def version(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show the MMU firmware version and build."""
-    v = mmu_.version
-    assert v is not None
+    v = await mmu_.version()
     dctx.output.result({"major": v.major, "minor": v.minor, "revision": v.revision, "build": v.build,
                         "version": str(v)}, f"MMU firmware {v}")
 
@@ -330,7 +410,8 @@ def _error_register_words(value: int) -> str:
 @with_mmu(auto_retries=0)
 async def status(dctx: DeviceContext, mmu_: MMU) -> None:
     """Show FINDA, filament sensor, slot, selector/idler, drive errors and the current command."""
-    st = mmu_.status
+    st = await mmu_.status()
+    firmware = await mmu_.version()
     fsensor = await mmu_.read_register(0x09)
     filament = await mmu_.read_register(0x07)
     progress = await mmu_.read_register(0x05)
@@ -340,12 +421,12 @@ async def status(dctx: DeviceContext, mmu_: MMU) -> None:
             "filament_text": codes.FILAMENT_WORDS.get(filament, str(filament)), "slot": slot,
             "progress": progress, "progress_text": codes.progress_words(progress), "error_code": error,
             "error_text": _error_register_words(error),
-            "version": str(mmu_.version)}
+            "version": str(firmware)}
 
     def human() -> None:
         out = dctx.output.out
         rows = [
-            ("firmware", str(mmu_.version)),
+            ("firmware", str(firmware)),
             ("command", f"{st.command} {st.words}"),
             ("progress", codes.progress_words(progress)),
             ("FINDA", "on" if st.finda else "off"),
@@ -378,7 +459,7 @@ async def button(dctx: DeviceContext, mmu_: MMU, button: str, max_time: float) -
         number = codes.BUTTON_ALIASES[button]
         dctx.output.result({"button": button, "sent": number}, f"pressed {codes.BUTTON_WORDS[number]}")
         return
-    pending = mmu_.status
+    pending = await mmu_.status()
     finished = await mmu_.answer(button, timeout=max_time,
                                  on_event=lambda e: dctx.output.note(describe(e)[1])
                                  if isinstance(e, ProgressChanged | ErrorRaised) else None)
@@ -411,7 +492,7 @@ async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
 @with_mmu(auto_retries=0)
 async def registers(dctx: DeviceContext, mmu_: MMU) -> None:
     """List every register with its address, name, value, size, access and meaning."""
-    version = mmu_.version.triple if mmu_.version else (3, 0, 4)
+    version = (await mmu_.version()).triple
     rows = []
     for reg in codes.REGISTERS:
         value = await mmu_.read_register(reg.address)
@@ -446,9 +527,10 @@ async def write(dctx: DeviceContext, mmu_: MMU, register: str, value: str) -> No
     """Write VALUE to REGISTER (by name or address)."""
     reg = resolve_register(register, for_write=True)
     number = _parse_value(value)
-    await mmu_.write_register(reg.address, number)
-    dctx.output.result({"address": reg.address, "name": reg.name, "value": number},
-                       f"0x{reg.address:02x} {reg.name} := {number}")
+    reads = await mmu_.write_register(reg.address, number)
+    kept = "" if reads == number else f" (reads back {reads} through the firmware's units)"
+    dctx.output.result({"address": reg.address, "name": reg.name, "value": number, "reads": reads},
+                       f"0x{reg.address:02x} {reg.name} := {number}{kept}")
 
 
 def _parse_value(text: str) -> int:
@@ -493,24 +575,127 @@ async def monitor(dctx: DeviceContext, mmu_: MMU, count: int | None, duration: f
                     break
 
 
+@mmu.command("hands")
+@click.argument("control")
+@click.argument("action", type=click.Choice(list(HANDS)))
+@click.argument("argument", required=False, default="")
+@click.option("--timeout", type=FiniteRange(min=0.1), default=5.0, show_default=True,
+              help="Seconds to wait for the simulator's answer.")
+@pass_app
+def hands(app: Any, control: str, action: str, argument: str, timeout: float) -> None:
+    """Act on a simulated MMU as its owner would: remove a cause (remove finda-stuck; remove alone removes
+    every cause), press one of its buttons (press left|middle|right), power-cycle it, inject a cause, or list the
+    causes present. CONTROL is the address `fabwire sim mmu --control HOST:PORT` printed; the simulator may
+    serve its MMU on TCP or on a pty."""
+    if action == "press" and argument.lower() not in PHYSICAL_BUTTONS:
+        raise InputError(f"press which button? left, middle or right, not {excerpt(argument, 20)}")
+    if action in ("remove", "inject") and argument:
+        parse_fault(argument)
+    address = parse_listen(control.removeprefix("tcp://"), 0)
+    if address.port == 0:
+        raise InputError(f"control address {excerpt(control, 60)} needs a port: HOST:PORT as the simulator printed")
+    answer = asyncio.run(_hands(address.host, address.port, f"{action} {argument}".strip(), timeout))
+    if not answer.pop("ok", False):
+        raise InputError(str(answer.get("error", "the simulator refused")))
+    app.output.result(answer, _hands_words(action, answer))
+
+
+HANDS_REPLY_LIMIT = 64 * 1024
+"""Longest answer line `fabwire mmu hands` reads (the simulator's are short JSON objects)."""
+
+
+async def _hands(host: str, port: int, line: str, timeout: float) -> dict[str, Any]:
+    try:
+        async with asyncio.timeout(timeout):
+            reader, writer = await asyncio.open_connection(host, port, limit=HANDS_REPLY_LIMIT)
+            try:
+                writer.write(line.encode() + b"\n")
+                await writer.drain()
+                reply = await reader.readline()
+            finally:
+                writer.close()
+    except ValueError:  # no newline within the limit: not an MMU simulator's control plane
+        raise RemoteProtocolError(f"{host}:{port} is not an MMU simulator's control plane: it answered more "
+                                  f"than {HANDS_REPLY_LIMIT} bytes without a line end") from None
+    except TimeoutError:
+        raise LinkTimeout(f"the simulator's control plane at {host}:{port} did not answer within {timeout:g} s") \
+            from None
+    except OSError as exc:
+        raise LinkClosed(f"no simulator control plane at {host}:{port} ({exc.strerror or exc}): give the address "
+                         "`fabwire sim mmu --control` printed") from None
+    try:
+        answer = json.loads(reply)
+    except ValueError:
+        raise RemoteProtocolError(f"{host}:{port} is not an MMU simulator's control plane: it answered "
+                                  f"{excerpt(reply.decode('utf-8', 'replace'), 40)!r}") from None
+    if not isinstance(answer, dict):
+        raise RemoteProtocolError(f"{host}:{port} answered {excerpt(str(answer), 40)}, not an object")
+    return answer
+
+
+def _hands_words(action: str, answer: dict[str, Any]) -> str:
+    causes = answer.get("causes", {})
+    present = ", ".join(n if left < 0 else f"{n} ({left} more checks)" for n, left in causes.items()) or "none"
+    if action == "remove":
+        return f"removed {', '.join(answer['removed'])}; causes present: {present}"
+    if action == "press":
+        return f"pressed {answer['pressed']} on the MMU"
+    if action == "power-cycle":
+        return f"MMU power-cycled; causes present: {present}"
+    if action == "inject":
+        return f"{answer['injected']} is there now; causes present: {present}"
+    return f"causes present: {present}"
+
+
 @click.command("mmu")
 @server_options(None)
 @click.option("--speed", type=FiniteRange(min=0.01), default=1.0, show_default=True,
               help="Run the machine this many times faster than real time.")
-@click.option("--fault", "faults", multiple=True, metavar="NAME[:N|:always]",
-              help="Inject a fault (repeatable): " + ", ".join(sorted(n for n in FAULT_NAMES if
-                                                                       not n.startswith("tmc-"))) +
+@click.option("--fault", "faults", multiple=True, metavar="NAME[:N]",
+              help="A cause present from power-on (repeatable); NAME stays until removed (`fabwire mmu hands`), "
+                   "NAME:N fails N checks: " + ", ".join(sorted(n for n in FAULT_NAMES if
+                                                                 not n.startswith("tmc-"))) +
                    ", tmc-KIND[-AXIS].")
 @click.option("--version", "fw_version", type=click.Choice(sorted(codes.FIRMWARES)), default="3.0.4",
-              show_default=True, help="Firmware personality.")
+              show_default=True, help="Firmware version: the MK3 printer firmware accepts only 3.0.2, the Buddy "
+                                      "firmware (MK4, MK3.5, XL) only 3.0.3, current Core One firmware 3.0.4.")
+@click.option("--control", metavar="HOST:PORT",
+              help="Also serve the control plane (`fabwire mmu hands`) on this TCP address (port 0: any free).")
+@click.option("--arithmetic", type=click.Choice(list(FLOAT_FORMATS)), default=DEFAULT_FLOAT, show_default=True,
+              help="Floating point of the firmware's unit conversions: pc (the firmware built for a PC) or avr "
+                   "(the MMU board's 32-bit floats); they differ on some register values.")
+@click.option("--phantom-requests", is_flag=True,
+              help="A one-byte garbage line right after a request repeats that request, as the firmware's response "
+                   "decoder repeats a response (to test hosts; a real MMU does not).")
 @pass_app
 def sim_mmu(app: Any, listen: tuple[str, ...], use_pty: bool, link: Any, speed: float, faults: tuple[str, ...],
-            fw_version: str) -> None:
+            fw_version: str, control: str | None, arithmetic: str, phantom_requests: bool) -> None:
     """Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."""
     from fabwire.mmu.sim import MMUSimulator
 
     for fault in faults:
         parse_fault(fault)
-    simulator = MMUSimulator(fw_version, speed=speed, faults=faults)
-    asyncio.run(serve("mmu", simulator.serve, listen=listen, use_pty=use_pty, link=link, default_port=None,
-                      json_mode=app.json))
+    hands_at = parse_listen(control, 0) if control is not None else None
+    simulator = MMUSimulator(fw_version, speed=speed, faults=faults, arithmetic=arithmetic,
+                             phantom_requests=phantom_requests)
+
+    async def main() -> None:
+        server = None
+        if hands_at is not None:
+            server = await serve_tcp(simulator.serve_hands, hands_at.host, hands_at.port, what="MMU control plane")
+            host, port = server.sockets[0].getsockname()[:2]
+            shown = f"[{host}]" if ":" in host else host
+            where = f"tcp://{shown}:{port}"
+            if app.json:
+                sys.stdout.write(json.dumps({"simulator": "mmu", "control": where}) + "\n")
+            else:
+                sys.stdout.write(f"mmu simulator control on {where}\n")
+            sys.stdout.flush()
+        try:
+            await serve("mmu", simulator.serve, listen=listen, use_pty=use_pty, link=link, default_port=None,
+                        json_mode=app.json)
+        finally:
+            if server is not None:
+                server.close()
+
+    asyncio.run(main())

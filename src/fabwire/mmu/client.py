@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
-from fabwire.mmu import codes
+from fabwire.mmu import codes, units
 from fabwire.mmu.errors import MMUError, describe_error
 from fabwire.mmu.evidence import end_state
 from fabwire.mmu.host import (
@@ -220,7 +220,7 @@ class MMU:
         try:
             while True:
                 data = await self.transport.read(4096)
-                if self.version is None and (busy := refusal(data, self.transport.peer or "the MMU")) is not None:
+                if self.logic.version is None and (busy := refusal(data, self.transport.peer or "the MMU")) is not None:
                     self._fail(busy)
                     return
                 self.logic.receive(data, self._clock())
@@ -295,13 +295,17 @@ class MMU:
 
     # ------------------------------------------------------------------------------------------ operations
 
-    @property
-    def status(self) -> Status:
+    async def status(self) -> Status:
+        """The MMU's state as its last status poll (Q0 and the register reads, each heartbeat) left it; `refresh`
+        waits for the next poll instead."""
         return self.logic.status
 
-    @property
-    def version(self) -> codes.FirmwareVersion | None:
-        return self.logic.version
+    async def version(self) -> codes.FirmwareVersion:
+        """The firmware version the handshake read (S0-S3)."""
+        version = self.logic.version
+        if version is None:
+            raise LinkClosed("the MMU link is not up: no firmware version was read")
+        return version
 
     def subscribe(self, callback: EventCallback) -> Callable[[], None]:
         """Call `callback` for every host event; returns the unsubscribe function."""
@@ -316,9 +320,7 @@ class MMU:
         if self.logic.busy and self.logic.command == request:  # running already (an earlier link, another client)
             return await self.follow(on_event=on_event, timeout=timeout, confirm_eject=confirm_eject)
         if self.logic.busy:
-            raise DeviceError("busy", f"the MMU is still busy with {self.logic.command}",
-                              action="let it finish, or answer its error (fabwire mmu button retry|continue|stop), "
-                                     "or reset it")
+            raise self.busy_error()
         outcome = self._command_outcome(str(request), confirm_eject)
         try:
             finished: CommandFinished = await self._operate(lambda now: self.logic.plan_command(request, now),
@@ -327,6 +329,18 @@ class MMU:
             self.logic.abandon()  # the caller gave up on it: a later command must not be refused as "already running"
             raise
         return await self._confirmed(request, finished, timeout)
+
+    def busy_error(self) -> DeviceError:
+        """Why a new command cannot start: the one the MMU runs, or the error it stopped in and what answers it
+        (reference §5.1: every command is refused until the running one ends or its error is answered)."""
+        status = self.logic.status
+        command = status.command if status.command[:1] in "TLUEKHM" else str(self.logic.command)
+        if status.kind == "E":
+            info = describe_error(status.value)
+            return DeviceError("stopped", f"the MMU stopped in {info} during {command}",
+                               action=f"answer it with {info.answers()}")
+        return DeviceError("busy", f"the MMU is still busy with {command} ({status.words})",
+                           action="let it finish (`fabwire mmu monitor`), or `fabwire mmu reset`")
 
     async def _confirmed(self, request: Request | None, finished: CommandFinished,
                          timeout: float | None) -> CommandFinished:
@@ -391,11 +405,11 @@ class MMU:
                      confirm_eject: bool = False) -> CommandFinished:
         """Follow the command the MMU is running (as adopted from its Q0 answer) to its end."""
         if not self.logic.busy:
-            status = self.status
+            status = self.logic.status
             raise DeviceError("idle", f"the MMU runs no command (it reports {status.command} {status.words})")
         request = self.logic.command
         start: Callable[[float], None] = lambda now: None  # noqa: E731
-        status = self.status
+        status = self.logic.status
         if status.kind == "E" and status.command == str(request) and not self.logic.retrying:
             # reported before we listened, and reported only once: waiting for it again would wait out `timeout`
             if not (confirm_eject and status.value == 0x800C):
@@ -411,9 +425,9 @@ class MMU:
         """Answer the MMU's pending error as the printer's dialog does (Retry, Continue, Stop…), then follow the
         command to its end. None when the choice ends nothing (Stop). Raises DeviceError when no error is
         pending or the dialog does not offer `choice`."""
-        word = self.status.value if self.status.kind == "E" else None
+        word = self.logic.status.value if self.logic.status.kind == "E" else None
         if word is None:
-            status = self.status
+            status = self.logic.status
             raise InputError(f"no error is pending: the MMU reports {status.command} {status.words}")
         info = describe_error(word)
         button = info.button_for(choice)
@@ -424,7 +438,7 @@ class MMU:
             offered = ", ".join(c.label for c in info.choices)
             then = "reset the MMU (fabwire mmu reset)" if button == "reset" else f"answer with one of: {offered}"
             raise InputError(f"{info} offers {offered}, not {choice}: {then}")
-        command = self.status.command
+        command = self.logic.status.command
         await self.press(button, timeout=timeout)
         await self.refresh(timeout=timeout)  # this poll may have been under way before the press: take the next
         status = await self.refresh(timeout=timeout)  # a running command is adopted from this poll
@@ -494,8 +508,10 @@ class MMU:
                                          timeout)
         return value
 
-    async def write_register(self, register: int | str, value: int, timeout: float | None = 10.0) -> None:
-        version = self.version.triple if self.version else (3, 0, 4)
+    async def write_register(self, register: int | str, value: int, timeout: float | None = 10.0) -> int:
+        """Write `value` and return what the register then reads: the firmware's conversion of it (300 mm/s² of
+        pulley acceleration reads 299). DeviceError when the MMU refuses or does not carry out the write."""
+        version = self.logic.version.triple if self.logic.version else (3, 0, 4)
         found = resolve_register(register, for_write=True, version=version)
         limit = (1 << found.bits) - 1
         if not isinstance(value, int) or not 0 <= value <= 0xFFFF:
@@ -513,21 +529,25 @@ class MMU:
 
         await self._operate(lambda now: self.logic.write_register(found.address, value, now), outcome, None,
                             timeout)
-        await self._check_written(found, value, timeout)
+        return await self._check_written(found, value, timeout)
 
-    async def _check_written(self, register: codes.Register, value: int, timeout: float | None) -> None:
+    async def _check_written(self, register: codes.Register, value: int, timeout: float | None) -> int:
         """The MMU answers `A` even to a write it does not carry out (a selector move refused while FINDA is
-        pressed, reference §register 0x1b): the register is read back, and a value that never shows is a
-        DeviceError. Writes that move an axis get the time the move (and a homing before it) takes."""
+        pressed, reference §register 0x1b): the register is read back and compared with what the firmware makes
+        of `value` (`fabwire.mmu.units`: 300 mm/s² of pulley acceleration reads 299); a value that never shows is
+        a DeviceError. Writes that move an axis get the time the move (and a homing before it) takes."""
+        expected = units.readbacks(register, value)
         settle = (MOVE_SETTLE if register.address in MOVING_REGISTERS else 0.0) / self.logic.timing.time_scale
         end = self._clock() + settle
         while True:
             now = await self.read_register(register.address, timeout)
-            if now == value:
-                return
+            if now in expected:
+                return now
             if self._clock() >= end:
+                wanted = " or ".join(str(v) for v in sorted(expected))
                 raise DeviceError("not applied", f"the MMU accepted {value} for register 0x{register.address:02x} "
-                                  f"({register.name}) but it reads {now}", action="nothing was changed")
+                                  f"({register.name}) but it reads {now}, not {wanted}",
+                                  action="nothing was changed")
             await asyncio.sleep(min(0.05, settle / 20))
 
     async def refresh(self, timeout: float | None = 10.0) -> Status:
@@ -548,9 +568,9 @@ class MMU:
 
         version: codes.FirmwareVersion = await self._operate(lambda now: self.logic.reset(now, erase=erase),
                                                              outcome, None, timeout)
-        if self.status.command != "X0":  # a rebooted MMU reports its start-up command first (reference §5.2)
-            raise DeviceError("not reset", f"the MMU answers again but still reports {self.status.command} "
-                              f"{self.status.words}, not the start-up command X0: it did not reboot",
+        if self.logic.status.command != "X0":  # a rebooted MMU reports its start-up command first (reference §5.2)
+            raise DeviceError("not reset", f"the MMU answers again but still reports {self.logic.status.command} "
+                              f"{self.logic.status.words}, not the start-up command X0: it did not reboot",
                               action="power-cycle the MMU")
         return version
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import enum
 import re
 from dataclasses import dataclass
+from typing import Literal
 
 from fabwire.mmu.errors import ErrorInfo, describe_error, format_error  # noqa: F401  (error words: own module)
 
@@ -157,6 +158,13 @@ class Access(enum.Enum):
     RW_304 = "read-only before 3.0.4, read/write from 3.0.4"
 
 
+Store = Literal["none", "u8", "u16", "accel", "eeprom-u8", "bowden", "filament", "fsensor", "selector", "idler"]
+"""How a write is kept (`fabwire.mmu.units`): "none" read-only; "u8"/"u16" the variable's width; "accel" motor
+steps; "eeprom-u8" an EEPROM byte whose erased value reads as the default; "bowden" an EEPROM word read back only
+inside 341..1000 mm; "filament" the load state (any byte, recorded in EEPROM from InSelector on); "fsensor" on/off;
+"selector"/"idler" a planned move to a slot."""
+
+
 @dataclass(frozen=True, slots=True)
 class Register:
     address: int
@@ -164,7 +172,14 @@ class Register:
     bits: int
     access: Access
     default: int | None
+    """The firmware's default (`config.h`) as written to the register; None where the machine's state decides."""
     meaning: str
+    store: Store
+    boot: int | None
+    """What a read answers on 3.0.4 after power-on with an erased EEPROM, once the boot homing is done (None: the
+    build, which depends on the version)."""
+    source: str
+    """The firmware's read and write functions for it (`MMU` = prusa3d/Prusa-Firmware-MMU)."""
 
     def writable(self, version: tuple[int, int, int]) -> bool:
         if self.access is Access.RW:
@@ -172,43 +187,86 @@ class Register:
         return self.access is Access.RW_304 and version >= (3, 0, 4)
 
 
+_REG = "MMU:src/registers.cpp registers[]"
 REGISTERS: tuple[Register, ...] = (
-    Register(0x00, "project_major", 8, Access.RO, 3, "firmware major version"),
-    Register(0x01, "project_minor", 8, Access.RO, 0, "firmware minor version"),
-    Register(0x02, "project_revision", 8, Access.RO, None, "firmware revision"),
-    Register(0x03, "project_build", 16, Access.RO, None, "firmware build number"),
-    Register(0x04, "drive_errors", 16, Access.RO, 0, "drive errors counted since the EEPROM was reset"),
-    Register(0x05, "progress", 8, Access.RO, None, "current progress code"),
-    Register(0x06, "error", 16, Access.RO, None, "current error code"),
-    Register(0x07, "filament_state", 8, Access.RW, 1, "where the filament is (0,1,2,4,8)"),
-    Register(0x08, "finda", 8, Access.RO, 0, "FINDA sees filament (1) or not (0)"),
-    Register(0x09, "fsensor", 8, Access.RW, 0, "printer filament sensor as reported by the printer"),
-    Register(0x0A, "motor_mode", 8, Access.RO, 0, "0 normal, 1 stealth"),
-    Register(0x0B, "extra_load_distance", 8, Access.RW, 30, "mm pushed from the filament sensor to the nozzle"),
-    Register(0x0C, "fsensor_unload_check_distance", 8, Access.RW, 40, "mm pulled before the sensor must be clear"),
-    Register(0x0D, "pulley_unload_feedrate", 16, Access.RW, 95, "mm/s"),
-    Register(0x0E, "pulley_acceleration", 16, Access.RW_304, 800, "mm/s²"),
-    Register(0x0F, "selector_acceleration", 16, Access.RW_304, 200, "mm/s²"),
-    Register(0x10, "idler_acceleration", 16, Access.RW_304, 500, "deg/s²"),
-    Register(0x11, "pulley_load_feedrate", 16, Access.RW, 95, "mm/s"),
-    Register(0x12, "selector_nominal_feedrate", 16, Access.RW, 45, "mm/s"),
-    Register(0x13, "idler_nominal_feedrate", 16, Access.RW, 300, "deg/s"),
-    Register(0x14, "pulley_slow_feedrate", 16, Access.RW, 20, "mm/s"),
-    Register(0x15, "selector_homing_feedrate", 16, Access.RW, 30, "mm/s"),
-    Register(0x16, "idler_homing_feedrate", 16, Access.RW, 265, "deg/s"),
-    Register(0x17, "pulley_sg_thrs", 8, Access.RW, 8, "pulley StallGuard threshold"),
-    Register(0x18, "selector_sg_thrs", 8, Access.RW, 3, "selector StallGuard threshold"),
-    Register(0x19, "idler_sg_thrs", 8, Access.RW, 7, "idler StallGuard threshold"),
-    Register(0x1A, "pulley_position", 16, Access.RO, 0, "pulley position, mm"),
-    Register(0x1B, "selector_slot", 8, Access.RW, None, "selector slot (5 = park, 255 = unknown)"),
-    Register(0x1C, "idler_slot", 8, Access.RW, None, "idler slot (5 = disengaged, 255 = unknown)"),
-    Register(0x1D, "selector_cut_irun", 8, Access.RW, 40, "selector current while cutting"),
-    Register(0x1E, "pulley_irun", 8, Access.RW, 13, "pulley run current"),
-    Register(0x1F, "selector_irun", 8, Access.RW, 31, "selector run current"),
-    Register(0x20, "idler_irun", 8, Access.RW, 31, "idler run current"),
-    Register(0x21, "vcc", 16, Access.RO, 225, "supply voltage (placeholder value)"),
-    Register(0x22, "bowden_length", 16, Access.RW, 360, "bowden tube length, mm (341-1000)"),
-    Register(0x23, "cut_length", 8, Access.RW, 8, "mm of filament cut"),
+    Register(0x00, "project_major", 8, Access.RO, 3, "firmware major version", "none", 3,
+             f"{_REG} 0x00 (project_major)"),
+    Register(0x01, "project_minor", 8, Access.RO, 0, "firmware minor version", "none", 0,
+             f"{_REG} 0x01 (project_minor)"),
+    Register(0x02, "project_revision", 8, Access.RO, None, "firmware revision", "none", 4,
+             f"{_REG} 0x02 (project_revision)"),
+    Register(0x03, "project_build", 16, Access.RO, None, "firmware build number", "none", None,
+             f"{_REG} 0x03 (project_build_number)"),
+    Register(0x04, "drive_errors", 16, Access.RO, 0, "drive errors counted since the EEPROM was reset", "none", 0,
+             f"{_REG} 0x04 (globals.DriveErrors; no writer); permanent_storage.cpp DriveError::get"),
+    Register(0x05, "progress", 8, Access.RO, None, "current progress code", "none", 0,
+             f"{_REG} 0x05 (application.CurrentProgressCode)"),
+    Register(0x06, "error", 16, Access.RO, None, "current error code", "none", 1,
+             f"{_REG} 0x06 (application.CurrentErrorCode)"),
+    Register(0x07, "filament_state", 8, Access.RW, 1, "where the filament is (0,1,2,4,8)", "filament", 1,
+             f"{_REG} 0x07 (globals.FilamentLoaded / SetFilamentLoaded); globals.cpp SetFilamentLoaded"),
+    Register(0x08, "finda", 8, Access.RO, 0, "FINDA sees filament (1) or not (0)", "none", 0,
+             f"{_REG} 0x08 (finda.Pressed)"),
+    Register(0x09, "fsensor", 8, Access.RW, 0, "printer filament sensor as reported by the printer", "fsensor", 0,
+             f"{_REG} 0x09 (fsensor.Pressed / fsensor.ProcessMessage(v != 0))"),
+    Register(0x0A, "motor_mode", 8, Access.RO, 0, "0 normal, 1 stealth", "none", 0,
+             f"{_REG} 0x0a (globals.MotorsStealth)"),
+    Register(0x0B, "extra_load_distance", 8, Access.RW, 30, "mm pushed from the filament sensor to the nozzle",
+             "u8", 30, f"{_REG} 0x0b; globals.h SetFSensorToNozzle_mm(uint8_t)"),
+    Register(0x0C, "fsensor_unload_check_distance", 8, Access.RW, 40, "mm pulled before the sensor must be clear",
+             "u8", 40, f"{_REG} 0x0c; globals.h SetFSensorUnloadCheck_mm(uint8_t)"),
+    Register(0x0D, "pulley_unload_feedrate", 16, Access.RW, 95, "mm/s", "u16", 95,
+             f"{_REG} 0x0d; globals.h SetPulleyUnloadFeedrate_mm_s(uint16_t)"),
+    Register(0x0E, "pulley_acceleration", 16, Access.RW_304, 800, "mm/s² (kept in steps/s², read back truncated)",
+             "accel", 799, f"{_REG} 0x0e (motion.Acceleration / SetAcceleration(unitToSteps)); axisunit.h "
+             "axisUnitToTruncatedUnit"),
+    Register(0x0F, "selector_acceleration", 16, Access.RW_304, 200, "mm/s² (kept in steps/s², read back "
+             "truncated)", "accel", 200, f"{_REG} 0x0f (motion.Acceleration / SetAcceleration(unitToSteps)); "
+             "axisunit.h axisUnitToTruncatedUnit"),
+    Register(0x10, "idler_acceleration", 16, Access.RW_304, 500, "deg/s² (kept in steps/s², read back truncated)",
+             "accel", 499, f"{_REG} 0x10 (motion.Acceleration / SetAcceleration(unitToSteps)); axisunit.h "
+             "axisUnitToTruncatedUnit"),
+    Register(0x11, "pulley_load_feedrate", 16, Access.RW, 95, "mm/s", "u16", 95,
+             f"{_REG} 0x11; globals.h SetPulleyLoadFeedrate_mm_s(uint16_t)"),
+    Register(0x12, "selector_nominal_feedrate", 16, Access.RW, 45, "mm/s", "u16", 45,
+             f"{_REG} 0x12; globals.h SetSelectorFeedrate_mm_s(uint16_t)"),
+    Register(0x13, "idler_nominal_feedrate", 16, Access.RW, 300, "deg/s", "u16", 300,
+             f"{_REG} 0x13; globals.h SetIdlerFeedrate_deg_s(uint16_t)"),
+    Register(0x14, "pulley_slow_feedrate", 16, Access.RW, 20, "mm/s", "u16", 20,
+             f"{_REG} 0x14; globals.h SetPulleySlowFeedrate_mm_s(uint16_t)"),
+    Register(0x15, "selector_homing_feedrate", 16, Access.RW, 30, "mm/s", "u16", 30,
+             f"{_REG} 0x15; globals.h SetSelectorHomingFeedrate_mm_s(uint16_t)"),
+    Register(0x16, "idler_homing_feedrate", 16, Access.RW, 265, "deg/s", "u16", 265,
+             f"{_REG} 0x16; globals.h SetIdlerHomingFeedrate_deg_s(uint16_t)"),
+    Register(0x17, "pulley_sg_thrs", 8, Access.RW, 8, "pulley StallGuard threshold (EEPROM)", "eeprom-u8", 8,
+             f"{_REG} 0x17; globals.cpp StallGuardThreshold / SetStallGuardThreshold; eeprom.cpp ReadByte(addr, "
+             "default)"),
+    Register(0x18, "selector_sg_thrs", 8, Access.RW, 3, "selector StallGuard threshold (EEPROM)", "eeprom-u8", 3,
+             f"{_REG} 0x18; globals.cpp StallGuardThreshold / SetStallGuardThreshold; eeprom.cpp ReadByte(addr, "
+             "default)"),
+    Register(0x19, "idler_sg_thrs", 8, Access.RW, 7, "idler StallGuard threshold (EEPROM)", "eeprom-u8", 7,
+             f"{_REG} 0x19; globals.cpp StallGuardThreshold / SetStallGuardThreshold; eeprom.cpp ReadByte(addr, "
+             "default)"),
+    Register(0x1A, "pulley_position", 16, Access.RO, 0, "pulley position, mm", "none", 0,
+             f"{_REG} 0x1a (pulley.CurrentPosition_mm, int32 → uint16)"),
+    Register(0x1B, "selector_slot", 8, Access.RW, None, "selector slot (5 = park, 255 = unknown)", "selector", 5,
+             f"{_REG} 0x1b (selector.Slot / selector.MoveToSlot(uint8_t)); selector.cpp MoveToSlot"),
+    Register(0x1C, "idler_slot", 8, Access.RW, None, "idler slot (5 = disengaged, 255 = unknown)", "idler", 5,
+             f"{_REG} 0x1c (idler.Slot / d >= toolCount ? Disengage : Engage(d))"),
+    Register(0x1D, "selector_cut_irun", 8, Access.RW, 40, "selector current while cutting", "u8", 40,
+             f"{_REG} 0x1d; globals.h SetCutIRunCurrent(uint8_t)"),
+    Register(0x1E, "pulley_irun", 8, Access.RW, 13, "pulley run current", "u8", 13,
+             f"{_REG} 0x1e; motion.h SetIRunForAxis(axis, uint8_t)"),
+    Register(0x1F, "selector_irun", 8, Access.RW, 31, "selector run current", "u8", 31,
+             f"{_REG} 0x1f; motion.h SetIRunForAxis(axis, uint8_t)"),
+    Register(0x20, "idler_irun", 8, Access.RW, 31, "idler run current", "u8", 31,
+             f"{_REG} 0x20; motion.h SetIRunForAxis(axis, uint8_t)"),
+    Register(0x21, "vcc", 16, Access.RO, 225, "supply voltage (placeholder value)", "none", 225,
+             f"{_REG} 0x21 (constant 225)"),
+    Register(0x22, "bowden_length", 16, Access.RW, 360, "bowden tube length, mm (341-1000)", "bowden", 360,
+             f"{_REG} 0x22; permanent_storage.cpp BowdenLength::Get / Set"),
+    Register(0x23, "cut_length", 8, Access.RW, 8, "mm of filament cut", "u8", 8,
+             f"{_REG} 0x23; globals.h SetCutLength(uint8_t)"),
 )
 REGISTER_COUNT = len(REGISTERS)
 REGISTERS_BY_NAME = {r.name: r for r in REGISTERS}
@@ -259,3 +317,7 @@ FIRMWARES = {
     "3.0.3": FirmwareVersion(3, 0, 3, 896),
     "3.0.4": FirmwareVersion(3, 0, 4, 936),
 }
+"""The versions a simulated MMU can report (S0-S3; builds = the firmware repository's commit count). A printer
+accepts exactly one: the MK3/MK3S firmware (Prusa-Firmware `mmu2_supported_version.h`) insists on 3.0.2, the
+Buddy firmware (MK4, MK3.5, XL: Prusa-Firmware-Buddy `mmu2_supported_version.h`) on 3.0.3, recent Core One
+firmware on 3.0.4 — pair `fabwire sim mmu --version` with the printer. 3.0.4 stays the default."""

@@ -193,6 +193,15 @@ class ErrorInfo:
     def __str__(self) -> str:
         return units.mmu_error(self.printer_code, self.title, self.code)
 
+    def answers(self, command: str = "fabwire mmu") -> str:
+        """The commands that answer this error as the printer's dialog would: "`fabwire mmu button retry`, or
+        `fabwire mmu reset`" (a reset always works; errors whose dialog offers no MMU button get only that)."""
+        words = {"retry": "retry", "continue": "continue"}
+        by_button = {0: "right", 1: "middle", 2: "left"}
+        buttons = [words.get(c.label.lower(), by_button[c.button]) for c in self.choices if isinstance(c.button, int)]
+        return ", ".join(f"`{command} button {b}`" for b in dict.fromkeys(buttons)) + \
+            (", or " if buttons else "") + f"`{command} reset`"
+
     def explained(self, *, command: str = "", detail: str = "") -> str:
         """The one line that tells a person about it, printer code first:
         `04101 FINDA DIDN'T TRIGGER (0x8001) during T1: <detail> — FINDA didn't trigger; check the filament path,

@@ -497,6 +497,10 @@ class HostLogic:
             self._error(response.number)
         elif isinstance(response, ButtonPressed):
             self._events.append(ButtonPushed(response.command, response.number))
+            if self._last_report is not None and self._last_report[0] == "E":
+                # a press on the MMU while it shows its own error is the person's answer: the printer hands it back
+                # (MK3 mmu2.cpp CheckUserInput, reference §5.3); at other times the printer ignores it
+                self._planned.append(ButtonPress(response.number))
 
     def _progress(self, code: int) -> None:
         command = self.status.command

@@ -7,14 +7,13 @@ scripts themselves live in `fabwire.mmu.scripts`; request dispatch in `fabwire.m
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections import deque
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any
 
-from fabwire.mmu import codes
+from fabwire.mmu import codes, units
 from fabwire.mmu.codes import FilamentState, FirmwareVersion
 from fabwire.mmu.codes import Progress as P  # noqa: N817
 from fabwire.mmu.errors import ERROR_OK, RUNNING
@@ -57,15 +56,18 @@ class Eeprom:
 
     slot: int | None = None
     drive_errors: int = 0
-    bowden: int = 360
-    sg: dict[int, int] = field(default_factory=lambda: {0x17: 8, 0x18: 3, 0x19: 7})
+    cells: dict[int, int] = field(default_factory=lambda: {0x17: 0xFF, 0x18: 0xFF, 0x19: 0xFF, 0x22: 0xFFFF})
+    """Register-backed cells as the firmware keeps them: erased (0xff / 0xffff) until written; a read of an erased
+    cell answers the default (`fabwire.mmu.units.report`)."""
 
 
 class Machine:
     """State and engine shared by the scripts and the request dispatcher."""
 
-    def __init__(self, firmware: FirmwareVersion, faults: FaultSet, now: float) -> None:
+    def __init__(self, firmware: FirmwareVersion, faults: FaultSet, now: float,
+                 float_format: units.FloatFormat = units.FLOAT_FORMATS[units.DEFAULT_FLOAT]) -> None:
         self.firmware = firmware
+        self.float_format = float_format
         self.faults = faults
         self.eeprom = Eeprom()
         self.history: deque[HistoryItem] = deque(maxlen=4000)
@@ -96,7 +98,8 @@ class Machine:
         self.tip = 0.0
         self.finda_raw = False
         self.finda_since = now
-        self.filament = FilamentState.AT_PULLEY
+        self.filament: int = FilamentState.AT_PULLEY
+        """The firmware's load state: one of FilamentState, or any byte written to register 0x07."""
         self.active_slot = 0
         self.panicked = False
         self._script: ScriptGen | None = None
@@ -222,7 +225,18 @@ class Machine:
     # ---------------------------------------------------------------------------------------- registers
 
     def _reg(self, address: int) -> int:
-        return self.regs[address]
+        """A setting as a read of its register answers it (the units the scripts compute with)."""
+        register = codes.REGISTERS[address]
+        if register.store == "accel" and not register.writable(self.firmware.triple):
+            return register.default or 0  # up to 3.0.3 the read returns the config constant
+        return units.report(register, self.regs[address], self.float_format)
+
+    def power_on_registers(self) -> None:
+        """The settings a reboot restores: the config defaults as the firmware keeps them, the EEPROM cells as
+        stored."""
+        self.regs = {r.address: units.store(r, r.default, self.float_format) for r in codes.REGISTERS
+                     if r.default is not None and r.store != "none"}
+        self.regs.update(self.eeprom.cells)
 
     def _pulley_now(self) -> float:
         if self.pulley_move is None:
@@ -231,48 +245,50 @@ class Machine:
         return self.pulley_mm + mm * (min(1.0, (self.now - start) / seconds) if seconds > 0 else 1.0)
 
     def read_register(self, address: int) -> int | None:
-        """`MMU:src/registers.cpp`; None (→ `R`) for an address past the map."""
+        """`MMU:src/registers.cpp` `ReadRegister`; None (→ `R`) for an address past the map."""
         if address >= codes.REGISTER_COUNT:
             return None
         fw = self.firmware
         live = {
             0x00: fw.major, 0x01: fw.minor, 0x02: fw.revision, 0x03: fw.build,
-            0x04: self.eeprom.drive_errors, 0x05: self.state, 0x06: self.error, 0x07: int(self.filament),
+            0x04: self.eeprom.drive_errors, 0x05: self.state, 0x06: self.error, 0x07: self.filament,
             0x08: int(self.finda), 0x09: int(self.fsensor), 0x0A: int(self.stealth),
             0x1A: int(self._pulley_now()) & 0xFFFF,  # int32 millimetres truncated to 16 bits: negatives wrap
             0x1B: self.selector,
             0x1C: self.idler,
+            0x21: 225,
         }
         if address in live:
             return live[address] & 0xFFFF
-        if address == 0x22:
-            value = self.regs[0x22]
-            return value if 341 <= value <= 1000 else 360
-        return self.regs[address]
+        return self._reg(address)
 
     def write_register(self, address: int, value: int) -> bool:
-        """False (→ `R`) for read-only or unknown registers; values are not range-checked, only truncated."""
+        """`MMU:src/registers.cpp` `WriteRegister`: False (→ `R`) for read-only or unknown registers; values are
+        not range-checked, only cut to the variable behind the register or converted to its units
+        (`fabwire.mmu.units`)."""
         if address >= codes.REGISTER_COUNT:
             return False
         register = codes.REGISTERS[address]
         if not register.writable(self.firmware.triple):
             return False
-        value &= (1 << register.bits) - 1
-        if address == 0x07:
-            with contextlib.suppress(ValueError):
-                self.filament = FilamentState(value)
+        kept = units.store(register, value, self.float_format)
+        if address == 0x07:  # globals.cpp SetFilamentLoaded(ActiveSlot(), v): any byte; EEPROM from InSelector on
+            self.filament = kept
+            if kept in (FilamentState.NOT_LOADED, FilamentState.AT_PULLEY):
+                self.eeprom.slot = None
+            elif kept in (FilamentState.IN_SELECTOR, FilamentState.IN_FSENSOR, FilamentState.IN_NOZZLE):
+                self.eeprom.slot = self.active_slot
         elif address == 0x09:
-            self.fsensor = value != 0
+            self.fsensor = bool(kept)
         elif address == 0x1B:
-            if value <= 5 and not (self.finda_raw and self.selector != value) and self._script is None:
-                self.selector = value
+            # selector.cpp MoveToSlot: refused while moving or while FINDA is pressed away from the slot; a slot
+            # past park (6+) would index past the firmware's position table, so the simulator leaves it alone
+            if kept <= 5 and not (self.finda_raw and self.selector != kept) and self._script is None:
+                self.selector = kept
         elif address == 0x1C:
-            self.idler = 5 if value >= 5 else value
-        elif address == 0x22:
-            self.eeprom.bowden = value
-            self.regs[address] = value
+            self.idler = kept
         else:
-            if address in self.eeprom.sg:
-                self.eeprom.sg[address] = value
-            self.regs[address] = value
+            self.regs[address] = kept
+            if address in self.eeprom.cells:
+                self.eeprom.cells[address] = kept
         return True

@@ -8,11 +8,11 @@ are in `fabwire.mmu.machine`, the command scripts in `fabwire.mmu.scripts`, what
 
 from __future__ import annotations
 
-from fabwire.mmu import codes
+from fabwire.mmu import codes, units
 from fabwire.mmu.codes import FilamentState, FirmwareVersion
 from fabwire.mmu.codes import Progress as P  # noqa: N817
 from fabwire.mmu.errors import ERROR_OK, RUNNING
-from fabwire.mmu.faults import Fault, FaultSet
+from fabwire.mmu.faults import Fault, FaultSet, parse_fault
 from fabwire.mmu.machine import FINDA_DEBOUNCE, HOMING_SECONDS, Eeprom
 from fabwire.mmu.protocol import (
     Accepted,
@@ -31,23 +31,44 @@ class MMUModel(Scripts):
     """The machine. `faults` are the causes present from power-on; more can be armed with `inject`."""
 
     def __init__(self, firmware: FirmwareVersion = codes.FIRMWARES["3.0.4"], *, faults: tuple[Fault, ...] = (),
-                 now: float = 0.0) -> None:
-        super().__init__(firmware, FaultSet(faults), now)
+                 now: float = 0.0, float_format: units.FloatFormat = units.FLOAT_FORMATS[units.DEFAULT_FLOAT]) -> None:
+        super().__init__(firmware, FaultSet(faults), now, float_format)
         self.requests_seen = 0
         self.power_on(now)
 
     # ------------------------------------------------------------------------------------- control plane
 
     def inject(self, fault: Fault | str) -> None:
+        """A new cause appears (a jam, a stalled axis…): the next checks of it fail until it is removed."""
         self.faults.arm(fault)
 
+    def remove_cause(self, name: str | None = None) -> list[str]:
+        """The owner's hands remove a cause (all when None): pull out the filament, free the jam. The error it
+        raised stays on the screen until Retry or a reset runs the check again, as on the machine. Returns the
+        causes that were present."""
+        if name is not None:
+            name = parse_fault(name).name
+        removed = self.faults.clear(name)
+        if "finda-on-boot" in removed and self.filament < FilamentState.IN_SELECTOR:
+            self._set_finda(False)  # the filament that sat under FINDA is out now
+        return removed
+
     def clear_faults(self, name: str | None = None) -> None:
-        """Remove a cause (all when None): errors it raised stay until Retry or reset, as on the machine."""
-        self.faults.clear(name)
+        """`remove_cause`, without the list."""
+        self.remove_cause(name)
+
+    def causes(self) -> dict[str, int]:
+        """The causes present: name → checks they will still fail (-1: until removed)."""
+        return self.faults.present()
 
     def press(self, button: int) -> None:
-        """A press on the MMU's own buttons."""
+        """A press on the MMU's own buttons (0 Right, 1 Middle, 2 Left)."""
         self._queue_event(button, printer=False)
+
+    def power_cycle(self, now: float) -> None:
+        """Switch the MMU off and on: like a reset, RAM is lost, the EEPROM and every cause stay."""
+        self.advance(now)
+        self.power_on(now)
 
     def set_finda(self, on: bool) -> None:
         """Force the FINDA (e.g. filament pushed in by hand)."""
@@ -64,9 +85,7 @@ class MMUModel(Scripts):
         if erase:
             self.eeprom = Eeprom()
         self.reset_state(now)
-        self.regs = {r.address: r.default for r in codes.REGISTERS if r.default is not None}
-        self.regs[0x22] = self.eeprom.bowden
-        self.regs.update(self.eeprom.sg)
+        self.power_on_registers()
         self.active_slot = self.eeprom.slot if self.eeprom.slot is not None else 0
         selftest = self.faults.selftest()
         if selftest:
@@ -77,7 +96,7 @@ class MMUModel(Scripts):
         if self.eeprom.slot is not None:
             # filament recorded: neither axis homes, positions stay unknown until a move completes
             self.filament = FilamentState.IN_NOZZLE
-            self.tip = FINDA_MM + self.regs[0x22] + self.regs[0x0B]
+            self.tip = FINDA_MM + self._reg(0x22) + self._reg(0x0B)
             self._set_finda(True, at=now - FINDA_DEBOUNCE)
             self.homed = {"selector": True, "idler": True}
             return

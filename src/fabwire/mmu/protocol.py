@@ -349,17 +349,30 @@ def _hex(digits: bytes, mask: int) -> int:
 
 
 class _Decoder:
-    """Shared plumbing: memo of well-formed lines, error snippets, the line-by-line driver."""
+    """Shared plumbing: memo of well-formed lines, error snippets, the line-by-line driver.
+
+    `phantoms` reproduces a quirk of the firmware's response decoder (Prusa-Firmware-MMU `protocol.cpp`
+    `DecodeResponse`, the `RequestCode` state's default branch, compiled into the MMU repository's and the printer
+    firmwares' codecs): a bad first byte moves to the error state without marking the message, so when the next byte
+    is already the newline (`a\\n` right after a valid frame) the decoder reports the previous message complete
+    once more — a phantom copy. Off by default: a host that acts on a phantom would count an acknowledgement or a
+    finished command twice. The firmware's request decoder marks the message unknown on the same path, so a real
+    MMU never repeats a request; the switch on the request side makes a simulated MMU that does, to test hosts
+    against it."""
 
     _START = 0
     _ERROR = 5
 
-    def __init__(self) -> None:
+    def __init__(self, *, phantoms: bool = False) -> None:
         self._state = self._START
         self._line = bytearray()
         self._memo: dict[bytes, Message] = {}
         self.errors = 0
         """How many error events this decoder has produced."""
+        self.phantoms = phantoms
+        self._last: Message | None = None
+        self._phantom = False
+        """The line failed on its first byte and nothing followed yet: its newline repeats `_last`."""
 
     @property
     def idle(self) -> bool:
@@ -371,10 +384,23 @@ class _Decoder:
         self._line.clear()
 
     def _fail(self, reason: str, events: list[object]) -> None:
+        self._phantom = self.phantoms and self._last is not None and len(self._line) == 1
         events.append(DecodeError(reason, bytes(self._line)))
         self.errors += 1
         self._state = self._ERROR
         self._line.clear()
+
+    def _completed(self, message: Message, events: list[object]) -> None:
+        self._last = message
+        events.append(message)
+
+    def _in_error(self, byte: int, events: list[object]) -> None:
+        """The error state: a newline ends the bad line (a phantom copy of the last message, see `phantoms`)."""
+        if byte in _NEWLINE:
+            self._state = self._START
+            if self._phantom and self._last is not None:
+                events.append(self._last)
+        self._phantom = False
 
     def _fast(self, line: bytes) -> Message | None:
         raise NotImplementedError
@@ -402,7 +428,7 @@ class _Decoder:
                                 memo.clear()
                             memo[line] = message
                     if message is not None:
-                        events.append(message)
+                        self._completed(message, events)
                         pos = nl + 1
                         continue
                     end = nl + 1
@@ -422,8 +448,8 @@ class RequestDecoder(_Decoder):
 
     _CODE, _VALUE, _ADDRESS, _WVALUE, _CRC = 0, 1, 2, 3, 4
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, *, phantoms: bool = False) -> None:
+        super().__init__(phantoms=phantoms)
         self._code = ""
         self._value = 0
         self._value2 = 0
@@ -451,8 +477,7 @@ class RequestDecoder(_Decoder):
     def _step(self, byte: int, events: list[object]) -> None:
         state = self._state
         if state == self._ERROR:
-            if byte in _NEWLINE:
-                self._state = self._CODE
+            self._in_error(byte, events)
             return
         if len(self._line) < _ERROR_SNIPPET:
             self._line.append(byte)
@@ -491,7 +516,7 @@ class RequestDecoder(_Decoder):
             elif byte in _NEWLINE:
                 if self._crc == request_crc(self._code, self._value, self._value2):
                     cls = REQUEST_TYPES[self._code]
-                    events.append(Write(self._value, self._value2) if cls is Write else cls(self._value))
+                    self._completed(Write(self._value, self._value2) if cls is Write else cls(self._value), events)
                     self._state = self._CODE
                     self._line.clear()
                 else:
@@ -505,8 +530,8 @@ class ResponseDecoder(_Decoder):
 
     _RCODE, _RVALUE, _PCODE, _PVALUE, _CRC = 0, 1, 2, 3, 4
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, *, phantoms: bool = False) -> None:
+        super().__init__(phantoms=phantoms)
         self._code = ""
         self._value = 0
         self._param = ""
@@ -533,8 +558,7 @@ class ResponseDecoder(_Decoder):
     def _step(self, byte: int, events: list[object]) -> None:
         state = self._state
         if state == self._ERROR:
-            if byte in _NEWLINE:
-                self._state = self._RCODE
+            self._in_error(byte, events)
             return
         nibble = _HEX[byte]
         if state == self._RCODE:
@@ -578,8 +602,8 @@ class ResponseDecoder(_Decoder):
                 self._crc = ((self._crc << 4) | nibble) & 0xFF
             elif byte in _NEWLINE:
                 if self._crc == response_crc(self._code, self._value, self._param, self._pvalue):
-                    events.append(_response(RESPONSE_TYPES[self._param], self._code, self._value,
-                                            self._pvalue if self._digits else None))
+                    self._completed(_response(RESPONSE_TYPES[self._param], self._code, self._value,
+                                              self._pvalue if self._digits else None), events)
                     self._state = self._RCODE
                     self._line.clear()
                 else:

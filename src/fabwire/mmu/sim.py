@@ -7,20 +7,24 @@ UART is deaf while booting. Model time = real time × speed, from an injectable 
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
-from fabwire.errors import InputError, LinkClosed
-from fabwire.mmu import codes
-from fabwire.mmu.faults import Fault, parse_fault
+from fabwire.errors import InputError, LinkClosed, excerpt
+from fabwire.mmu import codes, units
+from fabwire.mmu.faults import HANDS, PHYSICAL_BUTTONS, Fault, parse_fault
 from fabwire.mmu.machine import HistoryItem
 from fabwire.mmu.model import MMUModel
 from fabwire.mmu.protocol import Request, RequestDecoder, encode_response
 from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 
+HANDS_LINE_LIMIT = 200
+PHANTOM_LINE = b"a\n"
+"""One garbage byte and a newline: what the `phantom-reply` fault sends after a reply."""
 PENDING_LIMIT = 8
 """Decoded requests waiting for the main loop; the real RX ring holds 32 bytes, so a flood loses messages."""
 
@@ -31,8 +35,8 @@ class Port:
     A real MMU has one UART. Over TCP every connection gets its own Port, so one client's stray or half-sent
     bytes never mix with another's requests; all ports drive the same machine, one request per tick."""
 
-    def __init__(self) -> None:
-        self.decoder = RequestDecoder()
+    def __init__(self, phantoms: bool = False) -> None:
+        self.decoder = RequestDecoder(phantoms=phantoms)
         self.pending: deque[Request] = deque()
         self.dropped = 0
 
@@ -52,13 +56,24 @@ class MMUSimulator:
     """A whole MMU: control plane (faults, buttons) plus `serve(transport)`, one decoder per connection."""
 
     def __init__(self, version: str = "3.0.4", *, speed: float = 1.0, faults: Iterable[str | Fault] = (),
-                 clock: Callable[[], float] | None = None) -> None:
+                 clock: Callable[[], float] | None = None, arithmetic: str = units.DEFAULT_FLOAT,
+                 phantom_requests: bool = False) -> None:
+        """`arithmetic`: whose floating point the firmware's unit conversions use, "pc" (the firmware built for a
+        PC, as its own test runs do) or "avr" (the MMU board's 32-bit floats); see `fabwire.mmu.units`.
+        `phantom_requests`: a one-byte garbage line right after a request repeats that request, as the firmware's
+        response decoder repeats a response (`fabwire.mmu.protocol` `phantoms`): a host that sends such bytes can
+        be tested against it. The fault `phantom-reply` makes the simulator send such lines itself."""
+        self.phantom_requests = phantom_requests
         self.speed = checked_speed(speed)
+        if arithmetic not in units.FLOAT_FORMATS:
+            raise InputError(f"unknown MMU arithmetic {excerpt(arithmetic, 20)}; choose one of "
+                             f"{', '.join(units.FLOAT_FORMATS)}")
         self._clock = clock or time.monotonic
         self._t0 = self._clock()
         parsed = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)
-        self.model = MMUModel(firmware(version), faults=parsed, now=0.0)
-        self._port = Port()
+        self.model = MMUModel(firmware(version), faults=parsed, now=0.0,
+                              float_format=units.FLOAT_FORMATS[arithmetic])
+        self._port = Port(phantom_requests)
         """The line `receive`/`tick`/`exchange` use when no port is given (in-process and lockstep use)."""
         self._ports: list[Port] = [self._port]
 
@@ -104,7 +119,12 @@ class MMUSimulator:
         if self.model.booting:  # X: the board resets, whatever was still queued on any line is lost
             for each in self._ports:
                 each.reset()
-        return b"" if reply is None else encode_response(reply)
+        if reply is None:
+            return b""
+        data = encode_response(reply)
+        if self.model.faults.hit("phantom-reply"):
+            data += PHANTOM_LINE
+        return data
 
     def exchange(self, data: bytes, now: float | None = None) -> bytes:
         """Receive `data` and run ticks until every complete request has been handled."""
@@ -117,15 +137,85 @@ class MMUSimulator:
     # ------------------------------------------------------------------------------------------ control
 
     def inject(self, fault: str | Fault) -> None:
+        """A cause appears: `NAME` stays until removed, `NAME:N` fails N checks (`fabwire.mmu.faults`)."""
+        self.model.advance(self.now())
         self.model.inject(fault)
 
+    def remove_cause(self, name: str | None = None) -> list[str]:
+        """The owner removes a cause (all when None); its error waits for Retry or a reset. Returns what was
+        there."""
+        self.model.advance(self.now())
+        return self.model.remove_cause(name)
+
     def clear_faults(self, name: str | None = None) -> None:
-        """Remove a fault's cause (all when None); the error it raised waits for Retry or a reset."""
-        self.model.clear_faults(name)
+        self.remove_cause(name)
+
+    def causes(self) -> dict[str, int]:
+        """The causes present: name → checks they will still fail (-1: until removed)."""
+        return self.model.causes()
 
     def press(self, button: int) -> None:
+        """A press on the MMU's own buttons: 0 Right, 1 Middle, 2 Left."""
         self.model.advance(self.now())
         self.model.press(button)
+
+    def power_cycle(self) -> None:
+        """Off and on again: the UART is deaf while it boots, the EEPROM and every cause stay."""
+        self.model.power_cycle(self.now())
+        for port in self._ports:
+            port.reset()
+
+    def hands(self, action: str, argument: str = "") -> dict[str, Any]:
+        """One act of the owner's hands on the machine (`HANDS`), as a JSON-able answer; InputError for an unknown
+        action, button or cause, or for removing a cause that is not there."""
+        action = action.strip().lower()
+        argument = argument.strip()
+        if action == "remove":
+            name = parse_fault(argument).name if argument else None
+            removed = self.remove_cause(name)
+            if not removed:
+                present = ", ".join(self.causes()) or "none"
+                raise InputError(f"nothing to remove: {name or 'no cause'} is not present (present: {present})")
+            return {"removed": removed, "causes": self.causes()}
+        if action == "press":
+            button = PHYSICAL_BUTTONS.get(argument.lower())
+            if button is None:
+                raise InputError(f"press which button? left, middle or right, not {excerpt(argument, 20)}")
+            self.press(button)
+            return {"pressed": argument.lower()}
+        if action == "power-cycle":
+            self.power_cycle()
+            return {"power_cycled": True, "causes": self.causes()}
+        if action == "inject":
+            if not argument:
+                raise InputError("inject which cause? NAME (until removed) or NAME:N (fails N checks)")
+            self.inject(argument)
+            return {"injected": parse_fault(argument).name, "causes": self.causes()}
+        if action == "causes":
+            return {"causes": self.causes()}
+        raise InputError(f"unknown action {excerpt(action, 20)}; choose one of {', '.join(HANDS)}")
+
+    async def serve_hands(self, transport: Transport) -> None:
+        """The control plane on a connection: one action a line (`remove finda-stuck`, `press middle`,
+        `power-cycle`, `inject NAME[:N]`, `causes`), one JSON object a line back (`{"ok": true, …}` or
+        `{"ok": false, "error": …}`)."""
+        buffer = b""
+        try:
+            while True:
+                buffer += await transport.read(256)
+                while b"\n" in buffer:
+                    line, buffer = buffer.split(b"\n", 1)
+                    action, _, argument = line.decode("utf-8", "replace").strip().partition(" ")
+                    try:
+                        answer: dict[str, Any] = {"ok": True, **self.hands(action, argument)}
+                    except InputError as exc:
+                        answer = {"ok": False, "error": str(exc)}
+                    await transport.write(json.dumps(answer).encode() + b"\n")
+                if len(buffer) > HANDS_LINE_LIMIT:
+                    await transport.write(b'{"ok": false, "error": "line too long"}\n')
+                    return
+        except LinkClosed:
+            return
 
     @property
     def history(self) -> list[HistoryItem]:
@@ -140,7 +230,7 @@ class MMUSimulator:
     async def serve(self, transport: Transport) -> None:
         """Answer one connection until it closes. Every connection sees the same machine through its own
         decoder, so clients never corrupt each other's requests (replies go to whoever asked)."""
-        port = Port()
+        port = Port(self.phantom_requests)
         self._ports.append(port)
         try:
             while True:
@@ -164,7 +254,9 @@ def options_to_simulator(options: dict[str, str]) -> MMUSimulator:
     except ValueError:
         raise InputError(f"sim://mmu speed must be a number, not {speed_text!r}") from None
     faults = [f for f in options.get("fault", "").split(",") if f.strip()]
-    return MMUSimulator(options.get("version", "3.0.4"), speed=speed, faults=faults)
+    return MMUSimulator(options.get("version", "3.0.4"), speed=speed, faults=faults,
+                        arithmetic=options.get("arithmetic", units.DEFAULT_FLOAT),
+                        phantom_requests=options.get("phantom_requests", "") in ("1", "true", "yes"))
 
 
 async def _factory(options: dict[str, str]) -> Transport:

@@ -27,15 +27,13 @@ class SyncMMU(SyncClient[MMU]):
     def mmu(self) -> MMU:
         return self.client
 
-    @property
     def status(self) -> Status:
-        """The state the link's heartbeat (Q0 every few hundred ms) keeps current: read, not asked for."""
-        return self.mmu.status
+        """The state the link's heartbeat (Q0 every second) keeps current: read, not asked for."""
+        return self._call(self.mmu.status())
 
-    @property
-    def version(self) -> codes.FirmwareVersion | None:
-        """The firmware version the handshake read (S0-S2)."""
-        return self.mmu.version
+    def version(self) -> codes.FirmwareVersion:
+        """The firmware version the handshake read (S0-S3)."""
+        return self._call(self.mmu.version())
 
     @property
     def link_state(self) -> Link:
@@ -83,8 +81,8 @@ class SyncMMU(SyncClient[MMU]):
     def read_register(self, register: int | str, timeout: float | None = 10.0) -> int:
         return self._call(self.mmu.read_register(register, timeout))
 
-    def write_register(self, register: int | str, value: int, timeout: float | None = 10.0) -> None:
-        self._call(self.mmu.write_register(register, value, timeout))
+    def write_register(self, register: int | str, value: int, timeout: float | None = 10.0) -> int:
+        return self._call(self.mmu.write_register(register, value, timeout))
 
     def reset(self, timeout: float | None = 30.0, *, erase: bool = False) -> codes.FirmwareVersion:
         return self._call(self.mmu.reset(timeout, erase=erase))

@@ -61,8 +61,8 @@ class MMUDriver(Driver):
         self._failure = None
         self.mmu = await open_mmu(self.spec.address, self.spec.options)
         self._unsubscribe = self.mmu.subscribe(self._heard)
-        version = self.mmu.version
-        return Identity("MMU3", None, str(version) if version else None)
+        version = await self.mmu.version()
+        return Identity("MMU3", None, str(version))
 
     def _heard(self, event: HostEvent) -> None:
         if isinstance(event, StatusUpdated):
@@ -82,7 +82,7 @@ class MMUDriver(Driver):
         failure = self._failure or mmu._failure
         if failure is not None:
             raise LinkClosed(f"the MMU link failed: {failure}")
-        status = mmu.status
+        status = await mmu.status()
         busy = mmu.logic.busy
         error = describe_error(status.value) if status.kind == "E" else None
         if error is not None:
