@@ -32,11 +32,11 @@ def parse_json(data: str | bytes, *, what: str = "the JSON", max_bytes: int | No
     try:
         value = json.loads(text)
     except RecursionError:
-        raise InputError(f"{what} is nested deeper than {max_depth} levels") from None
+        raise InputError(f"{what} nests deeper than {max_depth} levels") from None
     except ValueError as exc:
         raise InputError(f"{what} is not valid JSON ({exc})") from None
     if depth_exceeds(value, max_depth):
-        raise InputError(f"{what} is nested deeper than {max_depth} levels")
+        raise InputError(f"{what} nests deeper than {max_depth} levels")
     return value
 
 

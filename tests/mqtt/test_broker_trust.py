@@ -192,8 +192,8 @@ async def test_a_command_flood_on_one_device_neither_starves_another_nor_is_kept
 
 
 @pytest.mark.parametrize(("payload", "said"), [
-    (b'{"action": "home", "params": {"x": ' + b"[" * 20_000 + b"]" * 20_000 + b"}}", "nested deeper"),
-    (b'{"action": "home", "params": ' + b'{"a": ' * 40 + b"1" + b"}" * 41, "nested deeper"),
+    (b'{"action": "home", "params": {"x": ' + b"[" * 20_000 + b"]" * 20_000 + b"}}", "nests deeper"),
+    (b'{"action": "home", "params": ' + b'{"a": ' * 40 + b"1" + b"}" * 41, "nests deeper"),
     (b'{"action": "home", "params": {"pad": "' + b"x" * MAX_COMMAND_BYTES + b'"}}', "at most"),
     (b"\xff\xfe", "UTF-8"),
     (b'{"action": ', "not valid JSON"),
@@ -286,7 +286,7 @@ def test_a_broker_url_that_cannot_work_is_a_usage_error(command: str, tmp_path: 
 
 
 @pytest.mark.parametrize(("text", "said"), [
-    ("[" * 100_000, "nested deeper"), ("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), "nested deeper"),
+    ("[" * 100_000, "nests deeper"), ("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), "nests deeper"),
     ('{"a": ', "not valid JSON"), (b"\xc3", "UTF-8")])
 def test_parse_json_says_what_is_wrong(text: str | bytes, said: str) -> None:
     with pytest.raises(InputError, match=said):
@@ -309,7 +309,7 @@ def test_parse_json_returns_what_json_reads_within_the_depth(value: Any) -> None
 
 
 def test_command_parsing_uses_the_same_bounds() -> None:
-    with pytest.raises(InputError, match="nested deeper"):
+    with pytest.raises(InputError, match="nests deeper"):
         parse_command(b"{" + b'"a":{' * 100 + b"}" * 101)
 
 
