@@ -75,3 +75,14 @@ def cut(lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
             kept.extend(_parts(shapely.intersection(geometry, region)))
             hidden.extend(_parts(shapely.difference(geometry, region)))
     return kept, hidden
+
+
+def cut_edge(area: BaseGeometry, region: BaseGeometry) -> tuple[Polylines, BaseGeometry]:
+    """Where `region` cuts a filled `area`: (the edges of the cut, which a browser shows as the new border of the
+    fill, and the part of the area that remains)."""
+    if area.is_empty or shapely.covers(region, area):
+        return [], area
+    if shapely.disjoint(region, area):
+        return [], shapely.Polygon()
+    edges = _parts(shapely.intersection(region.boundary, area))
+    return edges, shapely.intersection(area, region)
