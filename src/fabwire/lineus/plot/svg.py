@@ -10,7 +10,7 @@ painted over others do not hide what lies under them (a pen cannot unpaint): tha
 gradients' colours are what the plan does not show as a browser does, and each is named in `notes`.
 
 FEATURES below lists every class of SVG the reader renders as a browser does, with its source; each row names the
-case of the browser comparison test (tests/lineus/test_plot_svg_browser.py) that draws it in Chromium and
+case of the browser comparison test (tests/lineus/test_plot_svg_conformance.py) that draws it in Chromium and
 compares the ink with the plan.
 """
 
@@ -684,7 +684,7 @@ class _Reader:
         if any(style.get(k, "none").strip() != "none" for k in ("marker", "marker-start", "marker-mid",
                                                                  "marker-end")):
             self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
-        dashes, offset = self._dash_pattern(style, viewport) if stroke and fill != "solid" else ([], 0.0)
+        dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
         for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
             if sub.segments == 0:
@@ -705,7 +705,7 @@ class _Reader:
                 continue
             if fill == "solid" and not sub.closed and not flat:
                 pts = np.vstack([pts, pts[:1]])  # the fill's border closes the subpath
-            if dashes:
+            if dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between the dashes
                 inverse = _invert(matrix)
                 pieces = affine(dashed(affine([pts], inverse)[0], dashes, offset), matrix)
                 for piece in pieces:

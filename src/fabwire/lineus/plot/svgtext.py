@@ -30,29 +30,35 @@ TEXT_MODES = ("hershey", "outline")
 CAP_HEIGHT_PER_EM = 0.72
 """Capital height of the letters as a share of the font size (Arial 0.716, DejaVu Sans 0.729, Helvetica 0.717)."""
 XML_SPACE = "{http://www.w3.org/XML/1998/namespace}space"
-FONT_FAMILIES: tuple[tuple[tuple[str, ...], str, str, str, str], ...] = (
-    # (family names, regular, bold, italic, bold italic) - CSS Fonts 4 §4.2 generic families, common faces
-    (("serif", "times", "times new roman", "georgia", "garamond", "dejavu serif", "liberation serif"),
-     "timesr", "timesrb", "timesi", "timesib"),
-    (("cursive", "comic sans ms", "brush script mt", "script"), "scripts", "scriptc", "scripts", "scriptc"),
-    (("fantasy", "fraktur", "old english text mt"), "gothiceng", "gothiceng", "gothicita", "gothicita"),
-    (("sans-serif", "arial", "helvetica", "verdana", "dejavu sans", "liberation sans", "monospace", "courier",
-      "courier new", "system-ui"), DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"),
+FONT_FAMILIES: tuple[tuple[tuple[str, ...], tuple[str, str, str, str], float], ...] = (
+    # (family names, Hershey faces regular / bold / italic / bold italic, width) - CSS Fonts 4 §4.2 generic
+    # families and common faces. Width scales the Hershey letters across so a line of text is as long as in the
+    # browser's face: measured on a pangram against Noto Sans, Noto Serif and DejaVu Sans Mono at 30 px.
+    (("serif", "times", "times new roman", "georgia", "garamond", "dejavu serif", "liberation serif",
+      "noto serif"), ("timesr", "timesrb", "timesi", "timesib"), 0.79),
+    (("cursive", "comic sans ms", "brush script mt", "script"), ("scripts", "scriptc", "scripts", "scriptc"), 1.0),
+    (("fantasy", "fraktur", "old english text mt"), ("gothiceng", "gothiceng", "gothicita", "gothicita"), 0.86),
+    (("monospace", "courier", "courier new", "dejavu sans mono", "liberation mono"),
+     (DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"), 1.03),
+    (("sans-serif", "arial", "helvetica", "verdana", "dejavu sans", "liberation sans", "noto sans", "system-ui"),
+     (DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"), 0.84),
 )
-"""Hershey faces for CSS font families; the first listed family that is known here chooses (default sans)."""
+"""Hershey faces for CSS font families; the first listed family known here chooses (else the last row)."""
 
 _SPACES = re.compile(r" {2,}")
 
 
-def hershey_face(style: dict[str, str]) -> str:
-    """The Hershey face for the style's font-family, font-weight and font-style."""
+def hershey_face(style: dict[str, str]) -> tuple[str, float]:
+    """The Hershey face and width factor for the style's font-family, font-weight and font-style."""
     bold = style.get("font-weight", "normal").strip().lower() in ("bold", "bolder", "600", "700", "800", "900")
     italic = style.get("font-style", "normal").strip().lower() in ("italic", "oblique")
+    pick = (2 if italic else 0) + (1 if bold else 0)
     for name in (n.strip().strip("'\"").lower() for n in style.get("font-family", "").split(",")):
-        for names, *faces in FONT_FAMILIES:
+        for names, faces, width in FONT_FAMILIES:
             if name in names:
-                return faces[(2 if italic else 0) + (1 if bold else 0)]
-    return FONT_FAMILIES[-1][2] if bold else DEFAULT_FONT
+                return faces[pick], width
+    _, faces, width = FONT_FAMILIES[-1]
+    return faces[pick], width
 
 
 @functools.lru_cache(maxsize=4096)
@@ -181,11 +187,12 @@ class TextLayout:
                 end += 1
             text = "".join(c.char for c in chunk[index:end])
             size = number(first.style.get("font-size"), 16.0)
-            lines, advance, notes = _strokes(text, hershey_face(first.style), size * CAP_HEIGHT_PER_EM)
+            face, width = hershey_face(first.style)
+            lines, advance, notes = _strokes(text, face, size * CAP_HEIGHT_PER_EM)
             self.notes.extend(notes)
             if first.style.get("visibility", "visible").strip() == "visible":
-                runs.append((x, y, [np.column_stack([p[:, 0] + x, y - p[:, 1]]) for p in lines]))
-            x += advance
+                runs.append((x, y, [np.column_stack([p[:, 0] * width + x, y - p[:, 1]]) for p in lines]))
+            x += advance * width
             index = end
         self._pen = (x, y)
         anchor = chunk[0].style.get("text-anchor", "start").strip()
