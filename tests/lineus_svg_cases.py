@@ -175,6 +175,9 @@ CASES: dict[str, tuple[str, str]] = {
     "clip bounding box units": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox"><rect x="0.25" y="0.25" '
                                     'width="0.5" height="0.5"/></clipPath><rect x="20" y="20" width="160" '
                                     'height="160" clip-path="url(#c)"/>'), "clipped fill"),
+    "clip by a self-crossing star": (doc('<clipPath id="c"><path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z"/>'
+                                         '</clipPath><rect width="200" height="200" clip-path="url(#c)"/>'),
+                                     "clipped fill"),
     "clip evenodd": (doc('<clipPath id="c"><path clip-rule="evenodd" d="M10 10 H190 V190 H10 Z M60 60 H140 V140 '
                          'H60 Z"/></clipPath><rect x="30" y="30" width="140" height="140" clip-path="url(#c)"/>'),
                      "clipped fill"),

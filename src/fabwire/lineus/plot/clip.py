@@ -26,7 +26,11 @@ def area_of_rings(rings: Sequence[FloatArray], rule: str) -> BaseGeometry:
         signed = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
         if signed == 0:
             continue
-        polygons.append((signed, shapely.make_valid(shapely.Polygon(ring))))
+        polygon = shapely.Polygon(ring)
+        # A self-crossing ring: by non-zero winding all it encloses is filled ("structure"); even-odd keeps the
+        # pieces with odd crossings (the default "linework" split).
+        polygons.append((signed, shapely.make_valid(polygon, method="structure") if rule != "evenodd"
+                         else shapely.make_valid(polygon)))
     region: BaseGeometry = shapely.Polygon()
     if not polygons:
         return region
