@@ -210,6 +210,19 @@ CASES: dict[str, tuple[str, str]] = {
     "missing paint server": (doc('<rect x="20" y="20" width="60" height="60" fill="url(#nothing)"/>'
                                  '<rect x="100" y="100" width="60" height="60" fill="url(#nothing) black"/>'),
                              "white fill"),
+    # -- painting order: opaque fills hide what lies under them ---------------------------------------------
+    "white box over lines": (doc(f'<path d="M10 100 H190 M100 10 V190" {S}/><rect x="60" y="60" width="80" '
+                                 f'height="80" fill="white" stroke="black" stroke-width="2"/>'), "painting order"),
+    "later fill over earlier stroke": (doc(f'<rect x="20" y="20" width="100" height="100" {S}/>'
+                                           '<circle cx="120" cy="120" r="60" fill="navy"/>'), "painting order"),
+    "translucent fill hides nothing": (doc(f'<path d="M10 100 H190" {S}/><rect x="60" y="60" width="80" '
+                                           f'height="80" fill="white" fill-opacity="0.5"/>'), "painting order"),
+    "group opacity hides nothing": (doc(f'<path d="M10 100 H190" {S}/><g opacity="0.5"><rect x="60" y="60" '
+                                        f'width="80" height="80" fill="white" stroke="black" stroke-width="2"/></g>'),
+                                    "painting order"),
+    "fill over a clipped group": (doc('<clipPath id="c"><rect width="100" height="200"/></clipPath>'
+                                      f'<g clip-path="url(#c)"><path d="M10 100 H190" {S}/></g>'
+                                      '<rect x="50" y="50" width="100" height="100" fill="white"/>'), "painting order"),
     # -- patterns ----------------------------------------------------------------------------------------------
     "pattern fill": (doc('<defs><pattern id="h" patternUnits="userSpaceOnUse" width="20" height="20">'
                          '<path d="M0 0 L20 20" stroke="black" stroke-width="2"/></pattern></defs>'

@@ -481,9 +481,10 @@ def test_paths_read_together_match_each_read_alone(paths: list[list[tuple[str, l
 
 
 def test_many_short_paths_under_their_own_transforms_read_as_one_by_one() -> None:
-    body = "".join(f'<path d="M{i} 0 L{i} 10 h2 V{i % 7} Z" transform="rotate({i * 7} 50 50)" stroke="black"/>'
+    body = "".join(f'<path d="M{i} 0 L{i} 10 h2 V{i % 7} Z" transform="rotate({i * 7} 50 50)" stroke="black" '
+                   'fill="none"/>'
                    for i in range(40))
-    body += '<path d="M5 5 l1e7 0" stroke="black"/><path d="M1 1 q 5 5 10 0" stroke="black"/>'
+    body += '<path d="M5 5 l1e7 0" stroke="black"/><path d="M1 1 q 5 5 10 0" stroke="black" fill="none"/>'
     drawing = parse_svg(svg(body, 'width="300" height="300" viewBox="-100 -100 300 300"'), tolerance=0.01)
     assert len(drawing.lines) == 42
     for i, line in enumerate(drawing.lines[:40]):

@@ -45,7 +45,7 @@ from fabwire.lineus.plot.svgpath import (
     rect,
     straight_paths,
 )
-from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, own_style, paints
+from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, opaque_fill, own_style, paints
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
 from fabwire.lineus.plot.svgunits import (
     IDENTITY,
@@ -74,6 +74,8 @@ MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
 MAX_PATTERN_TILES = 20_000
 """Pattern tiles one fill may repeat at most; a finer pattern is drawn as the shape's outline, with a note."""
+MAX_OCCLUSION_CHECKS = 50_000_000
+"""Earlier lines that opaque fills are checked against at most; beyond, later fills no longer hide lines."""
 READ_AHEAD_CHARS = 100_000
 """Path data up to this length is read ahead with all the others; longer data is read on its own, in place."""
 USER_LANGUAGES = ("en",)
@@ -108,6 +110,7 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
     ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
     ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
+    ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
 )
 
@@ -131,15 +134,22 @@ class SvgDrawing:
     """Why a browser shows nothing of the whole file, when that is known before drawing (a viewport of size 0)."""
 
 
+def _box(points: FloatArray) -> list[float]:
+    return [*points.min(axis=0).tolist(), *points.max(axis=0).tolist()]
+
+
 class _Fill:
     """The area a solid fill covers, in output units, from its closed rings by its fill rule (made on demand)."""
 
-    __slots__ = ("_area", "rings", "rule")
+    __slots__ = ("_area", "box", "rings", "rule")
 
     def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None) -> None:
         self.rings = rings
         self.rule = rule
         self._area = area
+        self.box = _box(np.concatenate(rings)) if rings else (
+            shapely.bounds(area).tolist() if area is not None and not area.is_empty else [0.0, 0.0, -1.0, -1.0])
+        """(x0, y0, x1, y1); an empty fill's box holds nothing."""
 
     @property
     def area(self) -> BaseGeometry:
@@ -148,16 +158,74 @@ class _Fill:
         return self._area
 
 
+class _Boxes:
+    """A growing (n, 4) array of boxes, amortised O(1) per box added."""
+
+    def __init__(self, rows: FloatArray | None = None) -> None:
+        self.array = rows if rows is not None else np.zeros((16, 4))
+        self.count = 0 if rows is None else len(rows)
+
+    def add(self, boxes: list[list[float]]) -> None:
+        if not boxes:
+            return
+        need = self.count + len(boxes)
+        if need > len(self.array):
+            grown = np.zeros((max(need, 2 * len(self.array)), 4))
+            grown[:self.count] = self.array[:self.count]
+            self.array = grown
+        self.array[self.count:need] = boxes
+        self.count = need
+
+    def view(self) -> FloatArray:
+        return self.array[:self.count]
+
+
 class Ink(list[FloatArray]):
-    """Pen lines, with the solid fills they outline (so that a cut can outline a fill along the cut)."""
+    """Pen lines, with the solid fills they outline (so that a cut can outline a fill along the cut), and the
+    boxes of both for finding what lies under a later fill."""
 
     def __init__(self, lines: Polylines | None = None) -> None:
         super().__init__(lines or [])
         self.fills: list[_Fill] = []
+        self._boxes = _Boxes()
+        self._fill_boxes = _Boxes()
 
     def take(self, other: Ink) -> None:
         self.extend(other)
         self.fills.extend(other.fills)
+
+    def boxes(self) -> FloatArray:
+        """(x0, y0, x1, y1) of every line (lines are never changed in place, only added or replaced)."""
+        if self._boxes.count > len(self):
+            self._boxes = _Boxes()
+        self._boxes.add([_box(line) for line in self[self._boxes.count:]])
+        return self._boxes.view()
+
+    def fill_boxes(self) -> FloatArray:
+        """(x0, y0, x1, y1) of every fill (fills are only added, or replaced one by one with `set_fill`)."""
+        if self._fill_boxes.count > len(self.fills):
+            self._fill_boxes = _Boxes()
+        self._fill_boxes.add([fill.box for fill in self.fills[self._fill_boxes.count:]])
+        return self._fill_boxes.view()
+
+    def set_fill(self, index: int, fill: _Fill) -> None:
+        self.fills[index] = fill
+        if index < self._fill_boxes.count:
+            self._fill_boxes.array[index] = fill.box
+
+    def replace(self, lines: Polylines) -> None:
+        self[:] = lines
+        self._boxes = _Boxes()
+
+    def drop(self, indices: list[int]) -> None:
+        """Take out the lines at `indices`, moving the last ones into their places (order is not kept)."""
+        boxes = self.boxes()
+        for k in sorted(indices, reverse=True):
+            last = len(self) - 1
+            self[k] = self[last]
+            boxes[k] = boxes[last]
+            self.pop()
+            self._boxes.count -= 1
 
 
 def _read_root(source: str | Path | bytes) -> tuple[ET.Element, str]:
@@ -223,6 +291,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
             inner = (box[2], box[3]) if box else (width, height)
             placed = then(matrix, reader.placement(root, own, style, inner))
             drawn = Ink()
+            reader.below(drawn)
             reader.children(root, style, placed, inner, drawn, 0, ())
             reader.clip(root, own, placed, drawn, ())
             reader.lines.take(drawn)
@@ -301,6 +370,11 @@ class _Reader:
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
         self._read_ahead = self._read_straight_paths()
         self._patterns: tuple[str, ...] = ()
+        self._below: list[Ink] = []
+        """What is painted so far, innermost last: opaque fills hide the parts of these lines under them."""
+        self._shaded = 0
+        """Enclosing elements that make a fill's hiding unsure (group opacity, clip paths, masks, filters)."""
+        self._occlusion_checks = 0
 
     # -- limits -----------------------------------------------------------------------------------------------
 
@@ -474,6 +548,24 @@ class _Reader:
         if flattens(matrix):
             return  # scaled to a line or a point: nothing of it shows
         target = Ink()
+        shaded = _opacity(own) < 1 or any(own.get(k, "none").strip() != "none" for k in ("clip-path", "mask",
+                                                                                       "filter"))
+        self._below.append(target)
+        self._shaded += shaded
+        try:
+            self.draw(el, tag, style, matrix, viewport, target, depth, uses)
+        finally:
+            self._below.pop()
+            self._shaded -= shaded
+        self.clip(el, own, matrix, target, ())
+        out.take(target)
+
+    def below(self, ink: Ink) -> None:
+        """Start a drawing whose earlier paint is `ink`."""
+        self._below = [ink]
+
+    def draw(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
+             viewport: tuple[float, float], target: Ink, depth: int, uses: tuple[str, ...]) -> None:
         if tag in SHAPES:
             self.shape(el, tag, style, matrix, viewport, target)
         elif tag == "text":
@@ -491,8 +583,34 @@ class _Reader:
             self.viewport(el, el, style, matrix, viewport, target, depth, uses, None, None)
         else:
             self.children(el, style, matrix, viewport, target, depth, uses)
-        self.clip(el, own, matrix, target, ())
-        out.take(target)
+
+    def hide_under(self, fill: _Fill) -> None:
+        """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
+        model), and earlier fills shrink to what still shows."""
+        x0, y0, x1, y1 = fill.box
+        for ink in self._below[:-1]:
+            if not ink and not ink.fills:
+                continue
+            self._occlusion_checks += len(ink) + len(ink.fills)
+            if self._occlusion_checks > MAX_OCCLUSION_CHECKS:
+                self.unsupported["too many overlapping fills to work out which lines they hide: some lines "
+                                 "under fills are drawn"] += 1
+                return
+            boxes = ink.boxes()
+            under = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
+            if under.any():
+                hit = np.flatnonzero(under).tolist()
+                hidden, shown = cut([ink[k] for k in hit], fill.area)
+                ink.drop(hit)
+                ink.extend(shown)
+                self.hidden.extend(hidden)
+            if ink.fills:
+                fills = ink.fill_boxes()
+                near = (fills[:, 0] <= x1) & (fills[:, 2] >= x0) & (fills[:, 1] <= y1) & (fills[:, 3] >= y0)
+                for k in np.flatnonzero(near).tolist():
+                    earlier = ink.fills[k]
+                    if shapely.intersects(earlier.area, fill.area):
+                        ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area)))
 
     def clip(self, el: ET.Element, own: dict[str, str], matrix: FloatArray, target: Ink,
              stack: tuple[str, ...]) -> None:
@@ -517,7 +635,7 @@ class _Reader:
             kept.extend(edges)
             if not area.is_empty:
                 fills.append(_Fill([], fill.rule, area))
-        target[:] = kept
+        target.replace(kept)
         target.fills = fills
         self.hidden.extend(hidden)
 
@@ -554,8 +672,15 @@ class _Reader:
             if own.get("display", "").strip() == "none" and kind == "svg":
                 return
             drawn = Ink()
-            self.viewport(target, el, inner, matrix, viewport, drawn, depth, (*uses, str(ref)),
-                          el.get("width"), el.get("height"))
+            shaded = own.get("clip-path", "none").strip() != "none"
+            self._below.append(drawn)
+            self._shaded += shaded
+            try:
+                self.viewport(target, el, inner, matrix, viewport, drawn, depth, (*uses, str(ref)),
+                              el.get("width"), el.get("height"))
+            finally:
+                self._below.pop()
+                self._shaded -= shaded
             self.clip(target, own, matrix, drawn, ())
             out.take(drawn)
         else:
@@ -582,8 +707,15 @@ class _Reader:
         box = vb.box
         inner = then(matrix, viewport_matrix(box, x, y, w, h, el.get("preserveAspectRatio")))
         drawn = Ink()
-        self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
-        if style.get("overflow", "hidden").strip() in ("hidden", "scroll") and (drawn or drawn.fills):
+        clips = style.get("overflow", "hidden").strip() in ("hidden", "scroll")
+        self._below.append(drawn)
+        self._shaded += clips
+        try:
+            self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
+        finally:
+            self._below.pop()
+            self._shaded -= clips
+        if clips and (drawn or drawn.fills):
             corners = np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h], [x, y]])
             ring = corners @ matrix[:, :2].T + matrix[:, 2]
             self.cut_ink(drawn, shapely.Polygon(ring))
@@ -677,7 +809,8 @@ class _Reader:
             return
         stroke = paints(style, "stroke")
         fill, pattern = self._fill_kind(style)
-        if not stroke and fill == "none":
+        covers = not self._shaded and len(self._below) > 1 and opaque_fill(style)
+        if not (stroke or covers) and fill == "none":
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
         dots = stroke and caps
@@ -694,9 +827,9 @@ class _Reader:
                 self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
             flat = _without_area(pts)
-            if fill != "none" and not flat:
+            if (fill != "none" or covers) and not flat:
                 rings.append(pts)
-            if not stroke and (flat or fill == "pattern"):
+            if not stroke and (flat or fill != "solid"):
                 continue  # a fill with no area shows nothing; a pattern shows only its own lines
             if bool((pts == pts[0]).all()):
                 if dots:
@@ -719,8 +852,11 @@ class _Reader:
             return
         closed = [np.vstack([r, r[:1]]) for r in rings]
         rule = style.get("fill-rule", "nonzero").strip()
+        own = _Fill(closed, rule)
+        if covers:
+            self.hide_under(own)
         if fill == "solid":
-            out.fills.append(_Fill(closed, rule))
+            out.fills.append(own)
         elif pattern is not None:
             self.pattern(pattern, matrix, closed, rule, viewport, out)
 
@@ -786,11 +922,13 @@ class _Reader:
             inside = IDENTITY
         tile = Ink()
         self._patterns = (*self._patterns, ref)
+        outside, self._below = self._below, [tile]
         try:
             self.children(content, self.computed_style(content), inside,
                           (vb.box[2], vb.box[3]) if vb.box else (w, h), tile, 0, ())
         finally:
             self._patterns = self._patterns[:-1]
+            self._below = outside
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
             kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
             tile = Ink(kept)

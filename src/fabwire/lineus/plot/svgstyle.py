@@ -209,6 +209,25 @@ def paints(style: dict[str, str], which: str) -> bool:
     return _marks(value, alpha)
 
 
+def opaque_fill(style: dict[str, str]) -> bool:
+    """Whether the fill paints a solid colour without any transparency (white too), so it hides what is under it."""
+    value = style.get("fill", INITIAL["fill"]).strip().lower()
+    if value in ("none", "transparent", "") or value.startswith("url(") or number(style.get("fill-opacity"), 1.0) < 1:
+        return False
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    return _alpha(value) >= 1
+
+
+@functools.lru_cache(maxsize=256)
+def _alpha(color: str) -> float:
+    """A colour's own alpha (0 for a colour that does not parse)."""
+    parsed = tinycss2.color4.parse_color(color)
+    if parsed is None or not hasattr(parsed, "to"):
+        return 0.0
+    return float(parsed.to("srgb")[3])
+
+
 @functools.lru_cache(maxsize=256)
 def _marks(color: str, alpha: float) -> bool:
     """Whether a colour (CSS Color 4) at `alpha` leaves a mark on the paper; one that does not parse is ink."""
