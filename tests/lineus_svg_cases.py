@@ -92,6 +92,10 @@ CASES: dict[str, tuple[str, str]] = {
     "use of g with transform": (doc(f'<defs><g id="g"><rect width="40" height="30" {S}/></g></defs>'
                                     f'<use href="#g" x="20" y="20" transform="rotate(10)"/>'
                                     f'<use href="#g" x="120" y="120"/>'), "use"),
+    "symbol transform": (doc('<symbol id="s" transform="skewX(20)"><rect x="20" y="20" width="100" '
+                             'height="100"/></symbol><use href="#s"/>'), "use"),
+    "display none on the root is ignored": (doc(f'<rect x="20" y="20" width="100" height="100" {S}/>',
+                                                'display="none"'), "hidden parts"),
     "use cycle": (doc(f'<g id="a"><rect x="20" y="20" width="60" height="60" {S}/><use href="#a" x="50"/></g>'
                       f'<rect id="b" x="120" y="120" width="50" height="50" {S}/>'), "use cycle"),
     "use inherits style": (doc('<defs><path id="p" d="M20 20 L180 180"/></defs>'
@@ -131,6 +135,8 @@ CASES: dict[str, tuple[str, str]] = {
                     '<circle cx="140" cy="140" r="30"/></g>'), "inherit"),
     "inherit visibility": (doc(f'<g visibility="hidden"><rect x="20" y="20" width="60" height="60" {S}/>'
                                f'<circle cx="140" cy="140" r="30" visibility="visible" {S}/></g>'), "inherit"),
+    "q and rem units": (doc(f'<rect x="30Q" y="30Q" width="150Q" height="1.5rem" {S}/>'
+                            f'<circle cx="100" cy="120" r="2rem" {S}/>'), "em units"),
     "em units": (doc(f'<g font-size="20"><rect x="1em" y="1em" width="5em" height="3em" {S}/>'
                      f'<circle cx="6em" cy="7em" r="2ex" {S} font-size="30"/></g>'), "em units"),
     # -- hiding ------------------------------------------------------------------------------------------------
@@ -149,6 +155,8 @@ CASES: dict[str, tuple[str, str]] = {
     "switch extensions": (doc(f'<switch><rect requiredExtensions="http://example.org/x" x="10" y="10" width="50" '
                               f'height="50" {S}/><rect requiredFeatures="http://www.w3.org/TR/SVG11/feature#Shape" '
                               f'x="100" y="100" width="60" height="60" {S}/></switch>'), "switch"),
+    "switch takes an unknown svg element": (doc(f'<switch><unknown/><rect x="20" y="20" width="60" height="60" '
+                                                f'{S}/></switch><circle cx="140" cy="140" r="30" {S}/>'), "switch"),
     "language outside switch": (doc(f'<rect systemLanguage="zz" x="20" y="20" width="60" height="60" {S}/>'
                                     f'<rect systemLanguage="en" x="100" y="100" width="60" height="60" {S}/>'),
                                 "switch"),
@@ -207,6 +215,11 @@ CASES: dict[str, tuple[str, str]] = {
     "current colour": (doc('<g color="black"><rect x="20" y="20" width="60" height="60" fill="currentColor"/></g>'
                            '<g color="white"><rect x="100" y="100" width="60" height="60" fill="currentColor"/>'
                            '</g>'), "white fill"),
+    "gradient without stops paints nothing": (doc('<linearGradient id="g"/><linearGradient id="h" href="#k"/>'
+                                                  '<linearGradient id="k"><stop offset="0"/></linearGradient>'
+                                                  '<rect x="20" y="20" width="60" height="60" fill="url(#g)"/>'
+                                                  '<rect x="100" y="100" width="60" height="60" fill="url(#h)"/>'),
+                                              "white fill"),
     "missing paint server": (doc('<rect x="20" y="20" width="60" height="60" fill="url(#nothing)"/>'
                                  '<rect x="100" y="100" width="60" height="60" fill="url(#nothing) black"/>'),
                              "white fill"),

@@ -287,7 +287,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         matrix = viewport_matrix(box, 0.0, 0.0, width, height, root.get("preserveAspectRatio"))
         own = own_style(root, reader.sheet)
         style = inherit({}, own)
-        if style.get("display") != "none" and _opacity(style) > 0:
+        if _opacity(style) > 0:  # `display` on the root of a standalone document is ignored, as in browsers
             inner = (box[2], box[3]) if box else (width, height)
             placed = then(matrix, reader.placement(root, own, style, inner))
             drawn = Ink()
@@ -325,6 +325,13 @@ def _page_size(width: str | None, height: str | None) -> tuple[float, float] | N
         return None
     w, h = length(width, 0.0, default=-1.0), length(height, 0.0, default=-1.0)
     return (w, h) if w > 0 and h > 0 else None
+
+
+def _namespace(el: ET.Element) -> str:
+    """An element's namespace (SVG for elements without one; '' for comments)."""
+    if not isinstance(el.tag, str):
+        return ""
+    return el.tag[1:].split("}")[0] if el.tag.startswith("{") else SVG_NS
 
 
 def _invert(matrix: FloatArray) -> FloatArray:
@@ -525,16 +532,14 @@ class _Reader:
                  out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         kids: Iterator[ET.Element] = iter(el)
         if local(el.tag) == "switch":  # the first child whose conditions hold (SVG 1.1 §5.8.2)
-            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE
-                         and conditions_hold(k)][:1])
+            kids = iter([k for k in el if _namespace(k) == SVG_NS and conditions_hold(k)][:1])
         for child in kids:
             self.element(child, style, matrix, viewport, out, depth + 1, uses)
 
     def element(self, el: ET.Element, parent: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
                 out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         tag = local(el.tag)
-        namespace = el.tag[1:].split("}")[0] if isinstance(el.tag, str) and el.tag.startswith("{") else SVG_NS
-        if namespace != SVG_NS or not (tag in SHAPES or tag in CONTAINERS or tag in UNDRAWABLE):
+        if _namespace(el) != SVG_NS or not (tag in SHAPES or tag in CONTAINERS or tag in UNDRAWABLE):
             return
         if not conditions_hold(el):
             return
@@ -706,6 +711,8 @@ class _Reader:
                              f"({vb.error}): ignored, as browsers do"] += 1
         box = vb.box
         inner = then(matrix, viewport_matrix(box, x, y, w, h, el.get("preserveAspectRatio")))
+        if local(el.tag) == "symbol":  # SVG 2 §5.5: a symbol's transform applies inside its viewport
+            inner = then(inner, self.own_transform(el))
         drawn = Ink()
         clips = style.get("overflow", "hidden").strip() in ("hidden", "scroll")
         self._below.append(drawn)
@@ -786,7 +793,22 @@ class _Reader:
             if fallback and paints({**style, "fill": fallback}, "fill"):
                 return "solid", None
             return "none", None
-        return ("pattern", target) if local(target.tag) == "pattern" else ("solid", None)
+        if local(target.tag) == "pattern":
+            return "pattern", target
+        return ("solid", None) if self._has_stops(target) else ("none", None)
+
+    def _has_stops(self, gradient: ET.Element) -> bool:
+        """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
+        nothing (SVG 1.1 §13.2.4)."""
+        seen: list[ET.Element] = []
+        at: ET.Element | None = gradient
+        while at is not None and at not in seen:
+            if any(local(child.tag) == "stop" for child in at):
+                return True
+            seen.append(at)
+            ref = self._href(at)
+            at = self.ids.get(ref) if ref else None
+        return False
 
     def _dash_pattern(self, style: dict[str, str], viewport: tuple[float, float]) -> tuple[list[float], float]:
         """(dash and gap lengths, offset) in user units; no lengths for a solid stroke (none, or in error:

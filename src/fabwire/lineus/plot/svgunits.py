@@ -38,6 +38,8 @@ def translate(x: float, y: float) -> FloatArray:
     return np.array([[1.0, 0.0, x], [0.0, 1.0, y]])
 
 
+ROOT_FONT_SIZE = 16.0
+"""The font size of the document root, px, for `rem` lengths (a browser's default medium)."""
 EX_PER_EM = 0.5
 """The x-height as a share of the font size, for `ex` lengths (CSS Values 3 §6.1.1: 0.5em when not measured)."""
 
@@ -51,6 +53,10 @@ def length(value: str | None, relative_to: float, *, default: float = 0.0, font_
     try:
         if text[-2:].lower() == "ex":
             text, font_size = f"{text[:-2]}em", font_size * EX_PER_EM
+        elif text[-3:].lower() == "rem":
+            text, font_size = f"{text[:-3]}em", ROOT_FONT_SIZE
+        elif text[-1:] in "qQ" and text[:-1].strip():
+            text = f"{float(text[:-1]) / 4}mm"
         result = se.Length(text).value(ppi=96.0, relative_length=relative_to, font_size=font_size)
         result = float(result)
     except (ValueError, TypeError, AttributeError, ZeroDivisionError, OverflowError):
