@@ -29,6 +29,11 @@ CASES: dict[str, tuple[str, str]] = {
     "filled path with hole evenodd": (doc('<path fill-rule="evenodd" d="M20 20 H180 V180 H20 Z M60 60 H140 V140 '
                                           'H60 Z"/>'), "shapes"),
     "filled path with hole nonzero": (doc('<path d="M20 20 H180 V180 H20 Z M60 60 V140 H140 V60 Z"/>'), "shapes"),
+    "path without a moveto draws nothing": (doc(f'<path d="L 20 20 L 180 180" {S}/><path d="A 5 5 0 0 1 50 50" '
+                                                f'{S}/><rect x="20" y="120" width="60" height="60" {S}/>'), "shapes"),
+    "geometry properties in css": (doc(f'<style>#r {{ height: 120px; x: 40px }} circle {{ r: 30px }}</style>'
+                                       f'<rect id="r" x="10" y="20" width="100" {S}/>'
+                                       f'<circle cx="150" cy="150" r="5" {S} style="cx: 140px"/>'), "css cascade"),
     # -- curves ------------------------------------------------------------------------------------------------
     "curves and arcs": (doc(f'<path d="M20 100 C20 20 100 20 100 100 S180 180 180 100" {S}/>'
                             f'<path d="M20 180 Q60 120 100 180 T180 180" {S}/>'), "curves"),
@@ -186,6 +191,10 @@ CASES: dict[str, tuple[str, str]] = {
     "clip by a self-crossing star": (doc('<clipPath id="c"><path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z"/>'
                                          '</clipPath><rect width="200" height="200" clip-path="url(#c)"/>'),
                                      "clipped fill"),
+    "transform-origin on a clip path": (doc('<clipPath id="c" transform="rotate(45)" transform-origin="100 100">'
+                                            '<rect x="50" y="50" width="100" height="100"/></clipPath>'
+                                            '<rect x="20" y="20" width="160" height="160" clip-path="url(#c)"/>'),
+                                        "transform-origin"),
     "clip evenodd": (doc('<clipPath id="c"><path clip-rule="evenodd" d="M10 10 H190 V190 H10 Z M60 60 H140 V140 '
                          'H60 Z"/></clipPath><rect x="30" y="30" width="140" height="140" clip-path="url(#c)"/>'),
                      "clipped fill"),

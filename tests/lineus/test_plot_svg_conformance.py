@@ -49,23 +49,30 @@ def page() -> Iterator[Page]:
         browser.close()
 
 
+PAD = 2 * TOLERANCE_PX
+"""Pixels around the page in both pictures: a line along the page's edge is drawn just beyond it."""
+
+
 def browser_ink(page: Page, tmp_path: Path, text: str) -> np.ndarray:
+    """Painted pixels of the browser's picture, with PAD unpainted pixels around the page."""
     path = tmp_path / "case.svg"
     path.write_text(text)
     page.goto(path.as_uri())
     grey = Image.open(io.BytesIO(page.screenshot())).convert("L")
-    return np.asarray(grey)[:SIZE, :SIZE] < DARK
+    return np.pad(np.asarray(grey)[:SIZE, :SIZE] < DARK, PAD)
 
 
 def plan_ink(text: str) -> np.ndarray:
-    image = Image.new("L", (SIZE, SIZE), 0)
+    """The plan's lines drawn 2 px wide, dots as 3 px discs, on the same grid as `browser_ink`."""
+    image = Image.new("L", (SIZE + 2 * PAD, SIZE + 2 * PAD), 0)
     draw = ImageDraw.Draw(image)
     for line in parse_svg(text).lines:
-        if len(line) == 1:
-            x, y = line[0]
+        placed = line + PAD
+        if len(placed) == 1:
+            x, y = placed[0]
             draw.ellipse([x - 1.5, y - 1.5, x + 1.5, y + 1.5], fill=255)
         else:
-            draw.line([tuple(p) for p in line.tolist()], fill=255, width=2)
+            draw.line([tuple(p) for p in placed.tolist()], fill=255, width=2)
     return np.asarray(image) > 0
 
 
@@ -76,7 +83,8 @@ def _filter(mask: np.ndarray, kind: type[ImageFilter.MaxFilter] | type[ImageFilt
 
 
 def edge(mask: np.ndarray) -> np.ndarray:
-    """Painted pixels with an unpainted neighbour: the border of fills, all of a thin stroke."""
+    """Painted pixels with an unpainted neighbour: the border of fills, all of a thin stroke (beyond the page is
+    unpainted, so a fill the page cuts has its border along the cut)."""
     return mask & ~_filter(mask, ImageFilter.MinFilter, 3)
 
 

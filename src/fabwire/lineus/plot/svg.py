@@ -45,7 +45,17 @@ from fabwire.lineus.plot.svgpath import (
     rect,
     straight_paths,
 )
-from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, opaque_fill, own_style, paints
+from fabwire.lineus.plot.svgstyle import (
+    GEOMETRY,
+    StyleSheet,
+    inherit,
+    iri,
+    local,
+    number,
+    opaque_fill,
+    own_style,
+    paints,
+)
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
 from fabwire.lineus.plot.svgunits import (
     IDENTITY,
@@ -424,7 +434,8 @@ class _Reader:
         drawing of thousands of paths costs one array pass instead of thousands. Longer paths, curves and
         anything unusual are read one by one where drawn."""
         paths = [el for el in self.root.iter() if local(el.tag) == "path"
-                 and 0 < len(el.get("d") or "") <= READ_AHEAD_CHARS and is_straight(el.get("d") or "")]
+                 and 0 < len(el.get("d") or "") <= READ_AHEAD_CHARS and is_straight(el.get("d") or "")
+                 and (el.get("d") or "").lstrip()[:1] in ("M", "m")]
         if len(paths) < 2:
             return {}
         read = straight_paths([el.get("d") or "" for el in paths])
@@ -741,8 +752,10 @@ class _Reader:
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)
 
+        styled = self._geometry(el)
+
         def get(name: str, relative: float, default: float = 0.0) -> float:
-            return length(el.get(name), relative, default=default, font_size=font)
+            return length(styled.get(name, el.get(name)), relative, default=default, font_size=font)
 
         def radius(name: str, relative: float) -> float | None:
             """rx or ry: None for auto (absent, `auto`, or in error: negative)."""
@@ -751,7 +764,12 @@ class _Reader:
 
         try:
             if tag == "path":
-                path_data(builder, el.get("d") or "")
+                d = styled.get("d", el.get("d") or "")
+                if d.startswith("path("):
+                    d = d[5:].rstrip(")").strip().strip("'\"")
+                if d.strip() and d.lstrip()[0] not in "Mm":
+                    raise PathDataError("it does not start with a moveto")
+                path_data(builder, d)
             elif tag == "rect":
                 rect(builder, get("x", vw), get("y", vh), get("width", vw), get("height", vh),
                      radius("rx", vw), radius("ry", vh))
@@ -772,6 +790,13 @@ class _Reader:
             self.unsupported[f"<{tag}> data with an error{why} is drawn up to the error, as browsers do"] += 1
         self.curved = self.curved or builder.curved
         return builder.subpaths
+
+    def _geometry(self, el: ET.Element) -> dict[str, str]:
+        """Geometry properties a style sheet or the `style` attribute sets on the element (they win over the
+        attributes of the same names)."""
+        if id(el) not in self.sheet.matched and not el.get("style"):
+            return {}
+        return {k: v for k, v in own_style(el, self.sheet).items() if k in GEOMETRY}
 
     def _count(self, points: int) -> None:
         self.points += points
@@ -921,7 +946,8 @@ class _Reader:
         if not (w > 0 and h > 0):
             return
         try:
-            space = transform(attr("patternTransform"))
+            space = about(transform(attr("patternTransform")),
+                          transform_origin(attr("transform-origin"), (0.0, 0.0, vw, vh)))
         except ValueError:
             space = IDENTITY
         if flattens(space):
@@ -1005,7 +1031,7 @@ class _Reader:
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
-        matrix = then(matrix, self.own_transform(clip))
+        matrix = then(matrix, self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip), (0.0, 0.0)))
         key = (id(clip), matrix.tobytes())
         if key in self._clips and not by_box:
             return self._clips[key]

@@ -37,8 +37,11 @@ INHERITED = frozenset({
 })
 NOT_INHERITED = frozenset({"display", "opacity", "clip-path", "mask", "filter", "overflow", "transform",
                            "transform-origin", "transform-box"})
-PROPERTIES = INHERITED | NOT_INHERITED
-PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform"}
+GEOMETRY = frozenset({"x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", "d"})
+"""Geometry properties (SVG 2 §10.2-10.4): a style sheet or `style` attribute may set them; the attributes of
+the same names are read with the shape."""
+PROPERTIES = INHERITED | NOT_INHERITED | GEOMETRY
+PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform"} - GEOMETRY
 """Properties that may be given as attributes too; the `transform` attribute has its own (SVG 1.1) grammar and is
 read apart from the CSS property."""
 INITIAL = {"fill": "black", "stroke": "none", "fill-opacity": "1", "stroke-opacity": "1", "stroke-width": "1",
