@@ -28,6 +28,8 @@ CASES: dict[str, tuple[str, str]] = {
     "relative path": (doc(f'<path d="m20 20 h60 v60 h-60 z m100 0 l40 0 l0 40 z" {S}/>'), "shapes"),
     "filled path with hole evenodd": (doc('<path fill-rule="evenodd" d="M20 20 H180 V180 H20 Z M60 60 H140 V140 '
                                           'H60 Z"/>'), "shapes"),
+    "filled self-crossing star": (doc('<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z"/>'), "open fill"),
+    "filled overlapping subpaths": (doc('<path d="M20 20 H120 V120 H20 Z M80 80 H180 V180 H80 Z"/>'), "open fill"),
     "filled path with hole nonzero": (doc('<path d="M20 20 H180 V180 H20 Z M60 60 V140 H140 V60 Z"/>'), "shapes"),
     "path without a moveto draws nothing": (doc(f'<path d="L 20 20 L 180 180" {S}/><path d="A 5 5 0 0 1 50 50" '
                                                 f'{S}/><rect x="20" y="120" width="60" height="60" {S}/>'), "shapes"),

@@ -337,6 +337,22 @@ def _page_size(width: str | None, height: str | None) -> tuple[float, float] | N
     return (w, h) if w > 0 and h > 0 else None
 
 
+def _length(lines: Polylines) -> float:
+    return float(sum(np.hypot(*np.diff(line, axis=0).T).sum() for line in lines))
+
+
+def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
+    """The border of a fill's area when its closed `rings` cross or overlap (so some of them lie inside the
+    fill, where a browser shows no edge); None when the rings are that border already."""
+    if len(rings) == 1 and shapely.is_simple(shapely.LinearRing(rings[0])):
+        return None
+    area = fill.area
+    border = [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
+              if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
+    drawn = _length(rings)
+    return border if abs(_length(border) - drawn) > 1e-6 * drawn else None
+
+
 def _namespace(el: ET.Element) -> str:
     """An element's namespace (SVG for elements without one; '' for comments)."""
     if not isinstance(el.tag, str):
@@ -866,6 +882,7 @@ class _Reader:
             self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
+        start = len(out)
         for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
@@ -900,6 +917,10 @@ class _Reader:
         closed = [np.vstack([r, r[:1]]) for r in rings]
         rule = style.get("fill-rule", "nonzero").strip()
         own = _Fill(closed, rule)
+        if fill == "solid" and not stroke and len(out) > start:
+            border = _border(own, closed)
+            if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
+                out.replace(out[:start] + border)
         if covers:
             self.hide_under(own)
         if fill == "solid":
