@@ -18,6 +18,10 @@ def area_of_rings(rings: Sequence[FloatArray], rule: str) -> BaseGeometry:
     Non-zero winding is taken ring by ring: a ring wound against the largest one and lying inside the area so far
     cuts a hole, any other ring adds area (exact for shapes without self-overlapping rings).
     """
+    if len(rings) == 1 and len(rings[0]) >= 4:
+        simple = shapely.Polygon(rings[0])
+        if shapely.is_valid(simple):  # one ring that does not cross itself: the common case, read directly
+            return simple
     polygons: list[tuple[float, BaseGeometry]] = []
     for ring in rings:
         if len(ring) < 3:

@@ -346,6 +346,15 @@ def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
     fill, where a browser shows no edge); None when the rings are that border already."""
     if len(rings) == 1 and shapely.is_simple(shapely.LinearRing(rings[0])):
         return None
+    if shapely.is_simple(shapely.MultiLineString(rings)):  # no ring crosses or touches another, nor itself
+        if fill.rule == "evenodd":
+            return None  # nested rings alternate: every ring is a border
+        boxes = np.array([_box(ring) for ring in rings])
+        inside = ((boxes[:, None, 0] >= boxes[None, :, 0]) & (boxes[:, None, 1] >= boxes[None, :, 1])
+                  & (boxes[:, None, 2] <= boxes[None, :, 2]) & (boxes[:, None, 3] <= boxes[None, :, 3]))
+        np.fill_diagonal(inside, False)
+        if not inside.any():
+            return None  # side by side: every ring is a border
     area = fill.area
     border = [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
               if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
@@ -517,9 +526,8 @@ class _Reader:
             inside = np.zeros(0, dtype=bool)
         edges: Polylines = []
         for fill in self.lines.fills:
-            bounds = shapely.bounds(fill.area)
-            if not fill.area.is_empty and (bounds[0] < 0 or bounds[1] < 0 or bounds[2] > width
-                                           or bounds[3] > height):
+            x0, y0, x1, y1 = fill.box
+            if x1 >= x0 and (x0 < 0 or y0 < 0 or x1 > width or y1 > height) and not fill.area.is_empty:
                 edges.extend(cut_edge(fill.area, page)[0])
         if inside.all() and not edges:
             return
