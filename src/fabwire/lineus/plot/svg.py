@@ -94,6 +94,8 @@ USER_LANGUAGES = ("en",)
 SHAPES = frozenset({"path", "rect", "circle", "ellipse", "line", "polyline", "polygon"})
 CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
 UNDRAWABLE = frozenset({"text", "image", "foreignObject"})
+EFFECTS = frozenset({"clip-path", "mask", "filter"})
+MARKERS = frozenset({"marker", "marker-start", "marker-mid", "marker-end"})
 
 FEATURES: tuple[tuple[str, str, str], ...] = (
     # (feature class, source, browser comparison case)
@@ -171,16 +173,16 @@ class _Fill:
 class _Boxes:
     """A growing (n, 4) array of boxes, amortised O(1) per box added."""
 
-    def __init__(self, rows: FloatArray | None = None) -> None:
-        self.array = rows if rows is not None else np.zeros((16, 4))
-        self.count = 0 if rows is None else len(rows)
+    def __init__(self) -> None:
+        self.array = np.zeros((0, 4))
+        self.count = 0
 
     def add(self, boxes: list[list[float]]) -> None:
         if not boxes:
             return
         need = self.count + len(boxes)
         if need > len(self.array):
-            grown = np.zeros((max(need, 2 * len(self.array)), 4))
+            grown = np.zeros((max(need, 2 * len(self.array), 16), 4))
             grown[:self.count] = self.array[:self.count]
             self.array = grown
         self.array[self.count:need] = boxes
@@ -587,9 +589,12 @@ class _Reader:
             matrix = then(matrix, own_matrix)
         if flattens(matrix):
             return  # scaled to a line or a point: nothing of it shows
+        effects = [k for k in own.keys() & EFFECTS if own[k].strip() != "none"]
+        if tag in SHAPES and not effects:
+            self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
+            return
         target = Ink()
-        shaded = _opacity(own) < 1 or any(own.get(k, "none").strip() != "none" for k in ("clip-path", "mask",
-                                                                                       "filter"))
+        shaded = bool(effects) or _opacity(own) < 1
         self._below.append(target)
         self._shaded += shaded
         try:
@@ -628,7 +633,7 @@ class _Reader:
         """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
         model), and earlier fills shrink to what still shows."""
         x0, y0, x1, y1 = fill.box
-        for ink in self._below[:-1]:
+        for ink in self._below:
             if not ink and not ink.fills:
                 continue
             self._occlusion_checks += len(ink) + len(ink.fills)
@@ -880,17 +885,17 @@ class _Reader:
             return
         stroke = paints(style, "stroke")
         fill, pattern = self._fill_kind(style)
-        covers = not self._shaded and len(self._below) > 1 and opaque_fill(style)
+        covers = not self._shaded and bool(self._below) and opaque_fill(style)
         if not (stroke or covers) and fill == "none":
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
         dots = stroke and caps
-        if any(style.get(k, "none").strip() != "none" for k in ("marker", "marker-start", "marker-mid",
-                                                                 "marker-end")):
+        if any(style[k].strip() != "none" for k in style.keys() & MARKERS):
             self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
-        start = len(out)
+        final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
+        start = 0
         for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
@@ -898,7 +903,7 @@ class _Reader:
             if not np.isfinite(pts).all():
                 self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
-            flat = _without_area(pts)
+            flat = (fill != "none" or covers or not stroke) and _without_area(pts)
             if (fill != "none" or covers) and not flat:
                 rings.append(pts)
             if not stroke and (flat or fill != "solid"):
@@ -921,6 +926,7 @@ class _Reader:
             self._count(len(pts))
             out.append(pts)
         if not rings:
+            final.take(out)
             return
         closed = [np.vstack([r, r[:1]]) for r in rings]
         rule = style.get("fill-rule", "nonzero").strip()
@@ -935,6 +941,7 @@ class _Reader:
             out.fills.append(own)
         elif pattern is not None:
             self.pattern(pattern, matrix, closed, rule, viewport, out)
+        final.take(out)
 
     # -- patterns -----------------------------------------------------------------------------------------------
 

@@ -141,8 +141,12 @@ class StyleSheet:
 def own_style(element: ET.Element, sheet: StyleSheet) -> dict[str, str]:
     """The properties `element` sets itself, the cascade applied; `inherit` values are kept for `inherit()`."""
     out = {name: value.strip() for name, value in element.attrib.items() if name in PRESENTATION_ATTRIBUTES}
-    rules = sheet.matched.get(id(element), [])
-    inline = _declarations(element.get("style") or "")
+    rules = sheet.matched.get(id(element))
+    style = element.get("style")
+    if not rules and not style:
+        return out
+    inline = _declarations(style) if style else []
+    rules = rules or []
     for _, _, _, name, value in sorted((r for r in rules if not r[0]), key=lambda r: (r[1], r[2])):
         out[name] = value
     out.update((name, value) for name, value, important in inline if not important)
