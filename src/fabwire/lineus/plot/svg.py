@@ -170,11 +170,16 @@ class _Fill:
         return self._area
 
 
+_NO_BOXES = np.zeros((0, 4))
+
+
 class _Boxes:
     """A growing (n, 4) array of boxes, amortised O(1) per box added."""
 
+    __slots__ = ("array", "count")
+
     def __init__(self) -> None:
-        self.array = np.zeros((0, 4))
+        self.array = _NO_BOXES
         self.count = 0
 
     def add(self, boxes: list[list[float]]) -> None:
