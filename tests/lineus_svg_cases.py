@@ -193,6 +193,10 @@ CASES: dict[str, tuple[str, str]] = {
     "clip by a self-crossing star": (doc('<clipPath id="c"><path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z"/>'
                                          '</clipPath><rect width="200" height="200" clip-path="url(#c)"/>'),
                                      "clipped fill"),
+    "transform-origin center on a clip path": (doc('<clipPath id="c" transform="rotate(36)" '
+                                                   'transform-origin="center"><rect x="50" y="50" width="100" '
+                                                   'height="60"/></clipPath><rect width="200" height="200" '
+                                                   'clip-path="url(#c)"/>'), "transform-origin"),
     "transform-origin on a clip path": (doc('<clipPath id="c" transform="rotate(45)" transform-origin="100 100">'
                                             '<rect x="50" y="50" width="100" height="100"/></clipPath>'
                                             '<rect x="20" y="20" width="160" height="160" clip-path="url(#c)"/>'),

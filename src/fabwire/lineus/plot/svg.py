@@ -306,6 +306,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         style = inherit({}, own)
         if _opacity(style) > 0:  # `display` on the root of a standalone document is ignored, as in browsers
             inner = (box[2], box[3]) if box else (width, height)
+            reader.user_viewport = inner
             placed = then(matrix, reader.placement(root, own, style, inner))
             drawn = Ink()
             reader.below(drawn)
@@ -424,6 +425,8 @@ class _Reader:
         self._shaded = 0
         """Enclosing elements that make a fill's hiding unsure (group opacity, clip paths, masks, filters)."""
         self._occlusion_checks = 0
+        self.user_viewport = (0.0, 0.0)
+        """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
 
     # -- limits -----------------------------------------------------------------------------------------------
 
@@ -1072,7 +1075,8 @@ class _Reader:
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
-        matrix = then(matrix, self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip), (0.0, 0.0)))
+        matrix = then(matrix, self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip),
+                                             self.user_viewport))
         key = (id(clip), matrix.tobytes())
         if key in self._clips and not by_box:
             return self._clips[key]
