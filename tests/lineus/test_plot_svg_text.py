@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clitools import cli_env, run_cli
+from fabwire.errors import InputError
 from fabwire.lineus.plot import parse_svg
 from fabwire.lineus.plot.geometry import dashed
 from fabwire.lineus.plot.svgtext import CAP_HEIGHT_PER_EM, FONT_FAMILIES, hershey_face
@@ -102,3 +103,20 @@ def test_svg_text_option_of_the_cli(tmp_path: Path) -> None:
     wrong = run_cli("lineus", "preview", str(drawing), "--svg-text", "glyphs", env=cli_env(tmp_path))
     assert wrong.returncode != 0
     assert "Traceback" not in wrong.stderr
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.text(alphabet="0123456789.-+ ,%empxdgrtunscalerotaeXY()!important;:{}>#.*", max_size=40),
+       st.sampled_from(["stroke-dasharray", "stroke-dashoffset", "transform", "transform-origin", "font-size",
+                        "x", "r", "fill", "clip-path"]))
+def test_any_css_value_reads_or_is_refused_cleanly(value: str, name: str) -> None:
+    escaped = value.replace("<", "").replace("&", "")
+    text = (f'{HEAD}<style>g > rect {{ {name}: {escaped} }}</style><g><rect x="10" y="10" width="50" height="50" '
+            f'stroke="black" style="{name}: {escaped.replace(chr(34), "")}"/><text x="5" y="90">{escaped}</text>'
+            '</g></svg>')
+    try:
+        drawing = parse_svg(text)
+    except InputError:
+        return
+    for line in drawing.lines:
+        assert np.isfinite(line).all()
