@@ -92,13 +92,19 @@ def test_planned_strokes_match_the_file_geometry(name: str) -> None:
 
 
 def test_text_converted_to_paths_keeps_outlines_and_reports_live_text() -> None:
-    drawing = parse_svg(DATA / "text_paths.svg")
+    drawing = parse_svg(DATA / "text_paths.svg", text="outline")
     assert drawing.skipped == {"text": 1}
     assert len(drawing.lines) == 4  # L, the O's two contours, S
-    plan = plan_file(DATA / "text_paths.svg")
-    assert any("text" in note for note in plan.notes)
     for line in drawing.lines:  # every contour closes
         assert np.allclose(line[0], line[-1])
+    # By default the live text is drawn in single-stroke letters below the outlines, and named.
+    drawn = parse_svg(DATA / "text_paths.svg")
+    assert drawn.skipped == {}
+    letters = drawn.lines[4:]
+    assert len(letters) > 20
+    assert all(line[:, 1].max() <= 58.5 and line[:, 0].min() >= 9.5 for line in letters)
+    plan = plan_file(DATA / "text_paths.svg")
+    assert any("single-stroke" in note for note in plan.notes)
 
 
 def test_curves_are_flattened_within_tolerance() -> None:
@@ -130,8 +136,12 @@ def test_unreadable_svg_is_an_input_error(tmp_path: Path, content: str, message:
 
 
 def test_empty_and_missing_files_are_input_errors(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match=r"empty.*text"):
+    with pytest.raises(InputError, match=r"empty.*image"):
         plan_file(DATA / "empty.svg")
+    text_only = tmp_path / "text.svg"
+    text_only.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100">'
+                         '<text x="10" y="50">only text</text></svg>')
+    assert plan_file(text_only).strokes  # drawn in single-stroke letters
     with pytest.raises(InputError, match="no such file"):
         plan_file(tmp_path / "missing.svg")
     pdf = tmp_path / "drawing.pdf"

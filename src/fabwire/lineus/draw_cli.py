@@ -36,6 +36,7 @@ from fabwire.lineus.plot import (
     read_drawing,
 )
 from fabwire.lineus.plot.intake import STDIN
+from fabwire.lineus.plot.svgtext import TEXT_MODES
 from fabwire.lineus.plot.text import DEFAULT_FONT
 from fabwire.lineus.render import DEFAULT_DPI, dpi_scale, write_drawing
 
@@ -103,10 +104,17 @@ PEN_Z = click.option("--pen-z", type=FiniteRange(0, 499), default=0.0, show_defa
                      help="Pen-down height; about 300 presses less and smears less where the pen lands.")
 
 
+SVG_TEXT = click.option("--svg-text", type=click.Choice(TEXT_MODES), default=TEXT_MODES[0], show_default=True,
+                        expose_value=False, callback=lambda ctx, _, value: ctx.meta.__setitem__("svg_text", value),
+                        help="SVG <text>: draw it in single-stroke letters, or leave it out (outline: convert text "
+                             "to paths first).")
+
+
 def _options(fit: bool | None, margin: float, rotate: float | None, clip: bool, no_optimize: bool,
              optimize_time: float, full_area: bool = False) -> PlanOptions:
+    svg_text = click.get_current_context().meta.get("svg_text", TEXT_MODES[0])
     return PlanOptions(fit=fit, margin_mm=margin, rotate_deg=rotate or 0.0, rotate_auto=rotate is None, clip=clip,
-                       optimize=not no_optimize, time_budget=optimize_time, full_area=full_area)
+                       optimize=not no_optimize, time_budget=optimize_time, full_area=full_area, svg_text=svg_text)
 
 
 def figures_text(plan: Plan) -> str:
@@ -314,12 +322,14 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
 
 def _placement_key(options: PlanOptions) -> str:
     """The placement choices a resume must match beyond those `_state_key` lists."""
-    return f"auto={options.rotate_auto}|full={options.full_area}"
+    text = f"|text={options.svg_text}" if options.svg_text != TEXT_MODES[0] else ""
+    return f"auto={options.rotate_auto}|full={options.full_area}{text}"
 
 
 @click.command("draw")
 @click.argument("file", type=click.Path(path_type=Path, dir_okay=False, allow_dash=True))
 @placement_options
+@SVG_TEXT
 @click.option("--dry-run", is_flag=True, help="Plan, preview and estimate only; no device needed.")
 @click.option("--preview", "preview", type=click.Path(path_type=Path, dir_okay=False),
               help="Also write a picture of the plan (.svg or .png).")
@@ -336,7 +346,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
     """Draw an SVG, SVGZ or Line-us G-code FILE ('-' reads it from standard input)."""
     _one_start(resume, restart)
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
-    drawing = read_drawing(file)
+    drawing = read_drawing(file, svg_text=options.svg_text)
     key = _state_key(drawing.digest, options, _placement_key(options))
     existing = DrawProgress.load(state or state_dir() / f"draw-{key[:24]}.json", key) if resume else None
     plan = _plan_from_state(existing) if existing is not None else plan_drawing(drawing, options)
@@ -399,6 +409,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
               help="File to write: a picture (.svg, .png) or the plan as Line-us G-code (.gcode) for "
                    "`files save` and `draw`; repeat for several.")
 @placement_options
+@SVG_TEXT
 @click.option("--json", "json_output", is_flag=True, help="Print the plan figures as JSON.")
 @DPI
 @PEN_Z

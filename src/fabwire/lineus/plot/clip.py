@@ -18,6 +18,10 @@ def area_of_rings(rings: Sequence[FloatArray], rule: str) -> BaseGeometry:
     Non-zero winding is taken ring by ring: a ring wound against the largest one and lying inside the area so far
     cuts a hole, any other ring adds area (exact for shapes without self-overlapping rings).
     """
+    if len(rings) == 1 and len(rings[0]) >= 4:
+        simple = shapely.Polygon(rings[0])
+        if shapely.is_valid(simple):  # one ring that does not cross itself: the common case, read directly
+            return simple
     polygons: list[tuple[float, BaseGeometry]] = []
     for ring in rings:
         if len(ring) < 3:
@@ -26,7 +30,11 @@ def area_of_rings(rings: Sequence[FloatArray], rule: str) -> BaseGeometry:
         signed = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
         if signed == 0:
             continue
-        polygons.append((signed, shapely.make_valid(shapely.Polygon(ring))))
+        polygon = shapely.Polygon(ring)
+        # A self-crossing ring: by non-zero winding all it encloses is filled ("structure"); even-odd keeps the
+        # pieces with odd crossings (the default "linework" split).
+        polygons.append((signed, shapely.make_valid(polygon, method="structure") if rule != "evenodd"
+                         else shapely.make_valid(polygon)))
     region: BaseGeometry = shapely.Polygon()
     if not polygons:
         return region
@@ -75,3 +83,14 @@ def cut(lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
             kept.extend(_parts(shapely.intersection(geometry, region)))
             hidden.extend(_parts(shapely.difference(geometry, region)))
     return kept, hidden
+
+
+def cut_edge(area: BaseGeometry, region: BaseGeometry) -> tuple[Polylines, BaseGeometry]:
+    """Where `region` cuts a filled `area`: (the edges of the cut, which a browser shows as the new border of the
+    fill, and the part of the area that remains)."""
+    if area.is_empty or shapely.covers(region, area):
+        return [], area
+    if shapely.disjoint(region, area):
+        return [], shapely.Polygon()
+    edges = _parts(shapely.intersection(region.boundary, area))
+    return edges, shapely.intersection(area, region)

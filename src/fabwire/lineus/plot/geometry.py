@@ -73,3 +73,39 @@ def compose(second: FloatArray, first: FloatArray) -> FloatArray:
     out: FloatArray = second[:, :2] @ first
     out[:, 2] += second[:, 2]
     return out
+
+
+MAX_DASHES = 1_000_000
+"""Dashes one line may be cut into at most (a tiny dash array over a long line is drawn solid beyond this)."""
+
+
+def dashed(line: FloatArray, pattern: Sequence[float], offset: float = 0.0) -> Polylines:
+    """The dashes of `line` for a dash `pattern` (alternate dash and gap lengths, at least one positive, none
+    negative; an odd count is repeated, SVG 1.1 §11.4) started `offset` along the pattern. A dash of length 0 comes
+    out as a single point. The line itself (one dash) when the pattern would cut it into more than MAX_DASHES."""
+    values = list(pattern) * (2 if len(pattern) % 2 else 1)
+    period = float(sum(values))
+    if len(line) < 2 or not period > 0:
+        return [line]
+    steps = np.hypot(*np.diff(line, axis=0).T)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    total = float(along[-1])
+    if total / period * len(values) > MAX_DASHES:
+        return [line]
+    bounds = np.cumsum([0.0, *values])
+    start = -(offset % period)
+    cycles = np.arange(start, total, period)
+    dash_starts = (cycles[:, None] + bounds[:-1:2][None, :]).ravel()
+    dash_ends = (cycles[:, None] + bounds[1::2][None, :]).ravel()
+    out: Polylines = []
+    for a, b in zip(dash_starts.tolist(), dash_ends.tolist(), strict=True):
+        a, b = max(a, 0.0), min(b, total)
+        if b < a:
+            continue
+        inner = np.flatnonzero((along > a) & (along < b))
+        points = [np.array([np.interp(a, along, line[:, 0]), np.interp(a, along, line[:, 1])])]
+        points.extend(line[inner])
+        if b > a:
+            points.append(np.array([np.interp(b, along, line[:, 0]), np.interp(b, along, line[:, 1])]))
+        out.append(np.array(points))
+    return out

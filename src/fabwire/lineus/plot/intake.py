@@ -50,12 +50,14 @@ class Drawing:
     """Chord tolerance the curves were flattened with, machine units at real size."""
     digest: str = ""
     """SHA-256 of the bytes as given (before decompression)."""
+    svg_text: str = "hershey"
+    """How SVG `<text>` was read: 'hershey' (single-stroke letters) or 'outline' (left out, with a note)."""
 
     def reflattened(self, tolerance: float) -> Drawing:
         """The same SVG with its curves flattened to `tolerance` machine units at real size."""
         if self.kind != "svg":
             return self
-        return _svg_drawing(self.name, self.data, self.digest, tolerance)
+        return _svg_drawing(self.name, self.data, self.digest, tolerance, self.svg_text)
 
 
 def _read_limited(read: Callable[[int], bytes], refusal: str) -> bytes:
@@ -108,9 +110,9 @@ def _kind(name: str, data: bytes) -> str:
     raise InputError(f"{name}: {what}; give an .svg, .svgz or Line-us .gcode drawing")
 
 
-def _svg_drawing(name: str, data: bytes, digest: str, tolerance: float) -> Drawing:
+def _svg_drawing(name: str, data: bytes, digest: str, tolerance: float, svg_text: str) -> Drawing:
     try:
-        drawing = parse_svg(data, tolerance=tolerance / SVG_UNITS_PER_PX)
+        drawing = parse_svg(data, tolerance=tolerance / SVG_UNITS_PER_PX, text=svg_text)
     except InputError as exc:
         raise InputError(str(exc).replace("SVG data", name, 1)) from exc
     notes = [f"left out {count} {tag} element(s): convert them to paths to draw them"
@@ -118,28 +120,28 @@ def _svg_drawing(name: str, data: bytes, digest: str, tolerance: float) -> Drawi
     notes.extend(drawing.notes)
     m = scale_translate(SVG_UNITS_PER_PX, PAGE_ORIGIN[0], PAGE_ORIGIN[1], flip_y=True)
     return Drawing(affine(drawing.lines, m), "svg", name, tuple(notes), affine(drawing.hidden, m),
-                   drawing.empty_reason, data, drawing.curved, tolerance, digest)
+                   drawing.empty_reason, data, drawing.curved, tolerance, digest, svg_text)
 
 
-def read_drawing(source: str | Path) -> Drawing:
+def read_drawing(source: str | Path, *, svg_text: str = "hershey") -> Drawing:
     """Read a drawing file, or standard input for '-'.
 
     SVG comes out at real size (96 px per inch) with its page's top-left corner at the app drawing area's corner
-    (650, 1000), curves within FLATTEN_TOLERANCE; G-code is already in machine units. InputError for unreadable,
-    unknown or empty drawings.
+    (650, 1000), curves within FLATTEN_TOLERANCE, its `<text>` as `svg_text` says (see parse_svg); G-code is
+    already in machine units. InputError for unreadable, unknown or empty drawings.
     """
     name, raw = _read_bytes(source)
-    return drawing_from_bytes(name, raw)
+    return drawing_from_bytes(name, raw, svg_text=svg_text)
 
 
-def drawing_from_bytes(name: str, raw: bytes) -> Drawing:
+def drawing_from_bytes(name: str, raw: bytes, *, svg_text: str = "hershey") -> Drawing:
     """`read_drawing` for bytes already in memory; `name` (its file name) picks the type and names it in errors."""
     if len(raw) > MAX_INPUT:
         raise InputError(f"{name}: larger than {MAX_INPUT >> 20} MB; refusing to read it")
     digest = hashlib.sha256(raw).hexdigest()
     data = _gunzip(name, raw) if raw[:2] == b"\x1f\x8b" else raw
     if _kind(name, data) == "svg":
-        drawing = _svg_drawing(name, data, digest, FLATTEN_TOLERANCE)
+        drawing = _svg_drawing(name, data, digest, FLATTEN_TOLERANCE, svg_text)
     else:
         try:
             text = data.decode("utf-8-sig")

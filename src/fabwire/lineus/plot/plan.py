@@ -167,6 +167,8 @@ class PlanOptions:
     """Seconds the ordering may spend improving on greedy."""
     resolution: float = RESOLUTION
     motion: MotionModel = field(default_factory=MotionModel)
+    svg_text: str = "hershey"
+    """SVG `<text>`: 'hershey' draws it in single-stroke letters, 'outline' leaves it out with a note."""
 
 
 def file_digest(path: str | Path) -> str:
@@ -273,7 +275,7 @@ def plan_drawing(drawing: Drawing, options: PlanOptions = PlanOptions()) -> Plan
 
 def plan_file(path: str | Path, options: PlanOptions = PlanOptions()) -> Plan:
     """Plan an SVG, SVGZ or Line-us G-code drawing from a file, or from standard input for '-'."""
-    return plan_drawing(read_drawing(path), options)
+    return plan_drawing(read_drawing(path, svg_text=options.svg_text), options)
 
 
 LEGIBLE_CAP_MM = 2.0

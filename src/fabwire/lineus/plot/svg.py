@@ -1,21 +1,23 @@
-"""SVG documents to the pen lines a browser shows: every visible shape's outline with its transforms, viewports
-and clip paths applied, curves flattened to a chord tolerance. Output is in CSS px of the page (y down).
+"""SVG documents to the pen lines a browser shows: every visible stroke along its path (dashed as drawn), every
+solid fill along the border of the part a browser shows, pattern fills as their own lines inside the shape, text
+in single-stroke letters; transforms, viewports and clip paths applied, curves flattened to a chord tolerance.
+Output is in CSS px of the page (y down).
 
-Rendering follows SVG 1.1 / SVG 2 as browsers do: `<symbol>`, `<defs>`, `<clipPath>` and the like are drawn only
-through `<use>` or as clips (§5.5, §5.6); `<use width height>` of a symbol or svg is a new viewport its viewBox
-maps onto (§7.8); `display="none"`, `visibility="hidden"` and `opacity="0"` hide (§6, §14.5); a lone moveto is
-never stroked, and a zero-length subpath only with round or square caps, as a dot (SVG 2 §13.6); clip paths cut
-the geometry (§14.3). A standalone document shows no more than its root's box when that has a definite size,
-so lines beyond it are cut away. Geometry attributes follow the browsers' error handling (see svgunits): an
-attribute in error is ignored, a size of zero shows nothing, a transform that flattens the plane hides. What
-cannot be honoured (masks, markers, text, CSS transforms) is named in `notes`, never drawn otherwise.
+What a pen draws for a filled shape is the outline of what a browser shows of it: a fill cut by a clip path or a
+viewport is outlined along the cut too, an open subpath is closed for its fill, and a fill the colour of the paper
+draws nothing (so matplotlib's white figure background neither frames the plot nor drives fitting). Shapes
+painted over others do not hide what lies under them (a pen cannot unpaint): that, masks, markers, filters and
+gradients' colours are what the plan does not show as a browser does, and each is named in `notes`.
+
+FEATURES below lists every class of SVG the reader renders as a browser does, with its source; each row names the
+case of the browser comparison test (tests/lineus/test_plot_svg_conformance.py) that draws it in Chromium and
+compares the ink with the plan.
 """
 
 from __future__ import annotations
 
 import io
 import math
-import re
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator
@@ -27,8 +29,8 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from fabwire.errors import InputError, excerpt
-from fabwire.lineus.plot.clip import area_of_rings, cut
-from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine
+from fabwire.lineus.plot.clip import area_of_rings, cut, cut_edge
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dashed
 from fabwire.lineus.plot.geometry import compose as then
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
@@ -43,15 +45,29 @@ from fabwire.lineus.plot.svgpath import (
     rect,
     straight_paths,
 )
-from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, iri, local, number, own_style, paints
+from fabwire.lineus.plot.svgstyle import (
+    GEOMETRY,
+    StyleSheet,
+    inherit,
+    iri,
+    local,
+    number,
+    opaque_fill,
+    own_style,
+    paints,
+)
+from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
 from fabwire.lineus.plot.svgunits import (
     IDENTITY,
+    about,
     beyond_single,
+    css_transform,
     flattens,
     length,
     read_view_box,
     size_is_zero,
     transform,
+    transform_origin,
     translate,
     viewport_matrix,
 )
@@ -66,21 +82,56 @@ MAX_POINTS = 20_000_000
 """Points in one drawing: days of drawing for a Line-us, and about 320 MB of coordinates."""
 MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
+MAX_PATTERN_TILES = 20_000
+"""Pattern tiles one fill may repeat at most; a finer pattern is drawn as the shape's outline, with a note."""
+MAX_OCCLUSION_CHECKS = 50_000_000
+"""Earlier lines that opaque fills are checked against at most; beyond, later fills no longer hide lines."""
 READ_AHEAD_CHARS = 100_000
 """Path data up to this length is read ahead with all the others; longer data is read on its own, in place."""
-
-_CSS_TRANSFORM = re.compile(r"(?:^|;)\s*transform\s*:")
+USER_LANGUAGES = ("en",)
+"""The reader's languages for `systemLanguage` (a browser's default English locale), primary subtags."""
 
 SHAPES = frozenset({"path", "rect", "circle", "ellipse", "line", "polyline", "polygon"})
 CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
 UNDRAWABLE = frozenset({"text", "image", "foreignObject"})
+EFFECTS = frozenset({"clip-path", "mask", "filter"})
+MARKERS = frozenset({"marker", "marker-start", "marker-mid", "marker-end"})
+
+FEATURES: tuple[tuple[str, str, str], ...] = (
+    # (feature class, source, browser comparison case)
+    ("basic shapes and path data", "SVG 1.1 §8, §9", "shapes"),
+    ("arcs and curves flattened within the tolerance", "SVG 1.1 §8.3, F.6", "curves and arcs"),
+    ("rect rx/ry auto, clamped, negative in error", "SVG 2 §10.2", "rect rx auto"),
+    ("transform attribute lists", "SVG 1.1 §7.6", "nested transforms"),
+    ("CSS transform property with units", "CSS Transforms 1 §13", "css transform"),
+    ("transform-origin, keywords and percentages", "CSS Transforms 1 §7", "transform-origin"),
+    ("viewBox and preserveAspectRatio", "SVG 1.1 §7.7, §7.8", "viewbox aspect"),
+    ("nested svg viewports clip unless overflow is visible", "SVG 1.1 §7.9, §14.3.3", "nested svg clip"),
+    ("use of symbol and svg, x y kept", "SVG 1.1 §5.6, §5.8.4", "use of svg x y"),
+    ("use reference cycles leave out the looping reference", "SVG 2 §5.6.3", "use cycle"),
+    ("style sheets: combinators, specificity, !important", "CSS Cascade 4 §6, Selectors 3", "css cascade"),
+    ("presentation attributes below style sheets", "SVG 2 §6.6", "presentation attributes"),
+    ("inherit and inherited properties", "CSS Cascade 4 §7", "inherit"),
+    ("em and ex from the inherited font size", "CSS Values 3 §6.1", "em units"),
+    ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
+    ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
+    ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
+    ("fill cut by a clip path outlined along the cut", "SVG 1.1 §14.3", "clipped fill"),
+    ("clip-path on the root svg", "SVG 1.1 §14.3.5", "root clip-path"),
+    ("clip path cycles leave out the looping reference", "SVG 1.1 §14.3.5", "clip cycle"),
+    ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
+    ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
+    ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
+    ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
+    ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
+)
 
 
 @dataclass
 class SvgDrawing:
     lines: Polylines
     skipped: dict[str, int] = field(default_factory=dict)
-    """Visible elements that hold nothing a pen can draw (text, images), by tag."""
+    """Visible elements that hold nothing a pen can draw (images; text with `text="outline"`), by tag."""
     notes: list[str] = field(default_factory=list)
     """What the file shows that the plan leaves out or draws differently, one sentence each."""
     hidden: Polylines = field(default_factory=list)
@@ -93,6 +144,105 @@ class SvgDrawing:
     """The page's width and height, px."""
     empty_reason: str = ""
     """Why a browser shows nothing of the whole file, when that is known before drawing (a viewport of size 0)."""
+
+
+def _box(points: FloatArray) -> list[float]:
+    return [*points.min(axis=0).tolist(), *points.max(axis=0).tolist()]
+
+
+class _Fill:
+    """The area a solid fill covers, in output units, from its closed rings by its fill rule (made on demand)."""
+
+    __slots__ = ("_area", "box", "rings", "rule")
+
+    def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None) -> None:
+        self.rings = rings
+        self.rule = rule
+        self._area = area
+        self.box = _box(np.concatenate(rings)) if rings else (
+            shapely.bounds(area).tolist() if area is not None and not area.is_empty else [0.0, 0.0, -1.0, -1.0])
+        """(x0, y0, x1, y1); an empty fill's box holds nothing."""
+
+    @property
+    def area(self) -> BaseGeometry:
+        if self._area is None:
+            self._area = area_of_rings(self.rings, self.rule)
+        return self._area
+
+
+_NO_BOXES = np.zeros((0, 4))
+
+
+class _Boxes:
+    """A growing (n, 4) array of boxes, amortised O(1) per box added."""
+
+    __slots__ = ("array", "count")
+
+    def __init__(self) -> None:
+        self.array = _NO_BOXES
+        self.count = 0
+
+    def add(self, boxes: list[list[float]]) -> None:
+        if not boxes:
+            return
+        need = self.count + len(boxes)
+        if need > len(self.array):
+            grown = np.zeros((max(need, 2 * len(self.array), 16), 4))
+            grown[:self.count] = self.array[:self.count]
+            self.array = grown
+        self.array[self.count:need] = boxes
+        self.count = need
+
+    def view(self) -> FloatArray:
+        return self.array[:self.count]
+
+
+class Ink(list[FloatArray]):
+    """Pen lines, with the solid fills they outline (so that a cut can outline a fill along the cut), and the
+    boxes of both for finding what lies under a later fill."""
+
+    def __init__(self, lines: Polylines | None = None) -> None:
+        super().__init__(lines or [])
+        self.fills: list[_Fill] = []
+        self._boxes = _Boxes()
+        self._fill_boxes = _Boxes()
+
+    def take(self, other: Ink) -> None:
+        self.extend(other)
+        self.fills.extend(other.fills)
+
+    def boxes(self) -> FloatArray:
+        """(x0, y0, x1, y1) of every line (lines are never changed in place, only added or replaced)."""
+        if self._boxes.count > len(self):
+            self._boxes = _Boxes()
+        self._boxes.add([_box(line) for line in self[self._boxes.count:]])
+        return self._boxes.view()
+
+    def fill_boxes(self) -> FloatArray:
+        """(x0, y0, x1, y1) of every fill (fills are only added, or replaced one by one with `set_fill`)."""
+        if self._fill_boxes.count > len(self.fills):
+            self._fill_boxes = _Boxes()
+        self._fill_boxes.add([fill.box for fill in self.fills[self._fill_boxes.count:]])
+        return self._fill_boxes.view()
+
+    def set_fill(self, index: int, fill: _Fill) -> None:
+        self.fills[index] = fill
+        if index < self._fill_boxes.count:
+            self._fill_boxes.array[index] = fill.box
+
+    def replace(self, lines: Polylines) -> None:
+        self[:] = lines
+        self._boxes = _Boxes()
+
+    def drop(self, indices: list[int]) -> None:
+        """Take out the lines at `indices`, moving the last ones into their places (order is not kept)."""
+        boxes = self.boxes()
+        for k in sorted(indices, reverse=True):
+            last = len(self) - 1
+            self[k] = self[last]
+            boxes[k] = boxes[last]
+            self.pop()
+            self._boxes.count -= 1
 
 
 def _read_root(source: str | Path | bytes) -> tuple[ET.Element, str]:
@@ -119,14 +269,17 @@ def _read_root(source: str | Path | bytes) -> tuple[ET.Element, str]:
     return root, name
 
 
-def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None) -> SvgDrawing:
+def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, text: str = "hershey") -> SvgDrawing:
     """Read an SVG file, SVG bytes or text starting with '<' into the pen lines a browser would show.
 
-    `tolerance` is the largest chord error in page px (default: a share of the page diagonal). Raises
-    InputError for unreadable files, `<use>` cycles, and expansions past MAX_USE_COPIES or MAX_POINTS.
+    `tolerance` is the largest chord error in page px (default: a share of the page diagonal). `text` is
+    'hershey' (draw `<text>` in single-stroke letters) or 'outline' (leave text out, counted in `skipped`).
+    Raises InputError for unreadable files and expansions past MAX_USE_COPIES or MAX_POINTS.
     """
     if tolerance is not None and not tolerance > 0:
         raise InputError(f"curve tolerance must be positive, got {tolerance}")
+    if text not in TEXT_MODES:
+        raise InputError(f"SVG text mode must be one of {', '.join(TEXT_MODES)}, got {text!r}")
     root, name = _read_root(source)
     vb = read_view_box(root.get("viewBox"))
     for which in ("width", "height"):
@@ -142,24 +295,31 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None) -> 
         width, height = (box[2], box[3]) if box else (1000.0, 1000.0)
     if tolerance is None:
         tolerance = RELATIVE_TOLERANCE * math.hypot(width, height)
-    reader = _Reader(root, name, tolerance)
+    reader = _Reader(root, name, tolerance, text)
     if vb.error:
         reader.unsupported[f"the viewBox {excerpt(root.get('viewBox', ''), 60)} is in error ({vb.error}): ignored, as "
                            "browsers do"] += 1
     try:
         reader.check_expansion()
         matrix = viewport_matrix(box, 0.0, 0.0, width, height, root.get("preserveAspectRatio"))
-        style = inherit({}, own_style(root, reader.sheet))
-        if style.get("display") != "none" and _opacity(style) > 0:
-            reader.children(root, style, then(matrix, reader.own_transform(root)),
-                            (box[2], box[3]) if box else (width, height), reader.lines, 0, ())
+        own = own_style(root, reader.sheet)
+        style = inherit({}, own)
+        if _opacity(style) > 0:  # `display` on the root of a standalone document is ignored, as in browsers
+            inner = (box[2], box[3]) if box else (width, height)
+            reader.user_viewport = inner
+            placed = then(matrix, reader.placement(root, own, style, inner))
+            drawn = Ink()
+            reader.below(drawn)
+            reader.children(root, style, placed, inner, drawn, 0, ())
+            reader.clip(root, own, placed, drawn, ())
+            reader.lines.take(drawn)
         if page:  # a standalone document shows its root's box only, whatever its overflow
             reader.clip_to_page(width, height)
     except RecursionError as exc:
         raise InputError(f"{name}: elements nested too deeply to read") from exc
     except (ValueError, TypeError, ZeroDivisionError, shapely.errors.ShapelyError) as exc:
         raise InputError(f"{name}: malformed SVG geometry ({exc})") from exc
-    return SvgDrawing(reader.lines, dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
+    return SvgDrawing(list(reader.lines), dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
                       tolerance, (width, height))
 
 
@@ -185,17 +345,73 @@ def _page_size(width: str | None, height: str | None) -> tuple[float, float] | N
     return (w, h) if w > 0 and h > 0 else None
 
 
+def _length(lines: Polylines) -> float:
+    return float(sum(np.hypot(*np.diff(line, axis=0).T).sum() for line in lines))
+
+
+def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
+    """The border of a fill's area when its closed `rings` cross or overlap (so some of them lie inside the
+    fill, where a browser shows no edge); None when the rings are that border already."""
+    if len(rings) == 1 and shapely.is_simple(shapely.LinearRing(rings[0])):
+        return None
+    if shapely.is_simple(shapely.MultiLineString(rings)):  # no ring crosses or touches another, nor itself
+        if fill.rule == "evenodd":
+            return None  # nested rings alternate: every ring is a border
+        boxes = np.array([_box(ring) for ring in rings])
+        inside = ((boxes[:, None, 0] >= boxes[None, :, 0]) & (boxes[:, None, 1] >= boxes[None, :, 1])
+                  & (boxes[:, None, 2] <= boxes[None, :, 2]) & (boxes[:, None, 3] <= boxes[None, :, 3]))
+        np.fill_diagonal(inside, False)
+        if not inside.any():
+            return None  # side by side: every ring is a border
+    area = fill.area
+    border = [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
+              if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
+    drawn = _length(rings)
+    return border if abs(_length(border) - drawn) > 1e-6 * drawn else None
+
+
+def _namespace(el: ET.Element) -> str:
+    """An element's namespace (SVG for elements without one; '' for comments)."""
+    if not isinstance(el.tag, str):
+        return ""
+    return el.tag[1:].split("}")[0] if el.tag.startswith("{") else SVG_NS
+
+
+def _invert(matrix: FloatArray) -> FloatArray:
+    return np.asarray(np.linalg.inv(np.vstack([matrix, [0.0, 0.0, 1.0]]))[:2], dtype=float)
+
+
+def _font_size(style: dict[str, str]) -> float:
+    return number(style.get("font-size"), 16.0)
+
+
+def _language_matches(value: str) -> bool:
+    """`systemLanguage`: true when one of its comma-separated tags has a user language as its primary subtag
+    (SVG 1.1 §5.8.5; an empty value is false)."""
+    tags = [t.strip().lower() for t in value.split(",") if t.strip()]
+    return any(t.split("-")[0] in USER_LANGUAGES for t in tags)
+
+
+def conditions_hold(el: ET.Element) -> bool:
+    """Conditional processing (SVG 2 §5.8): `systemLanguage` matches a user language and `requiredExtensions`
+    names none (no extension is supported; an empty list is false). `requiredFeatures` is always true, as in
+    SVG 2 and browsers."""
+    language = el.get("systemLanguage")
+    if language is not None and not _language_matches(language):
+        return False
+    return el.get("requiredExtensions") is None
+
+
 class _Reader:
-    def __init__(self, root: ET.Element, name: str, tolerance: float) -> None:
+    def __init__(self, root: ET.Element, name: str, tolerance: float, text: str) -> None:
         self.root = root
         self.name = name
         self.tolerance = tolerance
+        self.text_mode = text
         self.ids = {el.get("id"): el for el in root.iter() if el.get("id")}
-        self.sheet = StyleSheet()
-        for el in root.iter():
-            if local(el.tag) == "style" and el.text:
-                self.sheet.add(el.text)
-        self.lines: Polylines = []
+        self.parents = {child: el for el in root.iter() for child in el}
+        self.sheet = StyleSheet.of(root)
+        self.lines = Ink()
         self.hidden: Polylines = []
         self.skipped: Counter[str] = Counter()
         self.unsupported: Counter[str] = Counter()
@@ -203,11 +419,19 @@ class _Reader:
         self.points = 0
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
         self._read_ahead = self._read_straight_paths()
+        self._patterns: tuple[str, ...] = ()
+        self._below: list[Ink] = []
+        """What is painted so far, innermost last: opaque fills hide the parts of these lines under them."""
+        self._shaded = 0
+        """Enclosing elements that make a fill's hiding unsure (group opacity, clip paths, masks, filters)."""
+        self._occlusion_checks = 0
+        self.user_viewport = (0.0, 0.0)
+        """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
 
     # -- limits -----------------------------------------------------------------------------------------------
 
     def check_expansion(self) -> None:
-        """Count the shape copies `<use>` makes before drawing any, refusing cycles and fan-out bombs."""
+        """Count the shape copies `<use>` makes before drawing any, refusing fan-out bombs."""
         weights: dict[tuple[int, bool], int] = {}
 
         def weight(el: ET.Element, stack: tuple[str, ...], depth: int, used: bool) -> int:
@@ -224,9 +448,7 @@ class _Reader:
             elif tag == "use":
                 ref = self._href(el)
                 target = self.ids.get(ref) if ref else None
-                if ref in stack:
-                    raise InputError(f"{self.name}: <use> refers back to itself through #{ref}")
-                if target is not None and ref:
+                if target is not None and ref and ref not in stack:  # a looping reference draws nothing
                     total = weight(target, (*stack, ref), depth + 1, True)
             elif tag in CONTAINERS or (tag == "symbol" and used):
                 for child in el:
@@ -247,14 +469,15 @@ class _Reader:
         drawing of thousands of paths costs one array pass instead of thousands. Longer paths, curves and
         anything unusual are read one by one where drawn."""
         paths = [el for el in self.root.iter() if local(el.tag) == "path"
-                 and 0 < len(el.get("d") or "") <= READ_AHEAD_CHARS and is_straight(el.get("d") or "")]
+                 and 0 < len(el.get("d") or "") <= READ_AHEAD_CHARS and is_straight(el.get("d") or "")
+                 and (el.get("d") or "").lstrip()[:1] in ("M", "m")]
         if len(paths) < 2:
             return {}
         read = straight_paths([el.get("d") or "" for el in paths])
         return {id(el): subs for el, subs in zip(paths, read, strict=True)} if read is not None else {}
 
     def own_transform(self, el: ET.Element) -> FloatArray:
-        """The element's `transform`; one in error is ignored (with a note), as browsers ignore it."""
+        """The element's `transform` attribute; one in error is ignored (with a note), as browsers ignore it."""
         value = el.get("transform")
         try:
             return transform(value)
@@ -263,20 +486,65 @@ class _Reader:
                              "ignored, as browsers do"] += 1
             return IDENTITY
 
+    def placement(self, el: ET.Element, own: dict[str, str], style: dict[str, str],
+                  viewport: tuple[float, float]) -> FloatArray:
+        """The element's transform: the CSS `transform` property when set and valid, else the attribute, about
+        its `transform-origin` (CSS Transforms 1 §6; the reference box is the viewport unless `transform-box`
+        names the element's own box)."""
+        font = _font_size(style)
+        matrix = IDENTITY
+        css = own.get("transform")
+        if css is not None:
+            try:
+                matrix = css_transform(css, viewport, font)
+            except ValueError as exc:
+                self.unsupported[f"the CSS transform {excerpt(css, 60)} is in error ({exc}): the transform "
+                                 "attribute applies, as browsers do"] += 1
+                css = None
+        if css is None:
+            matrix = self.own_transform(el)
+        origin = own.get("transform-origin")
+        if origin is None or matrix is IDENTITY:
+            return matrix
+        box = (0.0, 0.0, *viewport)
+        if own.get("transform-box", "").strip() in ("fill-box", "stroke-box", "content-box", "border-box"):
+            box = self.bounding_box(el, local(el.tag), viewport, style) or box
+        return about(matrix, transform_origin(origin, box, font))
+
+    def bounding_box(self, el: ET.Element, tag: str, viewport: tuple[float, float],
+                     style: dict[str, str]) -> tuple[float, float, float, float] | None:
+        """The shape's box in its own user units (x, y, width, height), or None for other elements."""
+        if tag not in SHAPES:
+            return None
+        subs = [s.points for s in self.subpaths(el, tag, IDENTITY, viewport, _font_size(style), keep=True)]
+        if not subs:
+            return None
+        pts = np.concatenate(subs)
+        (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
+        return (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+
     def clip_to_page(self, width: float, height: float) -> None:
         """Cut the drawing to the page, (0, 0)-(width, height) px, as a browser shows no more of it."""
-        if not self.lines:
-            return
-        starts = np.cumsum([0] + [len(line) for line in self.lines[:-1]])
-        points = np.concatenate(self.lines)
-        low = np.minimum.reduceat(points, starts)
-        high = np.maximum.reduceat(points, starts)
-        inside = (low >= 0).all(axis=1) & (high[:, 0] <= width) & (high[:, 1] <= height)
-        if inside.all():
+        page = shapely.box(0.0, 0.0, width, height)
+        if self.lines:
+            starts = np.cumsum([0] + [len(line) for line in self.lines[:-1]])
+            points = np.concatenate(self.lines)
+            low = np.minimum.reduceat(points, starts)
+            high = np.maximum.reduceat(points, starts)
+            inside = (low >= 0).all(axis=1) & (high[:, 0] <= width) & (high[:, 1] <= height)
+        else:
+            inside = np.zeros(0, dtype=bool)
+        edges: Polylines = []
+        for fill in self.lines.fills:
+            x0, y0, x1, y1 = fill.box
+            if x1 >= x0 and (x0 < 0 or y0 < 0 or x1 > width or y1 > height) and not fill.area.is_empty:
+                edges.extend(cut_edge(fill.area, page)[0])
+        if inside.all() and not edges:
             return
         crossing = np.flatnonzero(~inside).tolist()
-        kept, hidden = cut([self.lines[k] for k in crossing], shapely.box(0.0, 0.0, width, height))
-        self.lines = [line for line, keep in zip(self.lines, inside.tolist(), strict=True) if keep] + kept
+        kept, hidden = cut([self.lines[k] for k in crossing], page)
+        lines = Ink([line for line, keep in zip(self.lines, inside.tolist(), strict=True) if keep] + kept + edges)
+        self.lines = lines
         self.hidden.extend(hidden)
         self.unsupported[f"lines outside the {width:g} x {height:g} px page are hidden, as a browser hides them"] += 1
 
@@ -284,8 +552,19 @@ class _Reader:
         notes = [f"{what} ({count}x)" if count > 1 else what for what, count in sorted(self.unsupported.items())]
         if self.sheet.ignored:
             shown = ", ".join(sorted(set(self.sheet.ignored))[:5])
-            notes.append(f"CSS rules with selectors other than type, #id and .class were ignored: {shown}")
+            notes.append(f"CSS rules a browser cannot read were ignored: {shown}")
         return notes
+
+    def computed_style(self, el: ET.Element) -> dict[str, str]:
+        """The computed style of an element drawn away from its place (a pattern, a clip path): inherited from
+        its ancestors in the document."""
+        chain = [el]
+        while chain[-1] in self.parents:
+            chain.append(self.parents[chain[-1]])
+        style: dict[str, str] = {}
+        for ancestor in reversed(chain):
+            style = inherit(style, own_style(ancestor, self.sheet))
+        return style
 
     # -- walking ----------------------------------------------------------------------------------------------
 
@@ -295,83 +574,183 @@ class _Reader:
         return href[1:] if href.startswith("#") else (href or None)
 
     def children(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
-                 out: Polylines, depth: int, uses: tuple[str, ...]) -> None:
+                 out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         kids: Iterator[ET.Element] = iter(el)
-        if local(el.tag) == "switch":  # the first child that qualifies; no extension is supported (SVG 1.1 §5.8.2)
-            kids = iter([k for k in el if local(k.tag) in SHAPES | CONTAINERS | UNDRAWABLE
-                         and not (k.get("requiredExtensions") or "").strip()][:1])
+        if local(el.tag) == "switch":  # the first child whose conditions hold (SVG 1.1 §5.8.2)
+            kids = iter([k for k in el if _namespace(k) == SVG_NS and conditions_hold(k)][:1])
         for child in kids:
             self.element(child, style, matrix, viewport, out, depth + 1, uses)
 
     def element(self, el: ET.Element, parent: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
-                out: Polylines, depth: int, uses: tuple[str, ...]) -> None:
+                out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         tag = local(el.tag)
-        namespace = el.tag[1:].split("}")[0] if isinstance(el.tag, str) and el.tag.startswith("{") else SVG_NS
-        if namespace != SVG_NS or not (tag in SHAPES or tag in CONTAINERS or tag in UNDRAWABLE):
+        if _namespace(el) != SVG_NS or not (tag in SHAPES or tag in CONTAINERS or tag in UNDRAWABLE):
+            return
+        if not conditions_hold(el):
             return
         own = own_style(el, self.sheet)
         style = inherit(parent, own)
         if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
             return
-        own_matrix = self.own_transform(el)
+        own_matrix = self.placement(el, own, style, viewport)
         if own_matrix is not IDENTITY:
             matrix = then(matrix, own_matrix)
         if flattens(matrix):
             return  # scaled to a line or a point: nothing of it shows
-        if _CSS_TRANSFORM.search(el.get("style") or ""):
-            self.unsupported["the CSS transform property is not applied (use the transform attribute)"] += 1
-        target: Polylines = []
+        effects = [k for k in own.keys() & EFFECTS if own[k].strip() != "none"]
+        if tag in SHAPES and not effects:
+            self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
+            return
+        target = Ink()
+        shaded = bool(effects) or _opacity(own) < 1
+        self._below.append(target)
+        self._shaded += shaded
+        try:
+            self.draw(el, tag, style, matrix, viewport, target, depth, uses)
+        finally:
+            self._below.pop()
+            self._shaded -= shaded
+        self.clip(el, own, matrix, target, ())
+        out.take(target)
+
+    def below(self, ink: Ink) -> None:
+        """Start a drawing whose earlier paint is `ink`."""
+        self._below = [ink]
+
+    def draw(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
+             viewport: tuple[float, float], target: Ink, depth: int, uses: tuple[str, ...]) -> None:
         if tag in SHAPES:
             self.shape(el, tag, style, matrix, viewport, target)
+        elif tag == "text":
+            if self.text_mode == "outline":
+                if style.get("visibility", "visible") == "visible":
+                    self.skipped["text"] += 1
+            else:
+                self.text(el, style, matrix, viewport, target)
         elif tag in UNDRAWABLE:
             if style.get("visibility", "visible") == "visible":
-                self.skipped["text" if tag == "text" else "image" if tag == "image" else tag] += 1
+                self.skipped["image" if tag == "image" else tag] += 1
         elif tag == "use":
             self.use(el, style, matrix, viewport, target, depth, uses)
         elif tag == "svg":
             self.viewport(el, el, style, matrix, viewport, target, depth, uses, None, None)
         else:
             self.children(el, style, matrix, viewport, target, depth, uses)
+
+    def hide_under(self, fill: _Fill) -> None:
+        """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
+        model), and earlier fills shrink to what still shows."""
+        x0, y0, x1, y1 = fill.box
+        for ink in self._below:
+            if not ink and not ink.fills:
+                continue
+            self._occlusion_checks += len(ink) + len(ink.fills)
+            if self._occlusion_checks > MAX_OCCLUSION_CHECKS:
+                self.unsupported["too many overlapping fills to work out which lines they hide: some lines "
+                                 "under fills are drawn"] += 1
+                return
+            boxes = ink.boxes()
+            under = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
+            if under.any():
+                hit = np.flatnonzero(under).tolist()
+                hidden, shown = cut([ink[k] for k in hit], fill.area)
+                ink.drop(hit)
+                ink.extend(shown)
+                self.hidden.extend(hidden)
+            if ink.fills:
+                fills = ink.fill_boxes()
+                near = (fills[:, 0] <= x1) & (fills[:, 2] >= x0) & (fills[:, 1] <= y1) & (fills[:, 3] >= y0)
+                for k in np.flatnonzero(near).tolist():
+                    earlier = ink.fills[k]
+                    if shapely.intersects(earlier.area, fill.area):
+                        ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area)))
+
+    def clip(self, el: ET.Element, own: dict[str, str], matrix: FloatArray, target: Ink,
+             stack: tuple[str, ...]) -> None:
+        """Apply the element's clip path to what it drew, in place; name masks and filters it leaves out."""
         if own.get("mask", "none").strip() != "none":
             self.unsupported["masks are not applied: masked elements are drawn whole"] += 1
-        clip = own.get("clip-path", "none").strip()
-        if clip != "none" and target:
-            region = self.clip_region(clip, matrix, target, ())
-            if region is not None:
-                target, hidden = cut(target, region)
-                self.hidden.extend(hidden)
-        out.extend(target)
+        if own.get("filter", "none").strip() != "none":
+            self.unsupported["filters (blur, shadows and the like) are not applied"] += 1
+        value = own.get("clip-path", "none").strip()
+        if value == "none" or not (target or target.fills):
+            return
+        region = self.clip_region(value, matrix, target, stack)
+        if region is not None:
+            self.cut_ink(target, region)
+
+    def cut_ink(self, target: Ink, region: BaseGeometry) -> None:
+        """Cut lines and fills to `region`, in place: a fill is outlined along the cut as well."""
+        kept, hidden = cut(list(target), region)
+        fills: list[_Fill] = []
+        for fill in target.fills:
+            edges, area = cut_edge(fill.area, region)
+            kept.extend(edges)
+            if not area.is_empty:
+                fills.append(_Fill([], fill.rule, area))
+        target.replace(kept)
+        target.fills = fills
+        self.hidden.extend(hidden)
+
+    def _encloses(self, outer: ET.Element, el: ET.Element) -> bool:
+        """Whether `outer` is `el` or one of its ancestors (a `<use>` of it is a circular reference)."""
+        at: ET.Element | None = el
+        while at is not None:
+            if at is outer:
+                return True
+            at = self.parents.get(at)
+        return False
 
     def use(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
-            out: Polylines, depth: int, uses: tuple[str, ...]) -> None:
+            out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         ref = self._href(el)
         target = self.ids.get(ref) if ref else None
         if target is None:
             self.unsupported[f"<use> of {ref or 'nothing'!r}, which is not in this file, draws nothing"] += 1
             return
-        if ref in uses or depth > MAX_DEPTH:
-            raise InputError(f"{self.name}: <use> refers back to itself through #{ref}")
+        if ref in uses or depth > MAX_DEPTH or self._encloses(target, el):
+            self.unsupported[f"<use> of #{ref} refers back to itself: that reference draws nothing, as in "
+                             "browsers"] += 1
+            return
         if beyond_single(el.get("x")) or beyond_single(el.get("y")):
             return  # placed at infinity: nothing of the copy is on the page
         vw, vh = viewport
-        matrix = then(matrix, translate(length(el.get("x"), vw), length(el.get("y"), vh)))
+        font = _font_size(style)
+        matrix = then(matrix, translate(length(el.get("x"), vw, font_size=font),
+                                        length(el.get("y"), vh, font_size=font)))
         kind = local(target.tag)
         if kind in ("symbol", "svg"):
-            self.viewport(target, el, inherit(style, own_style(target, self.sheet)), matrix, viewport, out,
-                          depth, (*uses, str(ref)), el.get("width"), el.get("height"))
+            own = own_style(target, self.sheet)
+            inner = inherit(style, own)
+            if own.get("display", "").strip() == "none" and kind == "svg":
+                return
+            drawn = Ink()
+            shaded = own.get("clip-path", "none").strip() != "none"
+            self._below.append(drawn)
+            self._shaded += shaded
+            try:
+                self.viewport(target, el, inner, matrix, viewport, drawn, depth, (*uses, str(ref)),
+                              el.get("width"), el.get("height"))
+            finally:
+                self._below.pop()
+                self._shaded -= shaded
+            self.clip(target, own, matrix, drawn, ())
+            out.take(drawn)
         else:
             self.element(target, style, matrix, viewport, out, depth + 1, (*uses, str(ref)))
 
     def viewport(self, el: ET.Element, placed_by: ET.Element, style: dict[str, str], matrix: FloatArray,
-                 viewport: tuple[float, float], out: Polylines, depth: int, uses: tuple[str, ...],
+                 viewport: tuple[float, float], out: Ink, depth: int, uses: tuple[str, ...],
                  width: str | None, height: str | None) -> None:
-        """A nested `<svg>` or a used `<symbol>`: a viewport its viewBox maps onto, clipping unless overflow is
-        visible (SVG 1.1 §7.9, §14.3.3)."""
+        """A nested `<svg>` (drawn or used: its x and y place it) or a used `<symbol>`: a viewport its viewBox
+        maps onto, clipping unless overflow is visible (SVG 1.1 §7.9, §14.3.3)."""
         vw, vh = viewport
-        x = length(el.get("x"), vw) if el is placed_by else 0.0
-        y = length(el.get("y"), vh) if el is placed_by else 0.0
-        w = length(width if width is not None else el.get("width"), vw, default=vw)
-        h = length(height if height is not None else el.get("height"), vh, default=vh)
+        font = _font_size(style)
+        own_place = local(el.tag) == "svg"
+        x = length(el.get("x"), vw, font_size=font) if own_place else 0.0
+        y = length(el.get("y"), vh, font_size=font) if own_place else 0.0
+        w = length(width if width is not None else el.get("width"), vw, default=vw, font_size=font)
+        h = length(height if height is not None else el.get("height"), vh, default=vh, font_size=font)
         vb = read_view_box(el.get("viewBox"))
         if w <= 0 or h <= 0 or vb.empty:
             return
@@ -380,41 +759,65 @@ class _Reader:
                              f"({vb.error}): ignored, as browsers do"] += 1
         box = vb.box
         inner = then(matrix, viewport_matrix(box, x, y, w, h, el.get("preserveAspectRatio")))
-        drawn: Polylines = []
-        self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
-        if style.get("overflow", "hidden").strip() in ("hidden", "scroll") and drawn:
+        if local(el.tag) == "symbol":  # SVG 2 §5.5: a symbol's transform applies inside its viewport
+            inner = then(inner, self.own_transform(el))
+        drawn = Ink()
+        clips = style.get("overflow", "hidden").strip() in ("hidden", "scroll")
+        self._below.append(drawn)
+        self._shaded += clips
+        try:
+            self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
+        finally:
+            self._below.pop()
+            self._shaded -= clips
+        if clips and (drawn or drawn.fills):
             corners = np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h], [x, y]])
             ring = corners @ matrix[:, :2].T + matrix[:, 2]
-            drawn, hidden = cut(drawn, shapely.Polygon(ring))
-            self.hidden.extend(hidden)
-        out.extend(drawn)
+            self.cut_ink(drawn, shapely.Polygon(ring))
+        out.take(drawn)
 
-    def subpaths(self, el: ET.Element, tag: str, matrix: FloatArray, viewport: tuple[float, float]) -> list[Subpath]:
-        ahead = self._read_ahead.pop(id(el), None) if tag == "path" else None
+    def subpaths(self, el: ET.Element, tag: str, matrix: FloatArray, viewport: tuple[float, float],
+                 font: float = 16.0, *, keep: bool = False) -> list[Subpath]:
+        """The element's subpaths placed by `matrix`; `keep` leaves a read-ahead path for a later call."""
+        ahead = self._read_ahead.get(id(el)) if tag == "path" else None
         if ahead is not None:
+            if not keep:
+                self._read_ahead.pop(id(el), None)
             placed = affine([sub.points for sub in ahead], matrix)
             return [Subpath(points, sub.closed, sub.segments) for points, sub in zip(placed, ahead, strict=True)]
         builder = PathBuilder(matrix, self.tolerance)
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)
 
+        styled = self._geometry(el)
+
         def get(name: str, relative: float, default: float = 0.0) -> float:
-            return length(el.get(name), relative, default=default)
+            return length(styled.get(name, el.get(name)), relative, default=default, font_size=font)
+
+        def radius(name: str, relative: float) -> float | None:
+            """rx or ry: None for auto (absent, `auto`, or in error: negative)."""
+            value = get(name, relative, -1.0)
+            return value if value >= 0 else None
 
         try:
             if tag == "path":
-                path_data(builder, el.get("d") or "")
+                d = styled.get("d", el.get("d") or "")
+                if d.startswith("path("):
+                    d = d[5:].rstrip(")").strip().strip("'\"")
+                if d.strip() and d.lstrip()[0] not in "Mm":
+                    raise PathDataError("it does not start with a moveto")
+                path_data(builder, d)
             elif tag == "rect":
-                rx = el.get("rx")
-                ry = el.get("ry")
                 rect(builder, get("x", vw), get("y", vh), get("width", vw), get("height", vh),
-                     None if rx is None or rx == "auto" else get("rx", vw),
-                     None if ry is None or ry == "auto" else get("ry", vh))
+                     radius("rx", vw), radius("ry", vh))
             elif tag == "circle":
                 r = get("r", diag)
                 ellipse(builder, get("cx", vw), get("cy", vh), r, r)
             elif tag == "ellipse":
-                ellipse(builder, get("cx", vw), get("cy", vh), get("rx", vw), get("ry", vh))
+                rx, ry = radius("rx", vw), radius("ry", vh)
+                rx = ry if rx is None else rx
+                ry = rx if ry is None else ry
+                ellipse(builder, get("cx", vw), get("cy", vh), rx or 0.0, ry or 0.0)
             elif tag == "line":
                 line(builder, get("x1", vw), get("y1", vh), get("x2", vw), get("y2", vh))
             else:
@@ -425,35 +828,228 @@ class _Reader:
         self.curved = self.curved or builder.curved
         return builder.subpaths
 
+    def _geometry(self, el: ET.Element) -> dict[str, str]:
+        """Geometry properties a style sheet or the `style` attribute sets on the element (they win over the
+        attributes of the same names)."""
+        if id(el) not in self.sheet.matched and not el.get("style"):
+            return {}
+        return {k: v for k, v in own_style(el, self.sheet).items() if k in GEOMETRY}
+
+    def _count(self, points: int) -> None:
+        self.points += points
+        if self.points > MAX_POINTS:
+            raise InputError(f"{self.name}: the drawing has more than {MAX_POINTS:,} points; refusing it")
+
+    def _fill_kind(self, style: dict[str, str]) -> tuple[str, ET.Element | None]:
+        """('none' | 'solid' | 'pattern', the pattern element): how the fill paints. A `url()` to nothing takes
+        its fallback colour, else none (SVG 1.1 §11.2); a gradient paints like a solid colour."""
+        if not paints(style, "fill"):
+            return "none", None
+        value = style.get("fill", "").strip()
+        ref = iri(value)
+        if ref is None:
+            return "solid", None
+        target = self.ids.get(ref)
+        if target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient"):
+            fallback = value[value.find(")") + 1:].strip()
+            if fallback and paints({**style, "fill": fallback}, "fill"):
+                return "solid", None
+            return "none", None
+        if local(target.tag) == "pattern":
+            return "pattern", target
+        return ("solid", None) if self._has_stops(target) else ("none", None)
+
+    def _has_stops(self, gradient: ET.Element) -> bool:
+        """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
+        nothing (SVG 1.1 §13.2.4)."""
+        seen: list[ET.Element] = []
+        at: ET.Element | None = gradient
+        while at is not None and at not in seen:
+            if any(local(child.tag) == "stop" for child in at):
+                return True
+            seen.append(at)
+            ref = self._href(at)
+            at = self.ids.get(ref) if ref else None
+        return False
+
+    def _dash_pattern(self, style: dict[str, str], viewport: tuple[float, float]) -> tuple[list[float], float]:
+        """(dash and gap lengths, offset) in user units; no lengths for a solid stroke (none, or in error:
+        a negative length, or all zero)."""
+        value = style.get("stroke-dasharray", "none").strip()
+        if value in ("none", ""):
+            return [], 0.0
+        diag = math.hypot(*viewport) / math.sqrt(2)
+        font = _font_size(style)
+        parts = [p for p in value.replace(",", " ").split() if p]
+        lengths = [length(p, diag, default=-1.0, font_size=font) for p in parts]
+        if not lengths or any(v < 0 for v in lengths) or sum(lengths) <= 0:
+            return [], 0.0
+        offset = length(style.get("stroke-dashoffset"), diag, default=0.0, font_size=font)
+        return lengths, offset
+
     def shape(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
-              viewport: tuple[float, float], out: Polylines) -> None:
+              viewport: tuple[float, float], out: Ink) -> None:
         if style.get("visibility", "visible").strip() != "visible":
             return
-        stroke, fill = paints(style, "stroke"), paints(style, "fill")
-        if not (stroke or fill):
+        stroke = paints(style, "stroke")
+        fill, pattern = self._fill_kind(style)
+        covers = not self._shaded and bool(self._below) and opaque_fill(style)
+        if not (stroke or covers) and fill == "none":
             return
-        dots = stroke and style.get("stroke-linecap", "butt").strip() in ("round", "square")
-        if any(style.get(k, "none").strip() != "none" for k in ("marker", "marker-start", "marker-mid",
-                                                                 "marker-end")):
+        caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
+        dots = stroke and caps
+        if any(style[k].strip() != "none" for k in style.keys() & MARKERS):
             self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
-        for sub in self.subpaths(el, tag, matrix, viewport):
+        dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
+        rings: Polylines = []
+        final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
+        start = 0
+        for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
             pts = sub.points
             if not np.isfinite(pts).all():
                 self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
-            if not stroke and _without_area(pts):
-                continue  # a fill with no area shows nothing
+            flat = (fill != "none" or covers or not stroke) and _without_area(pts)
+            if (fill != "none" or covers) and not flat:
+                rings.append(pts)
+            if not stroke and (flat or fill != "solid"):
+                continue  # a fill with no area shows nothing; a pattern shows only its own lines
             if bool((pts == pts[0]).all()):
                 if dots:
                     out.append(pts[:1].copy())
-                    self.points += 1
+                    self._count(1)
                 continue
-            self.points += len(pts)
-            if self.points > MAX_POINTS:
-                raise InputError(f"{self.name}: the drawing has more than {MAX_POINTS:,} points; refusing it")
+            if fill == "solid" and not sub.closed and not flat:
+                pts = np.vstack([pts, pts[:1]])  # the fill's border closes the subpath
+            if dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between the dashes
+                inverse = _invert(matrix)
+                pieces = affine(dashed(affine([pts], inverse)[0], dashes, offset), matrix)
+                for piece in pieces:
+                    if len(piece) > 1 or caps:
+                        out.append(piece)
+                        self._count(len(piece))
+                continue
+            self._count(len(pts))
             out.append(pts)
+        if not rings:
+            final.take(out)
+            return
+        closed = [np.vstack([r, r[:1]]) for r in rings]
+        rule = style.get("fill-rule", "nonzero").strip()
+        own = _Fill(closed, rule)
+        if fill == "solid" and not stroke and len(out) > start:
+            border = _border(own, closed)
+            if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
+                out.replace(out[:start] + border)
+        if covers:
+            self.hide_under(own)
+        if fill == "solid":
+            out.fills.append(own)
+        elif pattern is not None:
+            self.pattern(pattern, matrix, closed, rule, viewport, out)
+        final.take(out)
+
+    # -- patterns -----------------------------------------------------------------------------------------------
+
+    def _pattern_chain(self, el: ET.Element) -> list[ET.Element]:
+        """The pattern and those it takes attributes and content from through `href` (SVG 1.1 §13.3)."""
+        chain = [el]
+        while True:
+            ref = self._href(chain[-1])
+            nxt = self.ids.get(ref) if ref else None
+            if nxt is None or local(nxt.tag) != "pattern" or nxt in chain:
+                return chain
+            chain.append(nxt)
+
+    def pattern(self, el: ET.Element, matrix: FloatArray, rings: Polylines, rule: str,
+                viewport: tuple[float, float], out: Ink) -> None:
+        """Draw a pattern's tiles over the shape whose output `rings` bound it, cut to the fill's area."""
+        chain = self._pattern_chain(el)
+
+        def attr(name: str) -> str | None:
+            return next((p.get(name) for p in chain if p.get(name) is not None), None)
+
+        content = next((p for p in chain if len(p)), chain[0])
+        ref = el.get("id") or ""
+        if ref in self._patterns:
+            self.unsupported[f"pattern #{ref} refers back to itself: that reference draws nothing"] += 1
+            return
+        inverse = _invert(matrix)
+        user = np.concatenate(affine(rings, inverse))
+        (bx, by), (bx1, by1) = user.min(axis=0), user.max(axis=0)
+        bw, bh = bx1 - bx, by1 - by
+        vw, vh = viewport
+        if (attr("patternUnits") or "").strip() == "userSpaceOnUse":
+            x, y = length(attr("x"), vw), length(attr("y"), vh)
+            w, h = length(attr("width"), vw), length(attr("height"), vh)
+        else:
+            x, y = bx + number(attr("x"), 0.0) * bw, by + number(attr("y"), 0.0) * bh
+            w, h = number(attr("width"), 0.0) * bw, number(attr("height"), 0.0) * bh
+        if not (w > 0 and h > 0):
+            return
+        try:
+            space = about(transform(attr("patternTransform")),
+                          transform_origin(attr("transform-origin"), (0.0, 0.0, vw, vh)))
+        except ValueError:
+            space = IDENTITY
+        if flattens(space):
+            return
+        corners = affine([np.array([[bx, by], [bx1, by], [bx1, by1], [bx, by1]])], _invert(space))[0]
+        (px0, py0), (px1, py1) = corners.min(axis=0), corners.max(axis=0)
+        i0, i1 = math.floor((px0 - x) / w), math.ceil((px1 - x) / w)
+        j0, j1 = math.floor((py0 - y) / h), math.ceil((py1 - y) / h)
+        if (i1 - i0) * (j1 - j0) > MAX_PATTERN_TILES:
+            self.unsupported[f"pattern #{ref} repeats more than {MAX_PATTERN_TILES:,} times over a shape: the "
+                             "shape's outline is drawn instead"] += 1
+            out.extend(rings)
+            return
+        vb = read_view_box(attr("viewBox"))
+        if vb.box is not None:
+            inside = viewport_matrix(vb.box, 0.0, 0.0, w, h, attr("preserveAspectRatio"))
+        elif (attr("patternContentUnits") or "").strip() == "objectBoundingBox":
+            inside = np.array([[bw, 0.0, 0.0], [0.0, bh, 0.0]])
+        else:
+            inside = IDENTITY
+        tile = Ink()
+        self._patterns = (*self._patterns, ref)
+        outside, self._below = self._below, [tile]
+        try:
+            self.children(content, self.computed_style(content), inside,
+                          (vb.box[2], vb.box[3]) if vb.box else (w, h), tile, 0, ())
+        finally:
+            self._patterns = self._patterns[:-1]
+            self._below = outside
+        if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
+            kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
+            tile = Ink(kept)
+        if not tile:
+            return
+        area = area_of_rings(rings, rule)
+        shapely.prepare(area)
+        placed: Polylines = []
+        for i in range(i0, i1):
+            for j in range(j0, j1):
+                at = then(matrix, then(space, translate(x + i * w, y + j * h)))
+                placed.extend(affine(tile, at))
+        kept, _ = cut(placed, area)
+        self._count(sum(len(k) for k in kept))
+        out.extend(kept)
+
+    # -- text -------------------------------------------------------------------------------------------------
+
+    def text(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
+             out: Ink) -> None:
+        """A `<text>` in single-stroke letters (see svgtext)."""
+        layout = TextLayout(viewport, self.sheet)
+        for lines in layout.draw(el, style):
+            placed = affine(lines, matrix)
+            self._count(sum(len(p) for p in placed))
+            out.extend(placed)
+        for note in layout.notes:
+            self.unsupported[note] += 1
+        self.unsupported["text is drawn in single-stroke letters, not in the file's font"] += 1
 
     # -- clipping ---------------------------------------------------------------------------------------------
 
@@ -466,19 +1062,25 @@ class _Reader:
             self.unsupported[f"clip-path {value!r} does not name a clipPath here: drawn unclipped"] += 1
             return None
         if ref in stack:
-            raise InputError(f"{self.name}: clip path #{ref} refers back to itself")
+            self.unsupported[f"clip path #{ref} refers back to itself: that reference is left out, as in "
+                             "browsers"] += 1
+            return None
+        if len(stack) > MAX_DEPTH:
+            raise InputError(f"{self.name}: clip paths nested deeper than {MAX_DEPTH}")
         by_box = clip.get("clipPathUnits", "").strip() == "objectBoundingBox"
         if by_box:
+            if not content:
+                return shapely.Polygon()
             pts = np.concatenate(content)
-            inverse = np.linalg.inv(np.vstack([matrix, [0.0, 0.0, 1.0]]))[:2]
-            user = pts @ inverse[:, :2].T + inverse[:, 2]
+            user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
-        matrix = then(matrix, self.own_transform(clip))
+        matrix = then(matrix, self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip),
+                                             self.user_viewport))
         key = (id(clip), matrix.tobytes())
         if key in self._clips and not by_box:
             return self._clips[key]
-        base = inherit({}, own_style(clip, self.sheet))
+        base = self.computed_style(clip)
         region: BaseGeometry = shapely.Polygon()
         for child in clip:
             region = shapely.union(region, self._clip_child(child, base, matrix, (*stack, str(ref))))
@@ -494,11 +1096,13 @@ class _Reader:
                     stack: tuple[str, ...]) -> BaseGeometry:
         empty = shapely.Polygon()
         tag = local(child.tag)
+        if not conditions_hold(child):
+            return empty
         own = own_style(child, self.sheet)
         style = inherit(base, own)
         if own.get("display", "").strip() == "none" or style.get("visibility", "visible").strip() != "visible":
             return empty
-        matrix = then(matrix, self.own_transform(child))
+        matrix = then(matrix, self.placement(child, own, style, (0.0, 0.0)))
         if flattens(matrix):
             return empty
         if tag == "use":
@@ -513,7 +1117,8 @@ class _Reader:
             return empty
         if tag not in SHAPES:
             return empty
-        rings = [np.vstack([s.points, s.points[:1]]) for s in self.subpaths(child, tag, matrix, (0.0, 0.0))
+        rings = [np.vstack([s.points, s.points[:1]]) for s in self.subpaths(child, tag, matrix, (0.0, 0.0),
+                                                                            _font_size(style), keep=True)
                  if len(s.points) >= 3]
         region = area_of_rings(rings, style.get("clip-rule", "nonzero").strip())
         inner = own.get("clip-path", "none").strip()

@@ -1,8 +1,17 @@
 """The SVG style cascade a browser applies, reduced to the properties that decide what a pen draws: paint,
-opacity, visibility, display, line caps, clipping.
+opacity, visibility, display, dashes, line caps, clipping, transforms, fonts.
 
-Sources: SVG 1.1 §6 (styling: presentation attributes < style sheets < the `style` attribute; inheritance),
-§11.2 (paint), CSS 2.1 §6.4.3 (specificity).
+Style sheets are parsed by tinycss2 and their selectors matched by cssselect2 (WeasyPrint's and CairoSVG's CSS
+engine), so every CSS 3 selector (descendant, child, sibling, attribute, :first-child, :not() …) applies.
+Cascade order (CSS Cascade 4 §6, SVG 2 §6.6 presentation attributes): presentation attributes < style sheet
+rules by specificity then order < the `style` attribute < `!important` sheet rules < `!important` in `style`.
+Inheritance (CSS Cascade 4 §7): inherited properties flow to children, `inherit` takes the parent's value for any
+property. `@media print` rules are not applied (a browser shows the screen media); other `@media` and `@supports`
+blocks are. Font sizes are computed to px as they inherit, so `em` lengths use the inherited size (CSS Values 3
+§6.1).
+
+Sources: SVG 1.1 §6 (styling), SVG 2 §6.6 (presentation attributes), §11.2 (paint), CSS 2.1 §6.4.3
+(specificity), CSS Fonts 3 §3.5 (absolute and relative size keywords).
 """
 
 from __future__ import annotations
@@ -12,23 +21,43 @@ import math
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from typing import Any
 
-import svgelements as se
+import cssselect2
+import tinycss2
+import tinycss2.color4
 
 from fabwire.lineus.plot.svgunits import length
 
 INHERITED = frozenset({
     "fill", "stroke", "fill-opacity", "stroke-opacity", "stroke-width", "stroke-linecap", "visibility",
-    "clip-rule", "fill-rule", "marker-start", "marker-mid", "marker-end", "marker",
+    "clip-rule", "fill-rule", "marker-start", "marker-mid", "marker-end", "marker", "stroke-dasharray",
+    "stroke-dashoffset", "font-size", "font-family", "font-style", "font-weight", "text-anchor", "color",
+    "letter-spacing", "word-spacing",
 })
-NOT_INHERITED = frozenset({"display", "opacity", "clip-path", "mask", "filter", "overflow"})
-PROPERTIES = INHERITED | NOT_INHERITED
+NOT_INHERITED = frozenset({"display", "opacity", "clip-path", "mask", "filter", "overflow", "transform",
+                           "transform-origin", "transform-box"})
+GEOMETRY = frozenset({"x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", "d"})
+"""Geometry properties (SVG 2 §10.2-10.4): a style sheet or `style` attribute may set them; the attributes of
+the same names are read with the shape."""
+PROPERTIES = INHERITED | NOT_INHERITED | GEOMETRY
+PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform"} - GEOMETRY
+"""Properties that may be given as attributes too; the `transform` attribute has its own (SVG 1.1) grammar and is
+read apart from the CSS property."""
 INITIAL = {"fill": "black", "stroke": "none", "fill-opacity": "1", "stroke-opacity": "1", "stroke-width": "1",
-           "stroke-linecap": "butt", "visibility": "visible", "clip-rule": "nonzero", "fill-rule": "nonzero"}
+           "stroke-linecap": "butt", "visibility": "visible", "clip-rule": "nonzero", "fill-rule": "nonzero",
+           "font-size": "16", "color": "black"}
+FONT_SIZE_KEYWORDS = {"xx-small": 9.0, "x-small": 10.0, "small": 13.0, "medium": 16.0, "large": 18.0,
+                      "x-large": 24.0, "xx-large": 32.0, "xxx-large": 48.0}
+"""Absolute font-size keywords in px as browsers compute them (CSS Fonts 4 §2.5, Chromium's table for 16 px)."""
+RELATIVE_FONT_STEP = 1.2
+"""`larger` and `smaller` scale the parent's font size by this factor (CSS Fonts 3 §3.5, as browsers do)."""
+PAPER = (255, 255, 255)
+"""The colour of the sheet the pen draws on."""
+PAPER_TOLERANCE = 6
+"""A paint whose colour, laid over the paper at its opacity, comes within this of the paper in every channel
+(of 255) leaves no visible mark."""
 
-_RULE = re.compile(r"([^{}]+)\{([^{}]*)\}")
-_COMMENT = re.compile(r"/\*.*?\*/", re.DOTALL)
-_SIMPLE_SELECTOR = re.compile(r"^(\*|[A-Za-z][\w-]*)?((?:[.#][\w-]+)*)$")
 _IRI = re.compile(r"url\(\s*['\"]?#([^'\")\s]+)['\"]?\s*\)")
 
 
@@ -37,73 +66,124 @@ def local(tag: object) -> str:
     return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
 
 
-def declarations(text: str) -> dict[str, str]:
-    """`name: value; …` pairs of a style attribute or rule body, lower-case names, known properties only."""
-    out: dict[str, str] = {}
-    for part in text.split(";"):
-        name, sep, value = part.partition(":")
-        name = name.strip().lower()
-        if sep and name in PROPERTIES:
-            out[name] = value.replace("!important", "").strip()
+def _declarations(tokens: object) -> list[tuple[str, str, bool]]:
+    """(name, value, important) of known properties in a rule body or style attribute."""
+    out: list[tuple[str, str, bool]] = []
+    for item in tinycss2.parse_blocks_contents(tokens, skip_whitespace=True, skip_comments=True):
+        if item.type == "declaration" and item.lower_name in PROPERTIES:
+            out.append((item.lower_name, tinycss2.serialize(item.value).strip(), bool(item.important)))
     return out
+
+
+def declarations(text: str) -> dict[str, str]:
+    """`name: value; …` pairs of a style attribute, lower-case names, known properties only."""
+    return {name: value for name, value, _ in _declarations(text)}
 
 
 @dataclass
 class StyleSheet:
-    """The `<style>` rules with simple selectors (type, #id, .class, combined); others are reported."""
+    """The rules of a document's `<style>` elements, matched to its elements."""
 
-    rules: list[tuple[tuple[int, int, int], int, str | None, str | None, frozenset[str], dict[str, str]]] = \
-        field(default_factory=list)
+    matched: dict[int, list[tuple[bool, tuple[int, int, int], int, str, str]]] = field(default_factory=dict)
+    """Per element (by id()): (important, specificity, order, property, value) of every matching declaration."""
     ignored: list[str] = field(default_factory=list)
+    """Selectors and at-rules that could not be read."""
 
-    def add(self, css: str) -> None:
-        for match in _RULE.finditer(_COMMENT.sub("", css)):
-            body = declarations(match.group(2))
-            for selector in match.group(1).split(","):
-                selector = selector.strip()
-                parsed = _SIMPLE_SELECTOR.match(selector)
-                if not selector or selector.startswith("@"):
-                    continue
-                if parsed is None or not (parsed.group(1) or parsed.group(2)):
-                    self.ignored.append(selector)
-                    continue
-                tag = parsed.group(1) if parsed.group(1) not in (None, "*") else None
-                parts = re.findall(r"[.#][\w-]+", parsed.group(2))
-                ident = next((p[1:] for p in parts if p[0] == "#"), None)
-                classes = frozenset(p[1:] for p in parts if p[0] == ".")
-                specificity = (1 if ident else 0, len(classes), 1 if tag else 0)
-                if body:
-                    self.rules.append((specificity, len(self.rules), tag, ident, classes, body))
-        self.rules.sort(key=lambda rule: (rule[0], rule[1]))
+    @classmethod
+    def of(cls, root: ET.Element) -> StyleSheet:
+        """Parse every `<style>` of the document and match its rules against all elements."""
+        sheet = cls()
+        matcher = cssselect2.Matcher()
+        count = 0
+        for el in root.iter():
+            if local(el.tag) == "style" and el.text and (el.get("type") or "text/css").strip() == "text/css":
+                count += sheet._add(matcher, tinycss2.parse_stylesheet(el.text, skip_comments=True,
+                                                                       skip_whitespace=True))
+        if not count:
+            return sheet
+        for wrapper in cssselect2.ElementWrapper.from_xml_root(root).iter_subtree():
+            found = matcher.match(wrapper)
+            if found:
+                sheet.matched[id(wrapper.etree_element)] = [
+                    (important, specificity, order, name, value)
+                    for specificity, order, _, body in found for name, value, important in body]
+        return sheet
 
-    def matching(self, element: ET.Element) -> dict[str, str]:
-        out: dict[str, str] = {}
-        if not self.rules:
-            return out
-        tag = local(element.tag)
-        ident = element.get("id")
-        classes = set((element.get("class") or "").split())
-        for _, _, r_tag, r_id, r_classes, body in self.rules:
-            if (r_tag is None or r_tag == tag) and (r_id is None or r_id == ident) and r_classes <= classes:
-                out.update(body)
-        return out
+    def _add(self, matcher: cssselect2.Matcher, rules: list[Any]) -> int:
+        count = 0
+        for rule in rules:
+            kind = getattr(rule, "type", "")
+            if kind == "at-rule":
+                keyword = rule.lower_at_keyword
+                prelude = tinycss2.serialize(rule.prelude).lower()
+                if keyword in ("media", "supports") and rule.content is not None \
+                        and not (keyword == "media" and "print" in prelude and "screen" not in prelude):
+                    count += self._add(matcher, tinycss2.parse_rule_list(
+                        rule.content, skip_comments=True, skip_whitespace=True))
+                elif keyword not in ("media", "import", "charset", "namespace", "font-face", "keyframes"):
+                    self.ignored.append(f"@{keyword}")
+                continue
+            if kind != "qualified-rule":
+                continue
+            body = _declarations(rule.content)
+            try:
+                selectors = cssselect2.compile_selector_list(rule.prelude)
+            except cssselect2.SelectorError:
+                self.ignored.append(tinycss2.serialize(rule.prelude).strip())
+                continue
+            for selector in selectors:
+                if selector.pseudo_element is None and body:
+                    matcher.add_selector(selector, body)
+                    count += 1
+        return count
 
 
 def own_style(element: ET.Element, sheet: StyleSheet) -> dict[str, str]:
-    """The properties `element` sets itself, cascade applied (attribute < sheet < style attribute)."""
-    out = {name: value.strip() for name, value in element.attrib.items() if name in PROPERTIES}
-    out.update(sheet.matching(element))
+    """The properties `element` sets itself, the cascade applied; `inherit` values are kept for `inherit()`."""
+    out = {name: value.strip() for name, value in element.attrib.items() if name in PRESENTATION_ATTRIBUTES}
+    rules = sheet.matched.get(id(element))
     style = element.get("style")
-    if style:
-        out.update(declarations(style))
-    return {k: v for k, v in out.items() if v != "inherit"}
+    if not rules and not style:
+        return out
+    inline = _declarations(style) if style else []
+    rules = rules or []
+    for _, _, _, name, value in sorted((r for r in rules if not r[0]), key=lambda r: (r[1], r[2])):
+        out[name] = value
+    out.update((name, value) for name, value, important in inline if not important)
+    for _, _, _, name, value in sorted((r for r in rules if r[0]), key=lambda r: (r[1], r[2])):
+        out[name] = value
+    out.update((name, value) for name, value, important in inline if important)
+    return out
 
 
 def inherit(parent: dict[str, str], own: dict[str, str]) -> dict[str, str]:
-    """The computed properties of a child: inherited ones from `parent`, then its own."""
+    """The computed properties of a child: inherited ones from `parent`, then its own (`inherit` takes the
+    parent's value of any property; a font size becomes px of the parent's)."""
     out = {k: v for k, v in parent.items() if k in INHERITED}
-    out.update(own)
+    for name, value in own.items():
+        if value == "inherit":
+            if name in parent:
+                out[name] = parent[name]
+            else:
+                out.pop(name, None)
+        elif name == "font-size":
+            out[name] = repr(font_size(value, float(parent.get("font-size", INITIAL["font-size"]))))
+        else:
+            out[name] = value
     return out
+
+
+def font_size(value: str, parent: float) -> float:
+    """A `font-size` value in px, given the parent's (em and % are of it); the parent's when in error."""
+    text = value.strip().lower()
+    if text in FONT_SIZE_KEYWORDS:
+        return FONT_SIZE_KEYWORDS[text]
+    if text == "larger":
+        return parent * RELATIVE_FONT_STEP
+    if text == "smaller":
+        return parent / RELATIVE_FONT_STEP
+    size = length(text, parent, default=-1.0, font_size=parent)
+    return size if size >= 0 else parent
 
 
 def number(value: str | None, default: float) -> float:
@@ -119,24 +199,52 @@ def number(value: str | None, default: float) -> float:
 
 
 def paints(style: dict[str, str], which: str) -> bool:
-    """Whether the fill or stroke paint of `style` puts anything on the page (not none, not transparent)."""
+    """Whether the fill or stroke paint of `style` leaves a mark on the paper: not none, not transparent, not
+    the paper's colour (a white fill on white paper shows nothing)."""
     value = style.get(which, INITIAL[which]).strip().lower()
     if value in ("none", "transparent", ""):
         return False
-    if number(style.get(f"{which}-opacity"), 1.0) <= 0:
+    alpha = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0)))
+    if alpha <= 0:
         return False
     if which == "stroke" and length(style.get("stroke-width"), 1.0, default=1.0) == 0:
         return False  # a negative width is in error: the initial 1 applies
-    return value.startswith("url(") or _opaque(value)
+    if value.startswith("url("):
+        return True
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    return _marks(value, alpha)
+
+
+def opaque_fill(style: dict[str, str]) -> bool:
+    """Whether the fill paints a solid colour without any transparency (white too), so it hides what is under it."""
+    value = style.get("fill", INITIAL["fill"]).strip().lower()
+    if value in ("none", "transparent", "") or value.startswith("url(") or number(style.get("fill-opacity"), 1.0) < 1:
+        return False
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    return _alpha(value) >= 1
 
 
 @functools.lru_cache(maxsize=256)
-def _opaque(color: str) -> bool:
-    """Whether a colour puts ink on the page (its alpha is not 0); one that does not parse is taken as ink."""
-    try:
-        return bool(se.Color(color).alpha != 0)
-    except (ValueError, TypeError):
+def _alpha(color: str) -> float:
+    """A colour's own alpha (0 for a colour that does not parse)."""
+    parsed = tinycss2.color4.parse_color(color)
+    if parsed is None or not hasattr(parsed, "to"):
+        return 0.0
+    return float(parsed.to("srgb")[3])
+
+
+@functools.lru_cache(maxsize=256)
+def _marks(color: str, alpha: float) -> bool:
+    """Whether a colour (CSS Color 4) at `alpha` leaves a mark on the paper; one that does not parse is ink."""
+    parsed = tinycss2.color4.parse_color(color)
+    if parsed is None or not hasattr(parsed, "to"):
         return True
+    *channels, own_alpha = parsed.to("srgb")
+    share = alpha * float(own_alpha)
+    return any(abs(share * 255 * float(c) + (1 - share) * p - p) > PAPER_TOLERANCE
+               for c, p in zip(channels, PAPER, strict=True))
 
 
 def iri(value: str | None) -> str | None:

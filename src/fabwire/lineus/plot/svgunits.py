@@ -38,13 +38,26 @@ def translate(x: float, y: float) -> FloatArray:
     return np.array([[1.0, 0.0, x], [0.0, 1.0, y]])
 
 
-def length(value: str | None, relative_to: float, *, default: float = 0.0) -> float:
-    """A length in user units (CSS px at 96 per inch); percentages of `relative_to`; `default` when absent, in
-    error or not finite."""
+ROOT_FONT_SIZE = 16.0
+"""The font size of the document root, px, for `rem` lengths (a browser's default medium)."""
+EX_PER_EM = 0.5
+"""The x-height as a share of the font size, for `ex` lengths (CSS Values 3 §6.1.1: 0.5em when not measured)."""
+
+
+def length(value: str | None, relative_to: float, *, default: float = 0.0, font_size: float = 16.0) -> float:
+    """A length in user units (CSS px at 96 per inch); percentages of `relative_to`; em and ex of `font_size`
+    (px); `default` when absent, in error or not finite."""
     if value is None or not value.strip():
         return default
+    text = value.strip()
     try:
-        result = se.Length(value.strip()).value(ppi=96.0, relative_length=relative_to, font_size=16.0)
+        if text[-2:].lower() == "ex":
+            text, font_size = f"{text[:-2]}em", font_size * EX_PER_EM
+        elif text[-3:].lower() == "rem":
+            text, font_size = f"{text[:-3]}em", ROOT_FONT_SIZE
+        elif text[-1:] in "qQ" and text[:-1].strip():
+            text = f"{float(text[:-1]) / 4}mm"
+        result = se.Length(text).value(ppi=96.0, relative_length=relative_to, font_size=font_size)
         result = float(result)
     except (ValueError, TypeError, AttributeError, ZeroDivisionError, OverflowError):
         return default
@@ -171,3 +184,116 @@ def flattens(matrix: FloatArray) -> bool:
     draws has no extent, and browsers show nothing of it."""
     det = float(matrix[0, 0] * matrix[1, 1] - matrix[0, 1] * matrix[1, 0])
     return not (math.isfinite(det) and det != 0)
+
+
+ANGLE_UNITS = {"deg": 1.0, "grad": 0.9, "rad": 180 / math.pi, "turn": 360.0, "": 1.0}
+"""Degrees per unit of a CSS angle (CSS Values 3 §7.1); a bare number is taken as degrees, as in SVG."""
+_CSS_FUNCTION = re.compile(r"\s*([a-zA-Z]+)\s*\(([^()]*)\)\s*")
+_CSS_ARG = re.compile(rf"\s*({_NUMBER})\s*([a-zA-Z%]*)\s*")
+_CSS_TRANSLATE_AXES = {"translate": "xy", "translatex": "x", "translatey": "y"}
+_CSS_SCALE_AXES = {"scale": "xy", "scalex": "x", "scaley": "y"}
+
+
+def css_transform(value: str, viewport: tuple[float, float], font_size: float = 16.0) -> FloatArray:
+    """The CSS `transform` property (CSS Transforms 1 §13: 2D functions with units) as a 2x3 matrix; `none` is
+    the identity. Lengths take CSS units (a bare number is px, as SVG allows); percentages are of the viewport
+    (`transform-box: view-box`, the initial box of SVG elements). ValueError when the value is in error."""
+    text = value.strip()
+    if not text or text.lower() == "none":
+        return IDENTITY
+    out = np.eye(3)
+    at = 0
+    while at < len(text):
+        match = _CSS_FUNCTION.match(text, at)
+        if match is None:
+            raise ValueError("it breaks the CSS transform grammar")
+        at = match.end()
+        name = match.group(1).lower()
+        args = [a for a in re.split(r"\s*,\s*|\s+", match.group(2).strip()) if a]
+        matrix = _css_function(name, args, viewport, font_size)
+        out = out @ np.vstack([matrix, [0.0, 0.0, 1.0]])
+    return np.asarray(out[:2], dtype=float)
+
+
+def _angle(text: str) -> float:
+    match = _CSS_ARG.fullmatch(text)
+    if match is None or match.group(2).lower() not in ANGLE_UNITS:
+        raise ValueError(f"{text!r} is not an angle")
+    return float(match.group(1)) * ANGLE_UNITS[match.group(2).lower()]
+
+
+def _css_function(name: str, args: list[str], viewport: tuple[float, float], font_size: float) -> FloatArray:
+    def size(text: str, axis: int) -> float:
+        result = length(text, viewport[axis], default=math.nan, font_size=font_size)
+        if not math.isfinite(result):
+            raise ValueError(f"{text!r} is not a length")
+        return result
+
+    if name in _CSS_TRANSLATE_AXES and 1 <= len(args) <= len(_CSS_TRANSLATE_AXES[name]):
+        axes = _CSS_TRANSLATE_AXES[name]
+        moved = {axis: size(arg, "xy".index(axis)) for axis, arg in zip(axes, args, strict=False)}
+        return translate(moved.get("x", 0.0), moved.get("y", 0.0))
+    if name in _CSS_SCALE_AXES and 1 <= len(args) <= len(_CSS_SCALE_AXES[name]):
+        factors = [number_or_percent(a) for a in args]
+        sx, sy = {"scale": (factors[0], factors[-1]), "scalex": (factors[0], 1.0),
+                  "scaley": (1.0, factors[0])}[name]
+        return np.array([[sx, 0.0, 0.0], [0.0, sy, 0.0]])
+    if name == "rotate" and len(args) == 1:
+        return _function_matrix("rotate", [_angle(args[0])])
+    if name in ("skew", "skewx", "skewy") and 1 <= len(args) <= (2 if name == "skew" else 1):
+        ax = _angle(args[0]) if name != "skewy" else 0.0
+        ay = _angle(args[-1]) if name == "skewy" or len(args) == 2 else 0.0
+        return np.array([[1.0, math.tan(math.radians(ax)), 0.0], [math.tan(math.radians(ay)), 1.0, 0.0]])
+    if name == "matrix" and len(args) == 6:
+        return _function_matrix("matrix", [number_or_percent(a) for a in args])
+    raise ValueError(f"{name}() with {len(args)} arguments is not a 2D CSS transform function")
+
+
+def number_or_percent(text: str) -> float:
+    """A plain number, or a percentage as a fraction; ValueError otherwise."""
+    match = _CSS_ARG.fullmatch(text)
+    if match is None or match.group(2) not in ("", "%"):
+        raise ValueError(f"{text!r} is not a number")
+    return float(match.group(1)) / (100.0 if match.group(2) else 1.0)
+
+
+ORIGIN_KEYWORDS = {"left": (0, 0.0), "right": (0, 1.0), "top": (1, 0.0), "bottom": (1, 1.0), "center": (-1, 0.5)}
+"""`transform-origin` keywords: the axis each names (-1 either) and the share of the reference box."""
+
+
+def transform_origin(value: str | None, box: tuple[float, float, float, float],
+                     font_size: float = 16.0) -> tuple[float, float]:
+    """The point `transform-origin` names (CSS Transforms 1 §7), in user units; percentages and keywords are of
+    `box` (x, y, width, height), the element's reference box, and lengths are offsets from its corner. (0, 0) of
+    user space when absent or in error (the initial value for SVG elements)."""
+    parts = (value or "").split()[:2]
+    if not parts:
+        return (0.0, 0.0)
+    if len(parts) == 2 and (ORIGIN_KEYWORDS.get(parts[0].lower(), (-1, 0))[0] == 1
+                            or ORIGIN_KEYWORDS.get(parts[1].lower(), (-1, 0))[0] == 0):
+        parts.reverse()  # "top left": the vertical keyword given first
+    if len(parts) == 1:
+        keyword = ORIGIN_KEYWORDS.get(parts[0].lower())
+        parts = ["center", parts[0]] if keyword and keyword[0] == 1 else [parts[0], "center"]
+    out = []
+    for axis, part in enumerate(parts):
+        keyword = ORIGIN_KEYWORDS.get(part.lower())
+        offset, extent = box[axis], box[axis + 2]
+        if keyword is not None and keyword[0] in (-1, axis):
+            out.append(offset + keyword[1] * extent)
+            continue
+        point = length(part, extent, default=math.nan, font_size=font_size)
+        if not math.isfinite(point):
+            return (0.0, 0.0)
+        out.append(offset + point)
+    return (out[0], out[1])
+
+
+def about(matrix: FloatArray, origin: tuple[float, float]) -> FloatArray:
+    """`matrix` applied about `origin` instead of (0, 0): translate(origin) · matrix · translate(-origin)."""
+    if origin == (0.0, 0.0):
+        return matrix
+    out = matrix.copy()
+    ox, oy = origin
+    out[:, 2] += np.array([ox, oy]) - matrix[:, :2] @ np.array([ox, oy])
+    return out

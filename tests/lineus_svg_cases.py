@@ -1,0 +1,289 @@
+"""SVG test documents over the feature classes the reader handles, in the manner of a renderer conformance suite:
+each a 200 x 200 px page whose ink a browser and the plan are compared on. Strokes are 2 px wide, so the ink of a
+stroke is its centre line and the ink of a fill is its border (what a pen draws of it).
+
+CASES maps a case name to (SVG document, feature class). Feature classes are the rows of
+fabwire.lineus.plot.svg.FEATURES; every row has cases here.
+"""
+
+from __future__ import annotations
+
+HEAD = ('<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="200" '
+        'height="200"')
+S = 'fill="none" stroke="black" stroke-width="2"'
+"""A plain 2 px black stroke."""
+
+
+def doc(body: str, attrs: str = "") -> str:
+    return f"{HEAD} {attrs}>{body}</svg>"
+
+
+CASES: dict[str, tuple[str, str]] = {
+    # -- basic shapes and path data --------------------------------------------------------------------------
+    "shapes": (doc(f'<rect x="20" y="20" width="60" height="40" {S}/><circle cx="140" cy="50" r="30" {S}/>'
+                   f'<ellipse cx="60" cy="140" rx="40" ry="20" {S}/><line x1="110" y1="110" x2="180" y2="180" {S}/>'
+                   f'<polyline points="110,180 140,120 170,170" {S}/>'), "shapes"),
+    "polygon filled": (doc('<polygon points="30,30 170,40 100,170"/>'), "shapes"),
+    "rounded rect": (doc(f'<rect x="30" y="30" width="140" height="100" rx="25" {S}/>'), "shapes"),
+    "relative path": (doc(f'<path d="m20 20 h60 v60 h-60 z m100 0 l40 0 l0 40 z" {S}/>'), "shapes"),
+    "filled path with hole evenodd": (doc('<path fill-rule="evenodd" d="M20 20 H180 V180 H20 Z M60 60 H140 V140 '
+                                          'H60 Z"/>'), "shapes"),
+    "filled self-crossing star": (doc('<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z"/>'), "open fill"),
+    "filled overlapping subpaths": (doc('<path d="M20 20 H120 V120 H20 Z M80 80 H180 V180 H80 Z"/>'), "open fill"),
+    "filled path with hole nonzero": (doc('<path d="M20 20 H180 V180 H20 Z M60 60 V140 H140 V60 Z"/>'), "shapes"),
+    "path without a moveto draws nothing": (doc(f'<path d="L 20 20 L 180 180" {S}/><path d="A 5 5 0 0 1 50 50" '
+                                                f'{S}/><rect x="20" y="120" width="60" height="60" {S}/>'), "shapes"),
+    "geometry properties in css": (doc(f'<style>#r {{ height: 120px; x: 40px }} circle {{ r: 30px }}</style>'
+                                       f'<rect id="r" x="10" y="20" width="100" {S}/>'
+                                       f'<circle cx="150" cy="150" r="5" {S} style="cx: 140px"/>'), "css cascade"),
+    # -- curves ------------------------------------------------------------------------------------------------
+    "curves and arcs": (doc(f'<path d="M20 100 C20 20 100 20 100 100 S180 180 180 100" {S}/>'
+                            f'<path d="M20 180 Q60 120 100 180 T180 180" {S}/>'), "curves"),
+    "arcs": (doc(f'<path d="M30 60 A40 30 0 0 1 110 60 A40 40 0 1 0 170 140" {S}/>'
+                 f'<path d="M30 150 a30 20 45 1 1 60 0" {S}/>'), "curves"),
+    "arc radii scaled up": (doc(f'<path d="M40 100 A10 10 0 0 1 160 100" {S}/>'), "curves"),
+    # -- rect radii --------------------------------------------------------------------------------------------
+    "rect rx auto": (doc(f'<rect x="20" y="20" width="160" height="80" rx="30" {S}/>'
+                         f'<rect x="20" y="120" width="160" height="60" ry="auto" rx="20" {S}/>'), "rect radii"),
+    "rect radii clamped": (doc(f'<rect x="20" y="20" width="160" height="160" rx="300" ry="40" {S}/>'),
+                           "rect radii"),
+    "rect negative rx": (doc(f'<rect x="20" y="20" width="160" height="160" rx="-10" ry="30" {S}/>'), "rect radii"),
+    "ellipse rx auto": (doc(f'<ellipse cx="100" cy="100" rx="auto" ry="50" {S}/>'), "rect radii"),
+    # -- transforms --------------------------------------------------------------------------------------------
+    "nested transforms": (doc(f'<g transform="translate(100 100) rotate(30)"><g transform="scale(1.5 0.8)">'
+                              f'<rect x="-40" y="-40" width="80" height="80" {S}/></g></g>'), "transforms"),
+    "skew and matrix": (doc(f'<rect x="20" y="20" width="60" height="60" transform="skewX(20)" {S}/>'
+                            f'<rect x="0" y="0" width="50" height="50" transform="matrix(1 0.3 -0.2 1 110 100)" {S}/>'),
+                        "transforms"),
+    "rotate about a point": (doc(f'<rect x="70" y="70" width="60" height="60" transform="rotate(30 100 100)" {S}/>'),
+                             "transforms"),
+    "css transform": (doc(f'<rect x="0" y="0" width="60" height="60" style="transform: translate(50px, 40px) '
+                          f'rotate(0.1turn)" {S}/>'), "css transform"),
+    "css transform in a sheet": (doc(f'<style>.t {{ transform: scale(2) translateX(10px) }}</style>'
+                                     f'<rect class="t" x="10" y="10" width="40" height="30" {S}/>'), "css transform"),
+    "css transform over the attribute": (doc(f'<rect x="0" y="0" width="50" height="50" transform="translate(5 5)" '
+                                             f'style="transform: translate(100px, 100px)" {S}/>'), "css transform"),
+    "transform-origin": (doc(f'<rect x="70" y="70" width="60" height="60" transform="rotate(45)" '
+                             f'transform-origin="100 100" {S}/>'), "transform-origin"),
+    "transform-origin keywords": (doc(f'<rect x="50" y="50" width="100" height="100" transform="scale(0.5)" '
+                                      f'transform-origin="center" {S}/>'), "transform-origin"),
+    "transform-origin percent fill-box": (doc(f'<rect x="40" y="60" width="120" height="80" '
+                                              f'style="transform: rotate(90deg); transform-origin: 50% 50%; '
+                                              f'transform-box: fill-box" {S}/>'), "transform-origin"),
+    "transform-origin in css px": (doc(f'<rect x="20" y="20" width="60" height="60" '
+                                       f'style="transform: rotate(180deg); transform-origin: 100px 100px" {S}/>'),
+                                   "transform-origin"),
+    # -- viewports ---------------------------------------------------------------------------------------------
+    "viewbox aspect": (doc(f'<rect x="5" y="5" width="90" height="40" {S}/>',
+                           'viewBox="0 0 100 50"'), "viewports"),
+    "viewbox slice": (doc('<g fill="none" stroke="black" stroke-width="0.5"><rect x="5" y="5" width="90" '
+                          'height="40"/><circle cx="50" cy="25" r="20"/></g>',
+                          'viewBox="0 0 100 50" preserveAspectRatio="xMinYMax slice"'), "viewports"),
+    "viewbox none": (doc(f'<circle cx="50" cy="25" r="20" {S}/>', 'viewBox="0 0 100 50" preserveAspectRatio="none"'),
+                     "viewports"),
+    "nested svg clip": (doc(f'<svg x="40" y="40" width="100" height="100" viewBox="0 0 50 50">'
+                            f'<circle cx="25" cy="25" r="35" {S}/></svg>'), "viewports"),
+    "nested svg overflow visible": (doc(f'<svg x="50" y="50" width="100" height="100" overflow="visible">'
+                                        f'<circle cx="50" cy="50" r="70" {S}/></svg>'), "viewports"),
+    "nested svg cuts a fill": (doc('<svg x="40" y="40" width="100" height="100"><circle cx="50" cy="50" r="70"/>'
+                                   '</svg>'), "clipped fill"),
+    "page cuts a fill": (doc('<circle cx="200" cy="100" r="60"/>'), "clipped fill"),
+    # -- use ---------------------------------------------------------------------------------------------------
+    "use of symbol": (doc('<symbol id="s" viewBox="0 0 10 10"><circle cx="5" cy="5" r="4" fill="none" '
+                          'stroke="black" stroke-width="0.25"/></symbol>'
+                          '<use href="#s" x="20" y="20" width="80" height="80"/>'
+                          '<use xlink:href="#s" x="110" y="110" width="60" height="60"/>'), "use"),
+    "use of svg x y": (doc(f'<defs><svg id="v" x="50" y="60" width="80" height="80"><rect x="10" y="10" '
+                           f'width="60" height="60" {S}/></svg></defs><use href="#v"/>'
+                           f'<use href="#v" x="40" y="40"/>'), "use"),
+    "use of g with transform": (doc(f'<defs><g id="g"><rect width="40" height="30" {S}/></g></defs>'
+                                    f'<use href="#g" x="20" y="20" transform="rotate(10)"/>'
+                                    f'<use href="#g" x="120" y="120"/>'), "use"),
+    "symbol transform": (doc('<symbol id="s" transform="skewX(20)"><rect x="20" y="20" width="100" '
+                             'height="100"/></symbol><use href="#s"/>'), "use"),
+    "display none on the root is ignored": (doc(f'<rect x="20" y="20" width="100" height="100" {S}/>',
+                                                'display="none"'), "hidden parts"),
+    "use cycle": (doc(f'<g id="a"><rect x="20" y="20" width="60" height="60" {S}/><use href="#a" x="50"/></g>'
+                      f'<rect id="b" x="120" y="120" width="50" height="50" {S}/>'), "use cycle"),
+    "use inherits style": (doc('<defs><path id="p" d="M20 20 L180 180"/></defs>'
+                               '<use href="#p" stroke="black" stroke-width="2"/>'), "use"),
+    # -- CSS ---------------------------------------------------------------------------------------------------
+    "css cascade": (doc(f'<style>.axis path, .axis line {{ display: none }} g.hidden > * {{ visibility: hidden }}'
+                        f'</style><rect x="20" y="20" width="160" height="160" {S}/>'
+                        f'<g class="axis"><path d="M10 190 H190" {S}/><line x1="10" y1="10" x2="10" y2="190" {S}/>'
+                        f'</g><g class="hidden"><circle cx="100" cy="100" r="30" {S}/></g>'), "css cascade"),
+    "css specificity": (doc('<style>#a { stroke: black } .c { stroke: none } rect { stroke: none }</style>'
+                            '<rect id="a" class="c" x="20" y="20" width="160" height="160" fill="none" '
+                            'stroke-width="2"/>'), "css cascade"),
+    "css important": (doc('<style>.c { display: none !important }</style>'
+                          f'<rect class="c" x="20" y="20" width="60" height="60" style="display: inline" {S}/>'
+                          f'<rect x="100" y="100" width="60" height="60" {S}/>'), "css cascade"),
+    "css siblings and attributes": (doc(f'<style>rect + circle {{ display: none }} [data-x="1"] {{ stroke: none }}'
+                                        f' path:first-child {{ stroke: none }}</style>'
+                                        f'<g><path d="M10 10 H190" {S}/><rect x="20" y="20" width="60" '
+                                        f'height="60" {S}/><circle cx="140" cy="50" r="30" {S}/>'
+                                        f'<line data-x="1" x1="10" y1="190" x2="190" y2="190" {S}/>'
+                                        f'<line x1="20" y1="150" x2="180" y2="150" {S}/></g>'), "css cascade"),
+    "css not and nth": (doc(f'<style>rect:not(.keep) {{ display: none }} circle:nth-of-type(2) '
+                            f'{{ visibility: hidden }}</style><rect class="keep" x="20" y="20" width="50" '
+                            f'height="50" {S}/><rect x="100" y="20" width="50" height="50" {S}/>'
+                            f'<circle cx="50" cy="140" r="30" {S}/><circle cx="140" cy="140" r="30" {S}/>'),
+                        "css cascade"),
+    "css media print": (doc(f'<style>@media print {{ rect {{ display: none }} }} @media screen {{ circle '
+                            f'{{ display: none }} }}</style><rect x="20" y="20" width="60" height="60" {S}/>'
+                            f'<circle cx="140" cy="140" r="30" {S}/>'), "css cascade"),
+    "presentation attributes": (doc('<style>rect { stroke: black }</style>'
+                                    '<rect x="20" y="20" width="160" height="160" stroke="none" fill="none" '
+                                    'stroke-width="2"/><circle cx="100" cy="100" r="40" fill="none" '
+                                    'stroke="black" stroke-width="2" style="stroke: none"/>'),
+                                "presentation attributes"),
+    "inherit": (doc('<g stroke="black" stroke-width="2" fill="none"><g stroke="none">'
+                    '<rect x="20" y="20" width="60" height="60" stroke="inherit"/></g>'
+                    '<circle cx="140" cy="140" r="30"/></g>'), "inherit"),
+    "inherit visibility": (doc(f'<g visibility="hidden"><rect x="20" y="20" width="60" height="60" {S}/>'
+                               f'<circle cx="140" cy="140" r="30" visibility="visible" {S}/></g>'), "inherit"),
+    "q and rem units": (doc(f'<rect x="30Q" y="30Q" width="150Q" height="1.5rem" {S}/>'
+                            f'<circle cx="100" cy="120" r="2rem" {S}/>'), "em units"),
+    "em units": (doc(f'<g font-size="20"><rect x="1em" y="1em" width="5em" height="3em" {S}/>'
+                     f'<circle cx="6em" cy="7em" r="2ex" {S} font-size="30"/></g>'), "em units"),
+    # -- hiding ------------------------------------------------------------------------------------------------
+    "hidden parts": (doc(f'<rect x="20" y="20" width="60" height="60" display="none" {S}/>'
+                         f'<g opacity="0"><circle cx="140" cy="50" r="30" {S}/></g>'
+                         f'<g style="display:none"><line x1="0" y1="0" x2="200" y2="200" {S}/></g>'
+                         f'<rect x="100" y="100" width="60" height="60" {S}/>'), "hidden parts"),
+    "transparent paints": (doc('<rect x="20" y="20" width="60" height="60" fill="transparent" stroke="none"/>'
+                               '<rect x="100" y="20" width="60" height="60" fill-opacity="0"/>'
+                               '<rect x="20" y="100" width="60" height="60" fill="rgba(0,0,0,0)"/>'
+                               '<rect x="100" y="100" width="60" height="60"/>'), "hidden parts"),
+    # -- switch ------------------------------------------------------------------------------------------------
+    "switch language": (doc(f'<switch><g systemLanguage="xx-unknown"><circle cx="100" cy="100" r="60" {S}/></g>'
+                            f'<g systemLanguage="de, en-GB"><rect x="40" y="40" width="120" height="120" {S}/></g>'
+                            f'<g><line x1="0" y1="0" x2="200" y2="200" {S}/></g></switch>'), "switch"),
+    "switch extensions": (doc(f'<switch><rect requiredExtensions="http://example.org/x" x="10" y="10" width="50" '
+                              f'height="50" {S}/><rect requiredFeatures="http://www.w3.org/TR/SVG11/feature#Shape" '
+                              f'x="100" y="100" width="60" height="60" {S}/></switch>'), "switch"),
+    "switch takes an unknown svg element": (doc(f'<switch><unknown/><rect x="20" y="20" width="60" height="60" '
+                                                f'{S}/></switch><circle cx="140" cy="140" r="30" {S}/>'), "switch"),
+    "language outside switch": (doc(f'<rect systemLanguage="zz" x="20" y="20" width="60" height="60" {S}/>'
+                                    f'<rect systemLanguage="en" x="100" y="100" width="60" height="60" {S}/>'),
+                                "switch"),
+    # -- dashes ------------------------------------------------------------------------------------------------
+    "dashes": (doc(f'<line x1="10" y1="30" x2="190" y2="30" stroke-dasharray="20 10" {S}/>'
+                   f'<rect x="20" y="60" width="160" height="120" stroke-dasharray="15,10" {S}/>'), "dashes"),
+    "dash offset and odd count": (doc(f'<line x1="10" y1="40" x2="190" y2="40" stroke-dasharray="20 10 5" '
+                                      f'stroke-dashoffset="12" {S}/><circle cx="100" cy="120" r="60" '
+                                      f'stroke-dasharray="25" stroke-dashoffset="-7" {S}/>'), "dashes"),
+    "dashes scaled": (doc('<g transform="scale(2)"><path d="M10 20 H90 M10 50 Q50 10 90 50" '
+                          'stroke-dasharray="8 4" fill="none" stroke="black" stroke-width="1"/></g>'), "dashes"),
+    "dashes in error draw solid": (doc(f'<line x1="10" y1="40" x2="190" y2="40" stroke-dasharray="10 -5" {S}/>'
+                                       f'<line x1="10" y1="100" x2="190" y2="100" stroke-dasharray="0 0" {S}/>'),
+                                   "dashes"),
+    "round-cap dots": (doc('<line x1="20" y1="100" x2="180" y2="100" stroke="black" stroke-width="6" '
+                           'stroke-linecap="round" stroke-dasharray="0 20"/>'), "dashes"),
+    "dashes as css": (doc(f'<style>.d {{ stroke-dasharray: 12px 8px }}</style>'
+                          f'<path class="d" d="M20 20 L180 180" {S}/>'), "dashes"),
+    # -- clip paths --------------------------------------------------------------------------------------------
+    "clipped fill": (doc('<clipPath id="c"><rect x="0" y="0" width="100" height="200"/></clipPath>'
+                         '<circle cx="100" cy="100" r="70" clip-path="url(#c)"/>'), "clipped fill"),
+    "clipped stroke": (doc(f'<clipPath id="c"><circle cx="100" cy="100" r="60"/></clipPath>'
+                           f'<path d="M0 100 H200 M100 0 V200" {S} clip-path="url(#c)"/>'), "clipped fill"),
+    "clip bounding box units": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox"><rect x="0.25" y="0.25" '
+                                    'width="0.5" height="0.5"/></clipPath><rect x="20" y="20" width="160" '
+                                    'height="160" clip-path="url(#c)"/>'), "clipped fill"),
+    "clip by a self-crossing star": (doc('<clipPath id="c"><path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z"/>'
+                                         '</clipPath><rect width="200" height="200" clip-path="url(#c)"/>'),
+                                     "clipped fill"),
+    "transform-origin center on a clip path": (doc('<clipPath id="c" transform="rotate(36)" '
+                                                   'transform-origin="center"><rect x="50" y="50" width="100" '
+                                                   'height="60"/></clipPath><rect width="200" height="200" '
+                                                   'clip-path="url(#c)"/>'), "transform-origin"),
+    "transform-origin on a clip path": (doc('<clipPath id="c" transform="rotate(45)" transform-origin="100 100">'
+                                            '<rect x="50" y="50" width="100" height="100"/></clipPath>'
+                                            '<rect x="20" y="20" width="160" height="160" clip-path="url(#c)"/>'),
+                                        "transform-origin"),
+    "clip evenodd": (doc('<clipPath id="c"><path clip-rule="evenodd" d="M10 10 H190 V190 H10 Z M60 60 H140 V140 '
+                         'H60 Z"/></clipPath><rect x="30" y="30" width="140" height="140" clip-path="url(#c)"/>'),
+                     "clipped fill"),
+    "clip on a group": (doc('<clipPath id="c"><circle cx="100" cy="100" r="80"/></clipPath>'
+                            '<g clip-path="url(#c)"><rect x="10" y="10" width="90" height="90"/>'
+                            f'<line x1="0" y1="200" x2="200" y2="0" {S}/></g>'), "clipped fill"),
+    "clip path with a transform": (doc('<clipPath id="c" transform="rotate(45 100 100)"><rect x="50" y="50" '
+                                       'width="100" height="100"/></clipPath><rect x="40" y="40" width="120" '
+                                       'height="120" clip-path="url(#c)"/>'), "clipped fill"),
+    "root clip-path": (doc('<clipPath id="c"><rect x="0" y="0" width="120" height="120"/></clipPath>'
+                           f'<rect x="20" y="20" width="160" height="160" {S}/>', 'clip-path="url(#c)"'),
+                       "root clip-path"),
+    "clip cycle": (doc('<clipPath id="a" clip-path="url(#b)"><rect x="20" y="20" width="160" height="160"/>'
+                       '</clipPath><clipPath id="b" clip-path="url(#a)"><rect x="0" y="0" width="120" '
+                       'height="120"/></clipPath><circle cx="100" cy="100" r="90" clip-path="url(#a)"/>'),
+                   "clip cycle"),
+    # -- fills -------------------------------------------------------------------------------------------------
+    "open fill": (doc('<path d="M20 20 L180 40 L100 180"/><polyline points="20,190 60,120 100,190"/>'), "open fill"),
+    "open fill with stroke": (doc('<path d="M20 20 L180 40 L100 180" stroke="black" stroke-width="2"/>'),
+                              "open fill"),
+    "white fill": (doc(f'<rect width="200" height="200" style="fill: #ffffff"/><path d="M20 100 Q100 0 180 100" '
+                       f'{S}/>'), "white fill"),
+    "paper-coloured paints": (doc('<rect x="10" y="10" width="80" height="80" fill="white" stroke="#fff"/>'
+                                  '<rect x="110" y="10" width="80" height="80" fill="rgb(255 255 255)"/>'
+                                  '<rect x="10" y="110" width="80" height="80" fill="black" fill-opacity="0.01"/>'
+                                  '<rect x="110" y="110" width="80" height="80" fill="navy"/>'), "white fill"),
+    "current colour": (doc('<g color="black"><rect x="20" y="20" width="60" height="60" fill="currentColor"/></g>'
+                           '<g color="white"><rect x="100" y="100" width="60" height="60" fill="currentColor"/>'
+                           '</g>'), "white fill"),
+    "gradient without stops paints nothing": (doc('<linearGradient id="g"/><linearGradient id="h" href="#k"/>'
+                                                  '<linearGradient id="k"><stop offset="0"/></linearGradient>'
+                                                  '<rect x="20" y="20" width="60" height="60" fill="url(#g)"/>'
+                                                  '<rect x="100" y="100" width="60" height="60" fill="url(#h)"/>'),
+                                              "white fill"),
+    "missing paint server": (doc('<rect x="20" y="20" width="60" height="60" fill="url(#nothing)"/>'
+                                 '<rect x="100" y="100" width="60" height="60" fill="url(#nothing) black"/>'),
+                             "white fill"),
+    # -- painting order: opaque fills hide what lies under them ---------------------------------------------
+    "white box over lines": (doc(f'<path d="M10 100 H190 M100 10 V190" {S}/><rect x="60" y="60" width="80" '
+                                 f'height="80" fill="white" stroke="black" stroke-width="2"/>'), "painting order"),
+    "later fill over earlier stroke": (doc(f'<rect x="20" y="20" width="100" height="100" {S}/>'
+                                           '<circle cx="120" cy="120" r="60" fill="navy"/>'), "painting order"),
+    "translucent fill hides nothing": (doc(f'<path d="M10 100 H190" {S}/><rect x="60" y="60" width="80" '
+                                           f'height="80" fill="white" fill-opacity="0.5"/>'), "painting order"),
+    "group opacity hides nothing": (doc(f'<path d="M10 100 H190" {S}/><g opacity="0.5"><rect x="60" y="60" '
+                                        f'width="80" height="80" fill="white" stroke="black" stroke-width="2"/></g>'),
+                                    "painting order"),
+    "fill over a clipped group": (doc('<clipPath id="c"><rect width="100" height="200"/></clipPath>'
+                                      f'<g clip-path="url(#c)"><path d="M10 100 H190" {S}/></g>'
+                                      '<rect x="50" y="50" width="100" height="100" fill="white"/>'), "painting order"),
+    # -- patterns ----------------------------------------------------------------------------------------------
+    "pattern fill": (doc('<defs><pattern id="h" patternUnits="userSpaceOnUse" width="20" height="20">'
+                         '<path d="M0 0 L20 20" stroke="black" stroke-width="2"/></pattern></defs>'
+                         '<rect x="20" y="20" width="160" height="160" fill="url(#h)"/>'), "pattern fill"),
+    "pattern bounding box units": (doc('<defs><pattern id="h" width="0.25" height="0.25">'
+                                       '<line x1="0" y1="10" x2="40" y2="10" stroke="black" stroke-width="2"/>'
+                                       '</pattern></defs><circle cx="100" cy="100" r="80" fill="url(#h)"/>'),
+                                   "pattern fill"),
+    "pattern transform": (doc('<defs><pattern id="h" patternUnits="userSpaceOnUse" width="25" height="25" '
+                              'patternTransform="rotate(30)"><line x1="0" y1="12" x2="25" y2="12" stroke="black" '
+                              'stroke-width="2"/></pattern></defs>'
+                              '<rect x="20" y="20" width="160" height="160" fill="url(#h)"/>'), "pattern fill"),
+    "pattern viewbox and href": (doc('<defs><pattern id="base" viewBox="0 0 10 10" patternUnits="userSpaceOnUse" '
+                                     'width="30" height="30"><circle cx="5" cy="5" r="3" fill="none" '
+                                     'stroke="black" stroke-width="0.6"/></pattern>'
+                                     '<pattern id="h" href="#base" x="5" y="5"/></defs>'
+                                     '<rect x="20" y="20" width="160" height="160" fill="url(#h)"/>'),
+                                 "pattern fill"),
+    "pattern with a stroke": (doc('<defs><pattern id="h" patternUnits="userSpaceOnUse" width="16" height="16">'
+                                  '<line x1="8" y1="0" x2="8" y2="16" stroke="black" stroke-width="2"/></pattern>'
+                                  '</defs><circle cx="100" cy="100" r="80" fill="url(#h)" stroke="black" '
+                                  'stroke-width="2"/>'), "pattern fill"),
+}
+
+TEXT_CASES: dict[str, str] = {
+    "text": doc('<text x="20" y="60" font-size="32">Plotter</text>'),
+    "text anchor middle": doc('<text x="100" y="100" font-size="24" text-anchor="middle">centred</text>'),
+    "text anchor end": doc('<text x="180" y="150" font-size="20" text-anchor="end" font-family="serif">the end'
+                           '</text>'),
+    "text transformed": doc('<text x="0" y="0" font-size="20" transform="translate(40 40) rotate(30)">turned'
+                            '</text>'),
+    "text tspans": doc('<text x="20" y="50" font-size="20">first <tspan x="20" y="100" font-size="30">second'
+                       '</tspan><tspan dx="10">third</tspan></text>'),
+    "text css font size": doc('<style>text { font-size: 2em }</style><text x="20" y="120">Big</text>'),
+}
+"""Text cases: the letters differ from the browser's font, so these are compared by the box the ink covers."""
