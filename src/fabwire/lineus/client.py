@@ -69,12 +69,26 @@ class Position:
         return f"X {self.x:g}  Y {self.y:g}  Z {self.z:g}  (pen {'down' if self.pen_down else 'up'})"
 
     @classmethod
-    def from_reply(cls, reply: p.Reply) -> Position:
-        fields = dict(reply.fields)
-        try:
-            return cls(float(fields["X"]), float(fields["Y"]), float(fields["Z"]))
-        except (KeyError, ValueError):
-            raise RemoteProtocolError(f"reply {reply.text()!r} does not carry X, Y and Z") from None
+    def from_reply(cls, reply: p.Reply, fallback: Point3 | None = None) -> Position:
+        """The X, Y, Z a reply carries; an axis the reply leaves out (clones and older firmware answer a bare `ok`)
+        is taken from `fallback`, where the client sent the arm. RemoteProtocolError for an axis that is not a
+        finite number, or missing with no fallback."""
+        values: list[float] = []
+        for axis, index in (("X", 0), ("Y", 1), ("Z", 2)):
+            text = reply.get(axis)
+            if text is None:
+                if fallback is None:
+                    raise RemoteProtocolError(f"reply {reply.text()!r} does not carry {axis}")
+                values.append(float(fallback[index]))
+                continue
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                raise RemoteProtocolError(f"reply {reply.text()!r}: {axis} {text!r} is not a number")
+            values.append(value)
+        return cls(*values)
 
 
 @dataclass(frozen=True, slots=True)
@@ -361,7 +375,7 @@ class LineUs:
         x, y, z = target
         if kin.in_body_zone(x, y):
             safe = kin.clamp_target(x, y)
-            self._notice(f"({x:g}, {y:g}) is in the body notch that firmware {self.hello.version.split()[0]} does "
+            self._notice(f"({x:g}, {y:g}) is in the body notch that firmware {self.hello.firmware_label} does "
                          f"not keep out of: moved to ({safe.x:g}, {safe.y:g}) with the pen lifted")
             x, y, z = max(safe.x, _CLEAR[0]) if safe.y < 0 else safe.x, safe.y, kin.Z_UP
             command = self._move_to(x, y, z, scaled, command)
@@ -392,20 +406,24 @@ class LineUs:
 
     # -- motion ---------------------------------------------------------------------------------------------------
 
+    def _position(self, reply: p.Reply) -> Position:
+        """The position a reply reports, an axis it leaves out taken from where the commands sent put the arm."""
+        return Position.from_reply(reply, self._aim)
+
     async def move(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
         """G01 to (x, y, z); omitted axes stay. Returns where the arm reports it ended (clamped if outside)."""
-        return Position.from_reply(await self.request(p.Move(x, y, z)))
+        return self._position(await self.request(p.Move(x, y, z)))
 
     async def rapid(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
         """G00: every servo at full speed; the path is a curve and may clip the body."""
-        return Position.from_reply(await self.request(p.Move(x, y, z, rapid=True)))
+        return self._position(await self.request(p.Move(x, y, z, rapid=True)))
 
     async def move_uncalibrated(self, x: float | None = None, y: float | None = None, z: float | None = None,
                                 keep: str | None = None) -> Position:
         """G40: ignore G54 and calibration (`keep` = "xy" or "z" re-applies that part)."""
         if keep not in (None, "xy", "z"):
             raise InputError("keep is 'xy' or 'z'")
-        return Position.from_reply(await self.request(p.RawMove(x, y, z, keep)))  # type: ignore[arg-type]
+        return self._position(await self.request(p.RawMove(x, y, z, keep)))  # type: ignore[arg-type]
 
     async def pen_up(self) -> Position:
         return await self.move(z=kin.Z_UP)
@@ -414,10 +432,10 @@ class LineUs:
         return await self.move(z=z)
 
     async def home(self) -> Position:
-        return Position.from_reply(await self.request(p.Home()))
+        return self._position(await self.request(p.Home()))
 
     async def position(self) -> Position:
-        return Position.from_reply(await self.request(p.GetPosition()))
+        return self._position(await self.request(p.GetPosition()))
 
     async def servo_angles(self) -> dict[str, float]:
         reply = await self.request(p.GetPosition(servos=True))
@@ -463,7 +481,7 @@ class LineUs:
     async def zmap(self) -> tuple[float, ...]:
         reply = await self.request(p.ZMap())
         try:
-            return tuple(float(v) for v in (reply.get("ZMap") or "").split(";"))
+            return tuple(float(v) for v in (reply.get("ZMap") or "").split(";") if v.strip())
         except ValueError:
             raise RemoteProtocolError(f"Z map {reply.text()!r} is not four numbers") from None
 
