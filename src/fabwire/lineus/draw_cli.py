@@ -370,13 +370,14 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
 def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: bool | None, margin: float,
          rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
          preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
-    """Write TEXT in a single-stroke font (\\n starts a new line; '-' reads the text from standard input)."""
+    """Write TEXT in a single-stroke font (\\n starts a new line, \\t moves on to the next tab stop; '-' reads the
+    text from standard input)."""
     _one_start(resume, restart)
     if text == STDIN:
         text = sys.stdin.read(MAX_TEXT + 1).rstrip("\n")
         if len(text) > MAX_TEXT:
             raise InputError(f"the text on standard input is longer than {MAX_TEXT} characters")
-    text = text.replace("\\n", "\n")
+    text = text.replace("\\n", "\n").replace("\\t", "\t")
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
     key = _state_key(hashlib.sha256(text.encode()).hexdigest(), options,
                      f"{size}|{font}|{_placement_key(options)}")
