@@ -314,7 +314,7 @@ class LineUs:
         return future
 
     async def _await_reply(self, command: p.Command, future: asyncio.Future[p.Reply], timeout: float | None) -> p.Reply:
-        limit = timeout if timeout is not None else self._timeout_for(self._spans.pop(future, None))
+        limit = timeout if timeout is not None else self._timeout_for(self._spans.get(future))
         try:
             async with asyncio.timeout(limit):
                 if self._read_task is None:
@@ -430,6 +430,23 @@ class LineUs:
 
     async def pen_down(self, z: float = kin.Z_DOWN) -> Position:
         return await self.move(z=z)
+
+    async def lift_after_stop(self) -> Position:
+        """After an interrupt (Ctrl-C, a cancelled job): wait for the replies the Line-us still owes (a move it
+        has taken cannot be called back), then lift the pen, so the last thing the connection sends is a pen-up.
+        LinkError or LinkTimeout when the link is gone or the owed replies do not come."""
+        waits = [self._timeout_for(self._spans.get(future)) for _, future in self._waiting if not future.done()]
+        if waits:
+            try:
+                async with asyncio.timeout(sum(waits)):
+                    while self._failure is None and any(not future.done() for _, future in self._waiting):
+                        if self._read_task is None:
+                            await self._pump()
+                        else:
+                            await asyncio.wait([future for _, future in self._waiting])
+            except TimeoutError:
+                self._fail(LinkTimeout("the Line-us did not finish its last move: the pen may still be down"))
+        return await self.pen_up()
 
     async def home(self) -> Position:
         return self._position(await self.request(p.Home()))

@@ -4,6 +4,7 @@ with progress that survives an interruption (`--resume`)."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import json
 import math
@@ -21,7 +22,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from fabwire import units
 from fabwire.cli_support import App, DeviceContext, FiniteRange, pass_app, pass_device
 from fabwire.console import Output
-from fabwire.errors import InputError, LinkError
+from fabwire.errors import FabwireError, InputError, LinkError
 from fabwire.files import same_file
 from fabwire.lineus.kinematics import UNITS_PER_MM
 from fabwire.lineus.plot import (
@@ -236,15 +237,19 @@ async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, point: int = 0, 
             on_stroke(index)
 
 
-async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float) -> tuple[int, float]:
+async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float,
+                what: str) -> tuple[int, float]:
+    """Draw alone on the robot (`DrawingLock`), saving progress per stroke; an interrupt lifts the pen before the
+    connection closes."""
     from fabwire.lineus.client import LineUs
+    from fabwire.lineus.drawing_lock import DrawingLock, robot_address
 
     per_stroke = plan.stroke_seconds()
     weights = [max(1, round(t * 1000)) for t in per_stroke]  # the bar advances by estimated milliseconds
     total = len(plan.strokes)
     began = time.monotonic()
     async with dctx.open(LineUs) as arm:
-        with Progress(
+        with DrawingLock(robot_address(arm.transport), what) as lock, Progress(
             TextColumn("[progress.description]{task.description}"),
             BarColumn(),
             TextColumn("{task.percentage:>3.0f}%"),
@@ -253,16 +258,25 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
             disable=dctx.output.json_mode,
         ) as bar:
             estimate = sum(per_stroke[progress.done :], 0.0)
-            task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=sum(weights),
+            all_weight = sum(weights)
+            task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=all_weight,
                                 completed=sum(weights[: progress.done]))
+            lock.update(100.0 * sum(weights[: progress.done]) / all_weight, f"stroke {progress.done + 1} of {total}")
 
             def done(index: int) -> None:
                 progress.reached(index + 1, 0)
                 progress.save()
                 bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
+                lock.update(100.0 * sum(weights[: index + 1]) / all_weight,
+                            f"stroke {min(index + 2, total)} of {total}")
 
-            await send_plan(arm, plan, start=progress.done, point=progress.point, pen_z=pen_z, on_stroke=done,
-                            on_point=progress.reached)
+            try:
+                await send_plan(arm, plan, start=progress.done, point=progress.point, pen_z=pen_z, on_stroke=done,
+                                on_point=progress.reached)
+            except (asyncio.CancelledError, KeyboardInterrupt):
+                with contextlib.suppress(FabwireError, OSError):
+                    await arm.lift_after_stop()
+                raise
         await arm.home()
     return total, time.monotonic() - began
 
@@ -294,7 +308,7 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
         progress.save()
     first = progress.done
     try:
-        total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z))
+        total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z, name))
     except (KeyboardInterrupt, LinkError, TimeoutError):
         if progress.done or progress.point:
             progress.save()  # the last acknowledged vertex, so a resume carries on from exactly there

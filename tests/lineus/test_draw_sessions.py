@@ -1,0 +1,159 @@
+"""Drawing sessions on one Line-us: one drawing at a time across processes, Ctrl-C lifting the pen before the
+connection closes, and `--resume` refusing a different plan. Real simulator and CLI processes on loopback TCP."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from clitools import RunningSimulator, cli_env, run_cli, spawn, start_simulator
+from fabwire.errors import DeviceBusy
+from fabwire.lineus.drawing_lock import DrawingLock, current_drawer
+
+TERM = b"\r\n\x00"
+WAIT = 60.0
+"""Longest wait for a state to come about (a bound against hanging, never a pass/fail window)."""
+
+
+def zigzag(path: Path, turns: int = 40) -> Path:
+    """One long stroke: the pen stays down for all of it."""
+    points = " ".join(f"{0 if i % 2 else 100},{i * 100 / turns:.2f}" for i in range(turns + 1))
+    path.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100"><polyline points="{points}" '
+                    'fill="none" stroke="black"/></svg>', encoding="utf-8")
+    return path
+
+
+@pytest.fixture
+def slow_sim() -> Iterator[RunningSimulator]:
+    """A simulator moving at the robot's own speed, so a drawing lasts long enough to interrupt."""
+    sim = start_simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "1")
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+def address(sim: RunningSimulator) -> str:
+    return sim.url.removeprefix("tcp://")
+
+
+class Observer:
+    """A second connection kept open through the test, reading where the arm is (M114) as the robot reports it."""
+
+    def __init__(self, where: str) -> None:
+        host, port = where.rsplit(":", 1)
+        self.sock = socket.create_connection((host, int(port)), timeout=WAIT)
+        self.buffer = b""
+        self.message()  # the hello
+
+    def message(self) -> bytes:
+        while TERM not in self.buffer:
+            chunk = self.sock.recv(4096)
+            assert chunk, "the simulator closed the observer's connection"
+            self.buffer += chunk
+        line, self.buffer = self.buffer.split(TERM, 1)
+        return line
+
+    def position(self) -> dict[str, float]:
+        self.sock.sendall(b"M114\x00")
+        fields = dict(part.split(":", 1) for part in self.message().decode().split()[1:])
+        return {k: float(v) for k, v in fields.items() if k in ("X", "Y", "Z")}
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def start_drawing(sim: RunningSimulator, svg: Path, state: Path, env: dict[str, str]) -> subprocess.Popen[str]:
+    return spawn([sys.executable, "-m", "fabwire", "lineus", "-d", address(sim), "draw", str(svg), "--state",
+                  str(state)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+
+def wait_for(condition: object, what: str) -> None:
+    deadline = time.monotonic() + WAIT
+    while not condition():  # type: ignore[operator]
+        assert time.monotonic() < deadline, f"gave up waiting for {what}"
+        time.sleep(0.05)
+
+
+def test_ctrl_c_lifts_the_pen_before_the_connection_closes(slow_sim: RunningSimulator, tmp_path: Path) -> None:
+    observer = Observer(address(slow_sim))
+    try:
+        drawing = start_drawing(slow_sim, zigzag(tmp_path / "zigzag.svg"), tmp_path / "state.json",
+                                cli_env(tmp_path))
+        wait_for(lambda: observer.position().get("Z", 1000) < 500, "the pen to go down")
+        drawing.send_signal(signal.SIGINT)
+        _, err = drawing.communicate(timeout=WAIT)
+        assert drawing.returncode != 0
+        assert "interrupted" in err
+        where = observer.position()
+        assert where["Z"] == 1000, f"the pen was left down at {where}"
+        assert (where["X"], where["Y"]) != (1000, 1000)  # lifted where it stopped, not sent home
+    finally:
+        observer.close()
+
+
+def test_a_second_drawing_is_refused_naming_the_first(slow_sim: RunningSimulator, tmp_path: Path) -> None:
+    env = cli_env(tmp_path)
+    first = start_drawing(slow_sim, zigzag(tmp_path / "zigzag.svg"), tmp_path / "state.json", env)
+    try:
+        wait_for(lambda: (tmp_path / "state.json").exists() and current_drawer(_robot(slow_sim)) is not None,
+                 "the first drawing to start")
+        second = run_cli("lineus", "-d", address(slow_sim), "text", "Hi", "--state", str(tmp_path / "s2.json"),
+                         env=env)
+        assert second.returncode == 4, second.stderr
+        line = second.stderr.strip().splitlines()[-1]
+        assert "is drawing already" in line
+        assert f"process {first.pid}" in line
+        assert "zigzag.svg" in line
+        assert "fabwire lineus -d" in line  # the command that draws
+        # a name for the same robot is the same robot
+        port = address(slow_sim).rsplit(":", 1)[1]
+        third = run_cli("lineus", "-d", f"localhost:{port}", "text", "Hi", "--state", str(tmp_path / "s3.json"),
+                        env=env)
+        assert third.returncode == 4, third.stderr
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.communicate(timeout=WAIT)
+    assert current_drawer(_robot(slow_sim)) is None  # released when the drawing ends
+
+
+def _robot(sim: RunningSimulator) -> str:
+    return address(sim)
+
+
+def test_the_lock_is_released_when_the_holder_dies(tmp_path: Path) -> None:
+    robot = f"127.0.0.1:{os.getpid() % 50000 + 10000}"
+    child = spawn([sys.executable, "-c", (
+        "import sys, time\n"
+        "from fabwire.lineus.drawing_lock import DrawingLock\n"
+        f"lock = DrawingLock({robot!r}, 'a test drawing', command='holder')\n"
+        "lock.acquire()\n"
+        "print('held', flush=True)\n"
+        "time.sleep(600)\n")], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "held"
+        holder = current_drawer(robot)
+        assert holder is not None
+        assert (holder.pid, holder.command) == (child.pid, "holder")
+        with pytest.raises(DeviceBusy, match=f"process {child.pid}"):
+            DrawingLock(robot, "mine").acquire()
+    finally:
+        child.kill()
+        child.wait()
+    assert current_drawer(robot) is None
+    with DrawingLock(robot, "mine") as lock:
+        lock.update(50.0, "stroke 2 of 4")
+        again = current_drawer(robot)
+        assert again is not None
+        assert (again.progress, again.pid) == ("stroke 2 of 4", os.getpid())
+
+
