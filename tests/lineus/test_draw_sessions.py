@@ -157,3 +157,49 @@ def test_the_lock_is_released_when_the_holder_dies(tmp_path: Path) -> None:
         assert (again.progress, again.pid) == ("stroke 2 of 4", os.getpid())
 
 
+
+
+def test_the_agent_and_the_cli_draw_one_at_a_time(slow_sim: RunningSimulator, tmp_path: Path) -> None:
+    from agent.agenttools import device_of, start_agent, summary
+    from agent.agenttools import wait_for as wait_until
+
+    config = tmp_path / "devices.toml"
+    config.write_text(f'[devices.arm]\nkind = "lineus"\nurl = "{slow_sim.url}"\n', encoding="utf-8")
+    agent = start_agent(tmp_path / "state", "--config", str(config))
+    drawing: subprocess.Popen[str] | None = None
+    try:
+        with agent.client() as client:
+            arm = wait_until(lambda: (d := device_of(client, "lineus"))["state"]["online"] and d, "the arm online")
+            drawing = start_drawing(slow_sim, zigzag(tmp_path / "zigzag.svg"), tmp_path / "state.json",
+                                    cli_env(tmp_path))
+            shown = wait_until(lambda: (s := summary(client, arm["id"]))["state"] == "drawing" and s,
+                               "the agent to show the CLI's drawing")
+            assert "another program" in shown["state_text"]
+            assert f"process {drawing.pid}" in shown["state_text"]
+            assert "zigzag.svg" in shown["state_text"]
+            assert shown["busy"] is True
+            assert shown["actions"] == []
+            moved = client.post(f"/api/v1/devices/{arm['id']}/actions/move", json={"x": 1000, "y": 0})
+            assert moved.status_code == 409, moved.text
+            assert f"process {drawing.pid}" in moved.text
+
+            drawing.send_signal(signal.SIGINT)
+            drawing.communicate(timeout=WAIT)
+            drawing = None
+            wait_until(lambda: summary(client, arm["id"])["state"] == "idle", "the agent to show the arm idle")
+
+            job = client.post(f"/api/v1/devices/{arm['id']}/actions/text",
+                              json={"text": "a long line of words"}).json()["job"]
+            wait_until(lambda: client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "running",
+                       "the agent's drawing running")
+            wait_until(lambda: current_drawer(address(slow_sim)) is not None, "the agent to hold the robot")
+            second = run_cli("lineus", "-d", address(slow_sim), "text", "Hi", "--state", str(tmp_path / "s2.json"),
+                             env=cli_env(tmp_path))
+            assert second.returncode == 4, second.stderr
+            assert "fabwire serve (arm)" in second.stderr
+            assert "'a long line of words'" in second.stderr
+    finally:
+        if drawing is not None:
+            drawing.kill()
+            drawing.communicate()
+        agent.stop()

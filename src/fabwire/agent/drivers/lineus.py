@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -10,9 +12,10 @@ from typing import Any, ClassVar
 
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_lineus
-from fabwire.errors import DeviceBusy, InputError, LinkClosed
+from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
+from fabwire.lineus.drawing_lock import Drawer, DrawingLock, current_drawer, robot_address
 from fabwire.lineus.plot import Plan, PlanOptions
 from fabwire.lineus.plot.intake import drawing_from_bytes
 from fabwire.lineus.plot.plan import plan_drawing, plan_file, plan_text
@@ -59,9 +62,21 @@ class LineUsDriver(Driver):
         self.position = await self.arm.position()
         return Identity("Line-us", hello.serial or None, hello.version or None)
 
+    def _other_drawer(self) -> Drawer | None:
+        """Another program drawing on this robot (a `fabwire lineus draw` on this host), if any."""
+        if self.arm is None:
+            return None
+        drawer = current_drawer(robot_address(self.arm.transport))
+        return drawer if drawer is not None and drawer.pid != os.getpid() else None
+
     def _summary(self) -> dict[str, Any]:
         pos = self.position
         where = {"x": pos.x, "y": pos.y, "z": pos.z} if pos else None
+        other = None if self.drawing else self._other_drawer()
+        if other is not None:
+            return summary(state="drawing", state_text=f"drawing from another program: {other.words()}", busy=True,
+                           progress_percent=other.progress_percent, position=where,
+                           pen_down=pos.pen_down if pos else None, actions=[])
         if self.drawing:
             percent, left = self._progress
             return summary(state="drawing", state_text=self.drawing, busy=True, progress_percent=round(percent, 1),
@@ -85,6 +100,8 @@ class LineUsDriver(Driver):
         arm = self._client()
         if self.drawing:
             raise DeviceBusy(f"the Line-us is busy ({self.drawing}): cancel the job first")
+        if (other := self._other_drawer()) is not None:
+            raise DeviceBusy(f"the Line-us is drawing for another program: {other.words()}")
         if action == "home":
             self.position = await arm.home()
         elif action == "pen_up":
@@ -139,12 +156,19 @@ class LineUsDriver(Driver):
                 raise JobStopped(f"stopped after stroke {index + 1} of {len(strokes)}")
 
         self._stop = False
+        what = repr(params["text"]) if job_type == "text" else path.name if path is not None else "a drawing"
         try:
-            await send_plan(arm, plan, on_stroke=drawn)
-            self.position = await arm.home()
-        except JobStopped:
-            self.position = await arm.pen_up()
-            raise
+            with DrawingLock(robot_address(arm.transport), what, command=f"fabwire serve ({self.spec.name})"):
+                try:
+                    await send_plan(arm, plan, on_stroke=drawn)
+                    self.position = await arm.home()
+                except JobStopped:
+                    self.position = await arm.pen_up()
+                    raise
+                except asyncio.CancelledError:  # the agent shuts down mid-drawing: the pen must not stay down
+                    with contextlib.suppress(FabwireError, OSError):
+                        await asyncio.shield(arm.lift_after_stop())
+                    raise
         finally:
             self.drawing = None
         return f"drew {len(strokes)} strokes in {time.monotonic() - began:.0f} s"
