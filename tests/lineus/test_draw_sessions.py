@@ -203,3 +203,96 @@ def test_the_agent_and_the_cli_draw_one_at_a_time(slow_sim: RunningSimulator, tm
             drawing.kill()
             drawing.communicate()
         agent.stop()
+
+
+# -- --resume never starts over by itself ---------------------------------------------------------------------------
+
+DATA = Path(__file__).parent / "data" / "svg"
+
+
+@pytest.fixture(scope="module")
+def interrupted(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
+    """A Line-us simulator and the progress file of a drawing of arcs.svg (default options) whose link dropped
+    part way through."""
+    sim = start_simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    folder = tmp_path_factory.mktemp("interrupted")
+    state = folder / "progress.json"
+    try:
+        first = run_cli("lineus", "-d", address(sim), "--inject", "disconnect_after=5000", "draw",
+                        str(DATA / "arcs.svg"), "--state", str(state), env=cli_env(folder))
+        assert first.returncode == 8, first.stderr
+        yield address(sim), state
+    finally:
+        sim.stop()
+
+
+# (options given to the resume, what the refusal names)
+CHANGED = [
+    (["--margin", "5"], "--margin 2 (now 5)"),
+    (["--rotate", "90"], "--rotate 0 (now 90)"),
+    (["--rotate", "auto"], "--rotate 0 (now auto)"),
+    (["--no-fit"], "--fit default (now off)"),
+    (["--clip"], "--clip off (now on)"),
+    (["--full-area"], "--full-area off (now on)"),
+    (["--no-optimize"], "--no-optimize off (now on)"),
+]
+
+
+@pytest.mark.parametrize(("options", "named"), CHANGED, ids=[" ".join(o) for o, _ in CHANGED])
+def test_resume_with_other_options_is_refused_naming_them(interrupted: tuple[str, Path], tmp_path: Path,
+                                                          options: list[str], named: str) -> None:
+    where, saved = interrupted
+    state = tmp_path / "progress.json"
+    state.write_bytes(saved.read_bytes())
+    done = run_cli("lineus", "-d", where, "draw", str(DATA / "arcs.svg"), "--state", str(state), "--resume",
+                   *options, env=cli_env(tmp_path))
+    assert done.returncode == 4, done.stderr
+    line = done.stderr.strip().splitlines()[-1]
+    assert named in line
+    assert "--restart" in line
+    assert state.read_bytes() == saved.read_bytes()  # nothing drawn, nothing overwritten
+
+
+def test_resume_without_progress_is_refused(interrupted: tuple[str, Path], tmp_path: Path) -> None:
+    where, _ = interrupted
+    done = run_cli("lineus", "-d", where, "draw", str(DATA / "arcs.svg"), "--state", str(tmp_path / "lost.json"),
+                   "--resume", env=cli_env(tmp_path))
+    assert done.returncode == 4, done.stderr
+    assert "nothing to resume" in done.stderr
+    assert "--restart" in done.stderr
+    assert not (tmp_path / "lost.json").exists()
+
+
+def test_resume_of_another_drawing_is_refused(interrupted: tuple[str, Path], tmp_path: Path) -> None:
+    where, saved = interrupted
+    state = tmp_path / "progress.json"
+    state.write_bytes(saved.read_bytes())
+    other = zigzag(tmp_path / "zigzag.svg")
+    done = run_cli("lineus", "-d", where, "draw", str(other), "--state", str(state), "--resume", env=cli_env(tmp_path))
+    assert done.returncode == 4, done.stderr
+    assert "is for another drawing" in done.stderr
+    assert "--restart" in done.stderr
+
+
+def test_resume_with_the_same_options_carries_on(interrupted: tuple[str, Path], tmp_path: Path) -> None:
+    where, saved = interrupted
+    state = tmp_path / "progress.json"
+    state.write_bytes(saved.read_bytes())
+    done = run_cli("--json", "lineus", "-d", where, "draw", str(DATA / "arcs.svg"), "--state", str(state),
+                   "--resume", "--margin", "2", env=cli_env(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert '"resumed_at"' in done.stdout
+
+
+def test_text_resume_names_a_changed_size_and_font(interrupted: tuple[str, Path], tmp_path: Path) -> None:
+    where, _ = interrupted
+    state = tmp_path / "text.json"
+    env = cli_env(tmp_path)
+    first = run_cli("lineus", "-d", where, "--inject", "disconnect_after=3000", "text", "Hello there", "--state",
+                    str(state), env=env)
+    assert first.returncode == 8, first.stderr
+    done = run_cli("lineus", "-d", where, "text", "Hello there", "--state", str(state), "--resume", "--size", "8",
+                   "--font", "timesr", env=env)
+    assert done.returncode == 4, done.stderr
+    assert "--size largest (now 8)" in done.stderr
+    assert "--font futural (now timesr)" in done.stderr

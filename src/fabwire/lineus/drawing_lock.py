@@ -21,13 +21,17 @@ import re
 import sys
 import time
 import warnings
+from collections.abc import AsyncIterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
-from fabwire.errors import DeviceBusy
+from fabwire.errors import DeviceBusy, FabwireError
 from fabwire.transport import Transport
+
+if TYPE_CHECKING:
+    from fabwire.lineus.client import LineUs
 
 
 def lock_dir() -> Path:
@@ -159,3 +163,17 @@ class DrawingLock:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.release()
+
+
+@contextlib.asynccontextmanager
+async def drawing_alone(arm: LineUs, what: str, *, command: str | None = None) -> AsyncIterator[DrawingLock]:
+    """`async with drawing_alone(arm, "'cat.svg'") as lock:` draw holding the robot's `DrawingLock`; an interrupt
+    (Ctrl-C, a cancelled task) lifts the pen before it goes on, so the connection does not close on a pen left
+    down on the paper."""
+    with DrawingLock(robot_address(arm.transport), what, command=command) as lock:
+        try:
+            yield lock
+        except (asyncio.CancelledError, KeyboardInterrupt):
+            with contextlib.suppress(FabwireError, OSError):
+                await asyncio.shield(arm.lift_after_stop())
+            raise

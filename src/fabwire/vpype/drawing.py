@@ -68,10 +68,11 @@ class DrawResult:
 async def _run(dctx: DeviceContext, plans: list[Plan], labels: list[str], progress: DrawProgress,
                pen_z: float, pen_change: PenChange | None) -> None:
     from fabwire.lineus.client import LineUs
+    from fabwire.lineus.drawing_lock import drawing_alone
 
     seconds = [t for plan in plans for t in [0.0, *plan.stroke_seconds()]][1:]  # a pen change costs no estimate
     weights = [max(1, round(t * 1000)) for t in seconds]
-    async with dctx.open(LineUs) as arm:
+    async with dctx.open(LineUs) as arm, drawing_alone(arm, f"a vpype document ({len(plans)} layer(s))") as lock:
         with Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
                       TextColumn("{task.percentage:>3.0f}%"), TimeRemainingColumn(),
                       console=dctx.output.err) as bar:
@@ -96,6 +97,8 @@ async def _run(dctx: DeviceContext, plans: list[Plan], labels: list[str], progre
                     progress.save()
                     bar.update(task, completed=sum(weights[: progress.done]),
                                description=f"{label}: stroke {stroke + 1}/{count}")
+                    lock.update(100.0 * sum(weights[: progress.done]) / max(1, sum(weights)),
+                                f"{label}: stroke {stroke + 1} of {count}")
 
                 start = max(0, progress.done - first)
                 if start < len(plan.strokes):
@@ -112,7 +115,8 @@ def draw_passes(dctx: DeviceContext, plans: Sequence[PassPlan], key: str, *, sta
     path = state or state_dir() / f"vpype-{key[:24]}.json"
     progress = DrawProgress.load(path, key) if resume else None
     if resume and progress is None:
-        dctx.output.note("nothing to resume: starting from the beginning")
+        raise InputError(f"nothing to resume: there is no progress file {path} for this document with these layers "
+                         "and options; run lineus-draw without --resume to draw it from the beginning")
     if progress is None:
         progress = DrawProgress(path, key, flatten(plans))
         progress.save()

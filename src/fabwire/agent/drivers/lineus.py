@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import os
 import time
 from collections.abc import Mapping
@@ -12,10 +11,10 @@ from typing import Any, ClassVar
 
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_lineus
-from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkClosed
+from fabwire.errors import DeviceBusy, InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
-from fabwire.lineus.drawing_lock import Drawer, DrawingLock, current_drawer, robot_address
+from fabwire.lineus.drawing_lock import Drawer, current_drawer, drawing_alone, robot_address
 from fabwire.lineus.plot import Plan, PlanOptions
 from fabwire.lineus.plot.intake import drawing_from_bytes
 from fabwire.lineus.plot.plan import plan_drawing, plan_file, plan_text
@@ -158,16 +157,12 @@ class LineUsDriver(Driver):
         self._stop = False
         what = repr(params["text"]) if job_type == "text" else path.name if path is not None else "a drawing"
         try:
-            with DrawingLock(robot_address(arm.transport), what, command=f"fabwire serve ({self.spec.name})"):
+            async with drawing_alone(arm, what, command=f"fabwire serve ({self.spec.name})"):
                 try:
                     await send_plan(arm, plan, on_stroke=drawn)
                     self.position = await arm.home()
                 except JobStopped:
                     self.position = await arm.pen_up()
-                    raise
-                except asyncio.CancelledError:  # the agent shuts down mid-drawing: the pen must not stay down
-                    with contextlib.suppress(FabwireError, OSError):
-                        await asyncio.shield(arm.lift_after_stop())
                     raise
         finally:
             self.drawing = None
