@@ -297,6 +297,12 @@ def improve(
             ix[v], ox[v] = ox[v], ix[v]
             iy[v], oy[v] = oy[v], iy[v]
 
+    def neigh_union(first: int, other: int) -> list[int]:
+        """The neighbours of either end line of a run (a run of two or three lines moves as one)."""
+        if first == other:
+            return neigh[first]
+        return list(set(neigh[first]).union(neigh[other]))
+
     queue: deque[int] = deque(order.tolist())
     gained = [0.0]
     """Travel saved by the moves applied so far (what a kick is judged by, without re-measuring the tour)."""
@@ -314,39 +320,57 @@ def improve(
     def local_search() -> bool:
         """Apply improving moves until none is left (True) or time is up (False)."""
         counter = 0
+        clock = time.thread_time
+        popleft = queue.popleft
         while queue:
             counter += 1
-            if counter & 63 == 0 and time.thread_time() > deadline:
+            if counter & 63 == 0 and clock() > deadline:
                 return False
-            a = queue.popleft()
+            a = popleft()
             queued[a] = 0
             i = pos[a]
             improved = False
-            # 2-opt, new edge from the end of a to the end of c (c later): reverse i+1..j.
+            oxa, oya, ixa, iya = ox[a], oy[a], ix[a], iy[a]
+            # The hops into and out of a, measured once for all its neighbours.
+            if i < last:
+                w = tour[i + 1]
+                wx, wy = ix[w], iy[w]
+                hop_out = hyp(oxa - wx, oya - wy)
+            else:
+                w, wx, wy, hop_out = -1, 0.0, 0.0, 0.0
+            if i > 0:
+                prev = tour[i - 1]
+                px, py = ox[prev], oy[prev]
+                hop_in = hyp(px - ixa, py - iya)
+            else:
+                prev, px, py, hop_in = -1, 0.0, 0.0, 0.0
             for c in neigh[a]:
                 j = pos[c]
                 if i < j <= i + MAX_REVERSAL:
-                    u, v = tour[i], tour[j]
-                    new = hyp(ox[u] - ox[v], oy[u] - oy[v])
-                    old = link(i, i + 1) + link(j, j + 1)
-                    if j + 1 <= last:
-                        w, z = tour[i + 1], tour[j + 1]
-                        new += hyp(ix[w] - ix[z], iy[w] - iy[z])
+                    # 2-opt, new edge from the end of a to the end of c (c later): reverse i+1..j.
+                    new = hyp(oxa - ox[c], oya - oy[c])
+                    old = hop_out
+                    if j < last:
+                        z = tour[j + 1]
+                        zx, zy = ix[z], iy[z]
+                        old += hyp(ox[c] - zx, oy[c] - zy)
+                        new += hyp(wx - zx, wy - zy)
                     if old - new > eps:
                         flip_block(i + 1, j)
                         gained[0] += old - new
                         push(a, c, tour[i + 1], *(tour[j + 1 : j + 2]))
                         improved = True
                         break
-                elif max(1, i - MAX_REVERSAL) <= j < i:
+                elif 1 <= j < i and j >= i - MAX_REVERSAL:
                     # new edge between the starts of a and c (c earlier): reverse j..i-1.
-                    u, v = tour[j - 1], tour[i - 1]
-                    new = hyp(ix[a] - ix[c], iy[a] - iy[c]) + hyp(ox[u] - ox[v], oy[u] - oy[v])
-                    old = link(j - 1, j) + link(i - 1, i)
+                    u = tour[j - 1]
+                    uxo, uyo = ox[u], oy[u]
+                    new = hyp(ixa - ix[c], iya - iy[c]) + hyp(uxo - px, uyo - py)
+                    old = hyp(uxo - ix[c], uyo - iy[c]) + hop_in
                     if old - new > eps:
                         flip_block(j, i - 1)
                         gained[0] += old - new
-                        push(a, c, u, v)
+                        push(a, c, u, prev)
                         improved = True
                         break
             if improved:
@@ -359,38 +383,46 @@ def improve(
                 end = i + size - 1
                 if end > last:
                     break
-                first_v, last_v = tour[i], tour[end]
-                removed = link(i - 1, i) + link(end, end + 1)
+                last_v = tour[end]
+                lox, loy = ox[last_v], oy[last_v]
+                removed = hop_in
                 bridge = 0.0
-                if end + 1 <= last:
-                    u, w = tour[i - 1], tour[end + 1]
-                    bridge = hyp(ox[u] - ix[w], oy[u] - iy[w])
+                if end < last:
+                    w = tour[end + 1]
+                    removed += hyp(lox - ix[w], loy - iy[w])
+                    bridge = hyp(px - ix[w], py - iy[w])
                 gain_out = removed - bridge
                 if gain_out <= eps:
                     continue
-                best = (eps, -1, False)
-                for c in set(neigh[first_v]) | set(neigh[last_v]):
-                    for q in (pos[c] - 1, pos[c]):
+                best_gain, best_q, best_rev = eps, -1, False
+                for c in (neigh[a] if size == 1 else neigh_union(a, last_v)):
+                    pc = pos[c]
+                    for q in (pc - 1, pc):
                         if q < 0 or i - 1 <= q <= end:
                             continue
                         u = tour[q]
-                        has_next = q + 1 <= last
-                        base = link(q, q + 1)
-                        fwd = hyp(ox[u] - ix[first_v], oy[u] - iy[first_v])
-                        rev = hyp(ox[u] - ox[last_v], oy[u] - oy[last_v])
-                        if has_next:
+                        uxo, uyo = ox[u], oy[u]
+                        fwd = hyp(uxo - ixa, uyo - iya)
+                        rev = hyp(uxo - lox, uyo - loy)
+                        if q < last:
                             w = tour[q + 1]
-                            fwd += hyp(ox[last_v] - ix[w], oy[last_v] - iy[w])
-                            rev += hyp(ix[first_v] - ix[w], iy[first_v] - iy[w])
-                        for cost, reverse in ((fwd, False), (rev, True)):
-                            gain = gain_out - (cost - base)
-                            if gain > best[0]:
-                                best = (gain, q, reverse)
-                if best[1] >= 0:
-                    gain, q, reverse = best
-                    gained[0] += gain
+                            wix, wiy = ix[w], iy[w]
+                            base = hyp(uxo - wix, uyo - wiy)
+                            fwd += hyp(lox - wix, loy - wiy)
+                            rev += hyp(ixa - wix, iya - wiy)
+                        else:
+                            base = 0.0
+                        gain = gain_out + base - fwd
+                        if gain > best_gain:
+                            best_gain, best_q, best_rev = gain, q, False
+                        gain = gain_out + base - rev
+                        if gain > best_gain:
+                            best_gain, best_q, best_rev = gain, q, True
+                if best_q >= 0:
+                    q = best_q
+                    gained[0] += best_gain
                     block = tour[i : end + 1]
-                    if reverse:
+                    if best_rev:
                         block.reverse()
                         for v in block:
                             ix[v], ox[v] = ox[v], ix[v]
