@@ -198,6 +198,17 @@ def test_the_agent_and_the_cli_draw_one_at_a_time(slow_sim: RunningSimulator, tm
             assert second.returncode == 4, second.stderr
             assert "fabwire serve (arm)" in second.stderr
             assert "'a long line of words'" in second.stderr
+
+            cancel = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True})
+            assert cancel.status_code < 300, cancel.text
+            wait_until(lambda: client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "cancelled",
+                       "the agent's drawing cancelled")
+            # a job keeps what the planner said about it, as `lineus text` prints it
+            noted = client.post(f"/api/v1/devices/{arm['id']}/actions/text", json={"text": "I 漢"}).json()["job"]
+            finished = wait_until(lambda: (j := client.get(f"/api/v1/jobs/{noted['id']}").json())["state"]
+                                  in ("done", "failed") and j, "the short drawing to finish")
+            assert finished["state"] == "done", finished
+            assert "cannot draw '漢'" in finished["message"]
     finally:
         if drawing is not None:
             drawing.kill()

@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import App, DeviceContext, FiniteRange, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
 from fabwire.devices import LINEUS
 from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
@@ -43,6 +43,10 @@ def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> 
 
 
 
+_DIAGNOSTIC_LABELS = {"Serial": "Serial code (M122's own field, not the serial number)"}
+"""M122 keys shown under other words: its `Serial` (`ikdBW+`) is not the machine's serial number."""
+
+
 @lineus.command()
 @pass_device
 def info(dctx: DeviceContext) -> None:
@@ -52,17 +56,22 @@ def info(dctx: DeviceContext) -> None:
         caps = await arm.capabilities()
         diag = await arm.diagnostics()
         hello = arm.hello
-        return {"version": hello.version, "firmware_major": hello.firmware_major, "name": hello.name,
-                "serial": hello.serial, "capabilities": caps, "diagnostics": diag}
+        # The hello's SERIAL is the ChipID M122 reports (reference §M122); either may be missing.
+        return {"version": hello.version, "firmware_major": hello.firmware_major,
+                "name": hello.name or diag.get("name", ""), "serial": hello.serial or diag.get("ChipID", ""),
+                "capabilities": caps, "diagnostics": diag}
 
     data = _with_arm(dctx, action)
 
     def human() -> None:
         out = dctx.output.out
-        out.print(f"Line-us {data['name']}  firmware {data['version']}  serial {data['serial']}")
+        out.print(f"Line-us {data['name'] or '(no name)'}  firmware {data['version'] or '(not given)'}  "
+                  f"serial {data['serial'] or '(not given)'}")
         out.print(f"connect mode {data['capabilities'].get('CONNECTMODE', '?')}")
         for key, value in data["diagnostics"].items():
-            out.print(f"  {key}: {value}")
+            if (key, value) in (("ChipID", data["serial"]), ("name", data["name"])):
+                continue  # shown on the first line already
+            out.print(f"  {_DIAGNOSTIC_LABELS.get(key, key)}: {value}")
 
     dctx.output.result(data, human)
 
@@ -146,12 +155,14 @@ def files_list(dctx: DeviceContext) -> None:
 @files.command("save")
 @click.argument("gcode", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("slot", type=click.IntRange(1, 32))
+@click.option("--yes", is_flag=True, help="Overwrite a drawing already stored in SLOT without asking.")
 @pass_device
-def files_save(dctx: DeviceContext, gcode: Path, slot: int) -> None:
+def files_save(dctx: DeviceContext, gcode: Path, slot: int, yes: bool) -> None:
     """Store a G-code FILE as drawing SLOT (M28 … M29); every line is checked first.
 
     Lines are read as the machine reads them (the interpreter `draw` and `preview` use too): comments are left
-    out, and a line the Line-us would refuse stops the upload before anything is sent."""
+    out, and a line the Line-us would refuse stops the upload before anything is sent. A drawing already stored
+    in SLOT is only replaced when confirmed (typed "y", or --yes)."""
     from fabwire.lineus.interpreter import read_program
 
     try:
@@ -165,7 +176,13 @@ def files_save(dctx: DeviceContext, gcode: Path, slot: int) -> None:
     note = program.skipped_note()
     if note is not None:
         dctx.output.note(note.replace("skipped", "left out", 1))
-    count = _with_arm(dctx, lambda arm: arm.save_drawing(slot, lines))
+    async def save(arm: LineUs) -> int:
+        stored = {d.slot: d for d in await arm.list_drawings()}
+        if slot in stored:
+            confirm(f"overwrite drawing {slot} stored on the Line-us ({stored[slot].size} bytes)", yes)
+        return await arm.save_drawing(slot, lines)
+
+    count = _with_arm(dctx, save)
     dctx.output.result({"slot": slot, "lines": count}, f"stored {count} lines as drawing {slot}")
 
 

@@ -69,26 +69,14 @@ class Position:
         return f"X {self.x:g}  Y {self.y:g}  Z {self.z:g}  (pen {'down' if self.pen_down else 'up'})"
 
     @classmethod
-    def from_reply(cls, reply: p.Reply, fallback: Point3 | None = None) -> Position:
-        """The X, Y, Z a reply carries; an axis the reply leaves out (clones and older firmware answer a bare `ok`)
-        is taken from `fallback`, where the client sent the arm. RemoteProtocolError for an axis that is not a
-        finite number, or missing with no fallback."""
-        values: list[float] = []
-        for axis, index in (("X", 0), ("Y", 1), ("Z", 2)):
-            text = reply.get(axis)
-            if text is None:
-                if fallback is None:
-                    raise RemoteProtocolError(f"reply {reply.text()!r} does not carry {axis}")
-                values.append(float(fallback[index]))
-                continue
-            try:
-                value = float(text)
-            except ValueError:
-                value = math.nan
-            if not math.isfinite(value):
-                raise RemoteProtocolError(f"reply {reply.text()!r}: {axis} {text!r} is not a number")
-            values.append(value)
-        return cls(*values)
+    def from_reply(cls, reply: p.Reply) -> Position:
+        """The X, Y, Z a motion or M114 reply carries. A reply without them does not show the arm went anywhere:
+        RemoteProtocolError (a clear error, never a position made up by the client)."""
+        fields = dict(reply.fields)
+        try:
+            return cls(float(fields["X"]), float(fields["Y"]), float(fields["Z"]))
+        except (KeyError, ValueError):
+            raise RemoteProtocolError(f"reply {reply.text()!r} does not carry X, Y and Z") from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -407,8 +395,7 @@ class LineUs:
     # -- motion ---------------------------------------------------------------------------------------------------
 
     def _position(self, reply: p.Reply) -> Position:
-        """The position a reply reports, an axis it leaves out taken from where the commands sent put the arm."""
-        return Position.from_reply(reply, self._aim)
+        return Position.from_reply(reply)
 
     async def move(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
         """G01 to (x, y, z); omitted axes stay. Returns where the arm reports it ended (clamped if outside)."""

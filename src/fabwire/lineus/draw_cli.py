@@ -418,8 +418,11 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
          rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
          preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
     """Write TEXT in a single-stroke font (\\n starts a new line, \\t moves on to the next tab stop; '-' reads the
-    text from standard input)."""
+    text from standard input). Without --rotate the text runs along the long side of the area when that lets it
+    be larger (as --rotate auto)."""
     _one_start(resume, restart)
+    if click.get_current_context().get_parameter_source("rotate") is click.core.ParameterSource.DEFAULT:
+        rotate = None  # as --rotate auto
     if text == STDIN:
         text = sys.stdin.read(MAX_TEXT + 1).rstrip("\n")
         if len(text) > MAX_TEXT:

@@ -6,6 +6,7 @@ import asyncio
 import os
 import time
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -126,14 +127,17 @@ class LineUsDriver(Driver):
         if self.drawing:
             raise DeviceBusy(f"the Line-us is busy ({self.drawing})")
         options = PlanOptions(time_budget=PLAN_TIME_BUDGET)
-        if job_type == "text":
-            plan: Plan = await asyncio.to_thread(plan_text, params["text"], options)
+        if job_type == "text":  # along the long side of the area, as `fabwire lineus text` writes it
+            plan: Plan = await asyncio.to_thread(plan_text, params["text"], replace(options, rotate_auto=True))
         elif path is not None:
             plan = await asyncio.to_thread(plan_file, path, options)
         else:
             raise InputError("a drawing job needs a file")
         strokes = plan.strokes
         handle.preview([_points(s) for s in strokes])
+        notes = "; ".join(plan.notes)  # what the planner changed or left out, as `lineus draw` prints it
+        if notes:
+            handle.progress(0.0, message=f"planner: {notes}")
         per_stroke = plan.stroke_seconds()
         total = sum(per_stroke) or 1.0
         done_s = 0.0
@@ -166,7 +170,8 @@ class LineUsDriver(Driver):
                     raise
         finally:
             self.drawing = None
-        return f"drew {len(strokes)} strokes in {time.monotonic() - began:.0f} s"
+        drew = f"drew {len(strokes)} strokes in {time.monotonic() - began:.0f} s"
+        return f"{drew} (planner: {notes})" if notes else drew
 
     async def stop_job(self) -> None:
         """Stop after the stroke being drawn (a move in flight cannot be called back) and lift the pen."""
