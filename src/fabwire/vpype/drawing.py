@@ -10,6 +10,7 @@ import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -100,9 +101,19 @@ async def _run(dctx: DeviceContext, plans: list[Plan], labels: list[str], progre
                     lock.update(100.0 * sum(weights[: progress.done]) / max(1, sum(weights)),
                                 f"{label}: stroke {stroke + 1} of {count}")
 
+                def reached(stroke: int, vertex: int, first: int = first, label: str = labels[index],
+                            count: int = len(plan.strokes), strokes: tuple[Any, ...] = plan.strokes) -> None:
+                    """Within a stroke, the bar moves with each vertex the arm reports reaching."""
+                    at = first + stroke
+                    share = vertex / max(1, len(strokes[stroke]) - 1)
+                    bar.update(task, completed=sum(weights[:at]) + min(1.0, share) * weights[at],
+                               description=f"{label}: stroke {stroke + 1}/{count}")
+
                 start = max(0, progress.done - first)
                 if start < len(plan.strokes):
-                    await send_plan(arm, plan, start=start, pen_z=pen_z, on_stroke=done)
+                    # the new layer's name at once, not after its first stroke
+                    bar.update(task, description=f"{labels[index]}: stroke {start + 1}/{len(plan.strokes)}")
+                    await send_plan(arm, plan, start=start, pen_z=pen_z, on_stroke=done, on_point=reached)
                 flat += len(plan.strokes)
         await arm.home()
 
