@@ -114,6 +114,12 @@ def test_a_second_drawing_is_refused_naming_the_first(slow_sim: RunningSimulator
         assert f"process {first.pid}" in line
         assert "zigzag.svg" in line
         assert "fabwire lineus -d" in line  # the command that draws
+        for moving in (["move", "1000", "0"], ["home"], ["send", "G01", "X1000", "Y0"]):  # nor moves the arm
+            refused = run_cli("lineus", "-d", address(slow_sim), *moving, env=env)
+            assert refused.returncode == 4, refused.stderr
+            assert f"process {first.pid}" in refused.stderr
+        asked = run_cli("lineus", "-d", address(slow_sim), "position", env=env)  # reading it is fine
+        assert asked.returncode == 0, asked.stderr
         # a name for the same robot is the same robot
         port = address(slow_sim).rsplit(":", 1)[1]
         third = run_cli("lineus", "-d", f"localhost:{port}", "text", "Hi", "--state", str(tmp_path / "s3.json"),

@@ -18,6 +18,7 @@ from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs
 from fabwire.lineus.draw_cli import draw, preview, text
+from fabwire.lineus.drawing_lock import DrawingLock, robot_address
 from fabwire.lineus.shell import shell
 from fabwire.units import json_key
 
@@ -29,11 +30,16 @@ def lineus() -> None:
     """Line-us drawing robot."""
 
 
-def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
+def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]], *, moves: str = "") -> T:
+    """Run `action` on the connected arm; one that `moves` the arm (named in words, "a move") is refused while
+    another program draws on this robot, and no drawing starts on it meanwhile."""
     async def main() -> T:
         async with dctx.open(LineUs) as arm:
             try:
-                return await action(arm)
+                if not moves:
+                    return await action(arm)
+                with DrawingLock(robot_address(arm.transport), moves):
+                    return await action(arm)
             finally:
                 for notice in arm.notices:
                     dctx.output.note(notice)
@@ -94,7 +100,7 @@ def position(dctx: DeviceContext, servos: bool) -> None:
 @pass_device
 def home(dctx: DeviceContext) -> None:
     """Send the arm home (1000, 1000), pen up."""
-    where = _with_arm(dctx, lambda arm: arm.home())
+    where = _with_arm(dctx, lambda arm: arm.home(), moves="going home")
     dctx.output.result(where.as_dict(), where.text())
 
 
@@ -117,7 +123,7 @@ def move(dctx: DeviceContext, x: float, y: float, pen: str | None, z: float | No
         raise InputError(str(exc)) from None
     from fabwire.lineus import kinematics as kin
 
-    where = _with_arm(dctx, lambda arm: arm.move(x, y, height))
+    where = _with_arm(dctx, lambda arm: arm.move(x, y, height), moves=f"a move to ({x:g}, {y:g})")
     clamped = abs(where.x - x) > 0.01 or abs(where.y - y) > 0.01
     if clamped and not kin.is_reachable(x, y):
         dctx.output.note(f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
@@ -133,7 +139,8 @@ def send(dctx: DeviceContext, words: tuple[str, ...]) -> None:
         command = p.parse_command(" ".join(words))
     except Exception as exc:
         raise InputError(f"not a Line-us command: {exc}") from None
-    reply = _with_arm(dctx, lambda arm: arm.send(command))
+    moving = isinstance(command, p.Move | p.RawMove | p.Home)
+    reply = _with_arm(dctx, lambda arm: arm.send(command), moves=f"G-code {command.text()!r}" if moving else "")
     dctx.output.result({"ok": reply.ok, "fields": reply.as_dict()}, reply.text())
 
 
