@@ -22,7 +22,8 @@ from fabwire.lineus.plot.geometry import FloatArray, Polylines
 
 RESOLUTION = 1.0
 """Smallest step worth sending, in machine units (0.05 mm): finer points are dropped."""
-NEIGHBOURS = 10
+NEIGHBOURS = 8
+"""Nearest line ends tried per line by the moves (8 gave the shortest stipple tours per CPU second in `make bench`)."""
 MAX_REVERSAL = 1000
 """Longest run a 2-opt move may reverse: long reversals cost more time than they usually save."""
 
