@@ -15,7 +15,7 @@ from fabwire.agent.opening import open_lineus
 from fabwire.errors import DeviceBusy, InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
-from fabwire.lineus.drawing_lock import Drawer, current_drawer, drawing_alone, robot_address
+from fabwire.lineus.drawing_lock import Drawer, DrawingLock, current_drawer, drawing_alone, robot_address
 from fabwire.lineus.plot import Plan, PlanOptions
 from fabwire.lineus.plot.intake import drawing_from_bytes
 from fabwire.lineus.plot.plan import plan_drawing, plan_file, plan_text
@@ -102,14 +102,17 @@ class LineUsDriver(Driver):
             raise DeviceBusy(f"the Line-us is busy ({self.drawing}): cancel the job first")
         if (other := self._other_drawer()) is not None:
             raise DeviceBusy(f"the Line-us is drawing for another program: {other.words()}")
-        if action == "home":
-            self.position = await arm.home()
-        elif action == "pen_up":
-            self.position = await arm.pen_up()
-        elif action == "pen_down":
-            self.position = await arm.pen_down()
-        elif action == "move":
-            self.position = await arm.move(params["x"], params["y"])
+        # held for the move itself, so no drawing starts on the robot in the middle of it
+        with DrawingLock(robot_address(arm.transport), f"the action {action!r}",
+                         command=f"fabwire serve ({self.spec.name})"):
+            if action == "home":
+                self.position = await arm.home()
+            elif action == "pen_up":
+                self.position = await arm.pen_up()
+            elif action == "pen_down":
+                self.position = await arm.pen_down()
+            elif action == "move":
+                self.position = await arm.move(params["x"], params["y"])
         pos = self.position
         return {"ok": True, "action": action, "position": pos.as_dict() if pos else None}
 
