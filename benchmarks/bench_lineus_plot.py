@@ -58,10 +58,10 @@ def sketch(rng: np.random.Generator, paths: int, per_path: int) -> str:
     return _svg(out)
 
 
-def stipple(rng: np.random.Generator) -> str:
-    """1,500 short dashes in random order (stippling / hatching fragments)."""
-    pts = rng.uniform(20, 980, (1500, 2))
-    ang = rng.uniform(0, math.pi, 1500)
+def stipple(rng: np.random.Generator, count: int = 1500) -> str:
+    """`count` short dashes in random order (stippling / hatching fragments)."""
+    pts = rng.uniform(20, 980, (count, 2))
+    ang = rng.uniform(0, math.pi, count)
     return _svg([f"M{x:.2f} {y:.2f} l{8 * math.cos(a):.2f} {8 * math.sin(a):.2f}" for (x, y), a in zip(pts, ang,
                                                                                                       strict=True)])
 

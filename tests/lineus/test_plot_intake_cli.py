@@ -94,9 +94,12 @@ def test_accented_letters_are_drawn_and_the_rest_named(tmp_path: Path) -> None:
 
 
 def test_rotation_comes_before_the_size_check(tmp_path: Path) -> None:
-    upright = run_cli("lineus", "text", "Line-us text", "--size", "8", "--dry-run", env=cli_env(tmp_path))
+    upright = run_cli("lineus", "text", "Line-us text", "--size", "8", "--rotate", "0", "--dry-run",
+                      env=cli_env(tmp_path))
     assert upright.returncode == 4
     assert "--rotate auto" in upright.stderr
+    by_default = run_cli("--json", "lineus", "text", "Line-us text", "--size", "8", "--dry-run", env=cli_env(tmp_path))
+    assert by_default.returncode == 0, by_default.stderr  # text runs along the area's long side unless told
     for rotate in ("90", "auto"):
         turned = run_cli("--json", "lineus", "text", "Line-us text", "--size", "8", "--rotate", rotate, "--dry-run",
                          env=cli_env(tmp_path))

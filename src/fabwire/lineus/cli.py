@@ -12,12 +12,13 @@ from typing import Any, TypeVar
 
 import click
 
-from fabwire.cli_support import App, DeviceContext, FiniteRange, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
 from fabwire.devices import LINEUS
 from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
 from fabwire.lineus.client import LineUs
 from fabwire.lineus.draw_cli import draw, preview, text
+from fabwire.lineus.drawing_lock import DrawingLock, robot_address
 from fabwire.lineus.shell import shell
 from fabwire.units import json_key
 
@@ -29,11 +30,16 @@ def lineus() -> None:
     """Line-us drawing robot."""
 
 
-def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> T:
+def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]], *, moves: str = "") -> T:
+    """Run `action` on the connected arm; one that `moves` the arm (named in words, "a move") is refused while
+    another program draws on this robot, and no drawing starts on it meanwhile."""
     async def main() -> T:
         async with dctx.open(LineUs) as arm:
             try:
-                return await action(arm)
+                if not moves:
+                    return await action(arm)
+                with DrawingLock(robot_address(arm.transport), moves):
+                    return await action(arm)
             finally:
                 for notice in arm.notices:
                     dctx.output.note(notice)
@@ -41,6 +47,10 @@ def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]]) -> 
     return asyncio.run(main())
 
 
+
+
+_DIAGNOSTIC_LABELS = {"Serial": "Serial code (M122's own field, not the serial number)"}
+"""M122 keys shown under other words: its `Serial` (`ikdBW+`) is not the machine's serial number."""
 
 
 @lineus.command()
@@ -52,17 +62,22 @@ def info(dctx: DeviceContext) -> None:
         caps = await arm.capabilities()
         diag = await arm.diagnostics()
         hello = arm.hello
-        return {"version": hello.version, "firmware_major": hello.firmware_major, "name": hello.name,
-                "serial": hello.serial, "capabilities": caps, "diagnostics": diag}
+        # The hello's SERIAL is the ChipID M122 reports (reference §M122); either may be missing.
+        return {"version": hello.version, "firmware_major": hello.firmware_major,
+                "name": hello.name or diag.get("name", ""), "serial": hello.serial or diag.get("ChipID", ""),
+                "capabilities": caps, "diagnostics": diag}
 
     data = _with_arm(dctx, action)
 
     def human() -> None:
         out = dctx.output.out
-        out.print(f"Line-us {data['name']}  firmware {data['version']}  serial {data['serial']}")
+        out.print(f"Line-us {data['name'] or '(no name)'}  firmware {data['version'] or '(not given)'}  "
+                  f"serial {data['serial'] or '(not given)'}")
         out.print(f"connect mode {data['capabilities'].get('CONNECTMODE', '?')}")
         for key, value in data["diagnostics"].items():
-            out.print(f"  {key}: {value}")
+            if (key, value) in (("ChipID", data["serial"]), ("name", data["name"])):
+                continue  # shown on the first line already
+            out.print(f"  {_DIAGNOSTIC_LABELS.get(key, key)}: {value}")
 
     dctx.output.result(data, human)
 
@@ -85,7 +100,7 @@ def position(dctx: DeviceContext, servos: bool) -> None:
 @pass_device
 def home(dctx: DeviceContext) -> None:
     """Send the arm home (1000, 1000), pen up."""
-    where = _with_arm(dctx, lambda arm: arm.home())
+    where = _with_arm(dctx, lambda arm: arm.home(), moves="going home")
     dctx.output.result(where.as_dict(), where.text())
 
 
@@ -108,7 +123,7 @@ def move(dctx: DeviceContext, x: float, y: float, pen: str | None, z: float | No
         raise InputError(str(exc)) from None
     from fabwire.lineus import kinematics as kin
 
-    where = _with_arm(dctx, lambda arm: arm.move(x, y, height))
+    where = _with_arm(dctx, lambda arm: arm.move(x, y, height), moves=f"a move to ({x:g}, {y:g})")
     clamped = abs(where.x - x) > 0.01 or abs(where.y - y) > 0.01
     if clamped and not kin.is_reachable(x, y):
         dctx.output.note(f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
@@ -124,7 +139,8 @@ def send(dctx: DeviceContext, words: tuple[str, ...]) -> None:
         command = p.parse_command(" ".join(words))
     except Exception as exc:
         raise InputError(f"not a Line-us command: {exc}") from None
-    reply = _with_arm(dctx, lambda arm: arm.send(command))
+    moving = isinstance(command, p.Move | p.RawMove | p.Home)
+    reply = _with_arm(dctx, lambda arm: arm.send(command), moves=f"G-code {command.text()!r}" if moving else "")
     dctx.output.result({"ok": reply.ok, "fields": reply.as_dict()}, reply.text())
 
 
@@ -146,12 +162,14 @@ def files_list(dctx: DeviceContext) -> None:
 @files.command("save")
 @click.argument("gcode", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("slot", type=click.IntRange(1, 32))
+@click.option("--yes", is_flag=True, help="Overwrite a drawing already stored in SLOT without asking.")
 @pass_device
-def files_save(dctx: DeviceContext, gcode: Path, slot: int) -> None:
+def files_save(dctx: DeviceContext, gcode: Path, slot: int, yes: bool) -> None:
     """Store a G-code FILE as drawing SLOT (M28 … M29); every line is checked first.
 
     Lines are read as the machine reads them (the interpreter `draw` and `preview` use too): comments are left
-    out, and a line the Line-us would refuse stops the upload before anything is sent."""
+    out, and a line the Line-us would refuse stops the upload before anything is sent. A drawing already stored
+    in SLOT is only replaced when confirmed (typed "y", or --yes)."""
     from fabwire.lineus.interpreter import read_program
 
     try:
@@ -165,7 +183,13 @@ def files_save(dctx: DeviceContext, gcode: Path, slot: int) -> None:
     note = program.skipped_note()
     if note is not None:
         dctx.output.note(note.replace("skipped", "left out", 1))
-    count = _with_arm(dctx, lambda arm: arm.save_drawing(slot, lines))
+    async def save(arm: LineUs) -> int:
+        stored = {d.slot: d for d in await arm.list_drawings()}
+        if slot in stored:
+            confirm(f"overwrite drawing {slot} stored on the Line-us ({stored[slot].size} bytes)", yes)
+        return await arm.save_drawing(slot, lines)
+
+    count = _with_arm(dctx, save)
     dctx.output.result({"slot": slot, "lines": count}, f"stored {count} lines as drawing {slot}")
 
 

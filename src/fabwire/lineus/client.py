@@ -70,6 +70,8 @@ class Position:
 
     @classmethod
     def from_reply(cls, reply: p.Reply) -> Position:
+        """The X, Y, Z a motion or M114 reply carries. A reply without them does not show the arm went anywhere:
+        RemoteProtocolError (a clear error, never a position made up by the client)."""
         fields = dict(reply.fields)
         try:
             return cls(float(fields["X"]), float(fields["Y"]), float(fields["Z"]))
@@ -300,7 +302,7 @@ class LineUs:
         return future
 
     async def _await_reply(self, command: p.Command, future: asyncio.Future[p.Reply], timeout: float | None) -> p.Reply:
-        limit = timeout if timeout is not None else self._timeout_for(self._spans.pop(future, None))
+        limit = timeout if timeout is not None else self._timeout_for(self._spans.get(future))
         try:
             async with asyncio.timeout(limit):
                 if self._read_task is None:
@@ -361,7 +363,7 @@ class LineUs:
         x, y, z = target
         if kin.in_body_zone(x, y):
             safe = kin.clamp_target(x, y)
-            self._notice(f"({x:g}, {y:g}) is in the body notch that firmware {self.hello.version.split()[0]} does "
+            self._notice(f"({x:g}, {y:g}) is in the body notch that firmware {self.hello.firmware_label} does "
                          f"not keep out of: moved to ({safe.x:g}, {safe.y:g}) with the pen lifted")
             x, y, z = max(safe.x, _CLEAR[0]) if safe.y < 0 else safe.x, safe.y, kin.Z_UP
             command = self._move_to(x, y, z, scaled, command)
@@ -392,20 +394,23 @@ class LineUs:
 
     # -- motion ---------------------------------------------------------------------------------------------------
 
+    def _position(self, reply: p.Reply) -> Position:
+        return Position.from_reply(reply)
+
     async def move(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
         """G01 to (x, y, z); omitted axes stay. Returns where the arm reports it ended (clamped if outside)."""
-        return Position.from_reply(await self.request(p.Move(x, y, z)))
+        return self._position(await self.request(p.Move(x, y, z)))
 
     async def rapid(self, x: float | None = None, y: float | None = None, z: float | None = None) -> Position:
         """G00: every servo at full speed; the path is a curve and may clip the body."""
-        return Position.from_reply(await self.request(p.Move(x, y, z, rapid=True)))
+        return self._position(await self.request(p.Move(x, y, z, rapid=True)))
 
     async def move_uncalibrated(self, x: float | None = None, y: float | None = None, z: float | None = None,
                                 keep: str | None = None) -> Position:
         """G40: ignore G54 and calibration (`keep` = "xy" or "z" re-applies that part)."""
         if keep not in (None, "xy", "z"):
             raise InputError("keep is 'xy' or 'z'")
-        return Position.from_reply(await self.request(p.RawMove(x, y, z, keep)))  # type: ignore[arg-type]
+        return self._position(await self.request(p.RawMove(x, y, z, keep)))  # type: ignore[arg-type]
 
     async def pen_up(self) -> Position:
         return await self.move(z=kin.Z_UP)
@@ -413,11 +418,28 @@ class LineUs:
     async def pen_down(self, z: float = kin.Z_DOWN) -> Position:
         return await self.move(z=z)
 
+    async def lift_after_stop(self) -> Position:
+        """After an interrupt (Ctrl-C, a cancelled job): wait for the replies the Line-us still owes (a move it
+        has taken cannot be called back), then lift the pen, so the last thing the connection sends is a pen-up.
+        LinkError or LinkTimeout when the link is gone or the owed replies do not come."""
+        waits = [self._timeout_for(self._spans.get(future)) for _, future in self._waiting if not future.done()]
+        if waits:
+            try:
+                async with asyncio.timeout(sum(waits)):
+                    while self._failure is None and any(not future.done() for _, future in self._waiting):
+                        if self._read_task is None:
+                            await self._pump()
+                        else:
+                            await asyncio.wait([future for _, future in self._waiting])
+            except TimeoutError:
+                self._fail(LinkTimeout("the Line-us did not finish its last move: the pen may still be down"))
+        return await self.pen_up()
+
     async def home(self) -> Position:
-        return Position.from_reply(await self.request(p.Home()))
+        return self._position(await self.request(p.Home()))
 
     async def position(self) -> Position:
-        return Position.from_reply(await self.request(p.GetPosition()))
+        return self._position(await self.request(p.GetPosition()))
 
     async def servo_angles(self) -> dict[str, float]:
         reply = await self.request(p.GetPosition(servos=True))
@@ -463,7 +485,7 @@ class LineUs:
     async def zmap(self) -> tuple[float, ...]:
         reply = await self.request(p.ZMap())
         try:
-            return tuple(float(v) for v in (reply.get("ZMap") or "").split(";"))
+            return tuple(float(v) for v in (reply.get("ZMap") or "").split(";") if v.strip())
         except ValueError:
             raise RemoteProtocolError(f"Z map {reply.text()!r} is not four numbers") from None
 

@@ -10,7 +10,7 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -84,7 +84,7 @@ def placement_options(func: F) -> F:
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep the file's own line order and directions."),
         click.option("--optimize-time", type=FiniteRange(min=0.0), default=1.0, show_default=True,
-                     help="Seconds the ordering may spend improving pen-up travel."),
+                     help="CPU seconds the ordering may spend improving pen-up travel."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -153,6 +153,10 @@ class DrawProgress:
     strokes: list[list[list[float]]]
     done: int = 0
     point: int = 0
+    source: str = ""
+    """Digest of what is drawn (the file's bytes, the text)."""
+    choices: dict[str, str] = field(default_factory=dict)
+    """The planning options it was drawn with, as the command line gives them (`{"--margin": "2"}`)."""
 
     @property
     def complete(self) -> bool:
@@ -172,14 +176,17 @@ class DrawProgress:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(self.path.name + ".tmp")
         tmp.write_text(json.dumps({"version": STATE_VERSION, "key": self.key, "done": self.done, "point": self.point,
-                                   "strokes": self.strokes}), encoding="utf-8")
+                                   "source": self.source, "choices": self.choices, "strokes": self.strokes}),
+                       encoding="utf-8")
         tmp.replace(self.path)
 
     def clear(self) -> None:
         self.path.unlink(missing_ok=True)
 
     @classmethod
-    def load(cls, path: Path, key: str) -> DrawProgress | None:
+    def load(cls, path: Path, key: str | None) -> DrawProgress | None:
+        """The progress saved in `path` (None if there is none); InputError when it is unreadable, damaged, or
+        (with a `key`) for another drawing or other options."""
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except FileNotFoundError:
@@ -188,7 +195,7 @@ class DrawProgress:
             raise InputError(f"resume state {path} is unreadable ({exc}); delete it to start over") from exc
         if not isinstance(data, dict) or data.get("version") != STATE_VERSION:
             raise InputError(f"resume state {path} is not a drawing progress file; delete it to start over")
-        if data.get("key") != key:
+        if key is not None and data.get("key") != key:
             raise InputError(f"resume state {path} belongs to a different drawing or different options")
         strokes = data.get("strokes")
         done = data.get("done")
@@ -198,13 +205,46 @@ class DrawProgress:
                 or (point and (done >= len(strokes) or not isinstance(strokes[done], list)
                                or point >= len(strokes[done])))):
             raise InputError(f"resume state {path} is damaged; delete it to start over")
-        return cls(path, key, strokes, done, point)
+        source, choices = data.get("source", ""), data.get("choices", {})
+        if not isinstance(source, str) or not isinstance(choices, dict):
+            raise InputError(f"resume state {path} is damaged; delete it to start over")
+        return cls(path, str(data.get("key", "")), strokes, done, point, source,
+                   {str(k): str(v) for k, v in choices.items()})
 
 
-def _state_key(source: str, options: PlanOptions, extra: str = "") -> str:
-    text = json.dumps([source, options.fit, options.margin_mm, options.rotate_deg, options.clip, options.optimize,
-                       extra])
-    return hashlib.sha256(text.encode()).hexdigest()
+def plan_choices(options: PlanOptions, **extra: str) -> dict[str, str]:
+    """The options that shape a plan, as the command line spells them, for naming what a resume would change."""
+    def flag(on: bool) -> str:
+        return "on" if on else "off"
+
+    return {"--fit": "default" if options.fit is None else flag(options.fit), "--margin": f"{options.margin_mm:g}",
+            "--rotate": "auto" if options.rotate_auto else f"{options.rotate_deg:g}",
+            "--full-area": flag(options.full_area), "--clip": flag(options.clip),
+            "--no-optimize": flag(not options.optimize), "--svg-text": options.svg_text, **extra}
+
+
+def resumable(path: Path, source: str, choices: dict[str, str], name: str) -> DrawProgress:
+    """The progress `--resume` carries on from: the one in `path`, for the same drawing planned with the same
+    options. Otherwise InputError naming what differs and pointing to --restart: a resume never starts over."""
+    restart = "or --restart to draw it from the beginning"
+    progress = DrawProgress.load(path, None)
+    if progress is None:
+        raise InputError(f"nothing to resume for {name}: there is no progress file {path}; use --restart to draw "
+                         "it from the beginning")
+    if progress.source and progress.source != source:
+        raise InputError(f"cannot resume {name}: the progress file {path} is for another drawing; give the file "
+                         f"it was for, {restart}")
+    changed = [f"{option} {progress.choices.get(option, '(not recorded)')} (now {value})"
+               for option, value in choices.items() if progress.choices.get(option) != value]
+    if changed:
+        raise InputError(f"cannot resume {name}: it was planned with {'; '.join(changed)}; give the same options "
+                         f"to carry on, {restart}")
+    return progress
+
+
+def progress_path(state: Path | None, source: str) -> Path:
+    """The progress file: `--state`, or one per drawing (whatever its options) in the user's state directory."""
+    return state or state_dir() / f"draw-{source[:24]}.json"
 
 
 def _plan_from_state(progress: DrawProgress) -> Plan:
@@ -244,14 +284,18 @@ async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, point: int = 0, 
             on_stroke(index)
 
 
-async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float) -> tuple[int, float]:
+async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float,
+                what: str) -> tuple[int, float]:
+    """Draw alone on the robot (`DrawingLock`), saving progress per stroke; an interrupt lifts the pen before the
+    connection closes."""
     from fabwire.lineus.client import LineUs
+    from fabwire.lineus.drawing_lock import drawing_alone
 
     per_stroke = plan.stroke_seconds()
     weights = [max(1, round(t * 1000)) for t in per_stroke]  # the bar advances by estimated milliseconds
     total = len(plan.strokes)
     began = time.monotonic()
-    async with dctx.open(LineUs) as arm:
+    async with dctx.open(LineUs) as arm, drawing_alone(arm, what) as lock:
         with Progress(
             TextColumn("[progress.description]{task.description}"),
             BarColumn(),
@@ -261,13 +305,17 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
             disable=dctx.output.json_mode,
         ) as bar:
             estimate = sum(per_stroke[progress.done :], 0.0)
-            task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=sum(weights),
+            all_weight = sum(weights)
+            task = bar.add_task(f"drawing (estimate {estimate:.0f} s)", total=all_weight,
                                 completed=sum(weights[: progress.done]))
+            lock.update(100.0 * sum(weights[: progress.done]) / all_weight, f"stroke {progress.done + 1} of {total}")
 
             def done(index: int) -> None:
                 progress.reached(index + 1, 0)
                 progress.save()
                 bar.update(task, advance=weights[index], description=f"stroke {index + 1}/{total}")
+                lock.update(100.0 * sum(weights[: index + 1]) / all_weight,
+                            f"stroke {min(index + 2, total)} of {total}")
 
             await send_plan(arm, plan, start=progress.done, point=progress.point, pen_z=pen_z, on_stroke=done,
                             on_point=progress.reached)
@@ -275,19 +323,15 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
     return total, time.monotonic() - began
 
 
-def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume: bool, source: dict[str, str],
-          pen_z: float) -> None:
-    """Draw `plan`, saving progress for --resume; `source` names what is drawn in the JSON result: {"file": path}
-    or {"text": text}."""
-    name = repr(source["text"]) if "text" in source else \
-        "standard input" if source["file"] == STDIN else source["file"]
-    path = state or state_dir() / f"draw-{key[:24]}.json"
-    progress: DrawProgress | None = DrawProgress.load(path, key) if resume else None
-    if resume and progress is None:
-        dctx.output.note(f"nothing to resume for {name}: starting from the beginning")
+def _draw(dctx: DeviceContext, plan: Plan, existing: DrawProgress | None, path: Path, source: str,
+          choices: dict[str, str], what: dict[str, str], pen_z: float) -> None:
+    """Draw `plan` (or carry on with `existing` progress), saving progress in `path` for --resume; `what` names
+    what is drawn in the JSON result: {"file": path} or {"text": text}."""
+    name = _name(what)
+    progress = existing
     if progress is not None and progress.complete:
         dctx.output.result(
-            {**source, "complete": True, "strokes": len(progress.strokes), "drawn": 0},
+            {**what, "complete": True, "strokes": len(progress.strokes), "drawn": 0},
             f"{name} has been drawn completely already; use --restart to draw it again")
         return
     if progress is not None:
@@ -297,12 +341,14 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
         dctx.output.note(f"resuming {name} at stroke {progress.done + 1} of {len(progress.strokes)}{where}; "
                          f"about {units.duration(left)} left")
     else:
-        progress = DrawProgress(path, key, [np.round(s, 3).tolist() for s in plan.strokes])
+        key = hashlib.sha256(json.dumps([source, choices], sort_keys=True).encode()).hexdigest()
+        progress = DrawProgress(path, key, [np.round(s, 3).tolist() for s in plan.strokes], source=source,
+                                choices=choices)
         plan = _plan_from_state(progress)
         progress.save()
     first = progress.done
     try:
-        total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z))
+        total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z, name))
     except (KeyboardInterrupt, LinkError, TimeoutError):
         if progress.done or progress.point:
             progress.save()  # the last acknowledged vertex, so a resume carries on from exactly there
@@ -314,16 +360,14 @@ def _draw(dctx: DeviceContext, plan: Plan, key: str, state: Path | None, resume:
     progress.save()  # complete: a --resume now says so instead of drawing over it
     figures = plan.figures()
     dctx.output.result(
-        {**source, "strokes": total, "drawn": total - first, "resumed_at": first,
+        {**what, "strokes": total, "drawn": total - first, "resumed_at": first,
          "elapsed_s": round(elapsed, 2), "estimated_s": round(figures.estimated_seconds, 2)},
         f"drew {total - first} of {total} strokes in {units.duration(elapsed)}",
     )
 
 
-def _placement_key(options: PlanOptions) -> str:
-    """The placement choices a resume must match beyond those `_state_key` lists."""
-    text = f"|text={options.svg_text}" if options.svg_text != TEXT_MODES[0] else ""
-    return f"auto={options.rotate_auto}|full={options.full_area}{text}"
+def _name(what: dict[str, str]) -> str:
+    return repr(what["text"]) if "text" in what else "standard input" if what["file"] == STDIN else what["file"]
 
 
 @click.command("draw")
@@ -347,8 +391,10 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
     _one_start(resume, restart)
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
     drawing = read_drawing(file, svg_text=options.svg_text)
-    key = _state_key(drawing.digest, options, _placement_key(options))
-    existing = DrawProgress.load(state or state_dir() / f"draw-{key[:24]}.json", key) if resume else None
+    what = {"file": str(file)}
+    choices = plan_choices(options)
+    path = progress_path(state, drawing.digest)
+    existing = resumable(path, drawing.digest, choices, _name(what)) if resume else None
     plan = _plan_from_state(existing) if existing is not None else plan_drawing(drawing, options)
     if preview is not None:
         write_drawing(preview, plan.strokes, plan.travel(), title=Path(drawing.name).name, hidden=plan.hidden,
@@ -359,7 +405,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
     for note in plan.notes:
         dctx.output.note(note)
     dctx.output.note(figures_text(plan))
-    _draw(dctx, plan, key, state, resume, {"file": str(file)}, pen_z)
+    _draw(dctx, plan, existing, path, drawing.digest, choices, what, pen_z)
 
 
 @click.command("text")
@@ -380,17 +426,23 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
 def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: bool | None, margin: float,
          rotate: float | None, full_area: bool, clip: bool, no_optimize: bool, optimize_time: float, dry_run: bool,
          preview: Path | None, resume: bool, restart: bool, state: Path | None, pen_z: float, dpi: float) -> None:
-    """Write TEXT in a single-stroke font (\\n starts a new line; '-' reads the text from standard input)."""
+    """Write TEXT in a single-stroke font (\\n starts a new line, \\t moves on to the next tab stop; '-' reads the
+    text from standard input). Without --rotate the text runs along the long side of the area when that lets it
+    be larger (as --rotate auto)."""
     _one_start(resume, restart)
+    if click.get_current_context().get_parameter_source("rotate") is click.core.ParameterSource.DEFAULT:
+        rotate = None  # as --rotate auto
     if text == STDIN:
         text = sys.stdin.read(MAX_TEXT + 1).rstrip("\n")
         if len(text) > MAX_TEXT:
             raise InputError(f"the text on standard input is longer than {MAX_TEXT} characters")
-    text = text.replace("\\n", "\n")
+    text = text.replace("\\n", "\n").replace("\\t", "\t")
     options = _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area)
-    key = _state_key(hashlib.sha256(text.encode()).hexdigest(), options,
-                     f"{size}|{font}|{_placement_key(options)}")
-    existing = DrawProgress.load(state or state_dir() / f"draw-{key[:24]}.json", key) if resume else None
+    what = {"text": text}
+    digest = hashlib.sha256(text.encode()).hexdigest()
+    choices = plan_choices(options, **{"--size": "largest" if size is None else f"{size:g}", "--font": font})
+    path = progress_path(state, digest)
+    existing = resumable(path, digest, choices, _name(what)) if resume else None
     plan = _plan_from_state(existing) if existing is not None else plan_text(text, options, size_mm=size, font=font)
     if preview is not None:
         write_drawing(preview, plan.strokes, plan.travel(), title=text.splitlines()[0][:60], scale=dpi_scale(dpi))
@@ -400,7 +452,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
     for note in plan.notes:
         dctx.output.note(note)
     dctx.output.note(figures_text(plan))
-    _draw(dctx, plan, key, state, resume, {"text": text}, pen_z)
+    _draw(dctx, plan, existing, path, digest, choices, what, pen_z)
 
 
 @click.command("preview")

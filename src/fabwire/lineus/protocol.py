@@ -251,7 +251,14 @@ class Hello:
 
     @property
     def firmware_major(self) -> int:
+        """The major version, 0 when the hello gives none (a bare `hello`, clones, test rigs)."""
         return self.firmware[0] if self.firmware else 0
+
+    @property
+    def firmware_label(self) -> str:
+        """The version's first word for messages (`3.2.0`), or "(version not given)" when the hello has none."""
+        words = self.version.split()
+        return words[0] if words else "(version not given)"
 
     def text(self) -> str:
         pairs = (("VERSION", self.version), ("NAME", self.name), ("SERIAL", self.serial), *self.extra)

@@ -37,7 +37,7 @@ SCALE_BAR = 10.0 * UNITS_PER_MM
 """The scale bar's length (10 mm)."""
 ROUND_JOINTS_UP_TO = 2_000
 """Vertices of a stroke up to which its joints are drawn round."""
-LEGEND = "black: pen down · orange dashes: pen-up travel · grey: hidden by clip paths"
+LEGEND = "black: pen down · orange dashes: pen-up travel · grey lines: hidden by clip paths · grey block: Line-us body"
 
 STROKE_COLOUR = (20, 20, 20)
 TRAVEL_COLOUR = (230, 120, 60)

@@ -163,7 +163,7 @@ def shell(dctx: DeviceContext) -> None:
         failures = 0
         async with dctx.open(LineUs) as arm:
             hello = arm.hello
-            dctx.output.note(f"connected to {hello.name} (firmware {hello.version.split()[0]}); type help")
+            dctx.output.note(f"connected to {hello.name} (firmware {hello.firmware_label}); type help")
             session = Session(arm, dctx.output.event)
             while (line := await _read_line("lineus> " if interactive else None)) is not None:
                 try:

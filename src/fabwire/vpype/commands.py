@@ -87,7 +87,7 @@ def plan_options(func: F) -> F:
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep vpype's line order and directions (as after linesort)."),
         click.option("--optimize-time", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
-                     help="Seconds per layer the ordering may spend improving pen-up travel."),
+                     help="CPU seconds per layer the ordering may spend improving pen-up travel."),
         _layer_option,
     ]
     for option in reversed(options):

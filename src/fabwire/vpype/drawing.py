@@ -10,6 +10,7 @@ import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -68,10 +69,11 @@ class DrawResult:
 async def _run(dctx: DeviceContext, plans: list[Plan], labels: list[str], progress: DrawProgress,
                pen_z: float, pen_change: PenChange | None) -> None:
     from fabwire.lineus.client import LineUs
+    from fabwire.lineus.drawing_lock import drawing_alone
 
     seconds = [t for plan in plans for t in [0.0, *plan.stroke_seconds()]][1:]  # a pen change costs no estimate
     weights = [max(1, round(t * 1000)) for t in seconds]
-    async with dctx.open(LineUs) as arm:
+    async with dctx.open(LineUs) as arm, drawing_alone(arm, f"a vpype document ({len(plans)} layer(s))") as lock:
         with Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
                       TextColumn("{task.percentage:>3.0f}%"), TimeRemainingColumn(),
                       console=dctx.output.err) as bar:
@@ -96,10 +98,22 @@ async def _run(dctx: DeviceContext, plans: list[Plan], labels: list[str], progre
                     progress.save()
                     bar.update(task, completed=sum(weights[: progress.done]),
                                description=f"{label}: stroke {stroke + 1}/{count}")
+                    lock.update(100.0 * sum(weights[: progress.done]) / max(1, sum(weights)),
+                                f"{label}: stroke {stroke + 1} of {count}")
+
+                def reached(stroke: int, vertex: int, first: int = first, label: str = labels[index],
+                            count: int = len(plan.strokes), strokes: tuple[Any, ...] = plan.strokes) -> None:
+                    """Within a stroke, the bar moves with each vertex the arm reports reaching."""
+                    at = first + stroke
+                    share = vertex / max(1, len(strokes[stroke]) - 1)
+                    bar.update(task, completed=sum(weights[:at]) + min(1.0, share) * weights[at],
+                               description=f"{label}: stroke {stroke + 1}/{count}")
 
                 start = max(0, progress.done - first)
                 if start < len(plan.strokes):
-                    await send_plan(arm, plan, start=start, pen_z=pen_z, on_stroke=done)
+                    # the new layer's name at once, not after its first stroke
+                    bar.update(task, description=f"{labels[index]}: stroke {start + 1}/{len(plan.strokes)}")
+                    await send_plan(arm, plan, start=start, pen_z=pen_z, on_stroke=done, on_point=reached)
                 flat += len(plan.strokes)
         await arm.home()
 
@@ -112,7 +126,8 @@ def draw_passes(dctx: DeviceContext, plans: Sequence[PassPlan], key: str, *, sta
     path = state or state_dir() / f"vpype-{key[:24]}.json"
     progress = DrawProgress.load(path, key) if resume else None
     if resume and progress is None:
-        dctx.output.note("nothing to resume: starting from the beginning")
+        raise InputError(f"nothing to resume: there is no progress file {path} for this document with these layers "
+                         "and options; run lineus-draw without --resume to draw it from the beginning")
     if progress is None:
         progress = DrawProgress(path, key, flatten(plans))
         progress.save()

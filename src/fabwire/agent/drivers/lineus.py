@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import asyncio
+import os
 import time
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -13,6 +15,7 @@ from fabwire.agent.opening import open_lineus
 from fabwire.errors import DeviceBusy, InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
+from fabwire.lineus.drawing_lock import Drawer, DrawingLock, current_drawer, drawing_alone, robot_address
 from fabwire.lineus.plot import Plan, PlanOptions
 from fabwire.lineus.plot.intake import drawing_from_bytes
 from fabwire.lineus.plot.plan import plan_drawing, plan_file, plan_text
@@ -59,9 +62,21 @@ class LineUsDriver(Driver):
         self.position = await self.arm.position()
         return Identity("Line-us", hello.serial or None, hello.version or None)
 
+    def _other_drawer(self) -> Drawer | None:
+        """Another program drawing on this robot (a `fabwire lineus draw` on this host), if any."""
+        if self.arm is None:
+            return None
+        drawer = current_drawer(robot_address(self.arm.transport))
+        return drawer if drawer is not None and drawer.pid != os.getpid() else None
+
     def _summary(self) -> dict[str, Any]:
         pos = self.position
         where = {"x": pos.x, "y": pos.y, "z": pos.z} if pos else None
+        other = None if self.drawing else self._other_drawer()
+        if other is not None:
+            return summary(state="drawing", state_text=f"drawing from another program: {other.words()}", busy=True,
+                           progress_percent=other.progress_percent, position=where,
+                           pen_down=pos.pen_down if pos else None, actions=[])
         if self.drawing:
             percent, left = self._progress
             return summary(state="drawing", state_text=self.drawing, busy=True, progress_percent=round(percent, 1),
@@ -85,14 +100,19 @@ class LineUsDriver(Driver):
         arm = self._client()
         if self.drawing:
             raise DeviceBusy(f"the Line-us is busy ({self.drawing}): cancel the job first")
-        if action == "home":
-            self.position = await arm.home()
-        elif action == "pen_up":
-            self.position = await arm.pen_up()
-        elif action == "pen_down":
-            self.position = await arm.pen_down()
-        elif action == "move":
-            self.position = await arm.move(params["x"], params["y"])
+        if (other := self._other_drawer()) is not None:
+            raise DeviceBusy(f"the Line-us is drawing for another program: {other.words()}")
+        # held for the move itself, so no drawing starts on the robot in the middle of it
+        with DrawingLock(robot_address(arm.transport), f"the action {action!r}",
+                         command=f"fabwire serve ({self.spec.name})"):
+            if action == "home":
+                self.position = await arm.home()
+            elif action == "pen_up":
+                self.position = await arm.pen_up()
+            elif action == "pen_down":
+                self.position = await arm.pen_down()
+            elif action == "move":
+                self.position = await arm.move(params["x"], params["y"])
         pos = self.position
         return {"ok": True, "action": action, "position": pos.as_dict() if pos else None}
 
@@ -110,14 +130,17 @@ class LineUsDriver(Driver):
         if self.drawing:
             raise DeviceBusy(f"the Line-us is busy ({self.drawing})")
         options = PlanOptions(time_budget=PLAN_TIME_BUDGET)
-        if job_type == "text":
-            plan: Plan = await asyncio.to_thread(plan_text, params["text"], options)
+        if job_type == "text":  # along the long side of the area, as `fabwire lineus text` writes it
+            plan: Plan = await asyncio.to_thread(plan_text, params["text"], replace(options, rotate_auto=True))
         elif path is not None:
             plan = await asyncio.to_thread(plan_file, path, options)
         else:
             raise InputError("a drawing job needs a file")
         strokes = plan.strokes
         handle.preview([_points(s) for s in strokes])
+        notes = "; ".join(plan.notes)  # what the planner changed or left out, as `lineus draw` prints it
+        if notes:
+            handle.progress(0.0, message=f"planner: {notes}")
         per_stroke = plan.stroke_seconds()
         total = sum(per_stroke) or 1.0
         done_s = 0.0
@@ -139,15 +162,19 @@ class LineUsDriver(Driver):
                 raise JobStopped(f"stopped after stroke {index + 1} of {len(strokes)}")
 
         self._stop = False
+        what = repr(params["text"]) if job_type == "text" else path.name if path is not None else "a drawing"
         try:
-            await send_plan(arm, plan, on_stroke=drawn)
-            self.position = await arm.home()
-        except JobStopped:
-            self.position = await arm.pen_up()
-            raise
+            async with drawing_alone(arm, what, command=f"fabwire serve ({self.spec.name})"):
+                try:
+                    await send_plan(arm, plan, on_stroke=drawn)
+                    self.position = await arm.home()
+                except JobStopped:
+                    self.position = await arm.pen_up()
+                    raise
         finally:
             self.drawing = None
-        return f"drew {len(strokes)} strokes in {time.monotonic() - began:.0f} s"
+        drew = f"drew {len(strokes)} strokes in {time.monotonic() - began:.0f} s"
+        return f"{drew} (planner: {notes})" if notes else drew
 
     async def stop_job(self) -> None:
         """Stop after the stroke being drawn (a move in flight cannot be called back) and lift the pen."""

@@ -164,7 +164,7 @@ class PlanOptions:
     clip: bool = False
     """Without fitting: cut away what lies outside the area instead of refusing the drawing."""
     time_budget: float = 1.0
-    """Seconds the ordering may spend improving on greedy."""
+    """CPU seconds (of the planning thread) the ordering may spend improving on greedy."""
     resolution: float = RESOLUTION
     motion: MotionModel = field(default_factory=MotionModel)
     svg_text: str = "hershey"

@@ -1,16 +1,22 @@
 """Text in a single-stroke Hershey font: each line of strokes drawn once, no outlines to retrace.
 
-Hershey fonts hold ASCII only. Other letters are built the way type designers compose them (Unicode canonical
-decomposition): the base glyph plus accent strokes placed over or under it (é = e + ´, Å = A + ˚); letters that do
-not decompose fall back to their usual spelling (ß → ss, æ → ae) or their compatibility form (ﬁ → fi). Every
-character drawn differently, or not at all, is named in the notes.
+Text is first brought to Unicode's composed form (NFC, UAX #15), so a letter typed as base + combining accent
+(macOS file names, text copied from PDFs) draws like the precomposed one. Each font draws one script (`FONTS`):
+the Hershey files key their Greek and Cyrillic glyphs by ASCII letters, and the table maps each Greek or Cyrillic
+letter to the key its glyph sits on. Other letters are built the way type designers compose them (Unicode
+canonical decomposition): the base glyph plus accent strokes placed over or under it (é = e + ´, Ё = Е + ¨);
+letters that do not decompose fall back to their usual spelling (ß → ss, æ → ae) or their compatibility form
+(ﬁ → fi). Every character drawn differently, or not at all, is named in the notes. Lines break at every Unicode
+line boundary (`\n`, `\r\n`, `\r`, U+2028 …); a tab is a gap to the next stop of `TAB_STOP` spaces.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import string
 import unicodedata
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +28,8 @@ from fabwire.lineus.plot.geometry import FloatArray, Polylines
 DEFAULT_FONT = "futural"
 LINE_SPACING = 1.4
 """Baseline distance as a multiple of the font's cap height."""
+TAB_STOP = 4
+"""A tab moves on to the next multiple of this many space widths."""
 ACCENT_HEIGHT = 0.28
 """Height of an accent as a share of the cap height; it sits this far above the letter's top, a third of it apart."""
 
@@ -62,29 +70,115 @@ _FALLBACK = {
     "Ð": "D\u0335", "đ": "d\u0335", "Đ": "D\u0335", "ħ": "h\u0335", "Ħ": "H\u0335", "ø": "o\u0338", "Ø": "O\u0338",
     "ł": "l\u0337", "Ł": "L\u0337", "ı": "i", "‘": "'", "’": "'", "‚": ",", "“": '"', "”": '"', "„": '"',
     "–": "-", "—": "-", "‐": "-", "−": "-", "…": "...", "«": "<<", "»": ">>", "\u00a0": " ", "€": "EUR",
-    "£": "GBP", "©": "(c)", "®": "(R)", "™": "TM", "×": "x", "·": ".",
+    "£": "GBP", "©": "(c)", "®": "(R)", "™": "TM", "×": "x", "·": ".", "ς": "σ", "ϑ": "θ", "ϕ": "φ", "ϐ": "β",
 }
+
+
+# -- which characters each font draws, and on which key ----------------------------------------------------------
+
+_ASCII = string.digits + string.ascii_letters + string.punctuation + " "
+_NON_LETTERS = "".join(c for c in _ASCII if not c.isalpha())
+GREEK = "ΑΒΓΔΕΖΗΘΙΚΛΜΝΞΟΠΡΣΤΥΦΧΨΩ"
+"""The Greek alphabet in Hershey's glyph order (Simplex Greek capitals 527-550, small letters 627-650)."""
+CYRILLIC = "АБВГДЕЖЗИЙКЛМНОПРСТУФХЦЧШЩ"
+"""The Russian alphabet as far as Hershey's Complex Cyrillic numbers it (capitals 2801-2826, small 2901-2926)."""
+
+
+def _keyed(letters: str, keys: str) -> dict[str, str]:
+    """Capital letters on `keys` and their small letters on the keys' small letters."""
+    pairs = dict(zip(letters, keys, strict=True))
+    return {**pairs, **{a.lower(): k.lower() for a, k in pairs.items()}}
+
+
+def _same(chars: str) -> dict[str, str]:
+    return {c: c for c in chars}
+
+
+@dataclass(frozen=True)
+class FontCoverage:
+    """What a font draws: `script` ("Latin", "Greek", "Cyrillic", or "symbols" for fonts of signs keyed by
+    ASCII), `keys` each drawable character to the ASCII key its glyph sits on, `source` where the layout is from."""
+
+    script: str
+    keys: Mapping[str, str]
+    source: str
+
+
+_LATIN = FontCoverage("Latin", _same(_ASCII), "Hershey's Roman, Script, Gothic and Italic sets: ASCII as it is")
+_GREEK_HERSHEY = FontCoverage(
+    "Greek", {**_same(_NON_LETTERS), **_keyed(GREEK, string.ascii_uppercase[:24])},
+    "Hershey Greek in Hershey's own order: A-X are Alpha-Omega (glyph numbers 527-550 simplex, 2027-2050 complex)")
+_GREEK_SYMBOL = FontCoverage(
+    "Greek", {**_same(_NON_LETTERS), **_keyed(GREEK, "ABGDEZHQIKLMNXOPRSTUFCYW")},
+    "Hershey Greek on the Adobe Symbol font's keys (C = Chi, F = Phi, Q = Theta, W = Omega …): the same glyphs "
+    "as 'greeks' / 'greekc' in Symbol order")
+_CYRILLIC_HERSHEY = FontCoverage(
+    "Cyrillic", {**_same(_NON_LETTERS), **_keyed(CYRILLIC, string.ascii_uppercase)},
+    "Hershey Complex Cyrillic in alphabet order: A-Z are А-Щ (glyph numbers 2801-2826, 2901-2926); "
+    "Ъ Ы Ь Э Ю Я are not in the set")
+_CYRILLIC_PHONETIC = FontCoverage(
+    "Cyrillic",
+    {**_same("".join(c for c in _NON_LETTERS if c not in "$%&[]^_`{|}~")),
+     **_keyed("АБВГДЖЗИКЛМНОПРСТУФХЧШЩЭЮ", "ABVGDHZIKLMNOPRSTYFXJQWCU"),
+     "Е": "[", "е": "{", "Ъ": "]", "ъ": "|", "Я": "^", "я": "}", "Ь": "_", "ь": "~", "Ц": "`", "ц": "%",
+     "Ы": "$", "ы": "&", "й": "e"},
+    "Hershey Complex Cyrillic keyed by sound (V = В, H = Ж, J = Ч, Q = Ш …; Е on [ {, Ц on ` %, Ы on $ &, "
+    "Ъ on ] |, Ь on _ ~, Я on ^ }): the glyphs of 'cyrilc_1' and its missing Ъ Ы Ь Э Ю Я; capital Й is "
+    "И with a breve")
+_SYMBOLS = FontCoverage("symbols", _same(_ASCII), "signs (astrological, musical, weather, map markers …) on "
+                                                   "ASCII keys: type the key of the sign wanted")
+FONTS: dict[str, FontCoverage] = {
+    "futural": _LATIN, "futuram": _LATIN, "rowmans": _LATIN, "rowmand": _LATIN, "rowmant": _LATIN,
+    "timesr": _LATIN, "timesrb": _LATIN, "timesi": _LATIN, "timesib": _LATIN, "cursive": _LATIN,
+    "scripts": _LATIN, "scriptc": _LATIN, "gothiceng": _LATIN, "gothicger": _LATIN, "gothicita": _LATIN,
+    "gothgbt": _LATIN, "gothgrt": _LATIN, "gothitt": _LATIN,
+    "mathlow": FontCoverage("Latin", {**_same(" %*+,-./0123456789<=>[\\]{}"),
+                                      **{c: c.upper() for c in string.ascii_lowercase}},
+                            "Hershey math set, small letters: A-Z carry a-z, the other keys math signs"),
+    "mathupp": FontCoverage("Latin", _same(" %*+-/0123456789<=>[\\]" + string.ascii_uppercase),
+                            "Hershey math set, capitals: A-Z as they are, the small-letter keys math signs"),
+    "greek": _GREEK_SYMBOL, "timesg": _GREEK_SYMBOL, "greeks": _GREEK_HERSHEY, "greekc": _GREEK_HERSHEY,
+    "cyrillic": _CYRILLIC_PHONETIC, "cyrilc_1": _CYRILLIC_HERSHEY,
+    "astrology": _SYMBOLS,
+    "markers": FontCoverage("symbols", _same(" " + string.ascii_letters[:16] + string.ascii_uppercase[:16]),
+                            "map markers on A-P and a-p; the other keys are blank"),
+    "meteorology": _SYMBOLS, "music": _SYMBOLS, "symbolic": _SYMBOLS,
+    "japanese": _SYMBOLS,
+}
+"""Every font `font_names` offers, with the characters it draws (HersheyFonts' default fonts, from the Hershey
+fonts of the U.S. National Bureau of Standards as distributed in .jhf files)."""
 
 
 def font_names() -> list[str]:
     return list(HersheyFonts().default_font_names)
 
 
+@dataclass(frozen=True)
+class _Face:
+    """A loaded font and the characters it draws."""
+
+    name: str
+    hershey: HersheyFonts
+    coverage: FontCoverage
+
+
 @functools.lru_cache(maxsize=8)
-def _font(name: str) -> HersheyFonts:
+def _font(name: str) -> _Face:
     font = HersheyFonts()
-    if name not in font.default_font_names:
+    if name not in font.default_font_names or name not in FONTS:
         raise InputError(f"unknown font {name!r}; choose one of: {', '.join(font.default_font_names)}")
     font.load_default_font(name)
-    return font
+    return _Face(name, font, FONTS[name])
 
 
-def _glyph(face: HersheyFonts, char: str) -> object | None:
-    found = list(face.glyphs_for_text(char)) if len(char) == 1 else []
+def _glyph(face: _Face, char: str) -> object | None:
+    """The glyph that draws `char` in this font (through the font's key for it), or None."""
+    key = face.coverage.keys.get(char)
+    found = list(face.hershey.glyphs_for_text(key)) if key is not None else []
     return found[0] if found else None
 
 
-def _spell(face: HersheyFonts, char: str, depth: int = 0) -> list[tuple[str, list[str]]] | None:
+def _spell(face: _Face, char: str, depth: int = 0) -> list[tuple[str, list[str]]] | None:
     """`char` as (base letter the font has, accent marks) pairs, or None when it cannot be built."""
     if _glyph(face, char) is not None:
         return [(char, [])]
@@ -103,7 +197,7 @@ def _spell(face: HersheyFonts, char: str, depth: int = 0) -> list[tuple[str, lis
     return None
 
 
-def _spell_text(face: HersheyFonts, text: str, depth: int) -> list[tuple[str, list[str]]] | None:
+def _spell_text(face: _Face, text: str, depth: int) -> list[tuple[str, list[str]]] | None:
     out: list[tuple[str, list[str]]] = []
     for char in text:
         if char in _MARKS and out:
@@ -114,6 +208,28 @@ def _spell_text(face: HersheyFonts, text: str, depth: int) -> list[tuple[str, li
             return None
         out.extend(part)
     return out
+
+
+def _clusters(line: str) -> list[str]:
+    """A line as user-perceived characters: each base character with the combining marks that follow it."""
+    out: list[str] = []
+    for char in line:
+        if out and unicodedata.combining(char):
+            out[-1] += char
+        else:
+            out.append(char)
+    return out
+
+
+def _spell_cluster(face: _Face, cluster: str) -> list[tuple[str, list[str]]] | None:
+    """A base character and its combining marks (left after NFC when no precomposed letter exists)."""
+    spelled = _spell(face, cluster[0])
+    if spelled is None or len(cluster) == 1:
+        return spelled
+    if not spelled or not all(mark in _MARKS for mark in cluster[1:]):
+        return None
+    spelled[-1][1].extend(cluster[1:])
+    return spelled
 
 
 def _mark_strokes(mark: _Mark, box: tuple[float, float, float, float], cap: float, baseline: float) -> Polylines:
@@ -140,24 +256,30 @@ def text_lines(text: str, *, font: str = DEFAULT_FONT, cap_height: float = 1.0,
     Characters built from a base letter and accents, or spelled another way, and characters that cannot be drawn
     at all, are named in `notes`. InputError when nothing at all can be drawn.
     """
+    text = unicodedata.normalize("NFC", text)
     if not text.strip():
         raise InputError("the text is empty")
     face = _font(font)
     top, baseline = _cap_span(face)
     cap = baseline - top
     scale = cap_height / cap
+    space = _glyph(face, " ")
+    tab = TAB_STOP * float(space.char_width if space is not None else cap / 2)  # type: ignore[attr-defined]
     result: Polylines = []
     missing: list[str] = []
     respelled: list[str] = []
-    for row, line in enumerate(text.split("\n")):
+    for row, line in enumerate(text.splitlines()):
         x = 0.0
-        for char in line:
-            spelled = _spell(face, char)
-            if spelled is None:
-                missing.append(char)
+        for cluster in _clusters(line):
+            if cluster == "\t":
+                x = (math.floor(x / tab + 1e-9) + 1) * tab
                 continue
-            if spelled != [(char, [])]:
-                respelled.append(char)
+            spelled = _spell_cluster(face, cluster)
+            if spelled is None:
+                missing.append(cluster)
+                continue
+            if spelled != [(cluster, [])]:
+                respelled.append(cluster)
             for base, marks in spelled:
                 glyph = _glyph(face, base)
                 shift = np.array([x - glyph.left_offset, 0.0])  # type: ignore[attr-defined]
@@ -176,24 +298,37 @@ def text_lines(text: str, *, font: str = DEFAULT_FONT, cap_height: float = 1.0,
                     placed[:, 1] = (baseline * scale - placed[:, 1]) - row * LINE_SPACING * cap_height
                     result.append(placed)
                 x += float(glyph.char_width)  # type: ignore[attr-defined]
+    script = face.coverage.script
     if not result:
-        raise InputError(f"font {font!r} has no strokes for {text!r}")
+        raise InputError(f"font {font!r} ({script}) has no strokes for {text!r}{_suggestion(missing)}")
     if notes is not None:
+        if script == "symbols":
+            notes.append(f"font {font!r} draws signs, not letters: each character typed draws the sign on its key")
         if respelled:
             notes.append(f"built from letters and accent strokes, or spelled out: {_listing(respelled)}")
         if missing:
-            notes.append(f"font {font!r} cannot draw {_listing(missing)}: left out")
+            notes.append(f"font {font!r} ({script}) cannot draw {_listing(missing)}: left out{_suggestion(missing)}")
     return result
+
+
+def _suggestion(missing: list[str]) -> str:
+    """'; for Greek use --font greek, …' when the characters left out belong to a script other fonts draw."""
+    for script in dict.fromkeys(c.script for c in FONTS.values() if c.script != "symbols"):
+        if any(unicodedata.name(c[0], "").startswith(script.upper() + " ") for c in missing):
+            fonts = [name for name, c in FONTS.items() if c.script == script]
+            return f"; for {script} use --font {', '.join(fonts[:4])}{' …' if len(fonts) > 4 else ''}"
+    return ""
 
 
 def _listing(chars: list[str]) -> str:
     unique = list(dict.fromkeys(chars))
-    return ", ".join(f"{c!r} (U+{ord(c):04X})" for c in unique[:20]) + (" …" if len(unique) > 20 else "")
+    named = (f"{c!r} ({' '.join(f'U+{ord(u):04X}' for u in c)})" for c in unique[:20])
+    return ", ".join(named) + (" …" if len(unique) > 20 else "")
 
 
-def _cap_span(face: HersheyFonts) -> tuple[float, float]:
+def _cap_span(face: _Face) -> tuple[float, float]:
     """(cap line, baseline) y of the font, measured on 'H' (y down)."""
-    ys = [float(p[1]) for seg in face.lines_for_text("H") for p in seg]
+    ys = [float(p[1]) for seg in face.hershey.lines_for_text("H") for p in seg]
     if not ys or max(ys) <= min(ys):
         return (0.0, 1.0)
     return (min(ys), max(ys))
