@@ -96,10 +96,16 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", help="MQTT password (or FABWIRE_MQTT_PASSWORD).", envvar="FABWIRE_MQTT_PASSWORD")
 @click.option("--mqtt-tls", is_flag=True, help="Connect to the broker with TLS.")
+@click.option("--notify", "notify_urls", multiple=True, metavar="URL",
+              help="Send print finished/failed/cancelled, MMU errors waiting and machines gone offline to this "
+                   "Apprise URL (repeatable): ntfy://topic, tgram://bot/chat, mailto://…, json://host/path …")
+@click.option("--notify-offline-after", type=FiniteRange(min=0.0), default=60.0, show_default=True,
+              metavar="SECONDS", help="With --notify: how long a machine must be unreachable to be announced.")
 @pass_app
 def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, state_dir: Path | None,
           demo: bool, speed: float, retention: float, max_upload: float, token: bool | None,
-          mqtt_url: str | None, mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool) -> None:
+          mqtt_url: str | None, mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool,
+          notify_urls: tuple[str, ...], notify_offline_after: float) -> None:
     """Watch a bench of machines: a live dashboard, an HTTP API with history and jobs, one agent.
 
     Open the printed address in a browser. The API is described at /api/v1/openapi.json.
@@ -110,6 +116,7 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
         raise InputError(f"refusing to listen on {address.host} without an access token: anyone on the network "
                          "could run the machines (leave out --no-token, or listen on 127.0.0.1)")
     bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls)
+    notifier = _notifier(notify_urls, notify_offline_after)
     specs = [parse_device_option(text, i) for i, text in enumerate(devices, 1)]
     if not demo:
         specs = configured_devices(config) + specs
@@ -124,11 +131,20 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
             else:
                 click.echo(f"access token: the one in {directory}", err=True)
         interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0,
-                                  int(max_upload * 1024 * 1024), secret, bridge))
+                                  int(max_upload * 1024 * 1024), secret, bridge, notifier))
     finally:
         sock.close()
     if interrupted:
         raise KeyboardInterrupt  # after the clean shutdown: the CLI's "interrupted" exit code
+
+
+def _notifier(urls: tuple[str, ...], offline_after_s: float) -> Any:
+    """The notifier for `--notify`, its URLs checked before anything starts; None without any."""
+    if not urls:
+        return None
+    from fabwire.agent.notify import Notifier
+
+    return Notifier(urls, offline_after_s=offline_after_s)
 
 
 def _run(main: Coroutine[Any, Any, bool]) -> bool:
@@ -141,7 +157,8 @@ def _run(main: Coroutine[Any, Any, bool]) -> bool:
 
 
 async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, demo: bool, speed: float,
-                 retention_s: float, max_upload: int, secret: str | None, bridge: Any) -> bool:
+                 retention_s: float, max_upload: int, secret: str | None, bridge: Any, notifier: Any = None
+                 ) -> bool:
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
@@ -155,11 +172,14 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     simulators: list[Any] = []
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=max_upload)
     bridge_task: asyncio.Task[None] | None = None
+    notify_task: asyncio.Task[None] | None = None
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
             specs = demo_specs + specs
         await agent.start()
+        if notifier is not None:  # subscribed before the devices come: their first states arm it
+            notify_task = asyncio.create_task(notifier.run(agent))
         results = await asyncio.gather(*(agent.add_device(s) for s in specs), return_exceptions=True)
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):
@@ -178,10 +198,11 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
-        if bridge_task is not None:
-            bridge_task.cancel()
-            with contextlib.suppress(BaseException):
-                await bridge_task
+        for task in (bridge_task, notify_task):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(BaseException):
+                    await task
         await agent.stop()
         if simulators:
             from fabwire.demo.runner import stop_all
