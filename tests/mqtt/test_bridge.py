@@ -13,6 +13,7 @@ from typing import Any
 
 import aiomqtt
 import pytest
+from hatools import check_device_discovery
 from mqtttools import FakeAgent, Mosquitto, lineus, mmu, observing, printer
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
@@ -67,6 +68,35 @@ async def test_state_availability_info_and_discovery_are_retained(broker: Mosqui
             wanted = {discovery_topic(d) for d in (PRINTER.id, mmu().id, lineus().id)}
             wanted |= {device_topic(PRINTER.id, leaf) for leaf in ("state", "info", "availability")}
             await late.wait_for(lambda o: wanted <= {t for t, _, retained in o.log if retained})
+
+
+async def test_every_discovery_message_published_passes_home_assistants_rules(broker: Mosquitto) -> None:
+    devices = [PRINTER, printer("3DP02P", "garage"), mmu(), lineus()]
+    agent = FakeAgent(devices)
+    made: asyncio.Future[Bridge] = asyncio.get_running_loop().create_future()
+
+    def linked(bridge: Bridge) -> None:
+        bridge.dashboard_url = "http://bench.local:8765/"
+        made.set_result(bridge)
+
+    task = asyncio.create_task(run_bridge(agent, broker.url, agent_id="bench-a", on_bridge=linked))
+    try:
+        async with observing(broker, "homeassistant/#") as seen:
+            wanted = {discovery_topic(d.id) for d in devices}
+            await seen.wait_for(lambda o: wanted <= set(o.latest))
+            async with aiomqtt.Client("127.0.0.1", broker.port) as ha:  # and again when Home Assistant restarts
+                await ha.publish("homeassistant/status", "online", qos=1)
+            await seen.wait_for(lambda o: all(o.count(t) >= 2 for t in wanted))
+            published = [(topic, payload) for topic, payload, _ in seen.log if payload and topic.endswith("/config")]
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    assert len(published) >= 2 * len(devices)
+    for topic, payload in published:
+        body = json.loads(payload)
+        assert check_device_discovery(topic, body) == [], topic
+        assert body["device"]["configuration_url"] == "http://bench.local:8765/"
 
 
 async def test_events_and_availability_changes_follow_the_agent(broker: Mosquitto) -> None:

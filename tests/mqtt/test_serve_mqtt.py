@@ -17,6 +17,7 @@ import paho.mqtt.client as paho
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
+from hatools import check_device_discovery
 from mqtttools import Mosquitto
 
 from clitools import cli_env, run_cli
@@ -31,6 +32,7 @@ class Agents:
     def __init__(self, tmp_path: Path) -> None:
         self.tmp_path = tmp_path
         self.processes: list[subprocess.Popen[str]] = []
+        self.urls: dict[str, str] = {}
 
     def start(self, name: str, broker: Mosquitto, *devices: str) -> subprocess.Popen[str]:
         args = [sys.executable, "-m", "fabwire", "serve", "--listen", "127.0.0.1:0", "--state-dir",
@@ -43,6 +45,7 @@ class Agents:
         assert process.stdout is not None
         line = process.stdout.readline()
         assert line.startswith(ANNOUNCEMENT), line + (process.stderr.read() if process.stderr else "")
+        self.urls[name] = line.removeprefix(ANNOUNCEMENT).strip()
         return process
 
     def stop_all(self) -> None:
@@ -121,6 +124,8 @@ def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto,
     device = watch.until(lambda w: w.device_of_kind("lineus"))
     discovery = watch.until(lambda w: w.json(f"homeassistant/device/fabwire_{device}/config"))
     assert discovery["device"]["manufacturer"] == "Line-us"
+    assert discovery["device"]["configuration_url"] == agents.urls["a"]  # Home Assistant's link to the dashboard
+    assert check_device_discovery(f"homeassistant/device/fabwire_{device}/config", discovery) == []
     watch.until(lambda w: w.latest.get(f"fabwire/device/{device}/availability") == b"online")
     # the first state may be published before the agent's first poll: wait for the one that says online
     state = watch.until(lambda w: (s := w.json(f"fabwire/device/{device}/state")) and s["online"] and s)

@@ -66,8 +66,12 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
     except ImportError:
         raise InputError("MQTT support not installed: pip install 'fabwire[mqtt]'") from None
 
-    def start(agent: Agent) -> Coroutine[Any, Any, None]:
-        result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls)
+    def start(agent: Agent, dashboard_url: str) -> Coroutine[Any, Any, None]:
+        def linked(bridge: Any) -> None:
+            bridge.dashboard_url = dashboard_url
+
+        result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls,
+                                                       on_bridge=linked)
         return result
 
     return start
@@ -194,7 +198,8 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
         sys.stdout.flush()
         if bridge is not None:
-            bridge_task = asyncio.create_task(_run_bridge(bridge(agent), server))
+            bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port)),
+                                                          server))
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
@@ -208,6 +213,15 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
             from fabwire.demo.runner import stop_all
 
             await asyncio.to_thread(stop_all, simulators)
+
+
+def dashboard_url(host: str, port: int) -> str:
+    """The dashboard's address as other machines reach it: a wildcard listen address becomes this computer's
+    mDNS name (`raspberrypi.local`, as Raspberry Pi OS and most Linux systems announce themselves)."""
+    if host in ("0.0.0.0", "::", ""):
+        name = socket.gethostname()
+        host = name if "." in name else f"{name}.local"
+    return f"http://[{host}]:{port}/" if ":" in host else f"http://{host}:{port}/"
 
 
 def _server_class() -> Any:

@@ -78,6 +78,8 @@ class Bridge:
         self.backoff = backoff
         self.view = FleetView()
         self.known: dict[str, dict[str, Any]] = {}
+        self.dashboard_url: str | None = None
+        """The agent's dashboard, Home Assistant's link to each device (`configuration_url`)."""
         """Devices this agent monitors and has claimed: id → DeviceInfo as a dict."""
         self.owned: set[str] = set()
         self.runner = CommandRunner(agent.act, agent_id)
@@ -278,7 +280,8 @@ class Bridge:
         await self._publish_state(device, state)
 
     async def _publish_discovery(self, device: str) -> None:
-        await self._publish(discovery_topic(device), _dump(discovery_payload(self.known[device], self.agent_id)))
+        await self._publish(discovery_topic(device), _dump(discovery_payload(self.known[device], self.agent_id,
+                                                                         self.dashboard_url)))
 
     async def _remove(self, device: str) -> None:
         """Clean up a device this agent stopped monitoring: its discovery and retained topics go unless another
