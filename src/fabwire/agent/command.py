@@ -7,7 +7,8 @@ import contextlib
 import signal
 import socket
 import sys
-from collections.abc import Coroutine, Iterator
+import tempfile
+from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -86,7 +87,8 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
               help="Named devices file (default: fabwire's devices.toml).")
 @click.option("--state-dir", type=click.Path(file_okay=False, path_type=Path),
               help="History, uploads and the access token (default: the platform's state directory).")
-@click.option("--demo", is_flag=True, help="Start the three simulators and monitor them.")
+@click.option("--demo", is_flag=True, help="Start the three simulators and monitor them, with a print, a drawing and "
+                                          "an MMU tool change under way (history in a temporary directory).")
 @click.option("--speed", type=FiniteRange(min=0.5), default=30.0, show_default=True,
               help="With --demo: simulated time runs this many times faster.")
 @click.option("--retention", type=FiniteRange(min=0.01), default=24.0, show_default=True, metavar="HOURS",
@@ -124,7 +126,8 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
     specs = [parse_device_option(text, i) for i, text in enumerate(devices, 1)]
     if not demo:
         specs = configured_devices(config) + specs
-    directory = state_dir or default_state_dir()
+    demo_dir = tempfile.TemporaryDirectory(prefix="fabwire-demo-") if demo and state_dir is None else None
+    directory = state_dir or (Path(demo_dir.name) if demo_dir else default_state_dir())
     sock = _bind(address.host, address.port)  # a bad address fails before a token is made for it
     try:
         secret = None
@@ -138,6 +141,8 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
                                   int(max_upload * 1024 * 1024), secret, bridge, notifier))
     finally:
         sock.close()
+        if demo_dir is not None:
+            demo_dir.cleanup()
     if interrupted:
         raise KeyboardInterrupt  # after the clean shutdown: the CLI's "interrupted" exit code
 
@@ -188,6 +193,9 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
+        if demo:
+            show = asyncio.create_task(_demo_show(agent))
+            show.add_done_callback(lambda task: task.cancelled() or task.exception())
         app: Any = create_app(agent, max_upload_bytes=max_upload)
         if secret is not None:
             app = TokenGuard(app, secret)
@@ -259,6 +267,51 @@ async def _run_bridge(coro: Coroutine[Any, Any, None], server: Any) -> None:
         click.echo(f"fabwire: error: MQTT bridge: {exc}", err=True)
         server.should_exit = True
         raise
+
+
+DEMO_SHOW_WAIT_S = 30.0
+
+
+async def _demo_show(agent: Agent) -> None:
+    """What the demo does at start, as the README's picture shows: the printer prints the sample, the Line-us
+    draws the sample logo, the MMU loads slot 0 and then stops on its (simulated) FINDA fault at slot 1."""
+    from fabwire.samples import SAMPLE_GCODE, SAMPLE_SVG, sample_path
+
+    async def until(device: str, done: Callable[[dict[str, Any]], bool]) -> None:
+        subscription = agent.subscribe(device)
+        try:
+            async with asyncio.timeout(DEMO_SHOW_WAIT_S):
+                if done({"type": "state", "state": agent.state(device)}):
+                    return
+                async for event in subscription:
+                    if done(event):
+                        return
+        finally:
+            subscription.close()
+
+    def idle(event: dict[str, Any]) -> bool:
+        return bool(event["type"] == "state" and event["state"]["summary"]["state"] == "idle")
+
+    async def step(device: str, run: Callable[[], Coroutine[Any, Any, Any]]) -> None:
+        try:
+            await until(device, idle)
+            await run()
+        except (FabwireError, TimeoutError) as exc:
+            click.echo(f"fabwire: demo: {device}: {exc}", err=True)
+
+    async def mmu() -> None:
+        finished = asyncio.ensure_future(until("mmu-demo", lambda e: e["type"] == "event"
+                                               and e["event"].get("event") == "action-done"))
+        await asyncio.sleep(0)  # subscribed before the tool change starts
+        await agent.act("mmu-demo", "tool_change", {"slot": 0})
+        await finished
+        await agent.act("mmu-demo", "tool_change", {"slot": 1})
+
+    await asyncio.gather(
+        step("xyz-demo", lambda: agent.start_job("xyz-demo", SAMPLE_GCODE,
+                                                 sample_path(SAMPLE_GCODE).read_bytes())),
+        step("lineus-demo", lambda: agent.start_job("lineus-demo", SAMPLE_SVG, sample_path(SAMPLE_SVG).read_bytes())),
+        step("mmu-demo", mmu))
 
 
 def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
