@@ -229,7 +229,10 @@ function kindSection(card, s) {
 function progressSection(card, s) {
   const job = card.state.job;
   const percent = job ? job.progress_percent : s.progress_percent;
-  if (!(s.busy || job) || percent === null || percent === undefined) return null;
+  // a flow (loading filament, calibrating) reports no progress worth a bar: its words are in the state line
+  if (!(job || ["printing", "paused", "drawing"].includes(s.state)) || percent === null || percent === undefined) {
+    return null;
+  }
   const left = job && job.time_left_s !== null ? job.time_left_s : s.time_left_s;
   return el("div", {class: "progress-block"},
     el("div", {class: "progress", role: "progressbar", "aria-valuenow": Math.round(percent), "aria-valuemin": 0,
