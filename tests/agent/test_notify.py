@@ -106,7 +106,9 @@ def test_each_rule_is_announced_once_in_words(rule: str, events: list[dict[str, 
       _state("m", "mmu", "error", state_text="x", actions=["stop"])], ["mmu-error"]),  # one error, a link drop
     ([_state("p", "xyz", "printing", job=RUNNING), _state("p", "xyz", "done", job=RUNNING),
       _job("p", "done"), _job("p", "done")], ["finished"]),  # the job's end told twice
-], ids=["busy", "never-online", "blip", "same-error", "job-twice"])
+    ([_state("m", "mmu", "idle"), _state("m", "mmu", "error", state_text="x", actions=["retry", "stop"]),
+      _state("m", "mmu", "busy")], []),  # retried (by the host) before anyone had to come
+], ids=["busy", "never-online", "blip", "same-error", "job-twice", "mmu-healed"])
 def test_what_is_not_news_is_not_announced(events: list[dict[str, Any]], expected: list[str]) -> None:
     assert [n.rule for n in _notices(events, later=31.0)] == expected
 

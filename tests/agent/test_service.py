@@ -8,6 +8,7 @@ import shutil
 import stat
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +32,11 @@ def systemd_analyze() -> str:
 
 def verify(unit: Path, *, user: bool) -> None:
     """systemd-analyze verify: exit 0 and not one warning (a wrong value is only warned about)."""
-    env = {**os.environ, "XDG_RUNTIME_DIR": str(unit.parent)}
-    run = subprocess.run([systemd_analyze(), *(["--user"] if user else []), "verify", str(unit)],
-                         capture_output=True, text=True, timeout=60, env=env, cwd=unit.parent)
+    # a user manager's runtime directory of its own, short enough for the socket paths of the units it loads
+    with tempfile.TemporaryDirectory(prefix="rt-", dir="/tmp") as runtime:
+        env = {**os.environ, "XDG_RUNTIME_DIR": runtime}
+        run = subprocess.run([systemd_analyze(), *(["--user"] if user else []), "verify", str(unit)],
+                             capture_output=True, text=True, timeout=60, env=env, cwd=unit.parent)
     assert run.returncode == 0, run.stderr
     assert run.stderr.strip() == "", run.stderr
 

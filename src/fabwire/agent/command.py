@@ -182,6 +182,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=max_upload)
     bridge_task: asyncio.Task[None] | None = None
     notify_task: asyncio.Task[None] | None = None
+    show: asyncio.Task[None] | None = None
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
@@ -195,7 +196,6 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
         if demo:
             show = asyncio.create_task(_demo_show(agent))
-            show.add_done_callback(lambda task: task.cancelled() or task.exception())
         app: Any = create_app(agent, max_upload_bytes=max_upload)
         if secret is not None:
             app = TokenGuard(app, secret)
@@ -211,16 +211,18 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
-        for task in (bridge_task, notify_task):
+        for task in (show, bridge_task, notify_task):
             if task is not None:
                 task.cancel()
                 with contextlib.suppress(BaseException):
                     await task
-        await agent.stop()
-        if simulators:
-            from fabwire.demo.runner import stop_all
+        try:
+            await agent.stop()
+        finally:
+            if simulators:  # whatever the agent's stop did, the demo's simulators go with it
+                from fabwire.demo.runner import stop_all
 
-            await asyncio.to_thread(stop_all, simulators)
+                await asyncio.to_thread(stop_all, simulators)
 
 
 def dashboard_url(host: str, port: int) -> str:

@@ -29,6 +29,8 @@ OFFLINE_AFTER_S = 60.0
 QUEUE = 100
 """Messages waiting to be sent; past that the oldest is dropped (a dead notification service must not grow
 the agent's memory)."""
+MMU_ERROR_AFTER_S = 3.0
+"""How long an MMU error must stand before it is announced: one the host retries by itself is gone by then."""
 PICTURE_DPI = 40.0
 """Resolution of a drawing's picture: a phone notification's size."""
 
@@ -106,6 +108,9 @@ class _Device:
     offline_since: float | None = None
     offline_reason: str = ""
     offline_told: bool = False
+    mmu_error: Notice | None = None
+    """An MMU error not yet announced, and since when it stands."""
+    mmu_error_since: float = 0.0
 
 
 @dataclass
@@ -140,7 +145,7 @@ class NoticeWatch:
         if kind == "job":
             return self._job(device, event["job"])
         if kind == "state":
-            return self._state(device, event["state"])
+            return self._state(device, event["state"], now)
         return []
 
     def _job(self, device: _Device, job: dict[str, Any]) -> list[Notice]:
@@ -163,7 +168,7 @@ class NoticeWatch:
                                               job.get("progress_percent") else ".")
         return [Notice(rule, device.name, f"{device.name}: {what} {rule}", body, job)]
 
-    def _state(self, device: _Device, state: dict[str, Any]) -> list[Notice]:
+    def _state(self, device: _Device, state: dict[str, Any], now: float) -> list[Notice]:
         device.name = state.get("name") or device.name
         device.kind = state.get("kind") or device.kind
         summary = state.get("summary") or {}
@@ -172,11 +177,13 @@ class NoticeWatch:
             return []
         device.summary_state = current
         out: list[Notice] = []
+        device.mmu_error = None
         if device.kind == "mmu" and current == "error":
             buttons = " or ".join(b.capitalize() for b in summary.get("actions") or ()) or "a button"
             error = summary.get("state_text") or summary.get("error") or "an error"
-            out.append(Notice("mmu-error", device.name, f"{device.name}: MMU error waiting",
-                              f"{error}. The MMU waits for {buttons} (on the dashboard or the printer)."))
+            device.mmu_error = Notice("mmu-error", device.name, f"{device.name}: MMU error waiting",
+                                      f"{error}. The MMU waits for {buttons} (on the dashboard or the printer).")
+            device.mmu_error_since = now
         if current not in PRINTING:
             device.job_ended = False
         if state.get("job") is not None:
@@ -195,6 +202,9 @@ class NoticeWatch:
     def due(self, now: float) -> list[Notice]:
         out = []
         for device in self.devices.values():
+            if device.mmu_error is not None and now - device.mmu_error_since >= MMU_ERROR_AFTER_S:
+                out.append(device.mmu_error)
+                device.mmu_error = None
             since = device.offline_since
             if since is not None and not device.offline_told and now - since >= self.offline_after_s:
                 device.offline_told = True
