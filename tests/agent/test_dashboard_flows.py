@@ -328,6 +328,8 @@ def test_demo_uses_a_temporary_state_directory_and_starts_busy(browser: Browser,
             expect(opened.locator("article.card")).to_have_count(3)
             expect(opened.locator("article[data-kind=mmu] .error-box")).to_be_visible()
             expect(opened.locator("#jobs tbody tr").first).to_be_visible()
+            progress = opened.locator("#jobs tr", has_text="fabwire-logo.svg").locator("td[data-label=Progress]")
+            expect(progress).not_to_have_text("0 %", timeout=60_000)  # the list follows the job, not only its start
             readme_picture(shot(opened, name))
             context.close()
     finally:

@@ -272,6 +272,8 @@ async def _run_bridge(coro: Coroutine[Any, Any, None], server: Any) -> None:
 
 
 DEMO_SHOW_WAIT_S = 30.0
+DEMO_LINEUS_SPEED = 1.0
+"""The demo's Line-us draws in real time: the logo takes half a minute, long enough to watch the ink arrive."""
 
 
 async def _demo_show(agent: Agent) -> None:
@@ -320,7 +322,7 @@ def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
     from fabwire.demo.mmu_show import FAULT
     from fabwire.demo.runner import start_simulators
 
-    args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{speed:g}"],
+    args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{min(speed, DEMO_LINEUS_SPEED):g}"],
             "mmu": ["--speed", f"{speed:g}", "--fault", FAULT]}
     sims = start_simulators([(kind, args[kind]) for _, kind in DEMO_DEVICES])
     specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {},  # type: ignore[arg-type]

@@ -446,7 +446,7 @@ function onEvent(event) {
     const previousJob = card.state.job;
     card.state = event.state;
     addSample(card, event.state.summary, Date.parse(event.state.ts) / 1000);
-    if (!previousJob && event.state.job) { card.preview = []; card.ink = []; }
+    if (!previousJob && event.state.job) { card.preview = []; card.ink = []; loadJobs(); }
     scheduleRender(card);
   } else if (event.type === "online") {
     card.device = {...card.device, ...event.info};
@@ -456,6 +456,8 @@ function onEvent(event) {
     if (event.stroke) addInk(card, event.stroke);
     if (event.preview || !event.stroke) scheduleRender(card);
     if (!event.stroke && event.job.state !== "running") loadJobs();
+    const cell = document.querySelector(`#jobs tr[data-job="${event.job.id}"] td[data-label="Progress"]`);
+    if (cell) cell.textContent = `${Math.round(event.job.progress_percent || 0)} %`;  // the list keeps up
   } else if (event.type === "error") {
     toast(`${card.device.name}: ${event.message}`, true);
   }
