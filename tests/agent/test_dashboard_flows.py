@@ -340,3 +340,25 @@ def test_demo_uses_a_temporary_state_directory_and_starts_busy(browser: Browser,
                 stream.close()
     assert process.returncode == 0
     assert not (home / "state").exists()  # nothing in the real state directory
+
+
+@pytest.mark.parametrize(("kind", "action", "body", "words"), [
+    ("xyz", "zoffset", {"mm": 99}, "must be from -20 to 20"),
+    ("xyz", "zoffset", {"mm": "2.45"}, "must be a finite number"),
+    ("xyz", "zoffset_step", {"direction": "sideways"}, "must be one of up, down"),
+    ("xyz", "confirm", {}, "no step is waiting"),
+    ("xyz", "stop_flow", {}, "no step is waiting"),
+    ("xyz", "calibrate", {"points": 9}, "takes no parameter 'points'"),
+    ("lineus", "pen_height", {"z": 2000}, "must be from 0 to 1000"),
+    ("lineus", "delete_drawing", {"slot": 1}, "send \"confirm\": true"),
+    ("lineus", "delete_drawing", {"slot": 40, "confirm": True}, "must be from 1 to 32"),
+    ("mmu", "eject", {"slot": 7}, "must be from 0 to 4"),
+])
+def test_flow_actions_refuse_bad_input_with_a_message(bench: Bench, kind: str, action: str, body: dict[str, Any],
+                                                      words: str) -> None:
+    with api(bench) as client:
+        device = device_of(client, kind)["id"]
+        response = client.post(f"/api/v1/devices/{device}/actions/{action}", json=body)
+    assert response.status_code == 400, response.text
+    assert words in response.json()["message"]
+    assert response.json()["exit_code"] == 4
