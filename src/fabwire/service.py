@@ -159,7 +159,8 @@ def _write(path: Path, text: str, mode: int) -> None:
 
 
 def serve_arguments(listen: str, state_dir: str, config: Path | None, devices: Sequence[str], mqtt: str | None,
-                    mqtt_user: str | None, mqtt_tls: bool, notify: Sequence[str]) -> tuple[str, ...]:
+                    mqtt_user: str | None, mqtt_tls: bool, notify: Sequence[str],
+                    mqtt_discovery: str = "device") -> tuple[str, ...]:
     """The `fabwire serve` options for the unit, each checked as `serve` checks it."""
     from fabwire.agent.command import DEFAULT_PORT, parse_device_option
     from fabwire.simserve import parse_listen
@@ -177,6 +178,8 @@ def serve_arguments(listen: str, state_dir: str, config: Path | None, devices: S
             args += ["--mqtt-user", mqtt_user]
         if mqtt_tls:
             args.append("--mqtt-tls")
+        if mqtt_discovery != "device":
+            args += ["--mqtt-discovery", mqtt_discovery]
     if notify:
         from fabwire.agent.notify import check_urls
 
@@ -205,21 +208,23 @@ def service() -> None:
               help="MQTT password: kept in an environment file only root (or you, with --user) can read, not "
                    "in the unit.")
 @click.option("--mqtt-tls", is_flag=True, help="Connect to the broker with TLS.")
+@click.option("--mqtt-discovery", type=click.Choice(["device", "entity"]), default="device", show_default=True,
+              help="Home Assistant discovery per machine (2024.11 or newer) or per entity (older).")
 @click.option("--notify", multiple=True, metavar="URL", help="Apprise notification URL (repeatable).")
 @click.option("--run-as", metavar="ACCOUNT", help="System service: the account it runs as (default: the one "
                                                   "that ran sudo, or yours).")
 @click.option("--output", type=click.Path(dir_okay=False, allow_dash=True, path_type=Path),
               help="Write the unit here instead (`-` for standard output); nothing else is written.")
 def install(user_mode: bool, listen: str, config: Path | None, devices: tuple[str, ...], mqtt_url: str | None,
-            mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool, notify: tuple[str, ...],
-            run_as: str | None, output: Path | None) -> None:
+            mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool, mqtt_discovery: str,
+            notify: tuple[str, ...], run_as: str | None, output: Path | None) -> None:
     """Write a systemd unit that runs `fabwire serve` at boot, restarts it on failure and keeps its state.
 
     As root, the system unit also comes with the udev rules (`fabwire service udev`). Then enable it with the
     commands printed at the end.
     """
     state_dir = Specifier("%S/fabwire")  # systemd's state directory for this unit, whoever runs it
-    args = serve_arguments(listen, state_dir, config, devices, mqtt_url, mqtt_user, mqtt_tls, notify)
+    args = serve_arguments(listen, state_dir, config, devices, mqtt_url, mqtt_user, mqtt_tls, notify, mqtt_discovery)
     if user_mode and run_as:
         raise InputError("--run-as is for a system service; a --user service runs as you")
     account = run_as or os.environ.get("SUDO_USER") or getpass.getuser()

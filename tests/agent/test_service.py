@@ -41,7 +41,8 @@ def verify(unit: Path, *, user: bool) -> None:
     assert run.stderr.strip() == "", run.stderr
 
 
-OPTIONS = ("--mqtt", "mqtt://homeassistant.local", "--mqtt-user", "fabwire", "--notify", "ntfy://my-bench",
+OPTIONS = ("--mqtt", "mqtt://homeassistant.local", "--mqtt-user", "fabwire", "--mqtt-discovery", "entity",
+           "--notify", "ntfy://my-bench",
            "--notify", "json://127.0.0.1:9/hook", "--device", "desk:xyz=192.168.1.50", "--listen", "0.0.0.0:8765")
 
 
@@ -60,7 +61,7 @@ def test_the_unit_passes_systemd_verify(tmp_path: Path, user: bool) -> None:
     assert service["WantedBy"] == ("default.target" if user else "multi-user.target")
     command = service["ExecStart"]
     assert command.startswith(f"{sys.executable} -m fabwire serve --listen 0.0.0.0:8765 --state-dir %S/fabwire ")
-    assert "--mqtt mqtt://homeassistant.local --mqtt-user fabwire" in command
+    assert "--mqtt mqtt://homeassistant.local --mqtt-user fabwire --mqtt-discovery entity" in command
     assert "--notify ntfy://my-bench --notify json://127.0.0.1:9/hook" in command
     assert f'--config "{tmp_path}/my devices/100%% devices.toml"' in command  # % is a specifier in a unit
     assert ("User" in service) is not user

@@ -82,13 +82,9 @@ def check_component(key: str, component: dict[str, Any], shared: dict[str, Any])
     return problems
 
 
-def check_device_discovery(topic: str, payload: dict[str, Any]) -> list[str]:
-    """Every rule of the table for one device discovery message; returns what breaks them."""
-    problems = []
-    if not re.match(RULES["discovery_topic"]["pattern"], topic):
-        problems.append(f"{topic}: not a discovery topic Home Assistant reads")
-    rules = RULES["device_discovery"]
-    problems += _check_keys("payload", payload, rules["required"], rules["allowed"])
+def _check_shared(payload: dict[str, Any]) -> list[str]:
+    """The device block, origin and availability: the same rules in device and per-entity messages."""
+    problems: list[str] = []
     device = payload.get("device")
     if isinstance(device, dict):
         device_rules = RULES["device"]
@@ -120,6 +116,31 @@ def check_device_discovery(topic: str, payload: dict[str, Any]) -> list[str]:
         problems.append("availability_mode must be all, any or latest")
     if payload.get("qos", 0) not in (0, 1, 2):
         problems.append("qos must be 0, 1 or 2")
+    return problems
+
+
+def check_entity_discovery(topic: str, payload: dict[str, Any]) -> list[str]:
+    """Every rule of the table for one per-entity discovery message (the platform is the topic's)."""
+    match = re.match(RULES["discovery_topic"]["pattern"], topic)
+    if not match:
+        return [f"{topic}: not a discovery topic Home Assistant reads"]
+    platform = match.group("component")
+    problems = check_component(topic, {**payload, "platform": platform}, {})
+    if "platform" in payload:
+        problems.append(f"{topic}: the platform is the topic's, not a key")
+    if "device" not in payload or "origin" not in payload:
+        problems.append(f"{topic}: device and origin are needed to group the entity under its machine")
+    return problems + _check_shared(payload)
+
+
+def check_device_discovery(topic: str, payload: dict[str, Any]) -> list[str]:
+    """Every rule of the table for one device discovery message; returns what breaks them."""
+    problems = []
+    if not re.match(RULES["discovery_topic"]["pattern"], topic):
+        problems.append(f"{topic}: not a discovery topic Home Assistant reads")
+    rules = RULES["device_discovery"]
+    problems += _check_keys("payload", payload, rules["required"], rules["allowed"])
+    problems += _check_shared(payload)
     components = payload.get("components")
     if not isinstance(components, dict) or not components:
         return [*problems, "components: must be a non-empty mapping"]

@@ -13,13 +13,14 @@ from typing import Any
 
 import aiomqtt
 import pytest
-from hatools import check_device_discovery
+from hatools import check_device_discovery, check_entity_discovery
 from mqtttools import FakeAgent, Mosquitto, lineus, mmu, observing, printer
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from fabwire.errors import InputError, LinkError
 from fabwire.mqtt.bridge import Bridge, run_bridge
+from fabwire.mqtt.discovery import discovery_topics
 from fabwire.mqtt.topics import agent_topic, claim_topic, device_topic, discovery_topic
 
 pytestmark = pytest.mark.timeout(90)
@@ -97,6 +98,31 @@ async def test_every_discovery_message_published_passes_home_assistants_rules(br
         body = json.loads(payload)
         assert check_device_discovery(topic, body) == [], topic
         assert body["device"]["configuration_url"] == "http://bench.local:8765/"
+
+
+async def test_per_entity_discovery_for_older_home_assistant_is_published_and_removed(broker: Mosquitto) -> None:
+    agent = FakeAgent([PRINTER, mmu()])
+    made: asyncio.Future[Bridge] = asyncio.get_running_loop().create_future()
+
+    def linked(bridge: Bridge) -> None:
+        bridge.discovery_mode = "entity"
+        made.set_result(bridge)
+
+    task = asyncio.create_task(run_bridge(agent, broker.url, agent_id="bench-a", on_bridge=linked))
+    try:
+        async with observing(broker, "homeassistant/#") as seen:
+            wanted = set(discovery_topics(PRINTER.id, "entity")) | set(discovery_topics(mmu().id, "entity"))
+            await seen.wait_for(lambda o: wanted <= {t for t, p in o.latest.items() if p})
+            for topic in wanted:
+                assert check_entity_discovery(topic, json.loads(seen.latest[topic])) == [], topic
+            assert discovery_topic(PRINTER.id) not in seen.latest  # no device message beside them
+            del agent.infos[PRINTER.id]  # removed from the agent
+            gone = set(discovery_topics(PRINTER.id, "entity"))
+            await seen.wait_for(lambda o: all(o.latest.get(t) == b"" for t in gone))
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
 
 
 async def test_events_and_availability_changes_follow_the_agent(broker: Mosquitto) -> None:

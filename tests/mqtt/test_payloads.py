@@ -13,13 +13,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hatools import check_device_discovery, render_command, render_value
+from hatools import check_device_discovery, check_entity_discovery, render_command, render_value
 from mqtttools import lineus, mmu, printer
 
 from fabwire.agent.drivers.base import summary
 from fabwire.errors import InputError
 from fabwire.mqtt.commands import parse_command
-from fabwire.mqtt.discovery import discovery_payload
+from fabwire.mqtt.discovery import discovery_messages, discovery_payload, discovery_topics
 from fabwire.mqtt.fleet_view import FleetView
 from fabwire.mqtt.topics import agent_topic, claim_topic, discovery_topic, parse_broker
 
@@ -37,6 +37,18 @@ def payloads() -> list[tuple[str, dict[str, Any]]]:
                                                                for t, p in payloads()])
 def test_every_payload_passes_home_assistants_discovery_rules(topic: str, payload: dict[str, Any]) -> None:
     assert check_device_discovery(topic, json.loads(json.dumps(payload))) == []
+
+
+@pytest.mark.parametrize("info", DEVICES, ids=[d.id for d in DEVICES])
+def test_per_entity_messages_for_older_home_assistant_pass_the_rules(info: Any) -> None:
+    device = discovery_payload(info.to_dict(), "bench-a", DASHBOARD)
+    messages = discovery_messages(info.to_dict(), "bench-a", DASHBOARD, "entity")
+    assert len(messages) == len(device["components"])  # one per entity, none lost
+    for topic, payload in messages:
+        assert check_entity_discovery(topic, json.loads(json.dumps(payload))) == [], topic
+        assert payload["device"] == device["device"]  # grouped under the same machine
+    assert [t for t, _ in messages] == discovery_topics(info.id, "entity")  # what removal empties
+    assert {p["unique_id"] for _, p in messages} == {c["unique_id"] for c in device["components"].values()}
 
 
 def test_every_kind_has_unique_ids_and_its_device_block() -> None:

@@ -17,10 +17,11 @@ import paho.mqtt.client as paho
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from hatools import check_device_discovery
+from hatools import check_device_discovery, check_entity_discovery
 from mqtttools import Mosquitto
 
 from clitools import cli_env, run_cli
+from fabwire.mqtt.discovery import discovery_topics
 
 pytestmark = pytest.mark.timeout(120)
 ANNOUNCEMENT = "fabwire agent listening on "
@@ -34,9 +35,10 @@ class Agents:
         self.processes: list[subprocess.Popen[str]] = []
         self.urls: dict[str, str] = {}
 
-    def start(self, name: str, broker: Mosquitto, *devices: str) -> subprocess.Popen[str]:
+    def start(self, name: str, broker: Mosquitto, *devices: str, options: tuple[str, ...] = ()
+              ) -> subprocess.Popen[str]:
         args = [sys.executable, "-m", "fabwire", "serve", "--listen", "127.0.0.1:0", "--state-dir",
-                str(self.tmp_path / name), "--mqtt", broker.url]
+                str(self.tmp_path / name), "--mqtt", broker.url, *options]
         for device in devices:
             args += ["--device", device]
         process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -194,3 +196,16 @@ def test_fleet_command_errors_are_one_line(tmp_path: Path) -> None:
     down = run_cli("fleet", "--mqtt", f"mqtt://127.0.0.1:{free_port()}", env=cli_env(tmp_path))
     assert down.returncode == 8, down.stderr
     assert "Traceback" not in down.stderr
+
+
+def test_per_entity_discovery_from_serve(broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    agents.start("a", broker, f"arm:lineus={sim.url}", options=("--mqtt-discovery", "entity"))
+    device = watch.until(lambda w: w.device_of_kind("lineus"))
+    topics = discovery_topics(device, "entity")
+    watch.until(lambda w: all(w.latest.get(t) for t in topics))
+    for topic in topics:
+        payload = watch.json(topic)
+        assert check_entity_discovery(topic, payload) == [], topic
+        assert payload["device"]["configuration_url"] == agents.urls["a"]
+    assert not watch.latest.get(f"homeassistant/device/fabwire_{device}/config")

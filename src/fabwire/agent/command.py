@@ -58,7 +58,7 @@ def _bind(host: str, port: int) -> socket.socket:
         raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
 
 
-def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) -> Any:
+def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, discovery: str = "device") -> Any:
     """The MQTT bridge's starter, checked before anything else starts (its module ships with fabwire[mqtt])."""
     if url is None:
         return None
@@ -70,6 +70,7 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
     def start(agent: Agent, dashboard_url: str) -> Coroutine[Any, Any, None]:
         def linked(bridge: Any) -> None:
             bridge.dashboard_url = dashboard_url
+            bridge.discovery_mode = discovery
 
         result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls,
                                                        on_bridge=linked)
@@ -102,6 +103,9 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", help="MQTT password (or FABWIRE_MQTT_PASSWORD).", envvar="FABWIRE_MQTT_PASSWORD")
 @click.option("--mqtt-tls", is_flag=True, help="Connect to the broker with TLS.")
+@click.option("--mqtt-discovery", type=click.Choice(["device", "entity"]), default="device", show_default=True,
+              help="Home Assistant discovery: one message per machine (Home Assistant 2024.11 or newer), or one per "
+                   "entity (older versions).")
 @click.option("--notify", "notify_urls", multiple=True, metavar="URL",
               help="Send print finished/failed/cancelled, MMU errors waiting and machines gone offline to this "
                    "Apprise URL (repeatable): ntfy://topic, tgram://bot/chat, mailto://…, json://host/path …")
@@ -111,7 +115,7 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, state_dir: Path | None,
           demo: bool, speed: float, retention: float, max_upload: float, token: bool | None,
           mqtt_url: str | None, mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool,
-          notify_urls: tuple[str, ...], notify_offline_after: float) -> None:
+          mqtt_discovery: str, notify_urls: tuple[str, ...], notify_offline_after: float) -> None:
     """Watch a bench of machines: a live dashboard, an HTTP API with history and jobs, one agent.
 
     Open the printed address in a browser. The API is described at /api/v1/openapi.json.
@@ -121,7 +125,7 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
     if token is False and not local:
         raise InputError(f"refusing to listen on {address.host} without an access token: anyone on the network "
                          "could run the machines (leave out --no-token, or listen on 127.0.0.1)")
-    bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls)
+    bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls, mqtt_discovery)
     notifier = _notifier(notify_urls, notify_offline_after)
     specs = [parse_device_option(text, i) for i, text in enumerate(devices, 1)]
     if not demo:

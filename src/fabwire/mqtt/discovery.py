@@ -6,7 +6,8 @@ Schema (Home Assistant's MQTT integration, "device discovery payload"): the topi
 mapping whose values each name their `platform` and carry a `unique_id`. An empty retained payload removes the
 device. Values are read from the state topic with `value_template`; a template rendering `None` shows as unknown.
 `event` entities read the event topic instead (Home Assistant ignores retained events). Needs Home Assistant
-2024.11 or newer (`MINIMUM_HOME_ASSISTANT`).
+2024.11 or newer (`MINIMUM_HOME_ASSISTANT`); `discovery_messages(..., mode="entity")` is the per-entity form
+(`<prefix>/<platform>/<node_id>/<object_id>/config`) for older versions.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fabwire import __version__
-from fabwire.mqtt.topics import OFFLINE, ONLINE, agent_topic, device_topic, object_id
+from fabwire.mqtt.topics import DISCOVERY_PREFIX, OFFLINE, ONLINE, agent_topic, device_topic, discovery_topic, object_id
 
 MANUFACTURERS = {"xyz": "XYZprinting", "lineus": "Line-us", "mmu": "Prusa Research"}
 MODELS = {"xyz": "da Vinci printer", "lineus": "Line-us", "mmu": "MMU3"}
@@ -25,7 +26,8 @@ ORIGIN = {"name": "fabwire", "sw_version": __version__}
 
 MINIMUM_HOME_ASSISTANT = "2024.11"
 """Device discovery (one message per machine with a `components` mapping) arrived in Home Assistant 2024.11; the
-`event` platform in 2023.8 and `text` in 2022.12. Older versions ignore the message."""
+`event` platform in 2023.8 and `text` in 2022.12. Older versions ignore the message: `discovery_messages` in
+`entity` mode gives them one message per entity instead."""
 
 
 @dataclass(frozen=True)
@@ -197,3 +199,45 @@ def discovery_payload(info: dict[str, Any], agent: str, dashboard_url: str | Non
         "qos": 1,
         "components": components,
     }
+
+
+DISCOVERY_MODES = ("device", "entity")
+"""`device`: one message per machine (Home Assistant 2024.11+); `entity`: one per entity, for older versions."""
+PLATFORM_TOPICS = {"sensor": ("state_topic",), "binary_sensor": ("state_topic",), "event": ("state_topic",),
+                   "button": ("command_topic",), "select": ("state_topic", "command_topic"),
+                   "text": ("state_topic", "command_topic")}
+"""The device-level topics each platform takes (a per-entity message carries only those)."""
+_SHARED = ("device", "origin", "availability", "availability_mode", "qos")
+
+
+def entity_topic(device_id: str, platform: str, key: str) -> str:
+    """`homeassistant/<platform>/<node_id>/<object_id>/config`, the per-entity discovery topic."""
+    return f"{DISCOVERY_PREFIX}/{platform}/{object_id(device_id)}/{key}/config"
+
+
+def discovery_messages(info: dict[str, Any], agent: str, dashboard_url: str | None = None,
+                       mode: str = "device") -> list[tuple[str, dict[str, Any]]]:
+    """(topic, payload) for every discovery message of a device: the device message, or in `entity` mode one
+    message per entity with the device block, origin, availability and its own topics in it."""
+    payload = discovery_payload(info, agent, dashboard_url)
+    if mode == "device":
+        return [(discovery_topic(info["id"]), payload)]
+    shared = {key: payload[key] for key in _SHARED if key in payload}
+    base = object_id(info["id"])
+    out = []
+    for component in payload["components"].values():
+        platform = component["platform"]
+        topics = {key: payload[key] for key in PLATFORM_TOPICS[platform] if key in payload}
+        body = {**shared, **topics, **{k: v for k, v in component.items() if k != "platform"}}
+        out.append((entity_topic(info["id"], platform, component["unique_id"].removeprefix(f"{base}_")), body))
+    return out
+
+
+def discovery_topics(device_id: str, mode: str = "device") -> list[str]:
+    """Every discovery topic a device may have been published on (emptied when it is removed); the kind is the
+    id's first word (`fabwire.agent.core.device_id`)."""
+    if mode == "device":
+        return [discovery_topic(device_id)]
+    kind = device_id.split("-", 1)[0]
+    info = {"id": device_id, "kind": kind, "name": device_id}
+    return [topic for topic, _ in discovery_messages(info, "", None, mode)]
