@@ -49,6 +49,7 @@ EXIT_REPLAY_DIFFERS = RemoteProtocolError.exit_code
         "fleet": "fabwire.mqtt.fleet:fleet",
         "serve": "fabwire.agent.command:serve",
         "devices": "fabwire.devices_cli:devices",
+        "service": "fabwire.service:service",
     },
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )

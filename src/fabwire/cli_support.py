@@ -4,6 +4,7 @@ arguments, the device context and opening devices, confirmations, running async 
 from __future__ import annotations
 
 import asyncio
+import difflib
 import importlib
 import importlib.util
 import os
@@ -121,8 +122,9 @@ class LazyGroup(SharingGroup):
         try:
             return super().resolve_command(ctx, args)
         except click.exceptions.NoSuchCommand as exc:  # click suggests from loaded commands only: add the lazy ones
-            raise click.exceptions.NoSuchCommand(exc.command_name, possibilities=self.list_commands(ctx),
-                                                 ctx=ctx) from None
+            # the closest one only (`sevre` is `serve`, not also `service`), as a misspelt config key is answered
+            closest = difflib.get_close_matches(exc.command_name, self.list_commands(ctx), n=1)
+            raise click.exceptions.NoSuchCommand(exc.command_name, possibilities=closest, ctx=ctx) from None
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name in self._lazy and self._available(cmd_name):

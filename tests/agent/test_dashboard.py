@@ -107,8 +107,10 @@ def test_lineus_drawing_appears_stroke_by_stroke(page: Page) -> None:
 
 def test_mmu_fault_shows_its_error_and_retry_recovers(page: Page) -> None:
     mmu = page.locator("article[data-kind=mmu]")
+    mmu.locator("button.slot[data-slot='0']").click()  # choose the slot, then what to do with it
     mmu.locator("button[data-action=tool_change][data-slot='0']").click()
     expect(mmu.locator(".state")).to_contain_text("T0 finished", timeout=30_000)
+    mmu.locator("button.slot[data-slot='1']").click()
     mmu.locator("button[data-action=tool_change][data-slot='1']").click()
     error = mmu.locator(".error-box")
     expect(error).to_have_text("04101 FINDA DIDN'T TRIGGER (0x8001)", timeout=30_000)
@@ -146,8 +148,10 @@ def test_readme_screenshot(page: Page) -> None:
     page.locator("article[data-kind=xyz] input[type=file]").set_input_files(str(sample_path(SAMPLE_GCODE)))
     page.locator("article[data-kind=xyz] button[data-action=upload]").click()
     mmu = page.locator("article[data-kind=mmu]")
+    mmu.locator("button.slot[data-slot='0']").click()  # choose the slot, then what to do with it
     mmu.locator("button[data-action=tool_change][data-slot='0']").click()
     expect(mmu.locator(".state")).to_contain_text("T0 finished", timeout=30_000)
+    mmu.locator("button.slot[data-slot='1']").click()
     mmu.locator("button[data-action=tool_change][data-slot='1']").click()
     page.locator("article[data-kind=lineus] input[type=text]").fill("fabwire")
     page.locator("article[data-kind=lineus] button[data-action=text]").click()

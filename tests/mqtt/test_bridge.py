@@ -7,18 +7,20 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
 import aiomqtt
 import pytest
+from hatools import check_device_discovery, check_entity_discovery
 from mqtttools import FakeAgent, Mosquitto, lineus, mmu, observing, printer
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from fabwire.errors import InputError, LinkError
 from fabwire.mqtt.bridge import Bridge, run_bridge
+from fabwire.mqtt.discovery import discovery_topics
 from fabwire.mqtt.topics import agent_topic, claim_topic, device_topic, discovery_topic
 
 pytestmark = pytest.mark.timeout(90)
@@ -26,10 +28,18 @@ PRINTER = printer()
 
 
 @contextlib.asynccontextmanager
-async def bridged(agent: FakeAgent, broker: Mosquitto, agent_id: str = "bench-a") -> AsyncIterator[Bridge]:
-    """Run a bridge until the block ends (cancelled, as `fabwire serve` stops it)."""
+async def bridged(agent: FakeAgent, broker: Mosquitto, agent_id: str = "bench-a", *,
+                  setup: Callable[[Bridge], None] | None = None) -> AsyncIterator[Bridge]:
+    """Run a bridge until the block ends (cancelled, as `fabwire serve` stops it); `setup` sees it before it
+    starts, as `fabwire serve` sets its options."""
     made: asyncio.Future[Bridge] = asyncio.get_running_loop().create_future()
-    task = asyncio.create_task(run_bridge(agent, broker.url, agent_id=agent_id, on_bridge=made.set_result))
+
+    def created(bridge: Bridge) -> None:
+        if setup is not None:
+            setup(bridge)
+        made.set_result(bridge)
+
+    task = asyncio.create_task(run_bridge(agent, broker.url, agent_id=agent_id, on_bridge=created))
     try:
         async with asyncio.timeout(15):
             bridge = await made
@@ -67,6 +77,44 @@ async def test_state_availability_info_and_discovery_are_retained(broker: Mosqui
             wanted = {discovery_topic(d) for d in (PRINTER.id, mmu().id, lineus().id)}
             wanted |= {device_topic(PRINTER.id, leaf) for leaf in ("state", "info", "availability")}
             await late.wait_for(lambda o: wanted <= {t for t, _, retained in o.log if retained})
+
+
+async def test_every_discovery_message_published_passes_home_assistants_rules(broker: Mosquitto) -> None:
+    devices = [PRINTER, printer("3DP02P", "garage"), mmu(), lineus()]
+    agent = FakeAgent(devices)
+
+    def linked(bridge: Bridge) -> None:
+        bridge.dashboard_url = "http://bench.local:8765/"
+
+    async with bridged(agent, broker, setup=linked), observing(broker, "homeassistant/#") as seen:
+        wanted = {discovery_topic(d.id) for d in devices}
+        await seen.wait_for(lambda o: wanted <= set(o.latest))
+        async with aiomqtt.Client("127.0.0.1", broker.port) as ha:  # and again when Home Assistant restarts
+            await ha.publish("homeassistant/status", "online", qos=1)
+        await seen.wait_for(lambda o: all(o.count(t) >= 2 for t in wanted))
+        published = [(topic, payload) for topic, payload, _ in seen.log if payload and topic.endswith("/config")]
+    assert len(published) >= 2 * len(devices)
+    for topic, payload in published:
+        body = json.loads(payload)
+        assert check_device_discovery(topic, body) == [], topic
+        assert body["device"]["configuration_url"] == "http://bench.local:8765/"
+
+
+async def test_per_entity_discovery_for_older_home_assistant_is_published_and_removed(broker: Mosquitto) -> None:
+    agent = FakeAgent([PRINTER, mmu()])
+
+    def per_entity(bridge: Bridge) -> None:
+        bridge.discovery_mode = "entity"
+
+    async with bridged(agent, broker, setup=per_entity), observing(broker, "homeassistant/#") as seen:
+        wanted = set(discovery_topics(PRINTER.id, "entity")) | set(discovery_topics(mmu().id, "entity"))
+        await seen.wait_for(lambda o: wanted <= {t for t, p in o.latest.items() if p})
+        for topic in wanted:
+            assert check_entity_discovery(topic, json.loads(seen.latest[topic])) == [], topic
+        assert discovery_topic(PRINTER.id) not in seen.latest  # no device message beside them
+        del agent.infos[PRINTER.id]  # removed from the agent
+        gone = set(discovery_topics(PRINTER.id, "entity"))
+        await seen.wait_for(lambda o: all(o.latest.get(t) == b"" for t in gone))
 
 
 async def test_events_and_availability_changes_follow_the_agent(broker: Mosquitto) -> None:

@@ -13,73 +13,56 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
+from hatools import check_device_discovery, check_entity_discovery, render_command, render_value
 from mqtttools import lineus, mmu, printer
 
+from fabwire.agent.drivers.base import summary
 from fabwire.errors import InputError
 from fabwire.mqtt.commands import parse_command
-from fabwire.mqtt.discovery import discovery_payload
+from fabwire.mqtt.discovery import discovery_messages, discovery_payload, discovery_topics
 from fabwire.mqtt.fleet_view import FleetView
 from fabwire.mqtt.topics import agent_topic, claim_topic, discovery_topic, parse_broker
 
-PLATFORM_NEEDS = {
-    # What each platform needs beyond `platform` and `unique_id` (Home Assistant's MQTT platform options).
-    "sensor": {"value_template"},
-    "button": {"payload_press"},
-    "select": {"options", "command_template", "value_template"},
-}
-
-
-def check_device_discovery(payload: dict[str, Any]) -> list[str]:
-    """The documented rules of a device discovery payload; returns what breaks them."""
-    problems = []
-    device = payload.get("device")
-    if not isinstance(device, dict) or not device.get("identifiers"):
-        problems.append("device mapping with identifiers is required")
-    origin = payload.get("origin")
-    if not isinstance(origin, dict) or not origin.get("name"):
-        problems.append("origin mapping with a name is required")
-    components = payload.get("components")
-    if not isinstance(components, dict) or not components:
-        problems.append("components mapping is required")
-        return problems
-    for key, component in components.items():
-        platform = component.get("platform")
-        if platform not in PLATFORM_NEEDS:
-            problems.append(f"{key}: unknown platform {platform!r}")
-            continue
-        if not component.get("unique_id"):
-            problems.append(f"{key}: unique_id is required")
-        missing = PLATFORM_NEEDS[platform] - set(component)
-        if missing:
-            problems.append(f"{key}: {platform} lacks {sorted(missing)}")
-        if platform == "sensor" and not payload.get("state_topic") and not component.get("state_topic"):
-            problems.append(f"{key}: a sensor needs a state topic")
-        if platform in ("button", "select") and not payload.get("command_topic"):
-            problems.append(f"{key}: {platform} needs a command topic")
-    for entry in payload.get("availability", []):
-        if not entry.get("topic"):
-            problems.append("availability entries need a topic")
-    if payload.get("availability_mode") not in (None, "all", "any", "latest"):
-        problems.append("availability_mode must be all, any or latest")
-    return problems
-
-
 DEVICES = [printer(), printer("3DP02P", "garage"), mmu(), lineus()]
+DASHBOARD = "http://raspberrypi.local:8765/"
 
 
-def test_every_kind_passes_the_schema_with_unique_ids_and_its_device_block() -> None:
+def payloads() -> list[tuple[str, dict[str, Any]]]:
+    """Every discovery message the bridge publishes for these devices, as topic and payload."""
+    return [(discovery_topic(info.id), discovery_payload(info.to_dict(), "bench-a", url))
+            for info in DEVICES for url in (DASHBOARD, None)]
+
+
+@pytest.mark.parametrize(("topic", "payload"), payloads(), ids=[f"{t}-{bool(p['device'].get('configuration_url'))}"
+                                                               for t, p in payloads()])
+def test_every_payload_passes_home_assistants_discovery_rules(topic: str, payload: dict[str, Any]) -> None:
+    assert check_device_discovery(topic, json.loads(json.dumps(payload))) == []
+
+
+@pytest.mark.parametrize("info", DEVICES, ids=[d.id for d in DEVICES])
+def test_per_entity_messages_for_older_home_assistant_pass_the_rules(info: Any) -> None:
+    device = discovery_payload(info.to_dict(), "bench-a", DASHBOARD)
+    messages = discovery_messages(info.to_dict(), "bench-a", DASHBOARD, "entity")
+    assert len(messages) == len(device["components"])  # one per entity, none lost
+    for topic, payload in messages:
+        assert check_entity_discovery(topic, json.loads(json.dumps(payload))) == [], topic
+        assert payload["device"] == device["device"]  # grouped under the same machine
+    assert [t for t, _ in messages] == discovery_topics(info.id, "entity")  # what removal empties
+    assert {p["unique_id"] for _, p in messages} == {c["unique_id"] for c in device["components"].values()}
+
+
+def test_every_kind_has_unique_ids_and_its_device_block() -> None:
     unique_ids: list[str] = []
     identifiers: set[str] = set()
     for info in DEVICES:
-        payload = discovery_payload(info.to_dict(), "bench-a")
-        assert check_device_discovery(payload) == [], info.kind
-        json.dumps(payload)  # plain JSON
+        payload = discovery_payload(info.to_dict(), "bench-a", DASHBOARD)
         unique_ids += [c["unique_id"] for c in payload["components"].values()]
         device = payload["device"]
         assert device["serial_number"] == info.serial
         assert device["sw_version"] == info.firmware
         assert device["model"] == info.model
         assert device["manufacturer"]
+        assert device["configuration_url"] == DASHBOARD
         identifiers.add(device["identifiers"][0])
         assert payload["origin"]["name"] == "fabwire"
         assert [a["topic"] for a in payload["availability"]] == [
@@ -89,11 +72,48 @@ def test_every_kind_passes_the_schema_with_unique_ids_and_its_device_block() -> 
     assert len(identifiers) == len(DEVICES)
 
 
+PARITY = [
+    # (kind, entity name, platform, extra options): what owners compare with the OctoPrint and Moonraker integrations
+    ("xyz", "Print removed", "button", {}),  # the da Vinci's finished state takes only this
+    ("xyz", "Printing", "binary_sensor", {"device_class": "running"}),
+    ("xyz", "Problem", "binary_sensor", {"device_class": "problem"}),
+    ("xyz", "Extruder target", "sensor", {"device_class": "temperature"}),
+    ("xyz", "Bed target", "sensor", {"device_class": "temperature"}),
+    ("xyz", "Job file", "sensor", {}),
+    ("xyz", "Print time", "sensor", {"device_class": "duration"}),
+    ("xyz", "Estimated finish", "sensor", {"device_class": "timestamp"}),
+    ("xyz", "Print", "event", {"event_types": ["finished", "failed", "cancelled"]}),
+    ("xyz", "Firmware", "sensor", {"entity_category": "diagnostic"}),
+    ("xyz", "Wi-Fi signal", "sensor", {"entity_category": "diagnostic", "device_class": "signal_strength"}),
+    ("mmu", "MMU error", "event", {"event_types": ["error"]}),
+    ("mmu", "Load slot 0", "button", {}),
+    ("mmu", "Load slot 4", "button", {}),
+    ("mmu", "Unload", "button", {}),
+    ("mmu", "Eject slot 2", "button", {}),
+    ("mmu", "Problem", "binary_sensor", {"device_class": "problem"}),
+    ("lineus", "Write text", "text", {}),
+    ("lineus", "Drawing", "event", {"event_types": ["finished", "failed", "cancelled"]}),
+]
+INFOS = {"xyz": printer(), "mmu": mmu(), "lineus": lineus()}
+
+
+@pytest.mark.parametrize(("kind", "name", "platform", "options"), PARITY, ids=[f"{r[0]}-{r[1]}" for r in PARITY])
+def test_home_assistant_parity_entities(kind: str, name: str, platform: str, options: dict[str, Any]) -> None:
+    components = discovery_payload(INFOS[kind].to_dict(), "a")["components"].values()
+    [found] = [c for c in components if c["name"] == name]
+    assert found["platform"] == platform
+    assert {k: found.get(k) for k in options} == options
+
+
 @pytest.mark.parametrize(("info", "expected"), [
     (printer(), {"Extruder temperature", "Bed temperature", "Progress", "Time left", "State", "Filament left",
-                 "Error", "Pause", "Resume", "Cancel", "Home"}),
-    (mmu(), {"Active slot", "Filament position", "Error", "Retry", "Continue", "Stop", "Tool change", "State"}),
-    (lineus(), {"State", "Drawing progress", "Error", "Home"}),
+                 "Error", "Pause", "Resume", "Cancel", "Home", "Print removed", "Printing", "Problem",
+                 "Extruder target", "Bed target", "Job file", "Print time", "Estimated finish", "Print", "Firmware",
+                 "Wi-Fi signal", "Wi-Fi network", "IP address"}),
+    (mmu(), {"Active slot", "Filament position", "Error", "Retry", "Continue", "Stop", "Tool change", "State",
+             "Problem", "MMU error", "Unload", *(f"Load slot {n}" for n in range(5)),
+             *(f"Eject slot {n}" for n in range(5))}),
+    (lineus(), {"State", "Drawing progress", "Error", "Home", "Problem", "Drawing", "Write text"}),
 ])
 def test_each_kind_has_the_entities_a_user_expects(info: Any, expected: set[str]) -> None:
     components = discovery_payload(info.to_dict(), "a")["components"].values()
@@ -101,20 +121,59 @@ def test_each_kind_has_the_entities_a_user_expects(info: Any, expected: set[str]
 
 
 def test_buttons_send_commands_the_bridge_understands() -> None:
+    for info in INFOS.values():
+        components = discovery_payload(info.to_dict(), "a")["components"].values()
+        for button in (c for c in components if c["platform"] == "button"):
+            parse_command(button["payload_press"].encode())
     components = discovery_payload(printer().to_dict(), "a")["components"].values()
     presses = {c["name"]: parse_command(c["payload_press"].encode()) for c in components if c["platform"] == "button"}
     assert presses["Pause"].action == "pause"
+    assert presses["Print removed"].action == "acknowledge"
     assert presses["Cancel"].params == {"confirm": True}  # cancel is destructive: the agent wants confirmation
-    select = next(c for c in discovery_payload(mmu().to_dict(), "a")["components"].values()
-                  if c["platform"] == "select")
-    rendered = select["command_template"].replace("{{ value | int }}", "3")
-    assert parse_command(rendered.encode()).params == {"slot": 3}
+    mmu_parts = {c["name"]: c for c in discovery_payload(mmu().to_dict(), "a")["components"].values()}
+    assert parse_command(mmu_parts["Eject slot 3"]["payload_press"].encode()).params == {"slot": 3}
+    assert parse_command(render_command(mmu_parts["Tool change"]["command_template"], "3").encode()).params \
+        == {"slot": 3}
 
 
-def test_the_schema_check_catches_broken_payloads() -> None:
-    payload = discovery_payload(printer().to_dict(), "a")
-    broken = {**payload, "origin": {}, "components": {"x": {"platform": "sensor"}}}
-    assert len(check_device_discovery(broken)) == 3
+@pytest.mark.parametrize("words", ["hello", 'say "hi" {{ x }}', "ünïcode ✓", "a\\b"])
+def test_the_text_entity_sends_what_is_typed(words: str) -> None:
+    text = next(c for c in discovery_payload(lineus().to_dict(), "a")["components"].values()
+                if c["platform"] == "text")
+    command = parse_command(render_command(text["command_template"], words).encode())
+    assert (command.action, command.params) == ("text", {"text": words})
+
+
+BREAKAGES = [  # (what is done to a valid payload, words of the problem): the checker catches each class
+    (lambda p: p.pop("origin"), "origin is required"),
+    (lambda p: p["device"].pop("identifiers"), "identifiers or connections"),
+    (lambda p: p["device"].update(configuration_url="raspberrypi:8765"), "not a URL"),
+    (lambda p: p.update(availability_mode="some"), "availability_mode"),
+    (lambda p: next(iter(p["components"].values())).update(platform="gizmo"), "platform 'gizmo'"),
+    (lambda p: next(iter(p["components"].values())).pop("unique_id"), "unique_id is required"),
+    (lambda p: next(iter(p["components"].values())).update(valu_template="{{ x }}"), "valu_template"),
+    (lambda p: p.pop("state_topic"), "state_topic is required"),
+    (lambda p: p.pop("command_topic"), "command_topic is required"),
+    (lambda p: p.update(command_topic="fabwire/#"), "wildcards"),
+    (lambda p: _first(p, "sensor").update(device_class="temperature", unit_of_measurement="s"), "not a unit"),
+    (lambda p: _first(p, "sensor").update(device_class="timestamp", state_class="measurement"), "no unit"),
+    (lambda p: _first(p, "sensor").update(entity_category="config"), "not allowed for a sensor"),
+    (lambda p: _first(p, "binary_sensor").update(device_class="printing"), "does not exist"),
+    (lambda p: _first(p, "event").update(event_types=[]), "event_types"),
+    (lambda p: _first(p, "sensor").update(value_template="{{ value_json.x "), "not a template"),
+]
+
+
+def _first(payload: dict[str, Any], platform: str) -> dict[str, Any]:
+    return next(c for c in payload["components"].values() if c["platform"] == platform)
+
+
+@pytest.mark.parametrize(("damage", "words"), BREAKAGES, ids=[w for _, w in BREAKAGES])
+def test_the_rules_catch_broken_payloads(damage: Any, words: str) -> None:
+    payload = json.loads(json.dumps(discovery_payload(printer().to_dict(), "a", DASHBOARD)))
+    damage(payload)
+    problems = check_device_discovery(discovery_topic(printer().id), payload)
+    assert any(words in p for p in problems), problems
 
 
 @pytest.mark.parametrize(("url", "host", "port", "tls"), [
@@ -185,3 +244,80 @@ def test_fleet_view_ignores_garbage_and_releases_claims() -> None:
     view.take(claim_topic("xyz-2", "a"), b"1")
     view.take(claim_topic("xyz-2", "a"), b"")
     assert "xyz-2" not in view.devices
+
+
+# ---------------------------------------------------------------------------------------------- templates on states
+
+def _state(kind: str, status: dict[str, Any] | None = None, job: dict[str, Any] | None = None,
+           **values: Any) -> dict[str, Any]:
+    """A state as the agent publishes it (`fabwire.agent.core.Agent.state`)."""
+    return {"ts": "2026-12-03T10:00:00.000Z", "online": True, "device": INFOS[kind].id, "kind": kind,
+            "name": INFOS[kind].name, "summary": summary(**values), "status": status, "job": job}
+
+
+PRINT_JOB = {"id": "j1", "type": "print", "filename": "benchy.gcode", "state": "running", "params": {}}
+NETWORK = {"connected": True, "ip": "10.0.0.5", "ssid": "workshop", "mac": None, "rssi_dbm": -61,
+           "signal_percent": 78}
+STATES = [  # (a state, entity name → what Home Assistant shows)
+    (_state("xyz", state="idle", extruder_temp_c=24, extruder_target_c=0, actions=["home"]),
+     {"Printing": "OFF", "Problem": "OFF", "Estimated finish": "None", "Job file": "None", "Extruder target": "0",
+      "Firmware": "None", "Wi-Fi signal": "None"}),
+    (_state("xyz", {"firmware": "1.1.J", "network": NETWORK}, PRINT_JOB, state="printing", progress_percent=40,
+            elapsed_s=1200, time_left_s=1800, extruder_temp_c=210, extruder_target_c=210, bed_temp_c=60,
+            bed_target_c=60),
+     {"Printing": "ON", "Problem": "OFF", "Estimated finish": "2026-12-03T10:30:00+00:00", "Job file": "benchy.gcode",
+      "Print time": "1200", "Time left": "1800", "Bed target": "60", "Firmware": "1.1.J", "Wi-Fi signal": "-61",
+      "Wi-Fi network": "workshop", "IP address": "10.0.0.5"}),
+    (_state("xyz", {"firmware": "1.1.J", "network": None}, state="paused"), {"Printing": "ON",
+                                                                            "Wi-Fi signal": "None"}),
+    (_state("xyz", state="error", error="extruder heater timeout"),
+     {"Problem": "ON", "Printing": "OFF", "Error": "extruder heater timeout"}),
+    (_state("mmu", state="error", active_slot=None), {"Problem": "ON", "Tool change": "None"}),
+    (_state("mmu", state="idle", active_slot=2), {"Problem": "OFF", "Tool change": "2", "Active slot": "2"}),
+    (_state("lineus", job={"id": "j2", "type": "text", "filename": None, "state": "running",
+                           "params": {"text": "hello"}}, state="drawing"), {"Write text": "hello"}),
+    (_state("lineus", job={"id": "j3", "type": "text", "filename": None, "state": "running",
+                           "params": {"text": "x" * 400}}, state="drawing"), {"Write text": "x" * 255}),
+    (_state("lineus", state="idle"), {"Write text": "", "Problem": "OFF"}),
+]
+
+
+@pytest.mark.parametrize(("state", "shown"), STATES, ids=[f"{s['kind']}-{s['summary']['state']}" for s, _ in STATES])
+def test_templates_render_what_home_assistant_shows(state: dict[str, Any], shown: dict[str, str]) -> None:
+    components = discovery_payload(INFOS[state["kind"]].to_dict(), "a")["components"].values()
+    rendered = {c["name"]: render_value(c["value_template"], json.loads(json.dumps(state)))
+                for c in components if "value_template" in c and c["platform"] != "event"}
+    assert {name: rendered[name] for name in shown} == shown
+    for component in components:
+        value = rendered.get(component["name"])
+        if component.get("unit_of_measurement") and value != "None":
+            float(value)  # a number, or None (unknown)
+        if component["platform"] == "binary_sensor":
+            assert value in ("ON", "OFF")
+
+
+EVENTS = [  # (kind, an event on the event topic, the event entity's event_type or None for no event)
+    ("xyz", {"type": "job", "job": {**PRINT_JOB, "state": "done", "message": "print done"}}, "finished"),
+    ("xyz", {"type": "job", "job": {**PRINT_JOB, "state": "failed", "message": "heater"}}, "failed"),
+    ("xyz", {"type": "job", "job": {**PRINT_JOB, "state": "cancelled"}}, "cancelled"),
+    ("xyz", {"type": "job", "job": {**PRINT_JOB, "state": "running"}}, None),
+    ("xyz", {"type": "error", "message": "x", "exit_code": 1}, None),
+    ("lineus", {"type": "job", "job": {"id": "j", "type": "text", "filename": None, "state": "done"}}, "finished"),
+    ("mmu", {"type": "event", "event": {"event": "error", "command": "T1", "error": "FINDA didn't trigger",
+                                        "auto_retry": False}}, "error"),
+    ("mmu", {"type": "event", "event": {"event": "progress", "command": "T1", "text": "feeding"}}, None),
+]
+
+
+@pytest.mark.parametrize(("kind", "event", "expected"), EVENTS)
+def test_event_entities_fire_on_endings_only(kind: str, event: dict[str, Any], expected: str | None) -> None:
+    [entity] = [c for c in discovery_payload(INFOS[kind].to_dict(), "a")["components"].values()
+                if c["platform"] == "event"]
+    assert entity["state_topic"] == f"fabwire/device/{INFOS[kind].id}/event"
+    rendered = render_value(entity["value_template"], {"ts": "t", "device": INFOS[kind].id, **event})
+    if expected is None:
+        assert rendered == ""  # Home Assistant ignores an empty rendering
+        return
+    fired = json.loads(rendered)
+    assert fired["event_type"] == expected
+    assert expected in entity["event_types"]

@@ -17,9 +17,11 @@ import paho.mqtt.client as paho
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
+from hatools import check_device_discovery, check_entity_discovery
 from mqtttools import Mosquitto
 
 from clitools import cli_env, run_cli
+from fabwire.mqtt.discovery import discovery_topics
 
 pytestmark = pytest.mark.timeout(120)
 ANNOUNCEMENT = "fabwire agent listening on "
@@ -31,10 +33,12 @@ class Agents:
     def __init__(self, tmp_path: Path) -> None:
         self.tmp_path = tmp_path
         self.processes: list[subprocess.Popen[str]] = []
+        self.urls: dict[str, str] = {}
 
-    def start(self, name: str, broker: Mosquitto, *devices: str) -> subprocess.Popen[str]:
+    def start(self, name: str, broker: Mosquitto, *devices: str, options: tuple[str, ...] = ()
+              ) -> subprocess.Popen[str]:
         args = [sys.executable, "-m", "fabwire", "serve", "--listen", "127.0.0.1:0", "--state-dir",
-                str(self.tmp_path / name), "--mqtt", broker.url]
+                str(self.tmp_path / name), "--mqtt", broker.url, *options]
         for device in devices:
             args += ["--device", device]
         process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -43,6 +47,7 @@ class Agents:
         assert process.stdout is not None
         line = process.stdout.readline()
         assert line.startswith(ANNOUNCEMENT), line + (process.stderr.read() if process.stderr else "")
+        self.urls[name] = line.removeprefix(ANNOUNCEMENT).strip()
         return process
 
     def stop_all(self) -> None:
@@ -121,6 +126,8 @@ def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto,
     device = watch.until(lambda w: w.device_of_kind("lineus"))
     discovery = watch.until(lambda w: w.json(f"homeassistant/device/fabwire_{device}/config"))
     assert discovery["device"]["manufacturer"] == "Line-us"
+    assert discovery["device"]["configuration_url"] == agents.urls["a"]  # Home Assistant's link to the dashboard
+    assert check_device_discovery(f"homeassistant/device/fabwire_{device}/config", discovery) == []
     watch.until(lambda w: w.latest.get(f"fabwire/device/{device}/availability") == b"online")
     # the first state may be published before the agent's first poll: wait for the one that says online
     state = watch.until(lambda w: (s := w.json(f"fabwire/device/{device}/state")) and s["online"] and s)
@@ -191,3 +198,16 @@ def test_fleet_command_errors_are_one_line(tmp_path: Path) -> None:
     down = run_cli("fleet", "--mqtt", f"mqtt://127.0.0.1:{free_port()}", env=cli_env(tmp_path))
     assert down.returncode == 8, down.stderr
     assert "Traceback" not in down.stderr
+
+
+def test_per_entity_discovery_from_serve(broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any) -> None:
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    agents.start("a", broker, f"arm:lineus={sim.url}", options=("--mqtt-discovery", "entity"))
+    device = watch.until(lambda w: w.device_of_kind("lineus"))
+    topics = discovery_topics(device, "entity")
+    watch.until(lambda w: all(w.latest.get(t) for t in topics))
+    for topic in topics:
+        payload = watch.json(topic)
+        assert check_entity_discovery(topic, payload) == [], topic
+        assert payload["device"]["configuration_url"] == agents.urls["a"]
+    assert not watch.latest.get(f"homeassistant/device/fabwire_{device}/config")

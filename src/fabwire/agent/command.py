@@ -8,8 +8,9 @@ import logging
 import signal
 import socket
 import sys
+import tempfile
 import time
-from collections.abc import Coroutine, Iterator
+from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -116,7 +117,7 @@ def _bind(host: str, port: int) -> socket.socket:
         raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
 
 
-def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) -> Any:
+def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, discovery: str = "device") -> Any:
     """The MQTT bridge's starter, checked before anything else starts (its module ships with fabwire[mqtt])."""
     if url is None:
         return None
@@ -125,8 +126,13 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
     except ImportError:
         raise InputError("MQTT support not installed: pip install 'fabwire[mqtt]'") from None
 
-    def start(agent: Agent) -> Coroutine[Any, Any, None]:
-        result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls)
+    def start(agent: Agent, dashboard_url: str) -> Coroutine[Any, Any, None]:
+        def linked(bridge: Any) -> None:
+            bridge.dashboard_url = dashboard_url
+            bridge.discovery_mode = discovery
+
+        result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls,
+                                                       on_bridge=linked)
         return result
 
     return start
@@ -145,7 +151,8 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
               help="Named devices file (default: fabwire's devices.toml).")
 @click.option("--state-dir", type=click.Path(file_okay=False, path_type=Path),
               help="History, uploads and the access token (default: the platform's state directory).")
-@click.option("--demo", is_flag=True, help="Start the three simulators and monitor them.")
+@click.option("--demo", is_flag=True, help="Start the three simulators and monitor them, with a print, a drawing and "
+                                          "an MMU tool change under way (history in a temporary directory).")
 @click.option("--speed", type=FiniteRange(min=0.5, max=MAX_SPEED), default=30.0, show_default=True,
               help="With --demo: simulated time runs this many times faster.")
 @click.option("--retention", type=FiniteRange(min=0.01, max=MAX_RETENTION_H), default=24.0, show_default=True,
@@ -161,11 +168,20 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", help="MQTT password (or FABWIRE_MQTT_PASSWORD).", envvar="FABWIRE_MQTT_PASSWORD")
 @click.option("--mqtt-tls", is_flag=True, help="Connect to the broker with TLS.")
+@click.option("--mqtt-discovery", type=click.Choice(["device", "entity"]), default="device", show_default=True,
+              help="Home Assistant discovery: one message per machine (Home Assistant 2024.11 or newer), or one per "
+                   "entity (older versions).")
+@click.option("--notify", "notify_urls", multiple=True, metavar="URL",
+              help="Send print finished/failed/cancelled, MMU errors waiting and machines gone offline to this "
+                   "Apprise URL (repeatable): ntfy://topic, tgram://bot/chat, mailto://…, json://host/path …")
+@click.option("--notify-offline-after", type=FiniteRange(min=0.0), default=60.0, show_default=True,
+              metavar="SECONDS", help="With --notify: how long a machine must be unreachable to be announced.")
 @pass_app
 def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices: list[DeviceSpec],
           config: Path | None, state_dir: Path | None, demo: bool, speed: float, retention: float,
           max_upload: float, token: bool | None, mqtt_url: str | None, mqtt_user: str | None,
-          mqtt_password: str | None, mqtt_tls: bool) -> None:
+          mqtt_password: str | None, mqtt_tls: bool, mqtt_discovery: str, notify_urls: tuple[str, ...],
+          notify_offline_after: float) -> None:
     """Watch a bench of machines: a live dashboard, an HTTP API with history and jobs, one agent.
 
     Open the printed address in a browser. The API is described at /api/v1/openapi.json.
@@ -175,11 +191,13 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
     if token is False and not local:
         raise InputError(f"refusing to listen on {address.host} without an access token: anyone on the network "
                          "could run the machines (leave out --no-token, or listen on 127.0.0.1)")
-    bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls)
+    bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls, mqtt_discovery)
+    notifier = _notifier(notify_urls, notify_offline_after)
     specs = list(devices)
     if not demo:
         specs = configured_devices(config) + specs
-    directory = state_dir or default_state_dir()
+    demo_dir = tempfile.TemporaryDirectory(prefix="fabwire-demo-") if demo and state_dir is None else None
+    directory = state_dir or (Path(demo_dir.name) if demo_dir else default_state_dir())
     sock = _bind(address.host, address.port)  # a bad address fails before a token is made for it
     try:
         secret = None
@@ -191,11 +209,23 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
                 click.echo(f"access token: the one in {directory}", err=True)
         policy = Policy.for_listen(address.host, allow_hosts, token=secret,
                                    max_upload_bytes=int(max_upload * 1024 * 1024))
-        interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0, policy, bridge))
+        interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0, policy, bridge,
+                                  notifier))
     finally:
         sock.close()
+        if demo_dir is not None:
+            demo_dir.cleanup()
     if interrupted:
         raise KeyboardInterrupt  # after the clean shutdown: the CLI's "interrupted" exit code
+
+
+def _notifier(urls: tuple[str, ...], offline_after_s: float) -> Any:
+    """The notifier for `--notify`, its URLs checked before anything starts; None without any."""
+    if not urls:
+        return None
+    from fabwire.agent.notify import Notifier
+
+    return Notifier(urls, offline_after_s=offline_after_s)
 
 
 def _run(main: Coroutine[Any, Any, bool]) -> bool:
@@ -208,7 +238,7 @@ def _run(main: Coroutine[Any, Any, bool]) -> bool:
 
 
 async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, demo: bool, speed: float,
-                 retention_s: float, policy: Policy, bridge: Any) -> bool:
+                 retention_s: float, policy: Policy, bridge: Any, notifier: Any = None) -> bool:
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
@@ -221,15 +251,21 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     simulators: list[Any] = []
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=policy.max_upload_bytes)
     bridge_task: asyncio.Task[None] | None = None
+    notify_task: asyncio.Task[None] | None = None
+    show: asyncio.Task[None] | None = None
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
             specs = demo_specs + specs
         await agent.start()
+        if notifier is not None:  # subscribed before the devices come: their first states arm it
+            notify_task = asyncio.create_task(notifier.run(agent))
         results = await asyncio.gather(*(agent.add_device(s) for s in specs), return_exceptions=True)
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
+        if demo:
+            show = asyncio.create_task(_demo_show(agent))
         app = create_app(agent, max_upload_bytes=policy.max_upload_bytes, policy=policy)
         _raise_open_files()
         logging.getLogger("uvicorn.error").addFilter(_Repeats())
@@ -241,19 +277,32 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
         sys.stdout.flush()
         if bridge is not None:
-            bridge_task = asyncio.create_task(_run_bridge(bridge(agent), server))
+            bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port)),
+                                                          server))
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
-        if bridge_task is not None:
-            bridge_task.cancel()
-            with contextlib.suppress(BaseException):
-                await bridge_task
-        await agent.stop()
-        if simulators:
-            from fabwire.demo.runner import stop_all
+        for task in (show, bridge_task, notify_task):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(BaseException):
+                    await task
+        try:
+            await agent.stop()
+        finally:
+            if simulators:  # whatever the agent's stop did, the demo's simulators go with it
+                from fabwire.demo.runner import stop_all
 
-            await asyncio.to_thread(stop_all, simulators)
+                await asyncio.to_thread(stop_all, simulators)
+
+
+def dashboard_url(host: str, port: int) -> str:
+    """The dashboard's address as other machines reach it: a wildcard listen address becomes this computer's
+    mDNS name (`raspberrypi.local`, as Raspberry Pi OS and most Linux systems announce themselves)."""
+    if host in ("0.0.0.0", "::", ""):
+        name = socket.gethostname()
+        host = name if "." in name else f"{name}.local"
+    return f"http://[{host}]:{port}/" if ":" in host else f"http://{host}:{port}/"
 
 
 FLOODING_MESSAGES = ("Exceeded concurrency limit.", "Invalid HTTP request received.")
@@ -370,11 +419,58 @@ async def _run_bridge(coro: Coroutine[Any, Any, None], server: Any) -> None:
         raise
 
 
+DEMO_SHOW_WAIT_S = 30.0
+DEMO_LINEUS_SPEED = 1.0
+"""The demo's Line-us draws in real time: the logo takes half a minute, long enough to watch the ink arrive."""
+
+
+async def _demo_show(agent: Agent) -> None:
+    """What the demo does at start, as the README's picture shows: the printer prints the sample, the Line-us
+    draws the sample logo, the MMU loads slot 0 and then stops on its (simulated) FINDA fault at slot 1."""
+    from fabwire.samples import SAMPLE_GCODE, SAMPLE_SVG, sample_path
+
+    async def until(device: str, done: Callable[[dict[str, Any]], bool]) -> None:
+        subscription = agent.subscribe(device)
+        try:
+            async with asyncio.timeout(DEMO_SHOW_WAIT_S):
+                if done({"type": "state", "state": agent.state(device)}):
+                    return
+                async for event in subscription:
+                    if done(event):
+                        return
+        finally:
+            subscription.close()
+
+    def idle(event: dict[str, Any]) -> bool:
+        return bool(event["type"] == "state" and event["state"]["summary"]["state"] == "idle")
+
+    async def step(device: str, run: Callable[[], Coroutine[Any, Any, Any]]) -> None:
+        try:
+            await until(device, idle)
+            await run()
+        except (FabwireError, TimeoutError) as exc:
+            click.echo(f"fabwire: demo: {device}: {exc}", err=True)
+
+    async def mmu() -> None:
+        finished = asyncio.ensure_future(until("mmu-demo", lambda e: e["type"] == "event"
+                                               and e["event"].get("event") == "action-done"))
+        await asyncio.sleep(0)  # subscribed before the tool change starts
+        await agent.act("mmu-demo", "tool_change", {"slot": 0})
+        await finished
+        await agent.act("mmu-demo", "tool_change", {"slot": 1})
+
+    await asyncio.gather(
+        step("xyz-demo", lambda: agent.start_job("xyz-demo", SAMPLE_GCODE,
+                                                 sample_path(SAMPLE_GCODE).read_bytes())),
+        step("lineus-demo", lambda: agent.start_job("lineus-demo", SAMPLE_SVG, sample_path(SAMPLE_SVG).read_bytes())),
+        step("mmu-demo", mmu))
+
+
 def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
     from fabwire.demo.mmu_show import FAULT
     from fabwire.demo.runner import start_simulators
 
-    args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{speed:g}"],
+    args = {"xyz": ["--speed", f"{speed:g}"], "lineus": ["--speed", f"{min(speed, DEMO_LINEUS_SPEED):g}"],
             "mmu": ["--speed", f"{speed:g}", "--fault", FAULT]}
     sims = start_simulators([(kind, args[kind]) for _, kind in DEMO_DEVICES])
     specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {},  # type: ignore[arg-type]

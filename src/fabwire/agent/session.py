@@ -311,6 +311,12 @@ class Session:
             self._last_job_event = now
             self._publish("job", job=dict(self._job))
 
+    def job_note(self, text: str) -> None:
+        """A note the CLI would print for this job, kept in the record's `notes` (a list of words)."""
+        if self._job is not None:
+            self._job["notes"] = [*(self._job.get("notes") or []), text]
+            self._publish("job", job=dict(self._job))
+
     def job_stroke(self, points: list[tuple[float, float]]) -> None:
         self.drawing["ink"].append(points)
         if self._job is not None:
@@ -359,6 +365,8 @@ class _Handle:
     def preview(self, strokes: list[list[tuple[float, float]]]) -> None:
         self._session.job_preview(strokes)
 
+    def note(self, text: str) -> None:
+        self._session.job_note(text)
 
 class JobClaim:
     """The machine, claimed for one job that is still arriving (see `Session.claim_job`).

@@ -29,7 +29,7 @@ from aiomqtt.exceptions import MqttConnectError
 from fabwire import __version__
 from fabwire.errors import FabwireError, LinkError
 from fabwire.mqtt.commands import CommandRunner
-from fabwire.mqtt.discovery import discovery_payload
+from fabwire.mqtt.discovery import discovery_messages, discovery_topics
 from fabwire.mqtt.fleet_view import STALE_CLAIM_S, FleetView
 from fabwire.mqtt.topics import (
     HA_STATUS,
@@ -46,7 +46,6 @@ from fabwire.mqtt.topics import (
     claim_topic,
     default_agent_id,
     device_topic,
-    discovery_topic,
     parse_broker,
     split_device_topic,
 )
@@ -162,6 +161,10 @@ class Bridge:
         self.backoff = backoff
         self.view = FleetView()
         self.known: dict[str, dict[str, Any]] = {}
+        self.dashboard_url: str | None = None
+        """The agent's dashboard, Home Assistant's link to each device (`configuration_url`)."""
+        self.discovery_mode = "device"
+        """`fabwire.mqtt.discovery.DISCOVERY_MODES`: one message per device, or per entity (older Home Assistant)."""
         """Devices this agent monitors and has claimed: id → DeviceInfo as a dict."""
         self.owned: set[str] = set()
         self.runner = CommandRunner(agent.act, agent_id)
@@ -461,15 +464,18 @@ class Bridge:
         await self._publish_state(device, state)
 
     async def _publish_discovery(self, device: str) -> None:
-        await self._publish(discovery_topic(device), _dump(discovery_payload(self.known[device], self.agent_id)))
+        for topic, payload in discovery_messages(self.known[device], self.agent_id, self.dashboard_url,
+                                                 self.discovery_mode):
+            await self._publish(topic, _dump(payload))
 
     async def _remove(self, device: str) -> None:
         """Clean up a device this agent stopped monitoring: its discovery and retained topics go unless another
         online agent still claims it (that agent then takes over); this agent's claim goes in any case."""
         others = [a for a in self.view.devices.get(device, _NO_VIEW).claims
-                  if a != self.agent_id and self.view.online(a)]
+                  if a != self.agent_id and self.view.alive(a, time.monotonic())]
         if not others:
-            await self._publish(discovery_topic(device), b"")
+            for topic in discovery_topics(device, self.discovery_mode):
+                await self._publish(topic, b"")
             for leaf in ("state", "info", "availability"):
                 await self._publish(device_topic(device, leaf), b"")
         self.owned.discard(device)

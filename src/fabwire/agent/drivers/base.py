@@ -7,6 +7,7 @@ kind has no such thing, SI units in the names):
   extruder_temp_c, extruder_target_c, bed_temp_c, bed_target_c, filament_left_mm,
   position ({"x", "y", "z"} in the Line-us's own units), pen_down,
   active_slot, filament_position (words), selector_slot, idler_slot, finda,
+  prompt (words a flow waits on the owner to confirm, e.g. "Lower the calibration detector, then confirm"),
   actions (names of the actions that apply now, for buttons).
 """
 
@@ -28,7 +29,7 @@ Emit = Callable[[dict[str, Any]], None]
 SUMMARY_KEYS = (
     "state", "state_text", "error", "error_code", "busy", "progress_percent", "elapsed_s", "time_left_s",
     "extruder_temp_c", "extruder_target_c", "bed_temp_c", "bed_target_c", "filament_left_mm", "position",
-    "pen_down", "active_slot", "filament_position", "selector_slot", "idler_slot", "finda", "actions",
+    "pen_down", "active_slot", "filament_position", "selector_slot", "idler_slot", "finda", "prompt", "actions",
 )
 
 
@@ -99,6 +100,9 @@ class JobHandle(Protocol):
     def stroke(self, points: list[tuple[float, float]]) -> None: ...
 
     def preview(self, strokes: list[list[tuple[float, float]]]) -> None: ...
+
+    def note(self, text: str) -> None:
+        """Something the owner should know about the job (what the planner left out of a drawing …)."""
 
 
 def checked_params(action: Action, params: Mapping[str, Any]) -> dict[str, Any]:

@@ -39,6 +39,11 @@ class LineUsDriver(Driver):
                (Param("x", "float", "x in Line-us units", -2000, 3000), Param("y", "float", "y", -2000, 3000))),
         Action("text", "Write text in a single-stroke font (runs as a job).",
                (Param("text", "str", "the words to write"),), job=True),
+        Action("pen_height", "Set the pen height, 0 (down on the paper) to 1000 (up).",
+               (Param("z", "float", "pen height, 0 down … 1000 up", 0, 1000),)),
+        Action("list_drawings", "List the drawings stored on the machine (M20)."),
+        Action("delete_drawing", "Delete a stored drawing (M30).",
+               (Param("slot", "int", "stored drawing 1 to 32", 1, 32),), confirm=True),
     )
     job_types: ClassVar[Mapping[str, str]] = dict.fromkeys((".svg", ".svgz", ".gcode", ".gc", ".nc", ".ngc"), "draw")
 
@@ -100,6 +105,10 @@ class LineUsDriver(Driver):
         arm = self._client()
         if self.drawing:
             raise DeviceBusy(f"the Line-us is busy ({self.drawing}): cancel the job first")
+        if action == "list_drawings":  # reads the robot's files: no motion, no lock
+            drawings = await arm.list_drawings()
+            return {"ok": True, "action": action,
+                    "drawings": [{"slot": d.slot, "size_bytes": d.size, "path": d.path} for d in drawings]}
         if (other := self._other_drawer()) is not None:
             raise DeviceBusy(f"the Line-us is drawing for another program: {other.words()}")
         # held for the move itself, so no drawing starts on the robot in the middle of it
@@ -113,6 +122,11 @@ class LineUsDriver(Driver):
                 self.position = await arm.pen_down()
             elif action == "move":
                 self.position = await arm.move(params["x"], params["y"])
+            elif action == "pen_height":
+                self.position = await arm.move(z=params["z"])
+            elif action == "delete_drawing":
+                await arm.delete_drawing(params["slot"])
+                return {"ok": True, "action": action, "slot": params["slot"]}
         pos = self.position
         return {"ok": True, "action": action, "position": pos.as_dict() if pos else None}
 
@@ -137,10 +151,10 @@ class LineUsDriver(Driver):
         else:
             raise InputError("a drawing job needs a file")
         strokes = plan.strokes
+        for note in plan.notes:  # what `lineus draw` prints: parts of the file left out, and why
+            handle.note(note)
         handle.preview([_points(s) for s in strokes])
-        notes = "; ".join(plan.notes)  # what the planner changed or left out, as `lineus draw` prints it
-        if notes:
-            handle.progress(0.0, message=f"planner: {notes}")
+        notes = "; ".join(plan.notes)
         per_stroke = plan.stroke_seconds()
         total = sum(per_stroke) or 1.0
         done_s = 0.0

@@ -2,20 +2,28 @@
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
+from fabwire import units
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
 from fabwire.agent.opening import open_xyz
 from fabwire.errors import InputError, LinkClosed
+from fabwire.units import ZOFFSET_LIMIT_MM
 from fabwire.xyz import intake, printjob
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.commands import JOG_LIMIT
 from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status
 from fabwire.xyz.threew import inspect_3w
 
+IDLE_ACTIONS = ("home", "jog", "load_filament", "unload_filament", "clean_nozzle", "calibrate", "zoffset",
+                "zoffset_step")
+PROMPT_ACTIONS = ["confirm", "stop_flow"]
+PROMPT_LIMIT_S = 15 * 60.0
+"""How long a flow waits for the owner at a prompt before it stops (and cancels the flow on the printer)."""
 PRINT_STATES = range(9500, 9511)
 BUSY_STATES = frozenset({9513, 9514, 9515, 9516, 9530, 9531, 9532, 9534, 9535, 9536, 9537, 9538, 9540, 9700, 30})
 ERROR_STATES = frozenset({9517, 9533})
@@ -43,7 +51,7 @@ def printer_summary(status: Status) -> dict[str, Any]:
     else:
         state = "idle" if code == IDLE else "busy"
     progress = status.progress
-    actions = {"idle": ["home", "jog", "unload_filament"], "printing": ["pause", "cancel"],
+    actions = {"idle": list(IDLE_ACTIONS), "printing": ["pause", "cancel"],
                "paused": ["resume", "cancel"], "done": ["acknowledge"], "busy": [], "error": []}[state]
     if state == "error" and code == PRINT_DONE:
         actions = ["acknowledge"]
@@ -75,6 +83,16 @@ class XYZDriver(Driver):
                                                                nonzero=True)),
                background=True),
         Action("unload_filament", "Heat and unload the filament.", background=True),
+        Action("load_filament", "Heat and feed filament; confirm when it comes out of the nozzle.", background=True),
+        Action("clean_nozzle", "Heat the nozzle for cleaning; confirm when it is clean.", background=True),
+        Action("calibrate", "Level the bed with the detector: lower it and raise it when asked; the nine bed "
+               "readings arrive in the status (calibration).", background=True),
+        Action("confirm", "Answer the step a flow waits on (filament out, nozzle clean, detector lowered/raised)."),
+        Action("stop_flow", "Stop the flow waiting on a step (the printer cancels it)."),
+        Action("zoffset", "Set the Z offset in mm (0.01 mm steps).",
+               (Param("mm", "float", "Z offset in mm", -ZOFFSET_LIMIT_MM, ZOFFSET_LIMIT_MM),)),
+        Action("zoffset_step", "Move the Z offset one 0.01 mm step up or down.",
+               (Param("direction", "str", "up or down", choices=("up", "down")),)),
     )
     job_types: ClassVar[Mapping[str, str]] = {".gcode": "print", ".gco": "print", ".g": "print", ".3w": "print"}
 
@@ -94,6 +112,9 @@ class XYZDriver(Driver):
         super().__init__(*args, **kwargs)
         self.printer: XYZPrinter | None = None
         self._last: tuple[Status, dict[str, Any], dict[str, Any]] | None = None
+        self.prompt: str | None = None
+        """The step a flow (load, clean, calibrate) waits on the owner to confirm."""
+        self._answer: asyncio.Future[bool] | None = None
         """The previous poll's status and its two views: an idle printer answers the same each second, and
         converting it again would cost as much as the poll itself."""
 
@@ -112,7 +133,32 @@ class XYZDriver(Driver):
         status = await self._client().status()
         if self._last is None or self._last[0] != status:
             self._last = (status, status.to_dict(), printer_summary(status))
+        if self.prompt is not None:
+            return self._last[1], {**self._last[2], "prompt": self.prompt, "actions": PROMPT_ACTIONS}
         return self._last[1], self._last[2]
+
+    async def _ask(self, text: str) -> None:
+        """The flows' prompt (as `fabwire xyz calibrate` asks on the terminal): shown in the summary until the
+        `confirm` action; `stop_flow`, or no answer in PROMPT_LIMIT_S, stops the flow (InputError)."""
+        self._answer = asyncio.get_running_loop().create_future()
+        self.prompt = text
+        self.emit({"event": "prompt", "text": text})
+        try:
+            async with asyncio.timeout(PROMPT_LIMIT_S):
+                confirmed = await self._answer
+        except TimeoutError:
+            raise InputError(f"nobody confirmed '{text}' within {PROMPT_LIMIT_S / 60:.0f} min; the step was "
+                             "stopped") from None
+        finally:
+            self.prompt = None
+            self._answer = None
+        if not confirmed:
+            raise InputError(f"stopped at '{text}'")
+
+    def _answered(self, confirmed: bool) -> None:
+        if self._answer is None or self._answer.done():
+            raise InputError("no step is waiting for an answer")
+        self._answer.set_result(confirmed)
 
     async def close(self) -> None:
         printer, self.printer = self.printer, None
@@ -135,6 +181,21 @@ class XYZDriver(Driver):
             await printer.jog(params["axis"], params["distance_mm"])
         elif action == "unload_filament":
             await printer.unload_filament()
+        elif action == "load_filament":
+            await printer.load_filament(self._ask)
+        elif action == "clean_nozzle":
+            await printer.clean_nozzle(self._ask)
+        elif action == "calibrate":
+            values = await printer.calibrate(self._ask)
+            return {"ok": True, "action": action, "calibration": list(values)}
+        elif action in ("confirm", "stop_flow"):
+            self._answered(action == "confirm")
+        elif action == "zoffset":
+            value = await printer.set_zoffset(units.parse_zoffset(f"{params['mm']:.2f}mm"))
+            return {"ok": True, "action": action, "zoffset_mm": value / 100}
+        elif action == "zoffset_step":
+            value = await printer.nudge_zoffset(params["direction"] == "up")
+            return {"ok": True, "action": action, "zoffset_mm": value / 100}
         return {"ok": True, "action": action}
 
     async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:

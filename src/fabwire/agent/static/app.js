@@ -67,14 +67,17 @@ function askToken() {
 
 // ---------------------------------------------------------------------------------------------- actions
 
-async function act(card, action, params = {}, confirmText = null) {
-  if (confirmText && !window.confirm(confirmText)) return;
+async function act(card, action, params = {}, confirmText = null, destructive = true) {
+  // confirmText: asked first; destructive actions also tell the agent so ("confirm": true), as the CLI's --yes
+  if (confirmText && !window.confirm(confirmText)) return null;
   try {
-    const body = confirmText ? {...params, confirm: true} : params;
+    const body = confirmText && destructive ? {...params, confirm: true} : params;
     const result = await call("POST", `/devices/${encodeURIComponent(card.device.id)}/actions/${action}`, body);
-    if (result && result.started) toast(`${card.device.name}: ${action.replace("_", " ")} started`);
+    if (result && result.started) toast(`${card.device.name}: ${action.replaceAll("_", " ")} started`);
+    return result;
   } catch (error) {
     toast(`${card.device.name}: ${error.message}`, true);
+    return null;
   }
 }
 
@@ -107,12 +110,14 @@ const LABELS = {pause: "Pause", resume: "Resume", cancel: "Cancel", acknowledge:
   home: "Home", unload_filament: "Unload filament", retry: "Retry", continue: "Continue", stop: "Stop",
   unload: "Unload", pen_up: "Pen up", pen_down: "Pen down", reset: "Restart MMU"};
 const CONFIRM = {reset: "Restart the MMU? A running command is lost."};
+const OWN_UI = ["jog", "move", "text", "load", "eject", "cut", "tool_change", "confirm", "stop_flow", "zoffset",
+  "zoffset_step", "pen_height", "list_drawings", "delete_drawing", "load_filament", "unload_filament", "clean_nozzle",
+  "calibrate", "home"];
 
 function actionButtons(card, applicable) {
   const out = [];
   for (const action of applicable) {
-    if (["jog", "move", "text", "load", "eject", "cut"].includes(action)) continue;  // need parameters: own UI
-    if (action === "tool_change") continue;
+    if (OWN_UI.includes(action) && !(action === "home" && card.device.kind !== "xyz")) continue;  // own tools
     const danger = ["cancel", "stop", "reset"].includes(action);
     const primary = ["retry", "continue", "resume"].includes(action);
     const handler = action === "cancel" ? () => cancelJob(card) : () => act(card, action, {}, CONFIRM[action] || null);
@@ -125,7 +130,7 @@ function actionButtons(card, applicable) {
 // ---------------------------------------------------------------------------------------------- charts
 
 function chart(samples, now) {
-  const width = 320, height = 120, left = 28, bottom = 14;
+  const width = 320, height = 120, left = 28, bottom = 14, topPad = 10;
   const svg = el("svg:svg", {class: "chart", viewBox: `0 0 ${width} ${height}`, preserveAspectRatio: "none",
     role: "img", "aria-label": "temperatures against targets, last ten minutes"});
   const recent = samples.filter((s) => now - s.t <= CHART_WINDOW_S);
@@ -134,7 +139,7 @@ function chart(samples, now) {
   const values = recent.flatMap((s) => [s.e, s.et, s.b, s.bt]).filter((v) => v !== null && v !== undefined);
   const top = Math.max(40, Math.ceil((Math.max(0, ...values) + 10) / 40) * 40);
   const x = (t) => left + (width - left - 2) * (1 - (now - t) / span);
-  const y = (v) => (height - bottom) * (1 - v / top) + 2;
+  const y = (v) => topPad + (height - bottom - topPad) * (1 - v / top);
   for (let v = 0; v <= top; v += top / 4) {
     svg.append(el("svg:line", {class: "grid", x1: left, x2: width, y1: y(v), y2: y(v)}),
       el("svg:text", {x: 2, y: y(v) + 3}, `${Math.round(v)}°`));
@@ -146,6 +151,12 @@ function chart(samples, now) {
     if (points.length) svg.append(el("svg:polyline", {class: cls, points: points.join(" ")}));
   }
   return svg;
+}
+
+function legend() {
+  return el("div", {class: "legend", "aria-label": "chart legend"},
+    el("span", {class: "key extruder"}, "Extruder"), el("span", {class: "key bed"}, "Bed"),
+    el("span", {class: "key target"}, "dashed: target"));
 }
 
 function addSample(card, summary, t) {
@@ -197,12 +208,18 @@ function kindSection(card, s) {
       el("span", {class: "bed"}, "Bed ", el("b", {class: "temp-bed"}, number(s.bed_temp_c, " °C")),
         s.bed_target_c !== null ? ` / ${number(s.bed_target_c, " °C")}` : ""),
       s.filament_left_mm !== null ? el("span", {class: "facts"}, `filament ${(s.filament_left_mm / 1000).toFixed(1)} m`) : null));
-    parts.push(chart(card.samples, Date.now() / 1000));
+    parts.push(chart(card.samples, Date.now() / 1000), legend());
+    const cal = card.state.status && card.state.status.calibration;
+    if (Array.isArray(cal) && cal.length === 9 && cal.every((v) => typeof v === "number")) parts.push(calibrationMap(cal));
   }
   if (kind === "mmu") {
-    parts.push(el("div", {class: "slots"}, [0, 1, 2, 3, 4].map((i) => el("div", {
-      class: `slot${s.active_slot === i ? " active" : ""}${s.selector_slot === i ? " selector" : ""}`,
-      "data-slot": i, title: s.active_slot === i ? "loaded" : ""}, `${i}`))));
+    if (card.slot === undefined) card.slot = s.active_slot ?? 0;
+    parts.push(el("div", {class: "slots", role: "group", "aria-label": "filament slots: choose one"},
+      [0, 1, 2, 3, 4].map((i) => el("button", {type: "button",
+        class: `slot${s.active_slot === i ? " active" : ""}${s.selector_slot === i ? " selector" : ""}`
+          + `${card.slot === i ? " chosen" : ""}`,
+        "data-slot": i, "aria-pressed": card.slot === i ? "true" : "false",
+        title: s.active_slot === i ? "loaded" : "", onclick: () => chooseSlot(card, i)}, `${i}`))));
     parts.push(el("div", {class: "facts"}, `Filament: ${s.filament_position || "–"} · FINDA ${s.finda ? "on" : "off"}`
       + (s.active_slot !== null ? ` · slot ${s.active_slot} loaded` : "")));
   }
@@ -213,22 +230,152 @@ function kindSection(card, s) {
 function progressSection(card, s) {
   const job = card.state.job;
   const percent = job ? job.progress_percent : s.progress_percent;
-  if (!(s.busy || job) || percent === null || percent === undefined) return null;
+  // a flow (loading filament, calibrating) reports no progress worth a bar: its words are in the state line
+  if (!(job || ["printing", "paused", "drawing"].includes(s.state)) || percent === null || percent === undefined) {
+    return null;
+  }
   const left = job && job.time_left_s !== null ? job.time_left_s : s.time_left_s;
   return el("div", {class: "progress-block"},
     el("div", {class: "progress", role: "progressbar", "aria-valuenow": Math.round(percent), "aria-valuemin": 0,
       "aria-valuemax": 100}, el("div", {style: `width:${Math.min(100, percent)}%`})),
     el("div", {class: "progress-text"}, `${Math.round(percent)} %`, left ? ` · ${duration(left)} left` : "",
-      job && job.message ? ` · ${job.message}` : ""));
+      job && job.message ? ` · ${job.message}` : ""),
+    job ? notesList(job) : null);
+}
+
+function notesList(job) {
+  // what the planner left out or changed, as `fabwire lineus draw` prints it
+  return job.notes && job.notes.length ? el("ul", {class: "job-notes"}, job.notes.map((n) => el("li", {}, n))) : null;
+}
+
+const PROMPT_BUTTONS = [  // the printer's prompts (fabwire.xyz.maintenance) → what the owner has just done
+  ["Lower the calibration detector", "Detector lowered"],
+  ["Raise the calibration detector", "Detector raised"],
+  ["Filament is feeding", "Filament comes out"],
+  ["The nozzle is hot", "Nozzle is clean"],
+];
+const HEATS = "The nozzle heats up to about 200 °C.";
+const FLOWS = [  // xyz maintenance: action, label, what is asked first (physical steps ask, as the CLI does)
+  ["load_filament", "Load filament", `Load filament? ${HEATS} Have the filament ready at the feeder.`],
+  ["unload_filament", "Unload filament", `Unload the filament? ${HEATS}`],
+  ["clean_nozzle", "Clean nozzle", `Heat the nozzle for cleaning? ${HEATS}`],
+  ["calibrate", "Calibrate bed", "Calibrate the bed? You will be asked to lower and raise the detector."],
+  ["home", "Home", "Home all axes? The print head and bed move."],
+];
+
+function promptBox(card, s) {
+  const label = (PROMPT_BUTTONS.find(([start]) => s.prompt.startsWith(start)) || [null, "Done"])[1];
+  return el("div", {class: "prompt", role: "alertdialog", "aria-label": "the printer waits for you"},
+    el("p", {}, s.prompt),
+    el("div", {class: "buttons"},
+      el("button", {type: "button", class: "primary", "data-action": "confirm", onclick: () => act(card, "confirm")},
+        label),
+      el("button", {type: "button", class: "danger", "data-action": "stop_flow",
+        onclick: () => act(card, "stop_flow", {}, `Stop this step on ${card.device.name}? The printer cancels it.`,
+          false)}, "Stop")));
+}
+
+function calibrationMap(values) {
+  const mean = values.reduce((a, b) => a + b, 0) / values.length;
+  const spread = Math.max(1, ...values.map((v) => Math.abs(v - mean)));
+  return el("figure", {class: "calmap"},
+    el("div", {class: "grid9", role: "table", "aria-label": "bed calibration: nine readings, back row first"},
+      values.map((v, i) => el("span", {class: "cell", role: "cell", "data-index": i,
+        style: `--dev:${((v - mean) / spread).toFixed(2)}`, title: `reading ${i + 1}: ${v}`}, `${v}`))),
+    el("figcaption", {}, `Bed calibration: nine readings (spread ${Math.max(...values) - Math.min(...values)})`));
+}
+
+function xyzTools(card, s) {
+  const out = [];
+  const idle = s.actions.includes("calibrate");
+  if (!idle) return out;
+  out.push(el("div", {class: "buttons tools"}, FLOWS.map(([action, label, ask]) => el("button", {type: "button",
+    "data-action": action, onclick: () => act(card, action, {}, ask, false)}, label))));
+  const step = el("select", {"aria-label": "jog step", class: "jog-step"},
+    ["0.1", "1", "10"].map((v) => el("option", {value: v, selected: v === "1"}, `${v} mm`)));
+  const jog = (axis, sign) => el("button", {type: "button", "data-action": "jog", "data-axis": axis,
+    "data-sign": sign > 0 ? "+" : "-", onclick: () => act(card, "jog", {axis, distance_mm: sign * Number(step.value)})},
+    `${axis.toUpperCase()}${sign > 0 ? "+" : "−"}`);
+  out.push(el("div", {class: "jogpad", role: "group", "aria-label": "jog"},
+    el("span"), jog("y", 1), el("span"), jog("z", 1),
+    jog("x", -1), el("span", {class: "jog-label"}, "XY"), jog("x", 1), el("span", {class: "jog-label"}, "Z"),
+    el("span"), jog("y", -1), el("span"), jog("z", -1), step));
+  const current = card.state.status ? card.state.status.zoffset_mm : null;
+  const field = el("input", {type: "number", step: "0.01", min: -20, max: 20, "aria-label": "Z offset in mm",
+    class: "zoffset-input", value: current ?? ""});
+  out.push(el("div", {class: "zoffset", role: "group", "aria-label": "Z offset"},
+    el("span", {}, "Z offset ", el("b", {class: "zoffset-value"}, current === null || current === undefined ? "–"
+      : `${current.toFixed(2)} mm`)),
+    el("button", {type: "button", "data-action": "zoffset_step", "data-direction": "up",
+      onclick: () => act(card, "zoffset_step", {direction: "up"})}, "▲ 0.01"),
+    el("button", {type: "button", "data-action": "zoffset_step", "data-direction": "down",
+      onclick: () => act(card, "zoffset_step", {direction: "down"})}, "▼ 0.01"),
+    field, el("button", {type: "button", "data-action": "zoffset", onclick: () => field.value !== "" &&
+      act(card, "zoffset", {mm: Number(field.value)}, `Set the Z offset of ${card.device.name} to `
+        + `${Number(field.value).toFixed(2)} mm?`, false)}, "Set")));
+  return out;
+}
+
+const SLOT_ACTIONS = [  // MMU, per chosen slot: action, label, what is asked first
+  ["tool_change", "Tool change", null],
+  ["load", "Load", null],
+  ["eject", "Eject", "Eject the filament of slot {slot}? It is pushed out of the MMU."],
+  ["cut", "Cut", "Cut the filament of slot {slot}? This cannot be undone."],
+];
+
+function chooseSlot(card, slot) {
+  card.slot = slot;
+  card.controlsKey = "";
+  render(card);
+}
+
+function mmuTools(card, s) {
+  if (!s.actions.includes("tool_change")) return [];
+  const slot = card.slot ?? 0;
+  return [el("div", {class: "buttons slot-actions", role: "group", "aria-label": `slot ${slot}`},
+    el("span", {class: "facts"}, `Slot ${slot}:`),
+    SLOT_ACTIONS.map(([action, label, ask]) => el("button", {type: "button", "data-action": action, "data-slot": slot,
+      class: ask ? "danger" : null, onclick: () => act(card, action, {slot}, ask && ask.replace("{slot}", slot),
+        false)}, label)))];
+}
+
+function lineusTools(card, s) {
+  if (!s.actions.includes("pen_height")) return [];
+  const z = s.position ? Math.round(s.position.z) : 1000;
+  const height = el("input", {type: "range", min: 0, max: 1000, step: 50, value: z, "aria-label": "pen height",
+    class: "pen-height"});
+  const shown = el("b", {class: "pen-height-value"}, `${z}`);
+  height.addEventListener("input", () => { shown.textContent = height.value; });
+  const list = el("div", {class: "stored"});
+  return [
+    el("div", {class: "pen-row", role: "group", "aria-label": "pen height"}, el("span", {}, "Pen height ", shown),
+      height, el("button", {type: "button", "data-action": "pen_height",
+        onclick: () => act(card, "pen_height", {z: Number(height.value)})}, "Set")),
+    el("div", {class: "buttons"}, el("button", {type: "button", "data-action": "list_drawings",
+      onclick: () => storedDrawings(card, list)}, "Stored drawings")),
+    list,
+  ];
+}
+
+async function storedDrawings(card, box) {
+  const result = await act(card, "list_drawings");
+  if (!result) return;
+  box.replaceChildren(result.drawings.length ? el("table", {class: "drawings"},
+    el("tbody", {}, result.drawings.map((d) => el("tr", {"data-slot": d.slot}, el("td", {}, `#${d.slot}`),
+      el("td", {}, `${d.size_bytes} bytes`), el("td", {}, el("button", {type: "button", class: "danger",
+        "data-action": "delete_drawing", "data-slot": d.slot, onclick: async () => {
+          if (await act(card, "delete_drawing", {slot: d.slot}, `Delete stored drawing ${d.slot} from `
+            + `${card.device.name}?`)) storedDrawings(card, box);
+        }}, "Delete")))))) : el("p", {class: "facts"}, "No stored drawings."));
 }
 
 function controls(card, s) {
   const kind = card.device.kind;
-  const out = [el("div", {class: "buttons"}, actionButtons(card, s.actions))];
-  if (kind === "mmu" && s.actions.includes("tool_change")) {
-    out.push(el("div", {class: "buttons"}, [0, 1, 2, 3, 4].map((i) => el("button", {type: "button",
-      "data-action": "tool_change", "data-slot": i, onclick: () => act(card, "tool_change", {slot: i})}, `T${i}`))));
-  }
+  const out = [];
+  if (s.prompt) out.push(promptBox(card, s));
+  out.push(el("div", {class: "buttons"}, actionButtons(card, s.actions)));
+  if (kind === "xyz") out.push(...xyzTools(card, s));
+  if (kind === "mmu") out.push(...mmuTools(card, s));
   const accepts = {xyz: ".gcode,.gco,.g,.3w", lineus: ".svg,.svgz,.gcode,.gc,.nc,.ngc"}[kind];
   if (accepts && card.state.online && !s.busy && !card.state.job) {
     const input = el("input", {type: "file", accept: accepts, "aria-label": "file to send"});
@@ -240,6 +387,7 @@ function controls(card, s) {
     out.push(el("div", {class: "upload"}, text, el("button", {type: "button", "data-action": "text",
       onclick: () => text.value.trim() && act(card, "text", {text: text.value.trim()})}, "Write")));
   }
+  if (kind === "lineus") out.push(...lineusTools(card, s));
   return out;
 }
 
@@ -260,7 +408,8 @@ function render(card) {
   ];
   card.live.replaceChildren(...live.filter(Boolean));
   // the controls hold a chosen file or typed text: rebuild them only when what applies has changed
-  const key = JSON.stringify([state.online, s.actions, s.busy, Boolean(state.job)]);
+  const key = JSON.stringify([state.online, s.actions, s.busy, Boolean(state.job), s.prompt, card.slot,
+    state.status && state.status.zoffset_mm]);
   if (key !== card.controlsKey) {
     card.controlsKey = key;
     card.controls.replaceChildren(...(state.online ? controls(card, s) : []));
@@ -298,7 +447,7 @@ function onEvent(event) {
     const previousJob = card.state.job;
     card.state = event.state;
     addSample(card, event.state.summary, Date.parse(event.state.ts) / 1000);
-    if (!previousJob && event.state.job) { card.preview = []; card.ink = []; }
+    if (!previousJob && event.state.job) { card.preview = []; card.ink = []; loadJobs(); }
     scheduleRender(card);
   } else if (event.type === "online") {
     card.device = {...card.device, ...event.info};
@@ -308,6 +457,8 @@ function onEvent(event) {
     if (event.stroke) addInk(card, event.stroke);
     if (event.preview || !event.stroke) scheduleRender(card);
     if (!event.stroke && event.job.state !== "running") loadJobs();
+    const cell = document.querySelector(`#jobs tr[data-job="${event.job.id}"] td[data-label="Progress"]`);
+    if (cell) cell.textContent = `${Math.round(event.job.progress_percent || 0)} %`;  // the list keeps up
   } else if (event.type === "error") {
     toast(`${card.device.name}: ${event.message}`, true);
   }
@@ -369,11 +520,14 @@ async function loadJobs() {
   const jobs = await call("GET", "/jobs?limit=20");
   const names = (id) => (cards.get(id)?.device.name) || id;
   document.querySelector("#jobs tbody").replaceChildren(...jobs.map((job) => el("tr", {"data-job": job.id},
-    el("td", {}, names(job.device)), el("td", {}, job.filename || (job.params && job.params.text) || job.type),
-    el("td", {class: `job-state ${job.state}`}, job.state), el("td", {}, `${Math.round(job.progress_percent || 0)} %`),
-    el("td", {}, job.started ? new Date(job.started).toLocaleTimeString() : ""),
-    el("td", {}, job.state === "running" ? el("button", {type: "button", class: "danger",
-      onclick: () => cancelJob(cards.get(job.device))}, "Cancel") : job.message || ""))));
+    el("td", {"data-label": "Machine"}, names(job.device)),
+    el("td", {"data-label": "File", class: "file"}, job.filename || (job.params && job.params.text) || job.type,
+      notesList(job)),
+    el("td", {"data-label": "State", class: `job-state ${job.state}`}, job.state),
+    el("td", {"data-label": "Progress"}, `${Math.round(job.progress_percent || 0)} %`),
+    el("td", {"data-label": "Started"}, job.started ? new Date(job.started).toLocaleTimeString() : ""),
+    el("td", {"data-label": "", class: "message"}, job.state === "running" ? el("button", {type: "button",
+      class: "danger", onclick: () => cancelJob(cards.get(job.device))}, "Cancel") : job.message || ""))));
 }
 
 async function start() {
