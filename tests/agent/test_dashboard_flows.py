@@ -14,29 +14,22 @@ from typing import Any
 
 import httpx
 import pytest
-from playwright.sync_api import Browser, Dialog, Page, expect, sync_playwright
+from playwright.sync_api import Browser, Dialog, Page, expect
 
 from clitools import cli_env
 
 from .agenttools import ANNOUNCEMENT, device_of, summary, wait_for
 from .conftest import Bench, start_bench, stop_bench
-from .test_dashboard import chromium_path, shot
+from .test_dashboard import shot
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "images"
 DESKTOP = {"width": 1280, "height": 900}
 PHONE = {"width": 390, "height": 844}
 NOTED_SVG = (b'<svg xmlns="http://www.w3.org/2000/svg" width="60mm" height="40mm" viewBox="0 0 60 40">'
              b'<path d="M5 5 L55 5 L55 35 L5 35 Z" fill="none" stroke="black"/>'
-             b'<text x="10" y="20">not drawn</text></svg>')
-"""A drawing whose text element the planner leaves out (and says so)."""
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    with sync_playwright() as playwright:
-        launched = playwright.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
-        yield launched
-        launched.close()
+             b'<foreignObject x="10" y="10" width="20" height="9"><p xmlns="http://www.w3.org/1999/xhtml">not drawn</p>'
+             b'</foreignObject></svg>')
+"""A drawing whose foreignObject (HTML) the planner leaves out (and says so)."""
 
 
 @pytest.fixture(scope="module")
@@ -261,7 +254,7 @@ def test_an_uploaded_drawing_shows_what_the_planner_left_out(page: Page, bench: 
     drawing.write_bytes(NOTED_SVG)
     arm.locator("input[type=file]").set_input_files(str(drawing))
     arm.locator("button[data-action=upload]").click()
-    note = "left out 1 text element(s)"
+    note = "left out 1 foreignObject element(s)"
     expect(arm.locator(".job-notes")).to_contain_text(note, timeout=30_000)  # on the card while it draws
     expect(page.locator("#jobs tr", has_text="boxed.svg").first.locator(".job-notes")).to_contain_text(
         note, timeout=90_000)  # and in the jobs list after
