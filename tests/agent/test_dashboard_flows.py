@@ -23,6 +23,8 @@ from .conftest import Bench, start_bench, stop_bench
 from .test_dashboard import shot
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "images"
+MMU_STEP_MS = 120_000
+"""A load or eject on the simulated MMU takes seconds; a machine shared with other test runs may stretch that."""
 DESKTOP = {"width": 1280, "height": 900}
 PHONE = {"width": 390, "height": 844}
 NOTED_SVG = (b'<svg xmlns="http://www.w3.org/2000/svg" width="60mm" height="40mm" viewBox="0 0 60 40">'
@@ -216,13 +218,13 @@ def test_mmu_one_row_of_slots_and_actions_for_the_chosen_one(page: Page, bench: 
     mmu.locator("button.slot[data-slot='2']").click()
     expect(mmu.locator("button.slot[data-slot='2']")).to_have_attribute("aria-pressed", "true")
     mmu.locator("button[data-action=load][data-slot='2']").click()
-    expect(mmu.locator(".state")).to_contain_text(re.compile("L2 finished|FINDA"), timeout=60_000)
+    expect(mmu.locator(".state")).to_contain_text(re.compile("L2 finished|FINDA"), timeout=MMU_STEP_MS)
     if mmu.locator(".error-box").count():  # the bench's MMU fails one feed to FINDA: Retry heals it
         mmu.locator("button[data-action=retry]").click()
-        expect(mmu.locator(".state")).to_contain_text("L2 finished", timeout=60_000)
+        expect(mmu.locator(".state")).to_contain_text("L2 finished", timeout=MMU_STEP_MS)
     mmu.locator("button[data-action=eject][data-slot='2']").click()
     assert "slot 2" in page.answers[-1]  # type: ignore[attr-defined]
-    expect(mmu.locator(".state")).to_contain_text("E2 finished", timeout=60_000)
+    expect(mmu.locator(".state")).to_contain_text("E2 finished", timeout=MMU_STEP_MS)
 
 
 def test_lineus_pen_height_and_stored_drawings(page: Page, bench: Bench) -> None:
