@@ -903,7 +903,6 @@ class _Reader:
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
-        start = 0
         for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
@@ -939,10 +938,10 @@ class _Reader:
         closed = [np.vstack([r, r[:1]]) for r in rings]
         rule = style.get("fill-rule", "nonzero").strip()
         own = _Fill(closed, rule)
-        if fill == "solid" and not stroke and len(out) > start:
+        if fill == "solid" and not stroke and out:
             border = _border(own, closed)
             if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
-                out.replace(out[:start] + border)
+                out.replace(border)
         if covers:
             self.hide_under(own)
         if fill == "solid":
