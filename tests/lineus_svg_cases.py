@@ -234,6 +234,9 @@ CASES: dict[str, tuple[str, str]] = {
     "root clip-path": (doc('<clipPath id="c"><rect x="0" y="0" width="120" height="120"/></clipPath>'
                            f'<rect x="20" y="20" width="160" height="160" {S}/>', 'clip-path="url(#c)"'),
                        "root clip-path"),
+    "clip path not displayed": (doc('<clipPath id="c" display="none"><rect width="50" height="50"/></clipPath>'
+                                    f'<rect x="20" y="20" width="160" height="160" {S} clip-path="url(#c)"/>'),
+                                "clipped fill"),
     "clip cycle": (doc('<clipPath id="a" clip-path="url(#b)"><rect x="20" y="20" width="160" height="160"/>'
                        '</clipPath><clipPath id="b" clip-path="url(#a)"><rect x="0" y="0" width="120" '
                        'height="120"/></clipPath><circle cx="100" cy="100" r="90" clip-path="url(#a)"/>'),
@@ -256,6 +259,10 @@ CASES: dict[str, tuple[str, str]] = {
                                                   '<rect x="20" y="20" width="60" height="60" fill="url(#g)"/>'
                                                   '<rect x="100" y="100" width="60" height="60" fill="url(#h)"/>'),
                                               "white fill"),
+    "stroke of no paint server": (doc('<defs><rect id="r" width="5" height="5"/></defs>'
+                                      '<rect x="20" y="20" width="60" height="60" fill="none" stroke="url(#r)"/>'
+                                      '<rect x="100" y="100" width="60" height="60" fill="none" '
+                                      'stroke="url(#none) black" stroke-width="2"/>'), "white fill"),
     "missing paint server": (doc('<rect x="20" y="20" width="60" height="60" fill="url(#nothing)"/>'
                                  '<rect x="100" y="100" width="60" height="60" fill="url(#nothing) black"/>'),
                              "white fill"),
