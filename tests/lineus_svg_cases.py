@@ -103,6 +103,8 @@ CASES: dict[str, tuple[str, str]] = {
                              'height="100"/></symbol><use href="#s"/>'), "use"),
     "display none on the root is ignored": (doc(f'<rect x="20" y="20" width="100" height="100" {S}/>',
                                                 'display="none"'), "hidden parts"),
+    "mutual use cycle": (doc(f'<use id="u1" href="#u2"/><use id="u2" href="#u1"/>'
+                             f'<rect x="40" y="40" width="120" height="120" {S}/>'), "use cycle"),
     "use cycle": (doc(f'<g id="a"><rect x="20" y="20" width="60" height="60" {S}/><use href="#a" x="50"/></g>'
                       f'<rect id="b" x="120" y="120" width="50" height="50" {S}/>'), "use cycle"),
     "use inherits style": (doc('<defs><path id="p" d="M20 20 L180 180"/></defs>'
@@ -132,6 +134,17 @@ CASES: dict[str, tuple[str, str]] = {
     "css media print": (doc(f'<style>@media print {{ rect {{ display: none }} }} @media screen {{ circle '
                             f'{{ display: none }} }}</style><rect x="20" y="20" width="60" height="60" {S}/>'
                             f'<circle cx="140" cy="140" r="30" {S}/>'), "css cascade"),
+    "css root, universal and attribute word": (doc(f'<style>:root rect {{ stroke: none }} * > [class~=on] '
+                                                   f'{{ stroke: black }} circle[r="30"] {{ display: none }}</style>'
+                                                   f'<rect class="a on" x="20" y="20" width="60" height="60" {S}/>'
+                                                   f'<rect class="a" x="100" y="20" width="60" height="60" {S}/>'
+                                                   f'<circle cx="50" cy="140" r="30" {S}/>'
+                                                   f'<circle cx="140" cy="140" r="31" {S}/>'), "css cascade"),
+    "css later rule of equal specificity wins": (doc('<style>.a { stroke: black } .b { stroke: none }</style>'
+                                                     '<rect class="b a" x="20" y="20" width="60" height="60" '
+                                                     'fill="none" stroke-width="2"/><circle cx="140" cy="140" '
+                                                     'r="30" fill="none" stroke="black" stroke-width="2"/>'),
+                                                 "css cascade"),
     "presentation attributes": (doc('<style>rect { stroke: black }</style>'
                                     '<rect x="20" y="20" width="160" height="160" stroke="none" fill="none" '
                                     'stroke-width="2"/><circle cx="100" cy="100" r="40" fill="none" '
@@ -182,6 +195,14 @@ CASES: dict[str, tuple[str, str]] = {
                            'stroke-linecap="round" stroke-dasharray="0 20"/>'), "dashes"),
     "dashes as css": (doc(f'<style>.d {{ stroke-dasharray: 12px 8px }}</style>'
                           f'<path class="d" d="M20 20 L180 180" {S}/>'), "dashes"),
+    "dashes through use and a transform": (doc(f'<defs><path id="p" d="M0 0 H80" stroke-dasharray="10 6" {S}/>'
+                                               '</defs><use href="#p" x="20" y="40"/><use href="#p" '
+                                               'transform="translate(20 120) rotate(20) scale(1.5 1)"/>'), "dashes"),
+    "dashes on a polyline with percentages": (doc(f'<polyline points="20,20 180,20 180,180 20,180" '
+                                                  f'stroke-dasharray="5% 3%" stroke-dashoffset="2%" {S}/>'),
+                                              "dashes"),
+    "dashed fill border stays whole": (doc('<rect x="40" y="40" width="120" height="120" fill="black" '
+                                           'stroke="black" stroke-width="2" stroke-dasharray="10 10"/>'), "dashes"),
     # -- clip paths --------------------------------------------------------------------------------------------
     "clipped fill": (doc('<clipPath id="c"><rect x="0" y="0" width="100" height="200"/></clipPath>'
                          '<circle cx="100" cy="100" r="70" clip-path="url(#c)"/>'), "clipped fill"),
@@ -213,6 +234,9 @@ CASES: dict[str, tuple[str, str]] = {
     "root clip-path": (doc('<clipPath id="c"><rect x="0" y="0" width="120" height="120"/></clipPath>'
                            f'<rect x="20" y="20" width="160" height="160" {S}/>', 'clip-path="url(#c)"'),
                        "root clip-path"),
+    "clip path not displayed": (doc('<clipPath id="c" display="none"><rect width="50" height="50"/></clipPath>'
+                                    f'<rect x="20" y="20" width="160" height="160" {S} clip-path="url(#c)"/>'),
+                                "clipped fill"),
     "clip cycle": (doc('<clipPath id="a" clip-path="url(#b)"><rect x="20" y="20" width="160" height="160"/>'
                        '</clipPath><clipPath id="b" clip-path="url(#a)"><rect x="0" y="0" width="120" '
                        'height="120"/></clipPath><circle cx="100" cy="100" r="90" clip-path="url(#a)"/>'),
@@ -235,6 +259,10 @@ CASES: dict[str, tuple[str, str]] = {
                                                   '<rect x="20" y="20" width="60" height="60" fill="url(#g)"/>'
                                                   '<rect x="100" y="100" width="60" height="60" fill="url(#h)"/>'),
                                               "white fill"),
+    "stroke of no paint server": (doc('<defs><rect id="r" width="5" height="5"/></defs>'
+                                      '<rect x="20" y="20" width="60" height="60" fill="none" stroke="url(#r)"/>'
+                                      '<rect x="100" y="100" width="60" height="60" fill="none" '
+                                      'stroke="url(#none) black" stroke-width="2"/>'), "white fill"),
     "missing paint server": (doc('<rect x="20" y="20" width="60" height="60" fill="url(#nothing)"/>'
                                  '<rect x="100" y="100" width="60" height="60" fill="url(#nothing) black"/>'),
                              "white fill"),
@@ -284,6 +312,9 @@ TEXT_CASES: dict[str, str] = {
                             '</text>'),
     "text tspans": doc('<text x="20" y="50" font-size="20">first <tspan x="20" y="100" font-size="30">second'
                        '</tspan><tspan dx="10">third</tspan></text>'),
+    "text in a styled group": doc('<g font-family="serif" font-size="24" transform="translate(10 0)">'
+                                  '<text x="30" y="80">Serif text</text></g>'),
+    "text preserving spaces": doc('<text x="20" y="100" font-size="20" xml:space="preserve">a   b</text>'),
     "text css font size": doc('<style>text { font-size: 2em }</style><text x="20" y="120">Big</text>'),
 }
 """Text cases: the letters differ from the browser's font, so these are compared by the box the ink covers."""

@@ -49,14 +49,15 @@ def test_tspans_start_new_chunks_and_transforms_apply() -> None:
     assert turned[0] == pytest.approx(100, abs=1)
 
 
-@pytest.mark.parametrize(("names", "faces", "width"), FONT_FAMILIES)
-def test_every_font_family_row_picks_its_faces(names: tuple[str, ...], faces: tuple[str, ...], width: float) -> None:
+@pytest.mark.parametrize(("names", "faces", "width", "space"), FONT_FAMILIES)
+def test_every_font_family_row_picks_its_faces(names: tuple[str, ...], faces: tuple[str, ...], width: float,
+                                               space: float) -> None:
     for name in names:
         for index, (weight, style) in enumerate([("normal", "normal"), ("bold", "normal"), ("normal", "italic"),
                                                  ("bold", "italic")]):
             chosen = hershey_face({"font-family": f"'{name}', fantasy-unknown", "font-weight": weight,
                                    "font-style": style})
-            assert chosen == (faces[index], width)
+            assert chosen == (faces[index], width, space)
 
 
 def test_css_cascade_specificity_important_and_inheritance() -> None:

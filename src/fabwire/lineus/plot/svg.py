@@ -840,19 +840,20 @@ class _Reader:
         if self.points > MAX_POINTS:
             raise InputError(f"{self.name}: the drawing has more than {MAX_POINTS:,} points; refusing it")
 
-    def _fill_kind(self, style: dict[str, str]) -> tuple[str, ET.Element | None]:
-        """('none' | 'solid' | 'pattern', the pattern element): how the fill paints. A `url()` to nothing takes
-        its fallback colour, else none (SVG 1.1 §11.2); a gradient paints like a solid colour."""
-        if not paints(style, "fill"):
+    def _paint_kind(self, style: dict[str, str], which: str = "fill") -> tuple[str, ET.Element | None]:
+        """('none' | 'solid' | 'pattern', the pattern element): how the fill or stroke paints. A `url()` to
+        nothing, or to an element that is no paint server, takes its fallback colour, else none (SVG 1.1 §11.2);
+        a gradient paints like a solid colour."""
+        if not paints(style, which):
             return "none", None
-        value = style.get("fill", "").strip()
+        value = style.get(which, "").strip()
         ref = iri(value)
         if ref is None:
             return "solid", None
         target = self.ids.get(ref)
         if target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient"):
             fallback = value[value.find(")") + 1:].strip()
-            if fallback and paints({**style, "fill": fallback}, "fill"):
+            if fallback and paints({**style, which: fallback}, which):
                 return "solid", None
             return "none", None
         if local(target.tag) == "pattern":
@@ -891,8 +892,8 @@ class _Reader:
               viewport: tuple[float, float], out: Ink) -> None:
         if style.get("visibility", "visible").strip() != "visible":
             return
-        stroke = paints(style, "stroke")
-        fill, pattern = self._fill_kind(style)
+        stroke = self._paint_kind(style, "stroke")[0] != "none"
+        fill, pattern = self._paint_kind(style)
         covers = not self._shaded and bool(self._below) and opaque_fill(style)
         if not (stroke or covers) and fill == "none":
             return
@@ -903,7 +904,6 @@ class _Reader:
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
-        start = 0
         for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
@@ -939,10 +939,10 @@ class _Reader:
         closed = [np.vstack([r, r[:1]]) for r in rings]
         rule = style.get("fill-rule", "nonzero").strip()
         own = _Fill(closed, rule)
-        if fill == "solid" and not stroke and len(out) > start:
+        if fill == "solid" and not stroke and out:
             border = _border(own, closed)
             if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
-                out.replace(out[:start] + border)
+                out.replace(border)
         if covers:
             self.hide_under(own)
         if fill == "solid":
@@ -1061,6 +1061,8 @@ class _Reader:
         if clip is None or local(clip.tag) != "clipPath":
             self.unsupported[f"clip-path {value!r} does not name a clipPath here: drawn unclipped"] += 1
             return None
+        if own_style(clip, self.sheet).get("display", "").strip() == "none":
+            return None  # Chromium draws what refers to a clip path that is not displayed unclipped
         if ref in stack:
             self.unsupported[f"clip path #{ref} refers back to itself: that reference is left out, as in "
                              "browsers"] += 1

@@ -30,35 +30,38 @@ TEXT_MODES = ("hershey", "outline")
 CAP_HEIGHT_PER_EM = 0.72
 """Capital height of the letters as a share of the font size (Arial 0.716, DejaVu Sans 0.729, Helvetica 0.717)."""
 XML_SPACE = "{http://www.w3.org/XML/1998/namespace}space"
-FONT_FAMILIES: tuple[tuple[tuple[str, ...], tuple[str, str, str, str], float], ...] = (
-    # (family names, Hershey faces regular / bold / italic / bold italic, width) - CSS Fonts 4 §4.2 generic
-    # families and common faces. Width scales the Hershey letters across so a line of text is as long as in the
-    # browser's face: measured on a pangram against Noto Sans, Noto Serif and DejaVu Sans Mono at 30 px.
+FONT_FAMILIES: tuple[tuple[tuple[str, ...], tuple[str, str, str, str], float, float], ...] = (
+    # (family names, Hershey faces regular / bold / italic / bold italic, width, space) - CSS Fonts 4 §4.2 generic
+    # families and common faces. Width scales the Hershey letters across so a word is as long as in the browser's
+    # face, measured on a pangram against Noto Sans, Noto Serif and DejaVu Sans Mono at 30 px; space is the
+    # advance of a space in em, from those fonts' metrics (Hershey spaces are far wider).
     (("serif", "times", "times new roman", "georgia", "garamond", "dejavu serif", "liberation serif",
-      "noto serif"), ("timesr", "timesrb", "timesi", "timesib"), 0.79),
-    (("cursive", "comic sans ms", "brush script mt", "script"), ("scripts", "scriptc", "scripts", "scriptc"), 1.0),
-    (("fantasy", "fraktur", "old english text mt"), ("gothiceng", "gothiceng", "gothicita", "gothicita"), 0.86),
+      "noto serif"), ("timesr", "timesrb", "timesi", "timesib"), 0.84, 0.26),
+    (("cursive", "comic sans ms", "brush script mt", "script"), ("scripts", "scriptc", "scripts", "scriptc"), 1.12,
+     0.26),
+    (("fantasy", "fraktur", "old english text mt"), ("gothiceng", "gothiceng", "gothicita", "gothicita"), 0.93,
+     0.26),
     (("monospace", "courier", "courier new", "dejavu sans mono", "liberation mono"),
-     (DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"), 1.03),
+     (DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"), 1.03, 0.6),
     (("sans-serif", "arial", "helvetica", "verdana", "dejavu sans", "liberation sans", "noto sans", "system-ui"),
-     (DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"), 0.84),
+     (DEFAULT_FONT, "futuram", DEFAULT_FONT, "futuram"), 0.91, 0.26),
 )
 """Hershey faces for CSS font families; the first listed family known here chooses (else the last row)."""
 
-_SPACES = re.compile(r" {2,}")
+_WORDS = re.compile(r"( +)")
 
 
-def hershey_face(style: dict[str, str]) -> tuple[str, float]:
-    """The Hershey face and width factor for the style's font-family, font-weight and font-style."""
+def hershey_face(style: dict[str, str]) -> tuple[str, float, float]:
+    """The Hershey face, width factor and space advance (em) for the style's font-family, -weight and -style."""
     bold = style.get("font-weight", "normal").strip().lower() in ("bold", "bolder", "600", "700", "800", "900")
     italic = style.get("font-style", "normal").strip().lower() in ("italic", "oblique")
     pick = (2 if italic else 0) + (1 if bold else 0)
     for name in (n.strip().strip("'\"").lower() for n in style.get("font-family", "").split(",")):
-        for names, faces, width in FONT_FAMILIES:
+        for names, faces, width, space in FONT_FAMILIES:
             if name in names:
-                return faces[pick], width
-    _, faces, width = FONT_FAMILIES[-1]
-    return faces[pick], width
+                return faces[pick], width, space
+    _, faces, width, space = FONT_FAMILIES[-1]
+    return faces[pick], width, space
 
 
 @functools.lru_cache(maxsize=4096)
@@ -187,12 +190,19 @@ class TextLayout:
                 end += 1
             text = "".join(c.char for c in chunk[index:end])
             size = number(first.style.get("font-size"), 16.0)
-            face, width = hershey_face(first.style)
-            lines, advance, notes = _strokes(text, face, size * CAP_HEIGHT_PER_EM)
-            self.notes.extend(notes)
-            if first.style.get("visibility", "visible").strip() == "visible":
-                runs.append((x, y, [np.column_stack([p[:, 0] * width + x, y - p[:, 1]]) for p in lines]))
-            x += advance * width
+            face, width, space = hershey_face(first.style)
+            shown = first.style.get("visibility", "visible").strip() == "visible"
+            for word in _WORDS.split(text):
+                if word.startswith(" "):
+                    x += len(word) * space * size
+                    continue
+                if not word:
+                    continue
+                lines, advance, notes = _strokes(word, face, size * CAP_HEIGHT_PER_EM)
+                self.notes.extend(notes)
+                if shown:
+                    runs.append((x, y, [np.column_stack([p[:, 0] * width + x, y - p[:, 1]]) for p in lines]))
+                x += advance * width
             index = end
         self._pen = (x, y)
         anchor = chunk[0].style.get("text-anchor", "start").strip()
