@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fabwire.xyz import gcodearrays
+from fabwire.xyz import gcodearrays, slicerfigures
 from fabwire.xyz.gcodearrays import VALUE, Words
 
 DEFAULT_FACETS = 50
@@ -31,6 +30,8 @@ class GcodeMetadata:
     layers: int | None = None
     facets: int | None = None
     slicer: str | None = None
+    notes: tuple[str, ...] = ()
+    """Why a figure was set aside (a slicer's placeholder, a zero, a value no print has)."""
 
     @property
     def complete(self) -> bool:
@@ -44,82 +45,11 @@ class GcodeMetadata:
             layers=self.layers if self.layers is not None else other.layers,
             facets=self.facets if self.facets is not None else other.facets,
             slicer=self.slicer or other.slicer,
+            notes=self.notes + other.notes,
         )
 
 
-_NUM = rb"([0-9]+(?:\.[0-9]*)?)"
-
-
-def _first(pattern: bytes) -> re.Pattern[bytes]:
-    return re.compile(pattern, re.MULTILINE | re.IGNORECASE)
-
-
-# Each list is in order of preference: the XYZ key a previous conversion wrote wins over a slicer's own wording.
-_TIME = (
-    ("xyz", _first(rb"^;[ \t]*print_time[ \t]*=[ \t]*" + _NUM)),
-    ("cura", _first(rb"^;TIME:[ \t]*" + _NUM)),
-    ("prusaslicer", _first(rb"^;[ \t]*estimated printing time \(normal mode\)[ \t]*=[ \t]*([^\r\n]+)")),
-    ("simplify3d", _first(rb"^;[ \t]*Build time:[ \t]*([^\r\n]+)")),
-)
-_FILAMENT = (
-    ("xyz", _first(rb"^;[ \t]*total_filament[ \t]*=[ \t]*" + _NUM)),
-    ("cura", _first(rb"^;Filament used:[ \t]*([0-9.,m \t]+)\r?$")),
-    ("prusaslicer", _first(rb"^;[ \t]*filament used \[mm\][ \t]*=[ \t]*([0-9., \t]+)")),
-    ("simplify3d", _first(rb"^;[ \t]*Filament length:[ \t]*" + _NUM + rb"[ \t]*mm")),
-    ("slic3r", _first(rb"^;[ \t]*filament[ _]used[ \t]*=[ \t]*" + _NUM)),
-)
-_LAYERS = (
-    ("xyz", _first(rb"^;[ \t]*total_layers[ \t]*=[ \t]*([0-9]+)")),
-    ("cura", _first(rb"^;LAYER_COUNT:[ \t]*([0-9]+)")),
-    ("prusaslicer", _first(rb"^;[ \t]*total layers count[ \t]*=[ \t]*([0-9]+)")),
-)
-_FACETS = _first(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)")
-_DECIMAL = rb"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
-"""A number as float() takes it (`1.2.3h` and `.h` are no durations)."""
-_DURATION = re.compile(_DECIMAL + rb"[ \t]*(d|h|m|s)", re.IGNORECASE)
-_S3D_DURATION = re.compile(_DECIMAL + rb"[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
-_UNIT_SECONDS = {b"d": 86400, b"h": 3600, b"m": 60, b"s": 1, b"hour": 3600, b"hr": 3600, b"minute": 60, b"min": 60,
-                 b"second": 1, b"sec": 1}
-_SLICER_NAMES = (
-    (rb"prusaslicer", "prusaslicer"), (rb"superslicer", "prusaslicer"), (rb"cura", "cura"),
-    (rb"simplify3d", "simplify3d"), (rb"slic3r", "slic3r"), (rb"xyzprint", "xyz"), (rb"xyzware", "xyz"),
-)
-
-
-ABSURD = 10**18
-"""Stands for a stated number too long to be real (hundreds of digits): `intake` refuses the file for it."""
-
-
-def _whole(raw: bytes) -> int:
-    """A stated number rounded to a whole one; ABSURD for one with more digits than any real figure has."""
-    value = float(raw) if len(raw.partition(b".")[0]) <= 18 else math.inf
-    return round(value) if value < ABSURD else ABSURD
-
-
-def _duration(text: bytes, units: re.Pattern[bytes]) -> int | None:
-    parts = units.findall(text)
-    if not parts:
-        return None
-    total = sum(float(value) * _UNIT_SECONDS[unit.lower()] for value, unit in parts)
-    return round(total) if total < ABSURD else ABSURD
-
-
-def _sum_numbers(text: bytes) -> float | None:
-    """The sum of the stated numbers; ABSURD when it is beyond a float (hundreds of digits)."""
-    values = [float(v) for v in re.findall(rb"[0-9]+(?:\.[0-9]*)?", text)]
-    if not values:
-        return None
-    total = round(sum(values), 6)
-    return total if math.isfinite(total) else float(ABSURD)
-
-
-def _search(patterns: Iterable[tuple[str, re.Pattern[bytes]]], windows: Iterable[bytes]) -> tuple[str, bytes] | None:
-    for name, pattern in patterns:
-        for window in windows:
-            found = pattern.search(window)
-            if found:
-                return name, found.group(1)
-    return None
+_FACETS = re.compile(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)", re.MULTILINE | re.IGNORECASE)
 
 
 def _comment_lines(window: bytes) -> bytes:
@@ -127,40 +57,23 @@ def _comment_lines(window: bytes) -> bytes:
     return b"\n".join(line for line in window.split(b"\n") if line.lstrip(b" \t")[:1] == b";")
 
 
+_FIGURE_NAMES = {"time": "print time", "filament": "filament", "layers": "layer count"}
+
+
 def header_metadata(*windows: bytes) -> GcodeMetadata:
-    """The values slicer comments state in the given pieces of a G-code (its head and its tail)."""
+    """The values slicer comments state in the given pieces of a G-code (its head and its tail), as the table of
+    wordings in `slicerfigures` reads them; figures not believed are left out and named in `notes`."""
     windows = tuple(_comment_lines(window) for window in windows)
-    time_s: int | None = None
-    filament: float | None = None
-    layers: int | None = None
-    found = _search(_TIME, windows)
-    if found:
-        name, raw = found
-        if name == "prusaslicer":
-            time_s = _duration(raw, _DURATION)
-        elif name == "simplify3d":
-            time_s = _duration(raw, _S3D_DURATION)
-        else:
-            time_s = _whole(raw)
-    found = _search(_FILAMENT, windows)
-    if found:
-        name, raw = found
-        if name == "cura":
-            metres = _sum_numbers(raw)
-            filament = None if metres is None else round(metres * 1000.0, 6)
-        else:
-            filament = _sum_numbers(raw)
-    found = _search(_LAYERS, windows)
-    if found:
-        layers = _whole(found[1])
-    facets = _search((("xyz", _FACETS),), windows)
-    slicer = None
-    lowered = windows[0][:4096].lower() if windows else b""
-    for needle, name in _SLICER_NAMES:
-        if needle in lowered:
-            slicer = name
+    stated = slicerfigures.stated_figures(windows)
+    facets = None
+    for window in windows:
+        found = _FACETS.search(window)
+        if found:
+            count = int(found.group(1)) if len(found.group(1)) <= 18 else slicerfigures.ABSURD
+            facets = count if 0 < count <= slicerfigures.MAX_COUNT else None
             break
-    return GcodeMetadata(time_s, filament, layers, _whole(facets[1]) if facets else None, slicer)
+    notes = tuple(f"the stated {_FIGURE_NAMES[figure]} is not believed: {why}" for figure, why in stated.rejected)
+    return GcodeMetadata(stated.time_s, stated.filament_mm, stated.layers, facets, stated.slicer, notes)
 
 
 # G-code as Marlin reads it: a word is a letter, optional blanks, then a decimal number without exponent (so

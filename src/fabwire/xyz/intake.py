@@ -26,6 +26,7 @@ import numpy as np
 
 from fabwire import units
 from fabwire.errors import InputError
+from fabwire.xyz import slicerfigures
 from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
 
 MAGIC = b"3DPFNKG13WTW"
@@ -441,16 +442,21 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
     return Prepared(keys, header, meta, computed is not None)
 
 
+def _tail(src: BinaryIO, total: int) -> bytes:
+    """The last TAIL_WINDOW bytes beyond the head window, from a line start (empty for a file the head covers)."""
+    if total <= HEAD_WINDOW:
+        return b""
+    start = max(HEAD_WINDOW, total - TAIL_WINDOW)
+    src.seek(start)
+    tail = normalise(src.read(total - start))
+    return tail[tail.find(b"\n") + 1:] if start > HEAD_WINDOW else tail
+
+
 def _metadata(
     src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
-    tail = b""
-    if total > CHUNK:
-        src.seek(max(CHUNK, total - TAIL_WINDOW))
-        tail = normalise(src.read())
-    stated = header_metadata(head[:HEAD_WINDOW], tail)
-    _check_plausible(stated, name, "its comments state", "which no print takes")
+    """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps)."""
+    stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete:
         return stated, None
     analyzer = MoveAnalyzer()
@@ -464,23 +470,13 @@ def _metadata(
     return stated, computed
 
 
-MAX_PRINT_S = 90 * 86400
-"""Longest print time believed: the longest real jobs take days, not months."""
-MAX_FILAMENT_MM = 10_000_000.0
-"""Most filament believed: 10 km, fifty spools; a da Vinci cartridge holds 200-300 m."""
-
-
-MAX_COUNT = 100_000_000
-"""Most layers or facets believed (a 300 mm print at 0.01 mm is 30,000 layers)."""
-
-
 def _check_plausible(meta: GcodeMetadata, name: str, how: str, why: str) -> None:
     """InputError when the figures say the file is no print at all: coordinates far outside any build volume
     (a Z of 1e23 mm) add up to centuries of printing, and the printer would show that as its time left."""
-    too_long = meta.print_time_s is not None and meta.print_time_s > MAX_PRINT_S
-    too_much = meta.filament_mm is not None and not meta.filament_mm <= MAX_FILAMENT_MM
+    too_long = meta.print_time_s is not None and meta.print_time_s > slicerfigures.MAX_PRINT_S
+    too_much = meta.filament_mm is not None and not meta.filament_mm <= slicerfigures.MAX_FILAMENT_MM
     too_many = [f"{units.count(n, noun)}" for n, noun in ((meta.layers, "layer"), (meta.facets, "facet"))
-                if n is not None and n > MAX_COUNT]
+                if n is not None and n > slicerfigures.MAX_COUNT]
     if too_long or too_much or too_many:
         what = (f"{units.duration(meta.print_time_s)} of printing" if too_long
                 else f"{units.filament(meta.filament_mm)} of filament" if too_much else too_many[0])

@@ -218,8 +218,10 @@ def _gcode_info(app: App, plain: Path, file: Path) -> None:
     sources = {"print_time_s": source(stated.print_time_s), "filament_mm": source(stated.filament_mm),
                "layers": source(stated.layers)}
     data = {"file": str(file), "kind": "gcode", "slicer": stated.slicer, "print_time_s": final.print_time_s,
-            "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources}
+            "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources,
+            "notes": list(stated.notes)}
+    notes = "".join(f"\n{note}" for note in stated.notes)
     app.output.result(data, f"{file}: G-code from {stated.slicer or 'an unknown slicer'}; print time "
                             f"{units.duration(final.print_time_s)} ({sources['print_time_s']}), filament "
                             f"{units.filament(final.filament_mm)} ({sources['filament_mm']}), "
-                            f"{units.count(final.layers, 'layer')} ({sources['layers']})")
+                            f"{units.count(final.layers, 'layer')} ({sources['layers']}){notes}")
