@@ -17,7 +17,7 @@ import os
 import re
 import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from io import BytesIO
 from pathlib import Path
 from typing import BinaryIO
@@ -128,9 +128,18 @@ def identify(head: bytes, size: int | None = None) -> Kind:
         return Kind.STL
     if text.lstrip().startswith((b"<?xml", b"<svg", b"<!DOCTYPE", b"<html")):
         return Kind.XML
-    if _CONTROL.search(head):
+    if _CONTROL.search(head) and not _nul_only(head):
         return Kind.BINARY
     return Kind.GCODE
+
+
+def _nul_only(head: bytes) -> bool:
+    """Whether the only control bytes of text are NULs, few of them or a run that pads its end (what a copy off an
+    SD card leaves): G-code with NULs, which `gcode_lines` drops (padding) or refuses by line (inside the code)."""
+    text = head.rstrip(b"\0")
+    if not text.strip() or _CONTROL.search(text.replace(b"\0", b"")):
+        return False
+    return text.count(b"\0") <= max(8, len(text) // 100)
 
 
 def _base64_kind(head: bytes) -> Kind | None:
@@ -304,15 +313,55 @@ def _long_line(name: str, length: int) -> InputError:
                       "printer reads it")
 
 
-def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0) -> Iterator[bytes]:
-    """The whole G-code from the file's start as LF-terminated, line-aligned chunks of at most about CHUNK bytes:
-    BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within CHUNK + MAX_LINE."""
+def content_end(src: BinaryIO) -> int:
+    """The stream's size without the NUL bytes that pad its end (a file copied off an SD card or written in fixed
+    blocks ends in them), read backwards in SNIFF pieces."""
+    end = stream_size(src)
+    while end > 0:
+        start = max(0, end - SNIFF)
+        src.seek(start)
+        piece = src.read(end - start).rstrip(b"\0")
+        if piece:
+            return start + len(piece)
+        end = start
+    return 0
+
+
+def padding_note(name: str, total: int, end: int) -> str | None:
+    """The note for NUL padding dropped from the end of a file, if any."""
+    if end >= total:
+        return None
+    return f"{name}: the {total - end} NUL bytes that pad its end were dropped"
+
+
+def _without_nuls(text: bytes, name: str, lines_before: int, repaired: list[int] | None) -> bytes:
+    """`text` (normalised, after `lines_before` whole lines) without its NUL bytes when `repaired` collects their
+    line numbers; otherwise the InputError naming the first one's line."""
+    runs = [lines_before + text.count(b"\n", 0, run.start()) + 1 for run in re.finditer(rb"\0+", text)]
+    if repaired is None:
+        raise InputError(f"{name} has a NUL byte inside its G-code on line {runs[0]} (a printer stalls on it); "
+                         "`fabwire xyz convert --repair` drops such bytes")
+    repaired.extend(line for line in runs if not repaired or line != repaired[-1])
+    return text.replace(b"\0", b"")
+
+
+def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0, *,
+                end: int | None = None, repaired: list[int] | None = None) -> Iterator[bytes]:
+    """The whole G-code from the file's start (to `end`, default its end) as LF-terminated, line-aligned chunks of
+    at most about CHUNK bytes: BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within
+    CHUNK + MAX_LINE.
+
+    A NUL byte before `end` is an InputError naming its line; when `repaired` is given, NULs are dropped instead and
+    the line numbers they were on are appended to it."""
     src.seek(0)
     carry = b""
     held_cr = False
     first = True
     done = 0
-    while block := src.read(CHUNK):
+    lines = 0
+    left = stream_size(src) if end is None else end
+    while left > 0 and (block := src.read(min(CHUNK, left))):
+        left -= len(block)
         done += len(block)
         if first:
             block = block.removeprefix(BOM)
@@ -323,6 +372,8 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         if held_cr:
             block = block[:-1]
         text = normalise(block)
+        if b"\0" in text:
+            text = _without_nuls(text, name, lines, repaired)
         _check_lines(text, name, len(carry))
         if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
             raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
@@ -332,7 +383,9 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             if len(carry) > MAX_LINE:
                 raise _long_line(name, len(carry))
             continue
-        yield carry + text[:cut] if carry else text[:cut]
+        piece = carry + text[:cut] if carry else text[:cut]
+        lines += piece.count(b"\n")
+        yield piece
         carry = text[cut:]
         if len(carry) > MAX_LINE:
             raise _long_line(name, len(carry))
@@ -377,6 +430,18 @@ class Prepared:
     metadata: GcodeMetadata
     analysed: bool
     """The moves were read once already to compute metadata (so progress counts two passes)."""
+    end: int
+    """Where the G-code ends (before any NUL padding)."""
+    repaired: list[int] | None = None
+    """With repair: the lines the body pass dropped NUL bytes from (filled as the body is read)."""
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the reader set aside or changed, for the user (complete once the body was read)."""
+        if not self.repaired:
+            return self.metadata.notes
+        shown = ", ".join(map(str, self.repaired[:10])) + (" …" if len(self.repaired) > 10 else "")
+        return (*self.metadata.notes, f"NUL bytes dropped from line{'s' if len(self.repaired) > 1 else ''} {shown}")
 
 
 def stream_size(src: BinaryIO) -> int:
@@ -395,10 +460,11 @@ def _second_half(progress: Progress | None) -> Progress | None:
 
 
 def check_gcode_head(src: BinaryIO, name: str) -> tuple[bytes, int]:
-    """(the normalised first CHUNK of the G-code, the file size); G-code without commands is refused."""
-    total = stream_size(src)
+    """(the normalised first CHUNK of the G-code, its size without the NUL padding at its end); G-code without
+    commands is refused."""
+    total = content_end(src)
     src.seek(0)
-    raw = src.read(CHUNK)
+    raw = src.read(min(CHUNK, total))
     head = normalise(raw[:-1] if raw.endswith(b"\r") else raw, first=True)
     if not head.strip():
         raise InputError(f"{name} is empty G-code: nothing to convert")
@@ -420,11 +486,12 @@ def _leading_comments(head: bytes, room: int) -> bytes | None:
 
 
 def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space: int,
-            progress: Progress | None) -> Prepared:
+            progress: Progress | None, *, repair: bool = False) -> Prepared:
     """The XYZ key lines and the .3w header for a G-code (its metadata read or computed); `header_space` is the
-    room the container has for the (padded) header."""
+    room the container has for the (padded) header; `repair` drops NUL bytes inside the G-code (noted) instead of
+    refusing the file."""
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total, _first_half(progress))
+    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair)
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
     keys = (
@@ -439,7 +506,9 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
     comments = _leading_comments(head, header_space)
     fits = comments is not None and (len(keys + comments) // 16 + 1) * 16 <= header_space  # with its PKCS#7 pad
     header = keys + comments if comments is not None and fits else keys
-    return Prepared(keys, header, meta, computed is not None)
+    padding = padding_note(name, stream_size(src), total)
+    notes = meta.notes + ((padding,) if padding else ())
+    return Prepared(keys, header, replace(meta, notes=notes), computed is not None, total, [] if repair else None)
 
 
 def _tail(src: BinaryIO, total: int) -> bytes:
@@ -453,14 +522,14 @@ def _tail(src: BinaryIO, total: int) -> bytes:
 
 
 def _metadata(
-    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
+    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None, *, repair: bool = False,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps)."""
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete:
         return stated, None
     analyzer = MoveAnalyzer()
-    for chunk in gcode_lines(src, name, progress, total):
+    for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None):
         analyzer.feed_chunk(chunk)
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
@@ -490,15 +559,15 @@ def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
 
 
 def stream_metadata(src: BinaryIO, name: str) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has
-    and for lines no printer reads."""
+    """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has,
+    for lines no printer reads and for NUL bytes inside the G-code (NUL padding at its end is dropped, noted)."""
     head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total)
     if computed is None:  # the comments told everything: the lines are still each checked, however far down
-        src.seek(0)
-        for _ in gcode_lines(src, name):
+        for _ in gcode_lines(src, name, end=total):
             pass
-    return stated, computed
+    padding = padding_note(name, stream_size(src), total)
+    return (replace(stated, notes=(*stated.notes, padding)) if padding else stated), computed
 
 
 def _process(chunk: bytes) -> bytes:
@@ -526,7 +595,7 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     if prepared.analysed:
         progress = _second_half(progress)
     leading = True
-    for chunk in gcode_lines(src, name, progress, stream_size(src)):
+    for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired):
         if leading:
             found = _FIRST_CODE_LINE.search(chunk)
             end = len(chunk) if found is None else found.start()

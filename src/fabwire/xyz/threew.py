@@ -67,6 +67,8 @@ class ThreeWInfo:
     header_offset: int = 0
     pad_ok: bool = True
     model: PrinterModel | None = None
+    notes: tuple[str, ...] = ()
+    """What the conversion set aside or changed (figures not believed, NUL padding or bytes dropped)."""
 
     @property
     def crc_ok(self) -> bool:
@@ -218,13 +220,14 @@ def _encrypt_zip(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]
 
 def _write(
     src: BinaryIO, name: str, out: BinaryIO, model: PrinterModel, container: int | None, zipped: bool | None,
-    filename: str, progress: Progress | None,
+    filename: str, progress: Progress | None, repair: bool = False,
 ) -> ThreeWInfo:
     container = model.container if container is None else container
     zipped = model.zipped if zipped is None else zipped
     if container not in HEADER_OFFSET:
         raise InputError(f"unknown .3w container version {container}; use 2 or 5")
-    prepared = intake.prepare(src, name, model.file_id, filename, BODY_OFFSET - _header_start(container), progress)
+    prepared = intake.prepare(src, name, model.file_id, filename, BODY_OFFSET - _header_start(container), progress,
+                              repair=repair)
     stored = _stored_header(container, prepared.header)
     tag = TAG_ZIP if zipped else TAG_ECB
     _preamble(container, tag, stored, 0)  # fail on an oversized header before writing the body
@@ -236,7 +239,7 @@ def _write(
     return ThreeWInfo(
         container=container, tag=tag.decode(), zipped=zipped, header_encrypted=container != 5, body_encrypted=True,
         header=prepared.header, fields=_fields(prepared.header), crc_stored=crc, crc_computed=crc, gcode_size=plain,
-        body_size=size, gap=GAP, header_offset=_header_start(container), model=model,
+        body_size=size, gap=GAP, header_offset=_header_start(container), model=model, notes=prepared.notes,
     )
 
 
@@ -288,15 +291,16 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
 
 def convert_gcode_file(
     src: Path, dst: Path, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
-    zipped: bool | None = None, progress: Progress | None = None,
+    zipped: bool | None = None, progress: Progress | None = None, repair: bool = False,
 ) -> ThreeWInfo:
-    """Convert a G-code file to a .3w file; `dst` appears complete or not at all."""
+    """Convert a G-code file to a .3w file; `dst` appears complete or not at all. A NUL byte inside the G-code is
+    an InputError naming its line, or with `repair` dropped and noted in the result's `notes`."""
     target = _resolve_model(model)
     kind, head = intake.sniff(src)
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, str(src), head)
     with intake.open_input(src) as source, _atomic(dst) as out:
-        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress)
+        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress, repair)
 
 
 # --------------------------------------------------------------------------------------------------------------------
