@@ -216,10 +216,13 @@ class MoveAnalyzer:
         self._lines(chunk)
 
     def _count_markers(self, chunk: bytes) -> None:
-        if b";" not in chunk:
-            return
-        for found in _MARKERS.finditer(b"\n" + chunk):
-            self.markers[found.lastindex - 1 if found.lastindex else 0] += 1
+        text = b"\n" + chunk
+        at = text.find(b"\n;")
+        while at >= 0:  # comment lines are few: find them, then try the markers on each
+            found = _MARKERS.match(text, at)
+            if found is not None:
+                self.markers[found.lastindex - 1 if found.lastindex else 0] += 1
+            at = text.find(b"\n;", at + 2)
 
     def _lines(self, chunk: bytes) -> None:
         for letter, number, params in _COMMAND.findall(b"\n" + chunk):

@@ -334,6 +334,18 @@ def padding_note(name: str, total: int, end: int) -> str | None:
     return f"{name}: the {total - end} NUL bytes that pad its end were dropped"
 
 
+def _lines_before(src: BinaryIO, offset: int) -> int:
+    """How many lines (LF, CRLF or CR ended) the stream's first `offset` bytes hold; the position is kept."""
+    here = src.tell()
+    src.seek(0)
+    lines = 0
+    while offset > 0 and (block := src.read(min(CHUNK, offset))):
+        offset -= len(block)
+        lines += block.count(b"\n") + len(re.findall(rb"\r(?!\n)", block))
+    src.seek(here)
+    return lines
+
+
 def _without_nuls(text: bytes, name: str, lines_before: int, repaired: list[int] | None) -> bytes:
     """`text` (normalised, after `lines_before` whole lines) without its NUL bytes when `repaired` collects their
     line numbers; otherwise the InputError naming the first one's line."""
@@ -358,14 +370,15 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
     held_cr = False
     first = True
     done = 0
-    lines = 0
     left = stream_size(src) if end is None else end
     while left > 0 and (block := src.read(min(CHUNK, left))):
         left -= len(block)
+        begin = done
         done += len(block)
         if first:
             block = block.removeprefix(BOM)
             first = False
+        carried_cr = held_cr  # a CR held back from the previous block ends a line this block's text counts
         if held_cr:
             block = b"\r" + block
         held_cr = block.endswith(b"\r")
@@ -373,7 +386,7 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             block = block[:-1]
         text = normalise(block)
         if b"\0" in text:
-            text = _without_nuls(text, name, lines, repaired)
+            text = _without_nuls(text, name, _lines_before(src, begin) - carried_cr, repaired)
         _check_lines(text, name, len(carry))
         if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
             raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
@@ -383,9 +396,7 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             if len(carry) > MAX_LINE:
                 raise _long_line(name, len(carry))
             continue
-        piece = carry + text[:cut] if carry else text[:cut]
-        lines += piece.count(b"\n")
-        yield piece
+        yield carry + text[:cut] if carry else text[:cut]
         carry = text[cut:]
         if len(carry) > MAX_LINE:
             raise _long_line(name, len(carry))

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 Floats = NDArray[np.float64]
 
-WINDOW = 4096
+WINDOW = 16384
 """Moves planned together; the speed at a window's end is the last move's safe speed."""
 
 
@@ -186,54 +186,59 @@ class Planner:
         self.seconds += seconds
 
 
-def _limit_columns(table: list[Limits], which: NDArray[np.intp]) -> dict[str, Floats]:
+def _limit_columns(table: list[Limits], which: Floats) -> dict[str, Floats]:
+    """Each limit per move: one row when the window has one set of limits (the usual case), else a row per move."""
     rows = np.array([[*t.max_feedrate, *t.max_acceleration, t.acceleration, t.retract_acceleration,
                       t.travel_acceleration, *t.max_jerk, t.min_feedrate, t.min_travel_feedrate] for t in table])
-    picked = rows[which]
+    picked = rows[int(which[0]):int(which[0]) + 1] if which[0] == which[-1] else rows[which.astype(np.intp)]
     return {"max_feedrate": picked[:, 0:4], "max_acceleration": picked[:, 4:8], "acceleration": picked[:, 8],
             "retract": picked[:, 9], "travel": picked[:, 10], "jerk": picked[:, 11:15], "min_feed": picked[:, 15],
             "min_travel": picked[:, 16]}
 
 
+def _smallest(values: list[Floats]) -> Floats:
+    """The elementwise minimum of a few arrays (faster than a reduction along a short axis)."""
+    out = values[0]
+    for value in values[1:]:
+        out = np.minimum(out, value)
+    return out
+
+
 def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | None) -> tuple[float, _Carry]:
     dx, dy, dz, de, length, feed, which = columns
-    lim = _limit_columns(table, which.astype(np.intp))
+    lim = _limit_columns(table, which)
     moving = length > 0
     dist = np.where(moving, length, np.abs(de))
-    unit = np.stack([dx, dy, dz, de], axis=1) / dist[:, None]
-    absolute = np.abs(unit)
-    speed = feed / 60.0
-    speed = np.maximum(speed, np.where(de == 0, lim["min_travel"], lim["min_feed"]))
-    with np.errstate(divide="ignore"):
-        factor = np.min(np.where(absolute > 0, lim["max_feedrate"] / (speed[:, None] * absolute), np.inf), axis=1)
-        cruise = speed * np.minimum(1.0, factor)
+    axes = [a for a, delta in enumerate((dx, dy, dz, de)) if delta.any()]  # Z is mostly still: skip it then
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse_dist = 1.0 / dist
+        unit = [(dx, dy, dz, de)[a] * inverse_dist for a in axes]
+        inverse = [1.0 / np.abs(u) for u in unit]  # inf for an axis that does not move
+        speed = np.maximum(feed / 60.0, np.where(de == 0, lim["min_travel"], lim["min_feed"]))
+        cruise = _smallest([speed] + [lim["max_feedrate"][:, a] * inverse[k] for k, a in enumerate(axes)])
         accel = np.where(~moving, lim["retract"], np.where(de > 0, lim["acceleration"], lim["travel"]))
-        accel = np.minimum(accel, np.min(np.where(absolute > 0, lim["max_acceleration"] / absolute, np.inf), axis=1))
-    velocity = cruise[:, None] * unit
-    safe = np.min(np.where(np.abs(velocity) > lim["jerk"], lim["jerk"], cruise[:, None]), axis=1)
-    safe = np.minimum(safe, cruise)
+        accel = _smallest([accel] + [lim["max_acceleration"][:, a] * inverse[k] for k, a in enumerate(axes)])
+    velocity = [cruise * u for u in unit]
+    jerk_limit = [lim["jerk"][:, a] for a in axes]
+    safe = _smallest([cruise] + [np.where(np.abs(v) > limit, limit, np.inf) for v, limit in zip(velocity, jerk_limit,
+                                                                                            strict=True)])
 
-    # The junction speed into each move (PrusaSlicer's GCodeProcessor, Marlin's classic jerk).
+    # The junction speed into each move (PrusaSlicer's GCodeProcessor, Marlin's classic jerk): the per-axis speed
+    # change, the larger of the two speeds where an axis reverses; scaled down by the tightest axis.
     first = carry is None
     prev_cruise = np.concatenate(([cruise[0] if carry is None else carry.cruise], cruise[:-1]))
-    prev_velocity = np.concatenate(([velocity[0] if carry is None else carry.velocity], velocity[:-1]))
     prev_safe = np.concatenate(([safe[0] if carry is None else carry.safe], safe[:-1]))
-    larger = prev_cruise > cruise
+    factor = np.ones(len(cruise))
     with np.errstate(divide="ignore", invalid="ignore"):
-        smaller_factor = np.where(larger, cruise / prev_cruise, 1.0)
-        junction = np.minimum(prev_cruise, cruise)
-        v_factor = np.ones(len(cruise))
-        limited = np.zeros(len(cruise), dtype=bool)
-        for a in range(4):
-            v_exit = prev_velocity[:, a] * smaller_factor * np.where(limited, v_factor, 1.0)
-            v_entry = velocity[:, a] * np.where(limited, v_factor, 1.0)
-            jerk = np.where(v_exit > v_entry,
-                            np.where((v_entry > 0) | (v_exit < 0), v_exit - v_entry, np.maximum(v_exit, -v_entry)),
-                            np.where((v_entry < 0) | (v_exit > 0), v_entry - v_exit, np.maximum(-v_exit, v_entry)))
-            over = jerk > lim["jerk"][:, a]
-            v_factor = np.where(over, v_factor * lim["jerk"][:, a] / jerk, v_factor)
-            limited |= over
-    junction = np.where(limited, junction * v_factor, junction)
+        slower = np.minimum(1.0, cruise / prev_cruise)  # the previous move's speeds as it slows to this one's
+        for k, a in enumerate(axes + [a for a in range(4) if a not in axes and carry is not None]):
+            v_entry = velocity[k] if k < len(axes) else np.zeros(len(cruise))
+            before = v_entry[0] if carry is None else carry.velocity[a]
+            v_exit = np.concatenate(([before], v_entry[:-1])) * slower
+            jerk = np.where(v_exit * v_entry < 0, np.maximum(np.abs(v_exit), np.abs(v_entry)),
+                            np.abs(v_exit - v_entry))
+            factor = np.minimum(factor, lim["jerk"][:, a] / jerk)
+    junction = np.minimum(prev_cruise, cruise) * factor
     threshold = junction * 0.99
     junction = np.where((prev_safe > threshold) & (safe > threshold), safe, junction)
     if first:
@@ -260,5 +265,7 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
         times = np.where(trapezoid, (cruise - v0) / accel + (cruise - v1) / accel + (dist - up - down) / cruise,
                          (peak - v0) / accel + (peak - v1) / accel)
     times = np.where(np.isfinite(times), times, dist / np.maximum(speed, 1e-9))
-    carried = _Carry(float(cruise[-1]), velocity[-1].copy(), float(safe[-1]), float(forward[-1]))
+    last = np.zeros(4)
+    last[axes] = [v[-1] for v in velocity]
+    carried = _Carry(float(cruise[-1]), last, float(safe[-1]), float(forward[-1]))
     return float(np.sum(times)), carried
