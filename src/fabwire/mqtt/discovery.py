@@ -85,6 +85,26 @@ ENTITIES: dict[str, tuple[Entity, ...]] = {
 }
 
 
+TWO_SPOOLS = (
+    _sensor("extruder2_temperature", "Extruder 2 temperature", "extruder2_temp_c", **TEMPERATURE),
+    _sensor("filament2_left", "Filament 2 left", "filament2_left_mm", device_class="distance",
+            unit_of_measurement="mm"),
+)
+"""What a da Vinci with two spools or extruders (Jr. 2.0 Mix, 2.0 Duo) has besides."""
+
+
+def _two_spools(kind: str, model: str | None) -> bool:
+    if kind != "xyz" or not model:
+        return False
+    from fabwire.errors import InputError
+    from fabwire.xyz.models import find_model
+
+    try:
+        return find_model(model).dual_extruder
+    except InputError:
+        return False
+
+
 def discovery_payload(info: dict[str, Any], agent: str) -> dict[str, Any]:
     """The device discovery payload for a device (`DeviceInfo` as a dict) published by `agent`.
 
@@ -100,7 +120,8 @@ def discovery_payload(info: dict[str, Any], agent: str) -> dict[str, Any]:
     if info.get("firmware"):
         device["sw_version"] = info["firmware"]
     components: dict[str, dict[str, Any]] = {}
-    for entity in ENTITIES.get(kind, (STATE,)):
+    extra = TWO_SPOOLS if _two_spools(kind, info.get("model")) else ()
+    for entity in (*ENTITIES.get(kind, (STATE,)), *extra):
         unique = f"{base}_{entity.key}"
         components[unique] = {"platform": entity.platform, "name": entity.name, "unique_id": unique,
                               **dict(entity.options)}

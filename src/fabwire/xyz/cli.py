@@ -106,6 +106,8 @@ def render_status(status: Status) -> Panel:
         table.add_row("Error", str(word))
     target = status.extruder_target
     table.add_row("Extruder", units.heating(status.extruder, target or None))
+    if status.temperatures is not None and status.temperatures.count == 2:
+        table.add_row("Extruder 2", units.heating(status.temperatures.extruder2, None))
     if status.bed is not None:
         table.add_row("Bed", units.temperature(status.bed))
     if status.progress and (status.progress.percent or status.progress.elapsed_min):
@@ -114,9 +116,12 @@ def render_status(status: Status) -> Panel:
                       + ("time left unknown" if left is None else f"{units.minutes(left)} left"))
     cart = status.cartridge
     if cart is not None:
-        fil = status.filament_mm
-        text = "none" if not cart.present else f"{cart.fields[0]} {cart.colour or ''}".strip()
-        table.add_row("Filament", text + (f", {units.filament(fil)} left" if fil is not None else ""))
+        spools = status.spools
+        for index, spool in enumerate(spools):
+            fil = spool["filament_left_mm"]
+            text = "none" if not spool["present"] else f"{spool['serial']} {spool['colour'] or ''}".strip()
+            table.add_row("Filament" + (f" {index + 1}" if len(spools) > 1 else ""),
+                          text + (f", {units.filament(fil)} left" if fil is not None else ""))
     if status.nozzle:
         table.add_row("Nozzle", f"{known(status.nozzle.diameter_mm, ' mm')} (type {status.nozzle.kind})")
     table.add_row("Z offset", units.zoffset(status.zoffset))
