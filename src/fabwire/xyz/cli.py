@@ -193,9 +193,11 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
               help="Name the file is uploaded under (default: derived from the file name, ASCII only).")
 @click.option("--save-to-sd", is_flag=True, help="Keep the file on the printer's SD card (XYZware's SaveToSD; some "
                                                  "Jr. 2.0 models need it).")
+@click.option("--force", is_flag=True, help="Print G-code even when its extrusions reach beyond the printer's build "
+                                            "volume.")
 @pass_device
 def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None, upload_name: str | None,
-              save_to_sd: bool) -> None:
+              save_to_sd: bool, force: bool) -> None:
     """Print a G-code (converted to the printer's .3w) or a .3w file ('-' reads it from standard input)."""
     from fabwire.xyz import intake  # G-code scanning: loaded when a file is printed, not for a status
 
@@ -205,11 +207,11 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
     with intake.input_file(file) as (path, shown):
         kind, head = intake.sniff(path, shown)
         intake.require_printable(kind, shown, head)  # before the printer is reached
-        _print(dctx, path, Path(shown).name, no_wait, model, upload_name, save_to_sd)
+        _print(dctx, path, Path(shown).name, no_wait, model, upload_name, save_to_sd, force)
 
 
 def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: PrinterModel | None,
-           upload_name: str | None, save_to_sd: bool) -> None:
+           upload_name: str | None, save_to_sd: bool, force: bool = False) -> None:
     out = dctx.output
 
     started = [False]
@@ -224,7 +226,7 @@ def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: Pr
             return await printer.print_file(file, model=chosen, progress=uploaded,
                                             on_status=lambda st: view.show(st, {"event": "status"}),
                                             wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
-                                            on_note=view.note)
+                                            on_note=view.note, force=force)
 
     try:
         final = _with_printer(dctx, run)

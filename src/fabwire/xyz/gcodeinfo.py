@@ -33,6 +33,10 @@ class GcodeMetadata:
     slicer: str | None = None
     notes: tuple[str, ...] = ()
     """Why a figure was set aside (a slicer's placeholder, a zero, a value no print has)."""
+    extent: tuple[tuple[float, float], ...] | None = None
+    """(lowest, highest) X, Y and Z of the extruding moves in mm, from the moves; None when none extrude."""
+    arcs: int = 0
+    """G2/G3 arc moves in the file (counted from the moves)."""
 
     @property
     def complete(self) -> bool:
@@ -47,6 +51,8 @@ class GcodeMetadata:
             facets=self.facets if self.facets is not None else other.facets,
             slicer=self.slicer or other.slicer,
             notes=self.notes + other.notes,
+            extent=self.extent if self.extent is not None else other.extent,
+            arcs=self.arcs or other.arcs,
         )
 
 
@@ -162,6 +168,11 @@ VASE_LAYER_MM = 0.2
 """Layer height assumed for a spiral vase without any flat layer to learn it from."""
 
 
+def words_of(params: bytes) -> dict[bytes, float]:
+    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value, the first wins)."""
+    return _words(params)
+
+
 class MoveAnalyzer:
     """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
 
@@ -189,6 +200,9 @@ class MoveAnalyzer:
         """How far extruding moves rose while they moved (mm): spiral vase printing."""
         self.markers = [0] * len(LAYER_MARKERS)
         self.arcs = 0
+        self.low = [math.inf] * 3
+        self.high = [-math.inf] * 3
+        """The extent (mm, per axis) of the extruding moves, start and end points."""
         self._held: list[tuple[float, float, float, float, float, float]] = []
         gcodearrays.reuse_freed_memory()
 
@@ -279,6 +293,9 @@ class MoveAnalyzer:
         self.path_seconds += (length or abs(de)) * 60.0 / self.feed
         self.filament += de
         if de > 0 and (dx or dy or arc) and math.isfinite(target_z):
+            for k, (start, end) in enumerate(((x, target_x), (y, target_y), (z, target_z))):
+                self.low[k] = min(self.low[k], start, end)
+                self.high[k] = max(self.high[k], start, end)
             if dz:
                 self.vase_rise += max(0.0, dz)
             else:
@@ -365,6 +382,7 @@ class MoveAnalyzer:
             self.filament += float(np.sum(de))
             printing = (de > 0) & ((dx != 0) | (dy != 0) | (arc != 0))
             if printing.any():
+                self._reach(axes, after, printing, first, count)
                 rising = printing & (dz != 0)
                 if rising.any():
                     self.vase_rise += float(np.sum(np.maximum(dz[rising], 0.0)))
@@ -380,6 +398,20 @@ class MoveAnalyzer:
         if len(after[3]):
             self.e = float(after[3][-1])
         self.feed = float(feed[-1])
+
+    def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], printing: NDArray[np.bool_], first: int,
+               count: int) -> None:
+        """Widen the extent with the start and end points of the printing moves (arcs: their end points)."""
+        for k in range(3):
+            at = np.full(count, np.nan)
+            at[axes[k].lines - first] = after[k]
+            ends = _ffill(at, self.pos[k])
+            starts = np.concatenate(([self.pos[k]], ends[:-1]))
+            points = np.concatenate((starts[printing], ends[printing]))
+            points = points[np.isfinite(points)]
+            if len(points):
+                self.low[k] = min(self.low[k], float(points.min()))
+                self.high[k] = max(self.high[k], float(points.max()))
 
     def _arc_lengths(self, axes: list[Words], after: list[NDArray[np.float64]], arc: NDArray[np.int8], first: int,
                      count: int, moves: list[NDArray[np.float64]], length: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -424,10 +456,11 @@ class MoveAnalyzer:
     def result(self) -> GcodeMetadata:
         """The totals; absurd coordinates (beyond what a float holds) leave time and filament unknown."""
         seconds = self.seconds if not self.absurd else math.inf
+        extent = tuple(zip(self.low, self.high, strict=True)) if self.low[0] <= self.high[0] else None
         return GcodeMetadata(
             print_time_s=max(1, round(seconds)) if math.isfinite(seconds) else None,
             filament_mm=max(0.0, self.filament) if math.isfinite(self.filament) else None,
-            layers=self.layers,
+            layers=self.layers, extent=extent, arcs=self.arcs,
         )
 
 

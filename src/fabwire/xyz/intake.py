@@ -26,8 +26,9 @@ import numpy as np
 
 from fabwire import units
 from fabwire.errors import InputError
-from fabwire.xyz import slicerfigures
+from fabwire.xyz import arcwork, slicerfigures
 from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
+from fabwire.xyz.models import PrinterModel
 
 MAGIC = b"3DPFNKG13WTW"
 """The .3w signature (reference §5.1)."""
@@ -445,6 +446,8 @@ class Prepared:
     """Where the G-code ends (before any NUL padding)."""
     repaired: list[int] | None = None
     """With repair: the lines the body pass dropped NUL bytes from (filled as the body is read)."""
+    expand_arcs: bool = False
+    """The body pass turns G2/G3 arcs into line segments."""
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -496,19 +499,24 @@ def _leading_comments(head: bytes, room: int) -> bytes | None:
     return b"".join(line + b"\n" for line in head[:found.start()].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
 
 
-def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space: int,
-            progress: Progress | None, *, repair: bool = False) -> Prepared:
-    """The XYZ key lines and the .3w header for a G-code (its metadata read or computed); `header_space` is the
-    room the container has for the (padded) header; `repair` drops NUL bytes inside the G-code (noted) instead of
-    refusing the file."""
+def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header_space: int,
+            progress: Progress | None, *, repair: bool = False, force: bool = False,
+            keep_arcs: bool = False) -> Prepared:
+    """The XYZ key lines and the .3w header of a G-code for `model` (its metadata read, the moves always read
+    for their extent and arcs); `header_space` is the room the container has for the (padded) header.
+
+    `repair` drops NUL bytes inside the G-code (noted) instead of refusing the file; extrusions beyond the model's
+    build volume are an InputError unless `force` (then noted); G2/G3 arcs become line segments unless
+    `keep_arcs`."""
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair)
+    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True)
+    outside = check_build_volume(stated.merged(computed) if computed else stated, name, model, force)
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
     keys = (
         f"; filename = {safe_name}\n"
         f"; print_time = {meta.print_time_s}\n"
-        f"; machine = {file_id}\n"
+        f"; machine = {model.file_id}\n"
         f"; facets = {meta.facets}\n"
         f"; total_layers = {meta.layers}\n"
         f"; version = {XYZ_VERSION}\n"
@@ -518,8 +526,14 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
     fits = comments is not None and (len(keys + comments) // 16 + 1) * 16 <= header_space  # with its PKCS#7 pad
     header = keys + comments if comments is not None and fits else keys
     padding = padding_note(name, stream_size(src), total)
-    notes = meta.notes + ((padding,) if padding else ())
-    return Prepared(keys, header, replace(meta, notes=notes), computed is not None, total, [] if repair else None)
+    notes = meta.notes + ((padding,) if padding else ()) + ((outside,) if outside else ())
+    arcs = 0 if keep_arcs else meta.arcs
+    if arcs:
+        notes += (f"{arcs} G2/G3 arc{'s' if arcs > 1 else ''} converted to line segments within "
+                  f"{arcwork.TOLERANCE_MM} mm (no public source shows da Vinci firmware running arcs; --keep-arcs "
+                  "passes them through)",)
+    return Prepared(keys, header, replace(meta, notes=notes), computed is not None, total, [] if repair else None,
+                    arcs > 0)
 
 
 def _tail(src: BinaryIO, total: int) -> bytes:
@@ -534,10 +548,12 @@ def _tail(src: BinaryIO, total: int) -> bytes:
 
 def _metadata(
     src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None, *, repair: bool = False,
+    always: bool = False,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps)."""
+    """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
+    `always`)."""
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
-    if stated.complete:
+    if stated.complete and not always:
         return stated, None
     analyzer = MoveAnalyzer()
     for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None):
@@ -548,6 +564,29 @@ def _metadata(
     computed = analyzer.result()
     _check_plausible(computed, name, "its moves add up to", "so its coordinates lie far beyond any printer's reach")
     return stated, computed
+
+
+BUILD_MARGIN_MM = 1.0
+"""How far past the build volume an extrusion may reach before the file is refused (slicers' rounding)."""
+
+
+def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, force: bool) -> str | None:
+    """InputError when the extrusions reach beyond `model`'s build volume (G-code sliced for a larger printer),
+    naming the extent; with `force`, the note saying so instead. None when they fit or nothing extrudes."""
+    if meta.extent is None:
+        return None
+    beyond = [axis for axis, (low, high), size in zip("XYZ", meta.extent, model.build_volume_mm, strict=True)
+              if (axis != "Z" and low < -BUILD_MARGIN_MM) or high > size + BUILD_MARGIN_MM]
+    if not beyond:
+        return None
+    reach = ", ".join(f"{axis} {low:.1f} to {high:.1f} mm" for axis, (low, high) in zip("XYZ", meta.extent,
+                                                                                        strict=True))
+    volume = " × ".join(str(v) for v in model.build_volume_mm)
+    text = (f"{name} extrudes beyond the {model.name}'s build volume of {volume} mm ({reach}): it was sliced for "
+            "another printer")
+    if not force:
+        raise InputError(f"{text}; slice it for this printer, or give --force to print it anyway")
+    return text + "; converted anyway (--force)"
 
 
 def _check_plausible(meta: GcodeMetadata, name: str, how: str, why: str) -> None:
@@ -606,6 +645,7 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     if prepared.analysed:
         progress = _second_half(progress)
     leading = True
+    arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
     for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired):
         if leading:
             found = _FIRST_CODE_LINE.search(chunk)
@@ -615,4 +655,4 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
                 continue
             leading = False
             chunk = chunk[end:]
-        yield _process(chunk)
+        yield _process(chunk if arcs is None else arcs.expand(chunk))

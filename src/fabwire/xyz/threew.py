@@ -220,14 +220,14 @@ def _encrypt_zip(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]
 
 def _write(
     src: BinaryIO, name: str, out: BinaryIO, model: PrinterModel, container: int | None, zipped: bool | None,
-    filename: str, progress: Progress | None, repair: bool = False,
+    filename: str, progress: Progress | None, repair: bool = False, force: bool = False, keep_arcs: bool = False,
 ) -> ThreeWInfo:
     container = model.container if container is None else container
     zipped = model.zipped if zipped is None else zipped
     if container not in HEADER_OFFSET:
         raise InputError(f"unknown .3w container version {container}; use 2 or 5")
-    prepared = intake.prepare(src, name, model.file_id, filename, BODY_OFFSET - _header_start(container), progress,
-                              repair=repair)
+    prepared = intake.prepare(src, name, model, filename, BODY_OFFSET - _header_start(container), progress,
+                              repair=repair, force=force, keep_arcs=keep_arcs)
     stored = _stored_header(container, prepared.header)
     tag = TAG_ZIP if zipped else TAG_ECB
     _preamble(container, tag, stored, 0)  # fail on an oversized header before writing the body
@@ -245,14 +245,15 @@ def _write(
 
 def write_3w(
     gcode: bytes, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
-    zipped: bool | None = None, progress: Progress | None = None, filename: str = "temp.3w",
+    zipped: bool | None = None, progress: Progress | None = None, filename: str = "temp.3w", force: bool = False,
 ) -> bytes:
     """The .3w bytes for `gcode` as `model` expects them (container/zipped override the model's defaults)."""
     kind = intake.identify(gcode[:intake.SNIFF], len(gcode))
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, "the data", gcode[:intake.SNIFF])
     out = BytesIO()
-    _write(BytesIO(gcode), "the G-code", out, _resolve_model(model), container, zipped, filename, progress)
+    _write(BytesIO(gcode), "the G-code", out, _resolve_model(model), container, zipped, filename, progress,
+           force=force)
     return out.getvalue()
 
 
@@ -291,16 +292,19 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
 
 def convert_gcode_file(
     src: Path, dst: Path, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
-    zipped: bool | None = None, progress: Progress | None = None, repair: bool = False,
+    zipped: bool | None = None, progress: Progress | None = None, repair: bool = False, force: bool = False,
+    keep_arcs: bool = False,
 ) -> ThreeWInfo:
     """Convert a G-code file to a .3w file; `dst` appears complete or not at all. A NUL byte inside the G-code is
-    an InputError naming its line, or with `repair` dropped and noted in the result's `notes`."""
+    an InputError naming its line, or with `repair` dropped and noted in the result's `notes`; so are extrusions
+    beyond the model's build volume, unless `force`. G2/G3 arcs become line segments unless `keep_arcs`."""
     target = _resolve_model(model)
     kind, head = intake.sniff(src)
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, str(src), head)
     with intake.open_input(src) as source, _atomic(dst) as out:
-        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress, repair)
+        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress, repair, force,
+                      keep_arcs)
 
 
 # --------------------------------------------------------------------------------------------------------------------

@@ -100,9 +100,12 @@ def _size(path: Path) -> int:
 @click.option("--zip/--no-zip", "zipped", default=None, help="Zipped AES-128 body (1.0/1.1/2.0 generation) or not.")
 @click.option("--repair", is_flag=True, help="Drop NUL bytes found inside the G-code (and say on which lines) "
                                              "instead of refusing the file.")
+@click.option("--force", is_flag=True, help="Convert even when the extrusions reach beyond the model's build volume.")
+@click.option("--keep-arcs", is_flag=True, help="Pass G2/G3 arcs through (default: line segments within 0.01 mm; "
+                                                "no public source shows da Vinci firmware running arcs).")
 @click.pass_context
 def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, file_format: str | None,
-            zipped: bool | None, repair: bool) -> None:
+            zipped: bool | None, repair: bool, force: bool, keep_arcs: bool) -> None:
     """Convert G-code to a .3w print file or back; the direction follows the files' types ('-' reads SRC from
     standard input).
 
@@ -115,11 +118,12 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
         kind, head = intake.sniff(path, shown)
         intake.require_printable(kind, shown, head)
         with intake.decoded_path(path, kind) as plain:
-            _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped, repair)
+            _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped,
+                     {"repair": repair, "force": force, "keep_arcs": keep_arcs})
 
 
 def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
-             container: Literal[2, 5] | None, zipped: bool | None, repair: bool = False) -> None:
+             container: Literal[2, 5] | None, zipped: bool | None, options: dict[str, bool] | None = None) -> None:
     """Convert `plain` (the source with any base64 layer decoded) of `kind` THREEW or GCODE."""
     size = _size(plain)
     if kind is intake.Kind.THREEW:
@@ -141,7 +145,8 @@ def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, wri
             with _progress(app, f"decoding {src.name}", size) as progress:
                 convert_3w_to_gcode(plain, middle, progress)
             with _progress(app, f"encoding {dst.name}", _size(middle)) as progress:
-                info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress)
+                info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress,
+                                          **(options or {}))
         _report(app, "3w-to-3w", src, dst, info)
         return
     if not writing:
@@ -150,7 +155,7 @@ def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, wri
     model = find_model(model_text or "dv1MX0A000")
     with _progress(app, f"encoding {dst.name}", size) as progress:
         info = convert_gcode_file(plain, dst, model, container=container, zipped=zipped, progress=progress,
-                                  repair=repair)
+                                  **(options or {}))
     _report(app, "gcode-to-3w", src, dst, info)
 
 
