@@ -24,7 +24,7 @@ from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.commands import JOG_LIMIT
-from fabwire.xyz.live import JobView, now_iso
+from fabwire.xyz.live import JobKeys, JobView, now_iso
 from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
@@ -218,7 +218,7 @@ def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: Pr
 
     async def run(printer: XYZPrinter) -> Status:
         chosen = model or _resolve_model(printer.settings.model)
-        with JobView(out, out.err, shown) as view:
+        with JobView(out, out.err, shown) as view, JobKeys(view, printer.pause, printer.resume, printer.cancel):
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)
