@@ -13,6 +13,7 @@ import base64
 import binascii
 import contextlib
 import enum
+import functools
 import os
 import re
 import tempfile
@@ -20,15 +21,17 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO
-
-import numpy as np
+from typing import TYPE_CHECKING, BinaryIO
 
 from fabwire import units
 from fabwire.errors import InputError
-from fabwire.xyz import arcwork, slicerfigures
-from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
+from fabwire.xyz import slicerfigures
 from fabwire.xyz.models import PrinterModel
+
+if TYPE_CHECKING:  # the move analysis (numpy) is loaded when G-code is read, not to decode a .3w
+    import numpy as np
+
+    from fabwire.xyz.gcodeinfo import GcodeMetadata
 
 MAGIC = b"3DPFNKG13WTW"
 """The .3w signature (reference §5.1)."""
@@ -426,11 +429,18 @@ _XYZ_KEY_LINE = re.compile(
     rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
 )
 _G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
-_ODD_FIRST = np.zeros(256, dtype=bool)
-_ODD_FIRST[list(b" \tNng")] = True
-"""A line starting with one of these needs the regular expression to find its command word."""
-_DIGIT_OR_DOT = np.zeros(256, dtype=bool)
-_DIGIT_OR_DOT[list(b"0123456789.")] = True
+
+
+@functools.cache
+def _tables() -> tuple[np.ndarray, np.ndarray]:
+    """(first bytes of a line that need the regular expression to find its command word, digits and the dot)."""
+    import numpy as np
+
+    odd_first = np.zeros(256, dtype=bool)
+    odd_first[list(b" \tNng")] = True
+    digit_or_dot = np.zeros(256, dtype=bool)
+    digit_or_dot[list(b"0123456789.")] = True
+    return odd_first, digit_or_dot
 
 
 @dataclass(frozen=True, slots=True)
@@ -508,6 +518,9 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
     `repair` drops NUL bytes inside the G-code (noted) instead of refusing the file; extrusions beyond the model's
     build volume are an InputError unless `force` (then noted); G2/G3 arcs become line segments unless
     `keep_arcs`."""
+    from fabwire.xyz import arcwork
+    from fabwire.xyz.gcodeinfo import finish
+
     head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True)
     outside = check_build_volume(stated.merged(computed) if computed else stated, name, model, force)
@@ -552,6 +565,8 @@ def _metadata(
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
     `always`)."""
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
+
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete and not always:
         return stated, None
@@ -624,6 +639,9 @@ def _process(chunk: bytes) -> bytes:
     """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
     if not chunk:
         return chunk
+    import numpy as np
+
+    _ODD_FIRST, _DIGIT_OR_DOT = _tables()  # noqa: N806
     data = np.frombuffer(chunk, dtype=np.uint8)
     starts = np.insert(np.flatnonzero(data[:-1] == 10) + 1, 0, 0)
     c0, c1, c2, c3 = (np.take(data, starts + i, mode="clip") for i in range(4))
@@ -645,6 +663,8 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     if prepared.analysed:
         progress = _second_half(progress)
     leading = True
+    from fabwire.xyz import arcwork
+
     arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
     for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired):
         if leading:
