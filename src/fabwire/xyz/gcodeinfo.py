@@ -183,7 +183,10 @@ class MoveAnalyzer:
     line-by-line path.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, timing: bool = True) -> None:
+        """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
+        path over feed rate only."""
+        self.timing = timing
         self.pos = [0.0, 0.0, 0.0]
         self.e = 0.0
         self.feed = DEFAULT_FEED_MM_MIN
@@ -210,7 +213,7 @@ class MoveAnalyzer:
     def seconds(self) -> float:
         """The estimated print time so far (complete once the whole file was fed)."""
         self._release()
-        return self.planner.total() + self.dwell
+        return self.planner.total() + self.dwell if self.timing else self.path_seconds
 
     def feed_chunk(self, chunk: bytes) -> None:
         """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
@@ -231,12 +234,14 @@ class MoveAnalyzer:
 
     def _count_markers(self, chunk: bytes) -> None:
         text = b"\n" + chunk
-        at = text.find(b"\n;")
-        while at >= 0:  # comment lines are few: find them, then try the markers on each
-            found = _MARKERS.match(text, at)
-            if found is not None:
-                self.markers[found.lastindex - 1 if found.lastindex else 0] += 1
-            at = text.find(b"\n;", at + 2)
+        at = text.find(b";")
+        while at >= 0:  # comments are few: find each `;` (memchr), try the markers where one opens a line
+            if text[at - 1] == 10:
+                found = _MARKERS.match(text, at - 1)
+                if found is not None:
+                    self.markers[found.lastindex - 1 if found.lastindex else 0] += 1
+            end = text.find(b"\n", at)
+            at = text.find(b";", end + 1) if end >= 0 else -1
 
     def _lines(self, chunk: bytes) -> None:
         for letter, number, params in _COMMAND.findall(b"\n" + chunk):
@@ -306,6 +311,8 @@ class MoveAnalyzer:
 
     def _release(self) -> None:
         """Hand the moves the line reader collected to the planner (before any array moves or limit change)."""
+        if self._held and not self.timing:
+            self._held = []
         if self._held:
             dx, dy, dz, de, length, feed = np.array(self._held).T
             self._held = []
@@ -390,8 +397,9 @@ class MoveAnalyzer:
                 runs, heights = _runs(axes[2].lines - first, after[2], self.pos[2])
                 heights = heights[np.logical_or.reduceat(printing, runs)] * 1000
                 self.layer_heights.update(map(round, heights[np.isfinite(heights)].tolist()))
-            self._release()
-            self.planner.add((dx, dy, dz, de), length, per_move)
+            if self.timing:
+                self._release()
+                self.planner.add((dx, dy, dz, de), length, per_move)
         for k in range(3):
             if len(after[k]):
                 self.pos[k] = float(after[k][-1])

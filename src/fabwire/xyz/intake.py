@@ -570,7 +570,7 @@ def _metadata(
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete and not always:
         return stated, None
-    analyzer = MoveAnalyzer()
+    analyzer = MoveAnalyzer(timing=stated.print_time_s is None)  # a stated time needs no planning
     for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None):
         analyzer.feed_chunk(chunk)
     if analyzer.absurd:
