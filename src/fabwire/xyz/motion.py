@@ -255,16 +255,13 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     v0 = np.minimum(np.sqrt(forward[:-1]), cruise)
     v1 = np.minimum(np.sqrt(forward[1:]), cruise)
 
-    # Each move's trapezoid (or triangle when it is too short to reach its cruise speed).
-    up = (cruise * cruise - v0 * v0) / (2 * accel)
-    down = (cruise * cruise - v1 * v1) / (2 * accel)
-    trapezoid = up + down <= dist
-    peak = np.sqrt(np.clip((2 * accel * dist + v0 * v0 + v1 * v1) / 2, 0.0, None))
-    peak = np.clip(peak, np.maximum(v0, v1), cruise)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        times = np.where(trapezoid, (cruise - v0) / accel + (cruise - v1) / accel + (dist - up - down) / cruise,
-                         (peak - v0) / accel + (peak - v1) / accel)
-    times = np.where(np.isfinite(times), times, dist / np.maximum(speed, 1e-9))
+    # Each move's trapezoid: up to its peak speed (the cruise speed, or less when the move is too short to reach
+    # it), any cruise, down to the exit speed.
+    v0_sq, v1_sq = v0 * v0, v1 * v1
+    peak = np.minimum(cruise, np.sqrt(accel * dist + (v0_sq + v1_sq) / 2))
+    peak = np.maximum(peak, np.maximum(v0, v1))
+    ramps = (2 * cruise * cruise - v0_sq - v1_sq) / (2 * accel)
+    times = (2 * peak - v0 - v1) / accel + np.maximum(dist - ramps, 0.0) / cruise
     last = np.zeros(4)
     last[axes] = [v[-1] for v in velocity]
     carried = _Carry(float(cruise[-1]), last, float(safe[-1]), float(forward[-1]))
