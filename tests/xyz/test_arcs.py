@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clitools import cli_env, run_cli
-from fabwire.xyz.arcwork import TOLERANCE_MM, ArcExpander, segments
+from fabwire.xyz.arcwork import MOST_SEGMENTS, TOLERANCE_MM, ArcExpander, segments
 from fabwire.xyz.threew import convert_gcode_file, read_3w
 
 MOVE = re.compile(r"G1 X(-?[0-9.]+) Y(-?[0-9.]+)(?: Z(-?[0-9.]+))?(?: E(-?[0-9.]+))?")
@@ -120,3 +120,15 @@ def test_gcode_beyond_the_build_volume_is_refused_unless_forced(tmp_path: Path) 
     assert "converted anyway (--force)" in forced.stderr
     fits = run_cli("xyz", "convert", str(src), str(tmp_path / "c.3w"), "-m", "da Vinci 1.0", env=cli_env())
     assert fits.returncode == 0, fits.stderr
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.dictionaries(st.sampled_from([b"X", b"Y", b"Z", b"E", b"I", b"J", b"R", b"F"]),
+                       st.floats(allow_nan=True, allow_infinity=True, width=64), max_size=8),
+       st.booleans(), st.booleans(), st.booleans())
+def test_any_arc_words_give_bounded_segments_or_none(words: dict[bytes, float], clockwise: bool, absolute: bool,
+                                                     absolute_e: bool) -> None:
+    lines = segments((1.0, 2.0, 0.2, 3.0), words, clockwise, absolute=absolute, absolute_e=absolute_e)
+    if lines is not None:
+        assert 1 <= len(lines) <= MOST_SEGMENTS + 1
+        assert all("nan" not in line and "inf" not in line for line in lines)

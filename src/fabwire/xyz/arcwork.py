@@ -18,6 +18,8 @@ from fabwire.xyz.gcodeinfo import MoveAnalyzer, words_of
 
 TOLERANCE_MM = 0.01
 """Largest distance between a segment and the arc it stands for."""
+MOST_SEGMENTS = 4096
+"""Segments of a full circle at most, whatever its radius (within the tolerance up to a radius of 30 m)."""
 _ARC_LINE = re.compile(rb"^[ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0*([23])(?![0-9.])([^\n]*)\n", re.MULTILINE)
 
 
@@ -53,11 +55,14 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
     else:
         return None
     radius = math.hypot(x0 - cx, y0 - cy)
+    if not all(math.isfinite(v) for v in (radius, x1, y1, z1, e1)):
+        return None
     begin, end = math.atan2(y0 - cy, x0 - cx), math.atan2(y1 - cy, x1 - cx)
     sweep = ((begin - end) if clockwise else (end - begin)) % (2 * math.pi)
     if sweep < 1e-9:
         sweep = 2 * math.pi
     step = 2 * math.acos(max(-1.0, 1 - TOLERANCE_MM / radius)) if radius > TOLERANCE_MM else math.pi
+    step = max(step, 2 * math.pi / MOST_SEGMENTS)
     count = max(1, math.ceil(sweep / step))
     sign = -1.0 if clockwise else 1.0
     lines = []
