@@ -80,7 +80,7 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
             line += f" Z{_number(shown[2], 4)}"
         if e1 != e0:
             line += f" E{_number(point[3] if absolute_e else point[3] - last[3], 5)}"
-        if k == 1 and b"F" in words:
+        if k == 1 and math.isfinite(words.get(b"F", math.nan)):
             line += f" F{_number(words[b'F'], 3)}"
         lines.append(line)
         last = point

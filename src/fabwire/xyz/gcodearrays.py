@@ -22,6 +22,9 @@ AXES = b"XYZEFIJR"
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
 _AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
+_PLAIN_AXES = 5
+"""X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are read only where G2/G3 lines are)."""
+_PLAIN_FLAGS = bytes(int(0 <= _AXIS_INDEX[byte] < _PLAIN_AXES) for byte in range(256))
 """bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
@@ -177,7 +180,9 @@ def scan(padded: bytes) -> Scan | None:
         odd_line = np.searchsorted(newlines, odd) - 1
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
-    where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
+    read = len(AXES) if arcs.any() else _PLAIN_AXES
+    flags = _AXIS_FLAGS if read == len(AXES) else _PLAIN_FLAGS
+    where = np.flatnonzero(np.frombuffer(padded.translate(flags), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of]
     if inline_comments:
@@ -195,6 +200,9 @@ def scan(padded: bytes) -> Scan | None:
         axis, line_of, numbers = axis[known], line_of[known], numbers[known]
     axes = []
     for k in range(len(AXES)):
+        if k >= read:
+            axes.append(_NO_WORDS)
+            continue
         picked = np.flatnonzero(axis == k)
         lines = line_of[picked]
         if (lines[1:] == lines[:-1]).any():
