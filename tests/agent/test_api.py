@@ -226,7 +226,6 @@ DAMAGED_3W = bytes(b ^ (i == 9000) for i, b in enumerate(write_3w(b"G28\nG1 X10 
     ("a.svg", b"<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'><path d='M1 1 L1e308 5' "
               b"stroke='black'/></svg>", "beyond what a browser can hold"),
     ("part.gcode", b"G28\nG1 X10 Y10 E1 F1200\nG1 Z" + b"9" * 40 + b"\n", "not a print file"),
-    ("part.gcode", b";TIME:99999999999\nG28\nG1 X10 Y10 E1 F1200\n", "not a print file"),
     ("part.3w", DAMAGED_3W, "is damaged"),
 ])
 def test_an_upload_no_intake_takes_is_refused_before_it_is_accepted(bench: Bench, name: str, data: bytes,

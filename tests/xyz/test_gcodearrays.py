@@ -33,11 +33,12 @@ def test_numbers_are_read_as_the_float_parser_reads_them(tokens: list[str], afte
             assert math.copysign(1.0, value) == math.copysign(1.0, expected)
 
 
-def reference(text: str) -> tuple[float, float, set[int]]:
-    """(seconds, net filament, layer heights in µm) of plain G-code, one move at a time in Python floats."""
+def reference(text: str) -> tuple[float, float, set[int], float]:
+    """(path length over feed in seconds, net filament, heights of flat printing moves in µm, how far printing moves
+    rose) of plain G-code, one move at a time in Python floats."""
     pos, e, feed = [0.0, 0.0, 0.0], 0.0, 1500.0
     absolute, absolute_e = True, True
-    seconds = filament = 0.0
+    seconds = filament = rise = 0.0
     heights: set[int] = set()
     for line in text.splitlines():
         command, *words = line.split(";")[0].split() or [""]
@@ -57,7 +58,10 @@ def reference(text: str) -> tuple[float, float, set[int]]:
             seconds += length * 60.0 / feed
             filament += new_e - e
             if new_e > e and (delta[0] or delta[1]):
-                heights.add(round(target[2] * 1000))
+                if delta[2]:
+                    rise += max(0.0, delta[2])
+                else:
+                    heights.add(round(target[2] * 1000))
             pos, e = target, new_e
         elif command == "G92":
             for k, axis in enumerate("XYZ"):
@@ -67,7 +71,7 @@ def reference(text: str) -> tuple[float, float, set[int]]:
             absolute = absolute_e = command == "G90"
         elif command in ("M82", "M83"):
             absolute_e = command == "M82"
-    return seconds, filament, heights
+    return seconds, filament, heights, rise
 
 
 def coordinate() -> st.SearchStrategy[str]:
@@ -102,7 +106,8 @@ def program(draw: st.DrawFn) -> str:
 def test_moves_add_up_as_a_line_by_line_computation_says(text: str) -> None:
     analyzer = MoveAnalyzer()
     analyzer.feed_chunk(text.encode())
-    seconds, filament, heights = reference(text)
-    assert analyzer.seconds == pytest.approx(seconds, rel=1e-9, abs=1e-9)
+    seconds, filament, heights, rise = reference(text)
+    assert analyzer.path_seconds == pytest.approx(seconds, rel=1e-9, abs=1e-9)
+    assert analyzer.vase_rise == pytest.approx(rise, rel=1e-9, abs=1e-9)
     assert analyzer.filament == pytest.approx(filament, rel=1e-9, abs=1e-9)
     assert analyzer.layer_heights == heights

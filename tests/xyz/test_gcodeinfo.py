@@ -77,7 +77,8 @@ def test_relative_extrusion_and_relative_moves(by_lines: bool) -> None:
     assert result.layers == 2
     assert analyzer.pos == [0.0, 0.0, 5.0]
     # 0.2 + 10 + 0.5 + 0.5 + 0.2 + 10 + sqrt(0 + 0 + 4.6^2) mm, all at 10 mm/s
-    assert analyzer.seconds == pytest.approx((0.2 + 10 + 0.5 + 0.5 + 0.2 + 10 + 4.6) / 10)
+    assert analyzer.path_seconds == pytest.approx((0.2 + 10 + 0.5 + 0.5 + 0.2 + 10 + 4.6) / 10)
+    assert analyzer.seconds > analyzer.path_seconds  # every stop costs its acceleration
 
 
 @pytest.mark.parametrize("by_lines", [False, True])
@@ -89,7 +90,8 @@ def test_z_hops_do_not_count_as_layers(by_lines: bool) -> None:
 def test_homing_dwell_and_default_feed() -> None:
     text = b"G1 X30\nG28 X\nG4 P500\nG4 S2\nG1 X15\n"
     analyzer = analyse(text)
-    assert analyzer.seconds == pytest.approx(30 / 25 + 0.5 + 2 + 15 / 25)
+    assert analyzer.path_seconds == pytest.approx(30 / 25 + 0.5 + 2 + 15 / 25)
+    assert analyzer.dwell == 2.5
     assert analyzer.pos == [15.0, 0.0, 0.0]
 
 

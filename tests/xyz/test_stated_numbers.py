@@ -98,7 +98,7 @@ def test_info_and_convert_take_unreadable_durations(tmp_path: Path) -> None:
 
 def _zipped_parts() -> tuple[bytes, bytes]:
     """(the first 0x2000 bytes, the zip archive) of a zipped .3w."""
-    made = write_3w(b"G28\n" + b"".join(b"G1 X%d Y%d E%d\n" % (i, i % 7, i) for i in range(2000)), "dvF100B000")
+    made = write_3w(b"G28\n" + b"".join(b"G1 X%d Y%d E%d\n" % (i % 150, i % 7, i) for i in range(2000)), "dvF100B000")
     body = made[BODY_OFFSET:]
     pieces = [body[i:i + ZIP_CIPHER_PIECE] for i in range(0, len(body), ZIP_CIPHER_PIECE)]
     return made[:BODY_OFFSET], b"".join(_unpad(_cbc128(piece, decrypt=True))[0] for piece in pieces)

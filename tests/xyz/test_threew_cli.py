@@ -258,17 +258,13 @@ def test_an_ordinary_long_print_is_not_called_absurd(tmp_path: Path) -> None:
                              "; estimated printing time (normal mode) = {n}d 2h", "; total layers count = {n}",
                              "; facets = {n}", "; filament used [mm] = {n}"]),
        digits=st.integers(1, 5000))
-def test_any_stated_figure_is_believed_or_refused_never_a_crash(tmp_path_factory: pytest.TempPathFactory, line: str,
-                                                               digits: int) -> None:
+def test_any_stated_figure_is_believed_or_set_aside_never_a_crash(tmp_path_factory: pytest.TempPathFactory,
+                                                                  line: str, digits: int) -> None:
     path = tmp_path_factory.mktemp("stated") / "stated.gcode"
     path.write_text(line.format(n="9" * digits) + "\nG28\nG1 X10 Y10 Z0.2 E1 F1200\n")
-    refusal = ""
-    try:
-        stated, _ = intake_metadata(path)
-    except InputError as exc:
-        refusal = str(exc)
-    if refusal:
-        assert "this is not a print file" in refusal
-    else:
-        assert digits < 19
-        assert all(v is None or v < 10**18 for v in (stated.print_time_s, stated.layers, stated.facets))
+    stated, computed = intake_metadata(path)
+    assert all(v is None or v <= 10**8 for v in (stated.layers, stated.facets))
+    assert stated.print_time_s is None or stated.print_time_s <= 90 * 86400
+    if digits >= 19 and "facets" not in line:
+        assert stated.notes  # no print has such a figure: said so, and computed
+        assert computed is not None

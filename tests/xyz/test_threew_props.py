@@ -18,9 +18,13 @@ G0_WORD = re.compile(rb"^([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
 
 def expected_body(text: bytes) -> bytes | None:
     """What follows the seven generated header lines, worked out line by line; None if nothing is printable (no
-    command, or not G-code text at all: control characters, another kind of file)."""
+    command, not G-code text at all: control characters, another kind of file, or a NUL inside the G-code; NULs
+    that pad its end are dropped)."""
     text = text.removeprefix(intake.BOM)
     if intake.identify(text) is not intake.Kind.GCODE or not intake.has_commands(text.replace(b"\r", b"")):
+        return None
+    text = text.rstrip(b"\0")
+    if b"\0" in text:
         return None
     lines = text.split(b"\n")
     if lines[-1] == b"":

@@ -162,6 +162,26 @@ ENTITIES: dict[str, tuple[Entity, ...]] = {
 }
 
 
+TWO_SPOOLS = (
+    _sensor("extruder2_temperature", "Extruder 2 temperature", "extruder2_temp_c", **TEMPERATURE),
+    _sensor("filament2_left", "Filament 2 left", "filament2_left_mm", device_class="distance",
+            unit_of_measurement="mm"),
+)
+"""What a da Vinci with two spools or extruders (Jr. 2.0 Mix, 2.0 Duo) has besides."""
+
+
+def _two_spools(kind: str, model: str | None) -> bool:
+    if kind != "xyz" or not model:
+        return False
+    from fabwire.errors import InputError
+    from fabwire.xyz.models import find_model
+
+    try:
+        return find_model(model).dual_extruder
+    except InputError:
+        return False
+
+
 def discovery_payload(info: dict[str, Any], agent: str, dashboard_url: str | None = None) -> dict[str, Any]:
     """The device discovery payload for a device (`DeviceInfo` as a dict) published by `agent`; `dashboard_url`
     becomes the device's `configuration_url` (Home Assistant's "Visit" link).
@@ -181,7 +201,8 @@ def discovery_payload(info: dict[str, Any], agent: str, dashboard_url: str | Non
         device["configuration_url"] = dashboard_url
     events = device_topic(device_id, "event")
     components: dict[str, dict[str, Any]] = {}
-    for entity in ENTITIES.get(kind, (STATE,)):
+    extra = TWO_SPOOLS if _two_spools(kind, info.get("model")) else ()
+    for entity in (*ENTITIES.get(kind, (STATE,)), *extra):
         unique = f"{base}_{entity.key}"
         options = {key: events if value == EVENT_TOPIC else value for key, value in entity.options}
         components[unique] = {"platform": entity.platform, "name": entity.name, "unique_id": unique, **options}

@@ -24,7 +24,7 @@ from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.commands import JOG_LIMIT
-from fabwire.xyz.live import JobView, now_iso
+from fabwire.xyz.live import JobKeys, JobView, now_iso
 from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
@@ -106,6 +106,8 @@ def render_status(status: Status) -> Panel:
         table.add_row("Error", str(word))
     target = status.extruder_target
     table.add_row("Extruder", units.heating(status.extruder, target or None))
+    if status.temperatures is not None and status.temperatures.count == 2:
+        table.add_row("Extruder 2", units.heating(status.temperatures.extruder2, None))
     if status.bed is not None:
         table.add_row("Bed", units.temperature(status.bed))
     if status.progress and (status.progress.percent or status.progress.elapsed_min):
@@ -114,9 +116,12 @@ def render_status(status: Status) -> Panel:
                       + ("time left unknown" if left is None else f"{units.minutes(left)} left"))
     cart = status.cartridge
     if cart is not None:
-        fil = status.filament_mm
-        text = "none" if not cart.present else f"{cart.fields[0]} {cart.colour or ''}".strip()
-        table.add_row("Filament", text + (f", {units.filament(fil)} left" if fil is not None else ""))
+        spools = status.spools
+        for index, spool in enumerate(spools):
+            fil = spool["filament_left_mm"]
+            text = "none" if not spool["present"] else f"{spool['serial']} {spool['colour'] or ''}".strip()
+            table.add_row("Filament" + (f" {index + 1}" if len(spools) > 1 else ""),
+                          text + (f", {units.filament(fil)} left" if fil is not None else ""))
     if status.nozzle:
         table.add_row("Nozzle", f"{known(status.nozzle.diameter_mm, ' mm')} (type {status.nozzle.kind})")
     table.add_row("Z offset", units.zoffset(status.zoffset))
@@ -188,9 +193,11 @@ def _resolve_model(text: str | None) -> PrinterModel | None:
               help="Name the file is uploaded under (default: derived from the file name, ASCII only).")
 @click.option("--save-to-sd", is_flag=True, help="Keep the file on the printer's SD card (XYZware's SaveToSD; some "
                                                  "Jr. 2.0 models need it).")
+@click.option("--force", is_flag=True, help="Print G-code even when its extrusions reach beyond the printer's build "
+                                            "volume.")
 @pass_device
 def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | None, upload_name: str | None,
-              save_to_sd: bool) -> None:
+              save_to_sd: bool, force: bool) -> None:
     """Print a G-code (converted to the printer's .3w) or a .3w file ('-' reads it from standard input)."""
     from fabwire.xyz import intake  # G-code scanning: loaded when a file is printed, not for a status
 
@@ -200,18 +207,18 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
     with intake.input_file(file) as (path, shown):
         kind, head = intake.sniff(path, shown)
         intake.require_printable(kind, shown, head)  # before the printer is reached
-        _print(dctx, path, Path(shown).name, no_wait, model, upload_name, save_to_sd)
+        _print(dctx, path, Path(shown).name, no_wait, model, upload_name, save_to_sd, force)
 
 
 def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: PrinterModel | None,
-           upload_name: str | None, save_to_sd: bool) -> None:
+           upload_name: str | None, save_to_sd: bool, force: bool = False) -> None:
     out = dctx.output
 
     started = [False]
 
     async def run(printer: XYZPrinter) -> Status:
         chosen = model or _resolve_model(printer.settings.model)
-        with JobView(out, out.err, shown) as view:
+        with JobView(out, out.err, shown) as view, JobKeys(view, printer.pause, printer.resume, printer.cancel):
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)
@@ -219,7 +226,7 @@ def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: Pr
             return await printer.print_file(file, model=chosen, progress=uploaded,
                                             on_status=lambda st: view.show(st, {"event": "status"}),
                                             wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
-                                            on_note=view.note)
+                                            on_note=view.note, force=force)
 
     try:
         final = _with_printer(dctx, run)

@@ -461,7 +461,8 @@ class XYZPrinter(Maintenance):
     async def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
                          wait: bool = True, name: str | None = None, save_to_sd: bool = False,
-                         start_limit: float = 30.0, on_note: Callable[[str], None] | None = None) -> Status:
+                         start_limit: float = 30.0, on_note: Callable[[str], None] | None = None,
+                         force: bool = False) -> Status:
         """Convert if needed, upload, start and (unless wait=False) follow the job to its end.
 
         `name` is the upload name (default: a safe one derived from the file name). The job counts as started
@@ -477,7 +478,7 @@ class XYZPrinter(Maintenance):
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
-        with printjob.ready_file(source, target, override=model is not None) as ready:
+        with printjob.ready_file(source, target, override=model is not None, force=force) as ready:
             await self.upload(ready, name, progress=progress, save_to_sd=save_to_sd)
         status = await self._await_job_start(start_limit)
         if on_status:

@@ -17,10 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-AXES = b"XYZEF"
+AXES = b"XYZEFIJR"
+"""The words read: the axes, the feed rate, and the centre offsets and radius of G2/G3 arcs."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
 _AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
+_PLAIN_AXES = 5
+"""X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are read only where G2/G3 lines are)."""
+_PLAIN_FLAGS = bytes(int(0 <= _AXIS_INDEX[byte] < _PLAIN_AXES) for byte in range(256))
 """bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
@@ -35,7 +39,7 @@ _ODD_FIRST[list(b" \tNngm")] = True
 VALUE = rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
 """A word's number as Marlin reads it: decimal, no exponent."""
 _NUMBER = re.compile(VALUE)
-_CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83))(?![0-9.])([^\n;]*)")
+_CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83|201|203|204|205))(?![0-9.])([^\n;]*)")
 _WORD = re.compile(rb"[A-Z][ \t]*" + _NUMBER.pattern)
 _SET_ONLY = re.compile(rb"[^XYZE0-9.+\- \t]")
 PAD = 32
@@ -120,11 +124,13 @@ class Words:
 
 @dataclass(frozen=True, slots=True)
 class Scan:
-    """A piece read into arrays: the words of each of X, Y, Z, E, F on move (G0-G3) and plain G92 lines, and the
+    """A piece read into arrays: the words of each of `AXES` on move (G0-G3) and plain G92 lines, and the
     other commands that change the analysis (line, command, upper-cased parameters), in order."""
 
     axes: tuple[Words, ...]
     controls: list[tuple[int, bytes, bytes]]
+    arcs: NDArray[np.int8]
+    """Per line of the piece: 2 for a G2 (clockwise arc), 3 for a G3, else 0."""
 
 
 def scan(padded: bytes) -> Scan | None:
@@ -136,7 +142,7 @@ def scan(padded: bytes) -> Scan | None:
     newlines = np.flatnonzero(text == 10)
     starts = newlines[:-1] + 1
     if not len(starts):
-        return Scan(tuple(_NO_WORDS for _ in AXES), [])
+        return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
     c0, c1, c2, c3 = (data[starts + i] for i in range(4))
     command = (c0 == ord("G")) | (c0 == ord("M"))
     if (_ODD_FIRST[c0] | (command & (
@@ -145,6 +151,8 @@ def scan(padded: bytes) -> Scan | None:
     is_move = (c0 == ord("G")) & (
         (_MOVE_DIGIT[c1] & ~_DIGIT_OR_DOT[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGIT_OR_DOT[c3])
     )
+    digit = np.where(c1 == ord("0"), c2, c1)
+    arcs = np.where(is_move & ((digit == ord("2")) | (digit == ord("3"))), digit - ord("0"), 0).astype(np.int8)
     controls: list[tuple[int, bytes, bytes]] = []
     is_set = np.zeros(len(starts), dtype=bool)
     for line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
@@ -172,7 +180,9 @@ def scan(padded: bytes) -> Scan | None:
         odd_line = np.searchsorted(newlines, odd) - 1
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
-    where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
+    read = len(AXES) if arcs.any() else _PLAIN_AXES
+    flags = _AXIS_FLAGS if read == len(AXES) else _PLAIN_FLAGS
+    where = np.flatnonzero(np.frombuffer(padded.translate(flags), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of]
     if inline_comments:
@@ -190,12 +200,15 @@ def scan(padded: bytes) -> Scan | None:
         axis, line_of, numbers = axis[known], line_of[known], numbers[known]
     axes = []
     for k in range(len(AXES)):
+        if k >= read:
+            axes.append(_NO_WORDS)
+            continue
         picked = np.flatnonzero(axis == k)
         lines = line_of[picked]
         if (lines[1:] == lines[:-1]).any():
             return None  # a letter repeats within a line
         axes.append(Words(lines, numbers[picked], is_set[lines]))
-    return Scan(tuple(axes), controls)
+    return Scan(tuple(axes), controls, arcs)
 
 
 _NO_WORDS = Words(np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0, dtype=bool))

@@ -6,15 +6,15 @@ is missing it is computed from the moves themselves.
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fabwire.xyz import gcodearrays
+from fabwire.xyz import gcodearrays, motion, slicerfigures
 from fabwire.xyz.gcodearrays import VALUE, Words
 
 DEFAULT_FACETS = 50
@@ -31,6 +31,12 @@ class GcodeMetadata:
     layers: int | None = None
     facets: int | None = None
     slicer: str | None = None
+    notes: tuple[str, ...] = ()
+    """Why a figure was set aside (a slicer's placeholder, a zero, a value no print has)."""
+    extent: tuple[tuple[float, float], ...] | None = None
+    """(lowest, highest) X, Y and Z of the extruding moves in mm, from the moves; None when none extrude."""
+    arcs: int = 0
+    """G2/G3 arc moves in the file (counted from the moves)."""
 
     @property
     def complete(self) -> bool:
@@ -44,82 +50,13 @@ class GcodeMetadata:
             layers=self.layers if self.layers is not None else other.layers,
             facets=self.facets if self.facets is not None else other.facets,
             slicer=self.slicer or other.slicer,
+            notes=self.notes + other.notes,
+            extent=self.extent if self.extent is not None else other.extent,
+            arcs=self.arcs or other.arcs,
         )
 
 
-_NUM = rb"([0-9]+(?:\.[0-9]*)?)"
-
-
-def _first(pattern: bytes) -> re.Pattern[bytes]:
-    return re.compile(pattern, re.MULTILINE | re.IGNORECASE)
-
-
-# Each list is in order of preference: the XYZ key a previous conversion wrote wins over a slicer's own wording.
-_TIME = (
-    ("xyz", _first(rb"^;[ \t]*print_time[ \t]*=[ \t]*" + _NUM)),
-    ("cura", _first(rb"^;TIME:[ \t]*" + _NUM)),
-    ("prusaslicer", _first(rb"^;[ \t]*estimated printing time \(normal mode\)[ \t]*=[ \t]*([^\r\n]+)")),
-    ("simplify3d", _first(rb"^;[ \t]*Build time:[ \t]*([^\r\n]+)")),
-)
-_FILAMENT = (
-    ("xyz", _first(rb"^;[ \t]*total_filament[ \t]*=[ \t]*" + _NUM)),
-    ("cura", _first(rb"^;Filament used:[ \t]*([0-9.,m \t]+)\r?$")),
-    ("prusaslicer", _first(rb"^;[ \t]*filament used \[mm\][ \t]*=[ \t]*([0-9., \t]+)")),
-    ("simplify3d", _first(rb"^;[ \t]*Filament length:[ \t]*" + _NUM + rb"[ \t]*mm")),
-    ("slic3r", _first(rb"^;[ \t]*filament[ _]used[ \t]*=[ \t]*" + _NUM)),
-)
-_LAYERS = (
-    ("xyz", _first(rb"^;[ \t]*total_layers[ \t]*=[ \t]*([0-9]+)")),
-    ("cura", _first(rb"^;LAYER_COUNT:[ \t]*([0-9]+)")),
-    ("prusaslicer", _first(rb"^;[ \t]*total layers count[ \t]*=[ \t]*([0-9]+)")),
-)
-_FACETS = _first(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)")
-_DECIMAL = rb"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)"
-"""A number as float() takes it (`1.2.3h` and `.h` are no durations)."""
-_DURATION = re.compile(_DECIMAL + rb"[ \t]*(d|h|m|s)", re.IGNORECASE)
-_S3D_DURATION = re.compile(_DECIMAL + rb"[ \t]*(hour|minute|second|sec|min|hr)", re.IGNORECASE)
-_UNIT_SECONDS = {b"d": 86400, b"h": 3600, b"m": 60, b"s": 1, b"hour": 3600, b"hr": 3600, b"minute": 60, b"min": 60,
-                 b"second": 1, b"sec": 1}
-_SLICER_NAMES = (
-    (rb"prusaslicer", "prusaslicer"), (rb"superslicer", "prusaslicer"), (rb"cura", "cura"),
-    (rb"simplify3d", "simplify3d"), (rb"slic3r", "slic3r"), (rb"xyzprint", "xyz"), (rb"xyzware", "xyz"),
-)
-
-
-ABSURD = 10**18
-"""Stands for a stated number too long to be real (hundreds of digits): `intake` refuses the file for it."""
-
-
-def _whole(raw: bytes) -> int:
-    """A stated number rounded to a whole one; ABSURD for one with more digits than any real figure has."""
-    value = float(raw) if len(raw.partition(b".")[0]) <= 18 else math.inf
-    return round(value) if value < ABSURD else ABSURD
-
-
-def _duration(text: bytes, units: re.Pattern[bytes]) -> int | None:
-    parts = units.findall(text)
-    if not parts:
-        return None
-    total = sum(float(value) * _UNIT_SECONDS[unit.lower()] for value, unit in parts)
-    return round(total) if total < ABSURD else ABSURD
-
-
-def _sum_numbers(text: bytes) -> float | None:
-    """The sum of the stated numbers; ABSURD when it is beyond a float (hundreds of digits)."""
-    values = [float(v) for v in re.findall(rb"[0-9]+(?:\.[0-9]*)?", text)]
-    if not values:
-        return None
-    total = round(sum(values), 6)
-    return total if math.isfinite(total) else float(ABSURD)
-
-
-def _search(patterns: Iterable[tuple[str, re.Pattern[bytes]]], windows: Iterable[bytes]) -> tuple[str, bytes] | None:
-    for name, pattern in patterns:
-        for window in windows:
-            found = pattern.search(window)
-            if found:
-                return name, found.group(1)
-    return None
+_FACETS = re.compile(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)", re.MULTILINE | re.IGNORECASE)
 
 
 def _comment_lines(window: bytes) -> bytes:
@@ -127,40 +64,23 @@ def _comment_lines(window: bytes) -> bytes:
     return b"\n".join(line for line in window.split(b"\n") if line.lstrip(b" \t")[:1] == b";")
 
 
+_FIGURE_NAMES = {"time": "print time", "filament": "filament", "layers": "layer count"}
+
+
 def header_metadata(*windows: bytes) -> GcodeMetadata:
-    """The values slicer comments state in the given pieces of a G-code (its head and its tail)."""
+    """The values slicer comments state in the given pieces of a G-code (its head and its tail), as the table of
+    wordings in `slicerfigures` reads them; figures not believed are left out and named in `notes`."""
     windows = tuple(_comment_lines(window) for window in windows)
-    time_s: int | None = None
-    filament: float | None = None
-    layers: int | None = None
-    found = _search(_TIME, windows)
-    if found:
-        name, raw = found
-        if name == "prusaslicer":
-            time_s = _duration(raw, _DURATION)
-        elif name == "simplify3d":
-            time_s = _duration(raw, _S3D_DURATION)
-        else:
-            time_s = _whole(raw)
-    found = _search(_FILAMENT, windows)
-    if found:
-        name, raw = found
-        if name == "cura":
-            metres = _sum_numbers(raw)
-            filament = None if metres is None else round(metres * 1000.0, 6)
-        else:
-            filament = _sum_numbers(raw)
-    found = _search(_LAYERS, windows)
-    if found:
-        layers = _whole(found[1])
-    facets = _search((("xyz", _FACETS),), windows)
-    slicer = None
-    lowered = windows[0][:4096].lower() if windows else b""
-    for needle, name in _SLICER_NAMES:
-        if needle in lowered:
-            slicer = name
+    stated = slicerfigures.stated_figures(windows)
+    facets = None
+    for window in windows:
+        found = _FACETS.search(window)
+        if found:
+            count = int(found.group(1)) if len(found.group(1)) <= 18 else slicerfigures.ABSURD
+            facets = count if 0 < count <= slicerfigures.MAX_COUNT else None
             break
-    return GcodeMetadata(time_s, filament, layers, _whole(facets[1]) if facets else None, slicer)
+    notes = tuple(f"the stated {_FIGURE_NAMES[figure]} is not believed: {why}" for figure, why in stated.rejected)
+    return GcodeMetadata(stated.time_s, stated.filament_mm, stated.layers, facets, stated.slicer, notes)
 
 
 # G-code as Marlin reads it: a word is a letter, optional blanks, then a decimal number without exponent (so
@@ -222,44 +142,115 @@ def _words(params: bytes) -> dict[bytes, float]:
     return words
 
 
+@dataclass(frozen=True, slots=True)
+class LayerMarker:
+    """A comment a slicer writes at each layer change."""
+
+    pattern: bytes
+    slicers: str
+    source: str
+
+
+LAYER_MARKERS: tuple[LayerMarker, ...] = (
+    LayerMarker(rb"LAYER_CHANGE\n", "PrusaSlicer, SuperSlicer, OrcaSlicer, BambuStudio",
+                "prusa3d/PrusaSlicer src/libslic3r/GCode.cpp (process_layer writes ;LAYER_CHANGE)"),
+    LayerMarker(rb"LAYER:-?[0-9]+\n", "Cura, ideaMaker",
+                "Ultimaker/CuraEngine gcodeExport::writeLayerComment; moonraker metadata.py (IdeaMaker ;LAYER:0)"),
+    LayerMarker(rb"[ \t]*layer [0-9]+, Z = ", "Simplify3D",
+                "Arksine/moonraker metadata.py; Simplify3D G-code (; layer 1, Z = 0.200)"),
+    LayerMarker(rb"; --- layer [0-9]+ ", "Kiri:Moto", "Arksine/moonraker metadata.py (KiriMoto ;; --- layer N)"),
+    LayerMarker(rb"[ \t]*END_LAYER_OBJECT z=", "KISSlicer", "Arksine/moonraker metadata.py (KISSlicer)"),
+)
+"""Layer change comments, one count per kind; the layers are the most any kind counts."""
+_MARKERS = re.compile(rb"\n;(?:" + b"|".join(b"(" + m.pattern + b")" for m in LAYER_MARKERS) + rb")", re.IGNORECASE)
+_ARC = {b"G2": 2, b"G3": 3}
+VASE_LAYER_MM = 0.2
+"""Layer height assumed for a spiral vase without any flat layer to learn it from."""
+
+
+def words_of(params: bytes) -> dict[bytes, float]:
+    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value, the first wins)."""
+    return _words(params)
+
+
 class MoveAnalyzer:
     """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
 
-    Time is length / feed rate per move (no acceleration), so it is an estimate on the short side. Ordinary slicer
-    output is analysed with array operations; chunks with indented or numbered lines take a line-by-line path.
+    Time: a trapezoid per move under the file's own M201-M205 limits (`motion`), plus dwells. Layers: the
+    slicer's layer markers when present, else the distinct heights of flat extruding moves plus, for spiral
+    vase parts (moves that rise while they extrude), their rise over the layer height. G2/G3 arcs count by their
+    length. Ordinary slicer output is analysed with array operations; chunks with indented or numbered lines take a
+    line-by-line path.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, timing: bool = True) -> None:
+        """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
+        path over feed rate only."""
+        self.timing = timing
         self.pos = [0.0, 0.0, 0.0]
         self.e = 0.0
         self.feed = DEFAULT_FEED_MM_MIN
         self.absolute = True
         self.absolute_e = True
         self.filament = 0.0
-        self.seconds = 0.0
+        self.path_seconds = 0.0
+        """Path length over feed rate, without acceleration (the lower bound of the time), plus dwells."""
+        self.dwell = 0.0
+        self.planner = motion.Planner()
         self.layer_heights: set[int] = set()
-        """Heights (in µm) at which extruding moves happened."""
+        """Heights (in µm) at which flat extruding moves happened."""
+        self.vase_rise = 0.0
+        """How far extruding moves rose while they moved (mm): spiral vase printing."""
+        self.markers = [0] * len(LAYER_MARKERS)
+        self.arcs = 0
+        self.low = [math.inf] * 3
+        self.high = [-math.inf] * 3
+        """The extent (mm, per axis) of the extruding moves, start and end points."""
+        self._held: list[tuple[float, float, float, float, float, float]] = []
         gcodearrays.reuse_freed_memory()
+
+    @property
+    def seconds(self) -> float:
+        """The estimated print time so far (complete once the whole file was fed)."""
+        self._release()
+        return self.planner.total() + self.dwell if self.timing else self.path_seconds
 
     def feed_chunk(self, chunk: bytes) -> None:
         """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
+        self._count_markers(chunk)
         start = 0
         view = memoryview(chunk)
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
             if not self._feed_arrays(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD)))):
-                self.feed_lines(chunk[start:end] + ended)
+                self._lines(chunk[start:end] + ended)
             start = end
 
     def feed_lines(self, chunk: bytes) -> None:
         """The line-by-line analysis (any G-code layout)."""
+        self._count_markers(chunk)
+        self._lines(chunk)
+
+    def _count_markers(self, chunk: bytes) -> None:
+        text = b"\n" + chunk
+        at = text.find(b";")
+        while at >= 0:  # comments are few: find each `;` (memchr), try the markers where one opens a line
+            if text[at - 1] == 10:
+                found = _MARKERS.match(text, at - 1)
+                if found is not None:
+                    self.markers[found.lastindex - 1 if found.lastindex else 0] += 1
+            end = text.find(b"\n", at)
+            at = text.find(b";", end + 1) if end >= 0 else -1
+
+    def _lines(self, chunk: bytes) -> None:
         for letter, number, params in _COMMAND.findall(b"\n" + chunk):
             self._command(letter.upper() + number.lstrip(b"0").rjust(1, b"0"), params.upper())
+        self._release()
 
     def _command(self, command: bytes, params: bytes) -> None:
         if command in (b"G0", b"G1", b"G2", b"G3"):
-            self._move(params)
+            self._move(params, _ARC.get(command, 0))
         elif command == b"G92":
             self._set_position(params)
         elif command == b"G90":
@@ -274,12 +265,16 @@ class MoveAnalyzer:
             self.absolute_e = True
         elif command == b"M83":
             self.absolute_e = False
+        elif command in motion.LIMIT_COMMANDS:
+            self._release()
+            self.planner.set_limits(motion.apply_command(self.planner.limits, command, _words(params)))
 
-    def _move(self, params: bytes) -> None:
+    def _move(self, params: bytes, arc: int = 0) -> None:
         x, y, z = self.pos
         e = self.e
         target_x, target_y, target_z, target_e = x, y, z, e
-        for axis, number in _words(params).items():
+        words = _words(params)
+        for axis, number in words.items():
             if axis == b"X":
                 target_x = number if self.absolute else x + number
             elif axis == b"Y":
@@ -291,13 +286,38 @@ class MoveAnalyzer:
             elif axis == b"F" and number > 0:
                 self.feed = number
         dx, dy, dz, de = target_x - x, target_y - y, target_z - z, target_e - e
-        length = math.sqrt(dx * dx + dy * dy + dz * dz) or abs(de)
-        self.seconds += length * 60.0 / self.feed
+        if arc:
+            self.arcs += 1
+            nan = math.nan
+            x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
+                x, y, target_x, target_y, words.get(b"I", nan), words.get(b"J", nan), words.get(b"R", nan)))
+            flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, np.array([arc == 2]))[0])
+            length = math.sqrt(flat * flat + dz * dz)
+        else:
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        self.path_seconds += (length or abs(de)) * 60.0 / self.feed
         self.filament += de
-        if de > 0 and (dx or dy) and math.isfinite(target_z):
-            self.layer_heights.add(round(target_z * 1000))
+        if de > 0 and (dx or dy or arc) and math.isfinite(target_z):
+            for k, (start, end) in enumerate(((x, target_x), (y, target_y), (z, target_z))):
+                self.low[k] = min(self.low[k], start, end)
+                self.high[k] = max(self.high[k], start, end)
+            if dz:
+                self.vase_rise += max(0.0, dz)
+            else:
+                self.layer_heights.add(round(target_z * 1000))
+        self._held.append((dx, dy, dz, de, length, self.feed))
         self.pos = [target_x, target_y, target_z]
         self.e = target_e
+
+    def _release(self) -> None:
+        """Hand the moves the line reader collected to the planner (before any array moves or limit change)."""
+        if self._held and not self.timing:
+            self._held = []
+        if self._held:
+            dx, dy, dz, de, length, feed = np.array(self._held).T
+            self._held = []
+            with np.errstate(invalid="ignore", over="ignore"):
+                self.planner.add((dx, dy, dz, de), length, feed)
 
     def _set_position(self, params: bytes) -> None:
         words = _words(params)
@@ -317,10 +337,9 @@ class MoveAnalyzer:
 
     def _dwell(self, params: bytes) -> None:
         words = _words(params)  # S (seconds) overrides P (milliseconds), as in Marlin
-        if b"S" in words:
-            self.seconds += words[b"S"]
-        elif b"P" in words:
-            self.seconds += words[b"P"] / 1000.0
+        seconds = words[b"S"] if b"S" in words else words[b"P"] / 1000.0 if b"P" in words else 0.0
+        self.dwell += seconds
+        self.path_seconds += seconds
 
     def _feed_arrays(self, padded: bytes) -> bool:
         """Analyse a piece if it is plain enough for array operations, else leave the state alone and say False.
@@ -334,15 +353,15 @@ class MoveAnalyzer:
         for line, code, params in [*found.controls, (len(padded), b"", b"")]:
             ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
             self._segment([Words(w.lines[a:b], w.values[a:b], w.sets[a:b])
-                           for w, a, b in zip(found.axes, start, ends, strict=True)])
+                           for w, a, b in zip(found.axes, start, ends, strict=True)], found.arcs)
             if code:
                 self._command(code, params)
             start = ends
         return True
 
-    def _segment(self, axes: list[Words]) -> None:
+    def _segment(self, axes: list[Words], arcs: NDArray[np.int8]) -> None:
         """The moves and G92s between two other commands: every axis's words, on lines counted from the piece's."""
-        given = [words for words in axes if len(words.lines)]
+        given = [words for words in axes[:5] if len(words.lines)]
         if not given:
             return
         first = min(int(words.lines[0]) for words in given)
@@ -359,17 +378,28 @@ class MoveAnalyzer:
                 after.append(positions)
             dx, dy, dz, de = moves
             length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            length = np.where(length > 0, length, np.abs(de))
+            arc = arcs[first:first + count]
+            if arc.any():
+                length = self._arc_lengths(axes, after, arc, first, count, moves, length)
             feeds = axes[4]
             valid = feeds.values > 0
             runs, feed = _runs(feeds.lines[valid] - first, feeds.values[valid], self.feed)
-            self.seconds += float(np.sum(np.add.reduceat(length, runs) * 60.0 / feed))
-            self.filament += float(np.sum(moves[3]))
-            printing = (de > 0) & ((dx != 0) | (dy != 0))
+            per_move = np.repeat(feed, np.diff(np.append(runs, count)))
+            self.path_seconds += float(np.sum(np.where(length > 0, length, np.abs(de)) * 60.0 / per_move))
+            self.filament += float(np.sum(de))
+            printing = (de > 0) & ((dx != 0) | (dy != 0) | (arc != 0))
             if printing.any():
+                self._reach(axes, after, printing, first, count)
+                rising = printing & (dz != 0)
+                if rising.any():
+                    self.vase_rise += float(np.sum(np.maximum(dz[rising], 0.0)))
+                    printing &= ~rising
                 runs, heights = _runs(axes[2].lines - first, after[2], self.pos[2])
                 heights = heights[np.logical_or.reduceat(printing, runs)] * 1000
                 self.layer_heights.update(map(round, heights[np.isfinite(heights)].tolist()))
+            if self.timing:
+                self._release()
+                self.planner.add((dx, dy, dz, de), length, per_move)
         for k in range(3):
             if len(after[k]):
                 self.pos[k] = float(after[k][-1])
@@ -377,17 +407,68 @@ class MoveAnalyzer:
             self.e = float(after[3][-1])
         self.feed = float(feed[-1])
 
+    def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], printing: NDArray[np.bool_], first: int,
+               count: int) -> None:
+        """Widen the extent with the start and end points of the printing moves (arcs: their end points)."""
+        for k in range(3):
+            at = np.full(count, np.nan)
+            at[axes[k].lines - first] = after[k]
+            ends = _ffill(at, self.pos[k])
+            starts = np.concatenate(([self.pos[k]], ends[:-1]))
+            points = np.concatenate((starts[printing], ends[printing]))
+            points = points[np.isfinite(points)]
+            if len(points):
+                self.low[k] = min(self.low[k], float(points.min()))
+                self.high[k] = max(self.high[k], float(points.max()))
+
+    def _arc_lengths(self, axes: list[Words], after: list[NDArray[np.float64]], arc: NDArray[np.int8], first: int,
+                     count: int, moves: list[NDArray[np.float64]], length: NDArray[np.float64]) -> NDArray[np.float64]:
+        """`length` with each arc's own length in place of its chord."""
+        dx, dy, dz = moves[:3]
+        rows = np.flatnonzero(arc)
+        self.arcs += len(rows)
+        ends = []
+        for k in range(2):  # the position after each line
+            at = np.full(count, np.nan)
+            at[axes[k].lines - first] = after[k]
+            ends.append(_ffill(at, self.pos[k]))
+        end_x, end_y = ends
+        offsets = []
+        for words in axes[5:8]:
+            value = np.full(count, np.nan)
+            value[words.lines - first] = words.values
+            offsets.append(value[rows])
+        i, j, r = offsets
+        flat = motion.arc_lengths(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
+                                  arc[rows] == 2)
+        out = length.copy()
+        out[rows] = np.sqrt(flat * flat + dz[rows] * dz[rows])
+        return out
+
     @property
     def absurd(self) -> bool:
         """Whether the moves went beyond what a float holds (a coordinate of 1e309 mm): no print does."""
-        return not (math.isfinite(self.seconds) and math.isfinite(self.filament))
+        return not (math.isfinite(self.path_seconds) and math.isfinite(self.filament))
+
+    @property
+    def layers(self) -> int:
+        """The slicer's layer markers when it wrote any, else flat printing heights plus the vase's rise."""
+        if max(self.markers):
+            return max(self.markers)
+        heights = sorted(self.layer_heights)
+        steps = [b - a for a, b in itertools.pairwise(heights) if b - a >= 20]
+        height = (sorted(steps)[len(steps) // 2] / 1000 if steps else heights[0] / 1000 if heights and heights[0] > 0
+                  else VASE_LAYER_MM)
+        return max(1, len(heights) + round(self.vase_rise / height))
 
     def result(self) -> GcodeMetadata:
         """The totals; absurd coordinates (beyond what a float holds) leave time and filament unknown."""
+        seconds = self.seconds if not self.absurd else math.inf
+        extent = tuple(zip(self.low, self.high, strict=True)) if self.low[0] <= self.high[0] else None
         return GcodeMetadata(
-            print_time_s=max(1, round(self.seconds)) if math.isfinite(self.seconds) else None,
+            print_time_s=max(1, round(seconds)) if math.isfinite(seconds) else None,
             filament_mm=max(0.0, self.filament) if math.isfinite(self.filament) else None,
-            layers=max(1, len(self.layer_heights)),
+            layers=self.layers, extent=extent, arcs=self.arcs,
         )
 
 

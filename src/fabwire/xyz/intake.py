@@ -13,20 +13,25 @@ import base64
 import binascii
 import contextlib
 import enum
+import functools
 import os
 import re
 import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO
-
-import numpy as np
+from typing import TYPE_CHECKING, BinaryIO
 
 from fabwire import units
 from fabwire.errors import InputError
-from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
+from fabwire.xyz import slicerfigures
+from fabwire.xyz.models import PrinterModel
+
+if TYPE_CHECKING:  # the move analysis (numpy) is loaded when G-code is read, not to decode a .3w
+    import numpy as np
+
+    from fabwire.xyz.gcodeinfo import GcodeMetadata
 
 MAGIC = b"3DPFNKG13WTW"
 """The .3w signature (reference §5.1)."""
@@ -127,9 +132,18 @@ def identify(head: bytes, size: int | None = None) -> Kind:
         return Kind.STL
     if text.lstrip().startswith((b"<?xml", b"<svg", b"<!DOCTYPE", b"<html")):
         return Kind.XML
-    if _CONTROL.search(head):
+    if _CONTROL.search(head) and not _nul_only(head):
         return Kind.BINARY
     return Kind.GCODE
+
+
+def _nul_only(head: bytes) -> bool:
+    """Whether the only control bytes of text are NULs, few of them or a run that pads its end (what a copy off an
+    SD card leaves): G-code with NULs, which `gcode_lines` drops (padding) or refuses by line (inside the code)."""
+    text = head.rstrip(b"\0")
+    if not text.strip() or _CONTROL.search(text.replace(b"\0", b"")):
+        return False
+    return text.count(b"\0") <= max(8, len(text) // 100)
 
 
 def _base64_kind(head: bytes) -> Kind | None:
@@ -303,25 +317,80 @@ def _long_line(name: str, length: int) -> InputError:
                       "printer reads it")
 
 
-def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0) -> Iterator[bytes]:
-    """The whole G-code from the file's start as LF-terminated, line-aligned chunks of at most about CHUNK bytes:
-    BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within CHUNK + MAX_LINE."""
+def content_end(src: BinaryIO) -> int:
+    """The stream's size without the NUL bytes that pad its end (a file copied off an SD card or written in fixed
+    blocks ends in them), read backwards in SNIFF pieces."""
+    end = stream_size(src)
+    while end > 0:
+        start = max(0, end - SNIFF)
+        src.seek(start)
+        piece = src.read(end - start).rstrip(b"\0")
+        if piece:
+            return start + len(piece)
+        end = start
+    return 0
+
+
+def padding_note(name: str, total: int, end: int) -> str | None:
+    """The note for NUL padding dropped from the end of a file, if any."""
+    if end >= total:
+        return None
+    return f"{name}: the {total - end} NUL bytes that pad its end were dropped"
+
+
+def _lines_before(src: BinaryIO, offset: int) -> int:
+    """How many lines (LF, CRLF or CR ended) the stream's first `offset` bytes hold; the position is kept."""
+    here = src.tell()
+    src.seek(0)
+    lines = 0
+    while offset > 0 and (block := src.read(min(CHUNK, offset))):
+        offset -= len(block)
+        lines += block.count(b"\n") + len(re.findall(rb"\r(?!\n)", block))
+    src.seek(here)
+    return lines
+
+
+def _without_nuls(text: bytes, name: str, lines_before: int, repaired: list[int] | None) -> bytes:
+    """`text` (normalised, after `lines_before` whole lines) without its NUL bytes when `repaired` collects their
+    line numbers; otherwise the InputError naming the first one's line."""
+    runs = [lines_before + text.count(b"\n", 0, run.start()) + 1 for run in re.finditer(rb"\0+", text)]
+    if repaired is None:
+        raise InputError(f"{name} has a NUL byte inside its G-code on line {runs[0]} (a printer stalls on it); "
+                         "`fabwire xyz convert --repair` drops such bytes")
+    repaired.extend(line for line in runs if not repaired or line != repaired[-1])
+    return text.replace(b"\0", b"")
+
+
+def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0, *,
+                end: int | None = None, repaired: list[int] | None = None) -> Iterator[bytes]:
+    """The whole G-code from the file's start (to `end`, default its end) as LF-terminated, line-aligned chunks of
+    at most about CHUNK bytes: BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within
+    CHUNK + MAX_LINE.
+
+    A NUL byte before `end` is an InputError naming its line; when `repaired` is given, NULs are dropped instead and
+    the line numbers they were on are appended to it."""
     src.seek(0)
     carry = b""
     held_cr = False
     first = True
     done = 0
-    while block := src.read(CHUNK):
+    left = stream_size(src) if end is None else end
+    while left > 0 and (block := src.read(min(CHUNK, left))):
+        left -= len(block)
+        begin = done
         done += len(block)
         if first:
             block = block.removeprefix(BOM)
             first = False
+        carried_cr = held_cr  # a CR held back from the previous block ends a line this block's text counts
         if held_cr:
             block = b"\r" + block
         held_cr = block.endswith(b"\r")
         if held_cr:
             block = block[:-1]
         text = normalise(block)
+        if b"\0" in text:
+            text = _without_nuls(text, name, _lines_before(src, begin) - carried_cr, repaired)
         _check_lines(text, name, len(carry))
         if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
             raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
@@ -360,11 +429,18 @@ _XYZ_KEY_LINE = re.compile(
     rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
 )
 _G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
-_ODD_FIRST = np.zeros(256, dtype=bool)
-_ODD_FIRST[list(b" \tNng")] = True
-"""A line starting with one of these needs the regular expression to find its command word."""
-_DIGIT_OR_DOT = np.zeros(256, dtype=bool)
-_DIGIT_OR_DOT[list(b"0123456789.")] = True
+
+
+@functools.cache
+def _tables() -> tuple[np.ndarray, np.ndarray]:
+    """(first bytes of a line that need the regular expression to find its command word, digits and the dot)."""
+    import numpy as np
+
+    odd_first = np.zeros(256, dtype=bool)
+    odd_first[list(b" \tNng")] = True
+    digit_or_dot = np.zeros(256, dtype=bool)
+    digit_or_dot[list(b"0123456789.")] = True
+    return odd_first, digit_or_dot
 
 
 @dataclass(frozen=True, slots=True)
@@ -376,6 +452,20 @@ class Prepared:
     metadata: GcodeMetadata
     analysed: bool
     """The moves were read once already to compute metadata (so progress counts two passes)."""
+    end: int
+    """Where the G-code ends (before any NUL padding)."""
+    repaired: list[int] | None = None
+    """With repair: the lines the body pass dropped NUL bytes from (filled as the body is read)."""
+    expand_arcs: bool = False
+    """The body pass turns G2/G3 arcs into line segments."""
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the reader set aside or changed, for the user (complete once the body was read)."""
+        if not self.repaired:
+            return self.metadata.notes
+        shown = ", ".join(map(str, self.repaired[:10])) + (" …" if len(self.repaired) > 10 else "")
+        return (*self.metadata.notes, f"NUL bytes dropped from line{'s' if len(self.repaired) > 1 else ''} {shown}")
 
 
 def stream_size(src: BinaryIO) -> int:
@@ -394,10 +484,11 @@ def _second_half(progress: Progress | None) -> Progress | None:
 
 
 def check_gcode_head(src: BinaryIO, name: str) -> tuple[bytes, int]:
-    """(the normalised first CHUNK of the G-code, the file size); G-code without commands is refused."""
-    total = stream_size(src)
+    """(the normalised first CHUNK of the G-code, its size without the NUL padding at its end); G-code without
+    commands is refused."""
+    total = content_end(src)
     src.seek(0)
-    raw = src.read(CHUNK)
+    raw = src.read(min(CHUNK, total))
     head = normalise(raw[:-1] if raw.endswith(b"\r") else raw, first=True)
     if not head.strip():
         raise InputError(f"{name} is empty G-code: nothing to convert")
@@ -418,18 +509,27 @@ def _leading_comments(head: bytes, room: int) -> bytes | None:
     return b"".join(line + b"\n" for line in head[:found.start()].split(b"\n")[:-1] if not _XYZ_KEY_LINE.match(line))
 
 
-def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space: int,
-            progress: Progress | None) -> Prepared:
-    """The XYZ key lines and the .3w header for a G-code (its metadata read or computed); `header_space` is the
-    room the container has for the (padded) header."""
+def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header_space: int,
+            progress: Progress | None, *, repair: bool = False, force: bool = False,
+            keep_arcs: bool = False) -> Prepared:
+    """The XYZ key lines and the .3w header of a G-code for `model` (its metadata read, the moves always read
+    for their extent and arcs); `header_space` is the room the container has for the (padded) header.
+
+    `repair` drops NUL bytes inside the G-code (noted) instead of refusing the file; extrusions beyond the model's
+    build volume are an InputError unless `force` (then noted); G2/G3 arcs become line segments unless
+    `keep_arcs`."""
+    from fabwire.xyz import arcwork
+    from fabwire.xyz.gcodeinfo import finish
+
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total, _first_half(progress))
+    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True)
+    outside = check_build_volume(stated.merged(computed) if computed else stated, name, model, force)
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
     keys = (
         f"; filename = {safe_name}\n"
         f"; print_time = {meta.print_time_s}\n"
-        f"; machine = {file_id}\n"
+        f"; machine = {model.file_id}\n"
         f"; facets = {meta.facets}\n"
         f"; total_layers = {meta.layers}\n"
         f"; version = {XYZ_VERSION}\n"
@@ -438,23 +538,40 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
     comments = _leading_comments(head, header_space)
     fits = comments is not None and (len(keys + comments) // 16 + 1) * 16 <= header_space  # with its PKCS#7 pad
     header = keys + comments if comments is not None and fits else keys
-    return Prepared(keys, header, meta, computed is not None)
+    padding = padding_note(name, stream_size(src), total)
+    notes = meta.notes + ((padding,) if padding else ()) + ((outside,) if outside else ())
+    arcs = 0 if keep_arcs else meta.arcs
+    if arcs:
+        notes += (f"{arcs} G2/G3 arc{'s' if arcs > 1 else ''} converted to line segments within "
+                  f"{arcwork.TOLERANCE_MM} mm (no public source shows da Vinci firmware running arcs; --keep-arcs "
+                  "passes them through)",)
+    return Prepared(keys, header, replace(meta, notes=notes), computed is not None, total, [] if repair else None,
+                    arcs > 0)
+
+
+def _tail(src: BinaryIO, total: int) -> bytes:
+    """The last TAIL_WINDOW bytes beyond the head window, from a line start (empty for a file the head covers)."""
+    if total <= HEAD_WINDOW:
+        return b""
+    start = max(HEAD_WINDOW, total - TAIL_WINDOW)
+    src.seek(start)
+    tail = normalise(src.read(total - start))
+    return tail[tail.find(b"\n") + 1:] if start > HEAD_WINDOW else tail
 
 
 def _metadata(
-    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
+    src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None, *, repair: bool = False,
+    always: bool = False,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
-    tail = b""
-    if total > CHUNK:
-        src.seek(max(CHUNK, total - TAIL_WINDOW))
-        tail = normalise(src.read())
-    stated = header_metadata(head[:HEAD_WINDOW], tail)
-    _check_plausible(stated, name, "its comments state", "which no print takes")
-    if stated.complete:
+    """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
+    `always`)."""
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
+
+    stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
+    if stated.complete and not always:
         return stated, None
-    analyzer = MoveAnalyzer()
-    for chunk in gcode_lines(src, name, progress, total):
+    analyzer = MoveAnalyzer(timing=stated.print_time_s is None)  # a stated time needs no planning
+    for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None):
         analyzer.feed_chunk(chunk)
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
@@ -464,23 +581,36 @@ def _metadata(
     return stated, computed
 
 
-MAX_PRINT_S = 90 * 86400
-"""Longest print time believed: the longest real jobs take days, not months."""
-MAX_FILAMENT_MM = 10_000_000.0
-"""Most filament believed: 10 km, fifty spools; a da Vinci cartridge holds 200-300 m."""
+BUILD_MARGIN_MM = 1.0
+"""How far past the build volume an extrusion may reach before the file is refused (slicers' rounding)."""
 
 
-MAX_COUNT = 100_000_000
-"""Most layers or facets believed (a 300 mm print at 0.01 mm is 30,000 layers)."""
+def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, force: bool) -> str | None:
+    """InputError when the extrusions reach beyond `model`'s build volume (G-code sliced for a larger printer),
+    naming the extent; with `force`, the note saying so instead. None when they fit or nothing extrudes."""
+    if meta.extent is None:
+        return None
+    beyond = [axis for axis, (low, high), size in zip("XYZ", meta.extent, model.build_volume_mm, strict=True)
+              if (axis != "Z" and low < -BUILD_MARGIN_MM) or high > size + BUILD_MARGIN_MM]
+    if not beyond:
+        return None
+    reach = ", ".join(f"{axis} {low:.1f} to {high:.1f} mm" for axis, (low, high) in zip("XYZ", meta.extent,
+                                                                                        strict=True))
+    volume = " × ".join(str(v) for v in model.build_volume_mm)
+    text = (f"{name} extrudes beyond the {model.name}'s build volume of {volume} mm ({reach}): it was sliced for "
+            "another printer")
+    if not force:
+        raise InputError(f"{text}; slice it for this printer, or give --force to print it anyway")
+    return text + "; converted anyway (--force)"
 
 
 def _check_plausible(meta: GcodeMetadata, name: str, how: str, why: str) -> None:
     """InputError when the figures say the file is no print at all: coordinates far outside any build volume
     (a Z of 1e23 mm) add up to centuries of printing, and the printer would show that as its time left."""
-    too_long = meta.print_time_s is not None and meta.print_time_s > MAX_PRINT_S
-    too_much = meta.filament_mm is not None and not meta.filament_mm <= MAX_FILAMENT_MM
+    too_long = meta.print_time_s is not None and meta.print_time_s > slicerfigures.MAX_PRINT_S
+    too_much = meta.filament_mm is not None and not meta.filament_mm <= slicerfigures.MAX_FILAMENT_MM
     too_many = [f"{units.count(n, noun)}" for n, noun in ((meta.layers, "layer"), (meta.facets, "facet"))
-                if n is not None and n > MAX_COUNT]
+                if n is not None and n > slicerfigures.MAX_COUNT]
     if too_long or too_much or too_many:
         what = (f"{units.duration(meta.print_time_s)} of printing" if too_long
                 else f"{units.filament(meta.filament_mm)} of filament" if too_much else too_many[0])
@@ -494,21 +624,24 @@ def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
 
 
 def stream_metadata(src: BinaryIO, name: str) -> tuple[GcodeMetadata, GcodeMetadata | None]:
-    """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has
-    and for lines no printer reads."""
+    """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has,
+    for lines no printer reads and for NUL bytes inside the G-code (NUL padding at its end is dropped, noted)."""
     head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total)
     if computed is None:  # the comments told everything: the lines are still each checked, however far down
-        src.seek(0)
-        for _ in gcode_lines(src, name):
+        for _ in gcode_lines(src, name, end=total):
             pass
-    return stated, computed
+    padding = padding_note(name, stream_size(src), total)
+    return (replace(stated, notes=(*stated.notes, padding)) if padding else stated), computed
 
 
 def _process(chunk: bytes) -> bytes:
     """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
     if not chunk:
         return chunk
+    import numpy as np
+
+    _ODD_FIRST, _DIGIT_OR_DOT = _tables()  # noqa: N806
     data = np.frombuffer(chunk, dtype=np.uint8)
     starts = np.insert(np.flatnonzero(data[:-1] == 10) + 1, 0, 0)
     c0, c1, c2, c3 = (np.take(data, starts + i, mode="clip") for i in range(4))
@@ -530,7 +663,10 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     if prepared.analysed:
         progress = _second_half(progress)
     leading = True
-    for chunk in gcode_lines(src, name, progress, stream_size(src)):
+    from fabwire.xyz import arcwork
+
+    arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
+    for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired):
         if leading:
             found = _FIRST_CODE_LINE.search(chunk)
             end = len(chunk) if found is None else found.start()
@@ -539,4 +675,4 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
                 continue
             leading = False
             chunk = chunk[end:]
-        yield _process(chunk)
+        yield _process(chunk if arcs is None else arcs.expand(chunk))

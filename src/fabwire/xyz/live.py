@@ -3,7 +3,12 @@ with --json."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import datetime
+import os
+import sys
+from collections.abc import Awaitable, Callable
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
@@ -38,7 +43,10 @@ def _bed_target(status: Status) -> int | None:
     return int(value) if isinstance(value, str) and value.isdigit() else None
 
 
-def job_panel(status: Status, title: str, upload: tuple[int, int] | None = None) -> Panel:
+KEYS_HINT = "space: pause/resume · c: cancel"
+
+
+def job_panel(status: Status, title: str, upload: tuple[int, int] | None = None, footer: str | None = None) -> Panel:
     """The live view of a job: state, a progress bar, temperatures with targets, elapsed and time left."""
     from rich.console import Group
     from rich.panel import Panel
@@ -64,7 +72,7 @@ def job_panel(status: Status, title: str, upload: tuple[int, int] | None = None)
     table.add_row("Time left", units.minutes(progress.remaining_min if progress else None))
     for word in status.error_words:
         table.add_row("Error", str(word))
-    return Panel(table, title=title, expand=False)
+    return Panel(table, title=title, expand=False, subtitle=footer)
 
 
 class JobView:
@@ -80,13 +88,15 @@ class JobView:
         self._last_line = ""
         self._status = Status()
         self._upload: tuple[int, int] | None = None
+        self.footer: str | None = None
+        """A line under the panel (the keys that control the job)."""
 
     def __enter__(self) -> JobView:
         if self.live_mode:
             from rich.live import Live
 
-            self._live = Live(job_panel(self._status, self.title), console=self.console, auto_refresh=False,
-                              transient=False)
+            self._live = Live(job_panel(self._status, self.title, footer=self.footer), console=self.console,
+                              auto_refresh=False, transient=False)
             self._live.start()
         return self
 
@@ -98,7 +108,7 @@ class JobView:
     def upload(self, done: int, total: int) -> None:
         if self._live is not None:
             self._upload = (done, total)
-            self._live.update(job_panel(self._status, self.title, self._upload), refresh=True)
+            self.redraw()
         elif done >= total and not self.output.json_mode:
             self.console.print(f"uploaded {total} bytes")
 
@@ -108,13 +118,22 @@ class JobView:
             self.output.event({"time": now_iso(), **(extra or {}), **status.to_dict()}, "")
             return
         if self._live is not None:
-            upload = self._upload if self._upload and self._upload[0] < self._upload[1] else None
-            self._live.update(job_panel(status, self.title, upload), refresh=True)
+            self.redraw()
             return
         line = job_line(status)
         if line != self._last_line:
             self._last_line = line
             self.console.print(line)
+
+    @property
+    def status(self) -> Status:
+        """The last status shown."""
+        return self._status
+
+    def redraw(self) -> None:
+        if self._live is not None:
+            upload = self._upload if self._upload and self._upload[0] < self._upload[1] else None
+            self._live.update(job_panel(self._status, self.title, upload, self.footer), refresh=True)
 
     def note(self, text: str) -> None:
         """A message between updates (link lost, reconnecting)."""
@@ -122,3 +141,81 @@ class JobView:
             self._live.console.print(text)
         else:
             self.output.note(text)
+
+
+CANCEL_WINDOW_S = 5.0
+"""How long after a first `c` a second one cancels the print."""
+
+
+class JobKeys:
+    """Keys on a terminal while a print is followed, as miniMover offers them: space pauses or resumes, `c` twice
+    cancels. Active only when standard input is a terminal and the view is live; the terminal's mode is restored
+    on exit. `pause`, `resume` and `cancel` are the printer's job commands."""
+
+    def __init__(self, view: JobView, pause: Callable[[], Awaitable[None]], resume: Callable[[], Awaitable[None]],
+                 cancel: Callable[[], Awaitable[None]]) -> None:
+        self.view = view
+        self.actions = {"pause": pause, "resume": resume, "cancel": cancel}
+        self._saved: list[Any] | None = None
+        self._fd = -1
+        self._cancel_asked = -1.0
+        self._tasks: set[asyncio.Task[None]] = set()
+
+    def __enter__(self) -> JobKeys:
+        try:
+            import termios
+            import tty
+        except ImportError:  # no POSIX terminal: no keys
+            return self
+        fd = sys.stdin.fileno() if sys.stdin is not None else -1
+        if not self.view.live_mode or fd < 0 or not os.isatty(fd):
+            return self
+        self._fd = fd
+        self._saved = termios.tcgetattr(fd)
+        tty.setcbreak(fd)
+        asyncio.get_running_loop().add_reader(fd, self._key)
+        self.view.footer = KEYS_HINT
+        self.view.redraw()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._saved is None:
+            return
+        import termios
+
+        with contextlib.suppress(Exception):
+            asyncio.get_running_loop().remove_reader(self._fd)
+        termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+        self._saved = None
+
+    def _key(self) -> None:
+        key = os.read(self._fd, 1)
+        now = asyncio.get_running_loop().time()
+        if key == b" ":
+            self._run("resume" if self.view.status.state_code == PAUSED else "pause")
+        elif key in (b"c", b"C"):
+            if now - self._cancel_asked <= CANCEL_WINDOW_S:
+                self._cancel_asked = -1.0
+                self._run("cancel")
+                return
+            self._cancel_asked = now
+            self.view.footer = "press c again to cancel the print"
+            self.view.redraw()
+            return
+        if self.view.footer != KEYS_HINT:
+            self.view.footer = KEYS_HINT
+            self.view.redraw()
+
+    def _run(self, action: str) -> None:
+        self.view.footer = f"{action} sent · {KEYS_HINT}"
+        self.view.redraw()
+
+        async def act() -> None:
+            try:
+                await self.actions[action]()
+            except Exception as exc:  # the print goes on: say why the key did nothing
+                self.view.note(f"{action}: {exc}")
+
+        task = asyncio.get_running_loop().create_task(act())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)

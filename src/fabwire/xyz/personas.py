@@ -23,6 +23,8 @@ class Personality:
     """Status letters of a `query=a` reply, in the order this firmware sends them."""
     nozzle: Nozzle
     cartridge: str = "PMP6QTH64R1093"
+    second_cartridge: str | None = None
+    """The second spool's tag on two-spool models (Jr. 2.0 Mix): `w:2,SN1,SN2` and `f:2,len1,len2`."""
     zoffset: int = 245
     calibration_tail: tuple[str, ...] = ()
     substates: bool = True
@@ -93,8 +95,9 @@ def personality(model_text: str = "dv1MW0A000", *, serial: str | None = None) ->
             status_and_upload_only=True, settings=(), ip="192.168.1.126", lifetime=(69342, 21785),
         )
     order = _SEED_ORDER if model.wifi else _SEED_ORDER.replace("V4", "")
+    second = "PMP6PTH6840596" if model.dual_extruder else None  # two spools: the Jr. 2.0 Mix
     # XYZprint writes v5 files for the Jr line (a Jr. 1.0w file in the Rojman1984 samples; Jr 1.0 on firmware
     # 2.4.8 per mwiens' converter), so their firmware takes both.
     accepts = (FileFormat.V2, FileFormat.V5) if number.startswith(("dv1J", "dv2J")) and model.container == 2 else ()
     return Personality(model, serial or generated, ("1.2.3",), short[:16], order,
-                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)), accepts=accepts)
+                       Nozzle("2", ("GB-0002-0000-TH-68T-0250-28727",)), accepts=accepts, second_cartridge=second)

@@ -510,6 +510,10 @@ class Printer:
             "network": (Network(s.ip, s.ssid, "0", 39, "54:8c:a0:06:7e:48") if persona.network_json
                         else Network(s.ip, json_form=False)),
         }
+        if persona.second_cartridge and persona.cartridge_tags:  # two spools: both tags, both lengths
+            fields["cartridge"] = Cartridge(2, (persona.cartridge if present else p.NO_CARTRIDGE_SERIAL,
+                                                persona.second_cartridge))
+            fields["filament"] = (2, s.filament_mm if present else -1, s.filament2_mm)
         if scan and persona.model.wifi:
             fields["networks"] = self.scan()
         if persona.fw3:

@@ -42,10 +42,12 @@ def _on_disk(source: Path | bytes) -> Iterator[tuple[Path, str]]:
 
 
 @contextlib.contextmanager
-def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = False) -> Iterator[Path]:
+def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = False,
+               force: bool = False) -> Iterator[Path]:
     """The .3w file to upload for `model`: the source itself when it is a .3w that suits the model (any .3w with
-    `override`), else a temporary one that lasts while the context does. Memory stays within the intake's and
-    the converter's bounds, not the file's size."""
+    `override`), else a temporary one that lasts while the context does (G-code reaching beyond the model's
+    build volume is an InputError unless `force`). Memory stays within the intake's and the converter's bounds,
+    not the file's size."""
     with _on_disk(source) as (path, name), tempfile.TemporaryDirectory() as scratch:
         kind, head = intake.sniff(path, name)
         intake.require_printable(kind, name, head)
@@ -56,7 +58,7 @@ def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = Fa
                 return
             _check_gcode(plain, name, model, override)
             target = Path(scratch) / userinput.derived_upload_name(name)
-            convert_gcode_file(plain, target, model)
+            convert_gcode_file(plain, target, model, force=force)
             yield target
 
 

@@ -38,6 +38,7 @@ class _Stored(msgspec.Struct, forbid_unknown_fields=False):
     machine_min: _Count | msgspec.UnsetType = msgspec.UNSET
     extruder_min: _Count | msgspec.UnsetType = msgspec.UNSET
     filament_mm: _Count | msgspec.UnsetType = msgspec.UNSET
+    filament2_mm: _Count | msgspec.UnsetType = msgspec.UNSET
     ssid: Annotated[str, msgspec.Meta(max_length=SSID_LIMIT, pattern=r"^[^,\[\]\x00-\x1f\x7f\ud800-\udfff]*\Z")] | (
         msgspec.UnsetType) = msgspec.UNSET
     ip: Annotated[str, msgspec.Meta(max_length=45, pattern=r"^[0-9A-Fa-f.:]*\Z")] | msgspec.UnsetType = msgspec.UNSET
@@ -57,6 +58,8 @@ class Settings:
     machine_min: int = 301080
     extruder_min: int = 28581
     filament_mm: int = 200000
+    filament2_mm: int = 120000
+    """The second spool of a two-spool model (Jr. 2.0 Mix)."""
     ssid: str = "TUCKER_HOME"
     ip: str = "192.168.1.118"
 

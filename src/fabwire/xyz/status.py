@@ -83,18 +83,36 @@ class Cartridge(msgspec.Struct, frozen=True):
 
     @property
     def colour(self) -> str | None:
-        serial = self.fields[0] if self.fields else ""
-        return COLOURS.get(serial[4:5]) if self.present and len(serial) > 4 else None
+        return self.spool_colour(0)
 
     @property
     def material_code(self) -> str | None:
-        serial = self.fields[0] if self.fields else ""
-        return serial[2] if self.present and len(serial) > 2 else None
+        return self.spool_material_code(0)
 
     @property
     def length_mm(self) -> int | None:
-        serial = self.fields[0] if self.fields else ""
-        return CARTRIDGE_LENGTHS.get(serial[3:4]) if self.present else None
+        return self.spool_length_mm(0)
+
+    def spool_present(self, index: int) -> bool:
+        """Whether spool `index` (0 or 1; the second only on two-spool printers) has a tag read."""
+        serials = self.serials
+        serial = serials[index] if index < len(serials) else ""
+        return bool(serial) and serial != NO_CARTRIDGE_SERIAL and not set(serial) <= {"-"}
+
+    def _serial(self, index: int) -> str:
+        return self.serials[index] if self.spool_present(index) else ""
+
+    def spool_colour(self, index: int) -> str | None:
+        serial = self._serial(index)
+        return COLOURS.get(serial[4:5]) if len(serial) > 4 else None
+
+    def spool_material_code(self, index: int) -> str | None:
+        serial = self._serial(index)
+        return serial[2] if len(serial) > 2 else None
+
+    def spool_length_mm(self, index: int) -> int | None:
+        serial = self._serial(index)
+        return CARTRIDGE_LENGTHS.get(serial[3:4]) if serial else None
 
 
 class Nozzle(msgspec.Struct, frozen=True):
@@ -519,9 +537,35 @@ class Status(msgspec.Struct, frozen=True):
 
     @property
     def filament_mm(self) -> int | None:
-        if not self.filament or len(self.filament) < 2 or self.filament[1] < 0:
+        return self.spool_filament_mm(0)
+
+    @property
+    def filament2_mm(self) -> int | None:
+        """The second spool's filament left (`f:2,len1,len2`, Jr. 2.0 Mix and 2.0 Duo); None on one-spool models."""
+        return self.spool_filament_mm(1)
+
+    def spool_filament_mm(self, index: int) -> int | None:
+        """Filament left on spool `index` in mm (`f:<count>,len1[,len2]`); None when unknown or not there."""
+        if not self.filament or len(self.filament) < index + 2 or self.filament[index + 1] < 0:
             return None
-        return self.filament[1]
+        if index and self.filament[0] < index + 1:
+            return None
+        return self.filament[index + 1]
+
+    @property
+    def spools(self) -> list[dict[str, Any]]:
+        """Each spool the printer reports (two on the Jr. 2.0 Mix and 2.0 Duo): its tag serial, colour, material
+        and filament left."""
+        cart = self.cartridge
+        count = max(1, cart.count if cart and cart.count == 2 else 1, self.filament[0] if self.filament else 1)
+        out = []
+        for index in range(min(count, 2)):
+            present = cart.spool_present(index) if cart else None
+            out.append({"serial": cart.serials[index] if cart and present else None, "present": present,
+                        "colour": cart.spool_colour(index) if cart else None,
+                        "material_code": cart.spool_material_code(index) if cart else None,
+                        "filament_left_mm": self.spool_filament_mm(index)})
+        return out
 
     @property
     def model(self) -> PrinterModel | None:
@@ -558,7 +602,7 @@ class Status(msgspec.Struct, frozen=True):
             "zoffset_mm": self.zoffset / 100 if self.zoffset is not None else None,
             "calibration": _calibration_ints(self.calibration),
             "autolevel": self.autolevel, "buzzer": self.buzzer, "block_size_bytes": self.block_size,
-            "filament_left_mm": self.filament_mm,
+            "filament_left_mm": self.filament_mm, "filament2_left_mm": self.filament2_mm, "spools": self.spools,
             "cartridge_present": cart.present if cart else None, "cartridge_colour": cart.colour if cart else None,
             "material": self.material_name, "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
             "network": None if net is None else net.as_dict(),

@@ -41,6 +41,9 @@ GAP = 4684
 """Zero bytes before the tag in miniMover/XYZware files (XYZprint's compact layout uses 8)."""
 HEADER_OFFSET = {2: 68, 5: 80}
 CHUNK = 1 << 22
+DECODE_PIECE = 1 << 20
+"""Bytes decrypted at once when reading a .3w: each piece is held about four times over (read, decrypted,
+joined, written), so a small piece keeps decoding within a few MiB whatever the file's size."""
 GCODE_SUFFIXES = (".gcode", ".gco", ".g")
 
 Progress = intake.Progress
@@ -67,6 +70,8 @@ class ThreeWInfo:
     header_offset: int = 0
     pad_ok: bool = True
     model: PrinterModel | None = None
+    notes: tuple[str, ...] = ()
+    """What the conversion set aside or changed (figures not believed, NUL padding or bytes dropped)."""
 
     @property
     def crc_ok(self) -> bool:
@@ -218,13 +223,14 @@ def _encrypt_zip(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]
 
 def _write(
     src: BinaryIO, name: str, out: BinaryIO, model: PrinterModel, container: int | None, zipped: bool | None,
-    filename: str, progress: Progress | None,
+    filename: str, progress: Progress | None, repair: bool = False, force: bool = False, keep_arcs: bool = False,
 ) -> ThreeWInfo:
     container = model.container if container is None else container
     zipped = model.zipped if zipped is None else zipped
     if container not in HEADER_OFFSET:
         raise InputError(f"unknown .3w container version {container}; use 2 or 5")
-    prepared = intake.prepare(src, name, model.file_id, filename, BODY_OFFSET - _header_start(container), progress)
+    prepared = intake.prepare(src, name, model, filename, BODY_OFFSET - _header_start(container), progress,
+                              repair=repair, force=force, keep_arcs=keep_arcs)
     stored = _stored_header(container, prepared.header)
     tag = TAG_ZIP if zipped else TAG_ECB
     _preamble(container, tag, stored, 0)  # fail on an oversized header before writing the body
@@ -236,20 +242,21 @@ def _write(
     return ThreeWInfo(
         container=container, tag=tag.decode(), zipped=zipped, header_encrypted=container != 5, body_encrypted=True,
         header=prepared.header, fields=_fields(prepared.header), crc_stored=crc, crc_computed=crc, gcode_size=plain,
-        body_size=size, gap=GAP, header_offset=_header_start(container), model=model,
+        body_size=size, gap=GAP, header_offset=_header_start(container), model=model, notes=prepared.notes,
     )
 
 
 def write_3w(
     gcode: bytes, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
-    zipped: bool | None = None, progress: Progress | None = None, filename: str = "temp.3w",
+    zipped: bool | None = None, progress: Progress | None = None, filename: str = "temp.3w", force: bool = False,
 ) -> bytes:
     """The .3w bytes for `gcode` as `model` expects them (container/zipped override the model's defaults)."""
     kind = intake.identify(gcode[:intake.SNIFF], len(gcode))
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, "the data", gcode[:intake.SNIFF])
     out = BytesIO()
-    _write(BytesIO(gcode), "the G-code", out, _resolve_model(model), container, zipped, filename, progress)
+    _write(BytesIO(gcode), "the G-code", out, _resolve_model(model), container, zipped, filename, progress,
+           force=force)
     return out.getvalue()
 
 
@@ -325,15 +332,19 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
 
 def convert_gcode_file(
     src: Path, dst: Path, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
-    zipped: bool | None = None, progress: Progress | None = None,
+    zipped: bool | None = None, progress: Progress | None = None, repair: bool = False, force: bool = False,
+    keep_arcs: bool = False,
 ) -> ThreeWInfo:
-    """Convert a G-code file to a .3w file; `dst` appears complete or not at all."""
+    """Convert a G-code file to a .3w file; `dst` appears complete or not at all. A NUL byte inside the G-code is
+    an InputError naming its line, or with `repair` dropped and noted in the result's `notes`; so are extrusions
+    beyond the model's build volume, unless `force`. G2/G3 arcs become line segments unless `keep_arcs`."""
     target = _resolve_model(model)
     kind, head = intake.sniff(src)
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, str(src), head)
     with intake.open_input(src) as source, _atomic(dst) as out:
-        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress)
+        return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress, repair, force,
+                      keep_arcs)
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -424,12 +435,12 @@ def _decrypt_ecb(
     src: BinaryIO, body_size: int, sink: Callable[[bytes], object], name: str, progress: Progress | None, total: int,
 ) -> tuple[int, int, bool, bool]:
     """Returns (crc of stored body, plaintext size, pad present, body encrypted)."""
-    first = src.read(CHUNK)
+    first = src.read(DECODE_PIECE)
     crc = zlib.crc32(first)
     if first[:1] == b";":
         sink(first)
         plain = len(first)
-        while block := src.read(CHUNK):
+        while block := src.read(DECODE_PIECE):
             crc = zlib.crc32(block, crc)
             sink(block)
             plain += len(block)
@@ -455,7 +466,7 @@ def _decrypt_ecb(
             plain += len(text) - 16
         if progress is not None:
             progress(done, total)
-        block = src.read(CHUNK)
+        block = src.read(DECODE_PIECE)
         crc = zlib.crc32(block, crc)
     last, pad_ok = _unpad(held + decryptor.finalize())
     sink(last)
@@ -493,7 +504,7 @@ def _decrypt_zip(
             with member:
                 while True:
                     with _corrupt_zip(name):
-                        data = member.read(CHUNK)
+                        data = member.read(DECODE_PIECE)
                     if not data:
                         break
                     sink(data)  # the output's own errors stay what they are

@@ -98,9 +98,14 @@ def _size(path: Path) -> int:
 @click.option("--format", "file_format", type=click.Choice(["v2", "v5"]),
               help="Container version (default: what the model needs; nano on firmware 3.x wants v5).")
 @click.option("--zip/--no-zip", "zipped", default=None, help="Zipped AES-128 body (1.0/1.1/2.0 generation) or not.")
+@click.option("--repair", is_flag=True, help="Drop NUL bytes found inside the G-code (and say on which lines) "
+                                             "instead of refusing the file.")
+@click.option("--force", is_flag=True, help="Convert even when the extrusions reach beyond the model's build volume.")
+@click.option("--keep-arcs", is_flag=True, help="Pass G2/G3 arcs through (default: line segments within 0.01 mm; "
+                                                "no public source shows da Vinci firmware running arcs).")
 @click.pass_context
 def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, file_format: str | None,
-            zipped: bool | None) -> None:
+            zipped: bool | None, repair: bool, force: bool, keep_arcs: bool) -> None:
     """Convert G-code to a .3w print file or back; the direction follows the files' types ('-' reads SRC from
     standard input).
 
@@ -113,11 +118,12 @@ def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, fi
         kind, head = intake.sniff(path, shown)
         intake.require_printable(kind, shown, head)
         with intake.decoded_path(path, kind) as plain:
-            _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped)
+            _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped,
+                     {"repair": repair, "force": force, "keep_arcs": keep_arcs})
 
 
 def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
-             container: Literal[2, 5] | None, zipped: bool | None) -> None:
+             container: Literal[2, 5] | None, zipped: bool | None, options: dict[str, bool] | None = None) -> None:
     """Convert `plain` (the source with any base64 layer decoded) of `kind` THREEW or GCODE."""
     size = _size(plain)
     if kind is intake.Kind.THREEW:
@@ -139,7 +145,8 @@ def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, wri
             with _progress(app, f"decoding {src.name}", size) as progress:
                 convert_3w_to_gcode(plain, middle, progress)
             with _progress(app, f"encoding {dst.name}", _size(middle)) as progress:
-                info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress)
+                info = convert_gcode_file(middle, dst, model, container=container, zipped=zipped, progress=progress,
+                                          **(options or {}))
         _report(app, "3w-to-3w", src, dst, info)
         return
     if not writing:
@@ -147,13 +154,16 @@ def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, wri
                          "(name the output *.3w to make a print file)")
     model = find_model(model_text or "dv1MX0A000")
     with _progress(app, f"encoding {dst.name}", size) as progress:
-        info = convert_gcode_file(plain, dst, model, container=container, zipped=zipped, progress=progress)
+        info = convert_gcode_file(plain, dst, model, container=container, zipped=zipped, progress=progress,
+                                  **(options or {}))
     _report(app, "gcode-to-3w", src, dst, info)
 
 
 def _report(app: App, direction: str, src: Path, dst: Path, info: ThreeWInfo) -> None:
     data = {"direction": direction, "source": str(src), "output": str(dst), "written_bytes": _size(dst),
-            **_info_data(info)}
+            **_info_data(info), "notes": list(info.notes)}
+    for note in info.notes:
+        app.output.note(f"note: {note}")
     model = info.model.name if info.model else info.machine or "unknown model"
     if direction == "3w-to-gcode":
         text = f"wrote {dst} ({info.gcode_size} bytes of G-code) from a {info.variant} file for {model}; "
@@ -218,8 +228,10 @@ def _gcode_info(app: App, plain: Path, file: Path) -> None:
     sources = {"print_time_s": source(stated.print_time_s), "filament_mm": source(stated.filament_mm),
                "layers": source(stated.layers)}
     data = {"file": str(file), "kind": "gcode", "slicer": stated.slicer, "print_time_s": final.print_time_s,
-            "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources}
+            "filament_mm": final.filament_mm, "layers": final.layers, "sources": sources,
+            "notes": list(stated.notes)}
+    notes = "".join(f"\n{note}" for note in stated.notes)
     app.output.result(data, f"{file}: G-code from {stated.slicer or 'an unknown slicer'}; print time "
                             f"{units.duration(final.print_time_s)} ({sources['print_time_s']}), filament "
                             f"{units.filament(final.filament_mm)} ({sources['filament_mm']}), "
-                            f"{units.count(final.layers, 'layer')} ({sources['layers']})")
+                            f"{units.count(final.layers, 'layer')} ({sources['layers']}){notes}")

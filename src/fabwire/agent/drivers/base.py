@@ -5,6 +5,7 @@ kind has no such thing, SI units in the names):
   state ("idle", "printing", "paused", "busy", "done", "error", "drawing", "offline"), state_text (words),
   error (words or None), error_code, busy (bool), progress_percent, elapsed_s, time_left_s,
   extruder_temp_c, extruder_target_c, bed_temp_c, bed_target_c, filament_left_mm,
+  extruder2_temp_c, filament2_left_mm (a second extruder or spool: da Vinci 2.0 Duo, Jr. 2.0 Mix),
   position ({"x", "y", "z"} in the Line-us's own units), pen_down,
   active_slot, filament_position (words), selector_slot, idler_slot, finda,
   prompt (words a flow waits on the owner to confirm, e.g. "Lower the calibration detector, then confirm"),
@@ -30,6 +31,7 @@ SUMMARY_KEYS = (
     "state", "state_text", "error", "error_code", "busy", "progress_percent", "elapsed_s", "time_left_s",
     "extruder_temp_c", "extruder_target_c", "bed_temp_c", "bed_target_c", "filament_left_mm", "position",
     "pen_down", "active_slot", "filament_position", "selector_slot", "idler_slot", "finda", "prompt", "actions",
+    "extruder2_temp_c", "filament2_left_mm",
 )
 
 

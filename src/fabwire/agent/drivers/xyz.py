@@ -66,6 +66,8 @@ def printer_summary(status: Status) -> dict[str, Any]:
         extruder_temp_c=status.extruder, extruder_target_c=status.extruder_target,
         bed_temp_c=status.bed, bed_target_c=_target(status, "bed"),
         filament_left_mm=status.filament_mm, actions=actions,
+        extruder2_temp_c=status.temperatures.extruder2 if status.temperatures else None,
+        filament2_left_mm=status.filament2_mm,
     )
 
 

@@ -1,0 +1,268 @@
+"""How long the moves of a G-code take on a printer: a trapezoid per move under the firmware's acceleration, jerk
+and feed rate limits, with look-ahead between moves, as Marlin-style firmware plans them (and as PrusaSlicer's
+G-code processor estimates them: the same junction rule, the same reverse and forward passes).
+
+Moves arrive as arrays; they are planned in windows of `WINDOW` moves counted from the file's start (so the result
+does not depend on how the file was cut into pieces). Both passes are min-plus recurrences on squared speeds
+(v_i^2 = min(limit_i, v_{i-1}^2 + 2 a d)), which a cumulative minimum solves for a whole window at once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+Floats = NDArray[np.float64]
+
+WINDOW = 16384
+"""Moves planned together; the speed at a window's end is the last move's safe speed."""
+
+
+@dataclass(frozen=True, slots=True)
+class Limits:
+    """A firmware's motion limits, axes X, Y, Z, E; speeds in mm/s, accelerations in mm/s^2."""
+
+    max_feedrate: tuple[float, float, float, float]
+    """M203 X Y Z E."""
+    max_acceleration: tuple[float, float, float, float]
+    """M201 X Y Z E."""
+    acceleration: float
+    """M204 P (Marlin 2) or S (legacy): moves that extrude."""
+    retract_acceleration: float
+    """M204 R (Marlin 2) or T with S (legacy): moves of the extruder alone."""
+    travel_acceleration: float
+    """M204 T (Marlin 2) or S (legacy): moves that do not extrude."""
+    max_jerk: tuple[float, float, float, float]
+    """M205 X Y Z E: the speed change an axis makes at once."""
+    min_feedrate: float = 0.0
+    """M205 S."""
+    min_travel_feedrate: float = 0.0
+    """M205 T."""
+
+
+DEFAULT_LIMITS = Limits(
+    max_feedrate=(500.0, 500.0, 12.0, 120.0), max_acceleration=(9000.0, 9000.0, 500.0, 10000.0), acceleration=1500.0,
+    retract_acceleration=1500.0, travel_acceleration=1500.0, max_jerk=(10.0, 10.0, 0.2, 2.5),
+)
+"""Used when a file states no limits: PrusaSlicer's default machine limits (PrintConfig.cpp, machine_max_*; the
+values it estimates with when the printer profile gives none). No public source gives the da Vinci firmware's own
+limits, so a file's M201-M205 always win."""
+
+_AXES = "XYZE"
+
+
+def apply_command(limits: Limits, command: bytes, words: dict[bytes, float]) -> Limits:
+    """`limits` after an M201, M203, M204 or M205 with these words (Marlin's units, as PrusaSlicer reads them)."""
+
+    def axes(current: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+        values = [words.get(axis.encode(), current[k]) for k, axis in enumerate(_AXES)]
+        return (values[0], values[1], values[2], values[3])
+
+    if command == b"M201":
+        return replace(limits, max_acceleration=axes(limits.max_acceleration))
+    if command == b"M203":
+        return replace(limits, max_feedrate=axes(limits.max_feedrate))
+    if command == b"M204":
+        if b"S" in words:  # the legacy form: S for printing and travel, T for retraction
+            return replace(limits, acceleration=words[b"S"], travel_acceleration=words[b"S"],
+                           retract_acceleration=words.get(b"T", limits.retract_acceleration))
+        return replace(limits, acceleration=words.get(b"P", limits.acceleration),
+                       retract_acceleration=words.get(b"R", limits.retract_acceleration),
+                       travel_acceleration=words.get(b"T", limits.travel_acceleration))
+    if command == b"M205":
+        return replace(limits, max_jerk=axes(limits.max_jerk), min_feedrate=words.get(b"S", limits.min_feedrate),
+                       min_travel_feedrate=words.get(b"T", limits.min_travel_feedrate))
+    return limits
+
+
+LIMIT_COMMANDS = (b"M201", b"M203", b"M204", b"M205")
+
+
+def _sane(limits: Limits) -> Limits:
+    """Zero, negative or absurd limits (a typo, `M204 S0`) would stop or never slow the machine: the defaults
+    stand in for them."""
+    def positive(value: float, default: float) -> float:
+        return value if math.isfinite(value) and value > 0 else default
+
+    def each(values: tuple[float, ...], defaults: tuple[float, ...]) -> tuple[float, float, float, float]:
+        out = [positive(v, d) for v, d in zip(values, defaults, strict=True)]
+        return (out[0], out[1], out[2], out[3])
+
+    d = DEFAULT_LIMITS
+    return Limits(each(limits.max_feedrate, d.max_feedrate), each(limits.max_acceleration, d.max_acceleration),
+                  positive(limits.acceleration, d.acceleration),
+                  positive(limits.retract_acceleration, d.retract_acceleration),
+                  positive(limits.travel_acceleration, d.travel_acceleration), each(limits.max_jerk, d.max_jerk),
+                  max(0.0, limits.min_feedrate) if math.isfinite(limits.min_feedrate) else 0.0,
+                  max(0.0, limits.min_travel_feedrate) if math.isfinite(limits.min_travel_feedrate) else 0.0)
+
+
+def arc_lengths(x0: Floats, y0: Floats, x1: Floats, y1: Floats, i: Floats, j: Floats, r: Floats,
+                clockwise: NDArray[np.bool_]) -> Floats:
+    """Lengths in the XY plane of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1), centre at offset (I, J) from
+    the start, or radius R when I and J are NaN (negative R: the longer way), as Marlin's plan_arc reads them; an
+    arc that ends where it starts is a full circle. An R arc whose chord exceeds its diameter is its chord."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        chord = np.hypot(x1 - x0, y1 - y0)
+        centred = ~(np.isnan(i) & np.isnan(j))
+        ii, jj = np.nan_to_num(i), np.nan_to_num(j)
+        radius = np.where(centred, np.hypot(ii, jj), np.abs(r))
+        start = np.arctan2(-jj, -ii)
+        end = np.arctan2(y1 - (y0 + jj), x1 - (x0 + ii))
+        sweep = np.where(clockwise, start - end, end - start) % (2 * math.pi)
+        sweep = np.where(sweep < 1e-9, 2 * math.pi, sweep)
+        half = np.arcsin(np.clip(chord / (2 * radius), 0.0, 1.0))
+        by_radius = np.where(r < 0, 2 * math.pi - 2 * half, 2 * half)
+        sweep = np.where(centred, sweep, by_radius)
+        length = radius * sweep
+        invalid = ~np.isfinite(length) | (~centred & (chord > 2 * radius + 1e-9)) | (radius == 0)
+    result: Floats = np.where(invalid, chord, length)
+    return result
+
+
+@dataclass(slots=True)
+class _Carry:
+    """The last planned move, for the junction into the next window."""
+
+    cruise: float
+    velocity: Floats
+    safe: float
+    reach: float
+    """The squared speed the next move may enter at (the last move's planned exit)."""
+
+
+@dataclass(slots=True)
+class Planner:
+    """Collects moves (axis deltas in mm, path length in mm, feed rate in mm/min) and adds up their time."""
+
+    limits: Limits = DEFAULT_LIMITS
+    seconds: float = 0.0
+    _table: list[Limits] = field(default_factory=lambda: [DEFAULT_LIMITS])
+    _pending: list[tuple[Floats, ...]] = field(default_factory=list)
+    _count: int = 0
+    _carry: _Carry | None = None
+
+    def set_limits(self, limits: Limits) -> None:
+        self.limits = limits
+        sane = _sane(limits)
+        if sane != self._table[-1]:
+            self._table.append(sane)
+
+    def add(self, delta: tuple[Floats, Floats, Floats, Floats], length: Floats, feed: Floats) -> None:
+        """Moves: X, Y, Z, E deltas, the path length (the arc's for arcs; 0 for extruder-only moves) and F."""
+        dx, dy, dz, de = delta
+        real = (length > 0) | (de != 0)
+        if not real.all():
+            dx, dy, dz, de, length, feed = (a[real] for a in (dx, dy, dz, de, length, feed))
+        if not len(length):
+            return
+        which = np.full(len(length), float(len(self._table) - 1))
+        self._pending.append((dx, dy, dz, de, length, feed, which))
+        self._count += len(length)
+        while self._count >= WINDOW + 1:  # a window is planned once the move after it is known
+            self._plan(WINDOW)
+
+    def total(self) -> float:
+        """The seconds of every move so far, the ones still waiting for their window planned as if the file ended
+        there (the planner itself is left as it was)."""
+        if not self._count:
+            return self.seconds
+        columns = [np.concatenate(parts) for parts in zip(*self._pending, strict=True)]
+        seconds, carry = self.seconds, self._carry
+        for start in range(0, self._count, WINDOW):
+            part, carry = _plan_window([c[start:start + WINDOW] for c in columns], self._table, carry)
+            seconds += part
+        return seconds
+
+    def _plan(self, n: int) -> None:
+        columns = [np.concatenate(parts) for parts in zip(*self._pending, strict=True)]
+        rest = [c[n:] for c in columns]
+        self._pending = [tuple(rest)] if len(rest[0]) else []
+        self._count = len(rest[0])
+        seconds, self._carry = _plan_window([c[:n] for c in columns], self._table, self._carry)
+        self.seconds += seconds
+
+
+def _limit_columns(table: list[Limits], which: Floats) -> dict[str, Floats]:
+    """Each limit per move: one row when the window has one set of limits (the usual case), else a row per move."""
+    rows = np.array([[*t.max_feedrate, *t.max_acceleration, t.acceleration, t.retract_acceleration,
+                      t.travel_acceleration, *t.max_jerk, t.min_feedrate, t.min_travel_feedrate] for t in table])
+    picked = rows[int(which[0]):int(which[0]) + 1] if which[0] == which[-1] else rows[which.astype(np.intp)]
+    return {"max_feedrate": picked[:, 0:4], "max_acceleration": picked[:, 4:8], "acceleration": picked[:, 8],
+            "retract": picked[:, 9], "travel": picked[:, 10], "jerk": picked[:, 11:15], "min_feed": picked[:, 15],
+            "min_travel": picked[:, 16]}
+
+
+def _smallest(values: list[Floats]) -> Floats:
+    """The elementwise minimum of a few arrays (faster than a reduction along a short axis)."""
+    out = values[0]
+    for value in values[1:]:
+        out = np.minimum(out, value)
+    return out
+
+
+def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | None) -> tuple[float, _Carry]:
+    dx, dy, dz, de, length, feed, which = columns
+    lim = _limit_columns(table, which)
+    moving = length > 0
+    dist = np.where(moving, length, np.abs(de))
+    axes = [a for a, delta in enumerate((dx, dy, dz, de)) if delta.any()]  # Z is mostly still: skip it then
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse_dist = 1.0 / dist
+        unit = [(dx, dy, dz, de)[a] * inverse_dist for a in axes]
+        inverse = [1.0 / np.abs(u) for u in unit]  # inf for an axis that does not move
+        speed = np.maximum(feed / 60.0, np.where(de == 0, lim["min_travel"], lim["min_feed"]))
+        cruise = _smallest([speed] + [lim["max_feedrate"][:, a] * inverse[k] for k, a in enumerate(axes)])
+        accel = np.where(~moving, lim["retract"], np.where(de > 0, lim["acceleration"], lim["travel"]))
+        accel = _smallest([accel] + [lim["max_acceleration"][:, a] * inverse[k] for k, a in enumerate(axes)])
+    velocity = [cruise * u for u in unit]
+    jerk_limit = [lim["jerk"][:, a] for a in axes]
+    safe = _smallest([cruise] + [np.where(np.abs(v) > limit, limit, np.inf) for v, limit in zip(velocity, jerk_limit,
+                                                                                            strict=True)])
+
+    # The junction speed into each move (PrusaSlicer's GCodeProcessor, Marlin's classic jerk): the per-axis speed
+    # change, the larger of the two speeds where an axis reverses; scaled down by the tightest axis.
+    first = carry is None
+    prev_cruise = np.concatenate(([cruise[0] if carry is None else carry.cruise], cruise[:-1]))
+    prev_safe = np.concatenate(([safe[0] if carry is None else carry.safe], safe[:-1]))
+    factor = np.ones(len(cruise))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slower = np.minimum(1.0, cruise / prev_cruise)  # the previous move's speeds as it slows to this one's
+        for k, a in enumerate(axes + [a for a in range(4) if a not in axes and carry is not None]):
+            v_entry = velocity[k] if k < len(axes) else np.zeros(len(cruise))
+            before = v_entry[0] if carry is None else carry.velocity[a]
+            v_exit = np.concatenate(([before], v_entry[:-1])) * slower
+            jerk = np.where(v_exit * v_entry < 0, np.maximum(np.abs(v_exit), np.abs(v_entry)),
+                            np.abs(v_exit - v_entry))
+            factor = np.minimum(factor, lim["jerk"][:, a] / jerk)
+    junction = np.minimum(prev_cruise, cruise) * factor
+    threshold = junction * 0.99
+    junction = np.where((prev_safe > threshold) & (safe > threshold), safe, junction)
+    if first:
+        junction[0] = safe[0]
+    limit_sq = np.concatenate((junction * junction, [safe[-1] * safe[-1]]))
+
+    # Reverse then forward pass: squared entry speeds, each within reach of the next and of the previous move.
+    gain = 2.0 * accel * dist
+    prefix = np.concatenate(([0.0], np.cumsum(gain)))
+    reverse = np.minimum.accumulate((limit_sq + prefix)[::-1])[::-1] - prefix
+    reach = math.inf if carry is None else carry.reach
+    forward = np.minimum.accumulate(np.concatenate(([reach], reverse - prefix)))[1:] + prefix
+    forward = np.maximum(forward, 0.0)
+    v0 = np.minimum(np.sqrt(forward[:-1]), cruise)
+    v1 = np.minimum(np.sqrt(forward[1:]), cruise)
+
+    # Each move's trapezoid: up to its peak speed (the cruise speed, or less when the move is too short to reach
+    # it), any cruise, down to the exit speed.
+    v0_sq, v1_sq = v0 * v0, v1 * v1
+    peak = np.minimum(cruise, np.sqrt(accel * dist + (v0_sq + v1_sq) / 2))
+    peak = np.maximum(peak, np.maximum(v0, v1))
+    ramps = (2 * cruise * cruise - v0_sq - v1_sq) / (2 * accel)
+    times = (2 * peak - v0 - v1) / accel + np.maximum(dist - ramps, 0.0) / cruise
+    last = np.zeros(4)
+    last[axes] = [v[-1] for v in velocity]
+    carried = _Carry(float(cruise[-1]), last, float(safe[-1]), float(forward[-1]))
+    return float(np.sum(times)), carried

@@ -1,0 +1,134 @@
+"""G2/G3 arcs written as G1 segments within 0.01 mm of the arc when converting (Marlin's arc rules), or kept."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from clitools import cli_env, run_cli
+from fabwire.xyz.arcwork import MOST_SEGMENTS, TOLERANCE_MM, ArcExpander, segments
+from fabwire.xyz.threew import convert_gcode_file, read_3w
+
+MOVE = re.compile(r"G1 X(-?[0-9.]+) Y(-?[0-9.]+)(?: Z(-?[0-9.]+))?(?: E(-?[0-9.]+))?")
+
+
+def points(lines: list[str]) -> list[tuple[float, ...]]:
+    out = []
+    for line in lines:
+        found = MOVE.match(line)
+        assert found, line
+        out.append(tuple(float(v) if v is not None else math.nan for v in found.groups()))
+    return out
+
+
+def sagitta_ok(start: tuple[float, float], pts: list[tuple[float, ...]], centre: tuple[float, float],
+               radius: float) -> None:
+    """Every vertex on the circle, every chord within the tolerance of it."""
+    previous = start
+    for p in pts:
+        assert math.hypot(p[0] - centre[0], p[1] - centre[1]) == pytest.approx(radius, abs=1e-3)
+        chord = math.hypot(p[0] - previous[0], p[1] - previous[1])
+        assert radius - math.sqrt(max(0.0, radius * radius - chord * chord / 4)) <= TOLERANCE_MM + 1e-4
+        previous = (p[0], p[1])
+
+
+@settings(max_examples=100, deadline=None)
+@given(radius=st.floats(0.5, 120), start=st.floats(0, 2 * math.pi), sweep=st.floats(0.05, 2 * math.pi - 0.05),
+       clockwise=st.booleans())
+def test_segments_stay_within_the_tolerance(radius: float, start: float, sweep: float, clockwise: bool) -> None:
+    cx, cy = 100.0, 100.0
+    x0, y0 = cx + radius * math.cos(start), cy + radius * math.sin(start)
+    end = start - sweep if clockwise else start + sweep
+    x1, y1 = cx + radius * math.cos(end), cy + radius * math.sin(end)
+    lines = segments((x0, y0, 0.2, 5.0), {b"X": x1, b"Y": y1, b"I": cx - x0, b"J": cy - y0, b"E": 6.0}, clockwise)
+    assert lines is not None
+    pts = points(lines)
+    sagitta_ok((x0, y0), pts, (cx, cy), radius)
+    assert pts[-1][:2] == pytest.approx((x1, y1), abs=1e-4)
+    assert pts[-1][3] == pytest.approx(6.0)
+    travelled = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip([(x0, y0), *pts], pts, strict=False))
+    half = math.acos(max(-1.0, 1 - TOLERANCE_MM / radius))  # chords are this much shorter at most
+    rounding = len(pts) * 2e-4  # coordinates are written with 4 decimals
+    assert radius * sweep * math.sin(half) / half - rounding <= travelled <= radius * sweep + rounding
+
+
+@pytest.mark.parametrize(("words", "clockwise", "centre"), [
+    pytest.param({b"X": 10.0, b"Y": 10.0, b"R": 10.0}, True, (10.0, 0.0), id="R-short-way-cw"),
+    pytest.param({b"X": 10.0, b"Y": 10.0, b"R": -10.0}, True, (0.0, 10.0), id="R-long-way-cw"),
+    pytest.param({b"X": 10.0, b"Y": 10.0, b"R": 10.0}, False, (0.0, 10.0), id="R-short-way-ccw"),
+    pytest.param({b"X": 0.0, b"Y": 0.0, b"I": 5.0}, False, (5.0, 0.0), id="full-circle"),
+])
+def test_marlins_arc_rules(words: dict[bytes, float], clockwise: bool, centre: tuple[float, float]) -> None:
+    lines = segments((0.0, 0.0, 0.0, 0.0), words, clockwise)
+    assert lines is not None
+    radius = math.hypot(centre[0], centre[1])
+    sagitta_ok((0.0, 0.0), points(lines), centre, radius)
+
+
+def test_no_centre_or_a_radius_too_small_is_a_straight_move() -> None:
+    assert segments((0, 0, 0, 0), {b"X": 10.0, b"Y": 0.0}, True) is None
+    assert segments((0, 0, 0, 0), {b"X": 20.0, b"Y": 0.0, b"R": 5.0}, True) is None
+    expander = ArcExpander()
+    assert expander.expand(b"G1 X5 Y5\nG2 X20 Y5 R2 E3\n") == b"G1 X5 Y5\nG1 X20 Y5 R2 E3\n"
+
+
+def test_relative_modes_are_followed() -> None:
+    expander = ArcExpander()
+    out = expander.expand(b"G91\nM83\nG1 X10 Y10 F600\nG3 X10 Y10 I0 J10 E2\nG1 X1\n").decode().splitlines()
+    arc = out[3:-1]
+    assert expander.converted == 1
+    xs = [float(MOVE.match(line).group(1)) for line in arc]  # type: ignore[union-attr]
+    es = [float(MOVE.match(line).group(4)) for line in arc]  # type: ignore[union-attr]
+    assert sum(xs) == pytest.approx(10.0, abs=1e-3)
+    assert sum(es) == pytest.approx(2.0, abs=1e-4)
+    assert out[-1] == "G1 X1"
+
+
+def test_convert_writes_segments_and_keep_arcs_keeps_them(tmp_path: Path) -> None:
+    src = tmp_path / "arcs.gcode"
+    src.write_bytes(b"G90\nM82\nG28\nG92 E0\nG1 Z0.2 F600\nG1 X55 Y75 F1200\n"
+                    + b"".join(b"G2 X55 Y75 I20 J0 E%d F1200\n" % (40 * (k + 1)) for k in range(3)))
+    info = convert_gcode_file(src, tmp_path / "out.3w")
+    body = read_3w(tmp_path / "out.3w").gcode
+    assert b"G2 " not in body
+    assert body.count(b"\nG1 X") > 3 * 50
+    assert any("3 G2/G3 arcs converted to line segments within 0.01 mm" in note for note in info.notes)
+    kept = convert_gcode_file(src, tmp_path / "kept.3w", keep_arcs=True)
+    assert read_3w(tmp_path / "kept.3w").gcode.count(b"\nG2 X55 Y75 I20 J0") == 3
+    assert not any("arc" in note for note in kept.notes)
+    done = run_cli("xyz", "convert", str(src), str(tmp_path / "cli.3w"), env=cli_env())
+    assert "converted to line segments" in done.stderr
+    assert read_3w(tmp_path / "cli.3w").gcode == read_3w(tmp_path / "out.3w").gcode.replace(b"out.3w", b"cli.3w")
+
+
+def test_gcode_beyond_the_build_volume_is_refused_unless_forced(tmp_path: Path) -> None:
+    src = tmp_path / "big.gcode"
+    src.write_bytes(b"G28\nG1 Z0.2 F600\nG1 X10 Y10 F3000\nG1 X198 Y10 E5 F1200\nG1 X198 Y100 E9\n")
+    refused = run_cli("xyz", "convert", str(src), str(tmp_path / "b.3w"), "-m", "mini w", env=cli_env())
+    assert refused.returncode == 4
+    assert "X 10.0 to 198.0 mm" in refused.stderr
+    assert "150 × 150 × 150 mm" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "b.3w").exists()
+    forced = run_cli("xyz", "convert", "--force", str(src), str(tmp_path / "b.3w"), "-m", "mini w", env=cli_env())
+    assert forced.returncode == 0, forced.stderr
+    assert "converted anyway (--force)" in forced.stderr
+    fits = run_cli("xyz", "convert", str(src), str(tmp_path / "c.3w"), "-m", "da Vinci 1.0", env=cli_env())
+    assert fits.returncode == 0, fits.stderr
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.dictionaries(st.sampled_from([b"X", b"Y", b"Z", b"E", b"I", b"J", b"R", b"F"]),
+                       st.floats(allow_nan=True, allow_infinity=True, width=64), max_size=8),
+       st.booleans(), st.booleans(), st.booleans())
+def test_any_arc_words_give_bounded_segments_or_none(words: dict[bytes, float], clockwise: bool, absolute: bool,
+                                                     absolute_e: bool) -> None:
+    lines = segments((1.0, 2.0, 0.2, 3.0), words, clockwise, absolute=absolute, absolute_e=absolute_e)
+    if lines is not None:
+        assert 1 <= len(lines) <= MOST_SEGMENTS + 1
+        assert all("nan" not in line and "inf" not in line for line in lines)
