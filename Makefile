@@ -4,15 +4,21 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed
 
-.PHONY: demo test lint typecheck pytest bench soak clean
+.PHONY: demo test lint typecheck pytest bench soak bytecode clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[all,test]'
+	$(MAKE) --no-print-directory bytecode
 	touch $(STAMP)
 
-demo: $(STAMP)
+# An editable install runs the sources in place: compile them as `pip install` compiles a wheel, so each command
+# loads bytecode (also where PYTHONDONTWRITEBYTECODE keeps Python from writing it); only changed files recompile.
+bytecode:
+	$(BIN)/python -m compileall -q src
+
+demo: $(STAMP) bytecode
 	$(BIN)/fabwire demo
 
 test: lint typecheck pytest
@@ -23,14 +29,14 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy --strict src
 
-pytest: $(STAMP)
+pytest: $(STAMP) bytecode
 	scripts/ensure-system-packages
 	$(BIN)/pytest -q
 
 soak: $(STAMP)
 	$(BIN)/pytest tests/robustness --soak
 
-bench: $(STAMP)
+bench: $(STAMP) bytecode
 	$(BIN)/python benchmarks/run.py
 
 clean:
