@@ -29,12 +29,17 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy --strict src
 
+# The suite runs on every CPU (pytest-xdist); tests that share something machine-wide (mDNS names) run in one group.
+PYTEST_PARALLEL = -n auto --dist loadgroup
+
 pytest: $(STAMP) bytecode
 	scripts/ensure-system-packages
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q $(PYTEST_PARALLEL)
 
-soak: $(STAMP)
-	$(BIN)/pytest tests/robustness --soak
+# The whole suite and the long soak runs, with CPU burners beside them: what holds on a busy machine.
+soak: $(STAMP) bytecode
+	scripts/ensure-system-packages stress-ng
+	scripts/under-load $(BIN)/pytest -q $(PYTEST_PARALLEL) --soak
 
 bench: $(STAMP) bytecode
 	$(BIN)/python benchmarks/run.py

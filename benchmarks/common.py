@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import resource
+import shutil
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -52,18 +54,32 @@ class Run:
     rss_mib: float
 
 
+_MEASURE = """
+import os, sys, time
+start = time.perf_counter()
+pid = os.posix_spawn(sys.argv[1], sys.argv[1:], os.environ, file_actions=[(os.POSIX_SPAWN_OPEN, 1, os.devnull,
+                                                                          os.O_WRONLY, 0)])
+_, status, usage = os.wait4(pid, 0)
+wall = time.perf_counter() - start
+print(os.waitstatus_to_exitcode(status), wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss, file=sys.stderr)
+"""
+"""Runs a command from a small process and reports that command's own figures: a child's peak RSS as the
+kernel counts it starts from its parent's, so the benchmark process (large) must not be the parent."""
+
+
 def run_command(args: Sequence[str], env: Mapping[str, str] | None = None) -> Run:
     """Run `args` as a fresh process to its end (it must succeed) and measure that process alone."""
+    program = args[0] if os.sep in args[0] else shutil.which(args[0]) or args[0]
     with tempfile.TemporaryFile() as err:
-        start = time.perf_counter()
-        process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=err, env=env)
-        _, status, usage = os.wait4(process.pid, 0)
-        wall = time.perf_counter() - start
-        process.returncode = os.waitstatus_to_exitcode(status)
-        if process.returncode != 0:
-            err.seek(0)
-            raise RuntimeError(f"{' '.join(args)} exited {process.returncode}: {err.read().decode()[-500:]}")
-    return Run(wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024)
+        subprocess.run([sys.executable, "-S", "-c", _MEASURE, program, *args[1:]], stdout=subprocess.DEVNULL,
+                       stderr=err, env=env, check=False)
+        err.seek(0)
+        said = err.read().decode(errors="replace")
+    *output, figures = said.rstrip("\n").rsplit("\n", 1) if "\n" in said.rstrip("\n") else ("", said.strip())
+    code, wall, cpu, rss_kib = figures.split()
+    if int(code) != 0:
+        raise RuntimeError(f"{' '.join(args)} exited {code}: {''.join(output)[-500:]}")
+    return Run(float(wall), float(cpu), int(rss_kib) / 1024)
 
 
 def interleaved(commands: Mapping[str, tuple[Sequence[str], Mapping[str, str] | None]], runs: int) -> dict[str, Run]:

@@ -13,6 +13,7 @@ import base64
 import binascii
 import contextlib
 import enum
+import functools
 import os
 import re
 import tempfile
@@ -20,13 +21,16 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO
-
-import numpy as np
+from typing import TYPE_CHECKING, BinaryIO
 
 from fabwire import units
 from fabwire.errors import InputError
-from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from fabwire.xyz.gcodeinfo import GcodeMetadata
 
 MAGIC = b"3DPFNKG13WTW"
 """The .3w signature (reference §5.1)."""
@@ -360,11 +364,18 @@ _XYZ_KEY_LINE = re.compile(
     rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
 )
 _G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
-_ODD_FIRST = np.zeros(256, dtype=bool)
-_ODD_FIRST[list(b" \tNng")] = True
-"""A line starting with one of these needs the regular expression to find its command word."""
-_DIGIT_OR_DOT = np.zeros(256, dtype=bool)
-_DIGIT_OR_DOT[list(b"0123456789.")] = True
+
+
+@functools.cache
+def _byte_classes() -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Lookup tables by byte value: (a line starting with it needs the regular expression to find its command
+    word, a digit or a dot). Built on first use: a .3w that is only sent never loads numpy."""
+    import numpy as np
+
+    odd_first, digit_or_dot = np.zeros(256, dtype=bool), np.zeros(256, dtype=bool)
+    odd_first[list(b" \tNng")] = True
+    digit_or_dot[list(b"0123456789.")] = True
+    return odd_first, digit_or_dot
 
 
 @dataclass(frozen=True, slots=True)
@@ -422,6 +433,8 @@ def prepare(src: BinaryIO, name: str, file_id: str, filename: str, header_space:
             progress: Progress | None) -> Prepared:
     """The XYZ key lines and the .3w header for a G-code (its metadata read or computed); `header_space` is the
     room the container has for the (padded) header."""
+    from fabwire.xyz.gcodeinfo import finish
+
     head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total, _first_half(progress))
     meta = finish(stated, computed)
@@ -445,6 +458,8 @@ def _metadata(
     src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state, what the moves say when the comments leave gaps)."""
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata  # numpy: for G-code, not for a .3w
+
     tail = b""
     if total > CHUNK:
         src.seek(max(CHUNK, total - TAIL_WINDOW))
@@ -509,14 +524,17 @@ def _process(chunk: bytes) -> bytes:
     """LF line ends, and G0/G00 command words as G1/G01 (the printers do not know G0)."""
     if not chunk:
         return chunk
+    import numpy as np
+
+    odd_first, digit_or_dot = _byte_classes()
     data = np.frombuffer(chunk, dtype=np.uint8)
     starts = np.insert(np.flatnonzero(data[:-1] == 10) + 1, 0, 0)
     c0, c1, c2, c3 = (np.take(data, starts + i, mode="clip") for i in range(4))
-    if (_ODD_FIRST[c0] | ((c0 == 71) & ((c1 == 32) | (c1 == 9)))).any():  # blanks, line numbers or lower case
+    if (odd_first[c0] | ((c0 == 71) & ((c1 == 32) | (c1 == 9)))).any():  # blanks, line numbers or lower case
         return _G0_WORD.sub(rb"\n\g<1>1", b"\n" + chunk)[1:]
     # Every line starts with its command: the `0` of each G0/G00 becomes `1` in place.
     g0 = (c0 == 71) & (c1 == 48)
-    ones = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT[c2]] + 1, starts[g0 & (c2 == 48) & ~_DIGIT_OR_DOT[c3]] + 2))
+    ones = np.concatenate((starts[g0 & ~digit_or_dot[c2]] + 1, starts[g0 & (c2 == 48) & ~digit_or_dot[c3]] + 2))
     if not len(ones):
         return chunk
     out = bytearray(chunk)
