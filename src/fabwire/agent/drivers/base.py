@@ -156,9 +156,9 @@ class Driver(ABC):
         self.spec = spec
         self.emit = emit
 
-    def check_upload(self, name: str, data: bytes) -> None:  # noqa: B027 - kinds without files check nothing
-        """Refuse an upload this device cannot run with the intake's InputError (naming it `name`), before
-        it is accepted; kinds that take no files accept anything `job_types` lets through."""
+    def check_upload(self, name: str, path: Path) -> None:  # noqa: B027 - kinds without files check nothing
+        """Refuse an upload (complete, at `path`) this device cannot run with the intake's InputError (naming
+        it `name`), before it is accepted; kinds that take no files accept anything `job_types` lets through."""
 
     @abstractmethod
     async def connect(self) -> Identity:

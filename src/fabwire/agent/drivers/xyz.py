@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -79,15 +78,17 @@ class XYZDriver(Driver):
     )
     job_types: ClassVar[Mapping[str, str]] = {".gcode": "print", ".gco": "print", ".g": "print", ".3w": "print"}
 
-    def check_upload(self, name: str, data: bytes) -> None:
+    def check_upload(self, name: str, path: Path) -> None:
         """The printer intake's refusal for what no printer takes (binary data, images, SVG, G-code without
-        commands), so a bad file is refused at upload rather than failing the job later."""
-        head = data[:intake.SNIFF]
-        kind = intake.require_printable(intake.identify(head, len(data)), name, head)
+        commands), so a bad file is refused at upload rather than failing the job later; read from disk in
+        pieces, never whole."""
+        kind, head = intake.sniff(path, name)
+        intake.require_printable(kind, name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
-            intake.stream_metadata(io.BytesIO(data), name)
+            with intake.open_input(path, name) as source:
+                intake.stream_metadata(source, name)
         elif kind is intake.Kind.THREEW:
-            printjob.check_intact(inspect_3w(data), name)
+            printjob.check_intact(inspect_3w(path), name)
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
