@@ -20,7 +20,7 @@ from pathlib import Path
 from common import Figure, interleaved, ratio_figure
 from fabwire.lifeline import spawn
 
-RUNS = 9
+RUNS = 5
 RAW_CLIENT = """
 import socket, sys
 host, port = sys.argv[1].removeprefix("tcp://").rsplit(":", 1)

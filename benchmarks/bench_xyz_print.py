@@ -24,7 +24,7 @@ SIZE = 21_000_000
 """Bytes of G-code; the .3w is about as large (the body is encrypted, not compressed)."""
 MODEL = "dv1MW0A000"
 """The simulator's default model (da Vinci mini w), the file's target."""
-ROUNDS = 5
+ROUNDS = 3
 
 RAW_SENDER = r"""
 import socket, struct, sys, zlib

@@ -87,10 +87,10 @@ def main(argv: list[str]) -> int:
             continue
         console.print(f"[dim]{name} took {took:.1f} s[/dim]")
         for fig in figures:
-            met = "" if fig.meets_target is None else ("yes" if fig.meets_target else "NO")
+            met = "—" if fig.meets_target is None else ("yes" if fig.meets_target else "NO")
             baseline = f"{fmt(fig.baseline)} ({fig.baseline_name})" if fig.baseline is not None else ""
-            table.add_row(name.removeprefix("bench_"), fig.name, fmt(fig.value), fig.unit, fig.target, met,
-                          baseline, fmt(fig.ratio))
+            table.add_row(name.removeprefix("bench_"), fig.name, fmt(fig.value), fig.unit,
+                          fig.target or "(reference)", met, baseline, fmt(fig.ratio))
             results.append({"benchmark": name, "figure": fig.name, "value": fig.value, "unit": fig.unit,
                             "target": fig.target, "meets_target": fig.meets_target, "baseline": fig.baseline,
                             "baseline_name": fig.baseline_name, "ratio": fig.ratio})
