@@ -1,26 +1,26 @@
-"""How fast the command starts: `fabwire --version` and a status query, against a minimal raw-socket client.
+"""Where people wait on the command line: help, shell completion and a status query, each timed as the whole
+command a user runs (a fresh process, start-up included), against the floor beside it in the same run.
 
-Each command runs as a fresh process (as from a script or a shell prompt) against one XYZ simulator on loopback;
-the figure is the median of several runs, wall time and the child's CPU time (user + system). The package is
-byte-compiled first, as `pip install` does, so a development checkout run without bytecode caching
-(PYTHONDONTWRITEBYTECODE) is measured like an installed copy. The floor is what Python needs to load the two
-libraries every command stands on (asyncio for the links, click for the command line) and nothing else.
+Every command runs as a fresh process, interleaved with its floor (one of each in turn, median of several rounds),
+so load that comes and goes weighs on both; the figure is the process's own CPU time (user + system) and its peak
+RSS. The package is byte-compiled first, as `pip install` and `make bytecode` do. The floors: what Python needs to
+load the two libraries every command stands on (asyncio for the links, click for the command line), and a
+ten-line raw-socket client that sends the same status query to the same simulator.
 """
 
 from __future__ import annotations
 
 import compileall
-import resource
-import statistics
+import os
 import subprocess
 import sys
-import time
+import tempfile
 from pathlib import Path
 
-from common import Figure
+from common import Figure, interleaved, ratio_figure
 from fabwire.lifeline import spawn
 
-RUNS = 9
+RUNS = 5
 RAW_CLIENT = """
 import socket, sys
 host, port = sys.argv[1].removeprefix("tcp://").rsplit(":", 1)
@@ -31,6 +31,7 @@ with socket.create_connection((host, int(port))) as s:
         reply += s.recv(65536)
 print(len(reply))
 """
+DEVICES = '[devices.office]\nkind = "xyz"\nurl = "10.0.0.5"\n[devices.basement]\nkind = "xyz"\nurl = "10.0.0.6"\n'
 
 
 def fabwire_command() -> list[str]:
@@ -38,20 +39,10 @@ def fabwire_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "fabwire"]
 
 
-def timed(args: list[str]) -> tuple[float, float]:
-    """Wall and CPU seconds of one run of `args` (which must succeed)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    subprocess.run(args, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-
-
-def median_of(args: list[str]) -> tuple[float, float]:
-    timed(args)  # warm the file cache
-    runs = [timed(args) for _ in range(RUNS)]
-    return statistics.median(w for w, _ in runs), statistics.median(c for _, c in runs)
+def completing(words: str, config: Path) -> dict[str, str]:
+    """The environment bash gives `fabwire` when Tab is pressed after `words`."""
+    return {**os.environ, "FABWIRE_CONFIG": str(config), "_FABWIRE_COMPLETE": "bash_complete", "COMP_WORDS": words,
+            "COMP_CWORD": str(len(words.split()) - (0 if words.endswith(" ") else 1))}
 
 
 def run() -> list[Figure]:
@@ -64,20 +55,41 @@ def run() -> list[Figure]:
     try:
         assert sim.stdout is not None
         address = sim.stdout.readline().rsplit(" ", 1)[1].strip()
-        version_wall, version_cpu = median_of([*fabwire_cmd, "--version"])
-        _, floor_cpu = median_of([sys.executable, "-c", "import asyncio, click"])
-        raw_wall, raw_cpu = median_of([sys.executable, "-c", RAW_CLIENT, address])
-        json_wall, json_cpu = median_of([*fabwire_cmd, "xyz", "-d", address, "status", "--json"])
-        panel_wall, panel_cpu = median_of([*fabwire_cmd, "xyz", "-d", address, "status"])
+        with tempfile.TemporaryDirectory() as tmp:
+            config = Path(tmp, "devices.toml")
+            config.write_text(DEVICES)
+            quiet = {**os.environ, "FABWIRE_CONFIG": str(config)}
+            runs = interleaved({
+                "floor": ([sys.executable, "-c", "import asyncio, click"], None),
+                "help": ([*fabwire_cmd, "--help"], quiet),
+                "complete device": (fabwire_cmd, completing("fabwire xyz status -d b", config)),
+                "complete command": (fabwire_cmd, completing("fabwire x", config)),
+                "version": ([*fabwire_cmd, "--version"], quiet),
+                "raw": ([sys.executable, "-c", RAW_CLIENT, address], None),
+                "json": ([*fabwire_cmd, "xyz", "-d", address, "status", "--json"], quiet),
+                "panel": ([*fabwire_cmd, "xyz", "-d", address, "status"], quiet),
+            }, RUNS)
     finally:
         sim.terminate()
         sim.wait(10)
+    floor, raw = runs["floor"], runs["raw"]
+    ms = 1000.0
     return [
-        Figure("fabwire --version, wall", version_wall, "s", "<= 0.10", version_wall <= 0.10),
-        Figure("fabwire --version, CPU", version_cpu, "s"),
-        Figure("floor: python + asyncio + click, CPU", floor_cpu, "s"),
-        Figure("xyz status --json, wall", json_wall, "s", "<= 0.25", json_wall <= 0.25, raw_wall, "raw socket"),
-        Figure("xyz status --json, CPU", json_cpu, "s", "<= 0.15", json_cpu <= 0.15, raw_cpu, "raw socket"),
-        Figure("xyz status (panel), wall", panel_wall, "s", "<= 0.25", panel_wall <= 0.25, raw_wall, "raw socket"),
-        Figure("xyz status (panel), CPU", panel_cpu, "s", "<= 0.15", panel_cpu <= 0.15, raw_cpu, "raw socket"),
+        Figure("floor: python -c 'import asyncio, click', CPU", floor.cpu * ms, "ms", "(floor)"),
+        ratio_figure("fabwire --help, CPU", runs["help"].cpu * ms, "ms", floor.cpu * ms, "floor", 1.5),
+        ratio_figure("fabwire --help, peak RSS", runs["help"].rss_mib, "MiB", floor.rss_mib, "floor", 1.5),
+        ratio_figure("completion of a device name (fabwire xyz status -d b<Tab>), CPU",
+                     runs["complete device"].cpu * ms, "ms", floor.cpu * ms, "floor", 1.5),
+        ratio_figure("completion of a command (fabwire x<Tab>), CPU", runs["complete command"].cpu * ms, "ms",
+                     floor.cpu * ms, "floor", 1.5),
+        Figure("fabwire --version, wall", runs["version"].wall, "s", "<= 0.10", runs["version"].wall <= 0.10),
+        Figure("floor: 10-line raw socket client, status query, CPU", raw.cpu * ms, "ms", "(floor)"),
+        ratio_figure("xyz status --json (whole command), CPU", runs["json"].cpu * ms, "ms", raw.cpu * ms,
+                     "raw socket", 2.0),
+        ratio_figure("xyz status --json (whole command), peak RSS", runs["json"].rss_mib, "MiB", raw.rss_mib,
+                     "raw socket", 2.5),
+        Figure("xyz status --json (whole command), wall", runs["json"].wall, "s", "<= 0.25",
+               runs["json"].wall <= 0.25, raw.wall, "raw socket"),
+        ratio_figure("xyz status (panel, whole command), CPU", runs["panel"].cpu * ms, "ms", raw.cpu * ms,
+                     "raw socket", 3.0),
     ]

@@ -21,13 +21,41 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--soak", action="store_true", help="also run the long soak profiles")
 
 
+SHARED_MACHINE_WIDE = {
+    # xdist group: tests (by node id prefix) that use something one machine has once, so they run one after another
+    "mdns": (  # mDNS: one responder on port 5353; two advertisements of the same name would be a name conflict
+        "tests/lineus/test_discovery.py::",
+        "tests/lineus/test_official_module.py::test_official_module_finds_advertised_simulator",
+        "tests/lineus/test_cli.py::test_discover_finds_advertised_simulator",
+        "tests/lineus/test_cli.py::test_local_names_resolve_by_mdns_with_the_advertised_port",
+    ),
+}
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        for group, prefixes in SHARED_MACHINE_WIDE.items():
+            if item.nodeid.startswith(prefixes):
+                item.add_marker(pytest.mark.xdist_group(group))
     if config.getoption("--soak"):
         return
     skip = pytest.mark.skip(reason="soak profile: run with --soak")
     for item in items:
         if "soak" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def own_state_home(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Each test process (each xdist worker) keeps state (drawing progress, the agent's files) in a folder of its
+    own, never the user's: parallel workers cannot meet in one state file."""
+    before = os.environ.get("XDG_STATE_HOME")
+    os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("state"))
+    yield
+    if before is None:
+        os.environ.pop("XDG_STATE_HOME", None)
+    else:
+        os.environ["XDG_STATE_HOME"] = before
 
 
 @pytest.fixture

@@ -19,6 +19,7 @@ from fabwire.cli_support import (
     LINK_OPTIONS,
     App,
     FiniteRange,
+    Lazy,
     LazyGroup,
     check_early_link_options,
     configure_logging,
@@ -39,18 +40,40 @@ EXIT_REPLAY_DIFFERS = RemoteProtocolError.exit_code
 """`trace replay`: the device did not answer as the recording says."""
 
 
+COMMANDS: dict[str, Lazy] = {
+    # name: where it lives, and its line in `fabwire --help` and completion (held to the command's own by a test)
+    "xyz": Lazy("fabwire.xyz.cli:xyz",
+                "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance."),
+    "lineus": Lazy("fabwire.lineus.cli:lineus",
+                   "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery."),
+    "mmu": Lazy("fabwire.mmu.cli:mmu", "Drive a Prusa MMU3 over its serial protocol, as the printer does."),
+    "demo": Lazy("fabwire.demo:demo", "A tour on simulators: a da Vinci print, a Line-us drawing and MMU3 tool "
+                                      "changes with a fault and Retry."),
+    "fleet": Lazy("fabwire.mqtt.fleet:fleet",
+                  "List every device the fabwire agents on an MQTT broker publish, and the agent that runs each."),
+    "serve": Lazy("fabwire.agent.command:serve",
+                  "Watch a bench of machines: a live dashboard, an HTTP API with history and jobs, one agent.",
+                  "serve"),
+    "devices": Lazy("fabwire.devices_cli:devices",
+                    "Named devices (devices.toml): -d NAME uses one, and its settings apply to every command."),
+    "service": Lazy("fabwire.service:service",
+                    "Run the agent (`fabwire serve`) as a systemd service, and give USB machines stable names."),
+}
+"""The top-level commands that live in their own modules: `fabwire --help` and completion import none of them."""
+
+SIMULATORS: dict[str, Lazy] = {
+    "xyz": Lazy("fabwire.xyz.cli:sim_xyz",
+                "A da Vinci printer on TCP 9100 and/or a raw pty that real clients cannot tell from the machine."),
+    "lineus": Lazy("fabwire.lineus.cli:sim_lineus",
+                   "A Line-us on TCP that the official clients cannot tell from the robot."),
+    "mmu": Lazy("fabwire.mmu.cli:sim_mmu", "Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."),
+}
+"""`fabwire sim KIND`, as COMMANDS."""
+
+
 @click.group(
     cls=LazyGroup,
-    lazy={
-        "xyz": "fabwire.xyz.cli:xyz",
-        "lineus": "fabwire.lineus.cli:lineus",
-        "mmu": "fabwire.mmu.cli:mmu",
-        "demo": "fabwire.demo:demo",
-        "fleet": "fabwire.mqtt.fleet:fleet",
-        "serve": "fabwire.agent.command:serve",
-        "devices": "fabwire.devices_cli:devices",
-        "service": "fabwire.service:service",
-    },
+    lazy=COMMANDS,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
 )
 @click.version_option(__version__, "-V", "--version", prog_name="fabwire")
@@ -69,14 +92,7 @@ cli.params.extend(make() for make in (*GLOBAL_OPTIONS, *DEVICE_OPTIONS, *itertoo
 cli.shared = (*GLOBAL_OPTIONS, *DEVICE_OPTIONS)
 
 
-@cli.group(
-    cls=LazyGroup,
-    lazy={
-        "xyz": "fabwire.xyz.cli:sim_xyz",
-        "lineus": "fabwire.lineus.cli:sim_lineus",
-        "mmu": "fabwire.mmu.cli:sim_mmu",
-    },
-)
+@cli.group(cls=LazyGroup, lazy=SIMULATORS)
 def sim() -> None:
     """Run a faithful simulator of a device on TCP or a raw pty."""
 

@@ -6,16 +6,16 @@ from __future__ import annotations
 import asyncio
 import difflib
 import importlib
-import importlib.util
 import os
 import re
 import sys
-from collections.abc import Awaitable, Callable, Coroutine, Sequence
+from collections.abc import Awaitable, Callable, Coroutine, Mapping, Sequence
 from functools import update_wrapper
-from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, NamedTuple, ParamSpec, TypeVar
 
 import click
 import msgspec
+from click.shell_completion import CompletionItem
 
 from fabwire.cli_options import ANY, OptionFactory, SharingGroup, app_of
 
@@ -32,6 +32,7 @@ from fabwire.cli_options import uses_link_options as uses_link_options
 from fabwire.console import Output
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError
+from fabwire.extras import first_missing
 from fabwire.importing import collection_paused
 
 if TYPE_CHECKING:
@@ -98,24 +99,62 @@ class NumberCommand(click.Command):
         return super().parse_args(ctx, [*named, "--", *positional] if positional else named)
 
 
+def _shortened(summary: str, limit: int = 45) -> str:
+    """`summary` cut to `limit` characters as click cuts a command's help for a listing."""
+    return click.Command(None, help=summary).get_short_help_str(limit)
+
+
+class Lazy(NamedTuple):
+    """A subcommand loaded only when it runs: where it lives and the line that stands for it until then.
+
+    `target` is `module:attribute`; `summary` is the command's short help as `--help` lists it and completion
+    offers it, so neither imports the module (a test holds every summary to the command's own); `extra` names the
+    optional part of the install it needs (`fabwire.extras`), so a listing says what to install when it is missing.
+    """
+
+    target: str
+    summary: str
+    extra: str = ""
+
+
 class LazyGroup(SharingGroup):
-    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack."""
+    """Loads a subcommand's module only when it runs, so `fabwire xyz status` never imports the SVG stack.
+
+    `lazy` maps a subcommand's name to a `Lazy` (listed in help and completion without loading) or to a bare
+    `module:attribute` (loaded to be listed).
+    """
 
     command_class = NumberCommand
 
-    def __init__(self, *args: object, lazy: dict[str, str] | None = None, **kwargs: object) -> None:
+    def __init__(self, *args: object, lazy: Mapping[str, Lazy | str] | None = None, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
-        self._lazy = lazy or {}
-
-    def _available(self, name: str) -> bool:
-        module = self._lazy[name].partition(":")[0]
-        try:
-            return importlib.util.find_spec(module) is not None
-        except ModuleNotFoundError:
-            return False
+        self._lazy = {name: entry if isinstance(entry, Lazy) else Lazy(entry, "") for name, entry in
+                      (lazy or {}).items()}
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(set(super().list_commands(ctx)) | {n for n in self._lazy if self._available(n)})
+        return sorted(set(super().list_commands(ctx)) | set(self._lazy))
+
+    def summary(self, ctx: click.Context, name: str) -> str | None:
+        """A subcommand's short help in full, from the table while it is not loaded; None for a hidden one."""
+        entry = self._lazy.get(name)
+        if entry is not None and entry.summary and name not in self.commands:
+            missing = first_missing(entry.extra) if entry.extra else None
+            return entry.summary if missing is None else _needs_extra(name, missing).get_short_help_str(1 << 16)
+        command = self.get_command(ctx, name)
+        return None if command is None or command.hidden else command.get_short_help_str(limit=1 << 16)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, summary) for name in self.list_commands(ctx)
+                if (summary := self.summary(ctx, name)) is not None]
+        if rows:
+            limit = formatter.width - 6 - max(len(name) for name, _ in rows)
+            with formatter.section("Commands"):
+                formatter.write_dl([(name, _shortened(text, limit)) for name, text in rows])
+
+    def shell_complete(self, ctx: click.Context, incomplete: str) -> list[CompletionItem]:
+        items = [CompletionItem(name, help=_shortened(summary)) for name in self.list_commands(ctx)
+                 if name.startswith(incomplete) and (summary := self.summary(ctx, name)) is not None]
+        return [*items, *click.Command.shell_complete(self, ctx, incomplete)]
 
     def resolve_command(self, ctx: click.Context,
                         args: list[str]) -> tuple[str | None, click.Command | None, list[str]]:
@@ -127,22 +166,23 @@ class LazyGroup(SharingGroup):
             raise click.exceptions.NoSuchCommand(exc.command_name, possibilities=closest, ctx=ctx) from None
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name in self._lazy and self._available(cmd_name):
-            module_name, _, attr = self._lazy[cmd_name].partition(":")
-            try:
-                with collection_paused():
-                    command = getattr(importlib.import_module(module_name), attr)
-            except ImportError as exc:
-                from fabwire.extras import missing_extra
+        entry = self._lazy.get(cmd_name)
+        if entry is None or cmd_name in self.commands:
+            return super().get_command(ctx, cmd_name)
+        module_name, _, attr = entry.target.partition(":")
+        try:
+            with collection_paused():
+                command = getattr(importlib.import_module(module_name), attr)
+        except ImportError as exc:
+            from fabwire.extras import missing_extra
 
-                missing = missing_extra(exc)
-                if missing is None:
-                    raise
-                return _needs_extra(cmd_name, missing)
-            if not isinstance(command, click.Command):
-                raise TypeError(f"{self._lazy[cmd_name]} is not a click command")
-            return self.share(command)
-        return super().get_command(ctx, cmd_name)
+            missing = missing_extra(exc)
+            if missing is None:
+                raise
+            return _needs_extra(cmd_name, missing)
+        if not isinstance(command, click.Command):
+            raise TypeError(f"{entry.target} is not a click command")
+        return self.share(command)
 
 
 class DeviceContext(msgspec.Struct):
@@ -181,10 +221,10 @@ class DeviceContext(msgspec.Struct):
 
 
 def device_group(kind: DeviceKind, help_text: str, link_options: Sequence[OptionFactory] = (),
-                 lazy: dict[str, str] | None = None) -> Callable[[Callable[..., None]], click.Group]:
+                 lazy: Mapping[str, Lazy | str] | None = None) -> Callable[[Callable[..., None]], click.Group]:
     """A click group for one device kind; the shared device options and `link_options` work at every level.
 
-    `lazy` maps subcommand names to `module:attribute`, imported only when that subcommand runs.
+    `lazy` maps subcommand names to where they live (see `LazyGroup`), imported only when that subcommand runs.
     """
 
     def decorate(func: Callable[..., None]) -> click.Group:

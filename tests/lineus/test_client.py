@@ -6,15 +6,19 @@ import asyncio
 import contextlib
 import itertools
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import pytest
 
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, LocalProtocolError, RemoteProtocolError
 from fabwire.lineus import protocol as p
+from fabwire.lineus.arm import MoveRecord
 from fabwire.lineus.client import LineUs, Network, Position, StoredDrawing, parse_file_list
 from fabwire.lineus.sim import LineUsSim, SimOptions, resolve_version
 from fabwire.lineus.sync import LineUsSync
-from fabwire.transport import FaultPlan, FaultyTransport, Transport, open_tcp, serve_tcp
+from fabwire.transport import FaultPlan, FaultyTransport, Transport, memory_pair, open_tcp, serve_tcp
+from fabwire.transport.tap import TapTransport, TraceWriter, read_trace
+from robustness.fakeclock import run_on_fake_clock
 
 
 @contextlib.asynccontextmanager
@@ -127,15 +131,54 @@ async def test_reply_awaited_no_earlier_than_the_move(lineus_sim) -> None:
         assert elapsed >= (move.finished - move.started) / 20.0 * 0.9
 
 
-async def test_lookahead_pipelines_moves(lineus_sim) -> None:
-    running = await lineus_sim(speed=20.0)
-    async with connected(running.port, lookahead=True) as arm:
-        commands = [p.Move(1000 + 20 * i, -300 + 40 * i, 0) for i in range(15)]
-        replies = await arm.run(commands)
-        assert [r.get("Y") for r in replies] == [f"{-300 + 40 * i:.2f}" for i in range(15)]
-        moves = list(running.sim.arm.moves)[-14:]
-        chained = sum(1 for a, b in itertools.pairwise(moves) if b.started == pytest.approx(a.finished))
-        assert chained >= 10
+def wire_log(transport: Transport, path: Path) -> Transport:
+    """`transport` with what crosses it recorded in order to the capture at `path` (see `wire`)."""
+    return TapTransport(transport, TraceWriter.to_file(path, url=transport.url, peer=transport.peer), log=False)
+
+
+def wire(path: Path) -> list[tuple[str, bytes]]:
+    """A capture's chunks in order: `('>', bytes written)` and `('<', bytes read)`."""
+    return [(r.direction, r.data) for r in read_trace(path) if r.direction is not None]
+
+
+@pytest.mark.parametrize("lookahead", [True, False])
+def test_lookahead_pipelines_moves(lookahead: bool, tmp_path: Path) -> None:
+    """With look-ahead the next move is on the wire before the reply to the one ahead of it, and each move starts
+    the instant the one before finishes; without it, strictly one at a time. On a fake clock, so that load on the
+    machine cannot delay a send: the order on the wire and the arm's record are what is checked."""
+
+    async def main() -> tuple[list[object], list[MoveRecord]]:
+        sim = LineUsSim(SimOptions(speed=20.0))
+        host, device = memory_pair("lineus")
+        tapped = wire_log(host, tmp_path / "wire.jsonl")
+        server = asyncio.create_task(sim.serve(device))
+        arm = await LineUs.connect(tapped, lookahead=lookahead)
+        try:
+            replies = await arm.run([p.Move(1000 + 20 * i, -300 + 40 * i, 0) for i in range(15)])
+        finally:
+            await arm.close()
+            await server
+            await sim.close()
+        return [r.get("Y") for r in replies], list(sim.arm.moves)
+
+    ys, moves = run_on_fake_clock(main())
+    assert ys == [f"{-300 + 40 * i:.2f}" for i in range(15)]
+    assert [m.end[:2] for m in moves[-15:]] == [(1000 + 20 * i, -300 + 40 * i) for i in range(15)]
+    assert all(b.started == a.finished > a.started for a, b in itertools.pairwise(moves[-15:]))
+    sent = replied = 0
+    ahead: list[int] = []  # moves on the wire beyond the one whose reply comes next, as each reply arrives
+    for direction, data in wire(tmp_path / "wire.jsonl"):
+        if direction == ">":
+            sent += data.count(b"G01")
+        else:
+            for _ in range(data.count(b"ok X:")):  # a move's reply
+                ahead.append(sent - replied - 1)
+                replied += 1
+    assert replied == 15
+    if lookahead:
+        assert min(ahead[:-1]) >= 1  # every reply but the last found the next move already sent
+    else:
+        assert set(ahead) == {0}
 
 
 @pytest.mark.parametrize("plan", [FaultPlan(chunk=1, seed=1), FaultPlan(chunk=3, delay=0.002, seed=2)])

@@ -11,13 +11,21 @@ from fabwire.mmu.codes import FilamentState
 from fabwire.mmu.sim import MMUSimulator
 from fabwire.transport import memory_pair
 
+from .fakeclock import run_on_fake_clock
 
-async def test_mmu_command_given_up_by_its_timeout_does_not_block_the_next_one() -> None:
-    sim = MMUSimulator(speed=100)
+
+def test_mmu_command_given_up_by_its_timeout_does_not_block_the_next_one() -> None:
+    """On a fake clock: the outcome (T1 given up, T2 accepted once the MMU is free) cannot depend on load."""
+    run_on_fake_clock(given_up_then_next())
+
+
+async def given_up_then_next() -> None:
+    clock = asyncio.get_running_loop().time
+    sim = MMUSimulator(speed=100, clock=clock)
     host, device = memory_pair("mmu-timeout")
     task = asyncio.create_task(sim.serve(device))
     try:
-        async with asyncio.timeout(20), MMU(host, time_scale=100) as mmu:
+        async with asyncio.timeout(20), MMU(host, time_scale=100, clock=clock) as mmu:
             timed_out = False
             try:
                 await mmu.tool_change(1, timeout=0.01)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import zlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable, Callable
 
 import pytest
 
@@ -18,6 +18,7 @@ from fabwire.xyz.protocol import Link
 from fabwire.xyz.sim import XYZSimulator
 from fabwire.xyz.status import Status
 from fabwire.xyz.threew import write_3w
+from robustness.fakeclock import run_on_fake_clock
 
 GCODE = b";TIME:600\n;LAYER_COUNT:3\n;Filament used: 0.25m\nG28\nG0 X10 Y10\nG1 X20 Y20 E1\nM84\n"
 
@@ -94,22 +95,41 @@ async def test_serial_framing_exact(serial_link: tuple[XYZSimulator, Transport])
     assert await read_until(link, b"$\n") == b"E1$\n"
 
 
-async def test_serial_home_and_load_cancel(serial_link: tuple[XYZSimulator, Transport]) -> None:
-    _, link = serial_link
-    await link.write(b"XYZv3/action=home\n")
-    assert await read_until(link, b"$\n") == b'home:{"stat":"start"}\n$\n'
-    await link.write(b"XYZv3/query=j\n")
-    assert await read_until(link, b"$\n") == b"j:9534,5\n$\n"
-    assert await read_until(link, b'home:{"stat":"complete"}\n$\n')
-    await link.write(b"XYZv3/action=load:new\n")
-    data = await read_until(link, b'load:{"stat":"load"}\n$\n')
-    assert data.startswith(b'load:{"stat":"start"}\n$\nload:{"stat":"heat","extemp":"')
-    await link.write(b"XYZv3/action=load:cancel\n")
-    assert await read_until(link, b"$\n", limit=0.2) == b'load:{"stat":"complete"}\n$\n'
-    await link.write(b"XYZv3/query=jt\n")
-    reply = await read_until(link, b"$\n")
-    assert reply.startswith(b"j:9511,0\nt:1,")
-    assert reply.endswith(b",0\n$\n")
+def on_fake_clock(exchange: Callable[[XYZSimulator, Transport], Awaitable[None]]) -> None:
+    """Run `exchange` against a serial simulator whose time is a fake clock's: what it answers when depends on
+    the simulated time alone, never on how loaded the machine running the test is."""
+
+    async def main() -> None:
+        sim = XYZSimulator(speed=200, link=Link.SERIAL, clock=asyncio.get_running_loop().time)
+        host, device = memory_pair("xyz")
+        task = asyncio.create_task(sim.serve(device))
+        try:
+            await exchange(sim, host)
+        finally:
+            await host.close()
+            await asyncio.wait_for(task, 2)
+
+    run_on_fake_clock(main())
+
+
+def test_serial_home_and_load_cancel() -> None:
+    async def exchange(_: XYZSimulator, link: Transport) -> None:
+        await link.write(b"XYZv3/action=home\n")
+        assert await read_until(link, b"$\n") == b'home:{"stat":"start"}\n$\n'
+        await link.write(b"XYZv3/query=j\n")
+        assert await read_until(link, b"$\n") == b"j:9534,5\n$\n"
+        assert await read_until(link, b'home:{"stat":"complete"}\n$\n')
+        await link.write(b"XYZv3/action=load:new\n")
+        data = await read_until(link, b'load:{"stat":"load"}\n$\n')
+        assert data.startswith(b'load:{"stat":"start"}\n$\nload:{"stat":"heat","extemp":"')
+        await link.write(b"XYZv3/action=load:cancel\n")
+        assert await read_until(link, b"$\n", limit=0.2) == b'load:{"stat":"complete"}\n$\n'
+        await link.write(b"XYZv3/query=jt\n")
+        reply = await read_until(link, b"$\n")
+        assert reply.startswith(b"j:9511,0\nt:1,")
+        assert reply.endswith(b",0\n$\n")
+
+    on_fake_clock(exchange)
 
 
 async def test_serial_calibration_values_reach_status(serial_link: tuple[XYZSimulator, Transport]) -> None:

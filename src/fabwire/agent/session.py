@@ -9,10 +9,14 @@ import asyncio
 import contextlib
 import logging
 import random
+import sys
+import threading
 import time
+import weakref
 from collections import deque
+from collections.abc import Coroutine
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
 from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
@@ -21,10 +25,12 @@ from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, exce
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
 
+T = TypeVar("T")
 log = logging.getLogger("fabwire.agent")
 LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
 """What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
 JOB_EVENT_EVERY_S = 0.5
+SWITCH_INTERVAL_S = 0.0005
 STOP_WAIT_S = 30.0
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
@@ -42,6 +48,59 @@ def make_driver(spec: DeviceSpec, emit: Any) -> Driver:
     from fabwire.agent.drivers.mmu import MMUDriver
 
     return MMUDriver(spec, emit)
+
+
+class LinkThread:
+    """A thread with an event loop of its own where an agent's device links live: connecting, polling and
+    parsing a bench of machines, actions and jobs on the wire. The agent's own loop (its HTTP API, the dashboard,
+    the event stream) only receives what each poll found, so a request waits for no machine's poll: its latency
+    does not grow with the number of machines. One per agent, started with its first session, ended with its
+    last; on uvloop where it is installed."""
+
+    def __init__(self) -> None:
+        try:
+            import uvloop
+        except ImportError:
+            self.loop = asyncio.new_event_loop()
+        else:
+            self.loop = uvloop.new_event_loop()
+        self.users = 0
+        # Hand the interpreter over between the two threads every 0.5 ms rather than 5: an API request waits for
+        # the polling thread at most that long at each step of its handling.
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
+        self._thread = threading.Thread(target=self.loop.run_forever, name="fabwire-links", daemon=True)
+        self._thread.start()
+
+    async def run(self, work: Coroutine[Any, Any, T]) -> T:
+        """Run `work` on the links' loop and wait for it here; cancelling the wait cancels the work."""
+        return await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(work, self.loop))
+
+    def close(self) -> None:
+        """Stop the loop once what is scheduled on it has run, and wait for the thread."""
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self._thread.join(STOP_WAIT_S)
+        if not self._thread.is_alive():
+            self.loop.close()
+
+
+_LINKS: weakref.WeakKeyDictionary[Agent, LinkThread] = weakref.WeakKeyDictionary()
+
+
+def _links_of(agent: Agent) -> LinkThread:
+    links = _LINKS.get(agent)
+    if links is None:
+        links = _LINKS[agent] = LinkThread()
+    links.users += 1
+    return links
+
+
+def _release_links(agent: Agent) -> None:
+    links = _LINKS.get(agent)
+    if links is not None:
+        links.users -= 1
+        if links.users <= 0:
+            del _LINKS[agent]
+            links.close()
 
 
 class PollStats:
@@ -65,7 +124,10 @@ class Session:
         self.agent = agent
         self.order = order
         self.spec = spec
-        self.driver = make_driver(spec, self._device_event)
+        self._home = asyncio.get_running_loop()
+        """The agent's loop: states, events and history are handled there; the links live on `_links`."""
+        self._links = _links_of(agent)
+        self.driver = make_driver(spec, self._device_event_from_link)
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
         self.online = False
         self.stats = PollStats()
@@ -109,7 +171,10 @@ class Session:
         for task in tasks:
             with contextlib.suppress(BaseException):
                 await task
-        await self.driver.close()
+        try:
+            await self._links.run(self.driver.close())
+        finally:
+            _release_links(self.agent)
 
     def _set_info(self, id_: str | None = None) -> None:
         ident = self._identity
@@ -124,7 +189,7 @@ class Session:
         delay = low
         while True:
             try:
-                self._identity = await self.driver.connect()
+                self._identity = await self._links.run(self.driver.connect())
             except LINK_FAILURES as exc:
                 self._reason = str(exc) or type(exc).__name__
                 self._first_attempt.set()
@@ -146,7 +211,7 @@ class Session:
                 self._reason = str(exc) or type(exc).__name__
             finally:
                 self.online = False
-                await self.driver.close()
+                await self._links.run(self.driver.close())
             await self._went_offline(delay)
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
 
@@ -159,20 +224,30 @@ class Session:
         self.agent.history.record_sample(self.info.id, time.time(), summary)
 
     async def _monitor(self) -> None:
+        await self._links.run(self._poll_forever())
+
+    async def _poll_forever(self) -> None:
+        """On the links' loop: poll on schedule; each result goes to the agent's loop as one callback."""
         loop = asyncio.get_running_loop()
         interval = self.driver.interval_s
         slot = loop.time() + random.uniform(0, interval)  # spread a bench's polls over the second
         await asyncio.sleep(slot - loop.time())
         while True:
-            self.stats.record(loop.time() - slot, interval)
+            lag = loop.time() - slot
             status, summary = await self.driver.poll()
-            self._set_state(online=True, summary=summary, status=status)
-            self.agent.history.record_sample(self.info.id, time.time(), summary)
+            self._home.call_soon_threadsafe(self._polled, status, summary, time.time(), lag, interval)
             slot += interval
             now = loop.time()
             if slot < now:
                 slot = now  # fell behind: start again from now rather than firing a burst
             await asyncio.sleep(slot - now)
+
+    def _polled(self, status: dict[str, Any] | None, summary: dict[str, Any], at: float, lag: float,
+                interval: float) -> None:
+        self.stats.record(lag, interval)
+        if self.online:  # a result that arrives after the link went down is not news
+            self._set_state(online=True, summary=summary, status=status)
+            self.agent.history.record_sample(self.info.id, at, summary)
 
     def _set_state(self, *, online: bool, summary: dict[str, Any] | None, status: dict[str, Any] | None = None
                    ) -> None:
@@ -195,6 +270,9 @@ class Session:
     def _device_event(self, payload: dict[str, Any]) -> None:
         self._publish("event", event=payload)
 
+    def _device_event_from_link(self, payload: dict[str, Any]) -> None:
+        self._home.call_soon_threadsafe(self._device_event, payload)
+
     # ------------------------------------------------------------------------------------------ actions
 
     def _require_online(self) -> None:
@@ -216,11 +294,11 @@ class Session:
             self._background.add(task)
             task.add_done_callback(self._background.discard)
             return {"started": action}
-        return await self.driver.act(action, checked)
+        return await self._links.run(self.driver.act(action, checked))
 
     async def _background_action(self, action: str, params: dict[str, Any]) -> None:
         try:
-            result = await self.driver.act(action, params)
+            result = await self._links.run(self.driver.act(action, params))
             self._publish("event", event={"event": "action-done", **result})
         except (*LINK_FAILURES, FabwireError) as exc:
             self._publish("error", message=f"{action}: {exc}", exit_code=exit_code_of(exc), action=action)
@@ -270,7 +348,8 @@ class Session:
         path = self.agent.jobs.path_of(job)
         await self._job_changed(state="running", started=now_iso())
         try:
-            message = await self.driver.run_job(path, job["type"], _Handle(self), job.get("params") or {})
+            message = await self._links.run(self.driver.run_job(path, job["type"], _Handle(self),
+                                                                 job.get("params") or {}))
         except asyncio.CancelledError:
             if self._stopping:
                 await self._job_changed(state="interrupted", message="the agent stopped while the job ran")
@@ -337,7 +416,7 @@ class Session:
         task = self._job_task
         self._cancelling = True
         try:
-            await self.driver.stop_job()  # the machine stops; the job's own loop then winds down cleanly
+            await self._links.run(self.driver.stop_job())  # the machine stops; the job's loop then winds down
             _, pending = await asyncio.wait({task}, timeout=STOP_WAIT_S)
         except (*LINK_FAILURES, FabwireError) as exc:
             self._publish("error", message=f"stopping job {job_id}: {exc}", exit_code=exit_code_of(exc))
@@ -346,24 +425,24 @@ class Session:
             task.cancel()
             with contextlib.suppress(BaseException):
                 await task
-            await self.driver.close()
+            await self._links.run(self.driver.close())
         return await self.agent.jobs.get(job_id)
 
 
 class _Handle:
-    """The JobHandle a driver reports through."""
+    """The JobHandle a driver reports through, from the links' loop: each report runs on the agent's loop."""
 
     def __init__(self, session: Session) -> None:
         self._session = session
 
     def progress(self, percent: float, *, time_left_s: float | None = None, message: str | None = None) -> None:
-        self._session.job_progress(percent, time_left_s, message)
+        self._session._home.call_soon_threadsafe(self._session.job_progress, percent, time_left_s, message)
 
     def stroke(self, points: list[tuple[float, float]]) -> None:
-        self._session.job_stroke(points)
+        self._session._home.call_soon_threadsafe(self._session.job_stroke, points)
 
     def preview(self, strokes: list[list[tuple[float, float]]]) -> None:
-        self._session.job_preview(strokes)
+        self._session._home.call_soon_threadsafe(self._session.job_preview, strokes)
 
     def note(self, text: str) -> None:
         self._session.job_note(text)

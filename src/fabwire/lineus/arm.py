@@ -45,19 +45,30 @@ class Job:
     queued: float = 0.0
 
 
+def _loop_time() -> float:
+    """The running event loop's clock (the one its timers follow), or the monotonic clock outside one."""
+    try:
+        return asyncio.get_running_loop().time()
+    except RuntimeError:
+        return time.monotonic()
+
+
 class Clock:
-    """Model time: wall time × speed, or (at infinite speed) time advanced only by the moves themselves."""
+    """Model time: the event loop's time × speed, or (at infinite speed) time advanced only by the moves themselves.
+
+    Following the loop's clock (rather than the wall) keeps model time and the loop's timers in step, also on a
+    loop whose clock is not the wall's."""
 
     def __init__(self, speed: float) -> None:
         self.speed = speed
         self.instant = math.isinf(speed)
-        self._t0 = time.monotonic()
+        self._t0 = _loop_time()
         self._virtual = 0.0
 
     def now(self) -> float:
         if self.instant:
             return self._virtual
-        return (time.monotonic() - self._t0) * self.speed
+        return (_loop_time() - self._t0) * self.speed
 
     def advance(self, moment: float) -> None:
         """At infinite speed, move model time on without waiting."""

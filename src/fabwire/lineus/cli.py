@@ -8,24 +8,33 @@ import math
 import socket
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
+from fabwire.cli_support import App, DeviceContext, FiniteRange, Lazy, confirm, device_group, pass_app, pass_device
 from fabwire.devices import LINEUS
 from fabwire.errors import InputError, LocalProtocolError
 from fabwire.lineus import protocol as p
-from fabwire.lineus.client import LineUs
-from fabwire.lineus.draw_cli import draw, preview, text
-from fabwire.lineus.drawing_lock import DrawingLock, robot_address
-from fabwire.lineus.shell import shell
 from fabwire.units import json_key
+
+if TYPE_CHECKING:
+    from fabwire.lineus.client import LineUs
 
 T = TypeVar("T")
 
 
-@device_group(LINEUS, "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery.")
+@device_group(LINEUS, "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery.", lazy={
+    "draw": Lazy("fabwire.lineus.draw_cli:draw",
+                 "Draw an SVG, SVGZ or Line-us G-code FILE ('-' reads it from standard input).", "lineus"),
+    "text": Lazy("fabwire.lineus.draw_cli:text", "Write TEXT in a single-stroke font (\\n starts a new line; '-' reads "
+                                                 "the text from standard input).", "lineus"),
+    "preview": Lazy("fabwire.lineus.draw_cli:preview", "Plan FILE ('-' reads standard input) and write a picture of "
+                    "what the pen will do (pen-up travel dashed, parts hidden by clip paths faint), or the plan as "
+                    "Line-us G-code; no device needed.", "lineus"),
+    "shell": Lazy("fabwire.lineus.shell:shell", "An interactive session on one connection: moves, pen, position, "
+                                                "G-code lines and their replies."),
+})
 def lineus() -> None:
     """Line-us drawing robot."""
 
@@ -33,6 +42,9 @@ def lineus() -> None:
 def _with_arm(dctx: DeviceContext, action: Callable[[LineUs], Awaitable[T]], *, moves: str = "") -> T:
     """Run `action` on the connected arm; one that `moves` the arm (named in words, "a move") is refused while
     another program draws on this robot, and no drawing starts on it meanwhile."""
+    from fabwire.lineus.client import LineUs  # with numpy's kinematics: not for help or completion
+    from fabwire.lineus.drawing_lock import DrawingLock, robot_address
+
     async def main() -> T:
         async with dctx.open(LineUs) as arm:
             try:
@@ -311,10 +323,6 @@ def discover(app: App, wait: float, interfaces: tuple[str, ...]) -> None:
     app.output.result(rows, text)
 
 
-lineus.add_command(draw)
-lineus.add_command(text)
-lineus.add_command(preview)
-lineus.add_command(shell)
 
 
 # -- the simulator ---------------------------------------------------------------------------------------------------

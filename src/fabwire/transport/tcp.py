@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import errno
 import socket
 from collections.abc import Awaitable, Callable
@@ -84,7 +85,8 @@ async def serve_tcp(handler: ConnectionHandler, host: str, port: int, *, limits:
         except asyncio.CancelledError:
             pass  # the server is shutting down; ending quietly spares asyncio's stream callback a traceback
         finally:
-            await link.close()
+            with contextlib.suppress(asyncio.CancelledError):  # shut down while closing: as quiet (the socket is
+                await link.close()  # closed at once; only the wait for the peer's last bytes is cut short)
 
     try:
         return await asyncio.start_server(on_connect, host, port, reuse_address=True)

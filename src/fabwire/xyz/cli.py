@@ -15,7 +15,16 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from fabwire import units
-from fabwire.cli_support import App, DeviceContext, FiniteRange, confirm, device_group, pass_app, pass_device
+from fabwire.cli_support import (
+    App,
+    DeviceContext,
+    FiniteRange,
+    Lazy,
+    confirm,
+    device_group,
+    pass_app,
+    pass_device,
+)
 from fabwire.devices import XYZ
 from fabwire.errors import FollowInterrupted, InputError, LinkError, LinkTimeout
 from fabwire.files import read_bounded
@@ -37,7 +46,10 @@ T = TypeVar("T")
 
 
 @device_group(XYZ, "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance.",
-              lazy={"convert": "fabwire.xyz.threew_cli:convert", "info": "fabwire.xyz.threew_cli:info"})
+              lazy={"convert": Lazy("fabwire.xyz.threew_cli:convert", "Convert G-code to a .3w print file or back; the "
+                                    "direction follows the files' types ('-' reads SRC from standard input)."),
+                    "info": Lazy("fabwire.xyz.threew_cli:info", "Show what a .3w file holds (variant, CRC, model, "
+                                 "print metadata), or what a G-code file would give ('-' reads standard input).")})
 def xyz() -> None:
     """XYZprinting da Vinci printers."""
 

@@ -30,6 +30,7 @@ from fabwire.xyz.models import PrinterModel
 
 if TYPE_CHECKING:  # the move analysis (numpy) is loaded when G-code is read, not to decode a .3w
     import numpy as np
+    from numpy.typing import NDArray
 
     from fabwire.xyz.gcodeinfo import GcodeMetadata
 
@@ -432,13 +433,13 @@ _G0_WORD = re.compile(rb"\n([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])"
 
 
 @functools.cache
-def _tables() -> tuple[np.ndarray, np.ndarray]:
-    """(first bytes of a line that need the regular expression to find its command word, digits and the dot)."""
+def _byte_classes() -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Lookup tables by byte value: (a line starting with it needs the regular expression to find its command
+    word, a digit or a dot). Built on first use: a .3w that is only sent never loads numpy."""
     import numpy as np
 
-    odd_first = np.zeros(256, dtype=bool)
+    odd_first, digit_or_dot = np.zeros(256, dtype=bool), np.zeros(256, dtype=bool)
     odd_first[list(b" \tNng")] = True
-    digit_or_dot = np.zeros(256, dtype=bool)
     digit_or_dot[list(b"0123456789.")] = True
     return odd_first, digit_or_dot
 
@@ -641,15 +642,15 @@ def _process(chunk: bytes) -> bytes:
         return chunk
     import numpy as np
 
-    _ODD_FIRST, _DIGIT_OR_DOT = _tables()  # noqa: N806
+    odd_first, digit_or_dot = _byte_classes()
     data = np.frombuffer(chunk, dtype=np.uint8)
     starts = np.insert(np.flatnonzero(data[:-1] == 10) + 1, 0, 0)
     c0, c1, c2, c3 = (np.take(data, starts + i, mode="clip") for i in range(4))
-    if (_ODD_FIRST[c0] | ((c0 == 71) & ((c1 == 32) | (c1 == 9)))).any():  # blanks, line numbers or lower case
+    if (odd_first[c0] | ((c0 == 71) & ((c1 == 32) | (c1 == 9)))).any():  # blanks, line numbers or lower case
         return _G0_WORD.sub(rb"\n\g<1>1", b"\n" + chunk)[1:]
     # Every line starts with its command: the `0` of each G0/G00 becomes `1` in place.
     g0 = (c0 == 71) & (c1 == 48)
-    ones = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT[c2]] + 1, starts[g0 & (c2 == 48) & ~_DIGIT_OR_DOT[c3]] + 2))
+    ones = np.concatenate((starts[g0 & ~digit_or_dot[c2]] + 1, starts[g0 & (c2 == 48) & ~digit_or_dot[c3]] + 2))
     if not len(ones):
         return chunk
     out = bytearray(chunk)

@@ -16,7 +16,7 @@ from pathlib import Path
 from fabwire.errors import InputError
 from fabwire.xyz import intake, userinput
 from fabwire.xyz.models import PrinterModel, model_for_file_id
-from fabwire.xyz.threew import ThreeWInfo, convert_gcode_file, inspect_3w
+from fabwire.xyz.threew import ThreeWCheck, ThreeWInfo, check_3w, convert_gcode_file
 
 _MACHINE_LINE = re.compile(rb"^\s*;\s*machine\s*=\s*(\S+)", re.MULTILINE)
 
@@ -62,7 +62,7 @@ def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = Fa
             yield target
 
 
-def check_intact(info: ThreeWInfo, name: str) -> None:
+def check_intact(info: ThreeWInfo | ThreeWCheck, name: str) -> None:
     """InputError for a .3w whose body does not match its stored checksum: the printer would take the upload and
     then refuse the file (0x020D)."""
     if not info.crc_ok:
@@ -71,7 +71,7 @@ def check_intact(info: ThreeWInfo, name: str) -> None:
 
 
 def _check_3w(path: Path, name: str, model: PrinterModel, override: bool) -> None:
-    info = inspect_3w(path)
+    info = check_3w(path)  # the printer decrypts the body; here its checksum and first block are enough
     check_intact(info, name)
     machine = (info.machine or "").strip()
     target = model_for_file_id(machine, model) if machine else None

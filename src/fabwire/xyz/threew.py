@@ -44,6 +44,8 @@ CHUNK = 1 << 22
 DECODE_PIECE = 1 << 20
 """Bytes decrypted at once when reading a .3w: each piece is held about four times over (read, decrypted,
 joined, written), so a small piece keeps decoding within a few MiB whatever the file's size."""
+SNIFF_BLOCK = 1 << 12
+"""Bytes of an encrypted body decrypted to see that it is G-code (a multiple of the AES block)."""
 GCODE_SUFFIXES = (".gcode", ".gco", ".g")
 
 Progress = intake.Progress
@@ -431,6 +433,21 @@ def _fields(header: bytes) -> dict[str, str]:
     return found
 
 
+def _refuse_ragged(body_size: int, name: str) -> None:
+    if body_size % 16:
+        raise InputError(f"{name} is truncated or corrupt: the body is {body_size} bytes, not a multiple of 16")
+
+
+def _refuse_undecryptable(text: bytes, name: str) -> None:
+    if not _looks_like_text(text):
+        raise InputError(f"{name}: the body does not decrypt to G-code (wrong key or encryption variant)")
+
+
+def _refuse_bodiless(body_size: int, name: str) -> None:
+    if body_size <= 0:
+        raise InputError(f"{name} is truncated: it has no body after its {BODY_OFFSET}-byte header area")
+
+
 def _decrypt_ecb(
     src: BinaryIO, body_size: int, sink: Callable[[bytes], object], name: str, progress: Progress | None, total: int,
 ) -> tuple[int, int, bool, bool]:
@@ -445,8 +462,7 @@ def _decrypt_ecb(
             sink(block)
             plain += len(block)
         return crc, plain, True, False
-    if body_size % 16:
-        raise InputError(f"{name} is truncated or corrupt: the body is {body_size} bytes, not a multiple of 16")
+    _refuse_ragged(body_size, name)
     decryptor = Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor()
     held = b""
     plain = 0
@@ -457,8 +473,7 @@ def _decrypt_ecb(
         done += len(block)
         text = held + decryptor.update(block)
         if not checked:
-            if not _looks_like_text(text):
-                raise InputError(f"{name}: the body does not decrypt to G-code (wrong key or encryption variant)")
+            _refuse_undecryptable(text, name)
             checked = True
         held = text[-16:]
         if len(text) > 16:
@@ -529,8 +544,7 @@ def _read(src: BinaryIO, name: str, sink: Callable[[bytes], object], progress: P
     layout = _parse_layout(pre, name)
     header, header_encrypted = _read_header(pre, layout, name)
     body_size = total - BODY_OFFSET
-    if body_size <= 0:
-        raise InputError(f"{name} is truncated: it has no body after its {BODY_OFFSET}-byte header area")
+    _refuse_bodiless(body_size, name)
     decrypt = _decrypt_zip if layout.tag == TAG_ZIP else _decrypt_ecb
     crc, plain, pad_ok, body_encrypted = decrypt(src, body_size, sink, name, progress, total)
     if plain == 0:
@@ -570,6 +584,51 @@ def inspect_3w(data_or_path: bytes | str | Path, progress: Progress | None = Non
     """Everything `read_3w` tells except the G-code, streaming (the body is still decrypted to validate it)."""
     with _source(data_or_path) as (source, name):
         return _read(source, name, lambda _data: None, progress)
+
+
+@dataclass(frozen=True, slots=True)
+class ThreeWCheck:
+    """What sending a .3w needs to know first: its header's fields and whether its body matches the stored
+    checksum (the printer refuses a file that does not, 0x020D)."""
+
+    fields: dict[str, str]
+    crc_stored: int
+    crc_computed: int
+
+    @property
+    def crc_ok(self) -> bool:
+        return self.crc_stored == self.crc_computed
+
+    @property
+    def machine(self) -> str | None:
+        return self.fields.get("machine")
+
+
+def check_3w(data_or_path: bytes | str | Path) -> ThreeWCheck:
+    """`inspect_3w`'s header fields and checksums, reading the body once without decrypting it all: only its
+    first block must decrypt to G-code (the wrong key or variant is refused as there); the rest is only summed,
+    as the printer's check does. For a file about to be sent, whose body the printer decrypts. InputError as
+    `inspect_3w`."""
+    with _source(data_or_path) as (src, name):
+        total = intake.stream_size(src)
+        src.seek(0)
+        pre = src.read(BODY_OFFSET)
+        layout = _parse_layout(pre, name)
+        if layout.tag == TAG_ZIP:  # its pieces are zipped, then encrypted: read it whole
+            info = _read(src, name, lambda _data: None, None)
+            return ThreeWCheck(info.fields, info.crc_stored, info.crc_computed)
+        header, _ = _read_header(pre, layout, name)
+        body_size = total - BODY_OFFSET
+        _refuse_bodiless(body_size, name)
+        first = src.read(CHUNK)
+        if first[:1] != b";":  # an encrypted body (a plain one starts with its header's comments)
+            _refuse_ragged(body_size, name)
+            start = first[:SNIFF_BLOCK]
+            _refuse_undecryptable(Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor().update(start), name)
+        crc = zlib.crc32(first)
+        while block := src.read(CHUNK):
+            crc = zlib.crc32(block, crc)
+    return ThreeWCheck(_fields(header), layout.crc, crc)
 
 
 def convert_3w_to_gcode(src: Path, dst: Path, progress: Progress | None = None) -> ThreeWInfo:
