@@ -303,9 +303,9 @@ def test_a_failed_job_keeps_its_reason_in_view(page: Page, bench: Bench, simulat
             client.delete(f"/api/v1/devices/{added['id']}")
 
 
-def test_demo_uses_a_temporary_state_directory_and_starts_busy(browser: Browser, tmp_path: Path) -> None:
-    """`serve --demo` leaves the real state directory alone and opens with work under way, as the README's
-    pictures (taken here) show."""
+def test_demo_uses_a_temporary_state_directory_and_gets_busy_once_looked_at(browser: Browser, tmp_path: Path) -> None:
+    """`serve --demo` leaves the real state directory alone; its machines stay idle for scripts until the
+    dashboard is opened, which then shows work under way, as the README's pictures (taken here) show."""
     home = tmp_path / "home"
     env = {**cli_env(tmp_path), "HOME": str(home), "XDG_STATE_HOME": str(home / "state"),
            "XDG_CONFIG_HOME": str(home / "config")}
@@ -317,6 +317,8 @@ def test_demo_uses_a_temporary_state_directory_and_starts_busy(browser: Browser,
         assert ANNOUNCEMENT in line, line
         url = line.split(ANNOUNCEMENT, 1)[1].strip()
         with httpx.Client(base_url=url.rstrip("/"), timeout=30) as client:
+            assert client.get("/api/v1/jobs").json() == []  # nobody looked yet: nothing started
+            assert client.get("/").status_code == 200  # the page, as a browser asks for it
             wait_for(lambda: {j["device"] for j in client.get("/api/v1/jobs").json()} >= {"xyz-demo", "lineus-demo"},
                      "the demo's print and drawing")
             wait_for(lambda: summary(client, "mmu-demo")["state"] == "error", "the demo's MMU stopping on its fault")

@@ -9,6 +9,7 @@ import asyncio
 import contextlib
 import json
 import re
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 from importlib import resources
 from typing import Any
@@ -116,9 +117,11 @@ def _iso(epoch: float) -> str:
     return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = None) -> FastAPI:
+def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = None,
+               on_dashboard: Callable[[], None] | None = None) -> FastAPI:
     """The agent's application, behind its boundary (`fabwire.agent.boundary`): `policy` says which names,
-    token and sizes it accepts (default: loopback names only, no token, uploads up to `max_upload_bytes`)."""
+    token and sizes it accepts (default: loopback names only, no token, uploads up to `max_upload_bytes`).
+    `on_dashboard` is called whenever the dashboard page is served."""
     app = FastAPI(title="fabwire agent", version=__version__, openapi_url="/api/v1/openapi.json", docs_url=None,
                   redoc_url=None, description="Machines, their states and history, jobs and actions; live events "
                   "on the WebSocket /api/v1/events.")
@@ -255,6 +258,8 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
 
     @app.get("/", include_in_schema=False)
     async def index() -> FileResponse:
+        if on_dashboard is not None:
+            on_dashboard()
         return FileResponse(str(STATIC / "index.html"), headers={"cache-control": "no-cache"})
 
     @app.exception_handler(Exception)

@@ -264,9 +264,10 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
+        opened = asyncio.Event()
         if demo:
-            show = asyncio.create_task(_demo_show(agent))
-        app = create_app(agent, max_upload_bytes=policy.max_upload_bytes, policy=policy)
+            show = asyncio.create_task(_demo_show(agent, opened))
+        app = create_app(agent, max_upload_bytes=policy.max_upload_bytes, policy=policy, on_dashboard=opened.set)
         _raise_open_files()
         logging.getLogger("uvicorn.error").addFilter(_Repeats())
         server = server_class(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
@@ -424,11 +425,13 @@ DEMO_LINEUS_SPEED = 1.0
 """The demo's Line-us draws in real time: the logo takes half a minute, long enough to watch the ink arrive."""
 
 
-async def _demo_show(agent: Agent) -> None:
-    """What the demo does at start, as the README's picture shows: the printer prints the sample, the Line-us
-    draws the sample logo, the MMU loads slot 0 and then stops on its (simulated) FINDA fault at slot 1."""
+async def _demo_show(agent: Agent, opened: asyncio.Event) -> None:
+    """What the demo does once its dashboard is first opened, as the README's picture shows: the printer prints
+    the sample, the Line-us draws the sample logo, the MMU loads slot 0 and then stops on its (simulated) FINDA
+    fault at slot 1. Until a person looks, the machines stay idle for whatever a script sends them."""
     from fabwire.samples import SAMPLE_GCODE, SAMPLE_SVG, sample_path
 
+    await opened.wait()
     async def until(device: str, done: Callable[[dict[str, Any]], bool]) -> None:
         subscription = agent.subscribe(device)
         try:
