@@ -42,8 +42,7 @@ accept = ["3.0.4"]
     async with asyncio.timeout(LIMIT), MMU.open("fast", config=path) as mmu:
         assert mmu.logic.heartbeat < 1  # 50 times faster than the printer's heartbeat
         assert mmu.logic.auto_retries == 0
-        assert mmu.version is not None
-        assert str(mmu.version).startswith("3.0.4")
+        assert str(await mmu.version()).startswith("3.0.4")
     assert mmu.transport.closed
 
 

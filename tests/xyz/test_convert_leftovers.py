@@ -13,7 +13,7 @@ from pathlib import Path
 from clitools import cli_env, run_cli
 from fabwire.xyz.threew import convert_gcode_file, read_3w
 
-GCODE = b";FLAVOR:Marlin\nG28\n" + b"".join(b"G1 X%d.%d Y%d E%d.1 F1200\n" % (i % 200, i % 10, (i * 7) % 200, i)
+GCODE = b";FLAVOR:Marlin\nG28\n" + b"".join(b"G1 X%d.%d Y%d E%d.1 F1200\n" % (i % 140, i % 10, (i * 7) % 140, i)
                                             for i in range(2000))
 
 
@@ -36,7 +36,7 @@ def test_leftovers_of_killed_runs_go_and_a_live_writers_stays(tmp_path: Path) ->
 def test_a_killed_convert_leaves_no_partial_output_and_the_next_run_cleans_up(tmp_path: Path) -> None:
     src = tmp_path / "big.gcode"
     src.write_bytes(b";FLAVOR:Marlin\nG28\n" + b"".join(
-        b"G1 X%d.%d Y%d E%d.1 F1200\n" % (i % 200, i % 10, (i * 7) % 200, i) for i in range(400_000)))
+        b"G1 X%d.%d Y%d E%d.1 F1200\n" % (i % 140, i % 10, (i * 7) % 140, i) for i in range(400_000)))
     out = tmp_path / "out.3w"
     proc = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "convert", str(src), str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=cli_env(tmp_path))

@@ -27,8 +27,9 @@ T = TypeVar("T")
 @device_group(LINEUS, "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery.", lazy={
     "draw": Lazy("fabwire.lineus.draw_cli:draw",
                  "Draw an SVG, SVGZ or Line-us G-code FILE ('-' reads it from standard input).", "lineus"),
-    "text": Lazy("fabwire.lineus.draw_cli:text", "Write TEXT in a single-stroke font (\\n starts a new line; '-' reads "
-                                                 "the text from standard input).", "lineus"),
+    "text": Lazy("fabwire.lineus.draw_cli:text", "Write TEXT in a single-stroke font (\\n starts a new line, \\t moves "
+                                                 "on to the next tab stop; '-' reads the text from standard input).",
+                 "lineus"),
     "preview": Lazy("fabwire.lineus.draw_cli:preview", "Plan FILE ('-' reads standard input) and write a picture of "
                     "what the pen will do (pen-up travel dashed, parts hidden by clip paths faint), or the plan as "
                     "Line-us G-code; no device needed.", "lineus"),

@@ -45,6 +45,9 @@ class LineUsSync(SyncClient[LineUs]):
     def pen_up(self) -> Position:
         return self._call(self.client.pen_up())
 
+    def lift_after_stop(self) -> Position:
+        return self._call(self.client.lift_after_stop())
+
     def pen_down(self, z: float = 0.0) -> Position:
         return self._call(self.client.pen_down(z))
 

@@ -66,10 +66,11 @@ class SyncXYZPrinter(SyncClient[XYZPrinter]):
     def print_file(self, source: Path | bytes, *, model: PrinterModel | None = None,
                    progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
                    wait: bool = True, name: str | None = None, save_to_sd: bool = False,
-                   start_limit: float = 30.0, on_note: Callable[[str], None] | None = None) -> Status:
+                   start_limit: float = 30.0, on_note: Callable[[str], None] | None = None,
+                   force: bool = False) -> Status:
         return self._call(self.client.print_file(source, model=model, progress=progress, on_status=on_status,
                                                  wait=wait, name=name, save_to_sd=save_to_sd,
-                                                 start_limit=start_limit, on_note=on_note))
+                                                 start_limit=start_limit, on_note=on_note, force=force))
 
     def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None,
                    on_note: Callable[[str], None] | None = None) -> Status:
