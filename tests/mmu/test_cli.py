@@ -97,6 +97,10 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
 
 def test_retry_with_the_cause_still_there_says_so(simulator: SimulatorStarter) -> None:
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED, "--fault", "homing-failed:always")
+    for _ in range(100):  # the boot homing stalls first (a loaded machine may take a while to get there)
+        code, out, _ = mmu(sim.url, "status", json_mode=True)
+        if code == 0 and json.loads(out)["value"] == 0x8087:
+            break
     code, _, err = mmu(sim.url, "button", "retry")  # the re-home stalls again
     assert code == 7
     assert "04115 SELECTOR CANNOT HOME (0x8087) during X0" in err

@@ -93,6 +93,10 @@ def test_the_cli_exits_non_zero_when_the_mmu_only_says_finished(tmp_path: Path) 
     try:
         assert liar.stdout is not None
         url = liar.stdout.readline().strip()
+        for _ in range(100):  # the boot homing first: until it ends the selector's position is unknown
+            read = run_cli("mmu", "-d", url, "--speed", "50", "read", "0x1b", timeout=60, env=cli_env(tmp_path))
+            if read.stdout.strip().endswith("= 5"):
+                break
         done = run_cli("mmu", "-d", url, "--speed", "50", "tool-change", "2", timeout=60, env=cli_env(tmp_path))
     finally:
         liar.kill()
