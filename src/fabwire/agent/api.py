@@ -23,7 +23,9 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from fabwire import __version__
 from fabwire.agent.auth import SUBPROTOCOL
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
+from fabwire.agent.doors import mount_doors
 from fabwire.agent.jobs import JobNotFound, UploadTooLarge
+from fabwire.agent.library import FileNotInLibrary
 from fabwire.errors import (
     DeviceBusy,
     DeviceError,
@@ -77,7 +79,7 @@ ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code i
 
 
 def _status_for(exc: BaseException) -> int:
-    if isinstance(exc, UnknownDevice | JobNotFound):
+    if isinstance(exc, UnknownDevice | JobNotFound | FileNotInLibrary):
         return 404
     if isinstance(exc, UploadTooLarge):
         return 413
@@ -260,6 +262,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
                 await receiver
 
     app.include_router(api)
+    mount_doors(app, agent)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.get("/", include_in_schema=False)

@@ -145,6 +145,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
+    from fabwire.agent.advertise import Advertiser
     from fabwire.agent.api import create_app
     from fabwire.agent.auth import TokenGuard
     from fabwire.logsink import log_in_background
@@ -155,6 +156,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     simulators: list[Any] = []
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=max_upload)
     bridge_task: asyncio.Task[None] | None = None
+    advertiser: Advertiser | None = None
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
@@ -175,9 +177,13 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         sys.stdout.flush()
         if bridge is not None:
             bridge_task = asyncio.create_task(_run_bridge(bridge(agent), server))
+        advertiser = Advertiser(agent, bound_host, bound_port)
+        await advertiser.start()
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
+        if advertiser is not None:
+            await advertiser.stop()
         if bridge_task is not None:
             bridge_task.cancel()
             with contextlib.suppress(BaseException):

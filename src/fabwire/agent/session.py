@@ -232,6 +232,7 @@ class Session:
             accepted = ", ".join(sorted(self.driver.job_types)) or "no files"
             raise InputError(f"a {self.spec.kind} job takes {accepted}, not {suffix or 'a file without extension'}")
         self._require_online()
+        self.agent.library.machines.require_ready(self.info.id)  # 409 with the reason, never accepted-then-failed
         await asyncio.to_thread(self.driver.check_upload, filename, data)
         return await self._start_job(job_type, filename, data, {})
 

@@ -160,6 +160,12 @@ class Driver(ABC):
         """Refuse an upload this device cannot run with the intake's InputError (naming it `name`), before
         it is accepted; kinds that take no files accept anything `job_types` lets through."""
 
+    def describe_upload(self, name: str, data: bytes) -> dict[str, Any]:
+        """`check_upload`, and what the file says about itself for a file library: `print_time_s`,
+        `filament_mm`, `layers`, `slicer` (None where it does not say; kinds without such figures say nothing)."""
+        self.check_upload(name, data)
+        return {}
+
     @abstractmethod
     async def connect(self) -> Identity:
         """Open the link and identify the machine; raises LinkError/LinkTimeout/RemoteProtocolError."""

@@ -82,12 +82,21 @@ class XYZDriver(Driver):
     def check_upload(self, name: str, data: bytes) -> None:
         """The printer intake's refusal for what no printer takes (binary data, images, SVG, G-code without
         commands), so a bad file is refused at upload rather than failing the job later."""
+        self.describe_upload(name, data)
+
+    def describe_upload(self, name: str, data: bytes) -> dict[str, Any]:
+        """`check_upload`, and the figures the intake reads for the .3w header (a G-code's comments, or its
+        moves where the comments are silent)."""
         head = data[:intake.SNIFF]
         kind = intake.require_printable(intake.identify(head, len(data)), name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
-            intake.stream_metadata(io.BytesIO(data), name)
-        elif kind is intake.Kind.THREEW:
+            stated, computed = intake.stream_metadata(io.BytesIO(data), name)
+            meta = stated.merged(computed) if computed is not None else stated
+            return {"print_time_s": meta.print_time_s, "filament_mm": meta.filament_mm, "layers": meta.layers,
+                    "slicer": meta.slicer}
+        if kind is intake.Kind.THREEW:
             printjob.check_intact(inspect_3w(data), name)
+        return {}
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
