@@ -8,6 +8,7 @@ else the first Line-us) at the root as well.
 from __future__ import annotations
 
 from fastapi import FastAPI
+from starlette.datastructures import UploadFile
 from starlette.requests import HTTPConnection
 
 from fabwire.agent.core import Agent
@@ -26,6 +27,12 @@ def machine_of(agent: Agent, request: HTTPConnection) -> MachineView:
     if view is None:
         raise TakesNoJobs("this agent monitors no printer or drawing machine: address one as /printers/NAME/")
     return view
+
+
+def file_name(upload: UploadFile) -> str:
+    """The name of an uploaded file part without any folders a client put in it (Windows' too): the folder
+    is the form's `path` field."""
+    return (upload.filename or "").replace("\\", "/").rsplit("/", 1)[-1]
 
 
 def base_url(request: HTTPConnection) -> str:

@@ -28,7 +28,7 @@ from starlette.datastructures import UploadFile
 
 from fabwire import __version__
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import PREFIXES, machine_of
+from fabwire.agent.doors import PREFIXES, file_name, machine_of
 from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.errors import FabwireError, InputError
 
@@ -314,7 +314,7 @@ class MoonrakerDoor:
                 folder = form.get("path")
                 start = str(form.get("print", "")).strip().lower() == "true"
                 result = await self.library.add(view.id, f"{folder if isinstance(folder, str) else ''}/"
-                                                f"{upload.filename or ''}", upload.file, start=start, select=start)
+                                                f"{file_name(upload)}", upload.file, start=start, select=start)
             finally:
                 await form.close()
         except FabwireError as exc:

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 import uuid
+from collections.abc import Awaitable, Callable
 from typing import Any
 from urllib.parse import quote
 
@@ -23,9 +25,9 @@ from starlette.datastructures import UploadFile
 from fabwire import __version__
 from fabwire.agent.appkeys import AppKeys
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import PREFIXES, base_url, machine_of
+from fabwire.agent.doors import PREFIXES, base_url, file_name, machine_of
 from fabwire.agent.model import MachineView, TakesNoJobs
-from fabwire.errors import InputError
+from fabwire.errors import FabwireError, InputError
 
 OCTOPRINT_VERSION = "1.10.0"
 """The OctoPrint release whose API this door follows."""
@@ -337,7 +339,7 @@ class OctoPrintDoor:
                     return _error(409, CANNOT["folder"])
                 return _error(400, "send the file as the multipart field 'file'")
             folder = form.get("path")
-            name = f"{folder if isinstance(folder, str) else ''}/{upload.filename or ''}"
+            name = f"{folder if isinstance(folder, str) else ''}/{file_name(upload)}"
             start = _true(form.get("print"))
             result = await self.library.add(view.id, name, upload.file, start=start,
                                             select=start or _true(form.get("select")))
@@ -445,5 +447,21 @@ def mount(app: FastAPI, agent: Agent, appkeys: AppKeys) -> None:
     for prefix in PREFIXES:
         router = APIRouter(prefix=prefix, include_in_schema=False)
         for path, endpoint, methods in routes:
-            router.add_api_route(path, endpoint, methods=methods)
+            router.add_api_route(path, _octoprint_errors(endpoint), methods=methods)
         app.include_router(router)
+
+
+def _octoprint_errors(endpoint: Callable[..., Awaitable[Any]]) -> Callable[..., Awaitable[Any]]:
+    """Errors as OctoPrint words them, `{"error": message}` (with `message` too), under the status the native
+    API gives the same error (404 unknown machine or file, 409 cannot now, 400 bad input, 413 too large)."""
+
+    @functools.wraps(endpoint)
+    async def wrapped(*args: Any, **kwargs: Any) -> Any:
+        from fabwire.agent.api import _status_for
+
+        try:
+            return await endpoint(*args, **kwargs)
+        except FabwireError as exc:
+            return _error(_status_for(exc), str(exc))
+
+    return wrapped
