@@ -198,6 +198,7 @@ def test_the_library_keeps_figures_previews_and_files(demo: RunningAgent, tmp_pa
     preview (OctoPrint `thumbnail`, served as an image), downloadable as sent, selectable, deletable."""
     data = prusaslicer_gcode(thumbs=[(16, 16, "png"), (120, 90, "qoi")], minutes=4, seconds=5, filament_mm=512.5)
     with demo.client() as client:
+        wait_idle(client)
         response = send(client, "kept.gcode", data, print_=False,
                         fields=[("print", "false"), ("path", "parts")])
         assert response.status_code == 201, response.text

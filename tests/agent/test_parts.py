@@ -5,20 +5,23 @@ from __future__ import annotations
 import asyncio
 import os
 import re
+import stat
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fabwire.agent.auth import TokenGuard, is_loopback, load_or_create_token
+from fabwire.agent.auth import is_loopback, load_or_create_token
+from fabwire.agent.boundary import Boundary, Policy
 from fabwire.agent.core import SUBSCRIBER_QUEUE, Agent, device_id, make_event
 from fabwire.agent.drivers.base import SUMMARY_KEYS, Action, Param, checked_params, summary
 from fabwire.agent.drivers.xyz import printer_summary
 from fabwire.agent.history import History
-from fabwire.agent.jobs import JobStore, UploadTooLarge
+from fabwire.agent.jobs import JobStore, UploadTooLarge, new_job_id
 from fabwire.errors import InputError
 from fabwire.xyz.status import Status
 
@@ -108,26 +111,66 @@ async def test_history_keeps_changes_drops_repeats_and_expires_old_rows(tmp_path
     await history.close()
 
 
+async def stored_upload(store: JobStore, name: str, data: bytes) -> dict[str, Any]:
+    """An upload written as the agent writes one (in chunks), then put on record."""
+    job_id = new_job_id()
+    writer = store.writer(job_id, name)
+    for i in range(0, len(data), 3):
+        await writer.write(data[i:i + 3])
+    await writer.finish()
+    return await store.create("d", "print", name, writer, {}, job_id=job_id)
+
+
 async def test_uploads_get_generated_names_whatever_they_are_called(tmp_path: Path) -> None:
     history = History(None, retention_s=60)
     await history.open()
     store = JobStore(history, tmp_path / "uploads", max_upload_bytes=100)
     names = ["../../etc/passwd.gcode", "/abs/x.SVG", "a\x00b.3w", "con.gcode", "..svg"]
-    made = [await store.create("d", "print", name, b"G28\n", {}) for name in names]
+    made = [await stored_upload(store, name, b"G28\n") for name in names]
     with pytest.raises(InputError, match="cannot tell what"):
-        await store.create("d", "print", "x.gcode;rm -rf", b"G28\n", {})
+        await stored_upload(store, "x.gcode;rm -rf", b"G28\n")
     for job in made:
         assert re.fullmatch(r"[0-9a-f]{16}\.(gcode|svg|3w)", job["stored"]), job
         path = store.path_of(job)
         assert path is not None
         assert path.parent == tmp_path / "uploads"
         assert path.read_bytes() == b"G28\n"
+        assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    assert stat.S_IMODE((tmp_path / "uploads").stat().st_mode) == 0o700
     assert sorted(p.name for p in (tmp_path / "uploads").iterdir()) == sorted(j["stored"] for j in made)
     with pytest.raises(UploadTooLarge):
-        await store.create("d", "print", "x.gcode", b"x" * 101, {})
+        await stored_upload(store, "x.gcode", b"x" * 101)
     with pytest.raises(InputError, match="empty"):
-        await store.create("d", "print", "x.gcode", b"", {})
+        await stored_upload(store, "x.gcode", b"")
+    assert sorted(p.name for p in (tmp_path / "uploads").iterdir()) == sorted(j["stored"] for j in made)
     await history.close()
+
+
+async def test_uploads_go_with_their_job_records(tmp_path: Path) -> None:
+    """The retention prunes a job record and its stored file with it; a `.part` nobody writes goes too, one
+    being written stays."""
+    history = History(tmp_path / "history.sqlite3", retention_s=3600)
+    await history.open()
+    store = JobStore(history, tmp_path / "uploads", max_upload_bytes=100)
+    old = await stored_upload(store, "old.gcode", b"G28\n")
+    new = await stored_upload(store, "new.gcode", b"G28\n")
+    orphan = tmp_path / "uploads" / "0123456789abcdef.gcode"
+    orphan.write_bytes(b"G28\n")
+    stale = tmp_path / "uploads" / ".fedcba9876543210.part"
+    stale.write_bytes(b"G2")
+    receiving = store.writer(new_job_id(), "busy.gcode")
+    await receiving.write(b"x" * 50)
+    await receiving._flush()
+    old["created"] = "2001-01-01T00:00:00.000Z"
+    await history.save_job(old)
+    await history._call(history._prune)
+    left = sorted(p.name for p in (tmp_path / "uploads").iterdir())
+    assert left == sorted([new["stored"], receiving.part])
+    assert await history.job(old["id"]) is None
+    receiving.discard()
+    assert sorted(p.name for p in (tmp_path / "uploads").iterdir()) == [new["stored"]]
+    await history.close()
+    assert stat.S_IMODE((tmp_path / "history.sqlite3").stat().st_mode) == 0o600
 
 
 @settings(max_examples=50, deadline=None)
@@ -141,7 +184,7 @@ def test_no_upload_name_reaches_the_file_system(name: str) -> None:
         with tempfile.TemporaryDirectory() as where:
             store = JobStore(history, Path(where) / "uploads", max_upload_bytes=10)
             try:
-                job = await store.create("d", "draw", name, b"M1\n", {})
+                job = await stored_upload(store, name, b"M1\n")
             except InputError:
                 pass
             else:
@@ -189,8 +232,8 @@ async def test_token_guard_covers_the_api_but_not_the_page() -> None:
         await send({"type": "http.response.start", "status": 200, "headers": []})  # type: ignore[operator]
         await send({"type": "http.response.body", "body": b"ok"})  # type: ignore[operator]
 
-    guarded = TokenGuard(app, "s3cret")
-    async with httpx.AsyncClient(transport=httpx.ASGITransport(app=guarded), base_url="http://agent") as client:
+    guarded = Boundary(app, policy=Policy(token="s3cret"), routes=[])
+    async with httpx.AsyncClient(transport=httpx.ASGITransport(app=guarded), base_url="http://localhost") as client:
         missing = await client.get("/api/v1/devices")
         assert missing.status_code == 401
         assert missing.json()["message"].startswith("this agent needs its access token")
@@ -198,4 +241,7 @@ async def test_token_guard_covers_the_api_but_not_the_page() -> None:
         assert wrong.status_code == 401
         assert wrong.json()["message"].startswith("the access token sent is not this agent's")
         assert (await client.get("/api/v1/devices", headers={"Authorization": "Bearer s3cret"})).text == "ok"
+        assert (await client.get("/api/v1/devices", headers={"X-Api-Key": "s3cret"})).text == "ok"
         assert (await client.get("/")).text == "ok"
+        assert (await client.get("/static/app.js")).text == "ok"
+        assert (await client.get("/printer/info")).status_code == 401  # every other path needs it

@@ -21,11 +21,10 @@ from pydantic import BaseModel, Field, StrictBool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fabwire import __version__
-from fabwire.agent.auth import SUBPROTOCOL
+from fabwire.agent.boundary import SUBPROTOCOL, Boundary, Policy, parse_json
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
 from fabwire.agent.doors import mount_doors
-from fabwire.agent.jobs import JobNotFound, UploadTooLarge
-from fabwire.agent.library import FileNotInLibrary
+from fabwire.agent.jobs import JobNotFound
 from fabwire.errors import (
     DeviceBusy,
     DeviceError,
@@ -75,14 +74,16 @@ def checked_address(body: NewDevice) -> str:
     return endpoint.url
 
 
-ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 404, 409, 413, 503, 504)}
+ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody}
+                                           for code in (400, 401, 403, 404, 408, 409, 413, 415, 503, 504)}
 
 
 def _status_for(exc: BaseException) -> int:
-    if isinstance(exc, UnknownDevice | JobNotFound | FileNotInLibrary):
+    status = getattr(exc, "http_status", None)
+    if isinstance(status, int):
+        return status
+    if isinstance(exc, UnknownDevice | JobNotFound):
         return 404
-    if isinstance(exc, UploadTooLarge):
-        return 413
     if isinstance(exc, DeviceError | DeviceBusy):
         return 409
     if isinstance(exc, LinkTimeout):
@@ -101,16 +102,12 @@ def error_response(status: int, message: str, exit_code: int, error: str) -> JSO
 
 
 async def _json_object(request: Request) -> dict[str, Any]:
-    """The request body as a JSON object (empty body: {}); InputError for anything else, such as the form
-    encoding curl sends by default."""
+    """The request body as a JSON object (empty body: {}); InputError for anything else. The boundary has
+    already bounded its size and checked its content type."""
     raw = await request.body()
     if not raw.strip():
         return {}
-    try:
-        body = json.loads(raw)
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise InputError("send the body as JSON: Content-Type: application/json, e.g. -d '{\"slot\": 1}'") \
-            from None
+    body = parse_json(raw)
     if not isinstance(body, dict):
         raise InputError(f"the body must be a JSON object of parameters, not {type(body).__name__}")
     return body
@@ -120,7 +117,9 @@ def _iso(epoch: float) -> str:
     return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
+def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = None) -> FastAPI:
+    """The agent's application, behind its boundary (`fabwire.agent.boundary`): `policy` says which names,
+    token and sizes it accepts (default: loopback names only, no token, uploads up to `max_upload_bytes`)."""
     app = FastAPI(title="fabwire agent", version=__version__, openapi_url="/api/v1/openapi.json", docs_url=None,
                   redoc_url=None, description="Machines, their states and history, jobs and actions; live events "
                   "on the WebSocket /api/v1/events.")
@@ -203,16 +202,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
     async def upload(device_id: str, request: Request, filename: str = UPLOAD_QUERY) -> dict[str, Any]:
-        agent.session(device_id)
-        declared = request.headers.get("content-length", "")
-        if declared.isdigit() and int(declared) > max_upload_bytes:
-            raise UploadTooLarge(f"the upload is {int(declared):,} bytes; the limit is {max_upload_bytes:,}")
-        data = bytearray()
-        async for chunk in request.stream():
-            data += chunk
-            if len(data) > max_upload_bytes:
-                raise UploadTooLarge(f"the upload is over the limit of {max_upload_bytes:,} bytes")
-        return await agent.start_job(device_id, filename, bytes(data))
+        return await agent.upload_job(device_id, filename, request.stream())  # claimed before a byte is read
 
     @api.get("/jobs", summary="Jobs, newest first (they survive a restart)")
     async def jobs(device: str | None = None, limit: int = Query(100, ge=1, le=1000)) -> list[dict[str, Any]]:
@@ -273,4 +263,6 @@ def create_app(agent: Agent, *, max_upload_bytes: int) -> FastAPI:
     async def unexpected(request: Request, exc: Exception) -> JSONResponse:
         return error_response(500, f"internal error: {exc!r}", exit_code_of(exc), type(exc).__name__)
 
+    app.add_middleware(Boundary, policy=policy or Policy(max_upload_bytes=max_upload_bytes),
+                       routes=app.router.routes)
     return app

@@ -14,14 +14,37 @@ from typing import Any
 import click
 
 from fabwire.agent.auth import is_loopback, load_or_create_token
+from fabwire.agent.boundary import Policy, normal_host, split_authority
 from fabwire.agent.core import KINDS, Agent, DeviceSpec
 from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import FabwireError, InputError
-from fabwire.simserve import parse_listen
+from fabwire.simserve import ListenAddress, parse_listen
 
 DEFAULT_PORT = 8765
 DEMO_DEVICES = (("printer", "xyz"), ("line-us", "lineus"), ("mmu", "mmu"))
 ANNOUNCEMENT = "fabwire agent listening on "
+MAX_UPLOAD_MB = 100 * 1024.0
+"""The largest --max-upload: 100 GiB, beyond any print or drawing file."""
+MAX_RETENTION_H = 100 * 365 * 24.0
+"""The longest --retention: a hundred years (a larger number would overflow the time arithmetic)."""
+MAX_SPEED = 10_000.0
+"""The fastest --demo simulation: a print of hours in a second."""
+
+CONNECTION_SETTINGS: dict[str, Any] = {
+    "timeout_keep_alive": 5,        # uvicorn's default: an idle keep-alive connection is closed after 5 s
+    "limit_concurrency": 1000,      # uvicorn answers 503 beyond this many connections and tasks
+    "h11_max_incomplete_event_size": 16 * 1024,  # a request line and headers larger than this are a 400
+    "ws_max_size": 64 * 1024,       # the WebSocket's messages from clients are ignored: no need for 16 MiB
+    "ws_ping_interval": 20.0,
+    "ws_ping_timeout": 20.0,
+    "timeout_graceful_shutdown": 5,
+}
+"""uvicorn's own connection settings (uvicorn docs, "Settings: Resource Limits / Timeouts")."""
+HEAD_TIMEOUT_S = 10.0
+"""A connection must complete its request line and headers this soon after opening (or after its previous
+answer), or it is closed: half-sent requests (slowloris) cannot hold the agent's connections."""
+OPEN_FILES = 4096
+"""The soft limit on open files the agent raises itself to (within the hard limit): above limit_concurrency."""
 
 
 def default_state_dir() -> Path:
@@ -47,6 +70,46 @@ def parse_device_option(text: str, index: int) -> DeviceSpec:
         raise InputError(f"--device takes KIND=ADDRESS or NAME:KIND=ADDRESS with KIND one of {', '.join(KINDS)}, "
                          f"not {text!r}")
     return DeviceSpec(name or f"{kind}-{index}", kind, address)
+
+
+def _usage(convert: Any) -> Any:
+    """A click callback that turns the parser's InputError into a usage error (exit 2) naming the option."""
+
+    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        try:
+            return convert(value)
+        except InputError as exc:
+            raise click.BadParameter(str(exc), ctx, param) from None
+
+    return callback
+
+
+def _listen(text: str) -> ListenAddress:
+    return parse_listen(text, DEFAULT_PORT)
+
+
+def _devices(texts: tuple[str, ...]) -> list[DeviceSpec]:
+    return [parse_device_option(text, i) for i, text in enumerate(texts, 1)]
+
+
+def _allow_hosts(texts: tuple[str, ...]) -> tuple[str, ...]:
+    """Host names (or addresses) the owner reaches the agent by, as a browser puts them in `Host`."""
+    names = []
+    for text in texts:
+        parsed = split_authority(text)
+        name = normal_host(parsed[0]) if parsed and parsed[1] is None else ""
+        if not name or len(name) > 253 or not all(c.isalnum() or c in "-._:" for c in name):
+            raise InputError(f"--allow-host takes a host name such as printers.lan, not {text!r}")
+        names.append(name)
+    return tuple(names)
+
+
+def _broker(url: str | None) -> str | None:
+    if url is not None:
+        from fabwire.mqtt.topics import parse_broker
+
+        parse_broker(url)  # its InputError says what is wrong without repeating a password
+    return url
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -75,42 +138,49 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool) 
 
 @click.command("serve")
 @click.option("--listen", default=f"127.0.0.1:{DEFAULT_PORT}", show_default=True, metavar="HOST:PORT",
+              callback=_usage(_listen),
               help="Where the API and dashboard listen; any address but loopback needs the access token.")
-@click.option("--device", "devices", multiple=True, metavar="[NAME:]KIND=ADDRESS",
+@click.option("--allow-host", "allow_hosts", multiple=True, metavar="NAME", callback=_usage(_allow_hosts),
+              help="A name you reach the agent by (repeatable), e.g. printers.lan; loopback names and the "
+                   "listen address are always allowed, other names are refused (DNS rebinding).")
+@click.option("--device", "devices", multiple=True, metavar="[NAME:]KIND=ADDRESS", callback=_usage(_devices),
               help="Monitor this device too (repeatable), besides the config file's named devices.")
 @click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path),
               help="Named devices file (default: fabwire's devices.toml).")
 @click.option("--state-dir", type=click.Path(file_okay=False, path_type=Path),
               help="History, uploads and the access token (default: the platform's state directory).")
 @click.option("--demo", is_flag=True, help="Start the three simulators and monitor them.")
-@click.option("--speed", type=FiniteRange(min=0.5), default=30.0, show_default=True,
+@click.option("--speed", type=FiniteRange(min=0.5, max=MAX_SPEED), default=30.0, show_default=True,
               help="With --demo: simulated time runs this many times faster.")
-@click.option("--retention", type=FiniteRange(min=0.01), default=24.0, show_default=True, metavar="HOURS",
+@click.option("--retention", type=FiniteRange(min=0.01, max=MAX_RETENTION_H), default=24.0, show_default=True,
+              metavar="HOURS",
               help="Keep history this long.")
-@click.option("--max-upload", type=FiniteRange(min=0.001), default=64.0, show_default=True, metavar="MB",
+@click.option("--max-upload", type=FiniteRange(min=0.001, max=MAX_UPLOAD_MB), default=64.0, show_default=True,
+              metavar="MB",
               help="Largest upload accepted.")
 @click.option("--token/--no-token", "token", default=None,
               help="Require the access token (default: only when listening beyond loopback, where it is "
                    "always required).")
-@click.option("--mqtt", "mqtt_url", metavar="URL", help="Also publish to an MQTT broker (mqtt://host[:port]).")
+@click.option("--mqtt", "mqtt_url", metavar="URL", callback=_usage(_broker), help="Also publish to an MQTT broker (mqtt://host[:port]).")
 @click.option("--mqtt-user", help="MQTT user name.")
 @click.option("--mqtt-password", help="MQTT password (or FABWIRE_MQTT_PASSWORD).", envvar="FABWIRE_MQTT_PASSWORD")
 @click.option("--mqtt-tls", is_flag=True, help="Connect to the broker with TLS.")
 @pass_app
-def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, state_dir: Path | None,
-          demo: bool, speed: float, retention: float, max_upload: float, token: bool | None,
-          mqtt_url: str | None, mqtt_user: str | None, mqtt_password: str | None, mqtt_tls: bool) -> None:
+def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices: list[DeviceSpec],
+          config: Path | None, state_dir: Path | None, demo: bool, speed: float, retention: float,
+          max_upload: float, token: bool | None, mqtt_url: str | None, mqtt_user: str | None,
+          mqtt_password: str | None, mqtt_tls: bool) -> None:
     """Watch a bench of machines: a live dashboard, an HTTP API with history and jobs, one agent.
 
     Open the printed address in a browser. The API is described at /api/v1/openapi.json.
     """
-    address = parse_listen(listen, DEFAULT_PORT)
+    address = listen
     local = is_loopback(address.host)
     if token is False and not local:
         raise InputError(f"refusing to listen on {address.host} without an access token: anyone on the network "
                          "could run the machines (leave out --no-token, or listen on 127.0.0.1)")
     bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls)
-    specs = [parse_device_option(text, i) for i, text in enumerate(devices, 1)]
+    specs = list(devices)
     if not demo:
         specs = configured_devices(config) + specs
     directory = state_dir or default_state_dir()
@@ -123,8 +193,9 @@ def serve(app: App, listen: str, devices: tuple[str, ...], config: Path | None, 
                 click.echo(f"access token (shown once; kept in {directory}): {secret}", err=True)
             else:
                 click.echo(f"access token: the one in {directory}", err=True)
-        interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0,
-                                  int(max_upload * 1024 * 1024), secret, bridge))
+        policy = Policy.for_listen(address.host, allow_hosts, token=secret,
+                                   max_upload_bytes=int(max_upload * 1024 * 1024))
+        interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0, policy, bridge))
     finally:
         sock.close()
     if interrupted:
@@ -141,20 +212,19 @@ def _run(main: Coroutine[Any, Any, bool]) -> bool:
 
 
 async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, demo: bool, speed: float,
-                 retention_s: float, max_upload: int, secret: str | None, bridge: Any) -> bool:
+                 retention_s: float, policy: Policy, bridge: Any) -> bool:
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
     from fabwire.agent.advertise import Advertiser
     from fabwire.agent.api import create_app
-    from fabwire.agent.auth import TokenGuard
     from fabwire.logsink import log_in_background
 
     log_in_background(also=("uvicorn",))  # a stderr nobody reads must not freeze the agent
 
     server_class = _server_class()
     simulators: list[Any] = []
-    agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=max_upload)
+    agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=policy.max_upload_bytes)
     bridge_task: asyncio.Task[None] | None = None
     advertiser: Advertiser | None = None
     try:
@@ -166,11 +236,11 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
-        app: Any = create_app(agent, max_upload_bytes=max_upload)
-        if secret is not None:
-            app = TokenGuard(app, secret)
+        app = create_app(agent, max_upload_bytes=policy.max_upload_bytes, policy=policy)
+        _raise_open_files()
         server = server_class(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
-                                               ws="websockets-sansio", log_config=None))
+                                               ws="websockets-sansio", http=_http_protocol(), log_config=None,
+                                               **CONNECTION_SETTINGS))
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
@@ -193,6 +263,54 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
             from fabwire.demo.runner import stop_all
 
             await asyncio.to_thread(stop_all, simulators)
+
+
+def _raise_open_files() -> None:
+    """A desktop's soft limit (1024) is below limit_concurrency: raise it, within the hard limit."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    wanted = OPEN_FILES if hard == resource.RLIM_INFINITY else min(OPEN_FILES, hard)
+    if soft != resource.RLIM_INFINITY and soft < wanted:
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_NOFILE, (wanted, hard))
+
+
+def _http_protocol() -> Any:
+    """uvicorn's h11 protocol with a deadline for the request head (uvicorn has none of its own: its
+    keep-alive timer stops at the first byte of a request)."""
+    import h11
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    class HeadDeadline(H11Protocol):
+        _head_timer: asyncio.TimerHandle | None = None
+
+        def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+            super().connection_made(transport)
+            self._arm_head_deadline()
+
+        def on_response_complete(self) -> None:
+            super().on_response_complete()
+            self._arm_head_deadline()
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            if self._head_timer is not None:
+                self._head_timer.cancel()
+            super().connection_lost(exc)
+
+        def _arm_head_deadline(self) -> None:
+            if self._head_timer is not None:
+                self._head_timer.cancel()
+            self._head_timer = self.loop.call_later(HEAD_TIMEOUT_S, self._head_deadline)
+
+        def _head_deadline(self) -> None:
+            self._head_timer = None
+            waiting = self.conn.their_state in (h11.IDLE, h11.DONE) and (self.cycle is None
+                                                                         or self.cycle.response_complete)
+            if waiting and not self.transport.is_closing() and self.transport.get_protocol() is self:
+                self.transport.close()
+
+    return HeadDeadline
 
 
 def _server_class() -> Any:

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import os
 import re
 import socket
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterable, AsyncIterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -25,7 +26,7 @@ from fabwire import __version__
 from fabwire.errors import FabwireError, InputError, excerpt
 
 if TYPE_CHECKING:
-    from fabwire.agent.session import Session
+    from fabwire.agent.session import JobClaim, Session
 
 Kind = Literal["xyz", "lineus", "mmu"]
 EventType = Literal["state", "event", "online", "offline", "job", "error"]
@@ -36,6 +37,16 @@ SUBSCRIBER_QUEUE = 2000
 
 class UnknownDevice(InputError):
     """No device with that id is monitored by this agent."""
+
+
+def private_dir(path: Path) -> Path:
+    """Create `path` (and its parents) if missing; the directory made here is 0700, its owner's alone (XDG Base
+    Directory spec: state data is the user's). An existing directory keeps its mode: it is the owner's choice."""
+    if not path.is_dir():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.mkdir(mode=0o700, exist_ok=True)
+        os.chmod(path, 0o700)  # mkdir's mode passes through the umask
+    return path
 
 
 def now_iso() -> str:
@@ -240,6 +251,20 @@ class Agent:
         await session.stop()
 
     # ------------------------------------------------------------------------------------------ jobs
+
+    def claim_job(self, device_id: str, filename: str) -> JobClaim:
+        """Claim a machine for an upload named `filename`, before reading a byte of it (see `JobClaim`):
+        atomic, so of simultaneous uploads to one machine exactly one gets it and the others DeviceBusy (409).
+        UnknownDevice (404), InputError (400) for a file the kind does not take, LinkError (503) offline."""
+        return self.session(device_id).claim_job(filename)
+
+    async def upload_job(self, device_id: str, filename: str, chunks: AsyncIterable[bytes]) -> dict[str, Any]:
+        """Claim the machine, stream the upload to disk under the size limit, check it and start it; returns
+        the job record. Errors as `claim_job`, `JobClaim.write` and `JobClaim.start`."""
+        async with self.claim_job(device_id, filename) as claim:
+            async for chunk in chunks:
+                await claim.write(chunk)
+            return await claim.start()
 
     async def start_job(self, device_id: str, filename: str, data: bytes) -> dict[str, Any]:
         """Store an upload under a generated name and start it on the device (print a G-code/.3w, draw an SVG)."""

@@ -11,6 +11,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import json
+import os
 import sqlite3
 import time
 from collections.abc import Callable
@@ -18,6 +19,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, TypeVar
 
+from fabwire.agent.core import private_dir
 from fabwire.errors import ConfigError
 
 T = TypeVar("T")
@@ -57,6 +59,8 @@ class History:
         self._events: list[tuple[Any, ...]] = []
         self._last: dict[str, tuple[float, tuple[Any, ...]]] = {}
         self._task: asyncio.Task[None] | None = None
+        self.after_prune: list[Callable[[sqlite3.Connection], None]] = []
+        """Run on the worker thread after each prune (the job store removes the uploads of pruned jobs)."""
 
     async def _call(self, func: Callable[[sqlite3.Connection], T]) -> T:
         def run() -> T:
@@ -68,7 +72,8 @@ class History:
     async def open(self) -> None:
         def connect() -> sqlite3.Connection:
             if self.path is not None:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
+                private_dir(self.path.parent)
+                os.close(os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600))  # SQLite gives -wal and -shm its mode
             db = sqlite3.connect(str(self.path) if self.path else ":memory:", check_same_thread=False)
             db.executescript("PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL;" + SCHEMA)
             return db
@@ -130,6 +135,8 @@ class History:
             db.execute("DELETE FROM events WHERE ts < ?", (cutoff,))
             db.execute("DELETE FROM jobs WHERE created < ? AND json_extract(data, '$.state') != 'running'",
                        (cutoff,))
+        for hook in self.after_prune:
+            hook(db)
 
     # ------------------------------------------------------------------------------------------ reading
 

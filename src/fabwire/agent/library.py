@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hashlib
-import io
 import json
 import logging
 import os
@@ -33,13 +32,16 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 from fabwire.agent.model import Machines, TakesNoJobs
 from fabwire.errors import InputError, excerpt
-from fabwire.thumbnails import Thumbnail, read_thumbnails
+from fabwire.thumbnails import read_thumbnails
 
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
+    from fabwire.agent.drivers.base import Driver
+    from fabwire.agent.session import JobClaim
 
 log = logging.getLogger("fabwire.agent")
 KEEP = 100
+CHUNK = 1 << 20
 """Files kept per machine by default."""
 QUEUE_MAX = 100
 NAME_MAX = 200
@@ -49,6 +51,8 @@ INDEX = "index.json"
 
 class FileNotInLibrary(InputError):
     """No file of that name in the machine's library (HTTP 404)."""
+
+    http_status = 404
 
 
 def clean_name(name: str, folder: str = "") -> str:
@@ -169,26 +173,31 @@ class Library:
                   select: bool = False) -> dict[str, Any]:
         """Keep an upload (read from `src`) in the machine's library, and select and/or start it.
 
-        Returns `{"file": entry, "job": job | None, "queued": bool}`. With `start`, a machine that cannot print
-        now refuses (`MachineNotReady`) before anything is kept, unless its queue is on (then the file waits).
-        InputError for a name or a file the machine cannot take (the intake's own words)."""
+        Returns `{"file": entry, "job": job | None, "queued": bool}`. With `start`, the machine is claimed first
+        (`Agent.claim_job`: atomic; `MachineNotReady`/`DeviceBusy`, HTTP 409, with the reason when it cannot
+        print now) and nothing is kept when it refuses, unless its queue is on (then the file waits). InputError
+        for a name or a file the machine cannot take (the intake's own words); nothing is kept then either."""
         view = self.machines.view(device)
         if not view.takes_jobs:
             raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
         device_id = view.id
         name = clean_name(name)
-        suffix = Path(name).suffix.lower()
         session = self.agent.session(device_id)
-        if suffix not in session.driver.job_types:
+        if Path(name).suffix.lower() not in session.driver.job_types:
             accepted = ", ".join(sorted(session.driver.job_types))
             raise InputError(f"{view.name} takes {accepted} files, not {excerpt(Path(name).name, 80)}")
         queue = start and self.queue_enabled(device_id) and view.refusal() is not None
-        if start and not queue:
-            self.machines.require_ready(device_id)
-        data = await asyncio.to_thread(_read_limited, src, self.agent.jobs.max_upload_bytes)
-        meta = await asyncio.to_thread(session.driver.describe_upload, Path(name).name, data)
+        claim = self.agent.claim_job(device_id, Path(name).name) if start and not queue else None
+        async with claim if claim is not None else contextlib.nullcontext():
+            stored = await asyncio.to_thread(self._copy_in, device_id, name, src)
+            try:
+                entry = await asyncio.to_thread(self._describe, device_id, name, stored, session.driver)
+                job = await self._feed(claim, device_id, entry) if claim is not None else None
+            except BaseException:
+                with contextlib.suppress(OSError):
+                    stored.unlink()
+                raise
         async with self._lock(device_id):
-            entry = await asyncio.to_thread(self._store, device_id, name, data, meta)
             index = self.index(device_id)
             old = index["files"].get(name)
             index["files"][name] = entry
@@ -200,18 +209,18 @@ class Library:
                     raise InputError(f"the queue of {view.name} holds {QUEUE_MAX} files already")
                 index["queue"].append(name)
             await self._save(device_id)
-        job = await self._start(device_id, entry, data) if start and not queue else None
         return {"file": dict(entry), "job": job, "queued": queue}
 
     async def start_print(self, device: str, name: str) -> dict[str, Any]:
-        """Start a kept file now: the job record; MachineNotReady with the reason when the machine cannot."""
-        view = self.machines.require_ready(device)
+        """Start a kept file now: the job record; MachineNotReady (409) with the reason when the machine cannot."""
+        view = self.machines.view(device)
         entry = self.get(view.id, name)
-        data = await asyncio.to_thread(self.path_of(view.id, entry).read_bytes)
+        async with self.agent.claim_job(view.id, Path(entry["name"]).name) as claim:
+            job = await self._feed(claim, view.id, entry)
         async with self._lock(view.id):
             self.index(view.id)["selected"] = entry["name"]
             await self._save(view.id)
-        return await self._start(view.id, entry, data)
+        return job
 
     async def select(self, device: str, name: str | None) -> None:
         view = self.machines.view(device)
@@ -265,8 +274,12 @@ class Library:
 
     # ------------------------------------------------------------------------------------------ plumbing
 
-    async def _start(self, device_id: str, entry: dict[str, Any], data: bytes) -> dict[str, Any]:
-        job = await self.agent.start_job(device_id, Path(entry["name"]).name, data)
+    async def _feed(self, claim: JobClaim, device_id: str, entry: dict[str, Any]) -> dict[str, Any]:
+        """Stream a kept file into a claim and start the job (the claim's own checks run on its copy)."""
+        with self.path_of(device_id, entry).open("rb") as handle:
+            while chunk := await asyncio.to_thread(handle.read, CHUNK):
+                await claim.write(chunk)
+        job = await claim.start()
         self._job_files[job["id"]] = (device_id, entry["name"])
         return job
 
@@ -309,24 +322,53 @@ class Library:
             prints["last"] = {"date": time.time(), "success": success}
             await self._save(device_id)
 
-    def _store(self, device_id: str, name: str, data: bytes, meta: dict[str, Any]) -> dict[str, Any]:
+    def _copy_in(self, device_id: str, name: str, src: BinaryIO) -> Path:
+        """The upload copied into the library under a generated name, at most the agent's upload limit."""
+        from fabwire.agent.jobs import UploadTooLarge
+
+        folder = self.root / _safe_dir(device_id) / "files"
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{secrets.token_hex(8)}{Path(name).suffix.lower()}"
+        limit = self.agent.jobs.max_upload_bytes
+        size = 0
+        try:
+            with path.open("wb") as out:
+                while chunk := src.read(CHUNK):
+                    size += len(chunk)
+                    if size > limit:
+                        raise UploadTooLarge(f"the upload is over the limit of {limit:,} bytes")
+                    out.write(chunk)
+            if not size:
+                raise InputError("the upload is empty")
+        except BaseException:
+            with contextlib.suppress(OSError):
+                path.unlink()
+            raise
+        return path
+
+    def _describe(self, device_id: str, name: str, path: Path, driver: Driver) -> dict[str, Any]:
+        """The entry of a copied upload: the driver's check and figures, the previews, the checksum."""
+        meta = driver.describe_upload(Path(name).name, path)
         base = self.root / _safe_dir(device_id)
-        (base / "files").mkdir(parents=True, exist_ok=True)
-        stored = f"{secrets.token_hex(8)}{Path(name).suffix.lower()}"
-        (base / "files" / stored).write_bytes(data)
+        digest = hashlib.sha256()
+        with path.open("rb") as handle:
+            while chunk := handle.read(CHUNK):
+                digest.update(chunk)
+            handle.seek(0)
+            found = read_thumbnails(handle)
         thumbs = []
-        for thumb in _thumbnails(data):
+        for thumb in found:
             try:
                 image, _ = thumb.web_image()
             except (OSError, ValueError):
                 continue
-            thumb_name = f"{Path(stored).stem}-{thumb.width}x{thumb.height}{thumb.web_suffix}"
+            thumb_name = f"{path.stem}-{thumb.width}x{thumb.height}{thumb.web_suffix}"
             (base / "thumbs").mkdir(parents=True, exist_ok=True)
             (base / "thumbs" / thumb_name).write_bytes(image)
             thumbs.append({"width": thumb.width, "height": thumb.height, "format": thumb.format,
                            "stored": thumb_name, "size": len(image)})
-        return {"name": name, "size": len(data), "uploaded": time.time(), "stored": stored,
-                "sha256": hashlib.sha256(data).hexdigest(),
+        return {"name": name, "size": path.stat().st_size, "uploaded": time.time(), "stored": path.name,
+                "sha256": digest.hexdigest(),
                 "meta": {k: meta.get(k) for k in ("print_time_s", "filament_mm", "layers", "slicer")},
                 "thumbnails": thumbs, "prints": {"success": 0, "failure": 0, "last": None}}
 
@@ -364,21 +406,6 @@ class Library:
 
 def _safe_dir(device_id: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]", "_", device_id).lstrip(".") or "_"
-
-
-def _read_limited(src: BinaryIO, limit: int) -> bytes:
-    from fabwire.agent.jobs import UploadTooLarge
-
-    data = src.read(limit + 1)
-    if len(data) > limit:
-        raise UploadTooLarge(f"the upload is over the limit of {limit:,} bytes")
-    if not data:
-        raise InputError("the upload is empty")
-    return data
-
-
-def _thumbnails(data: bytes) -> list[Thumbnail]:
-    return read_thumbnails(io.BytesIO(data))
 
 
 def _write_atomic(path: Path, text: str) -> None:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
 from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
-from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError
+from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, excerpt
 
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
@@ -78,6 +78,7 @@ class Session:
         self._task: asyncio.Task[None] | None = None
         self._job: dict[str, Any] | None = None
         self._job_task: asyncio.Task[None] | None = None
+        self._claim: JobClaim | None = None
         self._background: set[asyncio.Task[None]] = set()
         self._last_job_event = 0.0
         self._reason = "not connected yet"
@@ -207,7 +208,8 @@ class Session:
         if action == "cancel" and self._job is not None:  # the print is this agent's job: end the job with it
             return await self.cancel_job(self._job["id"], confirm=True)
         if spec.job:
-            job = await self._start_job(action, None, None, checked)
+            async with self.claim_job(None, action) as claim:
+                job = await claim.start(checked)
             return {"started": action, "job": job}
         if spec.background:
             task = asyncio.create_task(self._background_action(action, checked))
@@ -225,22 +227,41 @@ class Session:
 
     # ------------------------------------------------------------------------------------------ jobs
 
-    async def start_job(self, filename: str, data: bytes) -> dict[str, Any]:
-        suffix = Path(filename).suffix.lower() if "." in filename else ""
-        job_type = self.driver.job_types.get(suffix)
-        if job_type is None:
-            accepted = ", ".join(sorted(self.driver.job_types)) or "no files"
-            raise InputError(f"a {self.spec.kind} job takes {accepted}, not {suffix or 'a file without extension'}")
-        self._require_online()
-        self.agent.library.machines.require_ready(self.info.id)  # 409 with the reason, never accepted-then-failed
-        await asyncio.to_thread(self.driver.check_upload, filename, data)
-        return await self._start_job(job_type, filename, data, {})
+    def claim_job(self, filename: str | None, job_type: str | None = None) -> JobClaim:
+        """Claim the machine for one job, atomically (no await between the check and the claim): of any number
+        of simultaneous requests exactly one gets the claim; the others get DeviceBusy (HTTP 409) saying why.
 
-    async def _start_job(self, job_type: str, filename: str | None, data: bytes | None,
-                         params: dict[str, Any]) -> dict[str, Any]:
+        `filename` is an upload's name (its extension picks the job type, InputError when the kind takes no such
+        file); None with `job_type` is a job action (a Line-us text). LinkError when the machine is offline."""
+        if filename is not None:
+            suffix = Path(filename).suffix.lower() if "." in filename else ""
+            job_type = self.driver.job_types.get(suffix)
+            if job_type is None:
+                accepted = ", ".join(sorted(self.driver.job_types)) or "no files"
+                raise InputError(f"a {self.spec.kind} job takes {accepted}, "
+                                 f"not {suffix or 'a file without extension'}")
+        if job_type is None:
+            raise InputError("a job needs a file or an action")
+        self._require_online()
+        if filename is not None:  # 409 with the reason (a print still on the bed …), never accepted-then-failed
+            self.agent.library.machines.require_ready(self.info.id)
         if self._job is not None:
-            raise DeviceBusy(f"{self.spec.name} is busy with job {self._job['id']}: cancel it or wait")
-        job = await self.agent.jobs.create(self.info.id, job_type, filename, data, params)
+            raise DeviceBusy(f"{self.spec.name} is busy with job {self._job['id']} ({self._job['state']}): "
+                             "cancel it or wait")
+        if self._claim is not None:
+            raise DeviceBusy(f"{self.spec.name} is taking another job ({self._claim.what}): wait for it")
+        self._claim = JobClaim(self, job_type, filename)
+        return self._claim
+
+    async def start_job(self, filename: str, data: bytes) -> dict[str, Any]:
+        """Upload `data` as `filename` and start it: `claim_job`, `JobClaim.write`, `JobClaim.start`."""
+        async with self.claim_job(filename) as claim:
+            await claim.write(data)
+            return await claim.start()
+
+    def _begin(self, job: dict[str, Any]) -> dict[str, Any]:
+        """The claim becomes the running job (called by JobClaim.start, with no await in between)."""
+        self._claim = None
         self._job = job
         self.drawing = {"preview": [], "ink": []}
         self._job_task = asyncio.create_task(self._run_job(job), name=f"job-{job['id']}")
@@ -338,3 +359,66 @@ class _Handle:
 
     def preview(self, strokes: list[list[tuple[float, float]]]) -> None:
         self._session.job_preview(strokes)
+
+
+class JobClaim:
+    """The machine, claimed for one job that is still arriving (see `Session.claim_job`).
+
+        async with agent.claim_job(device, "part.gcode") as claim:    # DeviceBusy (409) if taken
+            async for chunk in request.stream():
+                await claim.write(chunk)                               # UploadTooLarge 413, DiskFull 507
+            job = await claim.start()                                  # the file checked (400), the job runs
+
+    Leaving the block without `start` (an error, a client gone) releases the machine and deletes what was
+    written. `what` names the claim in the refusals others get."""
+
+    def __init__(self, session: Session, job_type: str, filename: str | None) -> None:
+        from fabwire.agent.jobs import new_job_id
+
+        self.session = session
+        self.job_type = job_type
+        self.filename = filename
+        self.job_id = new_job_id()
+        self.what = f"upload of {excerpt(filename, 60)}" if filename else f"{job_type} job"
+        self._upload = session.agent.jobs.writer(self.job_id, filename) if filename is not None else None
+        self._started = False
+
+    async def __aenter__(self) -> JobClaim:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.release()
+
+    @property
+    def size(self) -> int:
+        """Bytes received so far."""
+        return self._upload.size if self._upload else 0
+
+    async def write(self, chunk: bytes) -> None:
+        """Append to the upload (written to disk in batches, never held whole)."""
+        if self._upload is None:
+            raise InputError(f"a {self.job_type} job takes no file")
+        await self._upload.write(chunk)
+
+    async def start(self, params: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Complete the upload, check it as the CLI would (InputError naming the upload), record the job and
+        start it; returns the job record."""
+        session = self.session
+        if self._started or session._claim is not self:
+            raise RuntimeError("this claim is already used or released")
+        path = await self._upload.finish() if self._upload is not None else None
+        if path is not None:
+            await asyncio.to_thread(session.driver.check_upload, self.filename or path.name, path)
+        job = await session.agent.jobs.create(session.info.id, self.job_type, self.filename, self._upload,
+                                              params or {}, job_id=self.job_id)
+        self._started = True
+        return session._begin(job)
+
+    def release(self) -> None:
+        """Give the machine back and delete the upload, unless the job started; safe to call twice."""
+        if self._started:
+            return
+        if self._upload is not None:
+            self._upload.discard()
+        if self.session._claim is self:
+            self.session._claim = None

@@ -14,6 +14,11 @@ from starlette.requests import HTTPConnection
 from fabwire.agent.core import Agent
 from fabwire.agent.model import MachineView, TakesNoJobs
 
+JSON_BODY: dict[str, object] = {"requestBody": {"required": False, "content": {"application/json": {}}}}
+"""The body a door's command route declares (`fabwire.agent.boundary` refuses undeclared bodies)."""
+MULTIPART_BODY: dict[str, object] = {"requestBody": {"required": True, "content": {"multipart/form-data": {}}}}
+"""The body an upload route declares: the form slicers send, its file part streamed by the door."""
+
 PREFIXES = ("", "/printers/{machine}")
 """Where each door's routes are mounted: the default machine at the root, every machine by name."""
 

@@ -28,7 +28,7 @@ from starlette.datastructures import UploadFile
 
 from fabwire import __version__
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import PREFIXES, file_name, machine_of
+from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, file_name, machine_of
 from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.errors import FabwireError, InputError
 
@@ -518,8 +518,8 @@ def mount(app: FastAPI, agent: Agent) -> None:
     for prefix in PREFIXES:
         router = APIRouter(prefix=prefix, include_in_schema=False)
         for verb, path, rpc in HTTP_ROUTES:
-            router.add_api_route(path, route(rpc), methods=[verb])
-        router.add_api_route("/server/files/upload", door.upload, methods=["POST"])
+            router.add_api_route(path, route(rpc), methods=[verb], openapi_extra=JSON_BODY if verb == "POST" else None)
+        router.add_api_route("/server/files/upload", door.upload, methods=["POST"], openapi_extra=MULTIPART_BODY)
         router.add_api_route(f"/server/files/{ROOT}/{{path:path}}", door.serve_file, methods=["GET"])
         router.add_api_route(f"/server/files/{ROOT}/{{path:path}}", delete_file, methods=["DELETE"])
         router.add_api_websocket_route("/websocket", door.websocket)

@@ -25,7 +25,7 @@ from starlette.datastructures import UploadFile
 from fabwire import __version__
 from fabwire.agent.appkeys import AppKeys
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import PREFIXES, base_url, file_name, machine_of
+from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, base_url, file_name, machine_of
 from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.errors import FabwireError, InputError
 
@@ -447,7 +447,8 @@ def mount(app: FastAPI, agent: Agent, appkeys: AppKeys) -> None:
     for prefix in PREFIXES:
         router = APIRouter(prefix=prefix, include_in_schema=False)
         for path, endpoint, methods in routes:
-            router.add_api_route(path, _octoprint_errors(endpoint), methods=methods)
+            body = MULTIPART_BODY if endpoint == door.upload else JSON_BODY if "POST" in methods else None
+            router.add_api_route(path, _octoprint_errors(endpoint), methods=methods, openapi_extra=body)
         app.include_router(router)
 
 

@@ -156,14 +156,14 @@ class Driver(ABC):
         self.spec = spec
         self.emit = emit
 
-    def check_upload(self, name: str, data: bytes) -> None:  # noqa: B027 - kinds without files check nothing
-        """Refuse an upload this device cannot run with the intake's InputError (naming it `name`), before
-        it is accepted; kinds that take no files accept anything `job_types` lets through."""
+    def check_upload(self, name: str, path: Path) -> None:  # noqa: B027 - kinds without files check nothing
+        """Refuse an upload (complete, at `path`) this device cannot run with the intake's InputError (naming
+        it `name`), before it is accepted; kinds that take no files accept anything `job_types` lets through."""
 
-    def describe_upload(self, name: str, data: bytes) -> dict[str, Any]:
+    def describe_upload(self, name: str, path: Path) -> dict[str, Any]:
         """`check_upload`, and what the file says about itself for a file library: `print_time_s`,
         `filament_mm`, `layers`, `slicer` (None where it does not say; kinds without such figures say nothing)."""
-        self.check_upload(name, data)
+        self.check_upload(name, path)
         return {}
 
     @abstractmethod

@@ -96,11 +96,11 @@ class LineUsDriver(Driver):
         pos = self.position
         return {"ok": True, "action": action, "position": pos.as_dict() if pos else None}
 
-    def check_upload(self, name: str, data: bytes) -> None:
+    def check_upload(self, name: str, path: Path) -> None:
         """The drawing intake's and the planner's refusal (not SVG, unreadable, nothing to draw, coordinates no
         arm can reach) before the upload is accepted, as `lineus draw` checks a file."""
         try:
-            plan_drawing(drawing_from_bytes(name, data), PlanOptions(optimize=False))
+            plan_drawing(drawing_from_bytes(name, path.read_bytes()), PlanOptions(optimize=False))
         except InputError as exc:
             message = str(exc)
             raise InputError(message if name in message else f"{name}: {message}") from None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -79,23 +78,25 @@ class XYZDriver(Driver):
     )
     job_types: ClassVar[Mapping[str, str]] = {".gcode": "print", ".gco": "print", ".g": "print", ".3w": "print"}
 
-    def check_upload(self, name: str, data: bytes) -> None:
+    def check_upload(self, name: str, path: Path) -> None:
         """The printer intake's refusal for what no printer takes (binary data, images, SVG, G-code without
-        commands), so a bad file is refused at upload rather than failing the job later."""
-        self.describe_upload(name, data)
+        commands), so a bad file is refused at upload rather than failing the job later; read from disk in
+        pieces, never whole."""
+        self.describe_upload(name, path)
 
-    def describe_upload(self, name: str, data: bytes) -> dict[str, Any]:
+    def describe_upload(self, name: str, path: Path) -> dict[str, Any]:
         """`check_upload`, and the figures the intake reads for the .3w header (a G-code's comments, or its
         moves where the comments are silent)."""
-        head = data[:intake.SNIFF]
-        kind = intake.require_printable(intake.identify(head, len(data)), name, head)
+        kind, head = intake.sniff(path, name)
+        intake.require_printable(kind, name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
-            stated, computed = intake.stream_metadata(io.BytesIO(data), name)
+            with intake.open_input(path, name) as source:
+                stated, computed = intake.stream_metadata(source, name)
             meta = stated.merged(computed) if computed is not None else stated
             return {"print_time_s": meta.print_time_s, "filament_mm": meta.filament_mm, "layers": meta.layers,
                     "slicer": meta.slicer}
         if kind is intake.Kind.THREEW:
-            printjob.check_intact(inspect_3w(data), name)
+            printjob.check_intact(inspect_3w(path), name)
         return {}
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:

@@ -1,0 +1,537 @@
+"""The agent's boundary: one ASGI middleware in front of every route, present and future.
+
+Every HTTP request and WebSocket handshake passes, in this order:
+  1. the Host allow-list — `Host` must name this agent: a loopback name or address, the listen address, names
+     given with `--allow-host`, and (when listening beyond loopback) any IP address and this computer's name.
+     A DNS-rebinding page reaches the agent under the attacker's name and is refused here (403).
+  2. the browser check — on every state-changing method (not GET/HEAD/OPTIONS) and every WebSocket handshake a
+     present `Origin` must be the agent's own, and a present `Sec-Fetch-Site` must be `same-origin` or `none`
+     (403). Slicers, scripts and curl send neither and are unaffected; every current browser sends both.
+  3. the access token, when the agent has one — `Authorization: Bearer TOKEN`, `X-Api-Key: TOKEN` (OctoPrint's
+     and Moonraker's header, which their clients send) or, for browsers' WebSockets, the subprotocol
+     `fabwire.token.TOKEN`; every path but the dashboard's own files (`PUBLIC_PATHS`) needs it (401).
+  4. the body — each route declares the bodies it takes (a pydantic/Form/File body, or `openapi_extra`'s
+     `requestBody` content); anything else is 415. JSON bodies are read here, at most `JSON_BODY_LIMIT` bytes,
+     parsed and checked for depth (400) before the route sees them; uploads are counted as they arrive and cut
+     off past `--max-upload` (413); a body that stops arriving for `BODY_IDLE_S` ends the request (408).
+
+A route added later is covered by all four without doing anything: the middleware wraps the whole application
+and looks the route up in the live route table. Errors are the API's `{"message", "exit_code", "error"}`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import ipaddress
+import json
+import logging
+import socket
+from collections.abc import Awaitable, Callable, Iterable, Iterator, MutableMapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from fabwire.errors import FabwireError, InputError
+
+log = logging.getLogger("fabwire.agent")
+
+Scope = MutableMapping[str, Any]
+Message = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+"""RFC 9110 §9.2.1: the methods defined to change nothing; every other method is checked as a write."""
+
+CORS_SIMPLE_TYPES: tuple[tuple[str, str], ...] = (
+    ("text/plain", "Fetch standard §4.1 CORS-safelisted Content-Type; HTML form enctype=text/plain; "
+                   "what fetch() sends for a string body"),
+    ("application/x-www-form-urlencoded", "Fetch standard CORS-safelisted Content-Type; HTML forms' default "
+                                          "enctype; curl -d"),
+    ("multipart/form-data", "Fetch standard CORS-safelisted Content-Type; HTML form enctype=multipart/form-data; "
+                            "FormData bodies"),
+)
+"""The content types a web page may send to any origin without a CORS preflight: a route that takes none of
+them can be written to cross-origin only after a preflight, which this agent never grants."""
+
+TRUSTED_FETCH_SITES = frozenset({"same-origin", "none"})
+"""W3C Fetch Metadata Request Headers §2.4 `Sec-Fetch-Site`: "none" is the user typing the URL or a bookmark;
+"same-site" is refused too, since another port of localhost is the same site but another program."""
+
+PUBLIC_PATHS: tuple[str, ...] = ("/", "/static/")
+"""Paths served without the token: the dashboard's page and files hold no data and ask for the token
+(a path ending in "/" covers everything under it, except "/" itself which is only the page)."""
+
+TOKEN_FILE = "access-token"
+SUBPROTOCOL = "fabwire"
+TOKEN_PREFIX = "fabwire.token."
+API_KEY_HEADER = b"x-api-key"
+"""OctoPrint REST API "Authorization" section and Moonraker's API-key authorization use this header."""
+
+JSON_BODY_LIMIT = 64 * 1024
+"""The largest JSON body: an action's parameters (a Line-us text is the longest) fit many times over."""
+MAX_JSON_DEPTH = 32
+"""Nesting a parameter object may have; deeper JSON is refused with 400 before anything parses it further."""
+MULTIPART_OVERHEAD = 64 * 1024
+"""What a multipart upload may carry besides its file (boundaries, part headers, small fields)."""
+BODY_IDLE_S = 30.0
+"""How long a request's body may stop arriving before the request is ended (408)."""
+
+JSON_TYPE = "application/json"
+RAW_TYPE = "application/octet-stream"
+MULTIPART_TYPE = "multipart/form-data"
+FORM_TYPE = "application/x-www-form-urlencoded"
+
+
+class BoundaryError(FabwireError):
+    """A request refused at the boundary; `http_status` is its HTTP status."""
+
+    http_status: ClassVar[int] = 400
+    exit_code = InputError.exit_code
+
+
+class AccessDenied(BoundaryError):
+    http_status = 401
+    exit_code = 3
+
+
+class ForeignHost(BoundaryError):
+    http_status = 403
+    exit_code = 3
+
+
+class CrossOrigin(BoundaryError):
+    http_status = 403
+    exit_code = 3
+
+
+class UnsupportedMediaType(BoundaryError):
+    http_status = 415
+
+
+class BodyTooLarge(BoundaryError):
+    http_status = 413
+
+
+class BodyTimeout(BoundaryError):
+    http_status = 408
+
+
+class BadJSON(BoundaryError):
+    http_status = 400
+
+
+# ------------------------------------------------------------------------------------------------ policy
+
+
+def is_loopback(host: str) -> bool:
+    """`localhost`, a `*.localhost` name (RFC 6761 §6.3: always loopback) or a loopback address."""
+    host = host.strip("[]").rstrip(".").lower()
+    if host == "localhost" or host.endswith(".localhost"):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _is_ip(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host.strip("[]"))
+    except ValueError:
+        return False
+    return True
+
+
+def normal_host(name: str) -> str:
+    """A host name as compared: lower case, no trailing dot, IPv6 without brackets."""
+    return name.strip().strip("[]").rstrip(".").lower()
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Who may talk to the agent. `hosts`: the names (besides loopback) a `Host` header may carry;
+    `any_ip`: any IP address may be the Host (the agent listens beyond loopback, where no rebinding can
+    produce an address); `token`: the access token, or None on a loopback agent without one."""
+
+    hosts: frozenset[str] = frozenset()
+    any_ip: bool = False
+    token: str | None = None
+    max_upload_bytes: int = 64 * 1024 * 1024
+
+    @classmethod
+    def for_listen(cls, listen_host: str, allow_hosts: Iterable[str] = (), *, token: str | None = None,
+                   max_upload_bytes: int = 64 * 1024 * 1024) -> Policy:
+        """The policy of an agent listening on `listen_host` (an address or a name), with the owner's extra
+        names; a wildcard address adds this computer's names."""
+        hosts = {normal_host(h) for h in allow_hosts if normal_host(h)}
+        listen = normal_host(listen_host)
+        wildcard = listen in ("0.0.0.0", "::", "")
+        if not wildcard:
+            hosts.add(listen)
+        if wildcard:
+            name = normal_host(socket.gethostname())
+            hosts |= {name, f"{name.partition('.')[0]}.local"}
+        return cls(frozenset(hosts), any_ip=not is_loopback(listen_host), token=token,
+                   max_upload_bytes=max_upload_bytes)
+
+    def host_allowed(self, host: str) -> bool:
+        host = normal_host(host)
+        if not host:
+            return False
+        if is_loopback(host) or host in self.hosts:
+            return True
+        return self.any_ip and _is_ip(host)
+
+
+# ------------------------------------------------------------------------------------------------ headers
+
+
+def header(scope: Scope, name: bytes) -> str:
+    """The first value of a request header (names are lower case in ASGI), "" when absent."""
+    for key, value in scope.get("headers", []):
+        if key == name:
+            return bytes(value).decode("latin-1")
+    return ""
+
+
+def split_authority(authority: str) -> tuple[str, int | None] | None:
+    """`host[:port]` → (host, port); None when malformed. IPv6 addresses come in brackets."""
+    authority = authority.strip()
+    if authority.startswith("["):
+        host, sep, rest = authority[1:].partition("]")
+        if not sep or (rest and not rest.startswith(":")):
+            return None
+        port_text = rest[1:]
+    else:
+        host, _, port_text = authority.partition(":")
+    if not host or any(c in host for c in "/@ \\"):
+        return None
+    if port_text and not (port_text.isdigit() and len(port_text) <= 5 and int(port_text) <= 65535):
+        return None
+    return host, int(port_text) if port_text else None
+
+
+DEFAULT_PORTS = {"http": 80, "https": 443, "ws": 80, "wss": 443}
+
+
+def same_origin(origin: str, host_header: str) -> bool:
+    """Whether an `Origin` (scheme://host[:port]) names the authority the request was sent to."""
+    scheme, sep, authority = origin.strip().partition("://")
+    scheme = scheme.lower()
+    if not sep or scheme not in DEFAULT_PORTS:
+        return False  # "null" (sandboxed frames, file: pages) and anything odd is not this agent
+    theirs, ours = split_authority(authority), split_authority(host_header)
+    if theirs is None or ours is None:
+        return False
+    default = DEFAULT_PORTS[scheme]
+    return normal_host(theirs[0]) == normal_host(ours[0]) and (theirs[1] or default) == (ours[1] or default)
+
+
+def presented_token(scope: Scope) -> str:
+    """The token a request carries: Bearer, X-Api-Key, or a `fabwire.token.` WebSocket subprotocol."""
+    auth = header(scope, b"authorization")
+    if auth[:7].lower() == "bearer ":
+        return auth[7:].strip()
+    key = header(scope, API_KEY_HEADER).strip()
+    if key:
+        return key
+    for proto in header(scope, b"sec-websocket-protocol").split(","):
+        proto = proto.strip()
+        if proto.startswith(TOKEN_PREFIX):
+            return proto[len(TOKEN_PREFIX):]
+    return ""
+
+
+def media_type(content_type: str) -> str:
+    return content_type.partition(";")[0].strip().lower()
+
+
+# ------------------------------------------------------------------------------------------------ JSON
+
+
+def json_depth(value: Any) -> int:
+    """How deeply lists and objects nest in a parsed JSON value (a scalar is 0), without recursion."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(value, 0)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict | list):
+            depth += 1
+            deepest = max(deepest, depth)
+            stack.extend((child, depth) for child in (item.values() if isinstance(item, dict) else item))
+    return deepest
+
+
+def parse_json(raw: bytes | str, *, what: str = "the body", max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """JSON text → value; BadJSON (an InputError, 400) for text that is not JSON or nests deeper than
+    `max_depth`. Safe for any input: Python's parser would raise RecursionError on deep nesting."""
+    try:
+        value = json.loads(raw)
+    except RecursionError:
+        raise BadJSON(f"{what} nests deeper than {max_depth} levels") from None
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise BadJSON(f"{what} is not JSON: {exc}") from None
+    if json_depth(value) > max_depth:
+        raise BadJSON(f"{what} nests deeper than {max_depth} levels")
+    return value
+
+
+# ------------------------------------------------------------------------------------------------ routes
+
+
+@dataclass(frozen=True)
+class BodyRule:
+    """What a route takes as its body: media types (empty: no body at all) and the largest size."""
+
+    types: frozenset[str] = frozenset()
+    limit: int = 0
+    raw: bool = False
+    """The body is a file as it is (any content type but the CORS-simple ones and JSON)."""
+    reasons: tuple[str, ...] = field(default=(), compare=False)
+
+
+def declared_types(route: Any) -> set[str]:
+    """The media types a route declares for its body: FastAPI's body field (Body → JSON, Form, File →
+    multipart) and `openapi_extra["requestBody"]["content"]`."""
+    types: set[str] = set()
+    body_field = getattr(route, "body_field", None)
+    if body_field is not None:
+        types.add(media_type(getattr(body_field.field_info, "media_type", JSON_TYPE) or JSON_TYPE))
+    extra = getattr(route, "openapi_extra", None) or {}
+    content = (extra.get("requestBody") or {}).get("content") or {}
+    types |= {media_type(t) for t in content}
+    return types
+
+
+def body_rule(route: Any, policy: Policy) -> BodyRule:
+    types = declared_types(route)
+    if not types:
+        return BodyRule()
+    limit = 0
+    if JSON_TYPE in types or FORM_TYPE in types:
+        limit = JSON_BODY_LIMIT
+    if MULTIPART_TYPE in types:
+        limit = max(limit, policy.max_upload_bytes + MULTIPART_OVERHEAD)
+    if RAW_TYPE in types:
+        limit = max(limit, policy.max_upload_bytes)
+    return BodyRule(frozenset(types), limit, raw=RAW_TYPE in types)
+
+
+def leaf_routes(routes: Iterable[Any]) -> Iterator[Any]:
+    """Every route of a route table in matching order, routers included with `include_router` opened up (newer
+    FastAPI keeps an included router as one entry whose `effective_candidates()` are its routes, prefixed)."""
+    for route in routes:
+        nested = getattr(route, "effective_candidates", None)
+        if callable(nested):
+            yield from leaf_routes(nested())
+        else:
+            yield route
+
+
+def find_route(routes: Iterable[Any], scope: Scope) -> Any | None:
+    """The route that will serve `scope` (Starlette's first full match), or None (404/405 follow)."""
+    from starlette.routing import Match
+
+    for route in leaf_routes(routes):
+        match, _ = route.matches(dict(scope))
+        if match == Match.FULL:
+            return route
+    return None
+
+
+def check_body_type(rule: BodyRule, content_type: str, has_body: bool) -> None:
+    """UnsupportedMediaType unless the request's Content-Type is one the route takes."""
+    given = media_type(content_type)
+    if not rule.types:
+        if has_body:
+            raise UnsupportedMediaType("this request takes no body")
+        return
+    if rule.raw and given not in {t for t, _ in CORS_SIMPLE_TYPES} and given != JSON_TYPE:
+        return  # a file as it is: none, application/octet-stream, image/svg+xml, text/x-gcode …
+    if given in rule.types:
+        return
+    if not given and not has_body:
+        return
+    wanted = " or ".join(sorted(rule.types))
+    if rule.raw:
+        wanted = "the file as it is, e.g. Content-Type: application/octet-stream"
+    raise UnsupportedMediaType(f"send {wanted}, not {given or 'a body without Content-Type'}"
+                               + (" (curl: --json '{…}' or -H 'Content-Type: application/json')"
+                                  if JSON_TYPE in rule.types else ""))
+
+
+# ------------------------------------------------------------------------------------------------ middleware
+
+
+def _declared_length(scope: Scope) -> int | None:
+    text = header(scope, b"content-length").strip()
+    return int(text) if text.isdigit() else None
+
+
+def _has_body(scope: Scope) -> bool:
+    length = _declared_length(scope)
+    return bool(length) or "chunked" in header(scope, b"transfer-encoding").lower()
+
+
+class Boundary:
+    """The ASGI middleware (see the module's docstring). `routes` is the live route list of the app behind it
+    (`app.router.routes`), so routes added later are looked up too."""
+
+    def __init__(self, app: ASGIApp, *, policy: Policy, routes: list[Any]) -> None:
+        self.app = app
+        self.policy = policy
+        self.routes = routes
+        self._token = policy.token.encode() if policy.token else None
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        try:
+            self.check_request(scope)
+            route = find_route(self.routes, scope)
+            if scope["type"] == "http" and scope["method"] not in SAFE_METHODS:
+                rule = body_rule(route, self.policy) if route is not None else BodyRule(limit=JSON_BODY_LIMIT)
+                if route is not None:
+                    check_body_type(rule, header(scope, b"content-type"), _has_body(scope))
+                declared = _declared_length(scope)
+                if declared is not None and declared > rule.limit:
+                    raise BodyTooLarge(_too_large(rule, declared))
+                if rule.types and not rule.raw and MULTIPART_TYPE not in rule.types:
+                    receive = await self._buffered(scope, receive, rule)
+                else:
+                    receive = _counted(receive, rule)
+        except BoundaryError as exc:
+            await deny(scope, send, exc)
+            return
+        try:
+            await self.app(scope, receive, send)
+        except Exception as exc:
+            from starlette.requests import ClientDisconnect
+
+            if not isinstance(exc, ClientDisconnect):
+                raise
+            log.info("%s %s: the client went away before its request was complete", scope.get("method", "GET"),
+                     scope.get("path", ""))
+
+    def check_request(self, scope: Scope) -> None:
+        host = header(scope, b"host")
+        parsed = split_authority(host)
+        if parsed is None or not self.policy.host_allowed(parsed[0]):
+            raise ForeignHost(f"this agent does not answer to the name {host[:100]!r}"
+                              + (f": if it is yours, start it with --allow-host {parsed[0][:100]}" if parsed else ""))
+        writes = scope["type"] == "websocket" or scope["method"] not in SAFE_METHODS
+        if writes:
+            origin = header(scope, b"origin")
+            if origin and not same_origin(origin, host):
+                raise CrossOrigin(f"a page from {origin[:100]} may not use this agent: only its own pages, "
+                                  "and programs that send no Origin, may")
+            site = header(scope, b"sec-fetch-site").strip().lower()
+            if site and site not in TRUSTED_FETCH_SITES:
+                raise CrossOrigin(f"a {site} page may not use this agent: only its own pages may")
+        if self._token is not None and not _public(scope["path"]):
+            presented = presented_token(scope)
+            if not hmac.compare_digest(presented.encode(), self._token):
+                problem = ("the access token sent is not this agent's" if presented
+                           else "this agent needs its access token")
+                raise AccessDenied(f"{problem}: send the header 'Authorization: Bearer TOKEN' or 'X-Api-Key: TOKEN' "
+                                   f"(the token is in the agent's state directory, file {TOKEN_FILE})")
+
+    async def _buffered(self, scope: Scope, receive: Receive, rule: BodyRule) -> Receive:
+        """Read a small body whole (bounded, with the idle timeout), check JSON, and replay it."""
+        chunks: list[bytes] = []
+        size = 0
+        more = True
+        while more:
+            message = await _receive_within(receive)
+            if message["type"] == "http.disconnect":
+                from starlette.requests import ClientDisconnect
+
+                raise ClientDisconnect()
+            chunk = message.get("body", b"")
+            size += len(chunk)
+            if size > rule.limit:
+                raise BodyTooLarge(_too_large(rule, None))
+            chunks.append(chunk)
+            more = message.get("more_body", False)
+        body = b"".join(chunks)
+        if body.strip() and media_type(header(scope, b"content-type")) == JSON_TYPE:
+            parse_json(body)
+        replayed = False
+
+        async def replay() -> Message:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        return replay
+
+
+def _too_large(rule: BodyRule, size: int | None) -> str:
+    if rule.limit == 0:
+        return "this request takes no body"
+    what = "the upload" if rule.raw or MULTIPART_TYPE in rule.types else "the body"
+    said = f"is {size:,} bytes" if size is not None else "is larger than that"
+    return f"{what} {said}; the limit is {rule.limit:,} bytes" + (" (--max-upload)" if what == "the upload" else "")
+
+
+async def _receive_within(receive: Receive) -> Message:
+    try:
+        async with asyncio.timeout(BODY_IDLE_S):
+            return await receive()
+    except TimeoutError:
+        raise BodyTimeout(f"the body stopped arriving for {BODY_IDLE_S:g} s") from None
+
+
+def _counted(receive: Receive, rule: BodyRule) -> Receive:
+    """`receive` that raises BodyTooLarge once the body passes the rule's limit, and BodyTimeout when it
+    stops arriving (both reach the route as exceptions, so whatever it held is released)."""
+    size = 0
+    done = False
+
+    async def counted() -> Message:
+        nonlocal size, done
+        if done:
+            return await receive()  # only the disconnect is left to wait for
+        message = await _receive_within(receive)
+        if message["type"] == "http.request":
+            size += len(message.get("body", b""))
+            if size > rule.limit:
+                raise BodyTooLarge(_too_large(rule, None))
+            done = not message.get("more_body", False)
+        return message
+
+    return counted
+
+
+def _public(path: str) -> bool:
+    return any(path == p or (p.endswith("/") and p != "/" and path.startswith(p)) for p in PUBLIC_PATHS)
+
+
+def error_body(exc: FabwireError) -> bytes:
+    return json.dumps({"message": str(exc), "exit_code": exc.exit_code, "error": type(exc).__name__}).encode()
+
+
+async def deny(scope: Scope, send: Send, exc: BoundaryError) -> None:
+    """Answer a refused request (or WebSocket handshake) with the error, before the app sees it."""
+    headers = [(b"content-type", b"application/json")]
+    if isinstance(exc, AccessDenied):
+        headers.append((b"www-authenticate", b"Bearer"))
+    if isinstance(exc, BodyTooLarge | BodyTimeout):
+        headers.append((b"connection", b"close"))
+    body = error_body(exc)
+    headers.append((b"content-length", str(len(body)).encode()))
+    if scope["type"] == "http":
+        prefix = "http"
+    elif "websocket.http.response" in scope.get("extensions", {}):
+        prefix = "websocket.http"
+    else:  # a server without the denial-response extension: close the handshake (HTTP 403)
+        await send({"type": "websocket.close", "code": 4403 if exc.http_status == 403 else 4401,
+                    "reason": str(exc)[:120]})
+        return
+    await send({"type": f"{prefix}.response.start", "status": exc.http_status, "headers": headers})
+    await send({"type": f"{prefix}.response.body", "body": body})
