@@ -61,9 +61,9 @@ def prusaslicer_gcode(thumbs: Iterable[tuple[int, int, str]] = ((16, 16, "png"),
 
 
 def multipart(fields: list[tuple[str, str]], filename: str, data: bytes, *, file_field: str = "file",
-              file_first: bool = False, disposition: str = "form-data") -> tuple[bytes, str]:
+              file_at: int | None = None, disposition: str = "form-data") -> tuple[bytes, str]:
     """A multipart body as a client library builds it: curl's formadd (plain parts, then the file part typed
-    application/octet-stream) or, with `file_first`, the file before the others; `disposition` is the
+    application/octet-stream) or, with `file_at`, the file part at that place among the others; `disposition` is the
     Content-Disposition's first word (Qt's QHttpPart, which Cura's plugin patches to "form-data")."""
     boundary = "------------------------" + uuid.uuid4().hex[:16]
     parts: list[bytes] = []
@@ -72,7 +72,7 @@ def multipart(fields: list[tuple[str, str]], filename: str, data: bytes, *, file
                      f"Content-Type: text/plain\r\n\r\n{value}\r\n".encode())
     file_part = (f'--{boundary}\r\nContent-Disposition: {disposition}; name="{file_field}"; filename="{filename}"'
                  "\r\nContent-Type: application/octet-stream\r\n\r\n").encode() + data + b"\r\n"
-    parts.insert(0, file_part) if file_first else parts.append(file_part)
+    parts.insert(len(parts) if file_at is None else file_at, file_part)
     return b"".join(parts) + f"--{boundary}--\r\n".encode(), f"multipart/form-data; boundary={boundary}"
 
 

@@ -77,8 +77,8 @@ class MachineView:
             return f"{name} is offline ({self.message})"
         if self.job is not None:
             shown = self.job.get("filename") or self.job.get("type")
-            doing = self.phase if self.printing else "busy with"
-            return f"{name} is {doing} {shown} (job {self.job['id']}): wait for it to finish or cancel it"
+            return (f"{name} is busy with job {self.job['id']} ({shown}, {self.phase}): wait for it to finish "
+                    "or cancel it")
         if self.printing:
             return f"{name} is {self.phase}: wait for the print to finish or cancel it"
         if self.phase == "done":
