@@ -17,6 +17,8 @@ import pytest
 from PIL import Image
 from pyoctoprintapi import OctoprintClient
 
+from fabwire.agent.library import SLICER_OUTPUTS, SlicerOutput
+
 from .agenttools import RunningAgent, start_agent, wait_for
 from .doortools import XYZ, approve_key_requests, multipart, printing, prusaslicer_gcode, wait_idle
 
@@ -230,6 +232,17 @@ def test_file_names_no_library_keeps_are_400(demo: RunningAgent, folder: str, na
         assert name not in [f["name"] for f in client.get("/api/files").json()["files"]]
 
 
+@pytest.mark.parametrize("output", SLICER_OUTPUTS, ids=[o.suffix for o in SLICER_OUTPUTS])
+def test_files_a_slicer_can_be_set_to_send_are_400_with_what_to_change(demo: RunningAgent,
+                                                                       output: SlicerOutput) -> None:
+    """Each row of SLICER_OUTPUTS (its source in the row): refused with the setting to change, nothing kept."""
+    with demo.client() as client:
+        response = send(client, f"part{output.suffix}", b"PK\x03\x04 not g-code")
+        assert response.status_code == 400
+        assert output.advice in response.json()["error"]
+        assert f"part{output.suffix}" not in [f["name"] for f in client.get("/api/files").json()["files"]]
+
+
 def test_a_folder_in_the_file_part_name_is_dropped(demo: RunningAgent) -> None:
     """The folder is the form's `path`; a client that puts one in the part's file name (Windows' too) does not
     reach outside it."""
@@ -238,3 +251,23 @@ def test_a_folder_in_the_file_part_name_is_dropped(demo: RunningAgent) -> None:
         assert response.status_code == 201, response.text
         assert response.json()["files"]["local"]["path"] == "evil.gcode"
         assert client.delete("/api/files/local/evil.gcode").status_code == 204
+
+
+def test_a_selected_file_starts_with_the_job_command_whatever_its_name(demo: RunningAgent) -> None:
+    """A name with spaces, accents, Greek and brackets round-trips through both doors; the OctoPrint job
+    command `start` prints the selected file."""
+    name = "Kühlkörper Ω v2 (1).gcode"
+    with demo.client() as client:
+        wait_idle(client)
+        response = send(client, name, prusaslicer_gcode(minutes=30), print_=False)
+        assert response.status_code == 201, response.text
+        resource = response.headers["location"]
+        assert client.get(resource).json()["name"] == name
+        assert client.get("/server/files/metadata", params={"filename": name}).json()["result"]["filename"] == name
+        assert client.post(resource, json={"command": "select"}).status_code == 204
+        assert client.post("/api/job", json={"command": "start"}).status_code == 204
+        wait_for(lambda: printing(client), "printing the selected file")
+        assert client.get("/api/job").json()["job"]["file"]["name"] == name
+        assert client.post("/api/job", json={"command": "start"}).status_code == 409
+        assert client.post("/api/job", json={"command": "cancel"}).status_code == 204
+        wait_for(lambda: client.get("/api/job").json()["state"] == "Operational", "cancelled")

@@ -27,6 +27,7 @@ import secrets
 import shutil
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
@@ -47,6 +48,26 @@ QUEUE_MAX = 100
 NAME_MAX = 200
 _BAD_NAME = re.compile(r"[\x00-\x1f\x7f\\:*?\"<>|]")
 INDEX = "index.json"
+
+
+@dataclass(frozen=True, slots=True)
+class SlicerOutput:
+    suffix: str
+    advice: str
+    """What the file is and what to change in the slicer so it sends plain G-code."""
+    source: str
+
+
+SLICER_OUTPUTS: tuple[SlicerOutput, ...] = (
+    SlicerOutput(".bgcode", "that is binary G-code; in PrusaSlicer untick Printer Settings → General → Firmware → "
+                 "Supports binary G-code, and send again", "PrusaSlicer 2.7 release notes (binary G-code, .bgcode)"),
+    SlicerOutput(".3mf", "that is a 3MF project (OrcaSlicer can send a plate as .gcode.3mf); export or send "
+                 "plain G-code", "OrcaSlicer src/slic3r/Utils/OctoPrint.cpp (plateindex of a .gcode.3mf)"),
+    SlicerOutput(".ufp", "that is an Ultimaker Format Package; turn off the UFP transfer of Cura's OctoPrint plugin",
+                 "fieldOfView/Cura-OctoPrintPlugin OctoPrintOutputDevice.py (_transfer_as_ufp)"),
+    SlicerOutput(".stl", "that is a model, not a print: slice it first and send the G-code", "STL (3D Systems)"),
+)
+"""Files slicers can be set to send that no da Vinci prints, with what to change in the slicer."""
 
 
 class FileNotInLibrary(InputError):
@@ -183,9 +204,12 @@ class Library:
         device_id = view.id
         name = clean_name(name)
         session = self.agent.session(device_id)
-        if Path(name).suffix.lower() not in session.driver.job_types:
+        suffix = Path(name).suffix.lower()
+        if suffix not in session.driver.job_types:
             accepted = ", ".join(sorted(session.driver.job_types))
-            raise InputError(f"{view.name} takes {accepted} files, not {excerpt(Path(name).name, 80)}")
+            advice = next((a.advice for a in SLICER_OUTPUTS if a.suffix == suffix), None)
+            raise InputError(f"{view.name} takes {accepted} files, not {excerpt(Path(name).name, 80)}"
+                             + (f": {advice}" if advice else ""))
         queue = start and self.queue_enabled(device_id) and view.refusal() is not None
         claim = self.agent.claim_job(device_id, Path(name).name) if start and not queue else None
         async with claim if claim is not None else contextlib.nullcontext():
