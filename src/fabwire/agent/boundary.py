@@ -403,7 +403,7 @@ class Boundary:
                 if rule.types and not rule.raw and MULTIPART_TYPE not in rule.types:
                     receive = await self._buffered(scope, receive, rule)
                 else:
-                    receive = _counted(receive, rule)
+                    receive = _Counted(receive, rule)
         except BoundaryError as exc:
             await deny(scope, send, exc)
             return
@@ -414,8 +414,9 @@ class Boundary:
 
             if not isinstance(exc, ClientDisconnect):
                 raise
-            log.info("%s %s: the client went away before its request was complete", scope.get("method", "GET"),
-                     scope.get("path", ""))
+            got = f" after {receive.size:,} bytes" if isinstance(receive, _Counted) else ""
+            log.warning("%s %s: the client went away%s, before its request was complete; nothing was kept",
+                        scope.get("method", "GET"), scope.get("path", ""), got)
 
     def check_request(self, scope: Scope) -> None:
         host = header(scope, b"host")
@@ -488,25 +489,26 @@ async def _receive_within(receive: Receive) -> Message:
         raise BodyTimeout(f"the body stopped arriving for {BODY_IDLE_S:g} s") from None
 
 
-def _counted(receive: Receive, rule: BodyRule) -> Receive:
+class _Counted:
     """`receive` that raises BodyTooLarge once the body passes the rule's limit, and BodyTimeout when it
-    stops arriving (both reach the route as exceptions, so whatever it held is released)."""
-    size = 0
-    done = False
+    stops arriving (both reach the route as exceptions, so whatever it held is released); `size` is what came."""
 
-    async def counted() -> Message:
-        nonlocal size, done
-        if done:
-            return await receive()  # only the disconnect is left to wait for
-        message = await _receive_within(receive)
+    def __init__(self, receive: Receive, rule: BodyRule) -> None:
+        self.receive = receive
+        self.rule = rule
+        self.size = 0
+        self.done = False
+
+    async def __call__(self) -> Message:
+        if self.done:
+            return await self.receive()  # only the disconnect is left to wait for
+        message = await _receive_within(self.receive)
         if message["type"] == "http.request":
-            size += len(message.get("body", b""))
-            if size > rule.limit:
-                raise BodyTooLarge(_too_large(rule, None))
-            done = not message.get("more_body", False)
+            self.size += len(message.get("body", b""))
+            if self.size > self.rule.limit:
+                raise BodyTooLarge(_too_large(self.rule, None))
+            self.done = not message.get("more_body", False)
         return message
-
-    return counted
 
 
 KEY_REQUEST_PATH = re.compile(r"^(?:/printers/[^/]+)?/plugin/appkeys/(?:probe|request(?:/[^/]+)?)$")
@@ -528,8 +530,8 @@ async def deny(scope: Scope, send: Send, exc: BoundaryError) -> None:
     headers = [(b"content-type", b"application/json")]
     if isinstance(exc, AccessDenied):
         headers.append((b"www-authenticate", b"Bearer"))
-    if isinstance(exc, BodyTooLarge | BodyTimeout):
-        headers.append((b"connection", b"close"))
+    if isinstance(exc, BodyTimeout):
+        headers.append((b"connection", b"close"))  # (a refused body that keeps coming is read and dropped)
     body = error_body(exc)
     headers.append((b"content-length", str(len(body)).encode()))
     if scope["type"] == "http":

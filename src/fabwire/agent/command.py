@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import signal
 import socket
 import sys
+import time
 from collections.abc import Coroutine, Iterator
 from pathlib import Path
 from typing import Any
@@ -42,7 +44,8 @@ CONNECTION_SETTINGS: dict[str, Any] = {
 """uvicorn's own connection settings (uvicorn docs, "Settings: Resource Limits / Timeouts")."""
 HEAD_TIMEOUT_S = 10.0
 """A connection must complete its request line and headers this soon after opening (or after its previous
-answer), or it is closed: half-sent requests (slowloris) cannot hold the agent's connections."""
+answer), or it is closed: half-sent requests (slowloris) cannot hold the agent's connections. The rest of a
+refused body is read and dropped (so the client sees the answer) for as long, no longer."""
 OPEN_FILES = 4096
 """The soft limit on open files the agent raises itself to (within the hard limit): above limit_concurrency."""
 
@@ -238,6 +241,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
         app = create_app(agent, max_upload_bytes=policy.max_upload_bytes, policy=policy)
         _raise_open_files()
+        logging.getLogger("uvicorn.error").addFilter(_Repeats())
         server = server_class(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
                                                ws="websockets-sansio", http=_http_protocol(), log_config=None,
                                                **CONNECTION_SETTINGS))
@@ -265,6 +269,33 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
             await asyncio.to_thread(stop_all, simulators)
 
 
+FLOODING_MESSAGES = ("Exceeded concurrency limit.", "Invalid HTTP request received.")
+"""uvicorn's warnings that a client can cause once per request: logged once a minute, with a count."""
+FLOOD_REPORT_S = 60.0
+
+
+class _Repeats(logging.Filter):
+    """Lets a flooding message through once per FLOOD_REPORT_S, saying how many were left out."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._seen: dict[str, tuple[float, int]] = {}
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if message not in FLOODING_MESSAGES:
+            return True
+        now = time.monotonic()
+        last, left_out = self._seen.get(message, (-FLOOD_REPORT_S, 0))
+        if now - last < FLOOD_REPORT_S:
+            self._seen[message] = (last, left_out + 1)
+            return False
+        if left_out:
+            record.msg, record.args = f"{message} ({left_out} more in the last {FLOOD_REPORT_S:g} s)", ()
+        self._seen[message] = (now, 0)
+        return True
+
+
 def _raise_open_files() -> None:
     """A desktop's soft limit (1024) is below limit_concurrency: raise it, within the hard limit."""
     import resource
@@ -279,7 +310,6 @@ def _raise_open_files() -> None:
 def _http_protocol() -> Any:
     """uvicorn's h11 protocol with a deadline for the request head (uvicorn has none of its own: its
     keep-alive timer stops at the first byte of a request)."""
-    import h11
     from uvicorn.protocols.http.h11_impl import H11Protocol
 
     class HeadDeadline(H11Protocol):
@@ -305,10 +335,13 @@ def _http_protocol() -> Any:
 
         def _head_deadline(self) -> None:
             self._head_timer = None
-            waiting = self.conn.their_state in (h11.IDLE, h11.DONE) and (self.cycle is None
-                                                                         or self.cycle.response_complete)
-            if waiting and not self.transport.is_closing() and self.transport.get_protocol() is self:
-                self.transport.close()
+            if self.transport.is_closing() or self.transport.get_protocol() is not self:
+                return  # closed, or now a WebSocket
+            if self.cycle is not None and not self.cycle.response_complete:
+                self._arm_head_deadline()  # the app is answering a request: look again later
+                return
+            # no request in the app: a head not complete in time, or the rest of a refused body still dripping in
+            self.transport.close()
 
     return HeadDeadline
 

@@ -9,6 +9,7 @@ bound memory.
 from __future__ import annotations
 
 import contextlib
+import glob
 import math
 import os
 import re
@@ -267,9 +268,32 @@ def _umask() -> int:
     return mask
 
 
+def _lock(fd: int) -> bool:
+    """Take the exclusive advisory lock of an open file without waiting; False when another process has it
+    (where there are no such locks, as on Windows, an open file cannot be deleted, which serves the same end)."""
+    try:
+        import fcntl
+    except ImportError:
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False
+    return True
+
+
+def _sweep_parts(dst: Path) -> None:
+    """Remove the temporaries of runs that were killed while writing `dst` (each writer locks its own)."""
+    for stale in dst.parent.glob(f".{glob.escape(dst.name)}.*.part"):
+        with contextlib.suppress(OSError), open(stale, "rb") as handle:
+            if _lock(handle.fileno()):
+                stale.unlink()
+
+
 @contextlib.contextmanager
 def _atomic(dst: Path) -> Iterator[BinaryIO]:
-    """A temporary file next to `dst` that replaces it only if the block succeeds."""
+    """A temporary file next to `dst` that replaces it, synced, only if the block succeeds; locked while it is
+    written, so a run killed half-way leaves a temporary the next run removes."""
     dst = Path(dst)
     try:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".part", dir=dst.parent)
@@ -278,9 +302,16 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
     tmp = Path(tmp_name)
     try:
         with os.fdopen(fd, "w+b") as handle:
+            _lock(handle.fileno())
+            _sweep_parts(dst)
             yield handle
             os.fchmod(handle.fileno(), 0o666 & ~_umask())  # mkstemp's 0600 is for the temporary name only
-        os.replace(tmp, dst)
+            handle.flush()
+            os.fsync(handle.fileno())  # a power cut after the rename must not leave an empty file
+            if os.name == "posix":
+                os.replace(tmp, dst)  # while still locked: no sweeper takes it for a leftover
+        if os.name != "posix":
+            os.replace(tmp, dst)  # Windows renames only closed files (and deletes no open one)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
