@@ -60,6 +60,16 @@ def browse(namespace: str, seconds: float = 4) -> list[dict[str, Any]]:
     return [json.loads(line) for line in out.stdout.splitlines() if line.strip()]
 
 
+def browse_until(namespace: str, count: int) -> list[dict[str, Any]]:
+    """Browse until `count` services answer, at most five times (announcements take a moment to settle)."""
+    found: list[dict[str, Any]] = []
+    for _ in range(5):
+        found = browse(namespace)
+        if len(found) >= count:
+            break
+    return found
+
+
 def test_printers_are_announced_on_the_lan_and_never_on_loopback(lan: str, tmp_path: Path) -> None:
     """Two agents in the namespace: one on loopback (announces nothing) and one on the LAN address, which
     announces each machine that takes files (the da Vinci, the Line-us; not the MMU) as `_octoprint._tcp` (TXT
@@ -68,11 +78,17 @@ def test_printers_are_announced_on_the_lan_and_never_on_loopback(lan: str, tmp_p
     local = serve_in(lan, "127.0.0.1:18080", tmp_path / "local")
     remote = serve_in(lan, f"{AGENT_ADDRESS}:18081", tmp_path / "remote")
     try:
-        found: list[dict[str, Any]] = []
-        for _ in range(5):  # a browse may start before the announcements settle: look again, a bounded number
-            found = browse(lan)
-            if len(found) >= 6:
-                break
+        found = browse_until(lan, 6)
+        # a machine added while the agent runs is announced once it is online
+        token = (tmp_path / "remote" / "access-token").read_text().strip()
+        add = ("import httpx, sys; r = httpx.post(sys.argv[1], json={'name': 'desk', 'kind': 'xyz', "
+               "'address': 'sim://'}, headers={'Authorization': 'Bearer ' + sys.argv[2]}, timeout=60); "
+               "print(r.status_code)")
+        added = subprocess.run(["ip", "netns", "exec", lan, sys.executable, "-c", add,
+                                f"http://{AGENT_ADDRESS}:18081/api/v1/devices", token],
+                               capture_output=True, text=True, timeout=90, check=True)
+        assert added.stdout.strip() == "201", added.stderr
+        later = browse_until(lan, 9)
     finally:
         for process in (local, remote):
             process.terminate()
@@ -86,3 +102,6 @@ def test_printers_are_announced_on_the_lan_and_never_on_loopback(lan: str, tmp_p
     assert {"api", "version", "path"} <= set(octoprint["printer"])
     moonraker = {e["name"].split(" on ")[0]: e["txt"] for e in found if e["type"] == TYPES[1]}
     assert moonraker["line-us"]["route_prefix"] == "printers/line-us"
+    desk = [e for e in later if e["name"].startswith("desk on ")]
+    assert sorted(e["type"] for e in desk) == sorted(TYPES)
+    assert next(e for e in desk if e["type"] == TYPES[0])["txt"]["path"] == "/printers/desk/"

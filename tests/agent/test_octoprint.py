@@ -271,3 +271,22 @@ def test_a_selected_file_starts_with_the_job_command_whatever_its_name(demo: Run
         assert client.post("/api/job", json={"command": "start"}).status_code == 409
         assert client.post("/api/job", json={"command": "cancel"}).status_code == 204
         wait_for(lambda: client.get("/api/job").json()["state"] == "Operational", "cancelled")
+
+
+def test_a_line_us_takes_a_drawing_through_its_own_prefix(demo: RunningAgent) -> None:
+    """A Line-us job is a drawing: an SVG sent to /printers/line-us/ is kept and drawn; a print file is not one."""
+    svg = (b"<svg xmlns='http://www.w3.org/2000/svg' width='60mm' height='40mm' viewBox='0 0 60 40'>"
+           b"<path d='M5 5 L55 5 L55 35 Z' stroke='black' fill='none'/></svg>")
+    with demo.client() as client:
+        lineus = "lineus-demo"
+        wait_for(lambda: client.get(f"/api/v1/devices/{lineus}/state").json()["summary"]["state"] == "idle",
+                 "the Line-us idle")
+        response = send(client, "triangle.svg", svg, prefix="/printers/line-us")
+        assert response.status_code == 201, response.text
+        wait_for(lambda: any(j["filename"] == "triangle.svg" for j in
+                             client.get("/api/v1/jobs", params={"device": lineus}).json()), "the drawing started")
+        listed = client.get("/printers/line-us/api/files").json()["files"]
+        assert [f["name"] for f in listed] == ["triangle.svg"]
+        assert "triangle.svg" not in [f["name"] for f in client.get("/api/files").json()["files"]]
+        refused = send(client, "part.3w", b"3DPFNKG13WTW", prefix="/printers/line-us", print_=False)
+        assert refused.status_code == 400

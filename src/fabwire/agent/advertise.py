@@ -9,6 +9,8 @@ every address announces its non-loopback ones.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import ipaddress
 import logging
 import socket
@@ -105,7 +107,9 @@ class Advertiser:
         self.port = port
         self.addresses = lan_addresses(host)
         self._zeroconf: AsyncZeroconf | None = None
-        self._infos: list[AsyncServiceInfo] = []
+        self._registered: dict[str, AsyncServiceInfo] = {}
+        """The announced services by the instance name they were asked for."""
+        self._watcher: asyncio.Task[None] | None = None
 
     def infos(self) -> list[AsyncServiceInfo]:
         from zeroconf.asyncio import AsyncServiceInfo
@@ -128,20 +132,47 @@ class Advertiser:
         return infos
 
     async def start(self) -> None:
+        """Announce every machine now, and a machine added later when it first comes online."""
         if not self.addresses:
             return
         from zeroconf import IPVersion
         from zeroconf.asyncio import AsyncZeroconf
 
         self._zeroconf = AsyncZeroconf(interfaces=self.addresses, ip_version=IPVersion.V4Only)
-        self._infos = self.infos()
-        for info in self._infos:
-            try:
+        await self.resync()
+        self._watcher = asyncio.create_task(self._watch(), name="advertise")
+
+    async def resync(self) -> None:
+        """Register the services of machines not announced yet; withdraw those of machines gone."""
+        if self._zeroconf is None:
+            return
+        wanted = {info.name: info for info in self.infos()}
+        for name in [n for n in self._registered if n not in wanted]:
+            with contextlib.suppress(Exception):
+                await self._zeroconf.async_unregister_service(self._registered.pop(name))
+        for name, info in wanted.items():
+            if name in self._registered:
+                continue
+            try:  # on a name clash zeroconf picks another instance name; it stays filed under the one wanted
                 await self._zeroconf.async_register_service(info, allow_name_change=True)
-            except Exception as exc:  # a name clash or a dead interface must not stop the agent
+                self._registered[name] = info
+            except Exception as exc:  # a dead interface must not stop the agent
                 log.warning("cannot announce %s: %s", info.name, exc)
 
+    async def _watch(self) -> None:
+        subscription = self.agent.subscribe()
+        try:
+            async for event in subscription:
+                if event["type"] == "online":
+                    await self.resync()
+        finally:
+            subscription.close()
+
     async def stop(self) -> None:
+        if self._watcher is not None:
+            self._watcher.cancel()
+            with contextlib.suppress(BaseException):
+                await self._watcher
         zeroconf, self._zeroconf = self._zeroconf, None
         if zeroconf is None:
             return
@@ -153,4 +184,5 @@ class Advertiser:
     def announced(self) -> list[dict[str, Any]]:
         """What is announced: `{"type", "name", "addresses", "port", "txt"}` per service."""
         return [{"type": i.type, "name": i.name, "addresses": self.addresses, "port": self.port,
-                 "txt": {k.decode(): (v or b"").decode() for k, v in i.properties.items()}} for i in self._infos]
+                 "txt": {k.decode(): (v or b"").decode() for k, v in i.properties.items()}}
+                for i in self._registered.values()]
