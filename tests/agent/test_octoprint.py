@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import io
+import socket
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -290,3 +291,25 @@ def test_a_line_us_takes_a_drawing_through_its_own_prefix(demo: RunningAgent) ->
         assert "triangle.svg" not in [f["name"] for f in client.get("/api/files").json()["files"]]
         refused = send(client, "part.3w", b"3DPFNKG13WTW", prefix="/printers/line-us", print_=False)
         assert refused.status_code == 400
+
+
+def test_a_print_refused_is_answered_before_the_file_is_sent(demo: RunningAgent) -> None:
+    """The machine is claimed when the file part begins (PrusaSlicer sends print=true first): while it prints,
+    a second upload's 409 comes back although only the start of its 20 MB file has been sent."""
+    with demo.client() as client:
+        wait_idle(client)
+        assert send(client, "busy.gcode", prusaslicer_gcode(minutes=30)).status_code == 201
+        wait_for(lambda: printing(client), "printing")
+        url = urlsplit(demo.url)
+        body, ctype = multipart([("print", "true"), ("path", "")], "late.gcode", b"G1 X1\n" * 4_000_000)
+        head = (f"POST /api/files/local HTTP/1.1\r\nHost: {url.netloc}\r\nContent-Type: {ctype}\r\n"
+                f"Content-Length: {len(body)}\r\n\r\n").encode()
+        with socket.create_connection((url.hostname, url.port), timeout=60) as conn:
+            conn.sendall(head + body[:64 * 1024])  # the fields and the start of the file, no more
+            answer = b""
+            while b"\r\n\r\n" not in answer:
+                chunk = conn.recv(4096)
+                assert chunk, "the agent closed without answering"
+                answer += chunk
+        assert answer.startswith(b"HTTP/1.1 409")
+        assert client.post("/api/job", json={"command": "cancel"}).status_code == 204

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
-from fabwire.agent.model import Machines, TakesNoJobs
+from fabwire.agent.model import Machines, MachineView, TakesNoJobs
 from fabwire.errors import InputError, excerpt
 from fabwire.thumbnails import read_thumbnails
 
@@ -190,11 +190,31 @@ class Library:
 
     # ------------------------------------------------------------------------------------------ changing
 
+    def _require_takes(self, view: MachineView, name: str) -> None:
+        """InputError unless the machine takes files named so, saying what a slicer's other outputs are."""
+        job_types = self.agent.session(view.id).driver.job_types
+        suffix = Path(name).suffix.lower()
+        if suffix not in job_types:
+            accepted = ", ".join(sorted(job_types))
+            advice = next((a.advice for a in SLICER_OUTPUTS if a.suffix == suffix), None)
+            raise InputError(f"{view.name} takes {accepted} files, not {excerpt(Path(name).name, 80)}"
+                             + (f": {advice}" if advice else ""))
+
+    def claim_print(self, device: str, name: str) -> JobClaim | None:
+        """Claim the machine for printing the upload `name` now (atomic; MachineNotReady/DeviceBusy, HTTP 409,
+        with the reason), or None when its queue is on and it cannot start now (the upload is to wait)."""
+        view = self.machines.view(device)
+        self._require_takes(view, clean_name(name))
+        if self.queue_enabled(view.id) and view.refusal() is not None:
+            return None
+        return self.agent.claim_job(view.id, Path(clean_name(name)).name)
+
     async def add(self, device: str, name: str, src: BinaryIO, *, start: bool = False,
-                  select: bool = False) -> dict[str, Any]:
+                  select: bool = False, claim: JobClaim | None = None) -> dict[str, Any]:
         """Keep an upload (read from `src`) in the machine's library, and select and/or start it.
 
         Returns `{"file": entry, "job": job | None, "queued": bool}`. With `start`, the machine is claimed first
+        (or `claim` is the one `claim_print` made before the upload was read)
         (`Agent.claim_job`: atomic; `MachineNotReady`/`DeviceBusy`, HTTP 409, with the reason when it cannot
         print now) and nothing is kept when it refuses, unless its queue is on (then the file waits). InputError
         for a name or a file the machine cannot take (the intake's own words); nothing is kept then either."""
@@ -204,14 +224,10 @@ class Library:
         device_id = view.id
         name = clean_name(name)
         session = self.agent.session(device_id)
-        suffix = Path(name).suffix.lower()
-        if suffix not in session.driver.job_types:
-            accepted = ", ".join(sorted(session.driver.job_types))
-            advice = next((a.advice for a in SLICER_OUTPUTS if a.suffix == suffix), None)
-            raise InputError(f"{view.name} takes {accepted} files, not {excerpt(Path(name).name, 80)}"
-                             + (f": {advice}" if advice else ""))
-        queue = start and self.queue_enabled(device_id) and view.refusal() is not None
-        claim = self.agent.claim_job(device_id, Path(name).name) if start and not queue else None
+        self._require_takes(view, name)
+        queue = start and claim is None and self.queue_enabled(device_id) and view.refusal() is not None
+        if start and not queue and claim is None:
+            claim = self.agent.claim_job(device_id, Path(name).name)
         async with claim if claim is not None else contextlib.nullcontext():
             stored = await asyncio.to_thread(self._copy_in, device_id, name, src)
             try:

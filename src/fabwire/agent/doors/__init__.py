@@ -7,12 +7,18 @@ else the first Line-us) at the root as well.
 
 from __future__ import annotations
 
-from fastapi import FastAPI
-from starlette.datastructures import UploadFile
+import asyncio
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, BinaryIO
+
+from fastapi import FastAPI, Request
 from starlette.requests import HTTPConnection
 
 from fabwire.agent.core import Agent
 from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.errors import InputError
 
 JSON_BODY: dict[str, object] = {"requestBody": {"required": False, "content": {"application/json": {}}}}
 """The body a door's command route declares (`fabwire.agent.boundary` refuses undeclared bodies)."""
@@ -34,10 +40,10 @@ def machine_of(agent: Agent, request: HTTPConnection) -> MachineView:
     return view
 
 
-def file_name(upload: UploadFile) -> str:
+def file_name_of(filename: str | None) -> str:
     """The name of an uploaded file part without any folders a client put in it (Windows' too): the folder
     is the form's `path` field."""
-    return (upload.filename or "").replace("\\", "/").rsplit("/", 1)[-1]
+    return (filename or "").replace("\\", "/").rsplit("/", 1)[-1]
 
 
 def base_url(request: HTTPConnection) -> str:
@@ -56,3 +62,106 @@ def mount_doors(app: FastAPI, agent: Agent) -> None:
     library_api.mount(app, agent, appkeys)
     octoprint.mount(app, agent, appkeys)
     moonraker.mount(app, agent)
+
+
+FIELD_MAX = 64 * 1024
+"""Bytes a plain form field may hold (a folder, "true"); more is an error."""
+FIELDS_MAX = 32
+
+
+@dataclass
+class Upload:
+    """A slicer's multipart upload: its plain fields, and the file part's name and bytes (in a temporary file)."""
+
+    fields: dict[str, str] = field(default_factory=dict)
+    filename: str | None = None
+    file: BinaryIO | None = None
+    size: int = 0
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+
+
+async def read_upload(request: Request, limit: int, before_file: Callable[[dict[str, str], str], None]) -> Upload:
+    """Stream a multipart/form-data body: plain fields into `fields`, the part named `file` to a temporary file.
+
+    `before_file(fields, filename)` runs when the file part begins, with the fields sent before it (PrusaSlicer,
+    OrcaSlicer and the Moonraker hosts send `print` first), before a byte of the file is read: a print that
+    cannot start is refused there. InputError for a body that is no such form, UploadTooLarge over `limit`;
+    `file` is None when the form has no file part."""
+    from python_multipart import MultipartParser
+    from python_multipart.exceptions import MultipartParseError
+    from python_multipart.multipart import parse_options_header
+
+    from fabwire.agent.jobs import UploadTooLarge
+
+    kind, options = parse_options_header(request.headers.get("content-type", ""))
+    boundary = options.get(b"boundary")
+    if kind != b"multipart/form-data" or not boundary:
+        raise InputError("send the file as multipart/form-data with the field 'file'")
+    upload = Upload()
+    part: dict[str, Any] = {}
+    pending = bytearray()
+
+    def begin() -> None:
+        part.clear()
+        part.update(headers={}, field=b"", value=b"", data=bytearray(), name=None, filename=None)
+
+    def header_field(data: bytes, start: int, end: int) -> None:
+        part["field"] += data[start:end]
+
+    def header_value(data: bytes, start: int, end: int) -> None:
+        part["value"] += data[start:end]
+
+    def header_end() -> None:
+        part["headers"][part["field"].lower()] = part["value"]
+        part["field"], part["value"] = b"", b""
+
+    def headers_finished() -> None:
+        _, disposition = parse_options_header(part["headers"].get(b"content-disposition", b""))
+        part["name"] = disposition.get(b"name", b"").decode("utf-8", "replace")
+        filename = disposition.get(b"filename")
+        if part["name"] == "file" and filename is not None and upload.file is None:
+            part["filename"] = filename.decode("utf-8", "replace")
+            before_file(dict(upload.fields), file_name_of(part["filename"]))
+            upload.filename = part["filename"]
+            upload.file = tempfile.TemporaryFile(prefix="fabwire-upload-")  # noqa: SIM115 - Upload.close
+
+    def data(chunk: bytes, start: int, end: int) -> None:
+        if part["filename"] is not None:
+            upload.size += end - start
+            if upload.size > limit:
+                raise UploadTooLarge(f"the upload is over the limit of {limit:,} bytes")
+            pending.extend(chunk[start:end])
+        elif part["name"]:
+            part["data"] += chunk[start:end]
+            if len(part["data"]) > FIELD_MAX:
+                raise InputError(f"the form field {part['name']!r} is over {FIELD_MAX:,} bytes")
+
+    def part_end() -> None:
+        if part["filename"] is None and part["name"]:
+            if len(upload.fields) >= FIELDS_MAX:
+                raise InputError(f"the form has over {FIELDS_MAX} fields")
+            upload.fields[part["name"]] = bytes(part["data"]).decode("utf-8", "replace")
+
+    parser = MultipartParser(boundary, {
+        "on_part_begin": begin, "on_header_field": header_field, "on_header_value": header_value,
+        "on_header_end": header_end, "on_headers_finished": headers_finished, "on_part_data": data,
+        "on_part_end": part_end})
+    try:
+        async for chunk in request.stream():
+            parser.write(chunk)
+            if pending and upload.file is not None:
+                await asyncio.to_thread(upload.file.write, bytes(pending))
+                pending.clear()
+        parser.finalize()
+    except MultipartParseError as exc:
+        upload.close()
+        raise InputError(f"the multipart form is malformed: {exc}") from None
+    except BaseException:
+        upload.close()
+        raise
+    if upload.file is not None:
+        upload.file.seek(0)
+    return upload

@@ -20,16 +20,16 @@ import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any
+from typing import Any, BinaryIO
 
 from fastapi import APIRouter, FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
-from starlette.datastructures import UploadFile
 
 from fabwire import __version__
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, file_name, machine_of
+from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, file_name_of, machine_of, read_upload
 from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.agent.session import JobClaim
 from fabwire.errors import FabwireError, InputError
 
 MOONRAKER_VERSION = "v0.9.3"
@@ -295,30 +295,44 @@ class MoonrakerDoor:
         return JSONResponse({"result": result})
 
     async def upload(self, request: Request) -> Response:
-        """POST /server/files/upload: multipart `file`, `root` (gcodes), `path`, `print` ("true"), `checksum`."""
+        """POST /server/files/upload: multipart `file`, `root` (gcodes), `path`, `print` ("true"), `checksum`
+        (SHA-256, 422 when it does not match). With print sent before the file (the slicers' Moonraker hosts),
+        the machine is claimed before the file is read."""
+        claims: list[JobClaim] = []
         try:
             view = machine_of(self.agent, request)
-            form = await request.form(max_files=1, max_fields=32)
+            if not view.takes_jobs:
+                raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
+
+            def before_file(fields: dict[str, str], filename: str) -> None:
+                if fields.get("print", "").strip().lower() == "true" and fields.get("root", ROOT) == ROOT:
+                    claim = self.library.claim_print(view.id, f"{fields.get('path', '')}/{filename}")
+                    claims.extend([claim] if claim is not None else [])
+
+            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file)
             try:
-                upload = form.get("file")
-                if not isinstance(upload, UploadFile):
+                fields = form.fields
+                if form.file is None:
                     raise InputError("send the file as the multipart field 'file'")
-                root = form.get("root") or ROOT
+                root = fields.get("root") or ROOT
                 if root != ROOT:
                     raise RpcError(400, f"uploads go to the root {ROOT!r} here, not {root!r}")
-                checksum = form.get("checksum")
-                if isinstance(checksum, str) and checksum:
-                    digest = await asyncio.to_thread(_sha256, upload)
-                    if digest != checksum.strip().lower():
+                checksum = fields.get("checksum", "").strip().lower()
+                if checksum:
+                    digest = await asyncio.to_thread(_sha256, form.file)
+                    if digest != checksum:
                         raise RpcError(422, f"checksum mismatch: the upload's SHA-256 is {digest}")
-                folder = form.get("path")
-                start = str(form.get("print", "")).strip().lower() == "true"
-                result = await self.library.add(view.id, f"{folder if isinstance(folder, str) else ''}/"
-                                                f"{file_name(upload)}", upload.file, start=start, select=start)
+                start = fields.get("print", "").strip().lower() == "true"
+                result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
+                                                form.file, start=start, select=start,
+                                                claim=claims[0] if claims else None)
             finally:
-                await form.close()
+                form.close()
         except FabwireError as exc:
             return _error(_status_code(exc), str(exc))
+        finally:
+            for claim in claims:
+                claim.release()
         entry = result["file"]
         return JSONResponse({"result": {"item": {**self._file(entry), "root": ROOT},
                                         "print_started": result["job"] is not None, "print_queued": result["queued"],
@@ -428,12 +442,12 @@ def _error(status: int, message: str) -> JSONResponse:
     return JSONResponse({"error": {"code": status, "message": message, "traceback": None}}, status_code=status)
 
 
-def _sha256(upload: UploadFile) -> str:
+def _sha256(file: BinaryIO) -> str:
     digest = hashlib.sha256()
-    upload.file.seek(0)
-    while chunk := upload.file.read(1 << 20):
+    file.seek(0)
+    while chunk := file.read(1 << 20):
         digest.update(chunk)
-    upload.file.seek(0)
+    file.seek(0)
     return digest.hexdigest()
 
 

@@ -20,13 +20,21 @@ from urllib.parse import quote
 
 from fastapi import APIRouter, FastAPI, Request
 from fastapi.responses import FileResponse, JSONResponse, Response
-from starlette.datastructures import UploadFile
 
 from fabwire import __version__
 from fabwire.agent.appkeys import AppKeys
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, base_url, file_name, machine_of
+from fabwire.agent.doors import (
+    JSON_BODY,
+    MULTIPART_BODY,
+    PREFIXES,
+    base_url,
+    file_name_of,
+    machine_of,
+    read_upload,
+)
 from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.agent.session import JobClaim
 from fabwire.errors import FabwireError, InputError
 
 OCTOPRINT_VERSION = "1.10.0"
@@ -328,29 +336,42 @@ class OctoPrintDoor:
         return self._entry(request, view, self.library.get(view.id, path))
 
     async def upload(self, request: Request) -> Response:
+        """POST /api/files/local: multipart `file`, `path` (its folder), `select`, `print` ("true"). With print
+        sent before the file (PrusaSlicer, OrcaSlicer), the machine is claimed before the file is read."""
         view = machine_of(self.agent, request)
         if not view.takes_jobs:
             raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
-        form = await request.form(max_files=1, max_fields=32)
+        claims: list[JobClaim] = []
+
+        def before_file(fields: dict[str, str], filename: str) -> None:
+            if _true(fields.get("print")):
+                claim = self.library.claim_print(view.id, f"{fields.get('path', '')}/{filename}")
+                claims.extend([claim] if claim is not None else [])
+
         try:
-            upload = form.get("file")
-            if not isinstance(upload, UploadFile):
-                if form.get("foldername"):
-                    return _error(409, CANNOT["folder"])
-                return _error(400, "send the file as the multipart field 'file'")
-            folder = form.get("path")
-            name = f"{folder if isinstance(folder, str) else ''}/{file_name(upload)}"
-            start = _true(form.get("print"))
-            result = await self.library.add(view.id, name, upload.file, start=start,
-                                            select=start or _true(form.get("select")))
+            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file)
+            try:
+                fields = form.fields
+                if form.file is None:
+                    if fields.get("foldername"):
+                        return _error(409, CANNOT["folder"])
+                    return _error(400, "send the file as the multipart field 'file'")
+                start = _true(fields.get("print"))
+                select = start or _true(fields.get("select"))
+                result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
+                                                form.file, start=start, select=select,
+                                                claim=claims[0] if claims else None)
+            finally:
+                form.close()
         finally:
-            await form.close()
+            for claim in claims:
+                claim.release()
         entry = result["file"]
         item = self._entry(request, view, entry)
         body = {"files": {"local": {"name": item["name"], "display": item["display"], "path": item["path"],
                                     "origin": "local", "refs": item["refs"]}},
-                "done": True, "effectiveSelect": start or _true(form.get("select")),
-                "effectivePrint": result["job"] is not None, "queued": result["queued"]}
+                "done": True, "effectiveSelect": select, "effectivePrint": result["job"] is not None,
+                "queued": result["queued"]}
         return JSONResponse(body, status_code=201, headers={"Location": item["refs"]["resource"]})
 
     async def file_command(self, request: Request, path: str) -> Response:
