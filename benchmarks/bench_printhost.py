@@ -25,7 +25,8 @@ except ImportError:  # imported as benchmarks.bench_printhost
     from benchmarks.common import Figure
 
 SIZE = 20 * 1024 * 1024
-RUNS = 3
+RUNS = 5
+"""Runs of each; the medians are compared (the machine may be shared: single runs vary by a third)."""
 SRC = Path(__file__).resolve().parents[1] / "src"
 XYZ = "xyz-demo"
 
