@@ -8,6 +8,7 @@ import re
 import stat
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import httpx
@@ -232,7 +233,7 @@ async def test_token_guard_covers_the_api_but_not_the_page() -> None:
         await send({"type": "http.response.start", "status": 200, "headers": []})  # type: ignore[operator]
         await send({"type": "http.response.body", "body": b"ok"})  # type: ignore[operator]
 
-    guarded = Boundary(app, policy=Policy(token="s3cret"), routes=[])
+    guarded = Boundary(app, policy=Policy(token="s3cret"), router=SimpleNamespace(routes=[]))
     async with httpx.AsyncClient(transport=httpx.ASGITransport(app=guarded), base_url="http://localhost") as client:
         missing = await client.get("/api/v1/devices")
         assert missing.status_code == 401

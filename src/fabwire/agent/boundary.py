@@ -218,7 +218,9 @@ DEFAULT_PORTS = {"http": 80, "https": 443, "ws": 80, "wss": 443}
 
 
 def same_origin(origin: str, host_header: str) -> bool:
-    """Whether an `Origin` (scheme://host[:port]) names the authority the request was sent to."""
+    """Whether an `Origin` (scheme://host[:port]) names the authority the request was sent to (RFC 6454 §5
+    compares scheme too; here host and port decide, since a TLS proxy in front of the agent turns the page's
+    https into http, and no other program can serve pages from the agent's own host and port)."""
     scheme, sep, authority = origin.strip().partition("://")
     scheme = scheme.lower()
     if not sep or scheme not in DEFAULT_PORTS:
@@ -377,13 +379,13 @@ def _has_body(scope: Scope) -> bool:
 
 
 class Boundary:
-    """The ASGI middleware (see the module's docstring). `routes` is the live route list of the app behind it
-    (`app.router.routes`), so routes added later are looked up too."""
+    """The ASGI middleware (see the module's docstring). `router` is the router of the app behind it (its
+    `routes` are read at each request, so routes added later are looked up too)."""
 
-    def __init__(self, app: ASGIApp, *, policy: Policy, routes: list[Any]) -> None:
+    def __init__(self, app: ASGIApp, *, policy: Policy, router: Any) -> None:
         self.app = app
         self.policy = policy
-        self.routes = routes
+        self.router = router
         self._token = policy.token.encode() if policy.token else None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -392,7 +394,7 @@ class Boundary:
             return
         try:
             self.check_request(scope)
-            route = find_route(self.routes, scope)
+            route = find_route(self.router.routes, scope)
             if scope["type"] == "http" and scope["method"] not in SAFE_METHODS:
                 rule = body_rule(route, self.policy) if route is not None else BodyRule(limit=JSON_BODY_LIMIT)
                 if route is not None:

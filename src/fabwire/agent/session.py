@@ -265,6 +265,7 @@ class Session:
         self._job = job
         self.drawing = {"preview": [], "ink": []}
         self._job_task = asyncio.create_task(self._run_job(job), name=f"job-{job['id']}")
+        self._set_state(online=self.online, summary=None)  # the device's state names its job from now on
         return dict(job)
 
     async def _run_job(self, job: dict[str, Any]) -> None:

@@ -1,0 +1,308 @@
+"""The boundary in front of every route: the whole route table, walked with what a stranger's page can send.
+
+In-process on the real application (`create_app`), with routes added after it was made (as the print-host doors
+are) to show that a route added later is covered without doing anything.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from fastapi import APIRouter, Body, FastAPI, Request
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from starlette.routing import WebSocketRoute
+from starlette.testclient import TestClient, WebSocketDenialResponse
+
+from fabwire.agent.api import create_app
+from fabwire.agent.boundary import (
+    CORS_SIMPLE_TYPES,
+    JSON_BODY_LIMIT,
+    MAX_JSON_DEPTH,
+    SAFE_METHODS,
+    BadJSON,
+    Policy,
+    leaf_routes,
+    parse_json,
+    same_origin,
+)
+from fabwire.agent.core import Agent
+
+OWN = "http://127.0.0.1:8765"
+OWN_HOST = {"host": "127.0.0.1:8765"}
+"""The test client's WebSockets say `Host: testserver` unless told."""
+FOREIGN_HOSTS = ("evil.example", "evil.example:8765", "127.0.0.1.evil.example", "localhost.evil.example",
+                 "printers.lan.evil.example", "", "a b", "[::1", "evil.example:99999")
+"""DNS-rebinding names (an attacker's name resolving to 127.0.0.1) and malformed Host values."""
+FOREIGN_ORIGINS = ("http://evil.example", "null", "http://127.0.0.2:8765", "http://localhost:8000",
+                   "http://127.0.0.1:8766", "https://127.0.0.1", "file://", "http://127.0.0.1:8765.evil.example",
+                   "chrome-extension://abcdef")
+"""Pages that are not the agent's own: another site, a sandboxed frame or file: page (null), another loopback
+address or port (another program on this computer), an extension."""
+REACHED: list[str] = []
+"""What the routes added for the test were reached with: must stay empty for every refused request."""
+
+
+def app_with_doors(policy: Policy | None = None) -> FastAPI:
+    """The agent's app, plus routes added afterwards the way a print-host door adds them."""
+    app = create_app(Agent(), max_upload_bytes=1024, policy=policy)
+    door = APIRouter()
+
+    @door.post("/api/files/local", openapi_extra={"requestBody": {"content": {"multipart/form-data": {}}}})
+    async def files(request: Request) -> dict[str, bool]:
+        REACHED.append(f"files {len(await request.body())}")
+        return {"done": True}
+
+    @door.post("/printer/print/start")
+    async def start(body: dict[str, Any] = Body(...)) -> dict[str, bool]:  # noqa: B008 - FastAPI's idiom
+        REACHED.append("start")
+        return {"started": True}
+
+    @door.post("/printer/gcode/script")
+    async def script(request: Request) -> dict[str, bool]:  # declares no body
+        REACHED.append("script")
+        return {"sent": True}
+
+    app.include_router(door)
+    return app
+
+
+def route_table(app: FastAPI) -> Iterator[tuple[str, str, str]]:
+    """(method or "WEBSOCKET", a concrete path, the path template) for every route of the app."""
+    for route in leaf_routes(app.router.routes):
+        real = getattr(route, "starlette_route", None) or getattr(route, "original_route", None) or route
+        template = getattr(route, "path", "") or real.path
+        if getattr(route, "path_format", "") == "" and isinstance(real, WebSocketRoute):
+            yield "WEBSOCKET", re.sub(r"\{[^}]+\}", "x", real.path), real.path
+            continue
+        path = re.sub(r"\{[^}]+\}", "x", template) + ("/app.js" if template == "/static" else "")
+        for method in sorted(getattr(route, "methods", None) or {"GET"}):
+            yield method, path, template
+
+
+@pytest.fixture(scope="module")
+def client() -> Iterator[TestClient]:
+    with TestClient(app_with_doors(), base_url=OWN) as made:
+        yield made
+
+
+@pytest.fixture(autouse=True)
+def nothing_reached() -> None:
+    REACHED.clear()
+
+
+TABLE = list(route_table(app_with_doors()))
+WRITES = [(m, p, t) for m, p, t in TABLE if m not in SAFE_METHODS and m != "WEBSOCKET"]
+SOCKETS = [(m, p, t) for m, p, t in TABLE if m == "WEBSOCKET"]
+
+
+def test_the_walk_sees_every_route_including_later_ones() -> None:
+    templates = {t for _, _, t in TABLE}
+    assert {"/api/v1/devices/{device_id}/actions/{action}", "/api/v1/devices/{device_id}/jobs",
+            "/api/v1/jobs/{job_id}/cancel", "/api/v1/devices", "/api/files/local", "/printer/print/start",
+            "/printer/gcode/script", "/", "/static"} <= templates
+    assert SOCKETS == [("WEBSOCKET", "/api/v1/events", "/api/v1/events")]
+
+
+@pytest.mark.parametrize("host", FOREIGN_HOSTS)
+@pytest.mark.parametrize(("method", "path", "template"), TABLE)
+def test_a_foreign_host_gets_nothing_from_any_route(client: TestClient, method: str, path: str, template: str,
+                                                    host: str) -> None:
+    if method == "WEBSOCKET":
+        with pytest.raises(WebSocketDenialResponse) as denied, client.websocket_connect(path,
+                                                                                       headers={"host": host}):
+            pass
+        assert denied.value.status_code == 403
+        assert b"ForeignHost" in denied.value.content
+        return
+    response = client.request(method, path, headers={"host": host, "content-type": "application/json"},
+                              content=b"{}" if method not in SAFE_METHODS else None)
+    assert response.status_code == 403, (method, path, response.text)
+    assert method == "HEAD" or response.json()["error"] == "ForeignHost"
+    assert not REACHED
+
+
+@pytest.mark.parametrize("origin", FOREIGN_ORIGINS)
+@pytest.mark.parametrize(("method", "path", "template"), WRITES + SOCKETS)
+def test_a_foreign_page_writes_nothing_and_opens_no_socket(client: TestClient, method: str, path: str,
+                                                           template: str, origin: str) -> None:
+    if method == "WEBSOCKET":
+        with pytest.raises(WebSocketDenialResponse) as denied, client.websocket_connect(
+                path, headers={**OWN_HOST, "origin": origin}):
+            pass
+        assert denied.value.status_code == 403
+        assert b"CrossOrigin" in denied.value.content
+        return
+    response = client.request(method, path, headers={"origin": origin, "content-type": "application/json"},
+                              content=b'{"confirm": true}')
+    assert response.status_code == 403, (method, path, response.text)
+    assert response.json()["error"] == "CrossOrigin"
+    assert not REACHED
+
+
+@pytest.mark.parametrize("site", ["cross-site", "same-site"])
+@pytest.mark.parametrize(("method", "path", "template"), WRITES + SOCKETS)
+def test_fetch_metadata_of_another_site_is_refused_without_an_origin(client: TestClient, method: str, path: str,
+                                                                     template: str, site: str) -> None:
+    headers = {"sec-fetch-site": site}
+    if method == "WEBSOCKET":
+        with pytest.raises(WebSocketDenialResponse) as denied, client.websocket_connect(
+                path, headers={**OWN_HOST, **headers}):
+            pass
+        assert b"CrossOrigin" in denied.value.content
+        return
+    response = client.request(method, path, headers={**headers, "content-type": "application/json"},
+                              content=b"{}")
+    assert response.status_code == 403, (method, path, response.text)
+    assert not REACHED
+
+
+@pytest.mark.parametrize(("content_type", "source"), CORS_SIMPLE_TYPES)
+@pytest.mark.parametrize(("method", "path", "template"), WRITES)
+def test_no_route_reads_a_simple_content_type_it_did_not_declare(client: TestClient, method: str, path: str,
+                                                                 template: str, content_type: str,
+                                                                 source: str) -> None:
+    """A page can send these cross-origin without a preflight (`source`); an old browser may omit Origin."""
+    response = client.request(method, path, headers={"content-type": content_type}, content=b'{"confirm": true}')
+    if template == "/api/files/local" and content_type == "multipart/form-data":
+        assert response.status_code == 200  # the door declared it (and the Origin check covers browsers)
+        return
+    assert response.status_code == 415, (method, path, response.text)
+    assert response.json()["error"] == "UnsupportedMediaType"
+    assert not REACHED
+
+
+def test_own_pages_and_programs_without_origin_pass(client: TestClient) -> None:
+    for headers in ({}, {"origin": OWN, "sec-fetch-site": "same-origin"}, {"origin": "HTTP://LOCALHOST:8765",
+                                                                          "host": "localhost:8765"}):
+        response = client.post("/printer/print/start", json={"x": 1}, headers=headers)
+        assert response.status_code == 200, (headers, response.text)
+    assert REACHED == ["start"] * 3
+    with client.websocket_connect("/api/v1/events", headers={**OWN_HOST, "origin": OWN}) as ws:
+        ws.close()
+
+
+def test_bodies_past_their_limit_are_refused_before_the_route(client: TestClient) -> None:
+    big = b'{"text": "' + b"a" * JSON_BODY_LIMIT + b'"}'
+    response = client.post("/printer/print/start", content=big, headers={"content-type": "application/json"})
+    assert response.status_code == 413
+    assert "limit" in response.json()["message"]
+
+    def chunks() -> Iterator[bytes]:  # no declared length: counted as it arrives
+        yield from (big[i:i + 4096] for i in range(0, len(big), 4096))
+
+    response = client.post("/printer/print/start", content=chunks(), headers={"content-type": "application/json"})
+    assert response.status_code == 413
+    upload = client.post("/api/files/local", content=b"x" * (1024 + 64 * 1024 + 1),
+                         headers={"content-type": "multipart/form-data; boundary=x"})
+    assert upload.status_code == 413
+    refused = client.post("/printer/gcode/script", content=b"G28", headers={"content-type": "application/json"})
+    assert refused.status_code == 415
+    assert "takes no body" in refused.json()["message"]
+    assert not REACHED
+
+
+@pytest.mark.parametrize("depth", [MAX_JSON_DEPTH + 1, 1000, 100_000])
+def test_nested_json_is_a_400_with_a_message(client: TestClient, depth: int) -> None:
+    for body in ("[" * depth + "]" * depth, '{"a":' * depth + "1" + "}" * depth):
+        response = client.post("/printer/print/start", content=body.encode(),
+                               headers={"content-type": "application/json"})
+        assert response.status_code in (400, 413), response.text
+        assert response.json()["error"] in ("BadJSON", "BodyTooLarge")
+        if len(body) <= JSON_BODY_LIMIT:
+            assert response.status_code == 400
+            assert "nests deeper than" in response.json()["message"]
+    assert not REACHED
+
+
+def test_token_in_either_header() -> None:
+    with TestClient(app_with_doors(Policy(token="t0ken")), base_url=OWN) as guarded:
+        assert guarded.get("/api/v1/devices").status_code == 401
+        assert guarded.get("/api/v1/devices", headers={"x-api-key": "wrong"}).status_code == 401
+        assert guarded.get("/api/v1/devices", headers={"x-api-key": "t0ken"}).status_code == 200
+        assert guarded.get("/api/v1/devices", headers={"authorization": "Bearer t0ken"}).status_code == 200
+        assert guarded.post("/printer/print/start", json={}).status_code == 401  # a later route needs it too
+        assert guarded.post("/printer/print/start", json={}, headers={"x-api-key": "t0ken"}).status_code == 200
+        assert guarded.get("/").status_code == 200
+
+
+def test_allow_host_and_a_wildcard_listen() -> None:
+    named = Policy.for_listen("127.0.0.1", ["Printers.LAN."])
+    assert [named.host_allowed(h) for h in ("printers.lan", "PRINTERS.lan.", "evil.example", "192.168.1.5")] == [
+        True, True, False, False]
+    wide = Policy.for_listen("0.0.0.0")
+    assert [wide.host_allowed(h) for h in ("192.168.1.5", "::1", "[fe80::1]", "evil.example")] == [
+        True, True, True, False]
+    with TestClient(app_with_doors(named), base_url="http://printers.lan:8765") as client:
+        assert client.get("/api/v1/devices").status_code == 200
+        assert client.post("/printer/print/start", json={}, headers={"origin": "http://printers.lan:8765"}
+                           ).status_code == 200
+
+
+# ------------------------------------------------------------------------------------------------ hypothesis
+
+LABEL = st.from_regex(r"[a-z0-9]([a-z0-9-]{0,10}[a-z0-9])?", fullmatch=True)
+NAMES = st.lists(LABEL, min_size=1, max_size=4).map(".".join)
+
+
+@settings(max_examples=200, suppress_health_check=[HealthCheck.function_scoped_fixture], deadline=None)
+@given(name=NAMES, port=st.none() | st.integers(0, 65535))
+def test_any_name_but_loopback_is_refused(client: TestClient, name: str, port: int | None) -> None:
+    own = name == "localhost" or name.endswith(".localhost")
+    host = name + (f":{port}" if port is not None else "")
+    response = client.get("/api/v1/devices", headers={"host": host})
+    assert response.status_code == (200 if own else 403), host
+
+
+@settings(max_examples=200, suppress_health_check=[HealthCheck.function_scoped_fixture], deadline=None)
+@given(scheme=st.sampled_from(["http", "https", "ws", "null", ""]), host=NAMES | st.just("127.0.0.1"),
+       port=st.none() | st.integers(1, 65535))
+def test_an_origin_is_accepted_only_when_it_is_the_agent(client: TestClient, scheme: str, host: str,
+                                                         port: int | None) -> None:
+    origin = f"{scheme}://{host}" + (f":{port}" if port is not None else "") if scheme != "null" else "null"
+    ours = scheme in ("http", "https", "ws") and host == "127.0.0.1" and port == 8765  # (a TLS proxy: https)
+    response = client.post("/printer/print/start", json={}, headers={"origin": origin})
+    assert (response.status_code == 200) is ours, origin
+    assert same_origin(origin, "127.0.0.1:8765") is ours
+
+
+MEDIA = st.sampled_from(["application/json", "text/plain", "application/x-www-form-urlencoded",
+                         "multipart/form-data", "application/octet-stream", "text/json", "application/jsonx",
+                         "APPLICATION/JSON", "application/json-patch+json", ""])
+
+
+@settings(max_examples=200, suppress_health_check=[HealthCheck.function_scoped_fixture], deadline=None)
+@given(media=MEDIA, params=st.sampled_from(["", "; charset=utf-8", ";boundary=x", " ; charset=latin-1"]),
+       body=st.sampled_from([b"", b"{}", b'{"confirm": true}', b"a=1", b"\x00\xff"]))
+def test_json_routes_read_only_application_json(client: TestClient, media: str, params: str,
+                                                body: bytes) -> None:
+    REACHED.clear()
+    headers = {"content-type": media + params} if media else {}
+    response = client.post("/printer/print/start", content=body, headers=headers)
+    if media.lower() == "application/json":
+        assert response.status_code in (200, 400, 422), response.text
+        assert (response.status_code == 200) == (body in (b"{}", b'{"confirm": true}'))
+    elif media == "" and not body:
+        assert response.status_code == 422  # nothing sent: the route's own "field required"
+    else:
+        assert response.status_code == 415, (headers, body)
+        assert not REACHED
+
+
+@given(st.recursive(st.none() | st.booleans() | st.integers() | st.text(max_size=5),
+                    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=3), inner,
+                                                                                  max_size=3), max_leaves=40))
+def test_parse_json_takes_what_json_takes(value: Any) -> None:
+    import json
+
+    assert parse_json(json.dumps(value)) == value
+
+
+@given(st.integers(MAX_JSON_DEPTH + 1, 50_000), st.sampled_from(["[", '{"k":']))
+def test_parse_json_never_recurses_out(depth: int, opener: str) -> None:
+    closer = "]" if opener == "[" else "}"
+    with pytest.raises(BadJSON, match="nests deeper"):
+        parse_json(opener * depth + ("1" if opener != "[" else "") + closer * depth)
