@@ -110,6 +110,7 @@ class Library:
     # ------------------------------------------------------------------------------------------ lifecycle
 
     async def start(self) -> None:
+        self.machines.start()
         self._watcher = asyncio.create_task(self._watch(), name="library-watch")
 
     async def stop(self) -> None:

@@ -10,11 +10,13 @@ loading filament …), "error", "offline".
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from fabwire.errors import DeviceBusy
+from fabwire.agent.core import Subscription
+from fabwire.errors import DeviceBusy, InputError
 
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
@@ -32,6 +34,21 @@ PHASE_OF_SUMMARY: dict[str, str] = {
 
 STATE_CODE_PHASE: dict[int, str] = {9602: "cancelling", 9601: "paused"}
 """da Vinci state codes that say more than the summary (reference §3: 9602 "cancelling print")."""
+
+
+class _JobEnds(Subscription):
+    """Notes each job's end as it is published (synchronously: a request right after a cancel sees it)."""
+
+    def __init__(self, agent: Agent, machines: Machines) -> None:
+        super().__init__(agent, None)
+        self._machines = machines
+
+    def offer(self, event: dict[str, Any]) -> None:
+        if event["type"] == "job" and event["job"].get("state") in JOB_ENDS:
+            self._machines.job_ended(event["device"], event["job"]["state"])
+
+
+JOB_ENDS = frozenset({"done", "failed", "cancelled", "interrupted"})
 
 
 class MachineNotReady(DeviceBusy):
@@ -97,6 +114,18 @@ class Machines:
     def __init__(self, agent: Agent) -> None:
         self.agent = agent
         self._requested: dict[str, tuple[str, float]] = {}
+        self._ended: dict[str, tuple[str, object]] = {}
+        """device → (how its last job ended, the status the machine had last reported then)."""
+
+    def start(self) -> None:
+        """Follow the agent's job ends (see `job_ended`); the agent ends it with its other subscriptions."""
+        _JobEnds(self.agent, self)
+
+    def job_ended(self, device_id: str, outcome: str) -> None:
+        """A job just ended: until the machine is polled again, its last reported state is older than that end
+        (a cancelled print's "printing"), so the job's outcome tells the phase."""
+        with contextlib.suppress(InputError):
+            self._ended[device_id] = (outcome, self.agent.session(device_id).state.get("status"))
 
     def view(self, device: str) -> MachineView:
         """UnknownDevice (an InputError) when no machine has that name or id."""
@@ -135,6 +164,13 @@ class Machines:
         if isinstance(code, int) and code in STATE_CODE_PHASE:
             phase = STATE_CODE_PHASE[code]
         job = state.get("job")
+        ended = self._ended.get(session.info.id)
+        if ended is not None and job is None and online:
+            outcome, status_then = ended
+            if state.get("status") is status_then:  # not polled since: the outcome is the news
+                phase = "done" if outcome == "done" else "standby"
+            else:
+                del self._ended[session.info.id]
         asked = self._requested.get(session.info.id)
         if asked is not None:
             what, when = asked
