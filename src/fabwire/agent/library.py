@@ -48,6 +48,8 @@ QUEUE_MAX = 100
 NAME_MAX = 200
 _BAD_NAME = re.compile(r"[\x00-\x1f\x7f\\:*?\"<>|]")
 INDEX = "index.json"
+STAGED = ".upload-"
+"""The name prefix of an upload a door is still writing into a machine's files (see `staging`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +112,10 @@ class Library:
     # ------------------------------------------------------------------------------------------ lifecycle
 
     async def start(self) -> None:
+        """Follow the agent's events; uploads a door staged when the agent last stopped are removed."""
+        for leftover in self.root.glob(f"*/files/{STAGED}*"):
+            with contextlib.suppress(OSError):
+                leftover.unlink()
         self.machines.start()
         self._watcher = asyncio.create_task(self._watch(), name="library-watch")
 
@@ -210,9 +216,14 @@ class Library:
             return None
         return self.agent.claim_job(view.id, Path(clean_name(name)).name)
 
-    async def add(self, device: str, name: str, src: BinaryIO, *, start: bool = False,
+    def staging(self, device: str) -> Path:
+        """Where a door may write an upload for `add` to adopt (same file system: a rename, not a copy)."""
+        return self.root / _safe_dir(self.machines.view(device).id) / "files"
+
+    async def add(self, device: str, name: str, src: BinaryIO | Path, *, start: bool = False,
                   select: bool = False, claim: JobClaim | None = None) -> dict[str, Any]:
-        """Keep an upload (read from `src`) in the machine's library, and select and/or start it.
+        """Keep an upload (read from `src`, or a file written in `staging` and moved into place) in the machine's
+        library, and select and/or start it.
 
         Returns `{"file": entry, "job": job | None, "queued": bool}`. With `start`, the machine is claimed first
         (or `claim` is the one `claim_print` made before the upload was read)
@@ -363,14 +374,23 @@ class Library:
             prints["last"] = {"date": time.time(), "success": success}
             await self._save(device_id)
 
-    def _copy_in(self, device_id: str, name: str, src: BinaryIO) -> Path:
-        """The upload copied into the library under a generated name, at most the agent's upload limit."""
+    def _copy_in(self, device_id: str, name: str, src: BinaryIO | Path) -> Path:
+        """The upload copied (or, staged, moved) into the library under a generated name, at most the agent's
+        upload limit."""
         from fabwire.agent.jobs import UploadTooLarge
 
         folder = self.root / _safe_dir(device_id) / "files"
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{secrets.token_hex(8)}{Path(name).suffix.lower()}"
         limit = self.agent.jobs.max_upload_bytes
+        if isinstance(src, Path):
+            size = src.stat().st_size
+            if size > limit:
+                raise UploadTooLarge(f"the upload is over the limit of {limit:,} bytes")
+            if not size:
+                raise InputError("the upload is empty")
+            os.replace(src, path)
+            return path
         size = 0
         try:
             with path.open("wb") as out:

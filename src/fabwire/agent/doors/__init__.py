@@ -8,15 +8,19 @@ else the first Line-us) at the root as well.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, BinaryIO
 
 from fastapi import FastAPI, Request
 from starlette.requests import HTTPConnection
 
 from fabwire.agent.core import Agent
+from fabwire.agent.library import STAGED
 from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.errors import InputError
 
@@ -76,15 +80,30 @@ class Upload:
     fields: dict[str, str] = field(default_factory=dict)
     filename: str | None = None
     file: BinaryIO | None = None
+    path: Path | None = None
+    """Where the file part was written (in the directory given to `read_upload`); the library adopts it."""
     size: int = 0
 
+    def adopt(self) -> Path:
+        """The written file, closed, for the library to move into place (`close` still removes it if not)."""
+        if self.file is None or self.path is None:
+            raise InputError("send the file as the multipart field 'file'")
+        self.file.close()
+        return self.path
+
     def close(self) -> None:
+        """Close the file and remove it unless it was adopted (moved away)."""
         if self.file is not None:
             self.file.close()
+        if self.path is not None:
+            with contextlib.suppress(FileNotFoundError):
+                self.path.unlink()
 
 
-async def read_upload(request: Request, limit: int, before_file: Callable[[dict[str, str], str], None]) -> Upload:
-    """Stream a multipart/form-data body: plain fields into `fields`, the part named `file` to a temporary file.
+async def read_upload(request: Request, limit: int, before_file: Callable[[dict[str, str], str], None],
+                      directory: Path) -> Upload:
+    """Stream a multipart/form-data body: plain fields into `fields`, the part named `file` to a new file in
+    `directory` (`Upload.path`, removed by `Upload.close` unless moved away).
 
     `before_file(fields, filename)` runs when the file part begins, with the fields sent before it (PrusaSlicer,
     OrcaSlicer and the Moonraker hosts send `print` first), before a byte of the file is read: a print that
@@ -126,7 +145,10 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
             part["filename"] = filename.decode("utf-8", "replace")
             before_file(dict(upload.fields), file_name_of(part["filename"]))
             upload.filename = part["filename"]
-            upload.file = tempfile.TemporaryFile(prefix="fabwire-upload-")  # noqa: SIM115 - Upload.close
+            directory.mkdir(parents=True, exist_ok=True)
+            fd, name = tempfile.mkstemp(dir=directory, prefix=STAGED)
+            upload.path = Path(name)
+            upload.file = os.fdopen(fd, "w+b")
 
     def data(chunk: bytes, start: int, end: int) -> None:
         if part["filename"] is not None:

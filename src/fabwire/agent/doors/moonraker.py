@@ -309,7 +309,8 @@ class MoonrakerDoor:
                     claim = self.library.claim_print(view.id, f"{fields.get('path', '')}/{filename}")
                     claims.extend([claim] if claim is not None else [])
 
-            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file)
+            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file,
+                                     self.library.staging(view.id))
             try:
                 fields = form.fields
                 if form.file is None:
@@ -324,7 +325,7 @@ class MoonrakerDoor:
                         raise RpcError(422, f"checksum mismatch: the upload's SHA-256 is {digest}")
                 start = fields.get("print", "").strip().lower() == "true"
                 result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
-                                                form.file, start=start, select=start,
+                                                form.adopt(), start=start, select=start,
                                                 claim=claims[0] if claims else None)
             finally:
                 form.close()

@@ -349,7 +349,8 @@ class OctoPrintDoor:
                 claims.extend([claim] if claim is not None else [])
 
         try:
-            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file)
+            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file,
+                                     self.library.staging(view.id))
             try:
                 fields = form.fields
                 if form.file is None:
@@ -359,7 +360,7 @@ class OctoPrintDoor:
                 start = _true(fields.get("print"))
                 select = start or _true(fields.get("select"))
                 result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
-                                                form.file, start=start, select=select,
+                                                form.adopt(), start=start, select=select,
                                                 claim=claims[0] if claims else None)
             finally:
                 form.close()
