@@ -313,3 +313,15 @@ def test_a_print_refused_is_answered_before_the_file_is_sent(demo: RunningAgent)
                 answer += chunk
         assert answer.startswith(b"HTTP/1.1 409")
         assert client.post("/api/job", json={"command": "cancel"}).status_code == 204
+
+
+@pytest.mark.parametrize("print_", [True, False])
+def test_a_file_the_intake_refuses_is_400_and_not_kept_whether_printed_or_not(demo: RunningAgent,
+                                                                              print_: bool) -> None:
+    with demo.client() as client:
+        wait_idle(client)
+        response = send(client, "comment_only.gcode", b"; only a comment\n" * 10, print_=print_)
+        assert response.status_code == 400
+        assert "no commands" in response.json()["error"]
+        assert "comment_only.gcode" not in [f["name"] for f in client.get("/api/files").json()["files"]]
+        assert not printing(client)

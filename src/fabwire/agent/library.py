@@ -243,7 +243,8 @@ class Library:
         async with claim if claim is not None else contextlib.nullcontext():
             stored = await asyncio.to_thread(self._copy_in, device_id, name, src)
             try:
-                entry = await asyncio.to_thread(self._describe, device_id, name, stored, session.driver)
+                entry = await asyncio.to_thread(self._describe, device_id, name, stored, session.driver,
+                                                claim is None)
                 job = await self._feed(claim, device_id, entry) if claim is not None else None
             except BaseException:
                 with contextlib.suppress(OSError):
@@ -407,9 +408,10 @@ class Library:
             raise
         return path
 
-    def _describe(self, device_id: str, name: str, path: Path, driver: Driver) -> dict[str, Any]:
-        """The entry of a copied upload: the driver's check and figures, the previews, the checksum."""
-        meta = driver.describe_upload(Path(name).name, path)
+    def _describe(self, device_id: str, name: str, path: Path, driver: Driver, check: bool) -> dict[str, Any]:
+        """The entry of a copied upload: the driver's check (unless the job about to start checks it) and
+        figures, the previews, the checksum."""
+        meta = driver.describe_upload(Path(name).name, path, check=check)
         base = self.root / _safe_dir(device_id)
         digest = hashlib.sha256()
         with path.open("rb") as handle:

@@ -84,18 +84,18 @@ class XYZDriver(Driver):
         pieces, never whole."""
         self.describe_upload(name, path)
 
-    def describe_upload(self, name: str, path: Path) -> dict[str, Any]:
+    def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
         """`check_upload`, and the figures the intake reads for the .3w header (a G-code's comments, or its
-        moves where the comments are silent)."""
+        moves where the comments are silent); with `check` False, only what the figures need is read."""
         kind, head = intake.sniff(path, name)
         intake.require_printable(kind, name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
             with intake.open_input(path, name) as source:
-                stated, computed = intake.stream_metadata(source, name)
+                stated, computed = intake.stream_metadata(source, name, every_line=check)
             meta = stated.merged(computed) if computed is not None else stated
             return {"print_time_s": meta.print_time_s, "filament_mm": meta.filament_mm, "layers": meta.layers,
                     "slicer": meta.slicer}
-        if kind is intake.Kind.THREEW:
+        if kind is intake.Kind.THREEW and check:
             printjob.check_intact(inspect_3w(path), name)
         return {}
 
