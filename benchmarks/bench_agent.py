@@ -44,12 +44,12 @@ def _env() -> dict[str, str]:
     return env
 
 
-def _agent(ports: list[int], where: Path) -> tuple[subprocess.Popen[str], str]:
+def _agent(ports: list[int], where: Path, *extra: str) -> tuple[subprocess.Popen[str], str]:
     config = where / "devices.toml"
     config.write_text("".join(f'[devices.p{i}]\nkind = "xyz"\nurl = "tcp://127.0.0.1:{port}"\n\n'
                               for i, port in enumerate(ports)), encoding="utf-8")
     command = [sys.executable, "-m", "fabwire", "serve", "--listen", "127.0.0.1:0", "--config", str(config),
-               "--state-dir", str(where / "state")]
+               "--state-dir", str(where / "state"), *extra]
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=_env())
     assert proc.stdout is not None
     line = proc.stdout.readline()

@@ -42,10 +42,10 @@ class FiniteRange(click.FloatRange):
         self.open_ended = open_ended
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
-        number = super().convert(value, param, ctx)
+        number = click.FLOAT.convert(value, param, ctx)  # the finiteness first: "inf" is no number, not too large
         if not math.isfinite(number) and not (self.open_ended and number == math.inf):
             self.fail(f"{value!r} is not a finite number.", param, ctx)
-        return number
+        return super().convert(number, param, ctx)
 
 
 class App(msgspec.Struct):

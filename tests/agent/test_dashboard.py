@@ -9,7 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from playwright.sync_api import Browser, Page, expect, sync_playwright
+from playwright.sync_api import Browser, Page, expect
 
 from fabwire.samples import SAMPLE_GCODE, sample_path
 
@@ -17,22 +17,6 @@ from .agenttools import ARTIFACTS
 from .conftest import Bench, start_bench, stop_bench
 
 README_SCREENSHOT = Path(__file__).resolve().parents[2] / "docs" / "images" / "serve-dashboard.png"
-
-
-def chromium_path() -> str:
-    found = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None)
-    if found is None:
-        pytest.fail("the dashboard tests need Debian's chromium: run scripts/ensure-system-packages "
-                    "(or: sudo apt-get install chromium)")
-    return found
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    with sync_playwright() as playwright:
-        launched = playwright.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
-        yield launched
-        launched.close()
 
 
 @pytest.fixture

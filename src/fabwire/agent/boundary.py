@@ -479,8 +479,8 @@ def _too_large(rule: BodyRule, size: int | None) -> str:
     if rule.limit == 0:
         return "this request takes no body"
     what = "the upload" if rule.raw or MULTIPART_TYPE in rule.types else "the body"
-    said = f"is {size:,} bytes" if size is not None else "is larger than that"
-    return f"{what} {said}; the limit is {rule.limit:,} bytes" + (" (--max-upload)" if what == "the upload" else "")
+    said = f"is {size:,} bytes; the limit is" if size is not None else "is over the limit of"
+    return f"{what} {said} {rule.limit:,} bytes" + (" (--max-upload)" if what == "the upload" else "")
 
 
 async def _receive_within(receive: Receive) -> Message:

@@ -43,7 +43,8 @@ function number(value, unit) {
 async function call(method, path, body, raw) {
   const headers = {};
   if (token) headers.Authorization = `Bearer ${token}`;
-  if (body !== undefined && !raw) headers["Content-Type"] = "application/json";
+  // a file goes as it is, whatever type the system gives its name (an upload is never read as a form)
+  if (body !== undefined) headers["Content-Type"] = raw ? "application/octet-stream" : "application/json";
   const response = await fetch(API + path, {method, headers, body: raw ? body : body === undefined ? undefined
     : JSON.stringify(body)});
   if (response.status === 401) { askToken(); throw new Error("this agent needs its access token"); }
