@@ -10,11 +10,10 @@ from pathlib import Path
 
 import httpx
 import pytest
-from playwright.sync_api import Browser, Page, expect, sync_playwright
+from playwright.sync_api import Browser, Page, expect
 
 from .agenttools import ARTIFACTS, RunningAgent, start_agent, wait_for
 from .doortools import XYZ, multipart, printing, prusaslicer_gcode, wait_idle
-from .test_dashboard import chromium_path
 
 README_SCREENSHOT = Path(__file__).resolve().parents[2] / "docs" / "images" / "serve-library.png"
 
@@ -27,15 +26,12 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningAgent]:
 
 
 @pytest.fixture
-def page(demo: RunningAgent) -> Iterator[Page]:
-    with sync_playwright() as playwright:
-        browser: Browser = playwright.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
-        context = browser.new_context(viewport={"width": 1280, "height": 1100})
-        opened = context.new_page()
-        opened.goto(demo.url)
-        yield opened
-        context.close()
-        browser.close()
+def page(browser: Browser, demo: RunningAgent) -> Iterator[Page]:
+    context = browser.new_context(viewport={"width": 1280, "height": 1100})
+    opened = context.new_page()
+    opened.goto(demo.url)
+    yield opened
+    context.close()
 
 
 def keep(client: httpx.Client, name: str, data: bytes) -> None:
