@@ -49,7 +49,7 @@ def test_the_key_flow_is_open_and_hands_out_the_token_after_approval(guarded: Ru
 
 
 @pytest.mark.parametrize(("method", "path"), [("GET", "/api/version"), ("GET", "/api/job"),
-                                              ("GET", "/printers/printer/api/printer"), ("GET", "/server/info"),
+                                              ("GET", "/printers/printer/api/settings"), ("GET", "/server/info"),
                                               ("GET", "/printer/objects/query?print_stats"),
                                               ("GET", "/printers/line-us/server/files/list")])
 def test_every_door_route_takes_the_token_as_x_api_key(guarded: RunningAgent, method: str, path: str) -> None:
