@@ -311,3 +311,40 @@ def test_parse_json_never_recurses_out(depth: int, opener: str) -> None:
     closer = "]" if opener == "[" else "}"
     with pytest.raises(BadJSON, match="nests deeper"):
         parse_json(opener * depth + ("1" if opener != "[" else "") + closer * depth)
+
+
+@pytest.mark.parametrize(("path", "content_type"), [("/printer/print/start", "application/json"),
+                                                    ("/api/files/local", "multipart/form-data; boundary=x")])
+async def test_a_body_that_stops_arriving_ends_the_request(monkeypatch: pytest.MonkeyPatch, path: str,
+                                                           content_type: str) -> None:
+    """A client that declares a body and sends one piece of it: 408 after the pause, whether the boundary reads
+    the body (JSON) or the route streams it (an upload)."""
+    import asyncio
+
+    from fabwire.agent import boundary
+
+    monkeypatch.setattr(boundary, "BODY_IDLE_S", 0.2)
+    app = app_with_doors()
+    sent: list[dict[str, Any]] = []
+    pieces = [{"type": "http.request", "body": b"{", "more_body": True}]
+
+    async def receive() -> dict[str, Any]:
+        if pieces:
+            return pieces.pop()
+        await asyncio.sleep(3600)  # the rest never comes
+        raise AssertionError("unreachable")
+
+    async def send(message: dict[str, Any]) -> None:
+        sent.append(message)
+
+    raw_path, _, query = path.partition("?")
+    headers = [(b"host", b"127.0.0.1:8765"), (b"content-length", b"100")]
+    if content_type:
+        headers.append((b"content-type", content_type.encode()))
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST", "scheme": "http",
+             "path": raw_path, "raw_path": raw_path.encode(), "query_string": query.encode(), "root_path": "",
+             "headers": headers, "client": ("127.0.0.1", 1), "server": ("127.0.0.1", 8765)}
+    await asyncio.wait_for(app(scope, receive, send), 30)
+    assert sent[0]["status"] == 408, sent
+    assert b"stopped arriving" in b"".join(m.get("body", b"") for m in sent)
+    assert not REACHED

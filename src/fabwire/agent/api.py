@@ -75,7 +75,7 @@ def checked_address(body: NewDevice) -> str:
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody}
-                                           for code in (400, 401, 403, 404, 408, 409, 413, 415, 503, 504)}
+                                           for code in (400, 401, 403, 404, 408, 409, 413, 415, 503, 504, 507)}
 
 
 def _status_for(exc: BaseException) -> int:

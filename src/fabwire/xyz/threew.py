@@ -9,7 +9,6 @@ bound memory.
 from __future__ import annotations
 
 import contextlib
-import glob
 import math
 import os
 import re
@@ -282,9 +281,16 @@ def _lock(fd: int) -> bool:
     return True
 
 
+_PART = re.compile(r"^\..+\.[a-z0-9_]{8}\.part$")
+"""The temporaries `_atomic` makes (tempfile.mkstemp: prefix ".NAME.", eight random characters, ".part")."""
+
+
 def _sweep_parts(dst: Path) -> None:
-    """Remove the temporaries of runs that were killed while writing `dst` (each writer locks its own)."""
-    for stale in dst.parent.glob(f".{glob.escape(dst.name)}.*.part"):
+    """Remove the temporaries of runs that were killed while writing `dst`, or any other .3w beside it (each
+    writer locks its own, so one that can be locked has no writer)."""
+    for stale in dst.parent.glob(".*.part"):
+        if not _PART.match(stale.name) or not (stale.name.startswith(f".{dst.name}.") or ".3w." in stale.name):
+            continue
         with contextlib.suppress(OSError), open(stale, "rb") as handle:
             if _lock(handle.fileno()):
                 stale.unlink()
