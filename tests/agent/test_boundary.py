@@ -313,8 +313,8 @@ def test_parse_json_never_recurses_out(depth: int, opener: str) -> None:
         parse_json(opener * depth + ("1" if opener != "[" else "") + closer * depth)
 
 
-@pytest.mark.parametrize(("path", "content_type"), [("/printer/print/start", "application/json"),
-                                                    ("/api/files/local", "multipart/form-data; boundary=x")])
+@pytest.mark.parametrize(("path", "content_type"), [(START, "application/json"),
+                                                    (FILES, "multipart/form-data; boundary=x")])
 async def test_a_body_that_stops_arriving_ends_the_request(monkeypatch: pytest.MonkeyPatch, path: str,
                                                            content_type: str) -> None:
     """A client that declares a body and sends one piece of it: 408 after the pause, whether the boundary reads
