@@ -221,12 +221,13 @@ class Library:
         return self.root / _safe_dir(self.machines.view(device).id) / "files"
 
     async def add(self, device: str, name: str, src: BinaryIO | Path, *, start: bool = False,
-                  select: bool = False, claim: JobClaim | None = None) -> dict[str, Any]:
+                  select: bool = False, claim: JobClaim | None = None, claim_fed: bool = False) -> dict[str, Any]:
         """Keep an upload (read from `src`, or a file written in `staging` and moved into place) in the machine's
         library, and select and/or start it.
 
         Returns `{"file": entry, "job": job | None, "queued": bool}`. With `start`, the machine is claimed first
-        (or `claim` is the one `claim_print` made before the upload was read)
+        (or `claim` is the one `claim_print` made before the upload was read; `claim_fed`: the upload was
+        written to it as it arrived)
         (`Agent.claim_job`: atomic; `MachineNotReady`/`DeviceBusy`, HTTP 409, with the reason when it cannot
         print now) and nothing is kept when it refuses, unless its queue is on (then the file waits). InputError
         for a name or a file the machine cannot take (the intake's own words); nothing is kept then either."""
@@ -245,7 +246,7 @@ class Library:
             try:
                 entry = await asyncio.to_thread(self._describe, device_id, name, stored, session.driver,
                                                 claim is None)
-                job = await self._feed(claim, device_id, entry) if claim is not None else None
+                job = await self._feed(claim, device_id, entry, fed=claim_fed) if claim is not None else None
             except BaseException:
                 with contextlib.suppress(OSError):
                     stored.unlink()
@@ -327,11 +328,14 @@ class Library:
 
     # ------------------------------------------------------------------------------------------ plumbing
 
-    async def _feed(self, claim: JobClaim, device_id: str, entry: dict[str, Any]) -> dict[str, Any]:
-        """Stream a kept file into a claim and start the job (the claim's own checks run on its copy)."""
-        with self.path_of(device_id, entry).open("rb") as handle:
-            while chunk := await asyncio.to_thread(handle.read, CHUNK):
-                await claim.write(chunk)
+    async def _feed(self, claim: JobClaim, device_id: str, entry: dict[str, Any], *, fed: bool = False
+                    ) -> dict[str, Any]:
+        """Stream a kept file into a claim (unless it was `fed` as it arrived) and start the job (the claim's
+        own checks run on its copy)."""
+        if not fed:
+            with self.path_of(device_id, entry).open("rb") as handle:
+                while chunk := await asyncio.to_thread(handle.read, CHUNK):
+                    await claim.write(chunk)
         job = await claim.start()
         self._job_files[job["id"]] = (device_id, entry["name"])
         return job

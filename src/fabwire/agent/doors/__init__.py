@@ -11,7 +11,7 @@ import asyncio
 import contextlib
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -101,14 +101,15 @@ class Upload:
 
 
 async def read_upload(request: Request, limit: int, before_file: Callable[[dict[str, str], str], None],
-                      directory: Path) -> Upload:
+                      directory: Path, sinks: list[Callable[[bytes], Awaitable[None]]] | None = None) -> Upload:
     """Stream a multipart/form-data body: plain fields into `fields`, the part named `file` to a new file in
     `directory` (`Upload.path`, removed by `Upload.close` unless moved away).
 
     `before_file(fields, filename)` runs when the file part begins, with the fields sent before it (PrusaSlicer,
     OrcaSlicer and the Moonraker hosts send `print` first), before a byte of the file is read: a print that
     cannot start is refused there. InputError for a body that is no such form, UploadTooLarge over `limit`;
-    `file` is None when the form has no file part."""
+    `file` is None when the form has no file part. Each of `sinks` (which `before_file` may fill: a job claim's
+    `write`) gets the file's bytes too, as they arrive."""
     from python_multipart import MultipartParser
     from python_multipart.exceptions import MultipartParseError
     from python_multipart.multipart import parse_options_header
@@ -175,8 +176,11 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
         async for chunk in request.stream():
             parser.write(chunk)
             if pending and upload.file is not None:
-                await asyncio.to_thread(upload.file.write, bytes(pending))
+                piece = bytes(pending)
                 pending.clear()
+                await asyncio.to_thread(upload.file.write, piece)
+                for sink in sinks or ():
+                    await sink(piece)
         parser.finalize()
     except MultipartParseError as exc:
         upload.close()

@@ -299,6 +299,7 @@ class MoonrakerDoor:
         (SHA-256, 422 when it does not match). With print sent before the file (the slicers' Moonraker hosts),
         the machine is claimed before the file is read."""
         claims: list[JobClaim] = []
+        sinks: list[Callable[[bytes], Awaitable[None]]] = []
         try:
             view = machine_of(self.agent, request)
             if not view.takes_jobs:
@@ -307,10 +308,12 @@ class MoonrakerDoor:
             def before_file(fields: dict[str, str], filename: str) -> None:
                 if fields.get("print", "").strip().lower() == "true" and fields.get("root", ROOT) == ROOT:
                     claim = self.library.claim_print(view.id, f"{fields.get('path', '')}/{filename}")
-                    claims.extend([claim] if claim is not None else [])
+                    if claim is not None:
+                        claims.append(claim)
+                        sinks.append(claim.write)  # the job's copy is written as the file arrives
 
             form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file,
-                                     self.library.staging(view.id))
+                                     self.library.staging(view.id), sinks)
             try:
                 fields = form.fields
                 if form.file is None:
@@ -326,7 +329,7 @@ class MoonrakerDoor:
                 start = fields.get("print", "").strip().lower() == "true"
                 result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
                                                 form.adopt(), start=start, select=start,
-                                                claim=claims[0] if claims else None)
+                                                claim=claims[0] if claims else None, claim_fed=bool(claims))
             finally:
                 form.close()
         except FabwireError as exc:

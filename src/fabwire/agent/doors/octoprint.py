@@ -342,15 +342,18 @@ class OctoPrintDoor:
         if not view.takes_jobs:
             raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
         claims: list[JobClaim] = []
+        sinks: list[Callable[[bytes], Awaitable[None]]] = []
 
         def before_file(fields: dict[str, str], filename: str) -> None:
             if _true(fields.get("print")):
                 claim = self.library.claim_print(view.id, f"{fields.get('path', '')}/{filename}")
-                claims.extend([claim] if claim is not None else [])
+                if claim is not None:
+                    claims.append(claim)
+                    sinks.append(claim.write)  # the job's copy is written as the file arrives
 
         try:
             form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file,
-                                     self.library.staging(view.id))
+                                     self.library.staging(view.id), sinks)
             try:
                 fields = form.fields
                 if form.file is None:
@@ -361,7 +364,7 @@ class OctoPrintDoor:
                 select = start or _true(fields.get("select"))
                 result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
                                                 form.adopt(), start=start, select=select,
-                                                claim=claims[0] if claims else None)
+                                                claim=claims[0] if claims else None, claim_fed=bool(claims))
             finally:
                 form.close()
         finally:
