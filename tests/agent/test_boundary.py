@@ -42,6 +42,9 @@ FOREIGN_ORIGINS = ("http://evil.example", "null", "http://127.0.0.2:8765", "http
                    "chrome-extension://abcdef")
 """Pages that are not the agent's own: another site, a sandboxed frame or file: page (null), another loopback
 address or port (another program on this computer), an extension."""
+FAKE_DOOR = "/test-door"
+"""Where the routes added for the test live: beside the agent's real OctoPrint and Moonraker doors, not over them."""
+START, SCRIPT, FILES = (FAKE_DOOR + p for p in ("/printer/print/start", "/printer/gcode/script", "/api/files/local"))
 REACHED: list[str] = []
 """What the routes added for the test were reached with: must stay empty for every refused request."""
 
@@ -49,7 +52,7 @@ REACHED: list[str] = []
 def app_with_doors(policy: Policy | None = None) -> FastAPI:
     """The agent's app, plus routes added afterwards the way a print-host door adds them."""
     app = create_app(Agent(), max_upload_bytes=1024, policy=policy)
-    door = APIRouter()
+    door = APIRouter(prefix=FAKE_DOOR)
 
     @door.post("/api/files/local", openapi_extra={"requestBody": {"content": {"multipart/form-data": {}}}})
     async def files(request: Request) -> dict[str, bool]:
@@ -102,9 +105,11 @@ SOCKETS = [(m, p, t) for m, p, t in TABLE if m == "WEBSOCKET"]
 def test_the_walk_sees_every_route_including_later_ones() -> None:
     templates = {t for _, _, t in TABLE}
     assert {"/api/v1/devices/{device_id}/actions/{action}", "/api/v1/devices/{device_id}/jobs",
-            "/api/v1/jobs/{job_id}/cancel", "/api/v1/devices", "/api/files/local", "/printer/print/start",
-            "/printer/gcode/script", "/", "/static"} <= templates
-    assert SOCKETS == [("WEBSOCKET", "/api/v1/events", "/api/v1/events")]
+            "/api/v1/jobs/{job_id}/cancel", "/api/v1/devices", "/api/files/local", "/server/files/upload",
+            "/printers/{machine}/api/files/local", f"{FAKE_DOOR}/api/files/local", f"{FAKE_DOOR}/printer/print/start",
+            f"{FAKE_DOOR}/printer/gcode/script", "/", "/static"} <= templates
+    assert SOCKETS == [("WEBSOCKET", "/api/v1/events", "/api/v1/events"), ("WEBSOCKET", "/websocket", "/websocket"),
+                       ("WEBSOCKET", "/printers/x/websocket", "/printers/{machine}/websocket")]
 
 
 @pytest.mark.parametrize("host", FOREIGN_HOSTS)
@@ -167,8 +172,8 @@ def test_no_route_reads_a_simple_content_type_it_did_not_declare(client: TestCli
                                                                  source: str) -> None:
     """A page can send these cross-origin without a preflight (`source`); an old browser may omit Origin."""
     response = client.request(method, path, headers={"content-type": content_type}, content=b'{"confirm": true}')
-    if template == "/api/files/local" and content_type == "multipart/form-data":
-        assert response.status_code == 200  # the door declared it (and the Origin check covers browsers)
+    if template.endswith(("/api/files/local", "/server/files/upload")) and content_type == "multipart/form-data":
+        assert response.status_code != 415  # the door declared it (and the Origin check covers browsers)
         return
     assert response.status_code == 415, (method, path, response.text)
     assert response.json()["error"] == "UnsupportedMediaType"
@@ -178,7 +183,7 @@ def test_no_route_reads_a_simple_content_type_it_did_not_declare(client: TestCli
 def test_own_pages_and_programs_without_origin_pass(client: TestClient) -> None:
     for headers in ({}, {"origin": OWN, "sec-fetch-site": "same-origin"}, {"origin": "HTTP://LOCALHOST:8765",
                                                                           "host": "localhost:8765"}):
-        response = client.post("/printer/print/start", json={"x": 1}, headers=headers)
+        response = client.post(START, json={"x": 1}, headers=headers)
         assert response.status_code == 200, (headers, response.text)
     assert REACHED == ["start"] * 3
     with client.websocket_connect("/api/v1/events", headers={**OWN_HOST, "origin": OWN}) as ws:
@@ -187,19 +192,19 @@ def test_own_pages_and_programs_without_origin_pass(client: TestClient) -> None:
 
 def test_bodies_past_their_limit_are_refused_before_the_route(client: TestClient) -> None:
     big = b'{"text": "' + b"a" * JSON_BODY_LIMIT + b'"}'
-    response = client.post("/printer/print/start", content=big, headers={"content-type": "application/json"})
+    response = client.post(START, content=big, headers={"content-type": "application/json"})
     assert response.status_code == 413
     assert "limit" in response.json()["message"]
 
     def chunks() -> Iterator[bytes]:  # no declared length: counted as it arrives
         yield from (big[i:i + 4096] for i in range(0, len(big), 4096))
 
-    response = client.post("/printer/print/start", content=chunks(), headers={"content-type": "application/json"})
+    response = client.post(START, content=chunks(), headers={"content-type": "application/json"})
     assert response.status_code == 413
-    upload = client.post("/api/files/local", content=b"x" * (1024 + 64 * 1024 + 1),
+    upload = client.post(FILES, content=b"x" * (1024 + 64 * 1024 + 1),
                          headers={"content-type": "multipart/form-data; boundary=x"})
     assert upload.status_code == 413
-    refused = client.post("/printer/gcode/script", content=b"G28", headers={"content-type": "application/json"})
+    refused = client.post(SCRIPT, content=b"G28", headers={"content-type": "application/json"})
     assert refused.status_code == 415
     assert "takes no body" in refused.json()["message"]
     assert not REACHED
@@ -208,7 +213,7 @@ def test_bodies_past_their_limit_are_refused_before_the_route(client: TestClient
 @pytest.mark.parametrize("depth", [MAX_JSON_DEPTH + 1, 1000, 100_000])
 def test_nested_json_is_a_400_with_a_message(client: TestClient, depth: int) -> None:
     for body in ("[" * depth + "]" * depth, '{"a":' * depth + "1" + "}" * depth):
-        response = client.post("/printer/print/start", content=body.encode(),
+        response = client.post(START, content=body.encode(),
                                headers={"content-type": "application/json"})
         assert response.status_code in (400, 413), response.text
         assert response.json()["error"] in ("BadJSON", "BodyTooLarge")
@@ -224,8 +229,8 @@ def test_token_in_either_header() -> None:
         assert guarded.get("/api/v1/devices", headers={"x-api-key": "wrong"}).status_code == 401
         assert guarded.get("/api/v1/devices", headers={"x-api-key": "t0ken"}).status_code == 200
         assert guarded.get("/api/v1/devices", headers={"authorization": "Bearer t0ken"}).status_code == 200
-        assert guarded.post("/printer/print/start", json={}).status_code == 401  # a later route needs it too
-        assert guarded.post("/printer/print/start", json={}, headers={"x-api-key": "t0ken"}).status_code == 200
+        assert guarded.post(START, json={}).status_code == 401  # a later route needs it too
+        assert guarded.post(START, json={}, headers={"x-api-key": "t0ken"}).status_code == 200
         assert guarded.get("/").status_code == 200
 
 
@@ -238,7 +243,7 @@ def test_allow_host_and_a_wildcard_listen() -> None:
         True, True, True, False]
     with TestClient(app_with_doors(named), base_url="http://printers.lan:8765") as client:
         assert client.get("/api/v1/devices").status_code == 200
-        assert client.post("/printer/print/start", json={}, headers={"origin": "http://printers.lan:8765"}
+        assert client.post(START, json={}, headers={"origin": "http://printers.lan:8765"}
                            ).status_code == 200
 
 
@@ -264,7 +269,7 @@ def test_an_origin_is_accepted_only_when_it_is_the_agent(client: TestClient, sch
                                                          port: int | None) -> None:
     origin = f"{scheme}://{host}" + (f":{port}" if port is not None else "") if scheme != "null" else "null"
     ours = scheme in ("http", "https", "ws") and host == "127.0.0.1" and port == 8765  # (a TLS proxy: https)
-    response = client.post("/printer/print/start", json={}, headers={"origin": origin})
+    response = client.post(START, json={}, headers={"origin": origin})
     assert (response.status_code == 200) is ours, origin
     assert same_origin(origin, "127.0.0.1:8765") is ours
 
@@ -281,7 +286,7 @@ def test_json_routes_read_only_application_json(client: TestClient, media: str, 
                                                 body: bytes) -> None:
     REACHED.clear()
     headers = {"content-type": media + params} if media else {}
-    response = client.post("/printer/print/start", content=body, headers=headers)
+    response = client.post(START, content=body, headers=headers)
     if media.lower() == "application/json":
         assert response.status_code in (200, 400, 422), response.text
         assert (response.status_code == 200) == (body in (b"{}", b'{"confirm": true}'))
@@ -308,8 +313,8 @@ def test_parse_json_never_recurses_out(depth: int, opener: str) -> None:
         parse_json(opener * depth + ("1" if opener != "[" else "") + closer * depth)
 
 
-@pytest.mark.parametrize(("path", "content_type"), [("/printer/print/start", "application/json"),
-                                                    ("/api/files/local", "multipart/form-data; boundary=x")])
+@pytest.mark.parametrize(("path", "content_type"), [(START, "application/json"),
+                                                    (FILES, "multipart/form-data; boundary=x")])
 async def test_a_body_that_stops_arriving_ends_the_request(monkeypatch: pytest.MonkeyPatch, path: str,
                                                            content_type: str) -> None:
     """A client that declares a body and sends one piece of it: 408 after the pause, whether the boundary reads

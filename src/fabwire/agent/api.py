@@ -24,6 +24,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from fabwire import __version__
 from fabwire.agent.boundary import SUBPROTOCOL, Boundary, Policy, parse_json
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
+from fabwire.agent.doors import mount_doors
 from fabwire.agent.jobs import JobNotFound
 from fabwire.errors import (
     DeviceBusy,
@@ -254,6 +255,7 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
                 await receiver
 
     app.include_router(api)
+    mount_doors(app, agent)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
 
     @app.get("/", include_in_schema=False)

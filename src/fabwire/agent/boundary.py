@@ -26,6 +26,7 @@ import hmac
 import ipaddress
 import json
 import logging
+import re
 import socket
 from collections.abc import Awaitable, Callable, Iterable, Iterator, MutableMapping
 from dataclasses import dataclass, field
@@ -495,8 +496,14 @@ class _Counted:
         return message
 
 
+KEY_REQUEST_PATH = re.compile(r"^(?:/printers/[^/]+)?/plugin/appkeys/(?:probe|request(?:/[^/]+)?)$")
+"""The application-key flow (OctoPrint's Application Keys plugin, `fabwire.agent.appkeys`): an application without
+the token asks for it there and gets it only once the owner approves on the dashboard, so it takes no token."""
+
+
 def _public(path: str) -> bool:
-    return any(path == p or (p.endswith("/") and p != "/" and path.startswith(p)) for p in PUBLIC_PATHS)
+    return any(path == p or (p.endswith("/") and p != "/" and path.startswith(p)) for p in PUBLIC_PATHS) or \
+        KEY_REQUEST_PATH.match(path) is not None
 
 
 def error_body(exc: FabwireError) -> bytes:

@@ -242,6 +242,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
+    from fabwire.agent.advertise import Advertiser
     from fabwire.agent.api import create_app
     from fabwire.logsink import log_in_background
 
@@ -253,6 +254,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     bridge_task: asyncio.Task[None] | None = None
     notify_task: asyncio.Task[None] | None = None
     show: asyncio.Task[None] | None = None
+    advertiser: Advertiser | None = None
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
@@ -280,9 +282,13 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         if bridge is not None:
             bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port)),
                                                           server))
+        advertiser = Advertiser(agent, bound_host, bound_port)
+        await advertiser.start()
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
+        if advertiser is not None:
+            await advertiser.stop()
         for task in (show, bridge_task, notify_task):
             if task is not None:
                 task.cancel()

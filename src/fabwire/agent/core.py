@@ -157,12 +157,15 @@ class Agent:
                  first_attempt_s: float = 10.0) -> None:
         from fabwire.agent.history import History
         from fabwire.agent.jobs import JobStore
+        from fabwire.agent.library import Library
 
         self.state_dir = state_dir
         self.backoff = backoff
         self.first_attempt_s = first_attempt_s
         self.history = History(state_dir / "history.sqlite3" if state_dir else None, retention_s=retention_s)
         self.jobs = JobStore(self.history, state_dir / "uploads" if state_dir else None, max_upload_bytes)
+        self.library = Library(self, state_dir / "library" if state_dir else None)
+        """Uploads kept per machine, their previews and the print queues (see `fabwire.agent.library`)."""
         self._sessions: dict[str, Session] = {}
         self._subscribers: set[Subscription] = set()
         self._started = False
@@ -178,12 +181,14 @@ class Agent:
     async def start(self) -> None:
         await self.history.open()
         await self.jobs.recover()
+        await self.library.start()
         self._started = True
 
     async def stop(self) -> None:
         sessions = list(self._sessions.values())
         self._sessions.clear()
         await asyncio.gather(*(s.stop() for s in sessions), return_exceptions=True)
+        await self.library.stop()
         for sub in list(self._subscribers):
             sub.close()
         await self.history.close()

@@ -321,6 +321,8 @@ class Session:
         if job_type is None:
             raise InputError("a job needs a file or an action")
         self._require_online()
+        if filename is not None:  # 409 with the reason (a print still on the bed …), never accepted-then-failed
+            self.agent.library.machines.require_ready(self.info.id)
         if self._job is not None:
             raise DeviceBusy(f"{self.spec.name} is busy with job {self._job['id']} ({self._job['state']}): "
                              "cancel it or wait")

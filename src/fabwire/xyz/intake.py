@@ -624,12 +624,15 @@ def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
         return stream_metadata(src, str(path))
 
 
-def stream_metadata(src: BinaryIO, name: str) -> tuple[GcodeMetadata, GcodeMetadata | None]:
+def stream_metadata(src: BinaryIO, name: str, *, every_line: bool = True,
+                    ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has,
-    for lines no printer reads and for NUL bytes inside the G-code (NUL padding at its end is dropped, noted)."""
+    for lines no printer reads and for NUL bytes inside the G-code (NUL padding at its end is dropped, noted).
+    `every_line=False`: only the lines read for the figures are checked, when the caller has the whole file
+    checked anyway."""
     head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total)
-    if computed is None:  # the comments told everything: the lines are still each checked, however far down
+    if computed is None and every_line:  # the comments told everything: the lines are still each checked
         for _ in gcode_lines(src, name, end=total):
             pass
     padding = padding_note(name, stream_size(src), total)

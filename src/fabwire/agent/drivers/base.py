@@ -166,6 +166,14 @@ class Driver(ABC):
         """Refuse an upload (complete, at `path`) this device cannot run with the intake's InputError (naming
         it `name`), before it is accepted; kinds that take no files accept anything `job_types` lets through."""
 
+    def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
+        """`check_upload` (unless `check` is False: the job about to start checks the file itself), and what the
+        file says about itself for a file library: `print_time_s`, `filament_mm`, `layers`, `slicer` (None where
+        it does not say; kinds without such figures say nothing)."""
+        if check:
+            self.check_upload(name, path)
+        return {}
+
     @abstractmethod
     async def connect(self) -> Identity:
         """Open the link and identify the machine; raises LinkError/LinkTimeout/RemoteProtocolError."""

@@ -102,13 +102,22 @@ class XYZDriver(Driver):
         """The printer intake's refusal for what no printer takes (binary data, images, SVG, G-code without
         commands), so a bad file is refused at upload rather than failing the job later; read from disk in
         pieces, never whole."""
+        self.describe_upload(name, path)
+
+    def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
+        """`check_upload`, and the figures the intake reads for the .3w header (a G-code's comments, or its
+        moves where the comments are silent); with `check` False, only what the figures need is read."""
         kind, head = intake.sniff(path, name)
         intake.require_printable(kind, name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
             with intake.open_input(path, name) as source:
-                intake.stream_metadata(source, name)
-        elif kind is intake.Kind.THREEW:
+                stated, computed = intake.stream_metadata(source, name, every_line=check)
+            meta = stated.merged(computed) if computed is not None else stated
+            return {"print_time_s": meta.print_time_s, "filament_mm": meta.filament_mm, "layers": meta.layers,
+                    "slicer": meta.slicer}
+        if kind is intake.Kind.THREEW and check:
             printjob.check_intact(inspect_3w(path), name)
+        return {}
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)

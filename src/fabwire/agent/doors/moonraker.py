@@ -1,0 +1,544 @@
+"""The Moonraker-compatible door: what PrusaSlicer's/SuperSlicer's/OrcaSlicer's Moonraker host and Moonraker clients
+(Home Assistant's Moonraker integration through `moonraker-api`, mobile apps) call. Field meanings from
+moonraker.readthedocs.io (external API: server, printer, file manager, history, JSON-RPC notifications) and
+Klipper's status reference (print_stats, extruder, heater_bed, virtual_sdcard, display_status …).
+
+One table of methods (`METHODS`) serves both transports: HTTP (`GET /server/info` answers `{"result": …}`) and
+JSON-RPC 2.0 over the WebSocket `/websocket` (`server.info`), where `printer.objects.subscribe` is followed by
+`notify_status_update` notifications carrying what changed. A translation of `MachineView`, the library and the
+agent's jobs; nothing here decides anything.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import json
+import socket
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any, BinaryIO
+
+from fastapi import APIRouter, FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, JSONResponse, Response
+
+from fabwire import __version__
+from fabwire.agent.core import Agent
+from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, file_name_of, machine_of, read_upload
+from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.agent.session import JobClaim
+from fabwire.errors import FabwireError, InputError
+
+MOONRAKER_VERSION = "v0.9.3"
+"""The Moonraker release whose API this door follows."""
+API_VERSION = (1, 5, 0)
+ROOT = "gcodes"
+THUMBS = ".thumbs"
+
+PRINT_STATE: dict[str, str] = {
+    "standby": "standby", "printing": "printing", "pausing": "printing", "paused": "paused",
+    "resuming": "paused", "cancelling": "printing", "done": "complete", "busy": "standby", "error": "error",
+    "offline": "error",
+}
+"""Phase → Klipper's print_stats.state (standby, printing, paused, complete, cancelled, error)."""
+
+JOB_STATUS: dict[str, str] = {
+    "queued": "in_progress", "running": "in_progress", "done": "completed", "failed": "error",
+    "cancelled": "cancelled", "interrupted": "server_exit",
+}
+"""The agent's job state → Moonraker's history job status."""
+
+CANNOT_GCODE = "these machines take whole files, not G-code scripts: upload a file and print it"
+ERROR_CODES = {"method": -32601, "params": -32602}
+
+
+class RpcError(FabwireError):
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def _status_code(exc: BaseException) -> int:
+    from fabwire.agent.api import _status_for
+
+    return exc.code if isinstance(exc, RpcError) and exc.code > 0 else _status_for(exc)
+
+
+def _epoch(iso: str | None) -> float | None:
+    return datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp() if iso else None
+
+
+@dataclass
+class Call:
+    """One method call: the machine addressed and the parameters (query/form/JSON for HTTP, `params` for RPC)."""
+
+    view: MachineView
+    params: dict[str, Any]
+    base: str
+    connection: Connection | None = None
+
+
+Method = Callable[["MoonrakerDoor", Call], Awaitable[Any]]
+
+
+class Connection:
+    """A WebSocket client: its id and its subscription (object → attributes, None for all)."""
+
+    counter = 0
+
+    def __init__(self) -> None:
+        Connection.counter += 1
+        self.id = Connection.counter
+        self.subscribed: dict[str, list[str] | None] = {}
+        self.sent: dict[str, dict[str, Any]] = {}
+
+
+class MoonrakerDoor:
+    def __init__(self, agent: Agent) -> None:
+        self.agent = agent
+        self.library = agent.library
+        self.connections: set[Connection] = set()
+        self._background: set[asyncio.Task[Any]] = set()
+
+    # ------------------------------------------------------------------------------------------ objects
+
+    def objects(self, view: MachineView) -> dict[str, dict[str, Any]]:
+        """Every printer object this machine has, with every attribute (Klipper's status reference)."""
+        entry = self.library.file_of_job(view.job)
+        filename = entry["name"] if entry else ((view.job or {}).get("filename") or "")
+        meta = (entry or {}).get("meta") or {}
+        active = view.job is not None or view.printing
+        fraction = round((view.progress_percent or 0.0) / 100.0, 4) if active else 0.0
+        elapsed = float(view.elapsed_s or 0.0) if active else 0.0
+        filament = meta.get("filament_mm")
+        out: dict[str, dict[str, Any]] = {
+            "webhooks": {"state": "ready" if view.online else "shutdown",
+                         "state_message": "Printer is ready" if view.online else view.message},
+            "print_stats": {"filename": filename, "total_duration": elapsed, "print_duration": elapsed,
+                            "filament_used": round(filament * fraction, 1) if filament else 0.0,
+                            "state": PRINT_STATE[view.phase],
+                            "message": view.error or (view.message if view.phase != "standby" else ""),
+                            "info": {"total_layer": meta.get("layers"), "current_layer": None}},
+            "virtual_sdcard": {"file_path": filename or None, "progress": fraction, "is_active": view.printing,
+                               "file_position": 0, "file_size": (entry or {}).get("size") or 0},
+            "display_status": {"progress": fraction, "message": view.message},
+            "pause_resume": {"is_paused": view.phase == "paused"},
+            "idle_timeout": {"state": "Printing" if view.printing else "Idle", "printing_time": elapsed},
+            "toolhead": {"homed_axes": "", "position": [0.0, 0.0, 0.0, 0.0], "status": "Ready",
+                         "print_time": elapsed, "estimated_print_time": float(meta.get("print_time_s") or 0)},
+        }
+        if view.extruder_c is not None or view.extruder_target_c is not None:
+            out["extruder"] = {"temperature": view.extruder_c, "target": view.extruder_target_c or 0.0,
+                               "power": None, "can_extrude": True}
+        if view.bed_c is not None or view.bed_target_c is not None:
+            out["heater_bed"] = {"temperature": view.bed_c, "target": view.bed_target_c or 0.0, "power": None}
+        return out
+
+    @staticmethod
+    def _wanted(objects: object) -> dict[str, list[str] | None]:
+        if not isinstance(objects, dict):
+            raise RpcError(400, 'objects must be an object: {"objects": {"print_stats": null}}')
+        wanted: dict[str, list[str] | None] = {}
+        for name, attrs in objects.items():
+            if attrs is not None and (not isinstance(attrs, list) or not all(isinstance(a, str) for a in attrs)):
+                raise RpcError(400, f"the attributes of {name!r} must be a list of names or null")
+            wanted[str(name)] = attrs or None
+        return wanted
+
+    @staticmethod
+    def _pick(objects: dict[str, dict[str, Any]], wanted: dict[str, list[str] | None]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for name, attrs in wanted.items():
+            if name in objects:  # Klipper leaves out objects it does not have
+                values = objects[name]
+                out[name] = dict(values) if attrs is None else {a: values[a] for a in attrs if a in values}
+        return out
+
+    # ------------------------------------------------------------------------------------------ methods
+
+    async def server_info(self, call: Call) -> dict[str, Any]:
+        return {"klippy_connected": call.view.online, "klippy_state": "ready" if call.view.online else "disconnected",
+                "components": ["file_manager", "history", "websockets", "octoprint_compat"],
+                "failed_components": [], "registered_directories": [ROOT], "warnings": [],
+                "websocket_count": len(self.connections), "moonraker_version": f"{MOONRAKER_VERSION}-fabwire",
+                "missing_klippy_requirements": [], "api_version": list(API_VERSION),
+                "api_version_string": ".".join(map(str, API_VERSION))}
+
+    async def printer_info(self, call: Call) -> dict[str, Any]:
+        view = call.view
+        return {"state": "ready" if view.online else "shutdown",
+                "state_message": "Printer is ready" if view.online else view.message,
+                "hostname": socket.gethostname(), "software_version": f"fabwire {__version__}",
+                "cpu_info": view.model or view.kind, "klipper_path": "", "python_path": "", "log_file": "",
+                "config_file": "", "app": "fabwire"}
+
+    async def objects_list(self, call: Call) -> dict[str, Any]:
+        return {"objects": list(self.objects(call.view))}
+
+    async def objects_query(self, call: Call) -> dict[str, Any]:
+        wanted = self._wanted(call.params.get("objects", {}))
+        return {"eventtime": time.monotonic(), "status": self._pick(self.objects(call.view), wanted)}
+
+    async def objects_subscribe(self, call: Call) -> dict[str, Any]:
+        wanted = self._wanted(call.params.get("objects", {}))
+        status = self._pick(self.objects(call.view), wanted)
+        if call.connection is not None:
+            call.connection.subscribed = wanted
+            call.connection.sent = json.loads(json.dumps(status))
+        return {"eventtime": time.monotonic(), "status": status}
+
+    async def print_start(self, call: Call) -> str:
+        filename = call.params.get("filename")
+        if not isinstance(filename, str) or not filename:
+            raise RpcError(400, "printer.print.start needs the parameter filename")
+        await self.library.start_print(call.view.id, filename.removeprefix(f"{ROOT}/"))
+        return "ok"
+
+    async def print_pause(self, call: Call) -> str:
+        return await self._act(call.view, "pause", "pausing")
+
+    async def print_resume(self, call: Call) -> str:
+        return await self._act(call.view, "resume", "resuming")
+
+    async def print_cancel(self, call: Call) -> str:
+        view = call.view
+        if view.job is None and not view.printing:
+            raise TakesNoJobs(f"{view.name} is not printing: there is nothing to cancel")
+        self.library.machines.requested(view.id, "cancelling")
+        work = (self.agent.cancel_job(view.job["id"], confirm=True) if view.job is not None
+                else self.agent.act(view.id, "cancel", {"confirm": True}))
+        task = asyncio.ensure_future(work)  # the machine takes its time to stop; its end arrives as updates
+        self._background.add(task)
+        task.add_done_callback(self._background.discard)
+        with contextlib.suppress(TimeoutError, asyncio.TimeoutError):
+            await asyncio.wait_for(asyncio.shield(task), 2.0)
+        return "ok"
+
+    async def _act(self, view: MachineView, action: str, shown: str) -> str:
+        applicable = (self.agent.state(view.id).get("summary") or {}).get("actions") or []
+        if action not in applicable:
+            raise TakesNoJobs(f"{view.name} cannot {action} now (it is {view.phase})")
+        await self.agent.act(view.id, action, {})
+        self.library.machines.requested(view.id, shown)
+        return "ok"
+
+    async def gcode_script(self, call: Call) -> str:
+        raise TakesNoJobs(CANNOT_GCODE)
+
+    def _file(self, entry: dict[str, Any]) -> dict[str, Any]:
+        return {"path": entry["name"], "modified": entry["uploaded"], "size": entry["size"], "permissions": "rw"}
+
+    async def files_list(self, call: Call) -> list[dict[str, Any]]:
+        root = call.params.get("root", ROOT)
+        if root != ROOT:
+            raise RpcError(400, f"only the root {ROOT!r} is kept here, not {root!r}")
+        return [self._file(e) for e in self.library.files(call.view.id)] if call.view.takes_jobs else []
+
+    async def files_metadata(self, call: Call) -> dict[str, Any]:
+        name = call.params.get("filename")
+        if not isinstance(name, str) or not name:
+            raise RpcError(400, "server.files.metadata needs the parameter filename")
+        entry = self.library.get(call.view.id, name.removeprefix(f"{ROOT}/"))
+        meta = entry["meta"]
+        folder = entry["name"].rsplit("/", 1)[0] + "/" if "/" in entry["name"] else ""
+        return {"filename": entry["name"], "size": entry["size"], "modified": entry["uploaded"],
+                "slicer": meta.get("slicer"), "slicer_version": None, "layer_count": meta.get("layers"),
+                "estimated_time": meta.get("print_time_s"), "filament_total": meta.get("filament_mm"),
+                "print_start_time": None, "job_id": None,
+                "thumbnails": [{"width": t["width"], "height": t["height"], "size": t["size"],
+                                "relative_path": f"{THUMBS}/{t['stored']}",
+                                "thumbnail_path": f"{folder}{THUMBS}/{t['stored']}"}
+                               for t in sorted(entry["thumbnails"], key=lambda t: t["width"] * t["height"])]}
+
+    async def files_delete(self, call: Call) -> dict[str, Any]:
+        path = str(call.params.get("path", "")).removeprefix(f"{ROOT}/")
+        entry = self.library.get(call.view.id, path)
+        await self.library.delete(call.view.id, path)
+        return {"item": {**self._file(entry), "root": ROOT}, "action": "delete_file"}
+
+    async def history_list(self, call: Call) -> dict[str, Any]:
+        try:
+            limit = max(1, min(int(call.params.get("limit", 50)), 1000))
+            start = max(0, int(call.params.get("start", 0)))
+        except (TypeError, ValueError):
+            raise RpcError(400, "limit and start must be whole numbers") from None
+        jobs = await self.agent.jobs.list(call.view.id, limit + start)
+        names = {e["name"].rsplit("/", 1)[-1] for e in self.library.files(call.view.id)}
+        out = []
+        for job in jobs[start:]:
+            began, ended = _epoch(job.get("started")), _epoch(job.get("finished"))
+            duration = (ended or time.time()) - began if began else 0.0
+            out.append({"job_id": job["id"], "filename": job.get("filename") or job["type"],
+                        "exists": job.get("filename") in names, "status": JOB_STATUS.get(job["state"], "error"),
+                        "start_time": began or _epoch(job.get("created")), "end_time": ended,
+                        "print_duration": duration, "total_duration": duration, "filament_used": 0.0,
+                        "metadata": {"size": job.get("size_bytes")}, "auxiliary_data": []})
+        return {"count": len(out), "jobs": out}
+
+    async def websocket_id(self, call: Call) -> dict[str, Any]:
+        return {"websocket_id": call.connection.id if call.connection else 0}
+
+    async def identify(self, call: Call) -> dict[str, Any]:
+        return {"connection_id": call.connection.id if call.connection else 0}
+
+    # ------------------------------------------------------------------------------------------ HTTP
+
+    async def http(self, request: Request, method: Method, params: dict[str, Any]) -> Response:
+        try:
+            view = machine_of(self.agent, request)
+            result = await method(self, Call(view, params, str(request.base_url)))
+        except FabwireError as exc:
+            return _error(_status_code(exc), str(exc))
+        return JSONResponse({"result": result})
+
+    async def upload(self, request: Request) -> Response:
+        """POST /server/files/upload: multipart `file`, `root` (gcodes), `path`, `print` ("true"), `checksum`
+        (SHA-256, 422 when it does not match). With print sent before the file (the slicers' Moonraker hosts),
+        the machine is claimed before the file is read."""
+        claims: list[JobClaim] = []
+        sinks: list[Callable[[bytes], Awaitable[None]]] = []
+        try:
+            view = machine_of(self.agent, request)
+            if not view.takes_jobs:
+                raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
+
+            def before_file(fields: dict[str, str], filename: str) -> None:
+                if fields.get("print", "").strip().lower() == "true" and fields.get("root", ROOT) == ROOT:
+                    claim = self.library.claim_print(view.id, f"{fields.get('path', '')}/{filename}")
+                    if claim is not None:
+                        claims.append(claim)
+                        sinks.append(claim.write)  # the job's copy is written as the file arrives
+
+            form = await read_upload(request, self.agent.jobs.max_upload_bytes, before_file,
+                                     self.library.staging(view.id), sinks)
+            try:
+                fields = form.fields
+                if form.file is None:
+                    raise InputError("send the file as the multipart field 'file'")
+                root = fields.get("root") or ROOT
+                if root != ROOT:
+                    raise RpcError(400, f"uploads go to the root {ROOT!r} here, not {root!r}")
+                checksum = fields.get("checksum", "").strip().lower()
+                if checksum:
+                    digest = await asyncio.to_thread(_sha256, form.file)
+                    if digest != checksum:
+                        raise RpcError(422, f"checksum mismatch: the upload's SHA-256 is {digest}")
+                start = fields.get("print", "").strip().lower() == "true"
+                result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
+                                                form.adopt(), start=start, select=start,
+                                                claim=claims[0] if claims else None, claim_fed=bool(claims))
+            finally:
+                form.close()
+        except FabwireError as exc:
+            return _error(_status_code(exc), str(exc))
+        finally:
+            for claim in claims:
+                claim.release()
+        entry = result["file"]
+        return JSONResponse({"result": {"item": {**self._file(entry), "root": ROOT},
+                                        "print_started": result["job"] is not None, "print_queued": result["queued"],
+                                        "action": "create_file"}}, status_code=201)
+
+    async def serve_file(self, request: Request, path: str) -> Response:
+        """GET /server/files/gcodes/PATH: a kept file, or a preview under `.thumbs/`."""
+        try:
+            view = machine_of(self.agent, request)
+            parts = path.split("/")
+            if THUMBS in parts[:-1]:
+                stored = parts[-1]
+                for entry in self.library.files(view.id):
+                    for index, thumb in enumerate(sorted(entry["thumbnails"],
+                                                         key=lambda t: t["width"] * t["height"])):
+                        if thumb["stored"] == stored:
+                            image, media = self.library.thumbnail(view.id, entry["name"], index)
+                            return Response(image, media_type=media)
+                raise RpcError(404, f"no preview {stored!r}")
+            entry = self.library.get(view.id, path)
+            return FileResponse(str(self.library.path_of(view.id, entry)), media_type="text/plain",
+                                filename=entry["name"].rsplit("/", 1)[-1])
+        except FabwireError as exc:
+            return _error(_status_code(exc), str(exc))
+
+    # ------------------------------------------------------------------------------------------ WebSocket
+
+    async def websocket(self, websocket: WebSocket) -> None:
+        """JSON-RPC 2.0: requests answered in order; `notify_status_update` [changes, eventtime] after a
+        subscription whenever a subscribed value changes."""
+        try:
+            view = machine_of(self.agent, websocket)
+        except FabwireError as exc:
+            await websocket.close(code=4404, reason=str(exc)[:120])
+            return
+        await websocket.accept()
+        connection = Connection()
+        self.connections.add(connection)
+        subscription = self.agent.subscribe(view.id)
+        receiver: asyncio.Future[Any] = asyncio.ensure_future(websocket.receive_text())
+        events: asyncio.Future[Any] = asyncio.ensure_future(anext(subscription))
+        try:
+            while True:
+                done, _ = await asyncio.wait({receiver, events}, return_when=asyncio.FIRST_COMPLETED)
+                if events in done:
+                    events.result()
+                    await self._notify(websocket, connection, view.id)
+                    events = asyncio.ensure_future(anext(subscription))
+                if receiver in done:
+                    reply = await self._rpc(receiver.result(), view.id, connection, str(websocket.base_url))
+                    if reply is not None:
+                        await websocket.send_text(json.dumps(reply))
+                    receiver = asyncio.ensure_future(websocket.receive_text())
+        except (WebSocketDisconnect, ConnectionError, RuntimeError, StopAsyncIteration):
+            pass
+        finally:
+            self.connections.discard(connection)
+            subscription.close()
+            for future in (receiver, events):
+                future.cancel()
+                with contextlib.suppress(BaseException):
+                    await future
+
+    async def _notify(self, websocket: WebSocket, connection: Connection, device_id: str) -> None:
+        if not connection.subscribed:
+            return
+        current = json.loads(json.dumps(self._pick(self.objects(self.library.machines.view(device_id)),
+                                                   connection.subscribed)))
+        changes: dict[str, Any] = {}
+        for name, values in current.items():
+            before = connection.sent.get(name, {})
+            diff = {k: v for k, v in values.items() if before.get(k, object()) != v}
+            if diff:
+                changes[name] = diff
+        if changes:
+            connection.sent = current
+            await websocket.send_text(json.dumps({"jsonrpc": "2.0", "method": "notify_status_update",
+                                                  "params": [changes, time.monotonic()]}))
+
+    async def _rpc(self, text: str, device_id: str, connection: Connection, base: str) -> dict[str, Any] | None:
+        try:
+            message = json.loads(text)
+        except json.JSONDecodeError:
+            return {"jsonrpc": "2.0", "error": {"code": -32700, "message": "Parse error"}, "id": None}
+        if not isinstance(message, dict) or not isinstance(message.get("method"), str):
+            return {"jsonrpc": "2.0", "error": {"code": -32600, "message": "Invalid Request"}, "id": None}
+        rpc_id = message.get("id")
+        method = METHODS.get(message["method"])
+        params = message.get("params") or {}
+        if method is None:
+            error: dict[str, Any] = {"code": ERROR_CODES["method"], "message": f"Method not found: "
+                                     f"{message['method'][:80]}"}
+        elif not isinstance(params, dict):
+            error = {"code": ERROR_CODES["params"], "message": "params must be an object"}
+        else:
+            try:
+                view = self.library.machines.view(device_id)
+                result = await method(self, Call(view, params, base, connection))
+            except FabwireError as exc:
+                error = {"code": _status_code(exc), "message": str(exc)}
+            else:
+                return {"jsonrpc": "2.0", "result": result, "id": rpc_id} if rpc_id is not None else None
+        return {"jsonrpc": "2.0", "error": error, "id": rpc_id} if rpc_id is not None else None
+
+
+def _error(status: int, message: str) -> JSONResponse:
+    return JSONResponse({"error": {"code": status, "message": message, "traceback": None}}, status_code=status)
+
+
+def _sha256(file: BinaryIO) -> str:
+    digest = hashlib.sha256()
+    file.seek(0)
+    while chunk := file.read(1 << 20):
+        digest.update(chunk)
+    file.seek(0)
+    return digest.hexdigest()
+
+
+METHODS: dict[str, Method] = {
+    "server.info": MoonrakerDoor.server_info,
+    "printer.info": MoonrakerDoor.printer_info,
+    "printer.objects.list": MoonrakerDoor.objects_list,
+    "printer.objects.query": MoonrakerDoor.objects_query,
+    "printer.objects.subscribe": MoonrakerDoor.objects_subscribe,
+    "printer.print.start": MoonrakerDoor.print_start,
+    "printer.print.pause": MoonrakerDoor.print_pause,
+    "printer.print.resume": MoonrakerDoor.print_resume,
+    "printer.print.cancel": MoonrakerDoor.print_cancel,
+    "printer.gcode.script": MoonrakerDoor.gcode_script,
+    "server.files.list": MoonrakerDoor.files_list,
+    "server.files.metadata": MoonrakerDoor.files_metadata,
+    "server.files.delete_file": MoonrakerDoor.files_delete,
+    "server.history.list": MoonrakerDoor.history_list,
+    "server.websocket.id": MoonrakerDoor.websocket_id,
+    "server.connection.identify": MoonrakerDoor.identify,
+}
+"""JSON-RPC method → its implementation (the HTTP routes below call the same ones)."""
+
+HTTP_ROUTES: tuple[tuple[str, str, str], ...] = (
+    ("GET", "/server/info", "server.info"),
+    ("GET", "/printer/info", "printer.info"),
+    ("GET", "/printer/objects/list", "printer.objects.list"),
+    ("GET", "/printer/objects/query", "printer.objects.query"),
+    ("POST", "/printer/objects/query", "printer.objects.query"),
+    ("POST", "/printer/objects/subscribe", "printer.objects.subscribe"),
+    ("POST", "/printer/print/start", "printer.print.start"),
+    ("POST", "/printer/print/pause", "printer.print.pause"),
+    ("POST", "/printer/print/resume", "printer.print.resume"),
+    ("POST", "/printer/print/cancel", "printer.print.cancel"),
+    ("POST", "/printer/gcode/script", "printer.gcode.script"),
+    ("GET", "/server/files/list", "server.files.list"),
+    ("GET", "/server/files/metadata", "server.files.metadata"),
+    ("GET", "/server/history/list", "server.history.list"),
+)
+"""(HTTP method, path, the JSON-RPC method it is): moonraker.readthedocs.io, external API."""
+
+
+async def _params(request: Request) -> dict[str, Any]:
+    """Query arguments (`?print_stats&extruder=temperature,target` → objects for the object routes), then a
+    JSON body's members."""
+    params: dict[str, Any] = {}
+    if request.url.path.endswith("/objects/query") or request.url.path.endswith("/objects/subscribe"):
+        objects = {k: (v.split(",") if v else None) for k, v in request.query_params.multi_items()}
+        if objects:
+            params["objects"] = objects
+    else:
+        params.update(request.query_params)
+    if request.method == "POST" and request.headers.get("content-type", "").startswith("application/json"):
+        raw = await request.body()
+        try:
+            body = json.loads(raw) if raw.strip() else {}
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            raise RpcError(400, "the body is not JSON") from None
+        if not isinstance(body, dict):
+            raise RpcError(400, "the body must be a JSON object")
+        params.update(body)
+    return params
+
+
+def mount(app: FastAPI, agent: Agent) -> None:
+    """Add the Moonraker-compatible routes, for the default machine and under `/printers/NAME`."""
+    door = MoonrakerDoor(agent)
+
+    def route(rpc: str) -> Callable[[Request], Awaitable[Response]]:
+        async def endpoint(request: Request) -> Response:
+            try:
+                params = await _params(request)
+            except RpcError as exc:
+                return _error(exc.code, str(exc))
+            return await door.http(request, METHODS[rpc], params)
+
+        return endpoint
+
+    async def delete_file(request: Request, path: str) -> Response:
+        return await door.http(request, METHODS["server.files.delete_file"], {"path": path})
+
+    for prefix in PREFIXES:
+        router = APIRouter(prefix=prefix, include_in_schema=False)
+        for verb, path, rpc in HTTP_ROUTES:
+            router.add_api_route(path, route(rpc), methods=[verb], openapi_extra=JSON_BODY if verb == "POST" else None)
+        router.add_api_route("/server/files/upload", door.upload, methods=["POST"], openapi_extra=MULTIPART_BODY)
+        router.add_api_route(f"/server/files/{ROOT}/{{path:path}}", door.serve_file, methods=["GET"])
+        router.add_api_route(f"/server/files/{ROOT}/{{path:path}}", delete_file, methods=["DELETE"])
+        router.add_api_websocket_route("/websocket", door.websocket)
+        app.include_router(router)

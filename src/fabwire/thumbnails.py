@@ -1,0 +1,124 @@
+"""Preview images that slicers embed in G-code comments, as blocks of base64 text between two marker lines.
+
+    ; thumbnail begin 220x124 5488        <- WIDTHxHEIGHT and the length of the base64 text
+    ; iVBORw0KGgoAAAANSUhEUgAAANwAAAB8...  <- the image, base64, wrapped at 78 characters
+    ; thumbnail end
+
+`BLOCKS` is the table of the markers slicers write, each row naming its source. The blocks sit in the leading
+comments, before the first command; `read_thumbnails` looks no further than `MAX_SCAN` bytes.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import io
+import re
+from dataclasses import dataclass
+from typing import BinaryIO
+
+MAX_SCAN = 16 << 20
+"""Bytes of leading comments read at most (a 600x600 PNG preview is well under 1 MB of base64)."""
+MAX_IMAGE = 4 << 20
+"""The largest single preview kept (decoded bytes)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Block:
+    marker: str
+    """The word before `begin`/`end`."""
+    format: str
+    """"png", "jpg" or "qoi": what the decoded bytes are."""
+    source: str
+
+
+BLOCKS: tuple[Block, ...] = (
+    Block("thumbnail", "png", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (PNG); OrcaSlicer the same; "
+          "Cura's CreateThumbnail post-processing script"),
+    Block("thumbnail_JPG", "jpg", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (JPG)"),
+    Block("thumbnail_QOI", "qoi", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (QOI, for the MK4 and XL)"),
+)
+_BY_MARKER = {b.marker.lower(): b for b in BLOCKS}
+_BEGIN = re.compile(rb"^;[ \t]*(thumbnail(?:_[A-Za-z0-9]+)?)[ \t]+begin[ \t]+([0-9]+)[xX]([0-9]+)(?:[ \t]+([0-9]+))?",
+                    re.IGNORECASE)
+_MAGIC = {"png": b"\x89PNG\r\n\x1a\n", "jpg": b"\xff\xd8\xff", "qoi": b"qoif"}
+
+
+@dataclass(frozen=True, slots=True)
+class Thumbnail:
+    width: int
+    height: int
+    format: str
+    """"png", "jpg" or "qoi" (as embedded)."""
+    data: bytes
+
+    def web_image(self) -> tuple[bytes, str]:
+        """(bytes, media type) a browser shows: PNG and JPG as they are, QOI converted to PNG (browsers have no
+        QOI decoder; Moonraker converts it the same way)."""
+        if self.format == "jpg":
+            return self.data, "image/jpeg"
+        if self.format == "png":
+            return self.data, "image/png"
+        from PIL import Image
+
+        with Image.open(io.BytesIO(self.data)) as image:
+            out = io.BytesIO()
+            image.save(out, format="PNG")
+        return out.getvalue(), "image/png"
+
+    @property
+    def web_suffix(self) -> str:
+        return ".jpg" if self.format == "jpg" else ".png"
+
+
+def _is_command(line: bytes) -> bool:
+    stripped = line.strip()
+    return bool(stripped) and not stripped.startswith(b";")
+
+
+def read_thumbnails(src: BinaryIO) -> list[Thumbnail]:
+    """Every well-formed preview block in the leading comments of a G-code stream, in file order.
+
+    A block whose stated length disagrees with its text, whose base64 is damaged, whose bytes are not the
+    stated format, or which never ends is skipped: a preview is an extra, never a reason to refuse a print."""
+    found: list[Thumbnail] = []
+    block: Block | None = None
+    size = (0, 0)
+    stated: int | None = None
+    parts: list[bytes] = []
+    read = 0
+    for line in src:
+        read += len(line)
+        if read > MAX_SCAN:
+            break
+        if block is None:
+            match = _BEGIN.match(line.lstrip(b"\xef\xbb\xbf"))
+            if match is not None:
+                block = _BY_MARKER.get(match.group(1).decode("ascii").lower())
+                size = (int(match.group(2)), int(match.group(3)))
+                stated = int(match.group(4)) if match.group(4) else None
+                parts = []
+            elif _is_command(line):
+                break
+            continue
+        text = line.strip().lstrip(b";").strip()
+        if text.lower() == f"{block.marker.lower()} end".encode():
+            _finish(found, block, size, stated, b"".join(parts))
+            block = None
+        elif sum(len(p) for p in parts) > 2 * MAX_IMAGE:
+            block = None
+        else:
+            parts.append(text)
+    return found
+
+
+def _finish(found: list[Thumbnail], block: Block, size: tuple[int, int], stated: int | None, text: bytes) -> None:
+    if stated is not None and stated != len(text):
+        return
+    try:
+        data = base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        return
+    if not data.startswith(_MAGIC[block.format]) or len(data) > MAX_IMAGE or not all(size):
+        return
+    found.append(Thumbnail(size[0], size[1], block.format, data))
