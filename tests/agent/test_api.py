@@ -182,6 +182,9 @@ def test_cancelling_a_job_needs_confirmation(bench: Bench) -> None:
             assert "confirm" in _error(client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": loose}),
                                        422, 4)["message"]
         assert client.get(f"/api/v1/jobs/{job['id']}").json()["state"] == "running"
+        wait_for(lambda: 0 < next(j for j in client.get("/api/v1/jobs").json()
+                                  if j["id"] == job["id"])["progress_percent"] < 100,
+                 "the job list following the drawing's progress")
         cancelled = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True})
         assert cancelled.json()["state"] == "cancelled", cancelled.text
         record = client.get(f"/api/v1/jobs/{job['id']}").json()

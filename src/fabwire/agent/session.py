@@ -391,6 +391,19 @@ class Session:
         if now - self._last_job_event >= JOB_EVENT_EVERY_S or percent >= 100:
             self._last_job_event = now
             self._publish("job", job=dict(self._job))
+            self._keep(self._save_progress(dict(self._job)))
+
+    async def _save_progress(self, job: dict[str, Any]) -> None:
+        """The job list shows progress too; a save that would come after the job's end is left out (the end's
+        own save, queued first on the history's one thread, stands)."""
+        current = self._job
+        if current is not None and current["id"] == job["id"] and current.get("state") == "running":
+            await self.agent.jobs.save(job)
+
+    def _keep(self, work: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.create_task(work)
+        self._background.add(task)
+        task.add_done_callback(self._background.discard)
 
     def job_note(self, text: str) -> None:
         """A note the CLI would print for this job, kept in the record's `notes` (a list of words)."""
@@ -447,7 +460,8 @@ class _Handle:
         self._session._home.call_soon_threadsafe(self._session.job_preview, strokes)
 
     def note(self, text: str) -> None:
-        self._session.job_note(text)
+        self._session._home.call_soon_threadsafe(self._session.job_note, text)
+
 
 class JobClaim:
     """The machine, claimed for one job that is still arriving (see `Session.claim_job`).
