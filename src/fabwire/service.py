@@ -180,13 +180,27 @@ def serve_arguments(listen: str, state_dir: str, config: Path | None, devices: S
             args.append("--mqtt-tls")
         if mqtt_discovery != "device":
             args += ["--mqtt-discovery", mqtt_discovery]
-    if notify:
+    if notify:  # checked here, carried by the environment file: an Apprise URL holds its service's secrets
         from fabwire.agent.notify import check_urls
 
         check_urls(notify)
         for url in notify:
-            args += ["--notify", url]
+            if any(c.isspace() or c in '"\\' for c in url):
+                scheme = url.partition("://")[0]  # the rest may hold the service's token
+                raise InputError(f"--notify: a {scheme}:// URL with spaces, quotes or backslashes cannot go into "
+                                 "the service's environment: percent-encode them")
     return tuple(args)
+
+
+def secret_environment(mqtt_password: str | None, notify: Sequence[str]) -> str:
+    """The environment file's text: what must not stand in a unit anyone may read (systemd.exec(5),
+    EnvironmentFile=; `serve` reads FABWIRE_MQTT_PASSWORD and FABWIRE_NOTIFY, URLs separated by spaces)."""
+    lines = []
+    if mqtt_password:
+        lines.append(f"FABWIRE_MQTT_PASSWORD={mqtt_password}\n")
+    if notify:
+        lines.append(f"FABWIRE_NOTIFY={' '.join(notify)}\n")
+    return "".join(lines)
 
 
 @click.group("service")
@@ -228,9 +242,9 @@ def install(user_mode: bool, listen: str, config: Path | None, devices: tuple[st
     if user_mode and run_as:
         raise InputError("--run-as is for a system service; a --user service runs as you")
     account = run_as or os.environ.get("SUDO_USER") or getpass.getuser()
-    env_file = None
-    if mqtt_password:
-        env_file = (unit_dir(True).parent.parent / "fabwire" if user_mode else Path("/etc/fabwire")) / "service.env"
+    secrets = secret_environment(mqtt_password, notify)
+    env_path = (unit_dir(True).parent.parent / "fabwire" if user_mode else Path("/etc/fabwire")) / "service.env"
+    env_file = env_path if secrets else None
     spec = ServiceSpec(user_mode, args, None if user_mode else account, env_file)
     if output is not None:
         if str(output) == "-":
@@ -240,12 +254,15 @@ def install(user_mode: bool, listen: str, config: Path | None, devices: tuple[st
             click.echo(f"wrote {output}", err=True)
         return
     if env_file is not None:
-        _write(env_file, f"FABWIRE_MQTT_PASSWORD={mqtt_password}\n", 0o600)
+        _write(env_file, secrets, 0o600)
+    elif env_path.exists():  # an earlier install's secrets, no longer meant to be used
+        env_path.unlink()
+        click.echo(f"removed {env_path} (no password or notification URL to keep)")
     path = unit_dir(user_mode) / UNIT_NAME
     _write(path, spec.unit(), 0o644)
     click.echo(f"wrote {path}")
     if env_file is not None:
-        click.echo(f"wrote {env_file} (the MQTT password, readable only by its owner)")
+        click.echo(f"wrote {env_file} (the MQTT password and notification URLs, readable only by its owner)")
     if not user_mode and os.geteuid() == 0:
         _write(UDEV_RULES, udev_rules(), 0o644)
         click.echo(f"wrote {UDEV_RULES}: USB printers appear as /dev/davinci-SERIAL, the MMU as /dev/prusa-mmu")

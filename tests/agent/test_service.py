@@ -62,7 +62,8 @@ def test_the_unit_passes_systemd_verify(tmp_path: Path, user: bool) -> None:
     command = service["ExecStart"]
     assert command.startswith(f"{sys.executable} -m fabwire serve --listen 0.0.0.0:8765 --state-dir %S/fabwire ")
     assert "--mqtt mqtt://homeassistant.local --mqtt-user fabwire --mqtt-discovery entity" in command
-    assert "--notify ntfy://my-bench --notify json://127.0.0.1:9/hook" in command
+    assert "--notify" not in command  # an Apprise URL holds its service's secrets: the environment file has them
+    assert "EnvironmentFile=" in text
     assert f'--config "{tmp_path}/my devices/100%% devices.toml"' in command  # % is a specifier in a unit
     assert ("User" in service) is not user
     assert ("SupplementaryGroups" in service) is not user
@@ -109,6 +110,15 @@ def test_user_install_writes_the_unit_and_a_private_password_file(tmp_path: Path
     assert "systemctl --user daemon-reload && systemctl --user enable --now fabwire" in run.stdout
     assert f"cat {tmp_path}/state/fabwire/access-token" in run.stdout  # how to read the token
     assert "loginctl enable-linger" in run.stdout
+    again = fabwire("service", "install", "--user", "--notify", "tgram://123456:SECRETBOTTOKEN/987",
+                    env={**env, "FABWIRE_MQTT_PASSWORD": ""})
+    assert again.returncode == 0, again.stderr
+    assert "SECRETBOTTOKEN" not in unit.read_text()
+    assert secrets.read_text() == "FABWIRE_NOTIFY=tgram://123456:SECRETBOTTOKEN/987\n"  # the old password gone
+    assert stat.S_IMODE(secrets.stat().st_mode) == 0o600
+    verify(unit, user=True)
+    fabwire("service", "install", "--user", env={**env, "FABWIRE_MQTT_PASSWORD": ""})
+    assert not secrets.exists()  # nothing secret left to keep
 
 
 @pytest.mark.parametrize(("args", "words"), [

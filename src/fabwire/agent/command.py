@@ -171,7 +171,7 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, 
 @click.option("--mqtt-discovery", type=click.Choice(["device", "entity"]), default="device", show_default=True,
               help="Home Assistant discovery: one message per machine (Home Assistant 2024.11 or newer), or one per "
                    "entity (older versions).")
-@click.option("--notify", "notify_urls", multiple=True, metavar="URL",
+@click.option("--notify", "notify_urls", multiple=True, metavar="URL", envvar="FABWIRE_NOTIFY",
               help="Send print finished/failed/cancelled, MMU errors waiting and machines gone offline to this "
                    "Apprise URL (repeatable): ntfy://topic, tgram://bot/chat, mailto://…, json://host/path …")
 @click.option("--notify-offline-after", type=FiniteRange(min=0.0), default=60.0, show_default=True,
