@@ -230,6 +230,8 @@ DAMAGED_3W = bytes(b ^ (i == 9000) for i, b in enumerate(write_3w(b"G28\nG1 X10 
               b"stroke='black'/></svg>", "beyond what a browser can hold"),
     ("part.gcode", b"G28\nG1 X10 Y10 E1 F1200\nG1 Z" + b"9" * 40 + b"\n", "not a print file"),
     ("part.3w", DAMAGED_3W, "is damaged"),
+    ("square.3w", write_3w(b"G28\nG1 X10 Y10 E1\n" * 50, find_model("miniMaker"), filename="square.3w"),
+     "square.3w is a .3w for da Vinci miniMaker"),  # another model's file: refused as `xyz print` refuses it
 ])
 def test_an_upload_no_intake_takes_is_refused_before_it_is_accepted(bench: Bench, name: str, data: bytes,
                                                                       says: str) -> None:

@@ -53,7 +53,7 @@ def ready_file(source: Path | bytes, model: PrinterModel, *, override: bool = Fa
         intake.require_printable(kind, name, head)
         with intake.decoded_path(path, kind) as plain:
             if kind.decoded is intake.Kind.THREEW:
-                _check_3w(plain, name, model, override)
+                check_3w_suits(plain, name, model, override=override)
                 yield plain
                 return
             _check_gcode(plain, name, model, override)
@@ -70,7 +70,9 @@ def check_intact(info: ThreeWInfo | ThreeWCheck, name: str) -> None:
                          f"contents (0x{info.crc_computed:08x}); convert the G-code again")
 
 
-def _check_3w(path: Path, name: str, model: PrinterModel, override: bool) -> None:
+def check_3w_suits(path: Path, name: str, model: PrinterModel, *, override: bool = False) -> None:
+    """InputError for a .3w that is damaged (`check_intact`) or made for another model than `model` (unless
+    `override`): the printer would take the upload and then refuse to print it."""
     info = check_3w(path)  # the printer decrypts the body; here its checksum and first block are enough
     check_intact(info, name)
     machine = (info.machine or "").strip()

@@ -116,7 +116,11 @@ class XYZDriver(Driver):
             return {"print_time_s": meta.print_time_s, "filament_mm": meta.filament_mm, "layers": meta.layers,
                     "slicer": meta.slicer}
         if kind is intake.Kind.THREEW and check:
-            printjob.check_intact(inspect_3w(path), name)
+            model = self._last[0].model if self._last is not None else None
+            if model is not None:  # as `xyz print` refuses it: made for another model, or damaged
+                printjob.check_3w_suits(path, name, model)
+            else:
+                printjob.check_intact(inspect_3w(path), name)
         return {}
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
