@@ -353,7 +353,7 @@ def _draw(dctx: DeviceContext, plan: Plan, existing: DrawProgress | None, path: 
         if progress.done or progress.point:
             progress.save()  # the last acknowledged vertex, so a resume carries on from exactly there
             dctx.output.note(f"stopped in stroke {progress.done + 1} of {len(plan.strokes)}; "
-                             f"run the same command with --resume to continue")
+                             "run the same command with --resume (instead of --restart, if it had it) to continue")
         elif first == 0:
             progress.clear()
         raise
