@@ -337,3 +337,40 @@ async def test_the_incoming_queue_keeps_a_bounded_share_per_device() -> None:
     queue.put_nowait(incoming(device_topic("flooded", "command")))  # one taken out: one more fits
     with pytest.raises(asyncio.QueueFull):
         queue.put_nowait(incoming(device_topic("flooded", "command")))
+
+
+@pytest.mark.parametrize("response_topic", [
+    "fabwire/device/mmu-x/command", "fabwire/agent/bench-a/status", "homeassistant/device/x/config", "a/+/b"])
+async def test_a_response_topic_cannot_aim_a_reply_at_fabwires_own_topics(broker: Mosquitto,
+                                                                          response_topic: str) -> None:
+    """A reply published on another device's command topic would run there: such a response topic is ignored,
+    and the reply goes to the device's own reply topic only."""
+    from paho.mqtt.packettypes import PacketTypes
+    from paho.mqtt.properties import Properties
+
+    arm, other = lineus(), printer()
+    agent = FakeAgent([arm, other])
+    async with bridged(agent, broker), observing(broker, "#") as seen:
+        async with aiomqtt.Client("127.0.0.1", broker.port, protocol=aiomqtt.ProtocolVersion.V5) as client:
+            props = Properties(PacketTypes.PUBLISH)  # type: ignore[no-untyped-call]
+            props.ResponseTopic = response_topic.replace("mmu-x", other.id)
+            await client.publish(device_topic(arm.id, "command"), '{"action": "home", "id": 1}', qos=1,
+                                 properties=props)
+        await seen.wait_for(lambda o: o.count(device_topic(arm.id, "reply")) == 1)
+        replies = await ask(broker, arm.id, [b'{"action": "home", "id": 2}'], 1)  # later than any stray reply
+    assert replies[0]["id"] == 2
+    assert [c[:2] for c in agent.calls] == [(arm.id, "home"), (arm.id, "home")]  # nothing ran on the other device
+    assert not [p for t, p, _ in seen.log if t == props.ResponseTopic and b'"action"' in p]  # no reply went there
+
+
+async def test_a_broker_full_of_junk_claims_does_not_take_the_agent_off(broker: Mosquitto) -> None:
+    junk = [(claim_topic(f"d{i}", f"a{i}"), b"1", True) for i in range(15_000)]
+    junk += [(agent_topic(f"a{i}", "status"), b"online", True) for i in range(15_000)]
+    await publish(broker, *junk)
+    arm = lineus()
+    agent = FakeAgent([arm])
+    async with bridged(agent, broker) as bridge:
+        assert arm.id in bridge.owned
+        replies = await ask(broker, arm.id, [b'{"action": "home", "id": "h"}'], 1)
+        assert replies[0]["ok"]
+        assert len(bridge.view.devices) <= bridge_module.FOREIGN_DEVICES + 1

@@ -27,11 +27,12 @@ import aiomqtt
 from aiomqtt.exceptions import MqttConnectError
 
 from fabwire import __version__
-from fabwire.errors import FabwireError, LinkError
+from fabwire.errors import FabwireError, LinkError, excerpt
 from fabwire.mqtt.commands import CommandRunner
 from fabwire.mqtt.discovery import discovery_messages, discovery_topics
 from fabwire.mqtt.fleet_view import STALE_CLAIM_S, FleetView
 from fabwire.mqtt.topics import (
+    DISCOVERY_PREFIX,
     HA_STATUS,
     HEARTBEAT,
     HEARTBEAT_S,
@@ -47,6 +48,7 @@ from fabwire.mqtt.topics import (
     default_agent_id,
     device_topic,
     parse_broker,
+    split_agent_topic,
     split_device_topic,
 )
 
@@ -64,6 +66,8 @@ COMMAND_QUEUE = 32
 """Commands waiting per device; one more is answered "busy" at once instead of being kept."""
 OVERFLOW_REPLIES = 64
 """"Busy" answers waiting to be published; beyond that a flood's commands are dropped unanswered."""
+FOREIGN_DEVICES = 10_000
+"""Devices followed on the broker beyond this agent's own; past it, only this agent's own devices are."""
 PONG_INTERVAL_S = 0.5
 """Pings are answered at most this often: a ping flood costs one heartbeat per interval."""
 
@@ -311,13 +315,16 @@ class Bridge:
                 if parts[0] in self.known and not message.retain:  # a retained command would rerun on every start
                     self._queue_command(parts[0], payload, message.properties)
                 continue
+            if (parts is not None and parts[0] not in self.known and not self._mine(parts[1])
+                    and len(self.view.devices) >= FOREIGN_DEVICES):
+                continue  # a broker full of other devices (or junk): only this agent's own are followed now
             concerned = self.view.take(topic, payload, now=time.monotonic(), retained=message.retain)
             if not self._synced.is_set():
                 continue
             if concerned is not None:
                 await self._reconcile(concerned)
-            else:
-                await self._reconcile_all()
+            elif split_agent_topic(topic) is not None:
+                await self._reconcile_mine()  # an agent came or went: this agent's own devices may change hands
 
     def _queue_command(self, device: str, payload: bytes, properties: Any) -> None:
         """Into the device's bounded queue (its worker starts with the first command); a full queue's command is
@@ -369,6 +376,10 @@ class Bridge:
         body = _dump(reply)
         await self._publish(device_topic(device, "reply"), body, retain=False)
         response_topic = getattr(properties, "ResponseTopic", None) if properties is not None else None
+        if response_topic and not _answerable(str(response_topic)):
+            log.warning("MQTT: not answering on %s: a response topic may not be one of fabwire's or Home "
+                        "Assistant's own topics", excerpt(str(response_topic), 60))
+            response_topic = None
         if response_topic:
             from paho.mqtt.packettypes import PacketTypes
             from paho.mqtt.properties import Properties
@@ -393,6 +404,13 @@ class Bridge:
         self.connected.set()
 
     # ------------------------------------------------------------------------------------------ ownership
+
+    def _mine(self, leaf: str) -> bool:
+        """Whether a device topic's leaf is this agent's own claim (one left from before must be seen)."""
+        return leaf == f"claim/{self.agent_id}"
+
+    async def _reconcile_mine(self) -> None:
+        await asyncio.gather(*(self._reconcile(device) for device in sorted(set(self.known) | self.owned)))
 
     async def _reconcile_all(self) -> None:
         # Concurrently: the client bounds the publishes in flight, and a farm's worth of devices one round trip
@@ -560,6 +578,13 @@ class Bridge:
         if self._availability.get(device) != value:
             self._availability[device] = value
             await self._publish(device_topic(device, "availability"), value)
+
+
+def _answerable(topic: str) -> bool:
+    """Whether a reply may go to an asker's response topic: never onto fabwire's or Home Assistant's own topics
+    (a reply published on another device's command topic would run there), nor a topic with wildcards."""
+    return not (topic.startswith((f"{PREFIX}/", f"{DISCOVERY_PREFIX}/")) or topic in (PREFIX, DISCOVERY_PREFIX)
+                or any(c in topic for c in "+#\0"))
 
 
 def _retrieve(task: asyncio.Task[Any]) -> None:
