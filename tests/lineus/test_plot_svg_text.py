@@ -121,3 +121,24 @@ def test_any_css_value_reads_or_is_refused_cleanly(value: str, name: str) -> Non
         return
     for line in drawing.lines:
         assert np.isfinite(line).all()
+
+
+@pytest.mark.parametrize("body", [
+    '<text x="1" y="50" font-size="1">' + "W" * 3_000_000 + "</text>",  # one enormous text
+    ('<text x="1" y="50" font-size="1">' + "W" * 2_000 + "</text>") * 300,  # many texts, each within the bound
+    '<text x="1" y="50">' + '<tspan>' + "W" * 1_000 + "</tspan>" * 1 + "</text>" * 1 + (
+        '<text x="1" y="60"><tspan>' + "x" * 900 + "</tspan></text>") * 10,  # spread over tspans
+])
+def test_text_beyond_what_a_page_holds_is_refused_before_it_is_planned(body: str) -> None:
+    from fabwire.lineus.plot.svgtext import MAX_TEXT_CHARS
+
+    with pytest.raises(InputError, match=f"more than {MAX_TEXT_CHARS:,} characters"):
+        parse_svg(f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100">{body}</svg>')
+
+
+def test_text_up_to_the_bound_is_drawn() -> None:
+    from fabwire.lineus.plot.svgtext import MAX_TEXT_CHARS
+
+    drawing = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100"><text x="1" y="50" '
+                        f'font-size="1">{"i" * MAX_TEXT_CHARS}</text></svg>')
+    assert drawing.lines

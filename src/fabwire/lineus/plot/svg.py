@@ -415,6 +415,8 @@ class _Reader:
         self.hidden: Polylines = []
         self.skipped: Counter[str] = Counter()
         self.unsupported: Counter[str] = Counter()
+        self.text_chars = 0
+        """Characters of SVG text read so far, in the whole file (bounded by svgtext.MAX_TEXT_CHARS)."""
         self.curved = False
         self.points = 0
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
@@ -1042,8 +1044,10 @@ class _Reader:
     def text(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
              out: Ink) -> None:
         """A `<text>` in single-stroke letters (see svgtext)."""
-        layout = TextLayout(viewport, self.sheet)
-        for lines in layout.draw(el, style):
+        layout = TextLayout(viewport, self.sheet, read_before=self.text_chars)
+        drawn = layout.draw(el, style)
+        self.text_chars = layout.read
+        for lines in drawn:
             placed = affine(lines, matrix)
             self._count(sum(len(p) for p in placed))
             out.extend(placed)

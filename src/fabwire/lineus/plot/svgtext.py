@@ -64,6 +64,10 @@ def hershey_face(style: dict[str, str]) -> tuple[str, float, float]:
     return faces[pick], width, space
 
 
+MAX_TEXT_CHARS = 5_000
+"""Characters of SVG text in one file: more than a Line-us area holds legibly; each costs the planner strokes."""
+
+
 @functools.lru_cache(maxsize=4096)
 def _strokes(text: str, face: str, cap: float) -> tuple[tuple[np.ndarray, ...], float, tuple[str, ...]]:
     """(strokes with y up from the baseline at x = 0, advance width, notes) of one run of text."""
@@ -95,9 +99,16 @@ class TextLayout:
 
     viewport: tuple[float, float]
     sheet: StyleSheet
+    read_before: int = 0
+    """Characters of text the file had before this element (the bound is on the whole file)."""
     notes: list[str] = field(default_factory=list)
     _pen: tuple[float, float] = field(default=(0.0, 0.0), init=False)
     """Where the next chunk without a position of its own starts."""
+    read: int = field(default=0, init=False)
+    """Characters read so far, `read_before` included (bounded by MAX_TEXT_CHARS)."""
+
+    def __post_init__(self) -> None:
+        self.read = self.read_before
 
     def draw(self, el: ET.Element, style: dict[str, str]) -> list[Polylines]:
         """The text's letters in its user units (y down), one list of strokes per run of letters."""
@@ -129,6 +140,11 @@ class TextLayout:
                     return
                 text = text.replace("\t", " ") if preserve else text.replace("\n", "").replace("\t", " ")
                 text = text.replace("\r", "").replace("\n", " ")
+                self.read += len(text)
+                if self.read > MAX_TEXT_CHARS:
+                    raise InputError(f"the drawing's text holds more than {MAX_TEXT_CHARS:,} characters, more "
+                                     "than a Line-us page takes; refusing it (convert the text to paths, or "
+                                     "split it)")
                 chars.extend(_Char(c, style) for c in text)
 
             add(el.text, style)
