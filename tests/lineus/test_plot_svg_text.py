@@ -142,3 +142,21 @@ def test_text_up_to_the_bound_is_drawn() -> None:
     drawing = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100"><text x="1" y="50" '
                         f'font-size="1">{"i" * MAX_TEXT_CHARS}</text></svg>')
     assert drawing.lines
+
+
+def test_a_style_sheet_beyond_any_drawings_is_refused_before_it_is_matched() -> None:
+    from fabwire.lineus.plot.svgstyle import MAX_SELECTOR_CHECKS
+
+    rules = "".join(f".c{i} path, .c{i} g, * * * * {{stroke:black}}\n" for i in range(20_000))
+    body = "".join(f'<g class="c{i}"><path d="M{i % 90} 1 L{i % 90} 9"/></g>' for i in range(2_000))
+    with pytest.raises(InputError, match=f"at most {MAX_SELECTOR_CHECKS:,} pairs"):
+        parse_svg(f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100"><style>{rules}</style>{body}</svg>')
+
+
+def test_a_style_sheet_of_a_real_drawings_size_is_applied() -> None:
+    rules = "".join(f".cls-{i}{{stroke:black}}\n" for i in range(200)) + ".hide{display:none}"
+    body = "".join(f'<path class="cls-{i % 200}{" hide" if i % 2 else ""}" d="M{i % 90} 1 L{i % 90} 9"/>'
+                   for i in range(20_000))
+    drawing = parse_svg(f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100"><style>{rules}</style>'
+                        f'{body}</svg>')
+    assert len(drawing.lines) == 10_000  # every other path hidden by the sheet

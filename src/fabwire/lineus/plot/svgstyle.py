@@ -27,6 +27,7 @@ import cssselect2
 import tinycss2
 import tinycss2.color4
 
+from fabwire.errors import InputError
 from fabwire.lineus.plot.svgunits import length
 
 INHERITED = frozenset({
@@ -80,6 +81,11 @@ def declarations(text: str) -> dict[str, str]:
     return {name: value for name, value, _ in _declarations(text)}
 
 
+MAX_SELECTOR_CHECKS = 10_000_000
+"""Selectors times elements matched at most: a style sheet of thousands of rules over thousands of elements would
+take the planner minutes (each pair costs a selector test), far beyond any real drawing's."""
+
+
 @dataclass
 class StyleSheet:
     """The rules of a document's `<style>` elements, matched to its elements."""
@@ -94,11 +100,17 @@ class StyleSheet:
         """Parse every `<style>` of the document and match its rules against all elements."""
         sheet = cls()
         matcher = cssselect2.Matcher()
+        elements = sum(1 for _ in root.iter())
+        budget = MAX_SELECTOR_CHECKS // max(elements, 1)  # selectors the document's size allows
         count = 0
         for el in root.iter():
             if local(el.tag) == "style" and el.text and (el.get("type") or "text/css").strip() == "text/css":
                 count += sheet._add(matcher, tinycss2.parse_stylesheet(el.text, skip_comments=True,
-                                                                       skip_whitespace=True))
+                                                                       skip_whitespace=True), budget - count)
+                if count > budget:
+                    raise InputError(f"the drawing's style sheets hold more than {budget:,} selectors for its "
+                                     f"{elements:,} elements, more matching than a drawing needs (at most "
+                                     f"{MAX_SELECTOR_CHECKS:,} pairs); refusing it")
         if not count:
             return sheet
         for wrapper in cssselect2.ElementWrapper.from_xml_root(root).iter_subtree():
@@ -109,9 +121,12 @@ class StyleSheet:
                     for specificity, order, _, body in found for name, value, important in body]
         return sheet
 
-    def _add(self, matcher: cssselect2.Matcher, rules: list[Any]) -> int:
+    def _add(self, matcher: cssselect2.Matcher, rules: list[Any], room: int) -> int:
+        """Add `rules`' selectors to `matcher`; the count added, stopping once past `room`."""
         count = 0
         for rule in rules:
+            if count > room:
+                break
             kind = getattr(rule, "type", "")
             if kind == "at-rule":
                 keyword = rule.lower_at_keyword
@@ -119,7 +134,7 @@ class StyleSheet:
                 if keyword in ("media", "supports") and rule.content is not None \
                         and not (keyword == "media" and "print" in prelude and "screen" not in prelude):
                     count += self._add(matcher, tinycss2.parse_rule_list(
-                        rule.content, skip_comments=True, skip_whitespace=True))
+                        rule.content, skip_comments=True, skip_whitespace=True), room - count)
                 elif keyword not in ("media", "import", "charset", "namespace", "font-face", "keyframes"):
                     self.ignored.append(f"@{keyword}")
                 continue
