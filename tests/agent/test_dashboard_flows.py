@@ -207,7 +207,8 @@ def test_mmu_one_row_of_slots_and_actions_for_the_chosen_one(page: Page, bench: 
     mmu = page.locator("article[data-kind=mmu]")
     numbered = mmu.locator("button").filter(has_text=re.compile(r"^\s*\d\s*$"))
     expect(numbered).to_have_count(5)  # the slots are the only numbered buttons
-    tops = {round(numbered.nth(i).bounding_box()["y"]) for i in range(5)}  # type: ignore[index]
+    # in one go: the card may be drawn anew between two separate reads (it follows the MMU's state)
+    tops = set(numbered.evaluate_all("buttons => buttons.map(b => Math.round(b.getBoundingClientRect().top))"))
     assert len(tops) == 1  # in one row
     with api(bench) as client:
         mmu_id = device_of(client, "mmu")["id"]

@@ -131,6 +131,8 @@ def test_moonraker_http_routes_answer_in_moonraker_shapes(demo: RunningAgent) ->
         info = client.get("/server/info").json()
         assert next(iter(info)) == "result"
         assert info["result"]["moonraker_version"]
+        wait_for(lambda: client.get("/printer/objects/query", params={"webhooks": ""}).json()["result"]["status"]
+                 ["webhooks"]["state"] == "ready", "the demo printer connected")  # a loaded machine is slower
         query = client.get("/printer/objects/query", params={"extruder": "temperature,target", "webhooks": ""})
         status = query.json()["result"]["status"]
         assert set(status["extruder"]) == {"temperature", "target"}
