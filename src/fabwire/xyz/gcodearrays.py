@@ -91,8 +91,10 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    windows = np.ndarray(shape=(len(data) - 15,), dtype="V16", buffer=data, strides=(1,))[at]
-    low, high = np.ascontiguousarray(windows.view("<u8").reshape(-1, 2).T) ^ _ZEROS
+    words = np.ndarray(shape=(len(data) - 7,), dtype="<u8", buffer=data, strides=(1,))  # 8 bytes at each offset
+    low, high = words[at], words[at + 8]
+    low ^= _ZEROS
+    high ^= _ZEROS
     sign = low & _U(0xFF)
     negative = sign == _U(ord("-") ^ 0x30)
     signed = (negative | (sign == _U(ord("+") ^ 0x30))).astype(np.uint64)
