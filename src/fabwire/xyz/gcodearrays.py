@@ -71,17 +71,27 @@ def reuse_freed_memory() -> None:
 
 
 def _digits_value(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
-    """The number that eight digit values (0-9, most significant in the lowest byte) spell."""
+    """The number that eight digit values (0-9, most significant in the lowest byte) spell; `x` is overwritten."""
     for factor, shift, mask in (_PAIRS, _QUADS, _OCTETS):
-        x = (x * factor + (x >> shift)) & mask
+        low = x >> shift
+        x *= factor
+        x += low
+        x &= mask
     return x
 
 
 def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
     """How many of the eight bytes (XORed with '0') are digits before the first non-digit (8 if all are)."""
-    non_digit = (((x & _LOW7) + _ABOVE_9) | x) & _HIGH
-    lowest = non_digit & (_U(0) - non_digit)
-    return np.bitwise_count(lowest - _U(1)).astype(np.uint64) >> _U(3)
+    non_digit = x & _LOW7
+    non_digit += _ABOVE_9
+    non_digit |= x
+    non_digit &= _HIGH
+    lowest = _U(0) - non_digit
+    lowest &= non_digit
+    lowest -= _U(1)
+    counted = np.bitwise_count(lowest).astype(np.uint64)
+    counted >>= _U(3)
+    return counted
 
 
 def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
