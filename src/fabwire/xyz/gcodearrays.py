@@ -89,7 +89,7 @@ def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
     lowest = _U(0) - non_digit
     lowest &= non_digit
     lowest -= _U(1)
-    counted = np.bitwise_count(lowest).astype(np.uint64)
+    counted: NDArray[np.uint64] = np.bitwise_count(lowest).astype(np.uint64)
     counted >>= _U(3)
     return counted
 
