@@ -71,17 +71,27 @@ def reuse_freed_memory() -> None:
 
 
 def _digits_value(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
-    """The number that eight digit values (0-9, most significant in the lowest byte) spell."""
+    """The number that eight digit values (0-9, most significant in the lowest byte) spell; `x` is overwritten."""
     for factor, shift, mask in (_PAIRS, _QUADS, _OCTETS):
-        x = (x * factor + (x >> shift)) & mask
+        low = x >> shift
+        x *= factor
+        x += low
+        x &= mask
     return x
 
 
 def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
     """How many of the eight bytes (XORed with '0') are digits before the first non-digit (8 if all are)."""
-    non_digit = (((x & _LOW7) + _ABOVE_9) | x) & _HIGH
-    lowest = non_digit & (_U(0) - non_digit)
-    return np.bitwise_count(lowest - _U(1)).astype(np.uint64) >> _U(3)
+    non_digit = x & _LOW7
+    non_digit += _ABOVE_9
+    non_digit |= x
+    non_digit &= _HIGH
+    lowest = _U(0) - non_digit
+    lowest &= non_digit
+    lowest -= _U(1)
+    counted: NDArray[np.uint64] = np.bitwise_count(lowest).astype(np.uint64)
+    counted >>= _U(3)
+    return counted
 
 
 def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -91,8 +101,10 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    windows = np.ndarray(shape=(len(data) - 15,), dtype="V16", buffer=data, strides=(1,))[at]
-    low, high = np.ascontiguousarray(windows.view("<u8").reshape(-1, 2).T) ^ _ZEROS
+    words = np.ndarray(shape=(len(data) - 7,), dtype="<u8", buffer=data, strides=(1,))  # 8 bytes at each offset
+    low, high = words[at], words[at + 8]
+    low ^= _ZEROS
+    high ^= _ZEROS
     sign = low & _U(0xFF)
     negative = sign == _U(ord("-") ^ 0x30)
     signed = (negative | (sign == _U(ord("+") ^ 0x30))).astype(np.uint64)

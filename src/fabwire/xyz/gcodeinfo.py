@@ -409,13 +409,21 @@ class MoveAnalyzer:
 
     def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], printing: NDArray[np.bool_], first: int,
                count: int) -> None:
-        """Widen the extent with the start and end points of the printing moves (arcs: their end points)."""
+        """Widen the extent with the start and end points of the printing moves (arcs: their end points).
+
+        A point is the position after a printing line or after the line before one; on each axis that is the value
+        of the last word at or before that line, so a word counts when a printing line or the line before one lies
+        in its reign (from its line to the next word's), and the position before the piece counts when one lies
+        before the axis's first word."""
+        wanted = printing.copy()
+        wanted[:-1] |= printing[1:]
+        marks = np.concatenate(([0], np.cumsum(wanted)))
         for k in range(3):
-            at = np.full(count, np.nan)
-            at[axes[k].lines - first] = after[k]
-            ends = _ffill(at, self.pos[k])
-            starts = np.concatenate(([self.pos[k]], ends[:-1]))
-            points = np.concatenate((starts[printing], ends[printing]))
+            lines = axes[k].lines - first
+            reigns = marks[np.append(lines[1:], count)] - marks[lines]
+            points = after[k][reigns > 0]
+            if not len(lines) or marks[lines[0]] > 0 or printing[0]:
+                points = np.append(points, self.pos[k])
             points = points[np.isfinite(points)]
             if len(points):
                 self.low[k] = min(self.low[k], float(points.min()))

@@ -162,8 +162,8 @@ class Planner:
         which = np.full(len(length), float(len(self._table) - 1))
         self._pending.append((dx, dy, dz, de, length, feed, which))
         self._count += len(length)
-        while self._count >= WINDOW + 1:  # a window is planned once the move after it is known
-            self._plan(WINDOW)
+        if self._count >= WINDOW + 1:  # a window is planned once the move after it is known
+            self._plan()
 
     def total(self) -> float:
         """The seconds of every move so far, the ones still waiting for their window planned as if the file ended
@@ -177,13 +177,16 @@ class Planner:
             seconds += part
         return seconds
 
-    def _plan(self, n: int) -> None:
+    def _plan(self) -> None:
+        """Plan every window whose next move is known; the moves after the last one wait for more."""
         columns = [np.concatenate(parts) for parts in zip(*self._pending, strict=True)]
-        rest = [c[n:] for c in columns]
-        self._pending = [tuple(rest)] if len(rest[0]) else []
-        self._count = len(rest[0])
-        seconds, self._carry = _plan_window([c[:n] for c in columns], self._table, self._carry)
-        self.seconds += seconds
+        start = 0
+        while self._count - start >= WINDOW + 1:
+            seconds, self._carry = _plan_window([c[start:start + WINDOW] for c in columns], self._table, self._carry)
+            self.seconds += seconds
+            start += WINDOW
+        self._pending = [tuple(c[start:] for c in columns)]
+        self._count -= start
 
 
 def _limit_columns(table: list[Limits], which: Floats) -> dict[str, Floats]:
