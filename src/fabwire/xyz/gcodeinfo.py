@@ -297,8 +297,10 @@ class MoveAnalyzer:
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
         self.path_seconds += (length or abs(de)) * 60.0 / self.feed
         self.filament += de
-        if de > 0 and (dx or dy or arc) and math.isfinite(target_z):
+        if de > 0 and (dx or dy or arc or not math.isfinite(dx + dy)):
             for k, (start, end) in enumerate(((x, target_x), (y, target_y), (z, target_z))):
+                # a coordinate that is no number (NaN, or beyond a float) reaches beyond any build volume
+                start, end = (v if not math.isnan(v) else math.inf for v in (start, end))
                 self.low[k] = min(self.low[k], start, end)
                 self.high[k] = max(self.high[k], start, end)
             if dz:
@@ -424,7 +426,8 @@ class MoveAnalyzer:
             points = after[k][reigns > 0]
             if not len(lines) or marks[lines[0]] > 0 or printing[0]:
                 points = np.append(points, self.pos[k])
-            points = points[np.isfinite(points)]
+            # a coordinate that is no number (NaN, or beyond what a float holds) reaches beyond any build volume
+            points = np.where(np.isnan(points), np.inf, points)
             if len(points):
                 self.low[k] = min(self.low[k], float(points.min()))
                 self.high[k] = max(self.high[k], float(points.max()))

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
 from fabwire import units
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 from fabwire.xyz import slicerfigures
 from fabwire.xyz.models import PrinterModel
 
@@ -313,6 +313,31 @@ def _check_lines(text: bytes, name: str, line_offset: int) -> None:
                 raise _long_line(name, length)
 
 
+_ODD_NUMBER = re.compile(rb"[XYZEFIJR][ \t]*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)E|NAN|INF)", re.IGNORECASE)
+"""A word whose value has an exponent or is no number: a firmware's strtod reads `X1e308` as a move to infinity
+where a reader of plain decimals sees `X1`, so no check of ours would stand for what the printer does."""
+_MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
+
+
+def _lines_after_crs(src: BinaryIO, begin: int, carried_cr: bool) -> int:
+    return _lines_before(src, begin) - carried_cr
+
+
+def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int]) -> None:
+    """Refuse a G line (outside its comment) with a number no printer reads as plain decimals (see _ODD_NUMBER)."""
+    for found in _ODD_NUMBER.finditer(text):
+        start = text.rfind(b"\n", 0, found.start()) + 1
+        head = text[start:found.start()]
+        if b";" in head or b"(" in head or not _MOVE_LINE.match(text, start):
+            continue
+        line = lines_before() + text.count(b"\n", 0, start) + 1
+        end = text.find(b"\n", found.start())
+        word = text[found.start():end if end >= 0 else len(text)].split()[0]
+        raise InputError(f"{name}: line {line}: {excerpt(word.decode('latin-1'), 30)} is a number with an exponent "
+                         "or no number at all, which printers read differently (a move to infinity); write it as "
+                         "plain decimals")
+
+
 def _long_line(name: str, length: int) -> InputError:
     return InputError(f"{name} has a line of over {length} bytes (the limit is {MAX_LINE}): not G-code as a "
                       "printer reads it")
@@ -393,6 +418,8 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         if b"\0" in text:
             text = _without_nuls(text, name, _lines_before(src, begin) - carried_cr, repaired)
         _check_lines(text, name, len(carry))
+        _check_numbers(carry + text if carry else text, name,  # carry holds no newline
+                       functools.partial(_lines_after_crs, src, begin, carried_cr))
         if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
             raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
         cut = text.rfind(b"\n") + 1
