@@ -59,6 +59,8 @@ from fabwire.lineus.plot.svgstyle import (
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
 from fabwire.lineus.plot.svgunits import (
     IDENTITY,
+    ROOT_FONT_SIZE,
+    Font,
     about,
     beyond_single,
     css_transform,
@@ -124,6 +126,15 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
+    ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
+     "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
+    ("viewport units vw, vh, vi, vb, vmin, vmax of the page", "CSS Values 4 §6.1.2", "viewport units"),
+    ("a length with an unknown unit or trailing text is in error", "CSS Values 4 §6, SVG 1.1 §F.2",
+     "length in error"),
+    ("paint servers under display none or failed conditions paint nothing (fallback colour)",
+     "SVG 2 §13.2, §5.8.1; CSS Display 3 §2.7", "paint server not rendered"),
+    ("hidden, transparent and unpainted shapes count for the group's bounding box", "SVG 2 §8.10",
+     "bbox of hidden children"),
 )
 
 
@@ -204,12 +215,16 @@ class Ink(list[FloatArray]):
     def __init__(self, lines: Polylines | None = None) -> None:
         super().__init__(lines or [])
         self.fills: list[_Fill] = []
+        self.extent: list[list[float]] = []
+        """Boxes (x0, y0, x1, y1) of geometry that shows nothing but counts for the bounding box of the group
+        (hidden, fully transparent or unpainted shapes: SVG 2 §8.10 takes every rendered element's geometry)."""
         self._boxes = _Boxes()
         self._fill_boxes = _Boxes()
 
     def take(self, other: Ink) -> None:
         self.extend(other)
         self.fills.extend(other.fills)
+        self.extent.extend(other.extent)
 
     def boxes(self) -> FloatArray:
         """(x0, y0, x1, y1) of every line (lines are never changed in place, only added or replaced)."""
@@ -304,6 +319,9 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         matrix = viewport_matrix(box, 0.0, 0.0, width, height, root.get("preserveAspectRatio"))
         own = own_style(root, reader.sheet)
         style = inherit({}, own)
+        # viewport units are of the window showing the document: the page when it has a size of its own
+        reader.root_font = Font(viewport=(width, height))
+        reader.root_font = reader.font(style)
         if _opacity(style) > 0:  # `display` on the root of a standalone document is ignored, as in browsers
             inner = (box[2], box[3]) if box else (width, height)
             reader.user_viewport = inner
@@ -381,10 +399,6 @@ def _invert(matrix: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.inv(np.vstack([matrix, [0.0, 0.0, 1.0]]))[:2], dtype=float)
 
 
-def _font_size(style: dict[str, str]) -> float:
-    return number(style.get("font-size"), 16.0)
-
-
 def _language_matches(value: str) -> bool:
     """`systemLanguage`: true when one of its comma-separated tags has a user language as its primary subtag
     (SVG 1.1 §5.8.5; an empty value is false)."""
@@ -427,6 +441,13 @@ class _Reader:
         self._occlusion_checks = 0
         self.user_viewport = (0.0, 0.0)
         """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
+        self.root_font = Font()
+        """The root element's font and the page's size: what rem, rlh and vw/vh/vi/vb/vmin/vmax are of."""
+
+    def font(self, style: dict[str, str]) -> Font:
+        """What font- and viewport-relative lengths of an element with the computed `style` are of."""
+        return Font(number(style.get("font-size"), ROOT_FONT_SIZE), style.get("font-family", ""),
+                    self.root_font.size, self.root_font.family, self.root_font.viewport)
 
     # -- limits -----------------------------------------------------------------------------------------------
 
@@ -491,7 +512,7 @@ class _Reader:
         """The element's transform: the CSS `transform` property when set and valid, else the attribute, about
         its `transform-origin` (CSS Transforms 1 §6; the reference box is the viewport unless `transform-box`
         names the element's own box)."""
-        font = _font_size(style)
+        font = self.font(style)
         matrix = IDENTITY
         css = own.get("transform")
         if css is not None:
@@ -516,7 +537,7 @@ class _Reader:
         """The shape's box in its own user units (x, y, width, height), or None for other elements."""
         if tag not in SHAPES:
             return None
-        subs = [s.points for s in self.subpaths(el, tag, IDENTITY, viewport, _font_size(style), keep=True)]
+        subs = [s.points for s in self.subpaths(el, tag, IDENTITY, viewport, self.font(style), keep=True)]
         if not subs:
             return None
         pts = np.concatenate(subs)
@@ -590,7 +611,10 @@ class _Reader:
             return
         own = own_style(el, self.sheet)
         style = inherit(parent, own)
-        if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
+        if own.get("display", "").strip() == "none":
+            return
+        if _opacity(own) <= 0:
+            self.extent_of(el, own, style, matrix, viewport, out, depth, uses)
             return
         own_matrix = self.placement(el, own, style, viewport)
         if own_matrix is not IDENTITY:
@@ -612,6 +636,26 @@ class _Reader:
             self._shaded -= shaded
         self.clip(el, own, matrix, target, ())
         out.take(target)
+
+    def extent_of(self, el: ET.Element, own: dict[str, str], style: dict[str, str], matrix: FloatArray,
+                  viewport: tuple[float, float], out: Ink, depth: int, uses: tuple[str, ...]) -> None:
+        """Add the box of a fully transparent element to `out`'s extent: it shows nothing, and hides nothing,
+        but its geometry counts for its group's bounding box (SVG 2 §8.10)."""
+        matrix = then(matrix, self.placement(el, own, style, viewport))
+        if flattens(matrix):
+            return
+        scratch = Ink()
+        self._below.append(scratch)
+        self._shaded += 1
+        try:
+            self.draw(el, local(el.tag), {**style, "visibility": "visible", "opacity": "1"}, matrix, viewport,
+                      scratch, depth, uses)
+        finally:
+            self._below.pop()
+            self._shaded -= 1
+        boxes = np.vstack([scratch.boxes(), np.asarray(scratch.extent, dtype=float).reshape(-1, 4)])
+        if len(boxes):
+            out.extent.append([*boxes[:, :2].min(axis=0).tolist(), *boxes[:, 2:].max(axis=0).tolist()])
 
     def below(self, ink: Ink) -> None:
         """Start a drawing whose earlier paint is `ink`."""
@@ -715,7 +759,7 @@ class _Reader:
         if beyond_single(el.get("x")) or beyond_single(el.get("y")):
             return  # placed at infinity: nothing of the copy is on the page
         vw, vh = viewport
-        font = _font_size(style)
+        font = self.font(style)
         matrix = then(matrix, translate(length(el.get("x"), vw, font_size=font),
                                         length(el.get("y"), vh, font_size=font)))
         kind = local(target.tag)
@@ -745,7 +789,7 @@ class _Reader:
         """A nested `<svg>` (drawn or used: its x and y place it) or a used `<symbol>`: a viewport its viewBox
         maps onto, clipping unless overflow is visible (SVG 1.1 §7.9, §14.3.3)."""
         vw, vh = viewport
-        font = _font_size(style)
+        font = self.font(style)
         own_place = local(el.tag) == "svg"
         x = length(el.get("x"), vw, font_size=font) if own_place else 0.0
         y = length(el.get("y"), vh, font_size=font) if own_place else 0.0
@@ -777,7 +821,7 @@ class _Reader:
         out.take(drawn)
 
     def subpaths(self, el: ET.Element, tag: str, matrix: FloatArray, viewport: tuple[float, float],
-                 font: float = 16.0, *, keep: bool = False) -> list[Subpath]:
+                 font: float | Font = 16.0, *, keep: bool = False) -> list[Subpath]:
         """The element's subpaths placed by `matrix`; `keep` leaves a read-ahead path for a later call."""
         ahead = self._read_ahead.get(id(el)) if tag == "path" else None
         if ahead is not None:
@@ -795,8 +839,11 @@ class _Reader:
             return length(styled.get(name, el.get(name)), relative, default=default, font_size=font)
 
         def radius(name: str, relative: float) -> float | None:
-            """rx or ry: None for auto (absent, `auto`, or in error: negative)."""
-            value = get(name, relative, -1.0)
+            """rx or ry: None for auto (absent, negative, or in error in CSS); an attribute in error (`auto`
+            included) is 0, as Chromium reads it."""
+            value = get(name, relative, math.nan)
+            if math.isnan(value):
+                return 0.0 if name not in styled and el.get(name) is not None else None
             return value if value >= 0 else None
 
         try:
@@ -851,7 +898,8 @@ class _Reader:
         if ref is None:
             return "solid", None
         target = self.ids.get(ref)
-        if target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient"):
+        if (target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient")
+                or not self._server_exists(target)):
             fallback = value[value.find(")") + 1:].strip()
             if fallback and paints({**style, which: fallback}, which):
                 return "solid", None
@@ -859,6 +907,20 @@ class _Reader:
         if local(target.tag) == "pattern":
             return "pattern", target
         return ("solid", None) if self._has_stops(target) else ("none", None)
+
+    def _server_exists(self, server: ET.Element) -> bool:
+        """Whether a paint server can paint: not when it or an ancestor has `display: none`, nor when an ancestor
+        fails its conditions (`systemLanguage`, `requiredExtensions`), as Chromium makes no paint server out of
+        such an element and the reference falls back as if it named nothing (SVG 2 §13.2, §5.8.1; CSS Display 3
+        §2.7). Conditions on the server itself are not processed (it is not a rendered element)."""
+        at: ET.Element | None = server
+        while at is not None:
+            if own_style(at, self.sheet).get("display", "").strip() == "none":
+                return False
+            if at is not server and not conditions_hold(at):
+                return False
+            at = self.parents.get(at)
+        return True
 
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
@@ -880,7 +942,7 @@ class _Reader:
         if value in ("none", ""):
             return [], 0.0
         diag = math.hypot(*viewport) / math.sqrt(2)
-        font = _font_size(style)
+        font = self.font(style)
         parts = [p for p in value.replace(",", " ").split() if p]
         lengths = [length(p, diag, default=-1.0, font_size=font) for p in parts]
         if not lengths or any(v < 0 for v in lengths) or sum(lengths) <= 0:
@@ -890,12 +952,13 @@ class _Reader:
 
     def shape(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
               viewport: tuple[float, float], out: Ink) -> None:
-        if style.get("visibility", "visible").strip() != "visible":
-            return
         stroke = self._paint_kind(style, "stroke")[0] != "none"
         fill, pattern = self._paint_kind(style)
         covers = not self._shaded and bool(self._below) and opaque_fill(style)
-        if not (stroke or covers) and fill == "none":
+        if style.get("visibility", "visible").strip() != "visible" or (not (stroke or covers) and fill == "none"):
+            points = [sub.points for sub in self.subpaths(el, tag, matrix, viewport, self.font(style))]
+            if points:
+                out.extent.append(_box(np.concatenate(points)))  # shows nothing, but has a bounding box
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
         dots = stroke and caps
@@ -904,7 +967,7 @@ class _Reader:
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
-        for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
+        for sub in self.subpaths(el, tag, matrix, viewport, self.font(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
             pts = sub.points
@@ -1053,7 +1116,7 @@ class _Reader:
 
     # -- clipping ---------------------------------------------------------------------------------------------
 
-    def clip_region(self, value: str, matrix: FloatArray, content: Polylines,
+    def clip_region(self, value: str, matrix: FloatArray, content: Ink,
                     stack: tuple[str, ...]) -> BaseGeometry | None:
         """The area `clip-path: value` lets through, in output units; None (and a note) when it can't be used."""
         ref = iri(value)
@@ -1071,9 +1134,10 @@ class _Reader:
             raise InputError(f"{self.name}: clip paths nested deeper than {MAX_DEPTH}")
         by_box = clip.get("clipPathUnits", "").strip() == "objectBoundingBox"
         if by_box:
-            if not content:
+            corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
+            if not content and not corners:
                 return shapely.Polygon()
-            pts = np.concatenate(content)
+            pts = np.concatenate([*content, *corners])
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
@@ -1120,12 +1184,12 @@ class _Reader:
         if tag not in SHAPES:
             return empty
         rings = [np.vstack([s.points, s.points[:1]]) for s in self.subpaths(child, tag, matrix, (0.0, 0.0),
-                                                                            _font_size(style), keep=True)
+                                                                            self.font(style), keep=True)
                  if len(s.points) >= 3]
         region = area_of_rings(rings, style.get("clip-rule", "nonzero").strip())
         inner = own.get("clip-path", "none").strip()
         if inner != "none":
-            content = list(rings) or [np.zeros((1, 2))]
+            content = Ink(list(rings) or [np.zeros((1, 2))])
             limit = self.clip_region(inner, matrix, content, stack)
             if limit is not None:
                 region = shapely.intersection(region, limit)
