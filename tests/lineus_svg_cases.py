@@ -339,6 +339,26 @@ CASES: dict[str, tuple[str, str]] = {
                                     '<rect x="120" y="120" width="40" height="60" fill="none" stroke="none"/>'
                                     '<g opacity="0"><line x1="0" y1="100" x2="200" y2="100" stroke="black"/></g>'
                                     '<rect x="60" y="40" width="80" height="120"/></g>'), "bbox of hidden children"),
+    # -- clip path transforms, group compositing ---------------------------------------------------------------
+    "clip path transform by bounding box": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox" '
+                                                'transform="translate(20 10)"><rect width="0.5" height="0.5"/>'
+                                                '</clipPath><rect x="40" y="40" width="120" height="120" '
+                                                'clip-path="url(#c)"/>'), "clip path transform by bounding box"),
+    "clip path transform-origin by bounding box": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox" '
+                                                       'transform="scale(1.5)" transform-origin="center">'
+                                                       '<circle cx="0.5" cy="0.5" r="0.3"/></clipPath>'
+                                                       '<rect x="20" y="50" width="140" height="100" '
+                                                       'clip-path="url(#c)"/>'),
+                                                   "clip path transform by bounding box"),
+    "fill hides lines within a translucent group": (doc('<g opacity="0.6"><line x1="10" y1="100" x2="190" '
+                                                        'y2="100" stroke="black" stroke-width="2"/>'
+                                                        '<circle cx="100" cy="100" r="50"/>'
+                                                        '</g>'), "fill hides lines within a translucent group"),
+    "fill hides lines within a clipped group": (doc('<clipPath id="c"><rect x="0" y="0" width="150" '
+                                                    'height="200"/></clipPath><g clip-path="url(#c)">'
+                                                    f'<path d="M20 40 L180 160" {S}/><rect x="60" y="60" '
+                                                    'width="80" height="80"/></g>'),
+                                                "fill hides lines within a translucent group"),
 }
 
 TEXT_CASES: dict[str, str] = {

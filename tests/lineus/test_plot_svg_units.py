@@ -134,3 +134,30 @@ def test_children_that_show_nothing_count_for_the_bounding_box(ghost: str) -> No
                         f'</clipPath><g clip-path="url(#c)"><rect x="0" y="0" width="200" height="200" {ghost}/>'
                         '<line x1="0" y1="100" x2="200" y2="100" stroke="black"/></g></svg>')
     assert drawing.lines[0][:, 0].max() == pytest.approx(100)
+
+
+def test_a_fill_in_a_translucent_group_hides_the_groups_lines_not_those_under_the_group() -> None:
+    drawing = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">'
+                        '<line x1="0" y1="50" x2="200" y2="50" stroke="black"/>'
+                        '<g opacity="0.5"><line x1="0" y1="150" x2="200" y2="150" stroke="black"/>'
+                        '<rect x="50" y="0" width="100" height="200"/></g></svg>')
+    on = {y: sorted(round(float(x)) for line in drawing.lines for x, yy in line if round(float(yy)) == y)
+          for y in (50, 150)}
+    assert on[50] == [0, 200]  # painted before the group: shows through it
+    assert on[150] == [0, 50, 150, 200]  # painted in the group before the fill: hidden under it
+
+
+@pytest.mark.parametrize(("transform", "origin", "box"), [
+    ("translate(20 10)", "", (60, 50, 120, 110)),
+    ("scale(2)", "", (80, 80, 160, 160)),
+    ("scale(2)", "center", (40, 40, 100, 100)),  # about the centre of the viewport, its reference box
+])
+def test_a_clip_path_transform_is_in_user_space_outside_bounding_box_units(transform: str, origin: str,
+                                                                           box: tuple[int, ...]) -> None:
+    drawing = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">'
+                        f'<clipPath id="c" clipPathUnits="objectBoundingBox" transform="{transform}" '
+                        f'transform-origin="{origin}"><rect x="0" y="0" width="0.5" height="0.5"/></clipPath>'
+                        '<rect x="40" y="40" width="120" height="120" clip-path="url(#c)"/></svg>')
+    points = [p for line in drawing.lines for p in line.tolist()]
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    assert (min(xs), min(ys), max(xs), max(ys)) == pytest.approx(box)

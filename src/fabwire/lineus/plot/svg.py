@@ -21,6 +21,7 @@ import math
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -135,6 +136,10 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
      "SVG 2 §13.2, §5.8.1; CSS Display 3 §2.7", "paint server not rendered"),
     ("hidden, transparent and unpainted shapes count for the group's bounding box", "SVG 2 §8.10",
      "bbox of hidden children"),
+    ("a clipPath's transform and transform-origin apply in user space, outside objectBoundingBox units",
+     "SVG 1.1 §14.3.5, CSS Transforms 1 §7", "clip path transform by bounding box"),
+    ("fills in a group with opacity or a clip path hide that group's earlier lines only",
+     "SVG 1.1 §14.5, Compositing and Blending 1 §3.3", "fill hides lines within a translucent group"),
 )
 
 
@@ -437,7 +442,11 @@ class _Reader:
         self._below: list[Ink] = []
         """What is painted so far, innermost last: opaque fills hide the parts of these lines under them."""
         self._shaded = 0
-        """Enclosing elements that make a fill's hiding unsure (group opacity, clip paths, masks, filters)."""
+        """Enclosing elements that make a fill's hiding unsure (masks, filters, what is drawn only to be measured)."""
+        self._floor = 0
+        """The first of `_below` a fill hides lines in: the innermost group composited on its own (group opacity,
+        a clip path, a viewport's clip) takes its content as one picture, so a fill in it hides what the group
+        painted before it, but not what lies under the group (SVG 1.1 §14.5, Compositing 1 §3.3 groups)."""
         self._occlusion_checks = 0
         self.user_viewport = (0.0, 0.0)
         """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
@@ -626,14 +635,9 @@ class _Reader:
             self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
             return
         target = Ink()
-        shaded = bool(effects) or _opacity(own) < 1
-        self._below.append(target)
-        self._shaded += shaded
-        try:
+        with self.painting(target, shaded=bool(set(effects) - {"clip-path"}),
+                           isolated=bool(effects) or _opacity(own) < 1):
             self.draw(el, tag, style, matrix, viewport, target, depth, uses)
-        finally:
-            self._below.pop()
-            self._shaded -= shaded
         self.clip(el, own, matrix, target, ())
         out.take(target)
 
@@ -645,14 +649,9 @@ class _Reader:
         if flattens(matrix):
             return
         scratch = Ink()
-        self._below.append(scratch)
-        self._shaded += 1
-        try:
+        with self.painting(scratch, shaded=True):
             self.draw(el, local(el.tag), {**style, "visibility": "visible", "opacity": "1"}, matrix, viewport,
                       scratch, depth, uses)
-        finally:
-            self._below.pop()
-            self._shaded -= 1
         boxes = np.vstack([scratch.boxes(), np.asarray(scratch.extent, dtype=float).reshape(-1, 4)])
         if len(boxes):
             out.extent.append([*boxes[:, :2].min(axis=0).tolist(), *boxes[:, 2:].max(axis=0).tolist()])
@@ -660,6 +659,23 @@ class _Reader:
     def below(self, ink: Ink) -> None:
         """Start a drawing whose earlier paint is `ink`."""
         self._below = [ink]
+        self._floor = 0
+
+    @contextmanager
+    def painting(self, target: Ink, *, shaded: bool = False, isolated: bool = False) -> Iterator[None]:
+        """Draw into `target`, painted over what is below: `isolated` for a group composited on its own (its
+        fills hide only its own earlier lines), `shaded` where fills hide nothing at all."""
+        floor = self._floor
+        self._below.append(target)
+        self._shaded += shaded
+        if isolated:
+            self._floor = len(self._below) - 1
+        try:
+            yield
+        finally:
+            self._below.pop()
+            self._shaded -= shaded
+            self._floor = floor
 
     def draw(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
              viewport: tuple[float, float], target: Ink, depth: int, uses: tuple[str, ...]) -> None:
@@ -685,7 +701,7 @@ class _Reader:
         """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
         model), and earlier fills shrink to what still shows."""
         x0, y0, x1, y1 = fill.box
-        for ink in self._below:
+        for ink in self._below[self._floor:]:
             if not ink and not ink.fills:
                 continue
             self._occlusion_checks += len(ink) + len(ink.fills)
@@ -769,15 +785,9 @@ class _Reader:
             if own.get("display", "").strip() == "none" and kind == "svg":
                 return
             drawn = Ink()
-            shaded = own.get("clip-path", "none").strip() != "none"
-            self._below.append(drawn)
-            self._shaded += shaded
-            try:
+            with self.painting(drawn, isolated=own.get("clip-path", "none").strip() != "none"):
                 self.viewport(target, el, inner, matrix, viewport, drawn, depth, (*uses, str(ref)),
                               el.get("width"), el.get("height"))
-            finally:
-                self._below.pop()
-                self._shaded -= shaded
             self.clip(target, own, matrix, drawn, ())
             out.take(drawn)
         else:
@@ -807,13 +817,8 @@ class _Reader:
             inner = then(inner, self.own_transform(el))
         drawn = Ink()
         clips = style.get("overflow", "hidden").strip() in ("hidden", "scroll")
-        self._below.append(drawn)
-        self._shaded += clips
-        try:
+        with self.painting(drawn, isolated=clips):
             self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
-        finally:
-            self._below.pop()
-            self._shaded -= clips
         if clips and (drawn or drawn.fills):
             corners = np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h], [x, y]])
             ring = corners @ matrix[:, :2].T + matrix[:, 2]
@@ -1077,13 +1082,13 @@ class _Reader:
             inside = IDENTITY
         tile = Ink()
         self._patterns = (*self._patterns, ref)
-        outside, self._below = self._below, [tile]
+        outside, floor, self._below, self._floor = self._below, self._floor, [tile], 0
         try:
             self.children(content, self.computed_style(content), inside,
                           (vb.box[2], vb.box[3]) if vb.box else (w, h), tile, 0, ())
         finally:
             self._patterns = self._patterns[:-1]
-            self._below = outside
+            self._below, self._floor = outside, floor
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
             kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
             tile = Ink(kept)
@@ -1133,6 +1138,10 @@ class _Reader:
         if len(stack) > MAX_DEPTH:
             raise InputError(f"{self.name}: clip paths nested deeper than {MAX_DEPTH}")
         by_box = clip.get("clipPathUnits", "").strip() == "objectBoundingBox"
+        # the clip path's transform is in the user space of the element it clips, outside the bounding box's
+        # units (SVG 1.1 §14.3.5: "the user coordinate system ... is established using the bounding box" after
+        # the transform on the clipPath element)
+        own_place = self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip), self.user_viewport)
         if by_box:
             corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
             if not content and not corners:
@@ -1140,9 +1149,9 @@ class _Reader:
             pts = np.concatenate([*content, *corners])
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
-            matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
-        matrix = then(matrix, self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip),
-                                             self.user_viewport))
+            matrix = then(then(matrix, own_place), np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
+        else:
+            matrix = then(matrix, own_place)
         key = (id(clip), matrix.tobytes())
         if key in self._clips and not by_box:
             return self._clips[key]
