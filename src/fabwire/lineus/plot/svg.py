@@ -115,7 +115,7 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("style sheets: combinators, specificity, !important", "CSS Cascade 4 §6, Selectors 3", "css cascade"),
     ("presentation attributes below style sheets", "SVG 2 §6.6", "presentation attributes"),
     ("inherit and inherited properties", "CSS Cascade 4 §7", "inherit"),
-    ("em and ex from the inherited font size", "CSS Values 3 §6.1", "em units"),
+    ("em from the inherited font size", "CSS Values 3 §6.1", "em units"),
     ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
     ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
     ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
