@@ -301,6 +301,64 @@ CASES: dict[str, tuple[str, str]] = {
                                   '<line x1="8" y1="0" x2="8" y2="16" stroke="black" stroke-width="2"/></pattern>'
                                   '</defs><circle cx="100" cy="100" r="80" fill="url(#h)" stroke="black" '
                                   'stroke-width="2"/>'), "pattern fill"),
+    # -- length units --------------------------------------------------------------------------------------
+    "font-relative units": (doc(f'<rect x="2ch" y="1cap" width="6ex" height="3lh" {S}/>'
+                                f'<rect x="3ic" y="100" width="4rem" height="2rlh" {S}/>', 'font-size="20"'),
+                            "font-relative units"),
+    "font-relative units of a monospace face": (doc(f'<g font-family="monospace" font-size="25"><rect x="1ch" '
+                                                    f'y="1ex" width="10ch" height="4lh" {S}/></g>'),
+                                                "font-relative units"),
+    "root font for rem and rlh": (doc(f'<g font-size="8"><rect x="1rem" y="1rlh" width="5rem" height="3rlh" '
+                                      f'{S}/></g>', 'font-size="24" font-family="serif"'), "font-relative units"),
+    "viewport units": (doc(f'<rect x="10vw" y="5vh" width="40vmin" height="30vmax" {S}/>'
+                           f'<line x1="60vi" y1="80vb" x2="90vw" y2="95vh" {S}/>'), "viewport units"),
+    "viewport units under a viewBox": (doc(f'<circle cx="50vw" cy="50vh" r="10vmin" {S}/>', 'viewBox="0 0 100 100"'),
+                                       "viewport units"),
+    "length in error": (doc(f'<rect x="20" y="20" width="160" height="160" {S}/>'
+                            f'<rect x="40" y="40" width="30pxx" height="100" {S}/>'
+                            f'<circle cx="100" cy="100" r="4 0" {S}/><circle cx="100" cy="100" r="40em2" {S}/>'),
+                        "length in error"),
+    # -- paint servers that are not rendered -------------------------------------------------------------------
+    "paint server not rendered": (doc('<defs display="none"><linearGradient id="g"><stop stop-color="black"/>'
+                                      '</linearGradient></defs><rect x="20" y="20" width="70" height="70" '
+                                      'fill="url(#g)"/><rect x="110" y="110" width="70" height="70" '
+                                      'fill="url(#g) black"/>'), "paint server not rendered"),
+    "paint server under a failed condition": (doc('<g systemLanguage="x-none"><pattern id="p" width="10" '
+                                                  'height="10" patternUnits="userSpaceOnUse"><rect width="5" '
+                                                  'height="5"/></pattern></g><circle cx="100" cy="100" r="60" '
+                                                  'fill="url(#p)" stroke="black" stroke-width="2"/>'
+                                                  '<linearGradient id="g" '
+                                                  'systemLanguage="x-none"><stop stop-color="black"/>'
+                                                  '</linearGradient><rect x="10" y="10" width="30" height="30" '
+                                                  'fill="url(#g)"/>'), "paint server not rendered"),
+    # -- bounding boxes --------------------------------------------------------------------------------------------
+    "bbox of hidden children": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox"><rect x="0.5" y="0" '
+                                    'width="0.5" height="1"/></clipPath><g clip-path="url(#c)">'
+                                    '<rect x="10" y="10" width="100" height="180" visibility="hidden"/>'
+                                    '<circle cx="150" cy="60" r="10" opacity="0"/>'
+                                    '<rect x="120" y="120" width="40" height="60" fill="none" stroke="none"/>'
+                                    '<g opacity="0"><line x1="0" y1="100" x2="200" y2="100" stroke="black"/></g>'
+                                    '<rect x="60" y="40" width="80" height="120"/></g>'), "bbox of hidden children"),
+    # -- clip path transforms, group compositing ---------------------------------------------------------------
+    "clip path transform by bounding box": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox" '
+                                                'transform="translate(20 10)"><rect width="0.5" height="0.5"/>'
+                                                '</clipPath><rect x="40" y="40" width="120" height="120" '
+                                                'clip-path="url(#c)"/>'), "clip path transform by bounding box"),
+    "clip path transform-origin by bounding box": (doc('<clipPath id="c" clipPathUnits="objectBoundingBox" '
+                                                       'transform="scale(1.5)" transform-origin="center">'
+                                                       '<circle cx="0.5" cy="0.5" r="0.3"/></clipPath>'
+                                                       '<rect x="20" y="50" width="140" height="100" '
+                                                       'clip-path="url(#c)"/>'),
+                                                   "clip path transform by bounding box"),
+    "fill hides lines within a translucent group": (doc('<g opacity="0.6"><line x1="10" y1="100" x2="190" '
+                                                        'y2="100" stroke="black" stroke-width="2"/>'
+                                                        '<circle cx="100" cy="100" r="50"/>'
+                                                        '</g>'), "fill hides lines within a translucent group"),
+    "fill hides lines within a clipped group": (doc('<clipPath id="c"><rect x="0" y="0" width="150" '
+                                                    'height="200"/></clipPath><g clip-path="url(#c)">'
+                                                    f'<path d="M20 40 L180 160" {S}/><rect x="60" y="60" '
+                                                    'width="80" height="80"/></g>'),
+                                                "fill hides lines within a translucent group"),
 }
 
 TEXT_CASES: dict[str, str] = {

@@ -21,6 +21,7 @@ import math
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -59,6 +60,8 @@ from fabwire.lineus.plot.svgstyle import (
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
 from fabwire.lineus.plot.svgunits import (
     IDENTITY,
+    ROOT_FONT_SIZE,
+    Font,
     about,
     beyond_single,
     css_transform,
@@ -112,7 +115,7 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("style sheets: combinators, specificity, !important", "CSS Cascade 4 §6, Selectors 3", "css cascade"),
     ("presentation attributes below style sheets", "SVG 2 §6.6", "presentation attributes"),
     ("inherit and inherited properties", "CSS Cascade 4 §7", "inherit"),
-    ("em and ex from the inherited font size", "CSS Values 3 §6.1", "em units"),
+    ("em from the inherited font size", "CSS Values 3 §6.1", "em units"),
     ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
     ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
     ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
@@ -124,6 +127,19 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
+    ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
+     "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
+    ("viewport units vw, vh, vi, vb, vmin, vmax of the page", "CSS Values 4 §6.1.2", "viewport units"),
+    ("a length with an unknown unit or trailing text is in error", "CSS Values 4 §6, SVG 1.1 §F.2",
+     "length in error"),
+    ("paint servers under display none or failed conditions paint nothing (fallback colour)",
+     "SVG 2 §13.2, §5.8.1; CSS Display 3 §2.7", "paint server not rendered"),
+    ("hidden, transparent and unpainted shapes count for the group's bounding box", "SVG 2 §8.10",
+     "bbox of hidden children"),
+    ("a clipPath's transform and transform-origin apply in user space, outside objectBoundingBox units",
+     "SVG 1.1 §14.3.5, CSS Transforms 1 §7", "clip path transform by bounding box"),
+    ("fills in a group with opacity or a clip path hide that group's earlier lines only",
+     "SVG 1.1 §14.5, Compositing and Blending 1 §3.3", "fill hides lines within a translucent group"),
 )
 
 
@@ -204,12 +220,16 @@ class Ink(list[FloatArray]):
     def __init__(self, lines: Polylines | None = None) -> None:
         super().__init__(lines or [])
         self.fills: list[_Fill] = []
+        self.extent: list[list[float]] = []
+        """Boxes (x0, y0, x1, y1) of geometry that shows nothing but counts for the bounding box of the group
+        (hidden, fully transparent or unpainted shapes: SVG 2 §8.10 takes every rendered element's geometry)."""
         self._boxes = _Boxes()
         self._fill_boxes = _Boxes()
 
     def take(self, other: Ink) -> None:
         self.extend(other)
         self.fills.extend(other.fills)
+        self.extent.extend(other.extent)
 
     def boxes(self) -> FloatArray:
         """(x0, y0, x1, y1) of every line (lines are never changed in place, only added or replaced)."""
@@ -304,6 +324,9 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         matrix = viewport_matrix(box, 0.0, 0.0, width, height, root.get("preserveAspectRatio"))
         own = own_style(root, reader.sheet)
         style = inherit({}, own)
+        # viewport units are of the window showing the document: the page when it has a size of its own
+        reader.root_font = Font(viewport=(width, height))
+        reader.root_font = reader.font(style)
         if _opacity(style) > 0:  # `display` on the root of a standalone document is ignored, as in browsers
             inner = (box[2], box[3]) if box else (width, height)
             reader.user_viewport = inner
@@ -381,10 +404,6 @@ def _invert(matrix: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.inv(np.vstack([matrix, [0.0, 0.0, 1.0]]))[:2], dtype=float)
 
 
-def _font_size(style: dict[str, str]) -> float:
-    return number(style.get("font-size"), 16.0)
-
-
 def _language_matches(value: str) -> bool:
     """`systemLanguage`: true when one of its comma-separated tags has a user language as its primary subtag
     (SVG 1.1 §5.8.5; an empty value is false)."""
@@ -425,10 +444,21 @@ class _Reader:
         self._below: list[Ink] = []
         """What is painted so far, innermost last: opaque fills hide the parts of these lines under them."""
         self._shaded = 0
-        """Enclosing elements that make a fill's hiding unsure (group opacity, clip paths, masks, filters)."""
+        """Enclosing elements that make a fill's hiding unsure (masks, filters, what is drawn only to be measured)."""
+        self._floor = 0
+        """The first of `_below` a fill hides lines in: the innermost group composited on its own (group opacity,
+        a clip path, a viewport's clip) takes its content as one picture, so a fill in it hides what the group
+        painted before it, but not what lies under the group (SVG 1.1 §14.5, Compositing 1 §3.3 groups)."""
         self._occlusion_checks = 0
         self.user_viewport = (0.0, 0.0)
         """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
+        self.root_font = Font()
+        """The root element's font and the page's size: what rem, rlh and vw/vh/vi/vb/vmin/vmax are of."""
+
+    def font(self, style: dict[str, str]) -> Font:
+        """What font- and viewport-relative lengths of an element with the computed `style` are of."""
+        return Font(number(style.get("font-size"), ROOT_FONT_SIZE), style.get("font-family", ""),
+                    self.root_font.size, self.root_font.family, self.root_font.viewport)
 
     # -- limits -----------------------------------------------------------------------------------------------
 
@@ -493,7 +523,7 @@ class _Reader:
         """The element's transform: the CSS `transform` property when set and valid, else the attribute, about
         its `transform-origin` (CSS Transforms 1 §6; the reference box is the viewport unless `transform-box`
         names the element's own box)."""
-        font = _font_size(style)
+        font = self.font(style)
         matrix = IDENTITY
         css = own.get("transform")
         if css is not None:
@@ -518,7 +548,7 @@ class _Reader:
         """The shape's box in its own user units (x, y, width, height), or None for other elements."""
         if tag not in SHAPES:
             return None
-        subs = [s.points for s in self.subpaths(el, tag, IDENTITY, viewport, _font_size(style), keep=True)]
+        subs = [s.points for s in self.subpaths(el, tag, IDENTITY, viewport, self.font(style), keep=True)]
         if not subs:
             return None
         pts = np.concatenate(subs)
@@ -592,7 +622,10 @@ class _Reader:
             return
         own = own_style(el, self.sheet)
         style = inherit(parent, own)
-        if own.get("display", "").strip() == "none" or _opacity(own) <= 0:
+        if own.get("display", "").strip() == "none":
+            return
+        if _opacity(own) <= 0:
+            self.extent_of(el, own, style, matrix, viewport, out, depth, uses)
             return
         own_matrix = self.placement(el, own, style, viewport)
         if own_matrix is not IDENTITY:
@@ -604,20 +637,47 @@ class _Reader:
             self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
             return
         target = Ink()
-        shaded = bool(effects) or _opacity(own) < 1
-        self._below.append(target)
-        self._shaded += shaded
-        try:
+        with self.painting(target, shaded=bool(set(effects) - {"clip-path"}),
+                           isolated=bool(effects) or _opacity(own) < 1):
             self.draw(el, tag, style, matrix, viewport, target, depth, uses)
-        finally:
-            self._below.pop()
-            self._shaded -= shaded
         self.clip(el, own, matrix, target, ())
         out.take(target)
+
+    def extent_of(self, el: ET.Element, own: dict[str, str], style: dict[str, str], matrix: FloatArray,
+                  viewport: tuple[float, float], out: Ink, depth: int, uses: tuple[str, ...]) -> None:
+        """Add the box of a fully transparent element to `out`'s extent: it shows nothing, and hides nothing,
+        but its geometry counts for its group's bounding box (SVG 2 §8.10)."""
+        matrix = then(matrix, self.placement(el, own, style, viewport))
+        if flattens(matrix):
+            return
+        scratch = Ink()
+        with self.painting(scratch, shaded=True):
+            self.draw(el, local(el.tag), {**style, "visibility": "visible", "opacity": "1"}, matrix, viewport,
+                      scratch, depth, uses)
+        boxes = np.vstack([scratch.boxes(), np.asarray(scratch.extent, dtype=float).reshape(-1, 4)])
+        if len(boxes):
+            out.extent.append([*boxes[:, :2].min(axis=0).tolist(), *boxes[:, 2:].max(axis=0).tolist()])
 
     def below(self, ink: Ink) -> None:
         """Start a drawing whose earlier paint is `ink`."""
         self._below = [ink]
+        self._floor = 0
+
+    @contextmanager
+    def painting(self, target: Ink, *, shaded: bool = False, isolated: bool = False) -> Iterator[None]:
+        """Draw into `target`, painted over what is below: `isolated` for a group composited on its own (its
+        fills hide only its own earlier lines), `shaded` where fills hide nothing at all."""
+        floor = self._floor
+        self._below.append(target)
+        self._shaded += shaded
+        if isolated:
+            self._floor = len(self._below) - 1
+        try:
+            yield
+        finally:
+            self._below.pop()
+            self._shaded -= shaded
+            self._floor = floor
 
     def draw(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
              viewport: tuple[float, float], target: Ink, depth: int, uses: tuple[str, ...]) -> None:
@@ -643,7 +703,7 @@ class _Reader:
         """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
         model), and earlier fills shrink to what still shows."""
         x0, y0, x1, y1 = fill.box
-        for ink in self._below:
+        for ink in self._below[self._floor:]:
             if not ink and not ink.fills:
                 continue
             self._occlusion_checks += len(ink) + len(ink.fills)
@@ -717,7 +777,7 @@ class _Reader:
         if beyond_single(el.get("x")) or beyond_single(el.get("y")):
             return  # placed at infinity: nothing of the copy is on the page
         vw, vh = viewport
-        font = _font_size(style)
+        font = self.font(style)
         matrix = then(matrix, translate(length(el.get("x"), vw, font_size=font),
                                         length(el.get("y"), vh, font_size=font)))
         kind = local(target.tag)
@@ -727,15 +787,9 @@ class _Reader:
             if own.get("display", "").strip() == "none" and kind == "svg":
                 return
             drawn = Ink()
-            shaded = own.get("clip-path", "none").strip() != "none"
-            self._below.append(drawn)
-            self._shaded += shaded
-            try:
+            with self.painting(drawn, isolated=own.get("clip-path", "none").strip() != "none"):
                 self.viewport(target, el, inner, matrix, viewport, drawn, depth, (*uses, str(ref)),
                               el.get("width"), el.get("height"))
-            finally:
-                self._below.pop()
-                self._shaded -= shaded
             self.clip(target, own, matrix, drawn, ())
             out.take(drawn)
         else:
@@ -747,7 +801,7 @@ class _Reader:
         """A nested `<svg>` (drawn or used: its x and y place it) or a used `<symbol>`: a viewport its viewBox
         maps onto, clipping unless overflow is visible (SVG 1.1 §7.9, §14.3.3)."""
         vw, vh = viewport
-        font = _font_size(style)
+        font = self.font(style)
         own_place = local(el.tag) == "svg"
         x = length(el.get("x"), vw, font_size=font) if own_place else 0.0
         y = length(el.get("y"), vh, font_size=font) if own_place else 0.0
@@ -765,13 +819,8 @@ class _Reader:
             inner = then(inner, self.own_transform(el))
         drawn = Ink()
         clips = style.get("overflow", "hidden").strip() in ("hidden", "scroll")
-        self._below.append(drawn)
-        self._shaded += clips
-        try:
+        with self.painting(drawn, isolated=clips):
             self.children(el, style, inner, (box[2], box[3]) if box else (w, h), drawn, depth, uses)
-        finally:
-            self._below.pop()
-            self._shaded -= clips
         if clips and (drawn or drawn.fills):
             corners = np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h], [x, y]])
             ring = corners @ matrix[:, :2].T + matrix[:, 2]
@@ -779,7 +828,7 @@ class _Reader:
         out.take(drawn)
 
     def subpaths(self, el: ET.Element, tag: str, matrix: FloatArray, viewport: tuple[float, float],
-                 font: float = 16.0, *, keep: bool = False) -> list[Subpath]:
+                 font: float | Font = 16.0, *, keep: bool = False) -> list[Subpath]:
         """The element's subpaths placed by `matrix`; `keep` leaves a read-ahead path for a later call."""
         ahead = self._read_ahead.get(id(el)) if tag == "path" else None
         if ahead is not None:
@@ -797,8 +846,11 @@ class _Reader:
             return length(styled.get(name, el.get(name)), relative, default=default, font_size=font)
 
         def radius(name: str, relative: float) -> float | None:
-            """rx or ry: None for auto (absent, `auto`, or in error: negative)."""
-            value = get(name, relative, -1.0)
+            """rx or ry: None for auto (absent, negative, or in error in CSS); an attribute in error (`auto`
+            included) is 0, as Chromium reads it."""
+            value = get(name, relative, math.nan)
+            if math.isnan(value):
+                return 0.0 if name not in styled and el.get(name) is not None else None
             return value if value >= 0 else None
 
         try:
@@ -853,7 +905,8 @@ class _Reader:
         if ref is None:
             return "solid", None
         target = self.ids.get(ref)
-        if target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient"):
+        if (target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient")
+                or not self._server_exists(target)):
             fallback = value[value.find(")") + 1:].strip()
             if fallback and paints({**style, which: fallback}, which):
                 return "solid", None
@@ -861,6 +914,20 @@ class _Reader:
         if local(target.tag) == "pattern":
             return "pattern", target
         return ("solid", None) if self._has_stops(target) else ("none", None)
+
+    def _server_exists(self, server: ET.Element) -> bool:
+        """Whether a paint server can paint: not when it or an ancestor has `display: none`, nor when an ancestor
+        fails its conditions (`systemLanguage`, `requiredExtensions`), as Chromium makes no paint server out of
+        such an element and the reference falls back as if it named nothing (SVG 2 §13.2, §5.8.1; CSS Display 3
+        §2.7). Conditions on the server itself are not processed (it is not a rendered element)."""
+        at: ET.Element | None = server
+        while at is not None:
+            if own_style(at, self.sheet).get("display", "").strip() == "none":
+                return False
+            if at is not server and not conditions_hold(at):
+                return False
+            at = self.parents.get(at)
+        return True
 
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
@@ -882,7 +949,7 @@ class _Reader:
         if value in ("none", ""):
             return [], 0.0
         diag = math.hypot(*viewport) / math.sqrt(2)
-        font = _font_size(style)
+        font = self.font(style)
         parts = [p for p in value.replace(",", " ").split() if p]
         lengths = [length(p, diag, default=-1.0, font_size=font) for p in parts]
         if not lengths or any(v < 0 for v in lengths) or sum(lengths) <= 0:
@@ -892,12 +959,13 @@ class _Reader:
 
     def shape(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
               viewport: tuple[float, float], out: Ink) -> None:
-        if style.get("visibility", "visible").strip() != "visible":
-            return
         stroke = self._paint_kind(style, "stroke")[0] != "none"
         fill, pattern = self._paint_kind(style)
         covers = not self._shaded and bool(self._below) and opaque_fill(style)
-        if not (stroke or covers) and fill == "none":
+        if style.get("visibility", "visible").strip() != "visible" or (not (stroke or covers) and fill == "none"):
+            points = [sub.points for sub in self.subpaths(el, tag, matrix, viewport, self.font(style))]
+            if points:
+                out.extent.append(_box(np.concatenate(points)))  # shows nothing, but has a bounding box
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
         dots = stroke and caps
@@ -906,7 +974,7 @@ class _Reader:
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
-        for sub in self.subpaths(el, tag, matrix, viewport, _font_size(style)):
+        for sub in self.subpaths(el, tag, matrix, viewport, self.font(style)):
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
             pts = sub.points
@@ -1016,13 +1084,13 @@ class _Reader:
             inside = IDENTITY
         tile = Ink()
         self._patterns = (*self._patterns, ref)
-        outside, self._below = self._below, [tile]
+        outside, floor, self._below, self._floor = self._below, self._floor, [tile], 0
         try:
             self.children(content, self.computed_style(content), inside,
                           (vb.box[2], vb.box[3]) if vb.box else (w, h), tile, 0, ())
         finally:
             self._patterns = self._patterns[:-1]
-            self._below = outside
+            self._below, self._floor = outside, floor
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
             kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
             tile = Ink(kept)
@@ -1057,7 +1125,7 @@ class _Reader:
 
     # -- clipping ---------------------------------------------------------------------------------------------
 
-    def clip_region(self, value: str, matrix: FloatArray, content: Polylines,
+    def clip_region(self, value: str, matrix: FloatArray, content: Ink,
                     stack: tuple[str, ...]) -> BaseGeometry | None:
         """The area `clip-path: value` lets through, in output units; None (and a note) when it can't be used."""
         ref = iri(value)
@@ -1074,15 +1142,20 @@ class _Reader:
         if len(stack) > MAX_DEPTH:
             raise InputError(f"{self.name}: clip paths nested deeper than {MAX_DEPTH}")
         by_box = clip.get("clipPathUnits", "").strip() == "objectBoundingBox"
+        # the clip path's transform is in the user space of the element it clips, outside the bounding box's
+        # units (SVG 1.1 §14.3.5: "the user coordinate system ... is established using the bounding box" after
+        # the transform on the clipPath element)
+        own_place = self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip), self.user_viewport)
         if by_box:
-            if not content:
+            corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
+            if not content and not corners:
                 return shapely.Polygon()
-            pts = np.concatenate(content)
+            pts = np.concatenate([*content, *corners])
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
-            matrix = then(matrix, np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
-        matrix = then(matrix, self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip),
-                                             self.user_viewport))
+            matrix = then(then(matrix, own_place), np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
+        else:
+            matrix = then(matrix, own_place)
         key = (id(clip), matrix.tobytes())
         if key in self._clips and not by_box:
             return self._clips[key]
@@ -1124,12 +1197,12 @@ class _Reader:
         if tag not in SHAPES:
             return empty
         rings = [np.vstack([s.points, s.points[:1]]) for s in self.subpaths(child, tag, matrix, (0.0, 0.0),
-                                                                            _font_size(style), keep=True)
+                                                                            self.font(style), keep=True)
                  if len(s.points) >= 3]
         region = area_of_rings(rings, style.get("clip-rule", "nonzero").strip())
         inner = own.get("clip-path", "none").strip()
         if inner != "none":
-            content = list(rings) or [np.zeros((1, 2))]
+            content = Ink(list(rings) or [np.zeros((1, 2))])
             limit = self.clip_region(inner, matrix, content, stack)
             if limit is not None:
                 region = shapely.intersection(region, limit)

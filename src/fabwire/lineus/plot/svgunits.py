@@ -15,7 +15,6 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-import svgelements as se
 
 from fabwire.lineus.plot.geometry import FloatArray
 
@@ -30,7 +29,7 @@ _ASPECT = re.compile(r"\s*(none|x(?:Min|Mid|Max)Y(?:Min|Mid|Max))(?:\s+(meet|sli
 _FUNCTION = rf"(matrix|translate|scale|rotate|skewX|skewY)\s*\(\s*((?:{_NUMBER}(?:{_COMMA_WSP}?{_NUMBER})*)?)\s*\)"
 _TRANSFORM_LIST = re.compile(rf"\s*{_FUNCTION}(?:[\s,]*+{_FUNCTION})*\s*")
 _TRANSFORM_ONE = re.compile(_FUNCTION)
-_UNITS = "px|pt|pc|mm|cm|in|q|em|ex|rem|ch|vw|vh|vmin|vmax|%"
+_UNITS = "px|pt|pc|mm|cm|in|q|em|ex|rem|ch|cap|ic|lh|rlh|vw|vh|vi|vb|vmin|vmax|%"
 _ARITY = {"matrix": (6,), "translate": (1, 2), "scale": (1, 2), "rotate": (1, 3), "skewX": (1,), "skewY": (1,)}
 
 
@@ -39,28 +38,95 @@ def translate(x: float, y: float) -> FloatArray:
 
 
 ROOT_FONT_SIZE = 16.0
-"""The font size of the document root, px, for `rem` lengths (a browser's default medium)."""
-EX_PER_EM = 0.5
-"""The x-height as a share of the font size, for `ex` lengths (CSS Values 3 §6.1.1: 0.5em when not measured)."""
+"""The font size of the document root, px, when the root sets none (a browser's default medium)."""
+
+FONT_METRICS: tuple[tuple[tuple[str, ...], float, float, float, float, float, float], ...] = (
+    # (family names, ex, ch, cap, ascent, descent, ic) in em: the font-relative units of CSS Values 4 §6.1.1 as
+    # Chromium resolves them with the faces Debian installs for these families (fonts-noto-core,
+    # fonts-dejavu-core): ex = OS/2 sxHeight, cap = OS/2 sCapHeight, ch = advance of "0", ascent and descent from
+    # hhea (lh, `line-height: normal`, is their sum, each rounded to whole px as Chromium does; no line gap), ic =
+    # advance of U+6C34 (1 em, the fallback when no face holds it). Sources: the fonts' OS/2 and hhea tables
+    # (OpenType spec), checked by getBBox() of rects sized in each unit in Chromium.
+    (("sans-serif", "noto sans", "arial", "helvetica", "liberation sans", "system-ui", "times new roman"),
+     0.536, 0.572, 0.714, 1.069, 0.293, 1.0),
+    (("serif", "noto serif"), 0.536, 0.559, 0.714, 1.069, 0.293, 1.0),
+    (("dejavu sans",), 0.5469, 0.6362, 0.7291, 1901 / 2048, 483 / 2048, 1.0),
+    (("dejavu serif",), 0.5119, 0.6362, 0.7219, 1901 / 2048, 483 / 2048, 1.0),
+    (("monospace", "dejavu sans mono"), 0.5469, 0.6021, 0.7291, 1901 / 2048, 483 / 2048, 1.0),
+)
+"""Font-relative length units per family; a family not listed falls back to the first row, as a browser falls
+back to its default face (Noto Sans on Debian). Below about 100 px Chromium grid-fits the x-height and cap
+height of the hinted DejaVu faces to whole px: ex and cap may then differ from a browser's by up to 1 px."""
+_FONT_UNITS = ("ex", "ch", "cap", "lh", "ic")
+_METRICS = ("ex", "ch", "cap", "ascent", "descent", "ic")
 
 
-def length(value: str | None, relative_to: float, *, default: float = 0.0, font_size: float = 16.0) -> float:
-    """A length in user units (CSS px at 96 per inch); percentages of `relative_to`; em and ex of `font_size`
-    (px); `default` when absent, in error or not finite."""
-    if value is None or not value.strip():
+def font_metrics(family: str) -> dict[str, float]:
+    """The ex, ch, cap, ascent, descent and ic of the first family of a `font-family` list that FONT_METRICS
+    knows, in em."""
+    for name in (n.strip().strip("'\"").lower() for n in family.split(",")):
+        for names, *values in FONT_METRICS:
+            if name in names:
+                return dict(zip(_METRICS, values, strict=True))
+    return dict(zip(_METRICS, FONT_METRICS[0][1:], strict=True))
+
+
+def line_height(size: float, family: str) -> float:
+    """`line-height: normal` in px of a font of `size` px: ascent and descent, each rounded to whole px."""
+    metrics = font_metrics(family)
+    return float(round(size * metrics["ascent"]) + round(size * metrics["descent"]))
+
+
+@dataclass(frozen=True)
+class Font:
+    """What font-relative and viewport-relative lengths are of: the element's font size (px) and `font-family`,
+    the root element's, and the viewport of the page (px; (0, 0) when unknown, then vw/vh/... are in error)."""
+
+    size: float = ROOT_FONT_SIZE
+    family: str = ""
+    root_size: float = ROOT_FONT_SIZE
+    root_family: str = ""
+    viewport: tuple[float, float] = (0.0, 0.0)
+
+    def unit(self, name: str) -> float | None:
+        """px per one `name` unit (lower case), or None for a unit not relative to the font or viewport."""
+        if name == "em":
+            return self.size
+        if name == "rem":
+            return self.root_size
+        if name == "lh":
+            return line_height(self.size, self.family)
+        if name == "rlh":
+            return line_height(self.root_size, self.root_family)
+        if name in _FONT_UNITS:
+            return self.size * font_metrics(self.family)[name]
+        w, h = self.viewport
+        if w <= 0 or h <= 0:
+            return None
+        # horizontal writing: the inline axis is x, the block axis y (CSS Values 4 §6.1.2)
+        return {"vw": w, "vi": w, "vh": h, "vb": h, "vmin": min(w, h), "vmax": max(w, h)}.get(name, 0.0) / 100 \
+            if name in ("vw", "vi", "vh", "vb", "vmin", "vmax") else None
+
+
+ABSOLUTE_UNITS = {"": 1.0, "px": 1.0, "in": 96.0, "cm": 96 / 2.54, "mm": 96 / 25.4, "q": 96 / 101.6, "pt": 96 / 72,
+                  "pc": 16.0}
+"""CSS px per absolute unit (CSS Values 4 §6.2; a bare number is px, as SVG user units)."""
+_LENGTH = re.compile(rf"\s*({_NUMBER})([a-zA-Z]*|%)\s*")
+
+
+def length(value: str | None, relative_to: float, *, default: float = 0.0, font_size: float | Font = 16.0) -> float:
+    """A length in user units (CSS px at 96 per inch): absolute units, percentages of `relative_to`, font-relative
+    units (em, ex, ch, cap, ic, lh, rem, rlh) and viewport units (vw, vh, vi, vb, vmin, vmax) of `font_size` (px, or
+    a Font); `default` when absent, in error (an unknown unit, trailing text) or not finite."""
+    match = _LENGTH.fullmatch(value) if value is not None else None
+    if match is None:
         return default
-    text = value.strip()
-    try:
-        if text[-2:].lower() == "ex":
-            text, font_size = f"{text[:-2]}em", font_size * EX_PER_EM
-        elif text[-3:].lower() == "rem":
-            text, font_size = f"{text[:-3]}em", ROOT_FONT_SIZE
-        elif text[-1:] in "qQ" and text[:-1].strip():
-            text = f"{float(text[:-1]) / 4}mm"
-        result = se.Length(text).value(ppi=96.0, relative_length=relative_to, font_size=font_size)
-        result = float(result)
-    except (ValueError, TypeError, AttributeError, ZeroDivisionError, OverflowError):
+    font = font_size if isinstance(font_size, Font) else Font(font_size)
+    unit = match.group(2).lower()
+    scale = relative_to / 100 if unit == "%" else ABSOLUTE_UNITS.get(unit, font.unit(unit))
+    if scale is None:
         return default
+    result = float(match.group(1)) * scale
     return result if math.isfinite(result) else default
 
 
@@ -194,7 +260,7 @@ _CSS_TRANSLATE_AXES = {"translate": "xy", "translatex": "x", "translatey": "y"}
 _CSS_SCALE_AXES = {"scale": "xy", "scalex": "x", "scaley": "y"}
 
 
-def css_transform(value: str, viewport: tuple[float, float], font_size: float = 16.0) -> FloatArray:
+def css_transform(value: str, viewport: tuple[float, float], font_size: float | Font = 16.0) -> FloatArray:
     """The CSS `transform` property (CSS Transforms 1 §13: 2D functions with units) as a 2x3 matrix; `none` is
     the identity. Lengths take CSS units (a bare number is px, as SVG allows); percentages are of the viewport
     (`transform-box: view-box`, the initial box of SVG elements). ValueError when the value is in error."""
@@ -222,7 +288,7 @@ def _angle(text: str) -> float:
     return float(match.group(1)) * ANGLE_UNITS[match.group(2).lower()]
 
 
-def _css_function(name: str, args: list[str], viewport: tuple[float, float], font_size: float) -> FloatArray:
+def _css_function(name: str, args: list[str], viewport: tuple[float, float], font_size: float | Font) -> FloatArray:
     def size(text: str, axis: int) -> float:
         result = length(text, viewport[axis], default=math.nan, font_size=font_size)
         if not math.isfinite(result):
@@ -262,7 +328,7 @@ ORIGIN_KEYWORDS = {"left": (0, 0.0), "right": (0, 1.0), "top": (1, 0.0), "bottom
 
 
 def transform_origin(value: str | None, box: tuple[float, float, float, float],
-                     font_size: float = 16.0) -> tuple[float, float]:
+                     font_size: float | Font = 16.0) -> tuple[float, float]:
     """The point `transform-origin` names (CSS Transforms 1 §7), in user units; percentages and keywords are of
     `box` (x, y, width, height), the element's reference box, and lengths are offsets from its corner. (0, 0) of
     user space when absent or in error (the initial value for SVG elements)."""
