@@ -160,6 +160,9 @@ class JobKeys:
         self._fd = -1
         self._cancel_asked = -1.0
         self._tasks: set[asyncio.Task[None]] = set()
+        self._sent: str | None = None
+        """The last pause or resume a key sent, and the state the view showed then (a poll may not have come)."""
+        self._sent_from: Any = None
 
     def __enter__(self) -> JobKeys:
         try:
@@ -192,7 +195,11 @@ class JobKeys:
         key = os.read(self._fd, 1)
         now = asyncio.get_running_loop().time()
         if key == b" ":
-            self._run("resume" if self.view.status.state_code == PAUSED else "pause")
+            code = self.view.status.state_code
+            caught_up = self._sent is None or code != self._sent_from  # a poll since the last key, or no key yet
+            paused = code == PAUSED if caught_up else self._sent == "pause"
+            self._sent, self._sent_from = ("resume" if paused else "pause"), code
+            self._run(self._sent)
         elif key in (b"c", b"C"):
             if now - self._cancel_asked <= CANCEL_WINDOW_S:
                 self._cancel_asked = -1.0
