@@ -141,7 +141,8 @@ def test_moonraker_http_routes_answer_in_moonraker_shapes(demo: RunningAgent) ->
         assert refused.status_code == 409
         assert "G-code" in refused.json()["error"]["message"]
         assert client.get("/server/files/metadata", params={"filename": "nope.gcode"}).status_code == 404
-        assert client.get("/printers/line-us/server/info").json()["result"]["klippy_connected"] is True
+        wait_for(lambda: client.get("/printers/line-us/server/info").json()["result"]["klippy_connected"] is True,
+                 "the demo Line-us connected")
         assert client.get("/printers/nope/server/info").status_code == 404
 
 

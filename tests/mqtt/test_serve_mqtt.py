@@ -181,6 +181,24 @@ def test_two_agents_with_one_device_take_turns(broker: Mosquitto, agents: Agents
     watch.until(lambda w: w.latest.get(f"fabwire/device/{device}/availability") == b"online")
 
 
+def test_the_owner_writes_its_device_again_when_another_agent_wrote_over_it(
+        broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any) -> None:
+    """An agent that could not see the owner alive (a late heartbeat) may publish the device's retained info in
+    its own name; the owner writes it back, so the broker ends naming the agent that answers commands."""
+    sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    agents.start("a", broker, f"arm:lineus={sim.url}")
+    device = watch.until(lambda w: w.device_of_kind("lineus"))
+    owner = watch.until(lambda w: (w.json(f"fabwire/device/{device}/info") or {}).get("agent"))
+    info = watch.json(f"fabwire/device/{device}/info")
+    watch.client.publish(f"fabwire/device/{device}/info", json.dumps({**info, "agent": "vm-000000"}), qos=1,
+                         retain=True).wait_for_publish(10)
+    def publishers(w: Watch) -> list[str]:
+        return [json.loads(p).get("agent") for t, p in w.log if t == f"fabwire/device/{device}/info" and p]
+
+    watch.until(lambda w: "vm-000000" in publishers(w))
+    watch.until(lambda w: publishers(w)[publishers(w).index("vm-000000"):][-1] == owner)
+
+
 def _digest(state_dir: Path) -> str:
     from fabwire.mqtt.topics import default_agent_id
 

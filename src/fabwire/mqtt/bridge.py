@@ -188,6 +188,7 @@ class Bridge:
         self._overflow: asyncio.Queue[tuple[str, bytes, Any]] = asyncio.Queue(OVERFLOW_REPLIES)
         self._beats = 0
         self._last_pong = -PONG_INTERVAL_S
+        self._reasserted: dict[str, float] = {}
         self._living: frozenset[str] = frozenset()
         self.commands_refused = 0
         """Commands answered "busy" or dropped because their device's queue was full."""
@@ -233,7 +234,8 @@ class Bridge:
         self._dirty = asyncio.Queue()
         me = self.agent_id
         for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/{HEARTBEAT}", f"{PREFIX}/device/+/claim/+",
-                      f"{PREFIX}/device/+/command", HA_STATUS, PING, agent_topic(me, "sync")):
+                      f"{PREFIX}/device/+/info", f"{PREFIX}/device/+/command", HA_STATUS, PING,
+                      agent_topic(me, "sync")):
             await client.subscribe(topic, qos=1)
         await client.publish(agent_topic(me, "status"), ONLINE, qos=1, retain=True)
         await self._heartbeat()
@@ -430,6 +432,19 @@ class Bridge:
             self._pending.pop(device, None)
             self._availability.pop(device, None)
             log.info("MQTT: %s is now published by agent %s", device, self.view.owner(device, now=now))
+        elif mine and self._overwritten(device, now):
+            # Another agent published the device while it could not see this one alive (a late heartbeat on a
+            # loaded machine): the retained info is last-writer-wins, so the owner writes it again. At most once
+            # per heartbeat period, so two agents that briefly both believe they own it cannot ping-pong.
+            self._reasserted[device] = now
+            await self._publish_device(device)
+
+    def _overwritten(self, device: str, now: float) -> bool:
+        """Whether the broker's retained info for an owned device names another agent."""
+        view = self.view.devices.get(device)
+        publisher = view.info.get("agent") if view is not None and view.info is not None else None
+        return (publisher is not None and publisher != self.agent_id
+                and now - self._reasserted.get(device, -HEARTBEAT_S) >= HEARTBEAT_S)
 
     async def _forget_stale_claims(self) -> None:
         """Claims this agent left on the broker for devices it no longer monitors (removed while it was away),
@@ -468,6 +483,7 @@ class Bridge:
             self._living = living
             await self._reconcile_all()
         else:
+            await self._reconcile_mine()  # also re-asserts a device another agent wrote over meanwhile
             await self._forget_stale_claims()
 
     async def _publish_device(self, device: str) -> None:
