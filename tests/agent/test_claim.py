@@ -83,8 +83,9 @@ async def test_the_job_that_prints_is_the_one_on_record_and_cancels(tmp_path: Pa
             if agent.state(device)["summary"]["state"] == "printing":
                 break
             await asyncio.sleep(0.05)
-        assert agent.state(device)["job"]["id"] == job["id"]
-        assert (await agent.jobs.get(job["id"]))["state"] == "running"
+        record = await agent.jobs.get(job["id"])
+        assert (agent.state(device)["job"] or {}).get("id") == job["id"], (record, agent.state(device)["summary"])
+        assert record["state"] == "running"
         done = await agent.cancel_job(job["id"], confirm=True)
         assert done["state"] == "cancelled"
         assert agent.state(device)["job"] is None
