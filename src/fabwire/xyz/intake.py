@@ -313,9 +313,6 @@ def _check_lines(text: bytes, name: str, line_offset: int) -> None:
                 raise _long_line(name, length)
 
 
-_ODD_NUMBER = re.compile(rb"[XYZEFIJR][ \t]*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)E|NAN|INF)", re.IGNORECASE)
-"""A word whose value has an exponent or is no number: a firmware's strtod reads `X1e308` as a move to infinity
-where a reader of plain decimals sees `X1`, so no check of ours would stand for what the printer does."""
 _MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
 
 
@@ -323,9 +320,13 @@ def _lines_after_crs(src: BinaryIO, begin: int, carried_cr: bool) -> int:
     return _lines_before(src, begin) - carried_cr
 
 
-def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int]) -> None:
-    """Refuse a G line (outside its comment) with a number no printer reads as plain decimals (see _ODD_NUMBER)."""
-    for found in _ODD_NUMBER.finditer(text):
+def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int], start: int = 0,
+                   end: int | None = None) -> None:
+    """Refuse a G line (outside its comment) with a number no printer reads as plain decimals
+    (`gcodearrays.ODD_NUMBER`), among the lines from offset `start` to `end` of `text`."""
+    from fabwire.xyz.gcodearrays import ODD_NUMBER
+
+    for found in ODD_NUMBER.finditer(text, start, len(text) if end is None else end):
         start = text.rfind(b"\n", 0, found.start()) + 1
         head = text[start:found.start()]
         if b";" in head or b"(" in head or not _MOVE_LINE.match(text, start):
@@ -388,13 +389,20 @@ def _without_nuls(text: bytes, name: str, lines_before: int, repaired: list[int]
 
 
 def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0, *,
-                end: int | None = None, repaired: list[int] | None = None) -> Iterator[bytes]:
+                end: int | None = None, repaired: list[int] | None = None,
+                odd: list[tuple[int, int]] | None = None) -> Iterator[bytes]:
     """The whole G-code from the file's start (to `end`, default its end) as LF-terminated, line-aligned chunks of
     at most about CHUNK bytes: BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within
     CHUNK + MAX_LINE.
 
     A NUL byte before `end` is an InputError naming its line; when `repaired` is given, NULs are dropped instead and
-    the line numbers they were on are appended to it."""
+    the line numbers they were on are appended to it. So is a G line with a number no printer reads as plain
+    decimals (`gcodearrays.ODD_NUMBER`). When `odd` is given, the caller reads each chunk's numbers itself and lists
+    there, before it asks for the next chunk, the (start, end) parts of the chunk outside which no such number is
+    (`MoveAnalyzer.feed_chunk` does): only those parts, and the line a read cuts in two, are searched here; the
+    errors and their order stay the same."""
+    from fabwire.xyz.gcodearrays import ODD_NUMBER, may_hold_odd_number
+
     src.seek(0)
     carry = b""
     held_cr = False
@@ -418,17 +426,31 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         if b"\0" in text:
             text = _without_nuls(text, name, _lines_before(src, begin) - carried_cr, repaired)
         _check_lines(text, name, len(carry))
-        _check_numbers(carry + text if carry else text, name,  # carry holds no newline
-                       functools.partial(_lines_after_crs, src, begin, carried_cr))
-        if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
-            raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
+        lines_before = functools.partial(_lines_after_crs, src, begin, carried_cr)
         cut = text.rfind(b"\n") + 1
+        if odd is None:
+            checked = True
+            if may_hold_odd_number(carry + text if carry else text):  # carry holds no newline
+                _check_numbers(carry + text if carry else text, name, lines_before)
+        else:  # the line the read cuts is searched here, the others by the caller
+            checked = cut == 0 or ODD_NUMBER.search(text, cut) is not None
+            if checked:
+                _check_numbers(carry + text if carry else text, name, lines_before)
+        if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
+            if not checked:  # an error in the lines before comes first
+                _check_numbers(carry + text, name, lines_before)
+            raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
         if cut == 0:
             carry += text
             if len(carry) > MAX_LINE:
                 raise _long_line(name, len(carry))
             continue
-        yield carry + text[:cut] if carry else text[:cut]
+        chunk = carry + text[:cut] if carry else text[:cut]
+        yield chunk
+        if odd:
+            for start, stop in odd:
+                _check_numbers(chunk, name, lines_before, start, stop)
+            odd.clear()
         carry = text[cut:]
         if len(carry) > MAX_LINE:
             raise _long_line(name, len(carry))
@@ -599,8 +621,9 @@ def _metadata(
     if stated.complete and not always:
         return stated, None
     analyzer = MoveAnalyzer(timing=stated.print_time_s is None)  # a stated time needs no planning
-    for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None):
-        analyzer.feed_chunk(chunk)
+    odd: list[tuple[int, int]] = []
+    for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None, odd=odd):
+        analyzer.feed_chunk(chunk, odd)
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
                          "this is not a print file")
@@ -697,7 +720,9 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     from fabwire.xyz import arcwork
 
     arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
-    for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired):
+    checked: list[tuple[int, int]] | None = [] if prepared.analysed else None  # the first read searched every line
+    for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired,
+                             odd=checked):
         if leading:
             found = _FIRST_CODE_LINE.search(chunk)
             end = len(chunk) if found is None else found.start()
