@@ -159,6 +159,9 @@ class Scan:
     controls: list[tuple[int, bytes, bytes]]
     arcs: NDArray[np.int8]
     """Per line of the piece: 2 for a G2 (clockwise arc), 3 for a G3, else 0."""
+    g0_at: NDArray[np.intp] | None = None
+    """Offsets in the padded piece of the `0` of each G0 (or the second of each G00) command word, which a printer
+    that knows no G0 is given as G1."""
     odd_at: int | None = None
     """Where (offset in the padded piece) the first G line starts that may hold a word `ODD_NUMBER` matches in
     its code: a letter without a number, an E right after a digit, or such a match on another G line (None when no
@@ -183,6 +186,9 @@ def scan(padded: bytes) -> Scan | None:
     is_move = (c0 == ord("G")) & (
         (_MOVE_DIGIT[c1] & ~_DIGIT_OR_DOT[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGIT_OR_DOT[c3])
     )
+    g0 = (c0 == ord("G")) & (c1 == ord("0"))
+    g0_at = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT[c2]] + 1,
+                            starts[g0 & (c2 == ord("0")) & ~_DIGIT_OR_DOT[c3]] + 2))
     digit = np.where(c1 == ord("0"), c2, c1)
     arcs = np.where(is_move & ((digit == ord("2")) | (digit == ord("3"))), digit - ord("0"), 0).astype(np.int8)
     controls: list[tuple[int, bytes, bytes]] = []
@@ -249,7 +255,7 @@ def scan(padded: bytes) -> Scan | None:
             if len(glued):
                 suspect = min(suspect, int(lines[glued[0]]))
         axes.append(Words(lines, numbers[picked], is_set[lines]))
-    return Scan(tuple(axes), controls, arcs, int(newlines[suspect]) + 1 if suspect < len(starts) else None)
+    return Scan(tuple(axes), controls, arcs, g0_at, int(newlines[suspect]) + 1 if suspect < len(starts) else None)
 
 
 _NO_WORDS = Words(np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0, dtype=bool))

@@ -184,10 +184,12 @@ class MoveAnalyzer:
     line-by-line path.
     """
 
-    def __init__(self, *, timing: bool = True) -> None:
+    def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None) -> None:
         """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
-        path over feed rate only."""
+        path over feed rate only. `g0_words` collects, per chunk fed, the offsets of the `0` of its G0 and G00
+        command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads."""
         self.timing = timing
+        self.g0_words = g0_words
         self.pos = [0.0, 0.0, 0.0]
         self.e = 0.0
         self.feed = DEFAULT_FEED_MM_MIN
@@ -224,6 +226,7 @@ class MoveAnalyzer:
         self._count_markers(chunk)
         start = 0
         view = memoryview(chunk)
+        g0_words: list[NDArray[np.intp]] | None = []
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
@@ -231,12 +234,17 @@ class MoveAnalyzer:
             if found is None:
                 self._lines(chunk[start:end] + ended)
                 odd_at: int | None = start
+                g0_words = None
             else:
                 self._feed_arrays(found)
                 odd_at = None if found.odd_at is None else start + found.odd_at - 1
+                if g0_words is not None and found.g0_at is not None:
+                    g0_words.append(found.g0_at + (start - 1))
             if odd is not None and odd_at is not None:
                 odd.append((odd_at, end))
             start = end
+        if self.g0_words is not None:
+            self.g0_words.append(None if g0_words is None else np.concatenate(g0_words or [np.zeros(0, np.intp)]))
 
     def feed_lines(self, chunk: bytes) -> None:
         """The line-by-line analysis (any G-code layout)."""

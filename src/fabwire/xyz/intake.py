@@ -508,6 +508,9 @@ class Prepared:
     """With repair: the lines the body pass dropped NUL bytes from (filled as the body is read)."""
     expand_arcs: bool = False
     """The body pass turns G2/G3 arcs into line segments."""
+    g0_words: list[NDArray[np.intp] | None] | None = None
+    """Per chunk of the G-code, the offsets of the `0` of its G0/G00 command words, as the analysis found them
+    (None for a chunk only the line reader read)."""
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -572,7 +575,9 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
     from fabwire.xyz.gcodeinfo import finish
 
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True)
+    g0_words: list[NDArray[np.intp] | None] = []
+    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True,
+                                 g0_words=g0_words)
     outside = check_build_volume(stated.merged(computed) if computed else stated, name, model, force)
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
@@ -596,7 +601,7 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
                   f"{arcwork.TOLERANCE_MM} mm (no public source shows da Vinci firmware running arcs; --keep-arcs "
                   "passes them through)",)
     return Prepared(keys, header, replace(meta, notes=notes), computed is not None, total, [] if repair else None,
-                    arcs > 0)
+                    arcs > 0, g0_words if computed is not None else None)
 
 
 def _tail(src: BinaryIO, total: int) -> bytes:
@@ -611,16 +616,16 @@ def _tail(src: BinaryIO, total: int) -> bytes:
 
 def _metadata(
     src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None, *, repair: bool = False,
-    always: bool = False,
+    always: bool = False, g0_words: list[NDArray[np.intp] | None] | None = None,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
-    `always`)."""
+    `always`); `g0_words` collects where the G0 command words are (see `MoveAnalyzer`) when the moves are read."""
     from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
 
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete and not always:
         return stated, None
-    analyzer = MoveAnalyzer(timing=stated.print_time_s is None)  # a stated time needs no planning
+    analyzer = MoveAnalyzer(timing=stated.print_time_s is None, g0_words=g0_words)  # a stated time: no planning
     odd: list[tuple[int, int]] = []
     for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None, odd=odd):
         analyzer.feed_chunk(chunk, odd)
@@ -703,9 +708,16 @@ def _process(chunk: bytes) -> bytes:
         return _G0_WORD.sub(rb"\n\g<1>1", b"\n" + chunk)[1:]
     # Every line starts with its command: the `0` of each G0/G00 becomes `1` in place.
     g0 = (c0 == 71) & (c1 == 48)
-    ones = np.concatenate((starts[g0 & ~digit_or_dot[c2]] + 1, starts[g0 & (c2 == 48) & ~digit_or_dot[c3]] + 2))
+    return _as_g1(chunk, np.concatenate((starts[g0 & ~digit_or_dot[c2]] + 1,
+                                         starts[g0 & (c2 == 48) & ~digit_or_dot[c3]] + 2)))
+
+
+def _as_g1(chunk: bytes, ones: NDArray[np.intp]) -> bytes:
+    """`chunk` with a `1` at each of the offsets `ones` (the `0` of a G0 or G00 command word)."""
     if not len(ones):
         return chunk
+    import numpy as np
+
     out = bytearray(chunk)
     np.frombuffer(out, dtype=np.uint8)[ones] = ord("1")
     return bytes(out)
@@ -721,8 +733,10 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
 
     arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
     checked: list[tuple[int, int]] | None = [] if prepared.analysed else None  # the first read searched every line
-    for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired,
-                             odd=checked):
+    g0_words = prepared.g0_words if arcs is None else None  # the analysis read these very chunks
+    for index, chunk in enumerate(gcode_lines(src, name, progress, prepared.end, end=prepared.end,
+                                              repaired=prepared.repaired, odd=checked)):
+        skipped = 0
         if leading:
             found = _FIRST_CODE_LINE.search(chunk)
             end = len(chunk) if found is None else found.start()
@@ -730,5 +744,11 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
             if found is None:
                 continue
             leading = False
-            chunk = chunk[end:]
-        yield _process(chunk if arcs is None else arcs.expand(chunk))
+            chunk, skipped = chunk[end:], end
+        ones = g0_words[index] if g0_words is not None and index < len(g0_words) else None
+        if arcs is not None:
+            yield _process(arcs.expand(chunk))
+        elif ones is not None:
+            yield _as_g1(chunk, ones - skipped if skipped else ones)
+        else:
+            yield _process(chunk)
