@@ -8,6 +8,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -192,3 +193,35 @@ def test_the_estimate_does_not_depend_on_how_the_file_is_cut(cuts: list[int]) ->
         pieces.feed_chunk(text[a:b])
     assert pieces.seconds == pytest.approx(whole.seconds, rel=1e-12)
 
+
+
+_DELTA = st.one_of(st.just(0.0), st.just(0.0), st.floats(-200, 200, allow_nan=False),
+                   st.sampled_from([1e-9, -3.5, 5e-324]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(moves=st.lists(st.tuples(_DELTA, _DELTA, _DELTA, _DELTA, st.floats(1, 20_000)), min_size=1, max_size=120),
+       window=st.integers(2, 40), limits=st.lists(st.tuples(st.integers(0, 119), st.sampled_from(
+           [b"M205", b"M203", b"M201"]), st.floats(0.05, 5_000)), max_size=3))
+def test_an_axis_planned_only_where_it_moves_gives_the_same_time(
+        moves: list[tuple[float, float, float, float, float]], window: int,
+        limits: list[tuple[int, bytes, float]]) -> None:
+    """Planning a rarely moving axis at its own moves only is exact: the same seconds to the last bit."""
+
+    def plan(sparse: float) -> float:
+        planner = motion.Planner()
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(motion, "WINDOW", window)
+            patch.setattr(motion, "SPARSE", sparse)
+            for k, (dx, dy, dz, de, feed) in enumerate(moves):
+                for at, command, value in limits:
+                    if at == k:
+                        planner.set_limits(motion.apply_command(planner.limits, command, {b"Z": value, b"X": value}))
+                columns = [np.array([v]) for v in (dx, dy, dz, de, math.sqrt(dx * dx + dy * dy + dz * dz), feed)]
+                with np.errstate(all="ignore"):
+                    planner.add((columns[0], columns[1], columns[2], columns[3]), columns[4], columns[5])
+            with np.errstate(all="ignore"):
+                return planner.total()
+
+    times = [plan(1 / 8), plan(0.0), plan(2.0)]
+    assert times[0] == times[1] == times[2] or all(math.isnan(t) for t in times)

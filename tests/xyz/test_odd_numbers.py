@@ -4,6 +4,7 @@ or a message is left alone."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import pytest
@@ -38,3 +39,54 @@ def test_the_same_text_outside_a_move_is_left_alone(tmp_path: Path, line: bytes)
     src.write_bytes(b"".join(LINES[:5]) + line + b"".join(LINES[5:]))
     convert_gcode_file(src, tmp_path / "out.3w")
     assert (tmp_path / "out.3w").exists()
+
+
+_PLAIN = [b"G1 X10.5 Y2 E0.25", b"G0 X1 Y2", b"G92 E0", b"G28", b"G4 P100", b"M117 XNaN here", b"; X1e5 in a comment",
+          b"G1 X1 ; Yinf", b"T0", b"", b"G1 X1 Y1 E2", b";LAYER_CHANGE", b"G1 Z0.2", b"G1 X" + b"1" * 30,
+          b"G1 ;" + b"x" * 50, b"G2 X1 Y1 I1 J0 E1", b"M204 S500"]
+_RARE = [b"G1X10E5", b"G1 X1 (Y1e5) E1", b"  G1 X1e5", b"N10 G1 Xnan", b"g1 x1e5", b"G1 X1 I1e3", b"G28 Xinf",
+        b"G1 E1.5e", b"G1 X.5e2", b"G1 X+inf", b"G1 X - nan", b"G1 Rinf", b"G1 X1.E2", b"G29 Je1", b"\0",
+        b"  G1 X1", b"N3 G1 X2 E1", b"G92 X1 E1e3"]
+_PIECES = _PLAIN * 8 + _RARE
+"""Lines of a file: plain ones mostly, and rarer ones that hold such a number (in their code, a comment or elsewhere)
+or that only the line-by-line reader reads (indented, numbered, lower case, comments in parentheses), or a NUL."""
+
+
+@settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(lines=st.lists(st.sampled_from(_PIECES), max_size=80), ends=st.lists(st.sampled_from([b"\n", b"\r\n", b"\r"]),
+                                                                          min_size=1, max_size=3),
+       chunk=st.integers(16, 200), longest=st.integers(24, 400), final=st.booleans())
+def test_the_analysis_finds_the_same_first_odd_number_as_reading_every_line(
+        monkeypatch: pytest.MonkeyPatch, lines: list[bytes], ends: list[bytes], chunk: int, longest: int,
+        final: bool) -> None:
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+    text = b"".join(line + ends[k % len(ends)] for k, line in enumerate(lines))
+    text = text if final else text.rstrip(b"\r\n")
+    monkeypatch.setattr(intake, "CHUNK", chunk)
+    monkeypatch.setattr(intake, "MAX_LINE", longest)
+
+    def outcome(analysed: bool) -> str:
+        try:
+            if analysed:
+                odd: list[tuple[int, int]] = []
+                analyzer = MoveAnalyzer()
+                for piece in intake.gcode_lines(io.BytesIO(text), "f", odd=odd):
+                    analyzer.feed_chunk(piece, odd)
+            else:
+                for _ in intake.gcode_lines(io.BytesIO(text), "f"):
+                    pass
+        except InputError as exc:
+            return str(exc)
+        return "read"
+
+    assert outcome(True) == outcome(False)
+
+
+@given(st.binary(max_size=40) | st.text(alphabet="XYZEFIJRxyzefijr0123456789.+- \tnaNAiIfF;", max_size=40).map(
+    str.encode))
+def test_the_quick_look_for_such_numbers_misses_none(text: bytes) -> None:
+    from fabwire.xyz.gcodearrays import ODD_NUMBER, may_hold_odd_number
+
+    if ODD_NUMBER.search(text):
+        assert may_hold_odd_number(text)

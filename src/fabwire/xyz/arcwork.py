@@ -31,7 +31,8 @@ def _number(value: float, places: int) -> str:
 def segments(start: tuple[float, float, float, float], words: dict[bytes, float], clockwise: bool, *,
              absolute: bool = True, absolute_e: bool = True) -> list[str] | None:
     """The G1 lines for an arc from `start` (X, Y, Z, E) with these words, or None when the arc has no centre
-    (no I, J or R; an R too small for its chord), which a printer runs as a straight move."""
+    (no I, J or R; an R too small for its chord; a circle too wide for a float to step across), which a printer runs
+    as a straight move."""
     x0, y0, z0, e0 = start
 
     def target(letter: bytes, begin: float, is_absolute: bool) -> float:
@@ -75,6 +76,8 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
             point = (cx + radius * math.cos(angle), cy + radius * math.sin(angle), z0 + (z1 - z0) * k / count,
                      e0 + (e1 - e0) * k / count)
         shown = point if absolute else tuple(p - q for p, q in zip(point, last, strict=True))
+        if not all(math.isfinite(v) for v in shown):  # steps across a circle wider than a float holds
+            return None
         line = f"G1 X{_number(shown[0], 4)} Y{_number(shown[1], 4)}"
         if z1 != z0:
             line += f" Z{_number(shown[2], 4)}"

@@ -22,10 +22,9 @@ AXES = b"XYZEFIJR"
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
 _AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
-_PLAIN_AXES = 5
-"""X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are read only where G2/G3 lines are)."""
-_PLAIN_FLAGS = bytes(int(0 <= _AXIS_INDEX[byte] < _PLAIN_AXES) for byte in range(256))
 """bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
+_PLAIN_AXES = 5
+"""X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
 _DIGIT_OR_DOT = np.zeros(256, dtype=bool)
@@ -42,6 +41,23 @@ _NUMBER = re.compile(VALUE)
 _CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83|201|203|204|205))(?![0-9.])([^\n;]*)")
 _WORD = re.compile(rb"[A-Z][ \t]*" + _NUMBER.pattern)
 _SET_ONLY = re.compile(rb"[^XYZE0-9.+\- \t]")
+ODD_NUMBER = re.compile(rb"[XYZEFIJR][ \t]*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)E|NAN|INF)", re.IGNORECASE)
+"""A word whose value has an exponent or is no number: a firmware's strtod reads `X1e308` as a move to infinity
+where a reader of plain decimals sees `X1`, so no check of ours would stand for what the printer does."""
+_ODD_CLASSES = bytes(1 if byte in b"0123456789." else 2 if byte in b"Ee" else 4 if byte in b"NnAaIiFf" else 0
+                     for byte in range(256))
+
+
+def may_hold_odd_number(text: bytes) -> bool:
+    """Whether `text` may hold a match of `ODD_NUMBER` (False proves it holds none): a digit or dot right before
+    an E, or three of the letters of NAN and INF in a row."""
+    folded = np.frombuffer(text.translate(_ODD_CLASSES), dtype=np.uint8)
+    if ((folded[:-1] == 1) & (folded[1:] == 2)).any():
+        return True
+    letter = folded == 4
+    return bool((letter[:-2] & letter[1:-1] & letter[2:]).any())
+
+
 PAD = 32
 """Zero bytes after the text, so reads of a number's 16 bytes never run past the buffer."""
 
@@ -143,6 +159,13 @@ class Scan:
     controls: list[tuple[int, bytes, bytes]]
     arcs: NDArray[np.int8]
     """Per line of the piece: 2 for a G2 (clockwise arc), 3 for a G3, else 0."""
+    g0_at: NDArray[np.intp] | None = None
+    """Offsets in the padded piece of the `0` of each G0 (or the second of each G00) command word, which a printer
+    that knows no G0 is given as G1."""
+    odd_at: int | None = None
+    """Where (offset in the padded piece) the first G line starts that may hold a word `ODD_NUMBER` matches in
+    its code: a letter without a number, an E right after a digit, or such a match on another G line (None when no
+    line may)."""
 
 
 def scan(padded: bytes) -> Scan | None:
@@ -163,11 +186,18 @@ def scan(padded: bytes) -> Scan | None:
     is_move = (c0 == ord("G")) & (
         (_MOVE_DIGIT[c1] & ~_DIGIT_OR_DOT[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGIT_OR_DOT[c3])
     )
+    g0 = (c0 == ord("G")) & (c1 == ord("0"))
+    g0_at = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT[c2]] + 1,
+                            starts[g0 & (c2 == ord("0")) & ~_DIGIT_OR_DOT[c3]] + 2))
     digit = np.where(c1 == ord("0"), c2, c1)
     arcs = np.where(is_move & ((digit == ord("2")) | (digit == ord("3"))), digit - ord("0"), 0).astype(np.int8)
     controls: list[tuple[int, bytes, bytes]] = []
     is_set = np.zeros(len(starts), dtype=bool)
+    suspect = len(starts)
     for line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
+        if line < suspect and padded[newlines[line] + 1] == 71 and ODD_NUMBER.search(  # G
+                padded, int(newlines[line]), int(newlines[line + 1])):
+            suspect = line
         found = _CONTROL.match(padded, int(newlines[line]))
         if found is None:
             continue
@@ -193,8 +223,8 @@ def scan(padded: bytes) -> Scan | None:
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
     read = len(AXES) if arcs.any() else _PLAIN_AXES
-    flags = _AXIS_FLAGS if read == len(AXES) else _PLAIN_FLAGS
-    where = np.flatnonzero(np.frombuffer(padded.translate(flags), dtype=np.bool_))
+    # I, J and R words are found (and checked) everywhere, and kept only where arcs are
+    where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of]
     if inline_comments:
@@ -208,8 +238,9 @@ def scan(padded: bytes) -> Scan | None:
     numbers = parse_numbers(padded, data, at)
     axis = _AXIS_INDEX[data[where]]
     known = ~np.isnan(numbers)
-    if not known.all():  # bare letters are not words
-        axis, line_of, numbers = axis[known], line_of[known], numbers[known]
+    if not known.all():  # bare letters are not words (and may be a NaN or an infinity)
+        suspect = min(suspect, int(line_of[~known][0]))
+        axis, line_of, numbers, where = axis[known], line_of[known], numbers[known], where[known]
     axes = []
     for k in range(len(AXES)):
         if k >= read:
@@ -219,8 +250,12 @@ def scan(padded: bytes) -> Scan | None:
         lines = line_of[picked]
         if (lines[1:] == lines[:-1]).any():
             return None  # a letter repeats within a line
+        if k == 3:  # an E right after a digit or dot may be an exponent
+            glued = np.flatnonzero(_DIGIT_OR_DOT[data[where[picked] - 1]])
+            if len(glued):
+                suspect = min(suspect, int(lines[glued[0]]))
         axes.append(Words(lines, numbers[picked], is_set[lines]))
-    return Scan(tuple(axes), controls, arcs)
+    return Scan(tuple(axes), controls, arcs, g0_at, int(newlines[suspect]) + 1 if suspect < len(starts) else None)
 
 
 _NO_WORDS = Words(np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0, dtype=bool))

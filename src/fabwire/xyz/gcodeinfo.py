@@ -61,7 +61,8 @@ _FACETS = re.compile(rb"^;[ \t]*facets[ \t]*=[ \t]*([0-9]+)", re.MULTILINE | re.
 
 def _comment_lines(window: bytes) -> bytes:
     """The `;` comment lines of a piece of G-code (every pattern here reads comments; moves are most of a file)."""
-    return b"\n".join(line for line in window.split(b"\n") if line.lstrip(b" \t")[:1] == b";")
+    return b"\n".join([line for line in window.split(b"\n")  # most lines start with their command: one look
+                       if line[:1] == b";" or (line[:1] in b" \t" and line.lstrip(b" \t")[:1] == b";")])
 
 
 _FIGURE_NAMES = {"time": "print time", "filament": "filament", "layers": "layer count"}
@@ -183,10 +184,12 @@ class MoveAnalyzer:
     line-by-line path.
     """
 
-    def __init__(self, *, timing: bool = True) -> None:
+    def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None) -> None:
         """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
-        path over feed rate only."""
+        path over feed rate only. `g0_words` collects, per chunk fed, the offsets of the `0` of its G0 and G00
+        command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads."""
         self.timing = timing
+        self.g0_words = g0_words
         self.pos = [0.0, 0.0, 0.0]
         self.e = 0.0
         self.feed = DEFAULT_FEED_MM_MIN
@@ -215,17 +218,33 @@ class MoveAnalyzer:
         self._release()
         return self.planner.total() + self.dwell if self.timing else self.path_seconds
 
-    def feed_chunk(self, chunk: bytes) -> None:
-        """Analyse whole lines; `chunk` must start at a line start (its end ends its last line)."""
+    def feed_chunk(self, chunk: bytes, odd: list[tuple[int, int]] | None = None) -> None:
+        """Analyse whole lines; `chunk` must start at a line start (its end ends its last line).
+
+        `odd` collects the (start, end) offsets of the parts of `chunk`, from a line start to a line end, outside
+        which no G line holds a word `gcodearrays.ODD_NUMBER` matches in its code."""
         self._count_markers(chunk)
         start = 0
         view = memoryview(chunk)
+        g0_words: list[NDArray[np.intp]] | None = []
         while start < len(chunk):  # bounded pieces keep the per-word arrays small
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
-            if not self._feed_arrays(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD)))):
+            found = gcodearrays.scan(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD))))
+            if found is None:
                 self._lines(chunk[start:end] + ended)
+                odd_at: int | None = start
+                g0_words = None
+            else:
+                self._feed_arrays(found)
+                odd_at = None if found.odd_at is None else start + found.odd_at - 1
+                if g0_words is not None and found.g0_at is not None:
+                    g0_words.append(found.g0_at + (start - 1))
+            if odd is not None and odd_at is not None:
+                odd.append((odd_at, end))
             start = end
+        if self.g0_words is not None:
+            self.g0_words.append(None if g0_words is None else np.concatenate(g0_words or [np.zeros(0, np.intp)]))
 
     def feed_lines(self, chunk: bytes) -> None:
         """The line-by-line analysis (any G-code layout)."""
@@ -343,23 +362,16 @@ class MoveAnalyzer:
         self.dwell += seconds
         self.path_seconds += seconds
 
-    def _feed_arrays(self, padded: bytes) -> bool:
-        """Analyse a piece if it is plain enough for array operations, else leave the state alone and say False.
-
-        `padded` starts with a newline, ends its last line and then has `gcodearrays.PAD` zero bytes.
-        """
-        found = gcodearrays.scan(padded)
-        if found is None:
-            return False
+    def _feed_arrays(self, found: gcodearrays.Scan) -> None:
+        """Analyse a piece read into arrays."""
         start = [0] * len(found.axes)
-        for line, code, params in [*found.controls, (len(padded), b"", b"")]:
+        for line, code, params in [*found.controls, (len(found.arcs) + 1, b"", b"")]:
             ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
             self._segment([Words(w.lines[a:b], w.values[a:b], w.sets[a:b])
                            for w, a, b in zip(found.axes, start, ends, strict=True)], found.arcs)
             if code:
                 self._command(code, params)
             start = ends
-        return True
 
     def _segment(self, axes: list[Words], arcs: NDArray[np.int8]) -> None:
         """The moves and G92s between two other commands: every axis's words, on lines counted from the piece's."""

@@ -313,9 +313,6 @@ def _check_lines(text: bytes, name: str, line_offset: int) -> None:
                 raise _long_line(name, length)
 
 
-_ODD_NUMBER = re.compile(rb"[XYZEFIJR][ \t]*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)E|NAN|INF)", re.IGNORECASE)
-"""A word whose value has an exponent or is no number: a firmware's strtod reads `X1e308` as a move to infinity
-where a reader of plain decimals sees `X1`, so no check of ours would stand for what the printer does."""
 _MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
 
 
@@ -323,9 +320,13 @@ def _lines_after_crs(src: BinaryIO, begin: int, carried_cr: bool) -> int:
     return _lines_before(src, begin) - carried_cr
 
 
-def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int]) -> None:
-    """Refuse a G line (outside its comment) with a number no printer reads as plain decimals (see _ODD_NUMBER)."""
-    for found in _ODD_NUMBER.finditer(text):
+def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int], start: int = 0,
+                   end: int | None = None) -> None:
+    """Refuse a G line (outside its comment) with a number no printer reads as plain decimals
+    (`gcodearrays.ODD_NUMBER`), among the lines from offset `start` to `end` of `text`."""
+    from fabwire.xyz.gcodearrays import ODD_NUMBER
+
+    for found in ODD_NUMBER.finditer(text, start, len(text) if end is None else end):
         start = text.rfind(b"\n", 0, found.start()) + 1
         head = text[start:found.start()]
         if b";" in head or b"(" in head or not _MOVE_LINE.match(text, start):
@@ -388,13 +389,20 @@ def _without_nuls(text: bytes, name: str, lines_before: int, repaired: list[int]
 
 
 def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, total: int = 0, *,
-                end: int | None = None, repaired: list[int] | None = None) -> Iterator[bytes]:
+                end: int | None = None, repaired: list[int] | None = None,
+                odd: list[tuple[int, int]] | None = None) -> Iterator[bytes]:
     """The whole G-code from the file's start (to `end`, default its end) as LF-terminated, line-aligned chunks of
     at most about CHUNK bytes: BOM dropped, CRLF and CR made LF, a final newline added. Memory stays within
     CHUNK + MAX_LINE.
 
     A NUL byte before `end` is an InputError naming its line; when `repaired` is given, NULs are dropped instead and
-    the line numbers they were on are appended to it."""
+    the line numbers they were on are appended to it. So is a G line with a number no printer reads as plain
+    decimals (`gcodearrays.ODD_NUMBER`). When `odd` is given, the caller reads each chunk's numbers itself and lists
+    there, before it asks for the next chunk, the (start, end) parts of the chunk outside which no such number is
+    (`MoveAnalyzer.feed_chunk` does): only those parts, and the line a read cuts in two, are searched here; the
+    errors and their order stay the same."""
+    from fabwire.xyz.gcodearrays import ODD_NUMBER, may_hold_odd_number
+
     src.seek(0)
     carry = b""
     held_cr = False
@@ -418,17 +426,31 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         if b"\0" in text:
             text = _without_nuls(text, name, _lines_before(src, begin) - carried_cr, repaired)
         _check_lines(text, name, len(carry))
-        _check_numbers(carry + text if carry else text, name,  # carry holds no newline
-                       functools.partial(_lines_after_crs, src, begin, carried_cr))
-        if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
-            raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
+        lines_before = functools.partial(_lines_after_crs, src, begin, carried_cr)
         cut = text.rfind(b"\n") + 1
+        if odd is None:
+            checked = True
+            if may_hold_odd_number(carry + text if carry else text):  # carry holds no newline
+                _check_numbers(carry + text if carry else text, name, lines_before)
+        else:  # the line the read cuts is searched here, the others by the caller
+            checked = cut == 0 or ODD_NUMBER.search(text, cut) is not None
+            if checked:
+                _check_numbers(carry + text if carry else text, name, lines_before)
+        if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
+            if not checked:  # an error in the lines before comes first
+                _check_numbers(carry + text, name, lines_before)
+            raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
         if cut == 0:
             carry += text
             if len(carry) > MAX_LINE:
                 raise _long_line(name, len(carry))
             continue
-        yield carry + text[:cut] if carry else text[:cut]
+        chunk = carry + text[:cut] if carry else text[:cut]
+        yield chunk
+        if odd:
+            for start, stop in odd:
+                _check_numbers(chunk, name, lines_before, start, stop)
+            odd.clear()
         carry = text[cut:]
         if len(carry) > MAX_LINE:
             raise _long_line(name, len(carry))
@@ -486,6 +508,9 @@ class Prepared:
     """With repair: the lines the body pass dropped NUL bytes from (filled as the body is read)."""
     expand_arcs: bool = False
     """The body pass turns G2/G3 arcs into line segments."""
+    g0_words: list[NDArray[np.intp] | None] | None = None
+    """Per chunk of the G-code, the offsets of the `0` of its G0/G00 command words, as the analysis found them
+    (None for a chunk only the line reader read)."""
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -550,7 +575,9 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
     from fabwire.xyz.gcodeinfo import finish
 
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True)
+    g0_words: list[NDArray[np.intp] | None] = []
+    stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True,
+                                 g0_words=g0_words)
     outside = check_build_volume(stated.merged(computed) if computed else stated, name, model, force)
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
@@ -574,7 +601,7 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
                   f"{arcwork.TOLERANCE_MM} mm (no public source shows da Vinci firmware running arcs; --keep-arcs "
                   "passes them through)",)
     return Prepared(keys, header, replace(meta, notes=notes), computed is not None, total, [] if repair else None,
-                    arcs > 0)
+                    arcs > 0, g0_words if computed is not None else None)
 
 
 def _tail(src: BinaryIO, total: int) -> bytes:
@@ -589,18 +616,19 @@ def _tail(src: BinaryIO, total: int) -> bytes:
 
 def _metadata(
     src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None, *, repair: bool = False,
-    always: bool = False,
+    always: bool = False, g0_words: list[NDArray[np.intp] | None] | None = None,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
-    `always`)."""
+    `always`); `g0_words` collects where the G0 command words are (see `MoveAnalyzer`) when the moves are read."""
     from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
 
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete and not always:
         return stated, None
-    analyzer = MoveAnalyzer(timing=stated.print_time_s is None)  # a stated time needs no planning
-    for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None):
-        analyzer.feed_chunk(chunk)
+    analyzer = MoveAnalyzer(timing=stated.print_time_s is None, g0_words=g0_words)  # a stated time: no planning
+    odd: list[tuple[int, int]] = []
+    for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None, odd=odd):
+        analyzer.feed_chunk(chunk, odd)
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
                          "this is not a print file")
@@ -680,9 +708,16 @@ def _process(chunk: bytes) -> bytes:
         return _G0_WORD.sub(rb"\n\g<1>1", b"\n" + chunk)[1:]
     # Every line starts with its command: the `0` of each G0/G00 becomes `1` in place.
     g0 = (c0 == 71) & (c1 == 48)
-    ones = np.concatenate((starts[g0 & ~digit_or_dot[c2]] + 1, starts[g0 & (c2 == 48) & ~digit_or_dot[c3]] + 2))
+    return _as_g1(chunk, np.concatenate((starts[g0 & ~digit_or_dot[c2]] + 1,
+                                         starts[g0 & (c2 == 48) & ~digit_or_dot[c3]] + 2)))
+
+
+def _as_g1(chunk: bytes, ones: NDArray[np.intp]) -> bytes:
+    """`chunk` with a `1` at each of the offsets `ones` (the `0` of a G0 or G00 command word)."""
     if not len(ones):
         return chunk
+    import numpy as np
+
     out = bytearray(chunk)
     np.frombuffer(out, dtype=np.uint8)[ones] = ord("1")
     return bytes(out)
@@ -697,7 +732,11 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     from fabwire.xyz import arcwork
 
     arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
-    for chunk in gcode_lines(src, name, progress, prepared.end, end=prepared.end, repaired=prepared.repaired):
+    checked: list[tuple[int, int]] | None = [] if prepared.analysed else None  # the first read searched every line
+    g0_words = prepared.g0_words if arcs is None else None  # the analysis read these very chunks
+    for index, chunk in enumerate(gcode_lines(src, name, progress, prepared.end, end=prepared.end,
+                                              repaired=prepared.repaired, odd=checked)):
+        skipped = 0
         if leading:
             found = _FIRST_CODE_LINE.search(chunk)
             end = len(chunk) if found is None else found.start()
@@ -705,5 +744,11 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
             if found is None:
                 continue
             leading = False
-            chunk = chunk[end:]
-        yield _process(chunk if arcs is None else arcs.expand(chunk))
+            chunk, skipped = chunk[end:], end
+        ones = g0_words[index] if g0_words is not None and index < len(g0_words) else None
+        if arcs is not None:
+            yield _process(arcs.expand(chunk))
+        elif ones is not None:
+            yield _as_g1(chunk, ones - skipped if skipped else ones)
+        else:
+            yield _process(chunk)

@@ -207,24 +207,64 @@ def _smallest(values: list[Floats]) -> Floats:
     return out
 
 
+SPARSE = 1 / 8
+"""An axis that moves in fewer than this share of a window's moves (Z between layers, mostly) is planned at those
+moves and the ones after them only: elsewhere it sets no limit."""
+
+
+def _at(column: Floats, rows: NDArray[np.intp]) -> Floats:
+    """A limit column (one value for the window, or one per move) at `rows`."""
+    return column if len(column) == 1 else column[rows]
+
+
+def _jerk(v_exit: Floats, v_entry: Floats) -> Floats:
+    """An axis's speed change at junctions: the larger of the two speeds where it reverses."""
+    jerk: Floats = np.where(v_exit * v_entry < 0, np.maximum(np.abs(v_exit), np.abs(v_entry)),
+                            np.abs(v_exit - v_entry))
+    return jerk
+
+
 def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | None) -> tuple[float, _Carry]:
     dx, dy, dz, de, length, feed, which = columns
+    count = len(length)
     lim = _limit_columns(table, which)
     moving = length > 0
     dist = np.where(moving, length, np.abs(de))
-    axes = [a for a, delta in enumerate((dx, dy, dz, de)) if delta.any()]  # Z is mostly still: skip it then
+    deltas = (dx, dy, dz, de)
+    moved = [np.flatnonzero(delta) for delta in deltas]
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse_dist = 1.0 / dist
-        unit = [(dx, dy, dz, de)[a] * inverse_dist for a in axes]
+        # still moves of an axis set no limit, unless a distance too small for its inverse makes them NaN
+        few = SPARSE * count if np.isfinite(inverse_dist).all() else 0.0
+        axes = [a for a in range(4) if len(moved[a]) > few or (len(moved[a]) and not few)]  # planned on every move
+        others = [a for a in range(4) if a not in axes and (len(moved[a]) or carry is not None)]
+        sparse, still = (others, []) if few else ([], others)
+        unit = [deltas[a] * inverse_dist for a in axes]
         inverse = [1.0 / np.abs(u) for u in unit]  # inf for an axis that does not move
+        few_unit = [deltas[a][moved[a]] * inverse_dist[moved[a]] for a in sparse]
+        few_inverse = [1.0 / np.abs(u) for u in few_unit]
         speed = np.maximum(feed / 60.0, np.where(de == 0, lim["min_travel"], lim["min_feed"]))
         cruise = _smallest([speed] + [lim["max_feedrate"][:, a] * inverse[k] for k, a in enumerate(axes)])
         accel = np.where(~moving, lim["retract"], np.where(de > 0, lim["acceleration"], lim["travel"]))
         accel = _smallest([accel] + [lim["max_acceleration"][:, a] * inverse[k] for k, a in enumerate(axes)])
+        for k, a in enumerate(sparse):
+            rows = moved[a]
+            cruise[rows] = np.minimum(cruise[rows], _at(lim["max_feedrate"][:, a], rows) * few_inverse[k])
+            accel[rows] = np.minimum(accel[rows], _at(lim["max_acceleration"][:, a], rows) * few_inverse[k])
     velocity = [cruise * u for u in unit]
     jerk_limit = [lim["jerk"][:, a] for a in axes]
     safe = _smallest([cruise] + [np.where(np.abs(v) > limit, limit, np.inf) for v, limit in zip(velocity, jerk_limit,
                                                                                             strict=True)])
+    if safe is cruise:
+        safe = cruise.copy()
+    few_velocity = []
+    for k, a in enumerate(sparse):
+        rows = moved[a]
+        v = np.zeros(count)
+        v[rows] = cruise[rows] * few_unit[k]
+        few_velocity.append(v)
+        limit = _at(lim["jerk"][:, a], rows)
+        safe[rows] = np.minimum(safe[rows], np.where(np.abs(v[rows]) > limit, limit, np.inf))
 
     # The junction speed into each move (PrusaSlicer's GCodeProcessor, Marlin's classic jerk): the per-axis speed
     # change, the larger of the two speeds where an axis reverses; scaled down by the tightest axis.
@@ -234,13 +274,18 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     factor = np.ones(len(cruise))
     with np.errstate(divide="ignore", invalid="ignore"):
         slower = np.minimum(1.0, cruise / prev_cruise)  # the previous move's speeds as it slows to this one's
-        for k, a in enumerate(axes + [a for a in range(4) if a not in axes and carry is not None]):
-            v_entry = velocity[k] if k < len(axes) else np.zeros(len(cruise))
+        for k, a in enumerate(axes + still):
+            v_entry = velocity[k] if k < len(axes) else np.zeros(count)
             before = v_entry[0] if carry is None else carry.velocity[a]
             v_exit = np.concatenate(([before], v_entry[:-1])) * slower
-            jerk = np.where(v_exit * v_entry < 0, np.maximum(np.abs(v_exit), np.abs(v_entry)),
-                            np.abs(v_exit - v_entry))
-            factor = np.minimum(factor, lim["jerk"][:, a] / jerk)
+            factor = np.minimum(factor, lim["jerk"][:, a] / _jerk(v_exit, v_entry))
+        for k, a in enumerate(sparse):  # the moves of the axis and the ones after them (and the window's first)
+            rows = np.union1d(np.append(moved[a], 0), (moved[a] + 1)[moved[a] + 1 < count])
+            v_entry = few_velocity[k][rows]
+            v_before = few_velocity[k][rows - 1]
+            v_before[rows == 0] = v_entry[0] if carry is None else carry.velocity[a]
+            factor[rows] = np.minimum(factor[rows], _at(lim["jerk"][:, a], rows) / _jerk(v_before * slower[rows],
+                                                                                          v_entry))
     junction = np.minimum(prev_cruise, cruise) * factor
     threshold = junction * 0.99
     junction = np.where((prev_safe > threshold) & (safe > threshold), safe, junction)
@@ -267,5 +312,6 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     times = (2 * peak - v0 - v1) / accel + np.maximum(dist - ramps, 0.0) / cruise
     last = np.zeros(4)
     last[axes] = [v[-1] for v in velocity]
+    last[sparse] = [v[-1] for v in few_velocity]
     carried = _Carry(float(cruise[-1]), last, float(safe[-1]), float(forward[-1]))
     return float(np.sum(times)), carried
