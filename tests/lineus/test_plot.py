@@ -190,7 +190,7 @@ def test_improvement_never_loses_to_greedy_and_keeps_every_line() -> None:
     assert sorted(order.tolist()) == list(range(800))
     lines = [np.array([s, e]) for s, e in zip(starts, ends, strict=True)]
     greedy = travel_length(arrange(lines, order, flips))
-    order2, flips2 = improve(starts, ends, order, flips, time_budget=0.5)
+    order2, flips2 = improve(starts, ends, order, flips, work=50_000)
     assert sorted(order2.tolist()) == list(range(800))
     improved = travel_length(arrange(lines, order2, flips2))
     assert improved < greedy * 0.95

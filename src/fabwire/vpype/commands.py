@@ -86,8 +86,10 @@ def plan_options(func: F) -> F:
         click.option("--clip", is_flag=True, help="Leave out lines outside the area instead of refusing them."),
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep vpype's line order and directions (as after linesort)."),
-        click.option("--optimize-time", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
-                     help="CPU seconds per layer the ordering may spend improving pen-up travel."),
+        click.option("--optimize-time", type=click.FloatRange(min=0.0), default=None,
+                     help="Work per layer the ordering may spend improving pen-up travel, in nominal CPU seconds "
+                          "(counted, not timed: the same plan on any machine). Default: in proportion to the "
+                          "number of lines, about what linesort costs."),
         _layer_option,
     ]
     for option in reversed(options):
@@ -95,7 +97,7 @@ def plan_options(func: F) -> F:
     return func
 
 
-def _plan_options(clip: bool, no_optimize: bool, optimize_time: float) -> PlanOptions:
+def _plan_options(clip: bool, no_optimize: bool, optimize_time: float | None) -> PlanOptions:
     return PlanOptions(fit=False, clip=clip, optimize=not no_optimize, time_budget=optimize_time)
 
 
@@ -152,7 +154,7 @@ def lineus_fit(document: Any, margin: float, full_area: bool, no_scale: bool, cl
 @processor("lineus-stat")
 @plan_options
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def lineus_stat(document: Any, clip: bool, no_optimize: bool, optimize_time: float, layer: Any,
+def lineus_stat(document: Any, clip: bool, no_optimize: bool, optimize_time: float | None, layer: Any,
                 as_json: bool) -> Any:
     """Print the Line-us plan's figures per layer: pen-down length, pen-up travel, lifts, estimated time."""
     with fabwire_errors():
@@ -166,7 +168,7 @@ def lineus_stat(document: Any, clip: bool, no_optimize: bool, optimize_time: flo
               help="Picture to write: .svg or .png (repeat for both).")
 @plan_options
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def lineus_preview(document: Any, outputs: tuple[Path, ...], clip: bool, no_optimize: bool, optimize_time: float,
+def lineus_preview(document: Any, outputs: tuple[Path, ...], clip: bool, no_optimize: bool, optimize_time: float | None,
                    layer: Any, as_json: bool) -> Any:
     """Write a picture of what the Line-us pen will do (pen-up travel dashed) and print the plan's figures."""
     with fabwire_errors():
@@ -191,7 +193,7 @@ def lineus_preview(document: Any, outputs: tuple[Path, ...], clip: bool, no_opti
               help="Progress file (default: one per drawing in the user's state directory).")
 @PEN_Z
 def lineus_draw(document: Any, device: str | None, timeout: float, clip: bool, no_optimize: bool,
-                optimize_time: float, layer: Any, no_pause: bool, resume: bool, state: Path | None,
+                optimize_time: float | None, layer: Any, no_pause: bool, resume: bool, state: Path | None,
                 pen_z: float) -> Any:
     """Draw the document on a Line-us, one layer after another.
 
@@ -224,7 +226,7 @@ def figures_text_all(plans: list[PassPlan]) -> str:
 @click.argument("file", type=vpype_cli.PathType(path_type=Path, dir_okay=False))
 @plan_options
 @PEN_Z
-def lineus_gcode(document: Any, file: Path, clip: bool, no_optimize: bool, optimize_time: float, layer: Any,
+def lineus_gcode(document: Any, file: Path, clip: bool, no_optimize: bool, optimize_time: float | None, layer: Any,
                  pen_z: float) -> Any:
     """Write the document as Line-us G-code FILE (for `fabwire lineus files save`).
 

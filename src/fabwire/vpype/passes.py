@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 
 from fabwire.errors import InputError
-from fabwire.lineus.kinematics import APP_AREA
+from fabwire.lineus.kinematics import APP_AREA, UNITS_PER_MM
 from fabwire.lineus.plot import Plan, PlanFigures, PlanOptions, plan_lines
 from fabwire.lineus.plot.export import gcode_lines
-from fabwire.lineus.plot.geometry import FloatArray, Polylines
+from fabwire.lineus.plot.fit import fit_placement
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, compose
 from fabwire.lineus.plot.intake import PAGE_ORIGIN, SVG_UNITS_PER_PX
 
 LAYER_NAME = "vp_name"
@@ -66,11 +67,19 @@ def document_passes(document: Any, layer_ids: Iterable[int] | None = None) -> li
         if wanted is not None and layer_id not in wanted:
             continue
         layer = document.layers[layer_id]
-        lines = [to_machine(line) for line in layer if len(line)]
+        lines = [line for line in layer if len(line)]
         if lines:
+            sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
+            placed = to_machine(np.concatenate(lines))  # one conversion for the whole layer, then split (views)
             name = layer.property(LAYER_NAME)
-            passes.append(Pass(layer_id, str(name) if name else None, lines))
+            passes.append(Pass(layer_id, str(name) if name else None, np.split(placed, np.cumsum(sizes)[:-1])))
     return passes
+
+
+PAGE_TO_MACHINE = np.array([[SVG_UNITS_PER_PX, 0.0, PAGE_ORIGIN[0]], [0.0, -SVG_UNITS_PER_PX, PAGE_ORIGIN[1]]])
+MACHINE_TO_PAGE = np.array([[1 / SVG_UNITS_PER_PX, 0.0, -PAGE_ORIGIN[0] / SVG_UNITS_PER_PX],
+                            [0.0, -1 / SVG_UNITS_PER_PX, PAGE_ORIGIN[1] / SVG_UNITS_PER_PX]])
+"""`to_machine` and `to_page` as 2x3 matrices."""
 
 
 def fit_document(document: Any, options: PlanOptions) -> Any:
@@ -79,22 +88,31 @@ def fit_document(document: Any, options: PlanOptions) -> Any:
     page becomes the app drawing area.
 
     Raises InputError for an empty document or, without fitting or clipping, for lines out of reach."""
+    if options.fit:
+        lines = [line for layer_id in sorted(document.layers) for line in document.layers[layer_id] if len(line)]
+        if not lines:
+            raise InputError("the document is empty (nothing for the pen to draw)")
+        z = np.concatenate(lines)
+        if not bool(np.isfinite(z).all()):
+            raise InputError("the drawing has coordinates that are not finite numbers (beyond any page)")
+        # The bounding box on the machine, where the fit is made; the placement is then a uniform scale and a
+        # shift of the page, which vpype applies to every layer itself (in place, as its own `scale` does).
+        x0, x1 = float(z.real.min()), float(z.real.max())
+        y0, y1 = float(z.imag.min()), float(z.imag.max())
+        corners = np.array([[x0, y1, 1.0], [x1, y0, 1.0]]) @ PAGE_TO_MACHINE.T
+        extent = (float(corners[0, 0]), float(corners[0, 1]), float(corners[1, 0]), float(corners[1, 1]))
+        placement = fit_placement(extent, margin=options.margin_mm * UNITS_PER_MM, full=options.full_area)
+        page = compose(MACHINE_TO_PAGE, compose(placement.matrix, PAGE_TO_MACHINE))
+        document.scale(float(page[0, 0]), float(page[1, 1]))
+        document.translate(float(page[0, 2]), float(page[1, 2]))
+        document.page_size = APP_PAGE
+        return document
     passes = document_passes(document)
     if not passes:
         raise InputError("the document is empty (nothing for the pen to draw)")
     unordered = dataclasses.replace(options, optimize=False, time_budget=0.0)
-    if options.fit:
-        everything = [line for one in passes for line in one.lines]
-        placed = list(plan_lines(everything, unordered, fit_default=True).strokes)
-        if len(placed) != len(everything):
-            raise InputError("fitting changed the number of lines; cannot keep them on their layers")
-        split: list[Polylines] = []
-        for one in passes:
-            split.append(placed[: len(one.lines)])
-            placed = placed[len(one.lines) :]
-    else:
-        split = [list(plan_lines(one.lines, unordered, fit_default=False).strokes) for one in passes]
-    for one, lines in zip(passes, split, strict=True):
+    for one in passes:
+        lines = list(plan_lines(one.lines, unordered, fit_default=False).strokes)
         layer = document.layers[one.layer_id]
         document.layers[one.layer_id] = layer.clone([to_page(line) for line in lines])
     document.page_size = APP_PAGE

@@ -10,8 +10,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from fabwire.errors import InputError
-from fabwire.lineus.kinematics import APP_AREA, UNITS_PER_MM, lines_outside, outside_length, reachable_mask
-from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, bbox, compose, drawn_length, scale_translate
+from fabwire.lineus.kinematics import (
+    APP_AREA,
+    UNITS_PER_MM,
+    is_reachable,
+    outside_length,
+    reachable_mask,
+    segments_outside,
+)
+from fabwire.lineus.plot.geometry import (
+    FloatArray,
+    Polylines,
+    affine,
+    bbox,
+    compose,
+    drawn_length,
+    flatten,
+    inner_segments,
+    scale_translate,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,6 +52,8 @@ def _box_inside(cx: float, cy: float, w: float, h: float, margin: float, full: b
         ax0, ay0, ax1, ay1 = APP_AREA
         if x0 < ax0 or y0 < ay0 or x1 > ax1 or y1 > ay1:
             return False
+    if not all(is_reachable(x, y) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))):
+        return False  # the corners alone, without arrays: most boxes tried fail here
     n = 48
     t = np.linspace(0.0, 1.0, n)
     xs = np.concatenate([x0 + (x1 - x0) * t, np.full(n, x1), x1 - (x1 - x0) * t, np.full(n, x0)])
@@ -92,7 +111,11 @@ class Placement:
 
 def fit_scale(lines: Polylines, *, margin: float = 0.0, full: bool = False) -> tuple[float, Box]:
     """The scale `fit_into_area` gives `lines` (at most: it may shrink a little more), and the box it fills."""
-    x0, y0, x1, y1 = bbox(lines)
+    return _fit_scale(bbox(lines), margin, full)
+
+
+def _fit_scale(extent: tuple[float, float, float, float], margin: float, full: bool) -> tuple[float, Box]:
+    x0, y0, x1, y1 = extent
     w, h = x1 - x0, y1 - y0
     aspect = max(w, 1e-9) / max(h, 1e-9)
     aspect = min(max(aspect, 1e-3), 1e3)
@@ -104,27 +127,49 @@ def fit_scale(lines: Polylines, *, margin: float = 0.0, full: bool = False) -> t
 
 def fit_into_area(lines: Polylines, *, margin: float = 0.0, full: bool = False) -> tuple[Polylines, Placement]:
     """Scale (keeping the aspect ratio) and centre `lines`, already in machine orientation, into the area."""
-    x0, y0, x1, y1 = bbox(lines)
-    scale, box = fit_scale(lines, margin=margin, full=full)
+    placement = fit_placement(bbox(lines), margin=margin, full=full)
+    return affine(lines, placement.matrix), placement
+
+
+def fit_placement(extent: tuple[float, float, float, float], *, margin: float = 0.0, full: bool = False
+                  ) -> Placement:
+    """How `fit_into_area` places a drawing whose bounding box (x_min, y_min, x_max, y_max, machine units) is
+    `extent`: a uniform scale and a translation, as a 2x3 matrix."""
+    x0, y0, x1, y1 = extent
+    scale, box = _fit_scale(extent, margin, full)
     m = scale_translate(float(scale), box.cx - (x0 + x1) / 2 * scale, box.cy - (y0 + y1) / 2 * scale)
     # Every line lies in the drawing's placed bounding rectangle, and a rectangle is convex: when its outline is
     # inside the area, so is all of the drawing. The box was checked on a sampled outline, so check the placed
     # rectangle finely and shrink a little in the rare case a corner still grazes out.
     for _ in range(8):
-        corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]) @ m[:, :2].T + m[:, 2]
-        if bool(reachable_mask(corners[:, 0], corners[:, 1]).all()) and outside_length(corners, step=0.5) == 0:
+        corners = np.array([[x0, y0], [x1, y1]]) @ m[:, :2].T + m[:, 2]
+        if rectangle_inside(float(corners[0, 0]), float(corners[0, 1]), float(corners[1, 0]), float(corners[1, 1])):
             break
         shrink = np.array([[0.99, 0.0, box.cx * 0.01], [0.0, 0.99, box.cy * 0.01]])
         m = compose(shrink, m)
         scale *= 0.99
-    return affine(lines, m), Placement(m, float(scale), box, 0.0)
+    return Placement(m, float(scale), box, 0.0)
+
+
+def rectangle_inside(x0: float, y0: float, x1: float, y1: float) -> bool:
+    """Whether the axis-aligned rectangle with corners (x0, y0) and (x1, y1) lies in the reachable area: its
+    corners reachable and its outline, sampled finely, nowhere outside. The area has no holes, so then its
+    inside is reachable too: everything drawn within the rectangle is."""
+    outline = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
+    return bool(reachable_mask(outline[:, 0], outline[:, 1]).all()) and outside_length(outline, step=0.5) == 0
 
 
 def check_placed(lines: Polylines, *, clip: bool) -> tuple[Polylines, float]:
     """Refuse (or with `clip`, cut away) pen-down lines outside the area; returns the kept lines and the length
     outside."""
-    outside = lines_outside(lines)
-    dots = [p for p in lines if len(p) == 1 and not reachable_mask(p[:, 0], p[:, 1])[0]]
+    points, offsets = flatten(lines)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    if rectangle_inside(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])):
+        return lines, 0.0  # what a fitted drawing always passes, at the cost of four sides
+    inner = inner_segments(offsets)
+    outside = segments_outside(points[:-1][inner], points[1:][inner])
+    single = offsets[1:] - offsets[:-1] == 1
+    dots = int((single & ~reachable_mask(points[offsets[:-1], 0], points[offsets[:-1], 1])).sum())
     if outside == 0 and not dots:
         return lines, 0.0
     total = drawn_length(lines)
@@ -132,7 +177,7 @@ def check_placed(lines: Polylines, *, clip: bool) -> tuple[Polylines, float]:
         share = 100.0 * outside / total if total else 100.0
         raise InputError(
             f"{outside / UNITS_PER_MM:.1f} mm of the {total / UNITS_PER_MM:.1f} mm drawing ({share:.1f} %)"
-            f"{f' and {len(dots)} dots' if dots else ''} lie outside the reachable area; use --fit to scale it "
+            f"{f' and {dots} dots' if dots else ''} lie outside the reachable area; use --fit to scale it "
             "into the area, or --clip to leave those parts out"
         )
     return clip_to_area(lines), outside

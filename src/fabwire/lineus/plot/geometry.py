@@ -9,8 +9,29 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 Polylines = list[FloatArray]
 """Each polyline an (n, 2) float array, n >= 1 (a single point is a dot)."""
+
+
+def flatten(lines: Sequence[FloatArray]) -> tuple[FloatArray, IntArray]:
+    """All points of `lines` in one (N, 2) array, and the offsets (len(lines) + 1) where each line starts and the
+    last ends: the whole drawing for one numpy operation instead of one per line."""
+    sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
+    offsets = np.zeros(len(lines) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    points = np.concatenate(lines).reshape(-1, 2) if lines else np.zeros((0, 2))
+    return points.astype(float, copy=False), offsets
+
+
+def inner_segments(offsets: IntArray) -> BoolArray:
+    """For the N-1 steps between consecutive points of a flattened drawing: True where both points belong to the
+    same line (a stroke's segment), False for the jump from one line's end to the next line's start."""
+    inner = np.ones(max(int(offsets[-1]) - 1, 0), dtype=bool)
+    cuts = offsets[1:-1] - 1
+    inner[cuts[(cuts >= 0) & (cuts < len(inner))]] = False
+    return inner
 
 
 def as_polylines(lines: Iterable[Sequence[tuple[float, float]] | FloatArray]) -> Polylines:
@@ -40,12 +61,11 @@ def segment_count(lines: Sequence[FloatArray]) -> int:
 
 def drawn_length(lines: Sequence[FloatArray]) -> float:
     """Total pen-down length."""
-    total = 0.0
-    for line in lines:
-        if len(line) > 1:
-            d = np.diff(line, axis=0)
-            total += float(np.hypot(d[:, 0], d[:, 1]).sum())
-    return total
+    if not lines:
+        return 0.0
+    points, offsets = flatten(lines)
+    d = np.diff(points, axis=0)[inner_segments(offsets)]
+    return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
 def affine(lines: Sequence[FloatArray], matrix: FloatArray) -> Polylines:

@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import math
 import random
-import time
 from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
-import numpy.typing as npt
 
 from fabwire.lineus.kinematics import HOME
-from fabwire.lineus.plot.geometry import FloatArray, Polylines
+from fabwire.lineus.plot.geometry import BoolArray, FloatArray, IntArray, Polylines, flatten, inner_segments
 
 RESOLUTION = 1.0
 """Smallest step worth sending, in machine units (0.05 mm): finer points are dropped."""
@@ -30,36 +28,60 @@ MAX_REVERSAL = 1000
 KICK_SPAN = 15
 """Longest block a kick of the iterated local search moves: short blocks keep the re-optimisation after a kick
 local, so many more kicks fit in the budget (measured on stipples and scribbles, `make bench`)."""
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
+WORK_PER_SECOND = 100_000
+"""Lines the improvement examines per nominal second of budget (about one CPU second of one 2020s core)."""
+WORK_PER_LINE = 1
+"""Lines examined per line of the drawing when no budget is given: one pass of the local search, about what
+vpype's greedy `linesort` costs, whatever the drawing's size."""
 
 
 def drop_fine_points(lines: Polylines, resolution: float = RESOLUTION) -> Polylines:
     """Remove vertices closer than `resolution` to the last kept one (the last vertex always stays)."""
-    out: Polylines = []
-    for line in lines:
-        if len(line) < 2:
-            out.append(line)
-            continue
-        d = np.hypot(*np.diff(line, axis=0).T)
-        if bool((d >= resolution).all()):
-            out.append(line)
-            continue
-        kept = [0]
-        lx, ly = float(line[0, 0]), float(line[0, 1])
-        for k in range(1, len(line)):
-            x, y = float(line[k, 0]), float(line[k, 1])
-            if math.hypot(x - lx, y - ly) >= resolution:
-                kept.append(k)
-                lx, ly = x, y
-        last = len(line) - 1
-        if kept[-1] != last:
-            if len(kept) > 1:
-                kept[-1] = last
-            elif math.hypot(*(line[last] - line[0])) > 0:
-                kept.append(last)
-        out.append(line[kept])
+    if not lines:
+        return []
+    points, offsets = flatten(lines)
+    steps = np.hypot(*np.diff(points, axis=0).T)
+    fine = np.flatnonzero(~(steps >= resolution) & inner_segments(offsets))
+    if not len(fine):
+        return list(lines)
+    # Vertices stay up to the first fine step; from there, scan for the next vertex far enough from the last
+    # kept one, and so on: only the fine steps cost a Python loop, not every vertex.
+    line_of = np.searchsorted(offsets, fine, side="right") - 1
+    firsts, lasts = offsets[:-1][line_of].tolist(), (offsets[1:] - 1)[line_of].tolist()
+    keep = np.ones(len(points), dtype=bool)
+    # Most scans stop two vertices on: that distance measured for every fine step at once.
+    after = np.minimum(fine + 2, len(points) - 1)
+    skip = (np.hypot(*(points[after] - points[fine]).T) >= resolution).tolist()
+    hyp = math.hypot
+    resume = 0
+    for a, first, last, two in zip(fine.tolist(), firsts, lasts, skip, strict=True):
+        if a < resume:
+            continue  # decided by an earlier scan
+        keep[a + 1] = False  # the fine step's own end
+        k = a + 2
+        if not (two and k <= last):
+            ax, ay = points[a].tolist()
+            while k <= last and hyp(*(points[k] - (ax, ay))) < resolution:
+                keep[k] = False
+                k += 1
+        if k > last:  # the last vertex always stays: in place of the last kept one, or after a lone first one
+            if a != first:
+                keep[a] = False
+                keep[last] = True
+            else:
+                keep[last] = bool((points[last] != points[a]).any())
+        resume = k
+    out = list(lines)
+    for i in np.unique(line_of).tolist():
+        a, b = int(offsets[i]), int(offsets[i + 1])
+        out[i] = points[a:b][keep[a:b]]
     return out
+
+
+def line_ends(lines: Sequence[FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """The first and the last point of every line, as two (n, 2) arrays."""
+    points, offsets = flatten(lines)
+    return points[offsets[:-1]], points[offsets[1:] - 1]
 
 
 def join_touching(lines: Polylines, resolution: float = RESOLUTION) -> Polylines:
@@ -67,25 +89,31 @@ def join_touching(lines: Polylines, resolution: float = RESOLUTION) -> Polylines
     n = len(lines)
     if n < 2:
         return list(lines)
-    q = 1.0 / max(resolution, 1e-9)
-
-    def key(p: FloatArray) -> tuple[int, int]:
-        return (round(float(p[0]) * q), round(float(p[1]) * q))
-
-    ends: dict[tuple[int, int], list[int]] = {}
-    for i, line in enumerate(lines):
-        ends.setdefault(key(line[0]), []).append(2 * i)
-        ends.setdefault(key(line[-1]), []).append(2 * i + 1)
+    # Line ends numbered e: the start of line e (e < n) or the end of line e - n; ends on one grid point of
+    # `resolution` share a group, and only groups holding ends of two or more lines can join anything.
+    starts, ends = line_ends(lines)
+    keys = np.round(np.concatenate([starts, ends]) * (1.0 / max(resolution, 1e-9)))
+    group = np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+    pairs = np.unique(group * n + np.arange(2 * n) % n)
+    joinable = (np.bincount(pairs // n, minlength=2 * n) >= 2)[group]
+    if not joinable.any():
+        return list(lines)
+    by_line = np.stack([np.arange(n), np.arange(n) + n], axis=1).reshape(-1)
+    buckets: dict[int, list[int]] = {}
+    grp = group.tolist()
+    for e in by_line[joinable[by_line]].tolist():
+        buckets.setdefault(grp[e], []).append(e)
     used = bytearray(n)
 
-    def take(at: tuple[int, int]) -> tuple[int, bool] | None:
-        bucket = ends.get(at)
+    def take(end: int) -> tuple[int, bool] | None:
+        """An unused line with an end where `end` is: (line, whether that is its last point)."""
+        bucket = buckets.get(grp[end])
         while bucket:
             e = bucket.pop()
-            i = e >> 1
+            i = e % n
             if not used[i]:
                 used[i] = 1
-                return (i, bool(e & 1))
+                return (i, e >= n)
         return None
 
     out: Polylines = []
@@ -93,28 +121,25 @@ def join_touching(lines: Polylines, resolution: float = RESOLUTION) -> Polylines
         if used[seed]:
             continue
         used[seed] = 1
-        if len(lines[seed]) < 2:
+        if len(lines[seed]) < 2 or not (joinable[seed] or joinable[seed + n]):
             out.append(lines[seed])
             continue
         parts: deque[FloatArray] = deque([lines[seed]])
-        while True:  # extend forward from the tail
-            found = take(key(parts[-1][-1]))
-            if found is None:
-                break
+        tail, head = seed + n, seed
+        while (found := take(tail)) is not None:  # extend forward from the tail
             i, at_end = found
             nxt = lines[i][::-1] if at_end else lines[i]
             parts.append(nxt[1:] if len(nxt) > 1 else nxt[:0])
             if len(nxt) == 1:
                 break
-        while True:  # extend backward from the head
-            found = take(key(parts[0][0]))
-            if found is None:
-                break
+            tail = i if at_end else i + n
+        while (found := take(head)) is not None:  # extend backward from the head
             i, at_end = found
             prev = lines[i] if at_end else lines[i][::-1]
             parts.appendleft(prev[:-1] if len(prev) > 1 else prev[:0])
             if len(prev) == 1:
                 break
+            head = i if at_end else i + n
         out.append(np.concatenate(list(parts)) if len(parts) > 1 else parts[0])
     return out
 
@@ -123,8 +148,7 @@ def travel_length(lines: Sequence[FloatArray], origin: tuple[float, float] = HOM
     """Pen-up distance to draw `lines` in the given order and direction, starting at `origin`."""
     if not lines:
         return 0.0
-    starts = np.array([line[0] for line in lines])
-    ends = np.array([line[-1] for line in lines])
+    starts, ends = line_ends(lines)
     prev = np.vstack([np.asarray(origin, dtype=float), ends[:-1]])
     return float(np.hypot(*(starts - prev).T).sum())
 
@@ -204,7 +228,8 @@ def greedy_order(
 
 
 def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[int]]:
-    """For each line, the lines with an end among the k nearest to either of its ends (grid-bucketed)."""
+    """For each line, the lines with an end among the k nearest to either of its ends (grid-bucketed: up to
+    `cap` ends from each of the 3 x 3 cells around an end are candidates)."""
     n = len(starts)
     pts = np.vstack([starts, ends])
     m = len(pts)
@@ -215,37 +240,29 @@ def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[
     w = int(g[:, 1].max()) + 3
     cid = (g[:, 0] + 1) * w + (g[:, 1] + 1)
     sort = np.argsort(cid, kind="stable")
-    sorted_c = cid[sort]
+    uniq, first, counts = np.unique(cid[sort], return_index=True, return_counts=True)
     cap = 6
-    uniq, first, counts = np.unique(sorted_c, return_index=True, return_counts=True)
-    cand_cols = []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            target = cid + dx * w + dy
-            at = np.searchsorted(uniq, target)
-            at = np.minimum(at, len(uniq) - 1)
-            hit = uniq[at] == target
-            base = np.where(hit, first[at], 0)
-            cnt = np.where(hit, np.minimum(counts[at], cap), 0)
-            for s in range(cap):
-                col = np.where(s < cnt, sort[np.minimum(base + s, m - 1)], -1)
-                cand_cols.append(col)
-    cand = np.stack(cand_cols, axis=1)
-    valid = cand >= 0
-    safe = np.where(valid, cand, 0)
-    d = np.hypot(pts[safe, 0] - pts[:, None, 0], pts[safe, 1] - pts[:, None, 1])
-    d[~valid] = np.inf
-    node_of = safe % n
-    d[node_of == (np.arange(m) % n)[:, None]] = np.inf
+    # Every end's 9 surrounding cells at once, then up to `cap` ends of each: an (m, 9 * cap) candidate table.
+    offsets = np.array([dx * w + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)], dtype=np.int64)
+    target = cid[:, None] + offsets[None, :]
+    at = np.minimum(np.searchsorted(uniq, target), len(uniq) - 1)
+    hit = uniq[at] == target
+    base = np.where(hit, first[at], 0)
+    count = np.where(hit, np.minimum(counts[at], cap), 0)
+    slot = np.arange(cap)
+    valid = (slot[None, None, :] < count[:, :, None]).reshape(m, -1)
+    cand = sort[np.minimum(base[:, :, None] + slot[None, None, :], m - 1)].reshape(m, -1)
+    node_of = cand % n
+    d = np.hypot(pts[cand, 0] - pts[:, None, 0], pts[cand, 1] - pts[:, None, 1])
+    d[~valid | (node_of == (np.arange(m) % n)[:, None])] = np.inf
     kk = min(k, d.shape[1])
     nearest = np.argpartition(d, kk - 1, axis=1)[:, :kk] if d.shape[1] > kk else np.argsort(d, axis=1)
     picked = np.take_along_axis(node_of, nearest, axis=1)
-    ok = np.isfinite(np.take_along_axis(d, nearest, axis=1))
-    out: list[list[int]] = []
-    for i in range(n):
-        row = set(picked[i][ok[i]].tolist()) | set(picked[i + n][ok[i + n]].tolist())
-        out.append(list(row))
-    return out
+    picked[~np.isfinite(np.take_along_axis(d, nearest, axis=1))] = -1
+    # Both ends of a line together, each other line once.
+    both = np.sort(np.concatenate([picked[:n], picked[n:]], axis=1), axis=1)
+    both[:, 1:][both[:, 1:] == both[:, :-1]] = -1
+    return [[v for v in row if v >= 0] for row in both.tolist()]
 
 
 def improve(
@@ -255,15 +272,16 @@ def improve(
     flips: BoolArray,
     origin: tuple[float, float] = HOME,
     *,
-    time_budget: float = 1.0,
+    work: int,
 ) -> tuple[IntArray, BoolArray]:
     """2-opt (segment reversal) and or-opt (move up to three lines, either way round) until no move on the
-    neighbour lists helps or `time_budget` seconds of this thread's CPU time have passed (CPU time, so a busy
-    machine gives the same plan, only later). Never makes the tour longer."""
+    neighbour lists helps, then kicks of an iterated local search, until `work` lines have been examined (a
+    count, never a clock: the same input and budget give the same tour on any machine). Never makes the tour
+    longer."""
     n = len(starts)
-    if n < 3 or time_budget <= 0:
+    if n < 3 or work <= 0:
         return order, flips
-    deadline = time.thread_time() + time_budget
+    spent = [0]
     neigh = _neighbour_lists(starts, ends, NEIGHBOURS)
     # Node n is the fixed starting point; per node: the point where drawing enters (i) and leaves (o).
     ix = [*starts[:, 0].tolist(), float(origin[0])]
@@ -320,12 +338,10 @@ def improve(
 
     def local_search() -> bool:
         """Apply improving moves until none is left (True) or time is up (False)."""
-        counter = 0
-        clock = time.thread_time
         popleft = queue.popleft
         while queue:
-            counter += 1
-            if counter & 63 == 0 and clock() > deadline:
+            spent[0] += 1
+            if spent[0] > work:
                 return False
             a = popleft()
             queued[a] = 0
@@ -452,7 +468,8 @@ def improve(
     rng = random.Random(n)
     span = max(4, min(KICK_SPAN, n // 4))
     saved = settled
-    while time.thread_time() < deadline and n >= 8:
+    while spent[0] < work and n >= 8:
+        spent[0] += 1
         p1 = rng.randrange(1, last - 2)
         p2 = min(last - 1, p1 + rng.randrange(1, span))
         p3 = min(last, p2 + rng.randrange(1, span))
@@ -491,6 +508,15 @@ def _result(
     return new_order, new_flips
 
 
+def work_budget(seconds: float | None, lines: int) -> int:
+    """The work (lines examined, see `improve`) of a budget of nominal CPU `seconds`, or with None, in
+    proportion to the number of `lines` (`WORK_PER_LINE` each). A count, so a plan never depends on how busy or
+    fast the machine is."""
+    if seconds is None:
+        return WORK_PER_LINE * lines
+    return max(0, round(seconds * WORK_PER_SECOND))
+
+
 def arrange(lines: Sequence[FloatArray], order: IntArray, flips: BoolArray) -> Polylines:
     """The lines in `order`, each reversed where `flips` says."""
     return [lines[i][::-1] if f else lines[i] for i, f in zip(order.tolist(), flips.tolist(), strict=True)]
@@ -501,28 +527,30 @@ def optimise(
     *,
     origin: tuple[float, float] = HOME,
     resolution: float = RESOLUTION,
-    time_budget: float = 1.0,
+    time_budget: float | None = 1.0,
 ) -> Polylines:
-    """The whole pass: fine points out, touching lines joined, then ordered for least pen-up travel."""
-    cleaned = join_touching(drop_fine_points(lines, resolution), resolution)
+    """The whole pass: fine points out, touching lines joined, then ordered for least pen-up travel, improving
+    on greedy within `time_budget` (see `work_budget`). Never travels more than the lines in their given order
+    (then that order is kept), and the same lines and budget always give the same result."""
+    thinned = drop_fine_points(lines, resolution)
+    cleaned = join_touching(thinned, resolution)
     if len(cleaned) < 2:
         return cleaned
-    starts = np.array([line[0] for line in cleaned], dtype=float)
-    ends = np.array([line[-1] for line in cleaned], dtype=float)
-    began = time.thread_time()
+    starts, ends = line_ends(cleaned)
+    work = work_budget(time_budget, len(cleaned))
     order, flips = greedy_order(starts, ends, origin)
-    order, flips = improve(starts, ends, order, flips, origin, time_budget=time_budget * 0.9)
+    order, flips = improve(starts, ends, order, flips, origin, work=work - work // 10)
     ordered = arrange(cleaned, order, flips)
-    left = time_budget - (time.thread_time() - began)
-    return _reorder_runs(ordered, origin, left) if left > 0 else ordered
+    if work // 10 > 0:
+        ordered = _reorder_runs(ordered, origin, work // 10)
+    return ordered if travel_length(ordered, origin) <= travel_length(thinned, origin) else thinned
 
 
-def _reorder_runs(lines: Polylines, origin: tuple[float, float], time_budget: float) -> Polylines:
+def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int) -> Polylines:
     """Order again at a coarser grain: runs of lines joined by short hops (a hatched patch, a word) move as one
     piece, either way round. Moves of single lines cannot carry a patch of many lines across the page; this
-    can. Kept only when it shortens the travel."""
-    starts = np.array([line[0] for line in lines])
-    ends = np.array([line[-1] for line in lines])
+    can. Kept only when it shortens the travel; `work` as for `improve`."""
+    starts, ends = line_ends(lines)
     hops = np.hypot(*(starts[1:] - ends[:-1]).T)
     if len(hops) < 3:
         return lines
@@ -530,12 +558,12 @@ def _reorder_runs(lines: Polylines, origin: tuple[float, float], time_budget: fl
     cuts = np.flatnonzero(hops > short) + 1
     bounds = [0, *cuts.tolist(), len(lines)]
     runs = [(bounds[k], bounds[k + 1]) for k in range(len(bounds) - 1)]
-    if not 3 <= len(runs) < len(lines):
-        return lines
+    if not 3 <= len(runs) < len(lines) or work < len(runs):
+        return lines  # no runs to move, or too little work left to look at each once
     run_starts = np.array([starts[a] for a, _ in runs])
     run_ends = np.array([ends[b - 1] for _, b in runs])
     order, flips = greedy_order(run_starts, run_ends, origin)
-    order, flips = improve(run_starts, run_ends, order, flips, origin, time_budget=time_budget)
+    order, flips = improve(run_starts, run_ends, order, flips, origin, work=work)
     out: Polylines = []
     for index, flip in zip(order.tolist(), flips.tolist(), strict=True):
         a, b = runs[index]
@@ -555,8 +583,7 @@ def orient_runs(lines: Polylines, sizes: Sequence[int], origin: tuple[float, flo
     (dynamic programming over the four ways of each run), counting the hops inside each run as well."""
     if not lines:
         return lines
-    starts = np.array([line[0] for line in lines])
-    ends = np.array([line[-1] for line in lines])
+    starts, ends = line_ends(lines)
     # Hops inside a run: end of k to start of k+1 as drawn, start of k to end of k+1 when mirrored.
     as_drawn = np.concatenate([[0.0], np.cumsum(np.hypot(*(starts[1:] - ends[:-1]).T))])
     mirrored = np.concatenate([[0.0], np.cumsum(np.hypot(*(ends[1:] - starts[:-1]).T))])

@@ -3,6 +3,7 @@ ordered, with the typed move stream a client sends and the figures (length, trav
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from collections.abc import Iterator, Sequence
@@ -21,15 +22,15 @@ from fabwire.lineus.plot.geometry import (
     affine,
     bbox,
     compose,
-    drawn_length,
+    flatten,
+    inner_segments,
     rotation,
     scale_translate,
-    segment_count,
 )
 from fabwire.lineus.plot.intake import FLATTEN_TOLERANCE, Drawing, read_drawing
 from fabwire.lineus.plot.intake import PAGE_ORIGIN as PAGE_ORIGIN
 from fabwire.lineus.plot.intake import SVG_UNITS_PER_PX as SVG_UNITS_PER_PX
-from fabwire.lineus.plot.optimize import RESOLUTION, optimise, travel_length
+from fabwire.lineus.plot.optimize import RESOLUTION, optimise
 from fabwire.lineus.plot.text import DEFAULT_FONT, text_lines
 
 
@@ -124,30 +125,48 @@ class Plan:
 
     def stroke_seconds(self) -> list[float]:
         """Estimated time of each stroke, including the travel to it and its pen drop and lift."""
-        m = self.motion
-        out: list[float] = []
-        here = self.origin
-        for stroke in self.strokes:
-            start = (float(stroke[0, 0]), float(stroke[0, 1]))
-            t = m.move_time((*here, 1000.0), (*start, 1000.0))
-            t += m.move_time((*start, 1000.0), (*start, 0.0))
-            t += m.polyline_time(stroke, pen_down=True)
-            end = (float(stroke[-1, 0]), float(stroke[-1, 1]))
-            t += m.move_time((*end, 0.0), (*end, 1000.0))
-            out.append(t)
-            here = end
-        return out
+        seconds: list[float] = self._measured[1].tolist()
+        return seconds
 
     def figures(self) -> PlanFigures:
-        strokes = list(self.strokes)
-        return PlanFigures(
-            strokes=len(strokes),
-            segments=segment_count(strokes),
-            pen_down_length=drawn_length(strokes),
-            pen_up_travel=travel_length(strokes, self.origin),
-            pen_lifts=len(strokes),
-            estimated_seconds=sum(self.stroke_seconds()),
+        return self._measured[0]
+
+    @functools.cached_property
+    def _measured(self) -> tuple[PlanFigures, FloatArray]:
+        """The figures and each stroke's seconds, from one pass over all points at once: the motion model's step
+        counts over every segment and hop."""
+        m = self.motion
+        if not self.strokes:
+            return PlanFigures(0, 0, 0.0, 0.0, 0, 0.0), np.zeros(0)
+        points, offsets = flatten(self.strokes)
+        starts, ends = points[offsets[:-1]], points[offsets[1:] - 1]
+        here = np.vstack([np.asarray(self.origin, dtype=float), ends[:-1]])
+        hop = starts - here
+        inner = inner_segments(offsets)
+        step = np.diff(points, axis=0)
+        drawn = _steps(np.abs(step).max(axis=1), m.draw_step) * inner
+        per_stroke = np.add.reduceat(np.append(drawn, 0.0), offsets[:-1])
+        sizes = offsets[1:] - offsets[:-1]
+        per_stroke[sizes < 2] = 0.0  # a dot has no segment of its own (reduceat hands it the next one)
+        segments = sizes - 1
+        # Travel (one command), drop and lift (one command and a pen move each), one command per segment.
+        hops = _steps(np.abs(hop).max(axis=1), m.travel_step)
+        seconds = (hops + per_stroke) * m.step_time + (3 + segments) * m.command_time + 2 * m.pen_time
+        figures = PlanFigures(
+            strokes=len(self.strokes),
+            segments=int(segments.sum()),
+            pen_down_length=float(np.hypot(step[inner, 0], step[inner, 1]).sum()),
+            pen_up_travel=float(np.hypot(hop[:, 0], hop[:, 1]).sum()),
+            pen_lifts=len(self.strokes),
+            estimated_seconds=float(seconds.sum()),
         )
+        return figures, seconds
+
+
+def _steps(span: FloatArray, step: float) -> FloatArray:
+    """The firmware's interpolation steps for moves spanning `span` units on their longer axis."""
+    n: FloatArray = np.where(span > 0, np.ceil(span / step - 1e-9), 0.0)
+    return n
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,8 +182,10 @@ class PlanOptions:
     optimize: bool = True
     clip: bool = False
     """Without fitting: cut away what lies outside the area instead of refusing the drawing."""
-    time_budget: float = 1.0
-    """CPU seconds (of the planning thread) the ordering may spend improving on greedy."""
+    time_budget: float | None = 1.0
+    """Work the ordering may spend improving on greedy, in nominal CPU seconds (counted in lines examined, never
+    read from a clock: the same drawing and options give the same plan on any machine), or None for work in
+    proportion to the number of lines (see `optimize.work_budget`)."""
     resolution: float = RESOLUTION
     motion: MotionModel = field(default_factory=MotionModel)
     svg_text: str = "hershey"
@@ -252,7 +273,7 @@ def plan_lines(
 
 
 def _check_finite(polys: Sequence[FloatArray], what: str) -> None:
-    if not all(bool(np.isfinite(p).all()) for p in polys):
+    if polys and not bool(np.isfinite(np.concatenate(polys)).all()):
         raise InputError(f"{what} has coordinates that are not finite numbers (beyond any page)")
 
 
