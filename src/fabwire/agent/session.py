@@ -18,6 +18,8 @@ from collections.abc import Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from sortedcontainers import SortedList
+
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
 from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
 from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, excerpt
@@ -111,12 +113,30 @@ class PollStats:
         self.late = 0
         self.lags: deque[float] = deque(maxlen=600)
         """The last ten minutes' lags at 1 Hz."""
+        self._window: SortedList | None = None
 
     def record(self, lag: float, interval: float) -> None:
         self.polls += 1
         if lag > interval / 2:
             self.late += 1
-        self.lags.append(lag)
+        lags = self.lags
+        if self._window is not None:
+            if len(lags) == lags.maxlen:
+                self._window.remove(lags[0])
+            self._window.add(lag)
+        lags.append(lag)
+
+    def join(self, window: SortedList) -> None:
+        """Keep `window` (the agent's, for every machine) holding this machine's lags too, in order."""
+        window.update(self.lags)
+        self._window = window
+
+    def leave(self) -> None:
+        """Take this machine's lags out of the window it joined."""
+        window, self._window = self._window, None
+        if window is not None:
+            for lag in self.lags:
+                window.remove(lag)
 
 
 class Session:

@@ -100,6 +100,8 @@ class _Pending(msgspec.Struct):
     acked: bool = False
     seen: set[str] = msgspec.field(default_factory=set)
     last_rx: float | None = None
+    wanted: frozenset[str] = frozenset()
+    """The letters of a partial query on Wi-Fi, whose reply ends once they all came (it has no `$`)."""
 
 
 class ReplyReader:
@@ -134,12 +136,16 @@ class ReplyReader:
         if expect is Expect.NOTHING:
             self._events.append(Reply(command))
         else:
-            self._pending = _Pending(command, expect, now + timeout)
+            self._pending = self._pending_for(command, expect, now + timeout)
         return encode(command, self.link)
 
     def arm(self, command: Command, now: float, timeout: float = 5.0) -> None:
         """Expect a reply for bytes already sent by other means (upload blocks)."""
-        self._pending = _Pending(command, command.expects(self.link), now + timeout)
+        self._pending = self._pending_for(command, command.expects(self.link), now + timeout)
+
+    def _pending_for(self, command: Command, expect: Expect, deadline: float) -> _Pending:
+        wanted = command.wanted if self.link is Link.WIFI and isinstance(command, Query) else frozenset()
+        return _Pending(command, expect, deadline, wanted=wanted)
 
     def abandon(self) -> None:
         """Stop waiting for the reply in flight (its command failed or was given up)."""
@@ -152,8 +158,26 @@ class ReplyReader:
 
     def receive(self, data: bytes, now: float) -> None:
         self._buffer += data
-        if self._pending is not None:
-            self._pending.last_rx = now
+        p = self._pending
+        if p is not None:
+            p.last_rx = now
+        if p is None or type(p.command) not in RAW_REPLIES:
+            # No reply read by byte count can start while these lines are read (a command is armed only
+            # between receives): every complete line at once, one decode for all of them.
+            end = self._buffer.rfind(b"\n")
+            if end >= 0:
+                text = self._buffer[:end].decode("latin-1")
+                del self._buffer[: end + 1]
+                for line in text.split("\n"):
+                    line = line.rstrip("\r ")
+                    p = self._pending
+                    if p is not None and p.expect is Expect.STATUS and line[1:2] == ":" and not p.wanted \
+                            and len(p.lines) < MAX_STATUS_LINES:
+                        p.lines.append(line)  # the bulk of a status reply, as `_line` takes it
+                    else:
+                        self._note(line)
+            self._bound()
+            return
         while True:
             raw_line = self._raw_reply()
             if raw_line is not None:
@@ -167,6 +191,9 @@ class ReplyReader:
             raw = bytes(self._buffer[:end])
             del self._buffer[: end + 1]
             self._note(raw.decode("latin-1").rstrip("\r "))
+        self._bound()
+
+    def _bound(self) -> None:
         if len(self._buffer) > 65536:  # a line this long is not XYZv3; keep the reader bounded
             self._buffer.clear()
             self.noise += 1
@@ -233,6 +260,11 @@ class ReplyReader:
         if not line:
             return
         p = self._pending
+        if p is not None and p.expect is Expect.STATUS and line[1:2] == ":":
+            # `x:value`, the bulk of a status reply, is neither an error (`E<n>`), a `$`, an `ok` nor an action
+            # progress line (whose name has two characters or more): straight to the reply.
+            self._status_line(p, line)
+            return
         if (m := _ERROR.match(line)) and (line.endswith("$") or p is not None):
             if p is not None:
                 self._pending = None
@@ -268,16 +300,7 @@ class ReplyReader:
                 self.noise += 1
             return
         if p.expect is Expect.STATUS:
-            if len(p.lines) >= MAX_STATUS_LINES:
-                self.noise += 1  # a reply that never ends: keep the reader bounded, let the wait time out
-            elif len(line) >= 2 and line[1] == ":":
-                p.lines.append(line)
-                p.seen.add(line[0])
-                wanted = p.command.wanted if isinstance(p.command, Query) else frozenset()
-                if self.link is Link.WIFI and wanted and wanted <= p.seen:
-                    self._finish()
-            else:
-                self.noise += 1
+            self._status_line(p, line)
         elif p.expect is Expect.NUMBER:
             if _NUMBER.fullmatch(line) and not p.lines:
                 p.lines.append(line)
@@ -290,6 +313,18 @@ class ReplyReader:
                     self._finish()
             else:
                 self.noise += 1
+        else:
+            self.noise += 1
+
+    def _status_line(self, p: _Pending, line: str) -> None:
+        if len(p.lines) >= MAX_STATUS_LINES:
+            self.noise += 1  # a reply that never ends: keep the reader bounded, let the wait time out
+        elif line[1:2] == ":":
+            p.lines.append(line)
+            if p.wanted:
+                p.seen.add(line[0])
+                if p.wanted <= p.seen:
+                    self._finish()
         else:
             self.noise += 1
 

@@ -280,7 +280,8 @@ def _json_any(text: str) -> Any:
     """A JSON value whose strings are all text: a `\\ud800` escape (a lone surrogate, which no output can
     write) is a ValueError, so the line is kept raw like any other value that does not parse."""
     value = json.loads(text)
-    json.dumps(value, ensure_ascii=False).encode("utf-8")  # UnicodeEncodeError (a ValueError) on a surrogate
+    if not text.isascii() or "\\u" in text:  # only an escape or a character of the text can be a surrogate
+        json.dumps(value, ensure_ascii=False).encode("utf-8")  # UnicodeEncodeError (a ValueError) on a surrogate
     return value
 
 
@@ -355,6 +356,51 @@ LETTERS: dict[str, tuple[str, Parser, Renderer]] = {
 }
 
 
+SHARED_LETTERS = frozenset(letter for letter, spec in LETTERS.items() if spec[1] not in (_json_obj, _json_any))
+"""Letters whose parsed value is immutable (numbers, strings, tuples, frozen structs): statuses parsed from the
+same line may share it. A JSON object or list is parsed afresh for each status."""
+
+_EXTRA, _DASHED, _PARSED, _UNPARSED = range(4)
+_Read = tuple[str, str, int, Any]
+"""A line read: its letter, its field (or "" for an unknown letter), what it was (_EXTRA … _UNPARSED), and the
+parsed value (or the raw text for _EXTRA and _UNPARSED)."""
+LINE_MEMORY = 4096
+"""Lines read recently, remembered (a bench of printers answers mostly the same lines each poll): between one
+and two generations of this many distinct lines."""
+_recent: dict[str, _Read] = {}
+_older: dict[str, _Read] = {}
+
+
+def _read(line: str) -> _Read | None:
+    """One `x:value` line, read as `Status.update` takes it; None when it is no such line."""
+    global _recent, _older
+    known = _recent.get(line)
+    if known is not None:
+        return known
+    known = _older.get(line)
+    if known is None:
+        text = visible(line)
+        if text[1:2] != ":":  # a control character first: shown as `\\xNN`, it is no letter
+            return None
+        letter, value = text[0], text[2:]
+        spec = LETTERS.get(letter)
+        if spec is None:
+            known = (letter, "", _EXTRA, value)
+        elif value.strip() == "--":
+            known = (letter, spec[0], _DASHED, None)
+        else:
+            try:
+                known = (letter, spec[0], _PARSED, spec[1](value))
+            except (ValueError, IndexError, TypeError, AttributeError, RecursionError, OverflowError):
+                known = (letter, spec[0], _UNPARSED, value)  # a value from the wire that does not parse is kept raw
+        if letter not in SHARED_LETTERS and known[2] == _PARSED:
+            return known
+    if len(_recent) >= LINE_MEMORY:
+        _older, _recent = _recent, {}
+    _recent[line] = known
+    return known
+
+
 # ----------------------------------------------------------------------------------------------- status
 
 
@@ -406,31 +452,28 @@ class Status(msgspec.Struct, frozen=True):
     def update(self, lines: Iterable[str]) -> Status:
         """This status with the letters in `lines` replaced (a partial query merges into the last full one)."""
         changes: dict[str, Any] = {}
-        order = list(self.order)
+        order = dict.fromkeys(self.order)
         extra = dict(self.extra)
         unparsed = dict(self.unparsed)
         dashed = set(self.dashed)
-        for line in map(visible, lines):
-            if len(line) < 2 or line[1] != ":":
+        for line in lines:
+            read = _read(line) if line[1:2] == ":" else None
+            if read is None:
                 continue
-            letter, value = line[0], line[2:]
-            if letter not in order:
-                order.append(letter)
-            spec = LETTERS.get(letter)
-            if spec is None:
+            letter, attr, what, value = read
+            order[letter] = None
+            if what == _PARSED:
+                changes[attr] = value
+                dashed.discard(letter)
+                unparsed.pop(letter, None)
+            elif what == _EXTRA:
                 extra[letter] = value
-                continue
-            attr, parse, _ = spec
-            if value.strip() == "--":
+            elif what == _DASHED:
                 dashed.add(letter)
                 changes[attr] = None
-                continue
-            dashed.discard(letter)
-            try:
-                changes[attr] = parse(value)
-                unparsed.pop(letter, None)
-            except (ValueError, IndexError, TypeError, AttributeError, RecursionError, OverflowError):
-                unparsed[letter] = value  # a value from the wire that does not parse is kept raw, never raised
+            else:
+                dashed.discard(letter)
+                unparsed[letter] = value
                 changes[attr] = None
         return msgspec.structs.replace(self, order=tuple(order), extra=extra, unparsed=unparsed,
                                        dashed=frozenset(dashed), **changes)
@@ -580,34 +623,116 @@ class Status(msgspec.Struct, frozen=True):
     def firmware_version(self) -> str | None:
         return ",".join(self.firmware) if self.firmware else None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, since: tuple[Status, dict[str, Any]] | None = None) -> dict[str, Any]:
         """A typed, JSON-ready view with units in the key names (°C, mm, s); absent values are null. The wire
-        lines, letter by letter, are under `raw`."""
-        model = self.model
-        progress = self.progress
-        remaining = progress.remaining_min if progress else None
-        cart = self.cartridge
-        net = self.network
-        return {
-            "model_number": self.model_number, "model": model.name if model else None, "name": self.name,
-            "serial": self.serial, "firmware": self.firmware_version, "language": self.language,
-            "state": self.state_code, "substate": self.substate, "state_name": self.state_name,
+        lines, letter by letter, are under `raw`.
+
+        `since`, an earlier status and its view, spares the work for what did not change (a printer polled each
+        second answers mostly the same): only the parts whose fields differ are made again. The result is equal to
+        a view made from scratch, key order included; it is a new dict either way."""
+        if since is None:
+            out: dict[str, Any] = {}
+            for _, section in VIEW_SECTIONS:
+                out.update(section(self))
+            out["raw"] = self._raw()
+            return out
+        before, view = since
+        changed = changed_fields(before, self)
+        out = dict(view)
+        for fields, section in VIEW_SECTIONS:
+            if not changed.isdisjoint(fields):
+                out.update(section(self))
+        if not changed:
+            out["raw"] = view["raw"]
+        elif changed.isdisjoint(("extra", "unparsed", "dashed")):
+            out["raw"] = self._raw(view["raw"], {FIELD_LETTERS[f] for f in changed if f in FIELD_LETTERS})
+        else:
+            out["raw"] = self._raw()
+        return out
+
+    def _raw(self, before: dict[str, str] | None = None, changed: set[str] | None = None) -> dict[str, str]:
+        """The wire value of each letter, in the printer's order; the letters not in `changed` taken from
+        `before` (an earlier status's, whose `extra`, `unparsed` and `dashed` were these)."""
+        out: dict[str, str] = {}
+        for letter in self.order:
+            if before is not None and changed is not None and letter not in changed and letter in before:
+                out[letter] = before[letter]
+            elif (line := self.line(letter)) is not None:
+                out[letter] = line[2:]
+        return out
+
+
+def _identity_view(status: Status) -> dict[str, Any]:
+    model = status.model
+    return {"model_number": status.model_number, "model": model.name if model else None, "name": status.name,
+            "serial": status.serial, "firmware": status.firmware_version, "language": status.language}
+
+
+def _state_view(status: Status) -> dict[str, Any]:
+    return {"state": status.state_code, "substate": status.substate, "state_name": status.state_name,
             "errors": [{"raw": w.raw, "source": w.source, "code": w.code, "name": w.name, "meaning": w.meaning}
-                       for w in self.error_words],
-            "extruder_c": self.extruder, "extruder_target_c": self.extruder_target,
-            "extruder2_c": self.temperatures.extruder2 if self.temperatures else None, "bed_c": self.bed,
-            "progress_percent": progress.percent if progress else None,
+                       for w in status.error_words]}
+
+
+def _heat_view(status: Status) -> dict[str, Any]:
+    return {"extruder_c": status.extruder, "extruder_target_c": status.extruder_target,
+            "extruder2_c": status.temperatures.extruder2 if status.temperatures else None, "bed_c": status.bed}
+
+
+def _progress_view(status: Status) -> dict[str, Any]:
+    progress = status.progress
+    remaining = progress.remaining_min if progress else None
+    return {"progress_percent": progress.percent if progress else None,
             "elapsed_s": progress.elapsed_min * 60 if progress else None,
-            "remaining_s": remaining * 60 if remaining is not None else None,
-            "zoffset_mm": self.zoffset / 100 if self.zoffset is not None else None,
-            "calibration": _calibration_ints(self.calibration),
-            "autolevel": self.autolevel, "buzzer": self.buzzer, "block_size_bytes": self.block_size,
-            "filament_left_mm": self.filament_mm, "filament2_left_mm": self.filament2_mm, "spools": self.spools,
-            "cartridge_present": cart.present if cart else None, "cartridge_colour": cart.colour if cart else None,
-            "material": self.material_name, "nozzle_mm": self.nozzle.diameter_mm if self.nozzle else None,
-            "network": None if net is None else net.as_dict(),
-            "raw": {letter: line[2:] for letter in self.order if (line := self.line(letter)) is not None},
-        }
+            "remaining_s": remaining * 60 if remaining is not None else None}
+
+
+def _settings_view(status: Status) -> dict[str, Any]:
+    return {"autolevel": status.autolevel, "buzzer": status.buzzer, "block_size_bytes": status.block_size}
+
+
+def _spools_view(status: Status) -> dict[str, Any]:
+    cart = status.cartridge
+    return {"filament_left_mm": status.filament_mm, "filament2_left_mm": status.filament2_mm,
+            "spools": status.spools, "cartridge_present": cart.present if cart else None,
+            "cartridge_colour": cart.colour if cart else None}
+
+
+VIEW_SECTIONS: tuple[tuple[frozenset[str], Callable[[Status], dict[str, Any]]], ...] = (
+    (frozenset({"model_number", "name", "serial", "firmware", "language"}), _identity_view),
+    (frozenset({"state", "errors", "model_number"}), _state_view),  # a model's idle noise is no error
+    (frozenset({"temperatures", "targets", "bed"}), _heat_view),
+    (frozenset({"progress"}), _progress_view),
+    (frozenset({"zoffset"}), lambda s: {"zoffset_mm": s.zoffset / 100 if s.zoffset is not None else None}),
+    (frozenset({"calibration"}), lambda s: {"calibration": _calibration_ints(s.calibration)}),
+    (frozenset({"packet", "settings"}), _settings_view),
+    (frozenset({"filament", "cartridge"}), _spools_view),
+    (frozenset({"material"}), lambda s: {"material": s.material_name}),
+    (frozenset({"nozzle"}), lambda s: {"nozzle_mm": s.nozzle.diameter_mm if s.nozzle else None}),
+    (frozenset({"network"}), lambda s: {"network": None if s.network is None else s.network.as_dict()}),
+)
+"""`Status.to_dict` but `raw`, part by part in its key order, each part with the fields it is made of."""
+
+FIELD_LETTERS = {spec[0]: letter for letter, spec in LETTERS.items()}
+_FIELDS: tuple[str, ...] = Status.__struct_fields__
+_SHARED_FIELDS = frozenset(LETTERS[letter][0] for letter in SHARED_LETTERS) | {"order", "extra", "unparsed",
+                                                                                 "dashed"}
+
+
+def changed_fields(before: Status, after: Status) -> frozenset[str]:
+    """The fields of `after` that differ from `before`'s. A JSON value is the same only when it is written the
+    same too: `1`, `1.0` and `true` are equal in Python but not on the wire."""
+    return frozenset([name for name, a, b in zip(_FIELDS, msgspec.structs.astuple(before),
+                                                 msgspec.structs.astuple(after), strict=True)
+                      if a is not b and (a != b or (name not in _SHARED_FIELDS and not _same_json(a, b)))])
+
+
+def _same_json(a: Any, b: Any) -> bool:
+    """Whether two equal JSON values are written alike (numbers of one type, keys in one order)."""
+    try:
+        return msgspec.json.encode(a) == msgspec.json.encode(b)
+    except (TypeError, ValueError, OverflowError):  # what msgspec does not write (a huge integer)
+        return False
 
 
 def _calibration_ints(values: tuple[str, ...] | None) -> list[int | None] | None:

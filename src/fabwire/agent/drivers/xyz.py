@@ -16,7 +16,7 @@ from fabwire.units import ZOFFSET_LIMIT_MM
 from fabwire.xyz import intake, printjob
 from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.commands import JOG_LIMIT
-from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status
+from fabwire.xyz.status import CANCELLING, FILE_CHECK, IDLE, PAUSED, PRINT_DONE, Status, changed_fields
 from fabwire.xyz.threew import inspect_3w
 
 IDLE_ACTIONS = ("home", "jog", "load_filament", "unload_filament", "clean_nozzle", "calibrate", "zoffset",
@@ -32,6 +32,11 @@ ERROR_STATES = frozenset({9517, 9533})
 def _target(status: Status, key: str) -> int | None:
     value = (status.targets or {}).get(key)
     return int(value) if isinstance(value, int) or (isinstance(value, str) and value.isdigit()) else None
+
+
+SUMMARY_FIELDS = frozenset({"state", "errors", "model_number", "progress", "temperatures", "targets", "bed",
+                            "filament"})
+"""The status fields `printer_summary` reads: a poll that changed none of them keeps the summary it had."""
 
 
 def printer_summary(status: Status) -> dict[str, Any]:
@@ -146,11 +151,18 @@ class XYZDriver(Driver):
 
     async def poll(self) -> tuple[dict[str, Any] | None, dict[str, Any]]:
         status = await self._client().status()
-        if self._last is None or self._last[0] != status:
-            self._last = (status, status.to_dict(), printer_summary(status))
+        last = self._last
+        if last is None:
+            last = (status, status.to_dict(), printer_summary(status))
+        elif last[0] is not status and last[0] != status:
+            # only what changed since the last poll is worked out again
+            changed = changed_fields(last[0], status)
+            last = (status, status.to_dict(since=(last[0], last[1])),
+                    printer_summary(status) if not changed.isdisjoint(SUMMARY_FIELDS) else last[2])
+        self._last = last
         if self.prompt is not None:
-            return self._last[1], {**self._last[2], "prompt": self.prompt, "actions": PROMPT_ACTIONS}
-        return self._last[1], self._last[2]
+            return last[1], {**last[2], "prompt": self.prompt, "actions": PROMPT_ACTIONS}
+        return last[1], last[2]
 
     async def _ask(self, text: str) -> None:
         """The flows' prompt (as `fabwire xyz calibrate` asks on the terminal): shown in the summary until the

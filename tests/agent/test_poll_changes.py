@@ -1,0 +1,101 @@
+"""Poll after poll on a simulated printer: a reply that did not change publishes no state event, a changed one
+does, and the views made from the previous poll equal views made from scratch."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+from fabwire.agent.core import Agent, DeviceSpec
+from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
+
+
+async def _collect(subscription: AsyncIterator[dict[str, Any]], events: list[dict[str, Any]]) -> None:
+    async for event in subscription:
+        events.append(event)
+
+
+async def test_an_unchanged_reply_publishes_no_state_and_a_changed_byte_does(tmp_path: Path) -> None:
+    async with Agent(state_dir=tmp_path / "state") as agent:
+        info = await agent.add_device(DeviceSpec("p", "xyz", "sim://xyz?speed=1"))
+        subscription = agent.subscribe(info.id)
+        events: list[dict[str, Any]] = []
+        collector = asyncio.create_task(_collect(subscription, events))
+        for _ in range(400):
+            if agent.state(info.id)["online"] and agent.state(info.id)["status"] is not None:
+                break
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(0)
+        events.clear()
+        first = agent.health()["polls"]
+        seen_ts = {agent.state(info.id)["ts"]}
+        while agent.health()["polls"] < first + 4:
+            await asyncio.sleep(0.05)
+            seen_ts.add(agent.state(info.id)["ts"])
+        states = [e["state"] for e in events if e["type"] == "state"]
+        # at one poll a second an idle printer answers the same bytes (its minute counter may tick once)
+        assert len(states) <= 1
+        assert len(seen_ts) >= 4  # the state's time still follows each poll
+        before = agent.state(info.id)
+        assert before["status"]["zoffset_mm"] != 0.37
+
+        await agent.act(info.id, "zoffset", {"mm": 0.37})
+        for _ in range(200):
+            if any(e["type"] == "state" and e["state"]["status"]["zoffset_mm"] == 0.37 for e in events):
+                break
+            await asyncio.sleep(0.05)
+        changed = [e["state"] for e in events if e["type"] == "state" and e["state"]["status"]["zoffset_mm"] == 0.37]
+        assert changed, "a changed `z:` line published no state"
+        assert changed[0]["status"]["raw"]["z"] == "37"
+        assert {k: v for k, v in changed[0]["status"].items() if k not in ("zoffset_mm", "raw")} == \
+            {k: v for k, v in before["status"].items() if k not in ("zoffset_mm", "raw")}
+        await subscription.aclose()
+        collector.cancel()
+
+
+async def test_each_poll_equals_views_made_from_scratch() -> None:
+    """At 1,000× the printer's counters move every poll; actions change other lines between polls."""
+    driver = XYZDriver(DeviceSpec("p", "xyz", "sim://xyz?speed=1000"), lambda event: None)
+    await driver.connect()
+    assert driver.printer is not None
+    try:
+        steps: list[tuple[str, dict[str, Any]]] = [
+            ("zoffset", {"mm": 0.12}), ("zoffset_step", {"direction": "up"}), ("jog", {"axis": "x", "distance_mm": 5}),
+            ("zoffset", {"mm": -0.3}), ("home", {}), ("zoffset_step", {"direction": "down"})]
+        for action, params in [("", {}), *steps, ("", {})]:
+            if action:
+                await driver.act(action, params)
+            for _ in range(3):
+                status, summary = await driver.poll()
+                last = driver.printer.last_status
+                assert status == last.to_dict()
+                assert list(status) == list(last.to_dict())
+                assert summary == printer_summary(last)
+    finally:
+        await driver.close()
+
+
+def _lag_figures(agent: Agent) -> tuple[float | None, float | None]:
+    lags = sorted(lag for session in agent.sessions() for lag in session.stats.lags)
+    return (lags[int(0.99 * (len(lags) - 1))], lags[-1]) if lags else (None, None)
+
+
+async def test_health_lags_are_those_of_the_machines_monitored(tmp_path: Path) -> None:
+    async with Agent(state_dir=tmp_path / "state") as agent:
+        infos = [await agent.add_device(DeviceSpec(f"p{n}", "xyz", f"sim://xyz?speed=30&serial=LAG{n}"))
+                 for n in range(3)]
+        while agent.health()["polls"] < 9:
+            await asyncio.sleep(0.05)
+        health = agent.health()
+        assert (health["poll_lag_p99_s"], health["poll_lag_max_s"]) == _lag_figures(agent)
+        await agent.remove_device(infos[1].id)
+        polls = agent.health()["polls"]
+        while agent.health()["polls"] < polls + 4:
+            await asyncio.sleep(0.05)
+        health = agent.health()
+        assert (health["poll_lag_p99_s"], health["poll_lag_max_s"]) == _lag_figures(agent)
+        for info in (infos[0], infos[2]):
+            await agent.remove_device(info.id)
+        assert (agent.health()["poll_lag_p99_s"], agent.health()["poll_lag_max_s"]) == (None, None)
