@@ -626,8 +626,14 @@ def check_3w(data_or_path: bytes | str | Path) -> ThreeWCheck:
             start = first[:SNIFF_BLOCK]
             _refuse_undecryptable(Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor().update(start), name)
         crc = zlib.crc32(first)
-        while block := src.read(CHUNK):
-            crc = zlib.crc32(block, crc)
+        try:  # a file on disk is summed where it lies (mapped, not copied in chunks)
+            import mmap
+
+            with mmap.mmap(src.fileno(), 0, access=mmap.ACCESS_READ) as mapped, memoryview(mapped) as whole:
+                crc = zlib.crc32(whole[src.tell():total], crc)
+        except (OSError, ValueError, AttributeError):  # not a file (bytes, a pipe's copy): read it in chunks
+            while block := src.read(CHUNK):
+                crc = zlib.crc32(block, crc)
     return ThreeWCheck(_fields(header), layout.crc, crc)
 
 
