@@ -225,9 +225,6 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
 
 def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: PrinterModel | None,
            upload_name: str | None, save_to_sd: bool, force: bool = False) -> None:
-    from fabwire.xyz import printjob
-
-    checked = printjob.check_in_background(file)  # the file's own checks while the printer is reached
     out = dctx.output
 
     started = [False]
@@ -244,7 +241,7 @@ def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: Pr
             return await printer.print_file(file, model=chosen, progress=uploaded,
                                             on_status=lambda st: view.show(st, {"event": "status"}),
                                             wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
-                                            on_note=view.note, force=force, checked=checked)
+                                            on_note=view.note, force=force)
 
     try:
         final = _with_printer(dctx, run)

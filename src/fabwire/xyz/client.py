@@ -38,7 +38,6 @@ from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, R
 from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
 
 if TYPE_CHECKING:
-    from fabwire.xyz.printjob import FileCheck
     from fabwire.xyz.sync import SyncXYZPrinter
 
 log = logging.getLogger("fabwire.xyz")
@@ -473,18 +472,16 @@ class XYZPrinter(Maintenance):
                          progress: UploadProgress | None = None, on_status: StatusCallback | None = None,
                          wait: bool = True, name: str | None = None, save_to_sd: bool = False,
                          start_limit: float = 30.0, on_note: Callable[[str], None] | None = None,
-                         force: bool = False, checked: FileCheck | None = None) -> Status:
+                         force: bool = False) -> Status:
         """Convert if needed, upload, start and (unless wait=False) follow the job to its end.
 
         `name` is the upload name (default: a safe one derived from the file name). The job counts as started
         only when the printer says so (checking the file, printing, or a file error); a printer that stays idle
-        for `start_limit` s is a DeviceError, never success. `checked`: `printjob.check_in_background(source)`
-        when the caller started it already (else it starts here, and runs while the printer is asked its state)."""
+        for `start_limit` s is a DeviceError, never success."""
         from fabwire.xyz import printjob
 
         printjob.check_source(source)  # before disturbing the printer
-        if checked is None:
-            checked = printjob.check_in_background(source)
+        checked = printjob.check_in_background(source)  # the file's own checks while the printer is asked its state
         name = userinput.upload_name(name) if name is not None else userinput.derived_upload_name(
             source.name if isinstance(source, Path) else None)
         status = await self.require_idle("print")
