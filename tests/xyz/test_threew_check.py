@@ -76,7 +76,7 @@ def test_a_body_that_does_not_decrypt_is_refused_alike(where: int, tmp_path: Pat
 
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_a_file_and_its_bytes_are_checked_alike(variant: str, tmp_path: Path) -> None:
-    """A file on disk is summed mapped; the same bytes in memory are read in chunks: one outcome."""
+    """A file on disk and the same bytes in memory (what a pipe gives): one outcome."""
     path = tmp_path / "job.3w"
     path.write_bytes(VARIANTS[variant](tmp_path))
     on_disk, in_memory = check_3w(path), check_3w(path.read_bytes())
