@@ -489,6 +489,8 @@ class XYZPrinter(Maintenance):
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
+        with contextlib.suppress(Exception):  # waited for without holding up the link; its outcome is read below
+            await asyncio.wrap_future(checked)
         with printjob.ready_file(source, target, override=model is not None, force=force, checked=checked) as ready:
             await self.upload(ready, name, progress=progress, save_to_sd=save_to_sd)
         status = await self._await_job_start(start_limit)
