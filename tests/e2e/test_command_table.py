@@ -78,6 +78,8 @@ HEAVY = {"numpy", "rich", "serialx", "termios", "cryptography", "svgelements", "
 XYZ_PRINTER_SIDE = {"fabwire.xyz.device", "fabwire.xyz.printer", "fabwire.xyz.sim", "fabwire.xyz.threew",
                     "fabwire.xyz.gcodeinfo", "fabwire.xyz.intake", "fabwire.xyz.threew_cli"}
 NOT_XYZ = {"fabwire.lineus", "fabwire.mmu", "fabwire.agent", "fabwire.mqtt", "fabwire.demo", "fabwire.vpype"}
+STATUS_SPARES = {"random", "click.shell_completion", "concurrent.futures.thread"}
+"""Loaded only where needed: fault injection, completion, a thread pool."""
 DEVICES = ('[devices.office]\nkind = "xyz"\nurl = "10.0.0.5"\n[devices.bench]\nkind = "mmu"\nurl = "/dev/ttyACM0"\n'
            '[devices.otto]\nkind = "lineus"\nurl = "10.0.0.7"\n')
 
@@ -96,8 +98,9 @@ IMPORTS: list[tuple[str, str, set[str]]] = [
     ("complete", "fabwire xyz co", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY),
     ("complete", "fabwire lineus -d o", {"numpy", "svgelements", "PIL", "fabwire.lineus.client", "fabwire.xyz"}),
     ("complete", "fabwire mmu -d b", {"numpy", "rich", "fabwire.mmu.sim", "fabwire.xyz", "fabwire.lineus"}),
-    ("status", "xyz -d {address} status --json", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY),
-    ("status", "xyz -d {address} status", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY - {"rich", "dataclasses"}),
+    ("status", "xyz -d {address} status --json", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY | STATUS_SPARES),
+    ("status", "xyz -d {address} status",  # the panel: rich, which loads random itself
+     NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY - {"rich", "dataclasses"} | STATUS_SPARES - {"random"}),
     # a .3w printed with standard error on a pipe: plain lines (no rich), the file checked without G-code scanning
     ("status", "xyz -d {address} print {job} --no-wait",
      NOT_XYZ | {"numpy", "rich", "fabwire.xyz.gcodeinfo", "fabwire.xyz.printer", "fabwire.xyz.sim"}),

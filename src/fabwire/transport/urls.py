@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import re
 from urllib.parse import parse_qsl, urlsplit
 
@@ -56,14 +57,11 @@ def _port(text: str, raw: str) -> int:
 def _check_host(text: str, host: str) -> str:
     if not host:
         raise _bad(text, "no host name")
-    if _HOSTNAME.match(host):  # a host name or a dotted IPv4 address: no need to load ipaddress
-        return host
-    import ipaddress
-
     try:
         ipaddress.ip_address(host)
     except ValueError:
-        raise _bad(text, f"{host!r} is not a valid host name or IP address") from None
+        if not _HOSTNAME.match(host):
+            raise _bad(text, f"{host!r} is not a valid host name or IP address") from None
     return host
 
 
