@@ -3,8 +3,10 @@ upload and the printer taking the job), against a raw lockstep sender: a short P
 file to the same kind of simulator in the same framed blocks and waits for every block's `ok`.
 
 Both run as fresh processes, interleaved (one of each in turn, median of several rounds), each against a simulator
-of its own that has not printed yet. The floor sends one block at a time, as a serial-line host must; fabwire keeps
-a Wi-Fi printer's window of blocks in flight, so it can be at or under the floor but has no reason to be above it.
+of its own that has not printed yet; beside them, what Python takes to load asyncio and click, which every fabwire
+command does before anything else (the raw sender needs neither). The floor sends one block at a time, as a
+serial-line host must; fabwire keeps a Wi-Fi printer's window of blocks in flight, so it can be at or under the
+floor but has no reason to be above it.
 """
 
 from __future__ import annotations
@@ -75,22 +77,29 @@ def run() -> list[Figure]:
         proc, ports = _start(2 * (ROUNDS + 1))
         try:
             free = iter(ports)
-            runs: dict[str, list[Run]] = {"fabwire": [], "raw": []}
+            runs: dict[str, list[Run]] = {"fabwire": [], "raw": [], "floor": []}
             for round_ in range(ROUNDS + 1):  # the first round warms the file cache and is not counted
                 ours = run_command([*fabwire_cmd, "xyz", "-d", f"127.0.0.1:{next(free)}", "print", str(job),
                                     "--no-wait"])
                 raw = run_command([sys.executable, "-c", RAW_SENDER, str(next(free)), str(job)])
+                floor = run_command([sys.executable, "-c", "import asyncio, click"])
                 if round_:
                     runs["fabwire"].append(ours)
                     runs["raw"].append(raw)
+                    runs["floor"].append(floor)
         finally:
             _stop(proc)
         size_mb = job.stat().st_size / 1e6
     ours_wall = statistics.median(r.wall for r in runs["fabwire"])
     raw_wall = statistics.median(r.wall for r in runs["raw"])
+    floor_wall = statistics.median(r.wall for r in runs["floor"])
     return [
         ratio_figure(f"xyz print --no-wait of a {size_mb:.0f} MB .3w (whole command), wall", ours_wall, "s", raw_wall,
                      "raw lockstep sender", 1.0),
+        Figure("the start-up under it: python -c 'import asyncio, click', wall", floor_wall, "s", "(floor)", None,
+               raw_wall, "raw lockstep sender"),
+        Figure("the whole command less that start-up, wall", ours_wall - floor_wall, "s", "(reference)", None,
+               raw_wall, "raw lockstep sender"),
         Figure("the same, CPU (fabwire's process)", statistics.median(r.cpu for r in runs["fabwire"]), "s",
                "(reference)", None, statistics.median(r.cpu for r in runs["raw"]), "raw lockstep sender"),
         Figure("the same, peak RSS", statistics.median(r.rss_mib for r in runs["fabwire"]), "MiB", "(reference)",

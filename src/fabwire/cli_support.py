@@ -4,7 +4,6 @@ arguments, the device context and opening devices, confirmations, running async 
 from __future__ import annotations
 
 import asyncio
-import difflib
 import importlib
 import os
 import re
@@ -15,7 +14,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple, ParamSpec, TypeVar
 
 import click
 import msgspec
-from click.shell_completion import CompletionItem
 
 from fabwire.cli_options import ANY, OptionFactory, SharingGroup, app_of
 
@@ -36,6 +34,8 @@ from fabwire.extras import first_missing
 from fabwire.importing import collection_paused
 
 if TYPE_CHECKING:
+    from click.shell_completion import CompletionItem
+
     from fabwire.config import Target
 
 P = ParamSpec("P")
@@ -152,6 +152,8 @@ class LazyGroup(SharingGroup):
                 formatter.write_dl([(name, _shortened(text, limit)) for name, text in rows])
 
     def shell_complete(self, ctx: click.Context, incomplete: str) -> list[CompletionItem]:
+        from click.shell_completion import CompletionItem  # loaded when completing, not to run a command
+
         items = [CompletionItem(name, help=_shortened(summary)) for name in self.list_commands(ctx)
                  if name.startswith(incomplete) and (summary := self.summary(ctx, name)) is not None]
         return [*items, *click.Command.shell_complete(self, ctx, incomplete)]
@@ -162,6 +164,8 @@ class LazyGroup(SharingGroup):
             return super().resolve_command(ctx, args)
         except click.exceptions.NoSuchCommand as exc:  # click suggests from loaded commands only: add the lazy ones
             # the closest one only (`sevre` is `serve`, not also `service`), as a misspelt config key is answered
+            import difflib  # only to suggest a command for a mistyped one
+
             closest = difflib.get_close_matches(exc.command_name, self.list_commands(ctx), n=1)
             raise click.exceptions.NoSuchCommand(exc.command_name, possibilities=closest, ctx=ctx) from None
 

@@ -6,9 +6,10 @@ The rich consoles are made on first use, so a command that prints JSON or one pl
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -33,6 +34,36 @@ def _console(stderr: bool) -> Console:
         Console(highlight=False, soft_wrap=True, markup=False, emoji=False)
 
 
+RICH_TERMINAL_VARIABLES = ("FORCE_TERMINAL", "FORCE_COLOR", "TTY_COMPATIBLE")
+"""Environment variables by which rich treats a stream that is not a terminal as one (rich's
+`Console.is_terminal`): where one is set, rich decides."""
+
+
+class PlainLines:
+    """Lines of text on a stream that is not a terminal, without importing rich: the part of rich's Console that a
+    view printing one line per change uses (`is_terminal`, `print`). Text is written as it is: no markup, no
+    wrapping, one line per `print`."""
+
+    is_terminal = False
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+
+    def print(self, *objects: object, markup: bool | None = None) -> None:
+        self.stream.write(" ".join(map(str, objects)) + "\n")
+        self.stream.flush()
+
+
+def _terminal_like(stream: TextIO) -> bool:
+    """Whether rich could draw on `stream`: a terminal, or one of RICH_TERMINAL_VARIABLES set."""
+    if any(name in os.environ for name in RICH_TERMINAL_VARIABLES):
+        return True
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
+
+
 class Output:
     def __init__(self, json_mode: bool = False) -> None:
         self.json_mode = json_mode
@@ -52,6 +83,13 @@ class Output:
         if self._out is None:
             self._out = _console(stderr=False)
         return self._out
+
+    def lines_err(self) -> Console | PlainLines:
+        """Where a view prints its lines on stderr: the rich console when rich could draw there (a terminal), else
+        plain lines, so a command whose stderr is a file or a pipe never imports rich for them."""
+        if self._err is None and not _terminal_like(sys.stderr):
+            return PlainLines(sys.stderr)
+        return self.err
 
     def _line(self, stream: Any, text: str) -> None:
         stream.write(text + "\n")

@@ -16,6 +16,8 @@ from clitools import SimulatorStarter, cli_env
 from fabwire.cli import cli
 from fabwire.cli_support import Lazy, LazyGroup
 from fabwire.extras import EXTRA_OF
+from fabwire.xyz.models import find_model
+from fabwire.xyz.threew import convert_gcode_file
 
 
 def lazy_groups(group: click.Group, path: str) -> Iterator[tuple[str, LazyGroup]]:
@@ -76,6 +78,8 @@ HEAVY = {"numpy", "rich", "serialx", "termios", "cryptography", "svgelements", "
 XYZ_PRINTER_SIDE = {"fabwire.xyz.device", "fabwire.xyz.printer", "fabwire.xyz.sim", "fabwire.xyz.threew",
                     "fabwire.xyz.gcodeinfo", "fabwire.xyz.intake", "fabwire.xyz.threew_cli"}
 NOT_XYZ = {"fabwire.lineus", "fabwire.mmu", "fabwire.agent", "fabwire.mqtt", "fabwire.demo", "fabwire.vpype"}
+STATUS_SPARES = {"random", "click.shell_completion", "concurrent.futures.thread"}
+"""Loaded only where needed: fault injection, completion, a thread pool."""
 DEVICES = ('[devices.office]\nkind = "xyz"\nurl = "10.0.0.5"\n[devices.bench]\nkind = "mmu"\nurl = "/dev/ttyACM0"\n'
            '[devices.otto]\nkind = "lineus"\nurl = "10.0.0.7"\n')
 
@@ -94,8 +98,12 @@ IMPORTS: list[tuple[str, str, set[str]]] = [
     ("complete", "fabwire xyz co", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY),
     ("complete", "fabwire lineus -d o", {"numpy", "svgelements", "PIL", "fabwire.lineus.client", "fabwire.xyz"}),
     ("complete", "fabwire mmu -d b", {"numpy", "rich", "fabwire.mmu.sim", "fabwire.xyz", "fabwire.lineus"}),
-    ("status", "xyz -d {address} status --json", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY),
-    ("status", "xyz -d {address} status", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY - {"rich", "dataclasses"}),
+    ("status", "xyz -d {address} status --json", NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY | STATUS_SPARES),
+    ("status", "xyz -d {address} status",  # the panel: rich, which loads random itself
+     NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY - {"rich", "dataclasses"} | STATUS_SPARES - {"random"}),
+    # a .3w printed with standard error on a pipe: plain lines (no rich), the file checked without G-code scanning
+    ("status", "xyz -d {address} print {job} --no-wait",
+     NOT_XYZ | {"numpy", "rich", "fabwire.xyz.gcodeinfo", "fabwire.xyz.printer", "fabwire.xyz.sim"}),
 ]
 
 
@@ -103,7 +111,7 @@ def imported(how: str, line: str, config: Path, address: str) -> tuple[int, str,
     """Run one command line in a fresh interpreter: its exit code, output and every module it imported."""
     env = cli_env()
     env["FABWIRE_CONFIG"] = str(config)
-    argv = line.format(address=address).split()
+    argv = line.format(address=address, job=config.with_name("part.3w")).split()
     if how == "complete":
         env.update(_FABWIRE_COMPLETE="bash_complete", COMP_WORDS=line,
                    COMP_CWORD=str(len(argv) - (0 if line.endswith(" ") else 1)))
@@ -121,6 +129,10 @@ def test_a_command_imports_only_what_it_uses(how: str, line: str, forbidden: set
                                              simulator: SimulatorStarter) -> None:
     config = tmp_path / "devices.toml"
     config.write_text(DEVICES)
+    if "{job}" in line:
+        gcode = tmp_path / "part.gcode"
+        gcode.write_text(";FLAVOR:Marlin\nG28\nG1 X10 Y10 E1 F1800\nG1 X20 Y10 E2\n")
+        convert_gcode_file(gcode, tmp_path / "part.3w", find_model("dv1MW0A000"))
     address = simulator("xyz", "--listen", "127.0.0.1:0").url if how == "status" else ""
     rc, out, modules = imported(how, line, config, address)
     assert rc == 0

@@ -397,3 +397,38 @@ async def test_a_peer_that_is_not_a_printer_is_named_as_such() -> None:
     finally:
         await printer.close()
         server.close()
+
+
+class Writes(Transport):
+    """The link as it is, with the size of every write the host makes."""
+
+    def __init__(self, inner: Transport) -> None:
+        self.inner, self.url, self.peer = inner, inner.url, inner.peer
+        self.sizes: list[int] = []
+
+    async def read(self, max_bytes: int = 65536) -> bytes:
+        return await self.inner.read(max_bytes)
+
+    async def write(self, data: bytes) -> None:
+        self.sizes.append(len(data))
+        await self.inner.write(data)
+
+    async def close(self) -> None:
+        await self.inner.close()
+
+
+async def test_the_blocks_in_flight_go_out_in_one_write(rig: Rig) -> None:
+    """A Wi-Fi upload writes the window's blocks at once, then as many as were acknowledged; a serial one writes
+    block by block. The printer receives the file exactly either way."""
+    printer = rig.printer
+    window = printer.upload_window if printer.link is Link.WIFI else 1
+    writes = Writes(printer.transport)
+    printer.transport = writes
+    data = bytes(range(256)) * 1000  # 32 blocks of 8 KiB, the last one short
+    async with asyncio.timeout(LIMIT):
+        result = await printer.upload(data, "blocks.3w")
+    framed = [size for size in writes.sizes if size > 100]  # the blocks, not the commands around them
+    assert framed[0] == window * (8192 + 12)
+    assert sum(framed) == len(data) + 12 * result.blocks
+    assert len(framed) <= result.blocks - window + 1
+    assert rig.sim.received("blocks.3w") == data

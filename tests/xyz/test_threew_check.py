@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from fabwire.errors import InputError
+from fabwire.xyz.printjob import check_in_background
 from fabwire.xyz.threew import BODY_OFFSET, check_3w, convert_gcode_file, inspect_3w
 
 DATA = Path(__file__).parent / "data" / "threew"
@@ -71,3 +72,39 @@ def test_a_body_that_does_not_decrypt_is_refused_alike(where: int, tmp_path: Pat
     with pytest.raises(InputError) as quick:
         check_3w(path)
     assert str(quick.value) == str(full.value)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_a_file_and_its_bytes_are_checked_alike(variant: str, tmp_path: Path) -> None:
+    """A file on disk and the same bytes in memory (what a pipe gives): one outcome."""
+    path = tmp_path / "job.3w"
+    path.write_bytes(VARIANTS[variant](tmp_path))
+    on_disk, in_memory = check_3w(path), check_3w(path.read_bytes())
+    assert (on_disk.fields, on_disk.crc_stored, on_disk.crc_computed) == \
+        (in_memory.fields, in_memory.crc_stored, in_memory.crc_computed)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_the_check_in_the_background_is_the_check(variant: str, tmp_path: Path) -> None:
+    """What `xyz print` starts while it reaches the printer: `check_3w` of a binary .3w on disk, nothing for a
+    base64 one (decoded first, then checked) or for bytes."""
+    path = tmp_path / "job.3w"
+    path.write_bytes(VARIANTS[variant](tmp_path))
+    found = check_in_background(path).result(timeout=60)
+    if "base64" in variant:
+        assert found is None
+    else:
+        assert found == check_3w(path)
+    assert check_in_background(path.read_bytes()).result(timeout=60) is None
+
+
+def test_the_check_in_the_background_hands_over_its_refusal(tmp_path: Path) -> None:
+    data = bytearray(converted("mini w")(tmp_path))
+    data[BODY_OFFSET:BODY_OFFSET + 16] = bytes(range(16))
+    path = tmp_path / "job.3w"
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError) as direct:
+        check_3w(path)
+    with pytest.raises(InputError) as handed:
+        check_in_background(path).result(timeout=60)
+    assert str(handed.value) == str(direct.value)

@@ -6,14 +6,16 @@ The same seed and the same traffic give the same faults, so a failing robustness
 from __future__ import annotations
 
 import asyncio
-import random
 import re
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import msgspec
 
 from fabwire.errors import InputError, LinkClosed, excerpt
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
+
+if TYPE_CHECKING:
+    import random
 
 Side = Literal["both", "write", "read"]
 Count = Annotated[int, msgspec.Meta(ge=0)]
@@ -75,7 +77,9 @@ class FaultyTransport(Transport):
     def __init__(self, inner: Transport, plan: FaultPlan) -> None:
         self._inner = inner
         self._plan = plan
-        self._rng = random.Random(plan.seed)
+        import random  # only where faults are injected: a command without them does not load it
+
+        self._rng: random.Random = random.Random(plan.seed)
         self._passed = 0
         self._silent = False
         self._disconnected = False

@@ -10,7 +10,7 @@ import threading
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import click
 
@@ -40,6 +40,7 @@ from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
 
 if TYPE_CHECKING:
+    from rich.console import Console
     from rich.panel import Panel
 
 T = TypeVar("T")
@@ -230,7 +231,9 @@ def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: Pr
 
     async def run(printer: XYZPrinter) -> Status:
         chosen = model or _resolve_model(printer.settings.model)
-        with JobView(out, out.err, shown) as view, JobKeys(view, printer.pause, printer.resume, printer.cancel):
+        # off a terminal the view prints plain lines, which need no rich (PlainLines is the part of Console it uses)
+        lines = cast("Console", out.lines_err())
+        with JobView(out, lines, shown) as view, JobKeys(view, printer.pause, printer.resume, printer.cancel):
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)

@@ -54,6 +54,9 @@ REPLY_ERRORS = {
 TRANSIENT_RETRIES = 20
 FILE_CHECK_LIMIT = 120.0  # printer seconds of "checking file" (9520) before a print is stuck; real checks take seconds
 CHECKING_NOTE_EVERY = 15.0  # seconds between "still checking the file" notes
+UPLOAD_READ_BUFFER = 1 << 20
+"""Bytes read from a file being uploaded at a time (it travels in blocks of a few KiB: one read per block would
+be a system call each)."""
 HANGS_UP = frozenset({"dvF110B000"})
 """Models that close the TCP connection after every reply."""
 _FIRMWARE_HEADER = re.compile(rb"([A-Za-z0-9]{10})\+([0-9][0-9A-Za-z.]*)")
@@ -385,7 +388,7 @@ class XYZPrinter(Maintenance):
         with contextlib.ExitStack() as stack:
             if isinstance(data, Path):
                 try:
-                    handle = stack.enter_context(data.open("rb"))
+                    handle = stack.enter_context(data.open("rb", buffering=UPLOAD_READ_BUFFER))
                 except OSError as exc:
                     raise InputError(f"cannot read {data}: {exc.strerror}") from exc
                 source: bytes | BinaryIO = handle
@@ -417,15 +420,22 @@ class XYZPrinter(Maintenance):
                 await self._request(command, self.timeout)
                 acks = p.AckCounter()
                 in_flight: deque[int] = deque()
+                batch: list[bytes] = []  # blocks that fill the window, written at once (one send, not one each)
                 for chunk in p.iter_blocks(data, block, crc=crc):
-                    await self._write(chunk, "uploading")
+                    batch.append(chunk)
                     in_flight.append(len(chunk) - 12)
                     blocks += 1
+                    if len(in_flight) < window:
+                        continue
+                    await self._write(b"".join(batch), "uploading")
+                    batch.clear()
                     while len(in_flight) >= window:
                         for _ in range(await self._acks(acks, len(in_flight))):
                             sent += in_flight.popleft()
                         if progress is not None:
                             progress(sent, size)
+                if batch:
+                    await self._write(b"".join(batch), "uploading")
                 while in_flight:
                     for _ in range(await self._acks(acks, len(in_flight))):
                         sent += in_flight.popleft()
@@ -471,6 +481,7 @@ class XYZPrinter(Maintenance):
         from fabwire.xyz import printjob
 
         printjob.check_source(source)  # before disturbing the printer
+        checked = printjob.check_in_background(source)  # the file's own checks while the printer is asked its state
         name = userinput.upload_name(name) if name is not None else userinput.derived_upload_name(
             source.name if isinstance(source, Path) else None)
         status = await self.require_idle("print")
@@ -478,7 +489,9 @@ class XYZPrinter(Maintenance):
         target = model or printer_model
         if target is None:
             raise DeviceError("model", f"the printer reports an unknown model {status.model_number!r}; pass a model")
-        with printjob.ready_file(source, target, override=model is not None, force=force) as ready:
+        with contextlib.suppress(Exception):  # waited for without holding up the link; its outcome is read below
+            await asyncio.wrap_future(checked)
+        with printjob.ready_file(source, target, override=model is not None, force=force, checked=checked) as ready:
             await self.upload(ready, name, progress=progress, save_to_sd=save_to_sd)
         status = await self._await_job_start(start_limit)
         if on_status:

@@ -620,13 +620,14 @@ def check_3w(data_or_path: bytes | str | Path) -> ThreeWCheck:
         header, _ = _read_header(pre, layout, name)
         body_size = total - BODY_OFFSET
         _refuse_bodiless(body_size, name)
-        first = src.read(CHUNK)
+        piece = 1 << 20  # summed faster than larger pieces, and memory stays low
+        first = src.read(piece)
         if first[:1] != b";":  # an encrypted body (a plain one starts with its header's comments)
             _refuse_ragged(body_size, name)
             start = first[:SNIFF_BLOCK]
             _refuse_undecryptable(Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor().update(start), name)
         crc = zlib.crc32(first)
-        while block := src.read(CHUNK):
+        while block := src.read(piece):
             crc = zlib.crc32(block, crc)
     return ThreeWCheck(_fields(header), layout.crc, crc)
 
