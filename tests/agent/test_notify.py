@@ -215,6 +215,9 @@ def test_a_finished_print_arrives_with_its_thumbnail(bench: Bench, receiver: Rec
         assert attachment["mimetype"] == "image/png"
         with Image.open(io.BytesIO(base64.b64decode(attachment["base64"]))) as image:
             assert image.size == (64, 48)  # the largest thumbnail the slicer embedded
+        finished = wait_for(lambda: (s := summary(client, printer["id"]))["state"] == "done" and s,
+                            "the printer showing print finished")  # until it is acknowledged
+        assert (finished["state"], finished["progress_percent"], finished["time_left_s"]) == ("done", 100, 0)
         assert client.post(f"/api/v1/devices/{printer['id']}/actions/acknowledge", json={}).status_code == 200
         wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle again")
     assert len(receiver.titled("print finished")) == 1  # the job's end and the printer's done screen: one message

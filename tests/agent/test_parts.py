@@ -92,6 +92,18 @@ def test_summaries_carry_every_key_for_every_kind() -> None:
     assert printing["actions"] == ["pause", "cancel"]
 
 
+@pytest.mark.parametrize(("lines", "state", "percent", "time_left_s"), [
+    (["j:9505,0", "d:42,12,30"], "printing", 42, 30 * 60),
+    (["j:9509,0", "d:0,0,0"], "done", 100, 0),  # "print finished": the printer zeroes d:
+    (["j:9509,0", "d:0,0,0", "e:525"], "error", 0, 0),  # ended on an error: not finished
+    (["j:9511,0", "d:0,0,0"], "idle", 0, 0),
+])
+def test_the_printer_summary_progress_follows_the_print_to_its_end(lines: list[str], state: str, percent: int,
+                                                                   time_left_s: int) -> None:
+    printed = printer_summary(Status.parse(lines))
+    assert (printed["state"], printed["progress_percent"], printed["time_left_s"]) == (state, percent, time_left_s)
+
+
 async def test_history_keeps_changes_drops_repeats_and_expires_old_rows(tmp_path: Path) -> None:
     history = History(tmp_path / "h.sqlite3", retention_s=3600)
     await history.open()
