@@ -256,8 +256,11 @@ def test_devices_answer_to_their_configured_name(bench: Bench) -> None:
         assert client.get("/api/v1/devices/arm/state").json()["online"] is True
         assert client.get("/api/v1/devices/arm/history").json()["device"] == device_of(client, "lineus")["id"]
         assert "pen_up" in client.get("/api/v1/devices/arm/actions").json()["applicable"]
-        assert ".svg" in _error(client.post("/api/v1/devices/arm/jobs", params={"filename": "a.exe"},
-                                            content=b"x"), 400, 4)["message"]
+        assert _error(client.post("/api/v1/devices/arm/jobs", params={"filename": "a.exe"}, content=b"x"),
+                      400, 4)["message"] == "arm takes .gc, .gcode, .nc, .ngc, .svg, .svgz files, not 'a.exe'"
+        assert _error(client.post("/api/v1/devices/printer/jobs", params={"filename": "logo.svg"},
+                                  content=b"<svg/>"), 400, 4)["message"] == \
+            "printer takes .3w, .g, .gco, .gcode files, not 'logo.svg'"
         unknown = _error(client.get("/api/v1/devices/desk"), 404, 4)["message"]
         assert "printer" in unknown
         assert "arm" in unknown

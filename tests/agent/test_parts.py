@@ -20,7 +20,9 @@ from fabwire.agent.auth import is_loopback, load_or_create_token
 from fabwire.agent.boundary import Boundary, Policy
 from fabwire.agent.core import SUBSCRIBER_QUEUE, Agent, device_id, make_event
 from fabwire.agent.drivers.base import SUMMARY_KEYS, Action, Param, checked_params, summary
-from fabwire.agent.drivers.xyz import printer_summary
+from fabwire.agent.drivers.lineus import LineUsDriver
+from fabwire.agent.drivers.mmu import MMUDriver
+from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
 from fabwire.agent.history import History
 from fabwire.agent.jobs import JobStore, UploadTooLarge, new_job_id
 from fabwire.errors import InputError
@@ -63,6 +65,16 @@ def test_parameters_are_checked_by_type_range_and_name() -> None:
                        ({"axis": "x", "distance_mm": 1, "speed": 3}, "no parameter 'speed'")):
         with pytest.raises(InputError, match=re.escape(words)):
             checked_params(JOG, bad)
+
+
+@pytest.mark.parametrize("action", [a for d in (XYZDriver, LineUsDriver, MMUDriver) for a in d.actions if a.confirm],
+                         ids=lambda a: a.name)
+def test_an_unconfirmed_step_says_in_words_what_confirming_does(action: Action) -> None:
+    with pytest.raises(InputError) as refused:
+        checked_params(action, {p.name: p.low if p.low is not None else "x" for p in action.params})
+    what = action.doc.split(". ")[0].rstrip(".")  # its first sentence, as a clause: "to cancel the print"
+    assert str(refused.value) == (f'{action.name} cannot be undone: send "confirm": true to '
+                                  f"{what[:1].lower()}{what[1:]}")
 
 
 def test_destructive_actions_need_confirm_true() -> None:
