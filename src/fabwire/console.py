@@ -14,6 +14,59 @@ if TYPE_CHECKING:
     from rich.console import Console
 
 
+class StdoutClosed(BaseException):
+    """The reader of stdout went away (`fabwire trace show | head`): the command ends quietly with exit code 0.
+
+    A BaseException, as KeyboardInterrupt is, so that it unwinds the command (links and partial files closed on
+    the way) rather than being reported as an error, and never taken for a device link's broken pipe."""
+
+
+class _GuardedStream:
+    """A stream whose broken pipe is StdoutClosed; everything else is the stream's own."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, data: Any) -> int:
+        try:
+            return int(self._stream.write(data))
+        except BrokenPipeError:
+            raise StdoutClosed from None
+
+    def writelines(self, lines: Any) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            raise StdoutClosed from None
+
+    @property
+    def buffer(self) -> Any:
+        return _GuardedStream(self._stream.buffer)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def guard_stdout() -> None:
+    """Make a closed stdout StdoutClosed (see `stdout_closed` for the end); for the entry point only."""
+    if sys.stdout is not None and not isinstance(sys.stdout, _GuardedStream):
+        sys.stdout = _GuardedStream(sys.stdout)
+
+
+def stdout_closed() -> int:
+    """End after StdoutClosed: what is still buffered goes nowhere (so that the interpreter's last flush is quiet,
+    as Python's note on SIGPIPE advises), and the exit code is 0."""
+    import os
+
+    with open(os.devnull, "wb") as devnull:
+        os.dup2(devnull.fileno(), sys.__stdout__.fileno() if sys.__stdout__ is not None else 1)
+    return 0
+
+
 def _default(value: object) -> object:
     if isinstance(value, bytes):
         return value.decode("latin-1")
