@@ -6,6 +6,7 @@ The rich consoles are made on first use, so a command that prints JSON or one pl
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -75,15 +76,50 @@ def _default(value: object) -> object:
     return str(value)
 
 
+MAX_WIDTH = 110
+"""The widest help and tables are laid out, on a terminal or not (the help's `max_content_width`)."""
+
+
+def columns(stream: Any = None) -> int | None:
+    """The width output is laid out to: $COLUMNS when set (as click and rich read it), else the width of the
+    terminal `stream` (default stdout) is; None when it is no terminal."""
+    given = os.environ.get("COLUMNS", "")
+    if given.isdigit() and int(given) > 0:
+        return int(given)
+    target = stream or sys.__stdout__
+    try:
+        return os.get_terminal_size(target.fileno()).columns if target is not None else None
+    except (ValueError, OSError):  # not a terminal, or closed
+        return None
+
+
+def help_width() -> int:
+    """Columns of `--help` text: click's rule (the terminal's width less 2, between 50 and `MAX_WIDTH`), with
+    `MAX_WIDTH` rather than click's 80 when the help goes to a pipe or a file, as the tables do."""
+    return max(min(columns() or MAX_WIDTH, MAX_WIDTH) - 2, 50)
+
+
 def _console(stderr: bool) -> Console:
     from fabwire.importing import collection_paused
 
     with collection_paused():
         from rich.console import Console
 
+    stream = sys.__stderr__ if stderr else sys.__stdout__
+    try:
+        terminal = stream is not None and stream.isatty()
+    except ValueError:  # closed
+        terminal = False
+    # Off a terminal (a pipe, a log), lines are never broken (a path stays whole) and tables get $COLUMNS or
+    # `MAX_WIDTH` columns, not rich's 80; on one, rich follows the terminal's width.
     # Markup and emoji codes off: device names, SSIDs and file names are printed as they are, never read as rich markup.
-    return Console(stderr=True, highlight=False, markup=False, emoji=False) if stderr else \
-        Console(highlight=False, soft_wrap=True, markup=False, emoji=False)
+    return Console(stderr=stderr, highlight=False, markup=False, emoji=False,
+                   width=None if terminal else columns(stream) or MAX_WIDTH, soft_wrap=not stderr or not terminal)
+
+
+def console(stderr: bool = False) -> Console:
+    """A rich console for fabwire's output (see `Output.out` / `Output.err`, which keep one each)."""
+    return _console(stderr)
 
 
 class Output:
