@@ -1,9 +1,11 @@
-"""Slicer previews embedded in G-code: every row of the block table, damaged blocks, and any input at all."""
+"""Slicer previews embedded in G-code: every row of the block table (as browser images and as the PNG a
+notification attaches), damaged blocks, and any input at all."""
 
 from __future__ import annotations
 
 import base64
 import io
+from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -11,22 +13,61 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from agent.doortools import preview, prusaslicer_gcode, thumbnail_block
-from fabwire.thumbnails import BLOCKS, read_thumbnails
+from fabwire.thumbnails import BLOCKS, Block, best_png, read_thumbnails
+
+BACKGROUND, LINE = (40, 120, 200), (250, 250, 250)  # the colours of doortools.preview
+
+
+def _sliced(*blocks: str) -> bytes:
+    """A PrusaSlicer G-code file with these preview blocks in its leading comments."""
+    head, _, body = prusaslicer_gcode(thumbs=[]).partition(b"\n;\n")
+    return head + b"\n;\n" + "".join(blocks).encode() + body
 
 
 @pytest.mark.parametrize("block", BLOCKS, ids=lambda b: b.marker)
-def test_each_slicer_block_is_read_and_shown_as_a_browser_image(block: object) -> None:
-    """Each row of `BLOCKS` (its source is in the row): the block PrusaSlicer/Orca/Cura write is found before the
-    first command, decoded to the stated size, and served as PNG or JPEG (QOI converted, as Moonraker does)."""
-    fmt = block.format  # type: ignore[attr-defined]
-    data = prusaslicer_gcode(thumbs=[(16, 16, "png"), (96, 64, fmt)])
+def test_each_slicer_block_is_read_and_shown_as_a_browser_image(block: Block) -> None:
+    """Each row of `BLOCKS` (its source is in the row): the block the slicer writes is found before the first
+    command, decoded to the stated size, and served as PNG or JPEG (QOI converted, as Moonraker does)."""
+    data = _sliced(thumbnail_block(16, 16, "png"), thumbnail_block(96, 64, block.format, marker=block.marker))
     found = read_thumbnails(io.BytesIO(data))
-    assert [(t.width, t.height, t.format) for t in found] == [(16, 16, "png"), (96, 64, fmt)]
+    assert [(t.width, t.height, t.format) for t in found] == [(16, 16, "png"), (96, 64, block.format)]
     image, media = found[1].web_image()
-    assert media == ("image/jpeg" if fmt == "jpg" else "image/png")
+    assert media == ("image/jpeg" if block.format == "jpg" else "image/png")
     with Image.open(io.BytesIO(image)) as decoded:
         assert decoded.size == (96, 64)
-        assert decoded.format == ("JPEG" if fmt == "jpg" else "PNG")
+        assert decoded.format == ("JPEG" if block.format == "jpg" else "PNG")
+
+
+@pytest.mark.parametrize("block", BLOCKS, ids=lambda b: b.marker)
+def test_each_slicer_block_gives_its_largest_preview_as_png(block: Block, tmp_path: Path) -> None:
+    """What a notification attaches: the largest preview of the file, whatever its format, as PNG bytes."""
+    path = tmp_path / "part.gcode"
+    path.write_bytes(_sliced(thumbnail_block(16, 16, block.format, marker=block.marker),
+                             thumbnail_block(220, 124, block.format, marker=block.marker)))
+    png = best_png(path)
+    assert png is not None
+    assert png.startswith(b"\x89PNG\r\n\x1a\n")
+    with Image.open(io.BytesIO(png)) as image:
+        assert image.size == (220, 124)
+        if block.format != "jpg":  # PNG and QOI are lossless
+            rgb = image.convert("RGB")
+            assert rgb.getpixel((0, 100)) == BACKGROUND
+            assert rgb.getpixel((110, 62)) == LINE
+
+
+@pytest.mark.parametrize("damage", [
+    lambda b: b.replace(b"; thumbnail end", b"G28"),  # a block cut short by a command
+    lambda b: b.replace(b"; iVBOR", b"; !!!!!"),  # not base64
+    lambda b: b.replace(b"begin 16x16", b"begin 16by16"),  # not a begin line
+], ids=["cut-short", "not-base64", "not-a-begin-line"])
+def test_a_file_whose_only_block_is_broken_has_no_png(damage: object, tmp_path: Path) -> None:
+    path = tmp_path / "part.gcode"
+    path.write_bytes(damage(_sliced(thumbnail_block(16, 16, "png"))))  # type: ignore[operator]
+    assert best_png(path) is None
+
+
+def test_a_file_that_cannot_be_read_has_no_png(tmp_path: Path) -> None:
+    assert best_png(tmp_path / "gone.gcode") is None
 
 
 def test_blocks_after_the_first_command_are_not_searched() -> None:

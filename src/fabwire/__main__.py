@@ -21,6 +21,9 @@ if _catching:
 
 
 def run() -> None:
+    from fabwire.console import StdoutClosed, guard_stdout, stdout_closed
+
+    guard_stdout()
     try:
         if sys.argv[1:] in (["--version"], ["-V"]):  # answered before click and the CLI are imported
             from fabwire import __version__
@@ -38,6 +41,8 @@ def run() -> None:
     except KeyboardInterrupt:  # between the handler's return and main's own handling
         sys.stderr.write(_INTERRUPTED.decode())
         code = _EXIT_INTERRUPTED
+    except StdoutClosed:  # the reader of the output went away (`| head`): nothing more to say, not an error
+        code = stdout_closed()
     sys.exit(code)
 
 

@@ -26,6 +26,7 @@ from fabwire.cli_support import (
     pass_app,
     uses_link_options,
 )
+from fabwire.console import MAX_WIDTH, help_width
 from fabwire.devices import KINDS
 from fabwire.errors import EXIT_INTERRUPTED, ConfigWarning, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
@@ -74,7 +75,8 @@ SIMULATORS: dict[str, Lazy] = {
 @click.group(
     cls=LazyGroup,
     lazy=COMMANDS,
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110},
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": MAX_WIDTH,
+                      "terminal_width": help_width()},
 )
 @click.version_option(__version__, "-V", "--version", prog_name="fabwire")
 @click.pass_context

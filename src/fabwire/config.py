@@ -143,6 +143,43 @@ def section_lines(text: str) -> dict[str, int]:
     return lines
 
 
+def _key_line(text: str, name: str, key: str | None, header: int) -> int:
+    """The line where device `name` writes `key`: its `key = …` line in the [devices.NAME] section starting at line
+    `header`, else a dotted `NAME.key = …` or the `NAME = {…}` inline table that holds it; `header` (0 when the
+    entry has no section header) when the key is not written at all (a missing `url`)."""
+    lines = text.splitlines()
+    if key is not None and header:
+        pattern = re.compile(rf"[ \t]*{_written(key)}[ \t]*=")
+        for number in range(header, len(lines)):  # header is 1-based: this starts on the line after it
+            if lines[number].lstrip().startswith("["):
+                break
+            if pattern.match(lines[number]):
+                return number + 1
+        return header
+    prefix = rf"[ \t]*(?:devices[ \t]*\.[ \t]*)?{_written(name)}[ \t]*"
+    shapes = [re.compile(rf"{prefix}\.[ \t]*{_written(key)}[ \t]*=")] if key is not None else []
+    for shape in [*shapes, re.compile(rf"{prefix}=")]:
+        for number, line in enumerate(lines, 1):
+            if shape.match(line):
+                return number
+    return header
+
+
+def _written(word: str) -> str:
+    """A TOML key as a regex: bare, "quoted" or 'literal'."""
+    return rf"""(?:{re.escape(word)}|"{re.escape(word)}"|'{re.escape(word)}')"""
+
+
+def _problem_key(error: msgspec.ValidationError) -> str | None:
+    """The top-level key a msgspec error is about (`accept` for `$.accept[0]`), or None."""
+    message = str(error)
+    unknown = re.match(r"Object contains unknown field `([^`]*)`", message)
+    if unknown:
+        return unknown.group(1)
+    where = re.search(r" - at `\$\.([A-Za-z0-9_]+)", message)
+    return where.group(1) if where else None
+
+
 def _example(schema: type[AnySettings], key: str) -> str:
     """` (such as '3.0.3')` from the field's msgspec.Meta examples, or nothing."""
     for meta in re.findall(r"examples=\[([^\]]*)\]", repr(get_type_hints(schema, include_extras=True).get(key))):
@@ -208,30 +245,33 @@ def validate_settings(kind: DeviceKind, values: dict[str, Any], *, what: str = "
         raise InputError(f"{kind.title}: {problem}") from None
 
 
-def _entry(path: Path, name: str, table: object, line: int) -> NamedDevice:
-    where = f"{path}, line {line}" if line else str(path)
+def _entry(path: Path, text: str, name: str, table: object, line: int) -> NamedDevice:
+    """Device `name` of the file (its section header on `line`, 0 when it has none); a problem is a ConfigError
+    naming the line of the key at fault."""
 
-    def fail(problem: str) -> ConfigError:
-        return ConfigError(f"{where}: device {name!r}: {problem}")
+    def fail(problem: str, key: str | None = None) -> ConfigError:
+        at = _key_line(text, name, key, line)
+        return ConfigError(f"{path}, line {at}: device {name!r}: {problem}" if at else
+                           f"{path}: device {name!r}: {problem}")
 
     if not isinstance(table, dict):
         raise fail("must be a table like [devices.NAME]")
     kind_name = table.get("kind")
     if not isinstance(kind_name, str) or kind_name not in KINDS:
         hint = closest(kind_name, KINDS) if isinstance(kind_name, str) else ""
-        raise fail(f"'kind' must be one of {', '.join(KINDS)} (got {kind_name!r}){hint}")
+        raise fail(f"'kind' must be one of {', '.join(KINDS)} (got {kind_name!r}){hint}", "kind")
     schema = SCHEMAS[kind_name]
     try:
         settings = msgspec.convert(table, type=schema)
     except msgspec.ValidationError as exc:
-        raise fail(describe_problem(exc, schema)) from None
+        raise fail(describe_problem(exc, schema), _problem_key(exc)) from None
     if not settings.url:
-        raise fail("'url' must be a non-empty string such as \"192.168.1.50\" or \"/dev/ttyACM0\"")
+        raise fail("'url' must be a non-empty string such as \"192.168.1.50\" or \"/dev/ttyACM0\"", "url")
     kind = KINDS[kind_name]
     try:
         endpoint = parse_url(settings.url, kind)
     except InputError as exc:
-        raise fail(str(exc)) from None
+        raise fail(str(exc), "url") from None
     return NamedDevice(name, kind, endpoint, settings, line)
 
 
@@ -258,7 +298,7 @@ def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
     if len(devices) > MAX_DEVICES:
         raise ConfigError(f"{path}: {len(devices)} devices is more than the {MAX_DEVICES} a config file may hold")
     lines = section_lines(text)
-    found = {name: _entry(path, name, table, lines.get(name, 0)) for name, table in devices.items()}
+    found = {name: _entry(path, text, name, table, lines.get(name, 0)) for name, table in devices.items()}
     defaults: dict[str, str] = {}
     for device in found.values():
         if device.default:

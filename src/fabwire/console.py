@@ -15,6 +15,59 @@ if TYPE_CHECKING:
     from rich.console import Console
 
 
+class StdoutClosed(BaseException):
+    """The reader of stdout went away (`fabwire trace show | head`): the command ends quietly with exit code 0.
+
+    A BaseException, as KeyboardInterrupt is, so that it unwinds the command (links and partial files closed on
+    the way) rather than being reported as an error, and never taken for a device link's broken pipe."""
+
+
+class _GuardedStream:
+    """A stream whose broken pipe is StdoutClosed; everything else is the stream's own."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, data: Any) -> int:
+        try:
+            return int(self._stream.write(data))
+        except BrokenPipeError:
+            raise StdoutClosed from None
+
+    def writelines(self, lines: Any) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            raise StdoutClosed from None
+
+    @property
+    def buffer(self) -> Any:
+        return _GuardedStream(self._stream.buffer)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def guard_stdout() -> None:
+    """Make a closed stdout StdoutClosed (see `stdout_closed` for the end); for the entry point only."""
+    if sys.stdout is not None and not isinstance(sys.stdout, _GuardedStream):
+        sys.stdout = _GuardedStream(sys.stdout)
+
+
+def stdout_closed() -> int:
+    """End after StdoutClosed: what is still buffered goes nowhere (so that the interpreter's last flush is quiet,
+    as Python's note on SIGPIPE advises), and the exit code is 0."""
+    import os
+
+    with open(os.devnull, "wb") as devnull:
+        os.dup2(devnull.fileno(), sys.__stdout__.fileno() if sys.__stdout__ is not None else 1)
+    return 0
+
+
 def _default(value: object) -> object:
     if isinstance(value, bytes):
         return value.decode("latin-1")
@@ -23,15 +76,50 @@ def _default(value: object) -> object:
     return str(value)
 
 
+MAX_WIDTH = 110
+"""The widest help and tables are laid out, on a terminal or not (the help's `max_content_width`)."""
+
+
+def columns(stream: Any = None) -> int | None:
+    """The width output is laid out to: $COLUMNS when set (as click and rich read it), else the width of the
+    terminal `stream` (default stdout) is; None when it is no terminal."""
+    given = os.environ.get("COLUMNS", "")
+    if given.isdigit() and int(given) > 0:
+        return int(given)
+    target = stream or sys.__stdout__
+    try:
+        return os.get_terminal_size(target.fileno()).columns if target is not None else None
+    except (ValueError, OSError):  # not a terminal, or closed
+        return None
+
+
+def help_width() -> int:
+    """Columns of `--help` text: click's rule (the terminal's width less 2, between 50 and `MAX_WIDTH`), with
+    `MAX_WIDTH` rather than click's 80 when the help goes to a pipe or a file, as the tables do."""
+    return max(min(columns() or MAX_WIDTH, MAX_WIDTH) - 2, 50)
+
+
 def _console(stderr: bool) -> Console:
     from fabwire.importing import collection_paused
 
     with collection_paused():
         from rich.console import Console
 
+    stream = sys.__stderr__ if stderr else sys.__stdout__
+    try:
+        terminal = stream is not None and stream.isatty()
+    except ValueError:  # closed
+        terminal = False
+    # Off a terminal (a pipe, a log), lines are never broken (a path stays whole) and tables get $COLUMNS or
+    # `MAX_WIDTH` columns, not rich's 80; on one, rich follows the terminal's width.
     # Markup and emoji codes off: device names, SSIDs and file names are printed as they are, never read as rich markup.
-    return Console(stderr=True, highlight=False, markup=False, emoji=False) if stderr else \
-        Console(highlight=False, soft_wrap=True, markup=False, emoji=False)
+    return Console(stderr=stderr, highlight=False, markup=False, emoji=False,
+                   width=None if terminal else columns(stream) or MAX_WIDTH, soft_wrap=not stderr or not terminal)
+
+
+def console(stderr: bool = False) -> Console:
+    """A rich console for fabwire's output (see `Output.out` / `Output.err`, which keep one each)."""
+    return _console(stderr)
 
 
 RICH_TERMINAL_VARIABLES = ("FORCE_TERMINAL", "FORCE_COLOR", "TTY_COMPATIBLE")

@@ -13,7 +13,7 @@ import re
 import tempfile
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, get_origin, get_type_hints
 
 import click
 import msgspec
@@ -51,11 +51,15 @@ def _toml_value(value: Any) -> str:
     return json.dumps(str(value), ensure_ascii=False)
 
 
-def _parse_setting(text: str) -> tuple[str, Any]:
+def _parse_setting(text: str, lists: frozenset[str]) -> tuple[str, Any]:
+    """KEY=VALUE as the key and a TOML value (a plain word is text); for a key in `lists`, a VALUE not written
+    as a TOML list is the comma-separated items: `accept=3.0.3,3.0.4` is `accept = ["3.0.3", "3.0.4"]`."""
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
         raise InputError(f"--set takes KEY=VALUE, not {text!r}")
+    if key in lists and not raw.lstrip().startswith("["):
+        return key, [item.strip() for item in raw.split(",") if item.strip()]
     try:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
     except (tomllib.TOMLDecodeError, RecursionError, ValueError):
@@ -139,7 +143,8 @@ def show(app: App, name: str) -> None:
 @click.option("--kind", "kind_name", required=True, type=click.Choice(sorted(KINDS)), help="The device kind.")
 @click.option("--default", "is_default", is_flag=True, help="Use it when -d is not given.")
 @click.option("--set", "settings", multiple=True, metavar="KEY=VALUE",
-              help="A setting of the kind, e.g. speed=50 or link=wifi (repeat).")
+              help="A setting of the kind, e.g. speed=50 or link=wifi (repeat); a list setting takes its items "
+                   "separated by commas, e.g. accept=3.0.3,3.0.4.")
 @pass_app
 def add(app: App, name: str, url: str, kind_name: str, is_default: bool, settings: tuple[str, ...]) -> None:
     """Name the device at URL (any address -d takes), with its settings."""
@@ -161,12 +166,13 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     values: dict[str, Any] = {"kind": kind_name, "url": url}
     if is_default:
         values["default"] = True
+    schema = SCHEMAS[kind_name]
+    lists = frozenset(k for k, hint in get_type_hints(schema).items() if get_origin(hint) is list)
     for item in settings:
-        key, value = _parse_setting(item)
+        key, value = _parse_setting(item, lists)
         if key in ("kind", "url", "default"):
             raise InputError(f"give {key} as an argument or option, not with --set")
         values[key] = value
-    schema = SCHEMAS[kind_name]
     unknown = [k for k in values if k != "kind" and k not in schema.__struct_fields__]
     if unknown:
         raise InputError(f"{KINDS[kind_name].title} has no setting {unknown[0]!r}"

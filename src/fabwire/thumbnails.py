@@ -5,7 +5,8 @@
     ; thumbnail end
 
 `BLOCKS` is the table of the markers slicers write, each row naming its source. The blocks sit in the leading
-comments, before the first command; `read_thumbnails` looks no further than `MAX_SCAN` bytes.
+comments, before the first command; `read_thumbnails` looks no further than `MAX_SCAN` bytes. The library shows
+them as browser images (`Thumbnail.web_image`); notifications attach the largest as PNG (`best_png`).
 """
 
 from __future__ import annotations
@@ -15,33 +16,38 @@ import binascii
 import io
 import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import BinaryIO
 
 MAX_SCAN = 16 << 20
 """Bytes of leading comments read at most (a 600x600 PNG preview is well under 1 MB of base64)."""
 MAX_IMAGE = 4 << 20
-"""The largest single preview kept (decoded bytes)."""
+"""The largest single preview kept (decoded bytes; no slicer writes one this large)."""
 
 
 @dataclass(frozen=True, slots=True)
 class Block:
     marker: str
-    """The word before `begin`/`end`."""
+    """The word before `begin`/`end`, as in `; thumbnail_JPG begin 16x16 640`."""
     format: str
     """"png", "jpg" or "qoi": what the decoded bytes are."""
     source: str
 
 
 BLOCKS: tuple[Block, ...] = (
-    Block("thumbnail", "png", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (PNG); OrcaSlicer the same; "
-          "Cura's CreateThumbnail post-processing script"),
-    Block("thumbnail_JPG", "jpg", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (JPG)"),
-    Block("thumbnail_QOI", "qoi", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (QOI, for the MK4 and XL)"),
+    Block("thumbnail", "png", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (format PNG); also SuperSlicer, "
+          "OrcaSlicer and Cura's CreateThumbnail post-processing script"),
+    Block("thumbnail_PNG", "png", "OrcaSlicer src/libslic3r/GCode/Thumbnails.cpp (PNG named explicitly)"),
+    Block("thumbnail_JPG", "jpg", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (format JPG, 2.4+)"),
+    Block("thumbnail_QOI", "qoi", "PrusaSlicer src/libslic3r/GCode/Thumbnails.cpp (format QOI, 2.6+, the Prusa "
+          "MINI/MK4/XL preview)"),
 )
 _BY_MARKER = {b.marker.lower(): b for b in BLOCKS}
 _BEGIN = re.compile(rb"^;[ \t]*(thumbnail(?:_[A-Za-z0-9]+)?)[ \t]+begin[ \t]+([0-9]+)[xX]([0-9]+)(?:[ \t]+([0-9]+))?",
                     re.IGNORECASE)
 _MAGIC = {"png": b"\x89PNG\r\n\x1a\n", "jpg": b"\xff\xd8\xff", "qoi": b"qoif"}
+_PILLOW = {"png": "PNG", "jpg": "JPEG", "qoi": "QOI"}
+"""Pillow's name of each format, so that a block is decoded only as what its marker says."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,20 +57,28 @@ class Thumbnail:
     format: str
     """"png", "jpg" or "qoi" (as embedded)."""
     data: bytes
+    """The image as the slicer encoded it."""
+
+    def png(self) -> bytes:
+        """The image as PNG bytes; ValueError when it does not decode."""
+        if self.format == "png":
+            return self.data
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(io.BytesIO(self.data), formats=[_PILLOW[self.format]]) as image:
+                out = io.BytesIO()
+                image.save(out, format="PNG")
+        except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+            raise ValueError(f"a {self.format.upper()} preview does not decode: {exc}") from None
+        return out.getvalue()
 
     def web_image(self) -> tuple[bytes, str]:
         """(bytes, media type) a browser shows: PNG and JPG as they are, QOI converted to PNG (browsers have no
-        QOI decoder; Moonraker converts it the same way)."""
+        QOI decoder; Moonraker converts it the same way). ValueError when a QOI preview does not decode."""
         if self.format == "jpg":
             return self.data, "image/jpeg"
-        if self.format == "png":
-            return self.data, "image/png"
-        from PIL import Image
-
-        with Image.open(io.BytesIO(self.data)) as image:
-            out = io.BytesIO()
-            image.save(out, format="PNG")
-        return out.getvalue(), "image/png"
+        return self.png(), "image/png"
 
     @property
     def web_suffix(self) -> str:
@@ -89,8 +103,8 @@ def read_thumbnails(src: BinaryIO) -> list[Thumbnail]:
     read = 0
     for line in src:
         read += len(line)
-        if read > MAX_SCAN:
-            break
+        if read > MAX_SCAN or _is_command(line):
+            break  # the leading comments are over (a block cut short by a command is no preview)
         if block is None:
             match = _BEGIN.match(line.lstrip(b"\xef\xbb\xbf"))
             if match is not None:
@@ -98,8 +112,6 @@ def read_thumbnails(src: BinaryIO) -> list[Thumbnail]:
                 size = (int(match.group(2)), int(match.group(3)))
                 stated = int(match.group(4)) if match.group(4) else None
                 parts = []
-            elif _is_command(line):
-                break
             continue
         text = line.strip().lstrip(b";").strip()
         if text.lower() == f"{block.marker.lower()} end".encode():
@@ -122,3 +134,19 @@ def _finish(found: list[Thumbnail], block: Block, size: tuple[int, int], stated:
     if not data.startswith(_MAGIC[block.format]) or len(data) > MAX_IMAGE or not all(size):
         return
     found.append(Thumbnail(size[0], size[1], block.format, data))
+
+
+def best_png(path: Path) -> bytes | None:
+    """The largest preview embedded in a G-code file as PNG bytes, or None when it has none that decodes (or the
+    file cannot be read)."""
+    try:
+        with path.open("rb") as src:
+            thumbnails = read_thumbnails(src)
+    except OSError:
+        return None
+    for thumbnail in sorted(thumbnails, key=lambda t: t.width * t.height, reverse=True):
+        try:
+            return thumbnail.png()
+        except ValueError:
+            continue
+    return None

@@ -26,10 +26,11 @@ def preview(width: int, height: int, fmt: str) -> bytes:
     return out.getvalue()
 
 
-def thumbnail_block(width: int, height: int, fmt: str, data: bytes | None = None) -> str:
+def thumbnail_block(width: int, height: int, fmt: str, data: bytes | None = None, *, marker: str = "") -> str:
     """The comment block PrusaSlicer writes (src/libslic3r/GCode/Thumbnails.cpp): a begin line with the size
-    and the base64 length, the base64 wrapped at 78 characters, an end line."""
-    marker = {"png": "thumbnail", "jpg": "thumbnail_JPG", "qoi": "thumbnail_QOI"}[fmt]
+    and the base64 length, the base64 wrapped at 78 characters, an end line. `marker` defaults to PrusaSlicer's
+    word for `fmt`."""
+    marker = marker or {"png": "thumbnail", "jpg": "thumbnail_JPG", "qoi": "thumbnail_QOI"}[fmt]
     text = base64.b64encode(data if data is not None else preview(width, height, fmt)).decode()
     lines = [f"; {marker} begin {width}x{height} {len(text)}"]
     lines += [f"; {text[i:i + 78]}" for i in range(0, len(text), 78)]

@@ -248,6 +248,18 @@ def test_an_upload_no_intake_takes_is_refused_before_it_is_accepted(bench: Bench
                     if j["filename"] == name and j["state"] == "failed"]
 
 
+def test_an_upload_whose_content_type_is_a_list_is_refused_and_nothing_is_kept(bench: Bench) -> None:
+    """Over a real socket: `text/plain,application/octet-stream` is no media type (a browser's Fetch would not
+    send it): 415 before the body is read, no job."""
+    with bench.agent.client() as client:
+        before = client.get("/api/v1/jobs").json()
+        for value in ("text/plain,application/octet-stream", "application/octet-stream, text/plain"):
+            body = _error(client.post("/api/v1/devices/printer/jobs", params={"filename": "a.gcode"},
+                                      content=b"G28\n", headers={"content-type": value}), 415, 4)
+            assert body["message"] == f"Content-Type {value!r} is not one media type such as application/octet-stream"
+        assert client.get("/api/v1/jobs").json() == before
+
+
 def test_devices_answer_to_their_configured_name(bench: Bench) -> None:
     with bench.agent.client() as client:
         wait_for(lambda: device_of(client, "lineus")["state"]["online"], "the Line-us online")
@@ -256,8 +268,11 @@ def test_devices_answer_to_their_configured_name(bench: Bench) -> None:
         assert client.get("/api/v1/devices/arm/state").json()["online"] is True
         assert client.get("/api/v1/devices/arm/history").json()["device"] == device_of(client, "lineus")["id"]
         assert "pen_up" in client.get("/api/v1/devices/arm/actions").json()["applicable"]
-        assert ".svg" in _error(client.post("/api/v1/devices/arm/jobs", params={"filename": "a.exe"},
-                                            content=b"x"), 400, 4)["message"]
+        assert _error(client.post("/api/v1/devices/arm/jobs", params={"filename": "a.exe"}, content=b"x"),
+                      400, 4)["message"] == "arm takes .gc, .gcode, .nc, .ngc, .svg, .svgz files, not 'a.exe'"
+        assert _error(client.post("/api/v1/devices/printer/jobs", params={"filename": "logo.svg"},
+                                  content=b"<svg/>"), 400, 4)["message"] == \
+            "printer takes .3w, .g, .gco, .gcode files, not 'logo.svg'"
         unknown = _error(client.get("/api/v1/devices/desk"), 404, 4)["message"]
         assert "printer" in unknown
         assert "arm" in unknown

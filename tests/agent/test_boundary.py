@@ -297,6 +297,61 @@ def test_json_routes_read_only_application_json(client: TestClient, media: str, 
         assert not REACHED
 
 
+UPLOAD = "/api/v1/devices/x/jobs?filename=a.gcode"
+"""The native upload: a file as it is, any media type but JSON and the CORS-simple ones (no device x: 404 after
+the boundary)."""
+CONTENT_TYPES: list[tuple[str, bool, str]] = [
+    ("application/octet-stream", True, "RFC 2046 §4.5.1: arbitrary binary data"),
+    ("application/octet-stream; charset=binary", True, "RFC 9110 §8.3.1: type/subtype with a parameter"),
+    ("Application/Octet-Stream", True, "RFC 9110 §8.3.1: type and subtype are case-insensitive"),
+    ("text/x-gcode", True, "what slicers and OctoPrint call G-code"),
+    ("image/svg+xml", True, "RFC 6838 §4.2.8 structured suffix (IANA: image/svg+xml)"),
+    ('application/octet-stream; name="a;b.gcode"', True, "RFC 9110 §5.6.4: a quoted parameter value holds ';'"),
+    ("text/plain,application/octet-stream", False, "a list (Fetch: not a valid MIME type; attacker's value)"),
+    ("application/octet-stream, text/plain", False, "a list the other way round"),
+    ("application/octet-stream,application/octet-stream", False, "a list of one type twice"),
+    ("application", False, "RFC 9110 §8.3.1: no subtype"),
+    ("application/", False, "RFC 9110 §8.3.1: an empty subtype"),
+    ("/octet-stream", False, "RFC 9110 §8.3.1: an empty type"),
+    ("application/octet stream", False, "RFC 9110 §5.6.2: a space is no token character"),
+    ("application/octet-stream/x", False, "two slashes"),
+    ("application/octet-stream; charset", False, "RFC 9110 §5.6.6: a parameter without a value"),
+    ("application/octet-stream (" + "(" * 300, False, "nested comments: the MIME parser recurses per level"),
+    ("application/octet-stream" + "; a=b" * 60, False, "longer than MAX_CONTENT_TYPE"),
+]
+"""Content-Type values, accepted (the route is reached) or refused (415 before the route), each with its source."""
+
+
+@pytest.mark.parametrize(("value", "accepted"), [(v, a) for v, a, _ in CONTENT_TYPES],
+                         ids=[source for _, _, source in CONTENT_TYPES])
+def test_a_content_type_is_one_media_type_or_refused(client: TestClient, value: str, accepted: bool) -> None:
+    response = client.post(UPLOAD, content=b"G28\n", headers={"content-type": value})
+    if accepted:
+        assert response.status_code == 404, response.text  # past the boundary: no such device
+        return
+    assert response.status_code == 415, response.text
+    message = response.json()["message"]
+    assert message.endswith(" is not one media type such as application/octet-stream"), message
+
+
+def test_a_content_type_given_twice_is_refused(client: TestClient) -> None:
+    for second in ("application/octet-stream", "text/plain"):
+        response = client.post(UPLOAD, content=b"G28\n", headers=[("content-type", "application/octet-stream"),
+                                                                  ("content-type", second)])
+        assert response.status_code == 415, response.text
+        assert response.json()["message"] == "send one Content-Type header, not 2"
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.function_scoped_fixture], deadline=None)
+@given(value=st.text(st.characters(min_codepoint=0x20, max_codepoint=0x7E), max_size=300),
+       path=st.sampled_from([UPLOAD, START]))
+def test_any_content_type_is_accepted_or_a_415_never_an_error(client: TestClient, value: str, path: str) -> None:
+    response = client.post(path, content=b"{}", headers={"content-type": value})
+    assert response.status_code in (200, 404, 415, 422), (value, response.text)
+    if response.status_code == 415:
+        assert response.json()["message"]
+
+
 @given(st.recursive(st.none() | st.booleans() | st.integers() | st.text(max_size=5),
                     lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=3), inner,
                                                                                   max_size=3), max_leaves=40))

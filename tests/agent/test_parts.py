@@ -20,7 +20,9 @@ from fabwire.agent.auth import is_loopback, load_or_create_token
 from fabwire.agent.boundary import Boundary, Policy
 from fabwire.agent.core import SUBSCRIBER_QUEUE, Agent, device_id, make_event
 from fabwire.agent.drivers.base import SUMMARY_KEYS, Action, Param, checked_params, summary
-from fabwire.agent.drivers.xyz import printer_summary
+from fabwire.agent.drivers.lineus import LineUsDriver
+from fabwire.agent.drivers.mmu import MMUDriver
+from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
 from fabwire.agent.history import History
 from fabwire.agent.jobs import JobStore, UploadTooLarge, new_job_id
 from fabwire.errors import InputError
@@ -65,6 +67,16 @@ def test_parameters_are_checked_by_type_range_and_name() -> None:
             checked_params(JOG, bad)
 
 
+@pytest.mark.parametrize("action", [a for d in (XYZDriver, LineUsDriver, MMUDriver) for a in d.actions if a.confirm],
+                         ids=lambda a: a.name)
+def test_an_unconfirmed_step_says_in_words_what_confirming_does(action: Action) -> None:
+    with pytest.raises(InputError) as refused:
+        checked_params(action, {p.name: p.low if p.low is not None else "x" for p in action.params})
+    what = action.doc.split(". ")[0].rstrip(".")  # its first sentence, as a clause: "to cancel the print"
+    assert str(refused.value) == (f'{action.name} cannot be undone: send "confirm": true to '
+                                  f"{what[:1].lower()}{what[1:]}")
+
+
 def test_destructive_actions_need_confirm_true() -> None:
     reset = Action("reset", "Restart the MMU.", confirm=True)
     with pytest.raises(InputError, match="confirm"):
@@ -90,6 +102,18 @@ def test_summaries_carry_every_key_for_every_kind() -> None:
     assert printing["progress_percent"] == 42
     assert printing["time_left_s"] == 30 * 60
     assert printing["actions"] == ["pause", "cancel"]
+
+
+@pytest.mark.parametrize(("lines", "state", "percent", "time_left_s"), [
+    (["j:9505,0", "d:42,12,30"], "printing", 42, 30 * 60),
+    (["j:9509,0", "d:0,0,0"], "done", 100, 0),  # "print finished": the printer zeroes d:
+    (["j:9509,0", "d:0,0,0", "e:525"], "error", 0, 0),  # ended on an error: not finished
+    (["j:9511,0", "d:0,0,0"], "idle", 0, 0),
+])
+def test_the_printer_summary_progress_follows_the_print_to_its_end(lines: list[str], state: str, percent: int,
+                                                                   time_left_s: int) -> None:
+    printed = printer_summary(Status.parse(lines))
+    assert (printed["state"], printed["progress_percent"], printed["time_left_s"]) == (state, percent, time_left_s)
 
 
 async def test_history_keeps_changes_drops_repeats_and_expires_old_rows(tmp_path: Path) -> None:

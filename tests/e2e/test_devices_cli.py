@@ -6,6 +6,8 @@ import json
 import os
 from pathlib import Path
 
+import pytest
+
 from clitools import cli_env, run_cli
 from fabwire.errors import ConfigError, InputError
 
@@ -88,6 +90,35 @@ def test_an_endless_config_or_text_that_is_not_utf8_is_one_line_of_error(tmp_pat
         assert not path.exists()
 
 
+@pytest.mark.parametrize(("setting", "accepted"), [
+    ("accept=3.0.3", ["3.0.3"]),
+    ("accept=3.0.3,3.0.4", ["3.0.3", "3.0.4"]),
+    ("accept= 3.0.3 , 3.0.4 ", ["3.0.3", "3.0.4"]),
+    ('accept=["3.0.3", "3.0.4"]', ["3.0.3", "3.0.4"]),
+])
+def test_a_list_setting_is_given_as_items_separated_by_commas_or_as_a_toml_list(
+        tmp_path: Path, setting: str, accepted: list[str]) -> None:
+    path = tmp_path / "devices.toml"
+    added = run_cli("devices", "add", "bench", "/dev/ttyACM0", "--kind", "mmu", "--set", setting, env=env_for(path))
+    assert added.returncode == 0, added.stderr
+    assert json.loads(run_cli("devices", "show", "bench", "--json", env=env_for(path)).stdout)["accept"] == accepted
+
+
+def test_the_help_of_add_shows_how_a_list_is_given(tmp_path: Path) -> None:
+    shown = run_cli("devices", "add", "--help", env=env_for(tmp_path / "devices.toml"))
+    assert "accept=3.0.3,3.0.4" in " ".join(shown.stdout.split())
+
+
+def test_a_malformed_item_of_a_list_setting_is_named_with_an_example(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    refused = run_cli("devices", "add", "bench", "/dev/ttyACM0", "--kind", "mmu", "--set", "accept=3.0.3,3.0",
+                      env=env_for(path))
+    assert refused.returncode == InputError.exit_code
+    assert refused.stderr == ("fabwire: error: Prusa MMU3: 'accept[1]': expected text of the right form "
+                              "(such as '3.0.3')\n")
+    assert not path.exists()
+
+
 def test_a_bad_setting_is_refused_before_it_is_written(tmp_path: Path) -> None:
     path = tmp_path / "devices.toml"
     for setting, words in (("reply_timeout=-5", "'reply_timeout': expected a number above 0"),
@@ -114,7 +145,7 @@ def test_the_broken_entry_itself_can_be_removed(tmp_path: Path) -> None:
     env = env_for(path)
     broken = run_cli("devices", "list", env=env)
     assert broken.returncode == ConfigError.exit_code
-    assert "line 5: device 'bad': unknown key 'defualt' (did you mean 'default'?)" in broken.stderr
+    assert "line 8: device 'bad': unknown key 'defualt' (did you mean 'default'?)" in broken.stderr
     assert run_cli("devices", "remove", "bad", env=env).returncode == 0
     assert json.loads(run_cli("devices", "list", "--json", env=env).stdout) == [
         {"name": "good", "kind": "xyz", "url": "127.0.0.1", "default": False}]

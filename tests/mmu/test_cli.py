@@ -73,7 +73,8 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     code, _, err = mmu(sim.url, "tool-change", "1")
     assert code == 7
     line = "04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the filament path, then Retry"
-    answers = f"`fabwire mmu -d {sim.url} button retry`, or `fabwire mmu -d {sim.url} reset`"
+    run_as = f"fabwire mmu -d {sim.url} --speed {SPEED}"  # what a message advises works as typed, link included
+    answers = f"`{run_as} button retry`, or `{run_as} reset`"
     assert err.endswith(f"error: {line}; answer it with {answers}\n")
     assert err.count(line) == 4  # three automatic retries, then the error once, with what answers it
     assert err.count(f"{line} (retrying automatically)\n") == 3
@@ -87,7 +88,7 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     code, _, err = mmu(sim.url, "tool-change", "2")  # the MMU still waits in T1's error
     assert code == 7
     assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04101 FINDA DIDN'T TRIGGER "
-                           "(0x8001) during T1 — answer it with `fabwire mmu button retry`, or `fabwire mmu reset`")
+                           f"(0x8001) during T1 — answer it with {answers}")
     code, out, err = mmu(sim.url, "button", "retry")  # the fourth failure was the last: this Retry heals
     assert (code, out.strip()) == (0, "retry: T1 finished"), err
     code, out, err = mmu(sim.url, "button", "retry")
@@ -112,7 +113,8 @@ def test_retry_with_the_cause_still_there_says_so(simulator: SimulatorStarter) -
 def test_eject_waits_for_the_person(simulator: SimulatorStarter) -> None:
     sim = simulator("mmu", "--listen", "127.0.0.1:0", "--speed", SPEED)
     code, out, err = mmu(sim.url, "eject", "3")
-    assert (code, out.strip()) == (0, "E3: filament ejected — take it out, then `fabwire mmu button continue`"), err
+    assert (code, out.strip()) == (0, f"E3: filament ejected — take it out, then `fabwire mmu -d {sim.url} --speed "
+                                      f"{SPEED} button continue`"), err
     code, out, err = mmu(sim.url, "status", json_mode=True)
     assert (json.loads(out)["command"], json.loads(out)["kind"], json.loads(out)["value"]) == ("E3", "E", 0x800C)
     code, out, err = mmu(sim.url, "button", "continue")
@@ -279,18 +281,19 @@ def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on_and_where_it_will_stop(sim
     lines = err.splitlines()
     assert "error:" not in err  # a stop the person asked for is no error
     assert lines[-2].startswith("stopped following T3 (")
-    assert lines[-2].endswith(f"); the MMU goes on with it. Follow it with `fabwire mmu -d {sim.url} monitor`")
+    run_as = f"fabwire mmu -d {sim.url} --speed 10"  # as this command was run
+    assert lines[-2].endswith(f"); the MMU goes on with it. Follow it with `{run_as} monitor`")
     assert lines[-1] == (
-        "warning: nothing reports the printer's filament sensor to the MMU now; unless a host does (`fabwire mmu -d "
-        f"{sim.url} monitor` does), T3 will stop at 04103 FSENSOR DIDN'T TRIGG. (0x8003) (Feeding to FSensor): then "
-        f"push the filament into the extruder and answer with `fabwire mmu -d {sim.url} button retry`, or "
-        f"`fabwire mmu -d {sim.url} reset`")
+        f"warning: nothing reports the printer's filament sensor to the MMU now; unless a host does (`{run_as} "
+        f"monitor` does), T3 will stop at 04103 FSENSOR DIDN'T TRIGG. (0x8003) (Feeding to FSensor): then "
+        f"push the filament into the extruder and answer with `{run_as} button retry`, or `{run_as} reset`")
     assert "Traceback" not in err
     assert poll_until(sim.url, "T3 E8003")  # a bare status poll, as a printer that reports no sensor sends it
     code, out, err = mmu(sim.url, "tool-change", "1")
     assert (code, out) == (7, "")
     assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04103 FSENSOR DIDN'T TRIGG. "
-                           "(0x8003) during T3 — answer it with `fabwire mmu button retry`, or `fabwire mmu reset`")
+                           f"(0x8003) during T3 — answer it with `fabwire mmu -d {sim.url} --speed {SPEED} button "
+                           f"retry`, or `fabwire mmu -d {sim.url} --speed {SPEED} reset`")
     code, out, err = mmu(sim.url, "button", "retry")  # this host reports the sensor: the change completes
     assert (code, out.strip()) == (0, "retry: T3 finished"), err
 
@@ -303,8 +306,22 @@ def test_a_failed_change_says_its_error_once_with_what_answers_it() -> None:
              "filament reached the extruder and the sensor works, then Retry")
     assert done.stderr.count(final + "\n") == 0  # the automatic retries are marked, the end is said once
     assert done.stderr.count(final + " (retrying automatically)") == 3
-    assert done.stderr.splitlines()[-1] == (f"fabwire: error: {final}; answer it with `fabwire mmu -d {url} button "
-                                            f"retry`, or `fabwire mmu -d {url} reset`")
+    run_as = f"fabwire mmu -d '{url}' --speed {SPEED}"  # quoted for a shell: the URL has & and ?
+    assert done.stderr.splitlines()[-1] == (f"fabwire: error: {final}; answer it with `{run_as} button retry`, or "
+                                            f"`{run_as} reset`")
+
+
+def test_the_advised_commands_repeat_every_link_option_the_command_was_run_with() -> None:
+    """--timeout and each of the MMU's link options (--speed, --accept repeated), wherever they were typed."""
+    url = "sim://mmu?speed=50&fault=fsensor-didnt-trigger"
+    done = run_cli("mmu", "--accept", "3.0.4", "-d", url, "--accept", "3.0.3", "--timeout", "7", "tool-change", "2",
+                   "--speed", SPEED, timeout=60)
+    assert done.returncode == 7, done.stderr
+    run_as = f"fabwire mmu -d '{url}' --timeout 7 --accept 3.0.4 --accept 3.0.3 --speed {SPEED}"
+    assert done.stderr.splitlines()[-1].endswith(f"; answer it with `{run_as} button retry`, or `{run_as} reset`")
+    again = subprocess.run(["sh", "-c", f"{sys.executable} -m {run_as} status"],
+                           env=cli_env(), capture_output=True, text=True, timeout=60)
+    assert again.returncode == 0, again.stderr  # the advice works as typed in a shell
 
 
 @pytest.mark.parametrize(("slot", "code", "said"), [

@@ -106,7 +106,7 @@ def test_the_cli_exits_non_zero_when_the_mmu_only_says_finished(tmp_path: Path) 
     assert done.stderr.strip().splitlines()[-1] == (
         "fabwire: error: device error not done: the MMU reported T2 finished, but it shows FINDA off, filament at "
         "pulley, selector parked (a finished T2 leaves FINDA on, filament in the nozzle, selector at slot 2) — the "
-        "command did not take effect: check the MMU with `fabwire mmu status`")
+        f"command did not take effect: check the MMU with `fabwire mmu -d {url} --speed 50 status`")
 
 
 async def test_an_mmu_that_ignores_the_reset_is_not_reported_reset() -> None:

@@ -71,7 +71,7 @@ def test_device_of_another_kind_is_refused(tmp_path: Path) -> None:
     [
         ("[devices.x]\nkind = \n", "not valid TOML: .*line 2"),
         ("[printers.x]\nkind='xyz'\n", "unknown top-level key"),
-        ("\n\n[devices.x]\nkind = 'toaster'\nurl='a'\n", "line 3: device 'x': 'kind' must be one of"),
+        ("\n\n[devices.x]\nkind = 'toaster'\nurl='a'\n", "line 4: device 'x': 'kind' must be one of"),
         ("[devices.x]\nkind = 'xyz'\n", "line 1: device 'x': 'url' must be a non-empty string"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'ftp://a'\n", "unknown scheme"),
         ("[devices.x]\nkind = 'mmu'\nurl = 'a'\n", "no default TCP port"),
@@ -90,6 +90,36 @@ def test_bad_files_name_file_line_and_problem(tmp_path: Path, text: str, problem
     with pytest.raises(ConfigError, match=problem) as info:
         load_devices(path)
     assert str(path) in str(info.value)
+
+
+OFFICE = "[devices.office]\nkind = \"xyz\"\nurl = \"192.168.1.50\"\n"
+MMU_BENCH = "# the MMU on the bench\n[devices.bench]\nkind = 'mmu'\nurl = '/dev/ttyACM0'\n"
+
+
+@pytest.mark.parametrize(("text", "line", "problem"), [
+    (OFFICE + "defualt = true\n", 4, "unknown key 'defualt'"),
+    (OFFICE + "\n# a comment\n  reply_timeout = -1\n", 6, "'reply_timeout'"),
+    (OFFICE + "link = 'usb'\n\n" + MMU_BENCH, 4, "'link': expected one of"),
+    (OFFICE + "\n" + MMU_BENCH + "speed = 2\naccept = ['3.0']\n", 10, "'accept[0]': expected text of the right form"),
+    (OFFICE + "\n" + MMU_BENCH + "\"speed\" = 'fast'\n", 9, "'speed': expected a number, not text"),
+    ("[devices.office]\nurl = '192.168.1.50'\n\nkind = 'xzy'\n", 4, "'kind' must be one of"),
+    ("[devices.office]\nkind = 'xyz'\n\nurl = 'ftp://a'\n", 4, "unknown scheme"),
+    ("[devices.office]\nkind = 'xyz'\n", 1, "'url' must be a non-empty string"),
+    ("[devices]\n# one per line\noffice.kind = 'xyz'\noffice.url = 'a'\noffice.defualt = 1\n", 5, "'defualt'"),
+    ("[devices]\n\noffice = { kind = 'xyz', url = 'a', lnk = 'wifi' }\n", 3, "unknown key 'lnk'"),
+    ("devices.office.kind = 'xyz'\ndevices.office.url = 'a'\ndevices.office.timeout = 0\n", 3, "'timeout'"),
+    ("[devices.\"the office\"]\nkind = 'xyz'\nurl = 'a'\n'model' = 3\n", 4, "'model'"),
+], ids=["unknown-key", "indented-after-comment", "first-of-two", "second-of-two", "quoted-key", "kind",
+        "url-scheme", "missing-url", "dotted-keys", "inline-table", "dotted-from-the-top", "quoted-name"])
+def test_a_problem_names_the_line_of_the_key_at_fault(tmp_path: Path, text: str, line: int, problem: str) -> None:
+    """The line in the message is the line of the key that is wrong (the section's own line only when the key
+    is missing), however the entry is written: a [devices.NAME] section, dotted keys or an inline table."""
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_devices(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}, line {line}: device "), message
+    assert problem in message
 
 
 def test_two_defaults_of_one_kind_is_an_error(tmp_path: Path) -> None:
@@ -134,7 +164,7 @@ def test_section_lines_are_found_for_every_device(tmp_path: Path) -> None:
     text = "".join(f"# printer {i}\n[devices.p{i}]\nkind = 'xyz'\nurl = '10.0.{i // 250}.{i % 250 + 1}'\n\n"
                    for i in range(2000))
     path = write(tmp_path, text + "[devices.bad]\nkind = 'xyz'\nurl = 'a'\nsped = 1\n")
-    with pytest.raises(ConfigError, match=f"line {2000 * 5 + 1}: device 'bad'"):
+    with pytest.raises(ConfigError, match=f"line {2000 * 5 + 4}: device 'bad'"):
         load_devices(path)
     devices = load_devices(write(tmp_path, text))
     assert len(devices) == 2000

@@ -30,10 +30,11 @@ import re
 import socket
 from collections.abc import Awaitable, Callable, Iterable, Iterator, MutableMapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from email.headerregistry import ContentTypeHeader, HeaderRegistry
+from typing import Any, ClassVar, cast
 
 from fabwire import jsontext
-from fabwire.errors import FabwireError, InputError
+from fabwire.errors import FabwireError, InputError, excerpt
 
 log = logging.getLogger("fabwire.agent")
 
@@ -248,8 +249,41 @@ def presented_token(scope: Scope) -> str:
     return ""
 
 
+_MIME_HEADERS = HeaderRegistry()
+MAX_CONTENT_TYPE = 256
+"""Characters of a Content-Type value read at most (a multipart boundary is at most 70, RFC 2046 §5.1.1); a longer
+one is refused unread, which also bounds the parser's work on hostile values."""
+
+
 def media_type(content_type: str) -> str:
-    return content_type.partition(";")[0].strip().lower()
+    """The media type of a Content-Type value, lower case, without parameters; "" for an empty value.
+
+    Parsed by the standard library's MIME header parser (`email.headerregistry`, the RFC 2045 Content-Type
+    grammar that RFC 9110 §8.3.1 shares: `type "/" subtype *( ";" parameter )`). A value it finds any defect in
+    is UnsupportedMediaType (415), never guessed at: a list (`text/plain,application/octet-stream`), a type
+    without a subtype, stray separators, control characters."""
+    if not content_type.strip():
+        return ""
+    refusal = UnsupportedMediaType(f"Content-Type {excerpt(content_type, 80)} is not one media type such as "
+                                   "application/octet-stream")
+    if len(content_type) > MAX_CONTENT_TYPE:
+        raise refusal
+    try:
+        parsed = _MIME_HEADERS("content-type", content_type)
+    except RecursionError:  # comments nested a few hundred deep: the parser recurses per level
+        raise refusal from None
+    if parsed.defects:
+        raise refusal
+    return cast(ContentTypeHeader, parsed).content_type
+
+
+def request_media_type(scope: Scope) -> str:
+    """The request's media type (see `media_type`); a Content-Type header given more than once is
+    UnsupportedMediaType (RFC 9110 §5.3: it is a singleton field, and the two would be read differently)."""
+    values = [bytes(v).decode("latin-1") for k, v in scope.get("headers", []) if k == b"content-type"]
+    if len(values) > 1:
+        raise UnsupportedMediaType(f"send one Content-Type header, not {len(values)}")
+    return media_type(values[0]) if values else ""
 
 
 # ------------------------------------------------------------------------------------------------ JSON
@@ -327,9 +361,8 @@ def find_route(routes: Iterable[Any], scope: Scope) -> Any | None:
     return None
 
 
-def check_body_type(rule: BodyRule, content_type: str, has_body: bool) -> None:
-    """UnsupportedMediaType unless the request's Content-Type is one the route takes."""
-    given = media_type(content_type)
+def check_body_type(rule: BodyRule, given: str, has_body: bool) -> None:
+    """UnsupportedMediaType unless the request's media type (`request_media_type`) is one the route takes."""
     if not rule.types:
         if has_body:
             raise UnsupportedMediaType("this request takes no body")
@@ -381,7 +414,7 @@ class Boundary:
             if scope["type"] == "http" and scope["method"] not in SAFE_METHODS:
                 rule = body_rule(route, self.policy) if route is not None else BodyRule(limit=JSON_BODY_LIMIT)
                 if route is not None:
-                    check_body_type(rule, header(scope, b"content-type"), _has_body(scope))
+                    check_body_type(rule, request_media_type(scope), _has_body(scope))
                 declared = _declared_length(scope)
                 if declared is not None and declared > rule.limit:
                     raise BodyTooLarge(_too_large(rule, declared))
@@ -444,7 +477,7 @@ class Boundary:
             chunks.append(chunk)
             more = message.get("more_body", False)
         body = b"".join(chunks)
-        if body.strip() and media_type(header(scope, b"content-type")) == JSON_TYPE:
+        if body.strip() and request_media_type(scope) == JSON_TYPE:
             parse_json(body)
         replayed = False
 

@@ -3,7 +3,7 @@ knows (e-mail, Telegram, ntfy, Pushover, Gotify, Discord, JSON webhooks …; see
 
 What is announced is the table `RULES`; `NoticeWatch` decides from the events alone (it is pure, so each rule is
 tested without a machine), and `Notifier` adds the picture and sends. A print's picture is the largest thumbnail
-its slicer embedded (`fabwire.xyz.thumbnails`); a drawing's is the drawing itself (`fabwire.lineus.render`).
+its slicer embedded (`fabwire.thumbnails`); a drawing's is the drawing itself (`fabwire.lineus.render`).
 """
 
 from __future__ import annotations
@@ -279,7 +279,7 @@ class Notifier:
         """The print's embedded thumbnail or the drawing, as PNG; None when there is none (never raises)."""
         try:
             if notice.job is not None and notice.job.get("type") == "print":
-                from fabwire.xyz.thumbnails import best_png
+                from fabwire.thumbnails import best_png
 
                 path = agent.jobs.path_of(notice.job)
                 return best_png(path) if path is not None and path.suffix != ".3w" else None

@@ -335,9 +335,9 @@ class Session:
             suffix = Path(filename).suffix.lower() if "." in filename else ""
             job_type = self.driver.job_types.get(suffix)
             if job_type is None:
-                accepted = ", ".join(sorted(self.driver.job_types)) or "no files"
-                raise InputError(f"a {self.spec.kind} job takes {accepted}, "
-                                 f"not {suffix or 'a file without extension'}")
+                accepted = ", ".join(sorted(self.driver.job_types))
+                raise InputError(f"{self.spec.name} takes {accepted} files, not {excerpt(Path(filename).name, 80)}"
+                                 if accepted else f"{self.spec.name} takes no files")
         if job_type is None:
             raise InputError("a job needs a file or an action")
         self._require_online()

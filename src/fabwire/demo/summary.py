@@ -83,8 +83,8 @@ class Summary:
         table.add_column("device", style="bold")
         table.add_column("step")
         table.add_column("time", justify="right")
-        table.add_column("result")
-        table.add_column("output")
+        table.add_column("result", overflow="fold")
+        table.add_column("output", overflow="fold")  # a path too long for its cell goes on, never cut with "…"
         for step in self.steps:
             result = Text("ok") if step.ok else Text("failed", style="red")
             if step.detail:

@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import dataclasses
 import json
+import shlex
 import sys
 import time
 from collections.abc import Awaitable, Callable
@@ -159,6 +160,21 @@ SENSOR_STEPS = (
 """In the order a command meets them."""
 
 
+def command_line(dctx: DeviceContext) -> str:
+    """`fabwire mmu` as this command was run: its device, --timeout and the MMU's link options (--speed,
+    --accept), so that a command a message advises works as typed."""
+    flags = {f.setting.removeprefix("shared_"): f().opts[0] for f in LINK_OPTIONS["mmu"]}  # type: ignore[attr-defined]
+    words = ["fabwire", "mmu"]
+    if dctx.device:
+        words += ["-d", dctx.device]
+    if dctx.app.timeout is not None:
+        words += ["--timeout", f"{dctx.app.timeout:g}"]
+    for setting, value in dctx.app.link_options.items():
+        for item in value if isinstance(value, list) else [value]:
+            words += [flags[setting], f"{item:g}" if isinstance(item, float) else str(item)]
+    return shlex.join(words)
+
+
 def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
              **open_options: Any) -> Callable[[Callable[..., Any]], Any]:
     """Open the link and the host logic around an `async def cmd(dctx, mmu, **options)`.
@@ -183,6 +199,7 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
 
             async def main() -> None:
                 async with dctx.open(MMU, **open_options) as mmu:
+                    mmu.commands = command_line(dctx)
                     mmu.subscribe(watch)
                     try:
                         await func(dctx, mmu, *args, **kwargs)
@@ -202,16 +219,16 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                 if not running:
                     raise
                 command, doing = running
-                where = f" -d {dctx.device}" if dctx.device else ""
+                line = command_line(dctx)
                 dctx.output.note(f"stopped following {command} ({doing}); the MMU goes on with it. Follow it with "
-                                 f"`fabwire mmu{where} monitor`")
+                                 f"`{line} monitor`")
                 if stops:
                     info = describe_error(stops[0])
                     step = next(s for s in SENSOR_STEPS if s.error == stops[0])
                     dctx.output.note(f"warning: nothing reports the printer's filament sensor to the MMU now; unless a "
-                                     f"host does (`fabwire mmu{where} monitor` does), {command} will stop at {info} "
-                                     f"({step.words}): then {step.remedy} and answer with `fabwire mmu{where} "
-                                     f"button retry`, or `fabwire mmu{where} reset`")
+                                     f"host does (`{line} monitor` does), {command} will stop at {info} "
+                                     f"({step.words}): then {step.remedy} and answer with `{line} "
+                                     f"button retry`, or `{line} reset`")
                 raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
 
         return update_wrapper(wrapper, func)
@@ -255,8 +272,7 @@ async def _command(dctx: DeviceContext, mmu_: MMU, run: Callable[..., Awaitable[
         finished = await run(on_event=show, timeout=max_time)
     except MMUError as error:
         if dctx.output.json_mode or not on_terminal():
-            where = f" -d {dctx.device}" if dctx.device else ""
-            error.args = (f"{error}; answer it with {error.info.answers(f'fabwire mmu{where}')}",)
+            error.args = (f"{error}; answer it with {error.info.answers(command_line(dctx))}",)
             raise
         finished = await _answer_on_terminal(dctx, mmu_, error, show, max_time, shown)
     factor = mmu_.logic.timing.too_fast
@@ -282,9 +298,8 @@ async def _answer_on_terminal(dctx: DeviceContext, mmu_: MMU, error: MMUError, s
         choice = await asyncio.to_thread(click.prompt, " / ".join(choices), type=click.Choice(
             [c.lower() for c in choices], case_sensitive=False), err=True)
         if choice.lower() == "stop":  # asked for: said as what it is, not as an error
-            where = f" -d {dctx.device}" if dctx.device else ""
             dctx.output.note(f"stopped: {error.command or 'the MMU'} stays in {info}; answer it later with "
-                             f"{info.answers(f'fabwire mmu{where}')}")
+                             f"{info.answers(command_line(dctx))}")
             raise click.exceptions.Exit(error.exit_code)
         try:
             finished = await mmu_.answer(choice, on_event=show, timeout=max_time)
@@ -361,7 +376,7 @@ async def eject(dctx: DeviceContext, mmu_: MMU, slot: int, max_time: float, cont
             raise
     if continue_after is None and not on_terminal():
         dctx.output.result({"command": f"E{slot}", "waiting": True, "printer_code": "04507"},
-                           f"E{slot}: filament ejected — take it out, then `fabwire mmu button continue`")
+                           f"E{slot}: filament ejected — take it out, then `{mmu_.commands} button continue`")
         return
     if continue_after is None:
         await asyncio.to_thread(click.prompt, "Take the filament out of the MMU, then press Enter", default="",

@@ -106,6 +106,9 @@ class MMU:
         self._kick = asyncio.Event()
         self.owns_transport = False
         """Opened by `open`: closing the client also closes the link."""
+        self.commands = "fabwire mmu"
+        """The command line that messages name for what to do next (`fabwire mmu reset` …); the CLI sets the one it
+        was run with, device and link options included, so that the advice works as typed."""
 
     @classmethod
     def open(cls, target: DeviceTarget = None, **options: Any) -> Opening[MMU]:
@@ -338,9 +341,9 @@ class MMU:
         if status.kind == "E":
             info = describe_error(status.value)
             return DeviceError("stopped", f"the MMU stopped in {info} during {command}",
-                               action=f"answer it with {info.answers()}")
+                               action=f"answer it with {info.answers(self.commands)}")
         return DeviceError("busy", f"the MMU is still busy with {command} ({status.words})",
-                           action="let it finish (`fabwire mmu monitor`), or `fabwire mmu reset`")
+                           action=f"let it finish (`{self.commands} monitor`), or `{self.commands} reset`")
 
     async def _confirmed(self, request: Request | None, finished: CommandFinished,
                          timeout: float | None) -> CommandFinished:
@@ -362,7 +365,8 @@ class MMU:
                 raise DeviceError("not done", f"the MMU reported {request} finished, but it shows "
                                   + ", ".join(e.shown(read[e.address]) for e in wrong) + " (a finished "
                                   + f"{request} leaves " + ", ".join(e.wanted for e in wrong) + ")",
-                                  action="the command did not take effect: check the MMU with `fabwire mmu status`")
+                                  action="the command did not take effect: check the MMU with "
+                                         f"`{self.commands} status`")
             await asyncio.sleep(min(0.05, settle / 20 / self.logic.timing.time_scale))
         return finished
 
@@ -383,7 +387,7 @@ class MMU:
             if isinstance(event, CommandRejected):
                 raise DeviceError("rejected", f"the MMU rejected {event.command} {event.attempts} times "
                                   "(busy, in an error state, or the filament state does not allow it)",
-                                  action="check `fabwire mmu status`, resolve any error, then try again")
+                                  action=f"check `{self.commands} status`, resolve any error, then try again")
             if isinstance(event, CommandInterrupted):
                 raise RemoteProtocolError(f"{event.command} was interrupted: the MMU reported {event.reported} "
                                           "(it probably rebooted)")
@@ -436,7 +440,7 @@ class MMU:
             return None
         if not isinstance(button, int):
             offered = ", ".join(c.label for c in info.choices)
-            then = "reset the MMU (fabwire mmu reset)" if button == "reset" else f"answer with one of: {offered}"
+            then = f"reset the MMU (`{self.commands} reset`)" if button == "reset" else f"answer with one of: {offered}"
             raise InputError(f"{info} offers {offered}, not {choice}: {then}")
         command = self.logic.status.command
         await self.press(button, timeout=timeout)

@@ -53,8 +53,9 @@ def _cell(value: Any) -> str:
 
 
 def _table(rows: list[dict[str, Any]], agents: dict[str, str]) -> None:
-    from rich.console import Console
     from rich.table import Table
+
+    from fabwire.console import console
 
     table = Table(title=f"{len(rows)} device(s), {sum(1 for s in agents.values() if s == 'online')} agent(s) online")
     for column in ("device", "name", "kind", "model", "agent", "availability", "state", "standby"):
@@ -65,7 +66,7 @@ def _table(rows: list[dict[str, Any]], agents: dict[str, str]) -> None:
             agent += " (offline)"
         table.add_row(*(_cell(row[key]) for key in ("device", "name", "kind", "model")), agent,
                       _cell(row["availability"]), _cell(row["state"]), _cell(", ".join(row["standby"])))
-    Console(highlight=False, soft_wrap=True, markup=False, emoji=False).print(table)  # broker strings are not markup
+    console().print(table)  # markup off: broker strings are not markup
 
 
 @click.command("fleet")

@@ -115,8 +115,8 @@ def checked_params(action: Action, params: Mapping[str, Any]) -> dict[str, Any]:
         raise InputError(f"{action.name} takes no parameter {sorted(extra)[0]!r}"
                          + (f" (it takes {', '.join(known)})" if known else ""))
     if action.confirm and params.get("confirm") is not True:
-        raise InputError(f"{action.name}: {action.doc.rstrip('.').lower()} cannot be undone: "
-                         "send \"confirm\": true to go ahead")
+        what = action.doc.split(". ")[0].rstrip(".")
+        raise InputError(f"{action.name} cannot be undone: send \"confirm\": true to {what[:1].lower()}{what[1:]}")
     out: dict[str, Any] = {}
     for param in action.params:
         if param.name not in params:

@@ -56,6 +56,10 @@ def printer_summary(status: Status) -> dict[str, Any]:
     else:
         state = "idle" if code == IDLE else "busy"
     progress = status.progress
+    percent = progress.percent if progress else None
+    time_left_s = progress.remaining_min * 60 if progress and progress.remaining_min is not None else None
+    if state == "done":  # "print finished" reports d:0,0,0: the print is whole, not at its start
+        percent, time_left_s = 100, 0
     actions = {"idle": list(IDLE_ACTIONS), "printing": ["pause", "cancel"],
                "paused": ["resume", "cancel"], "done": ["acknowledge"], "busy": [], "error": []}[state]
     if state == "error" and code == PRINT_DONE:
@@ -65,9 +69,9 @@ def printer_summary(status: Status) -> dict[str, Any]:
         error="; ".join(w.meaning for w in errors) or None,
         error_code=f"0x{errors[0].raw:08X}" if errors else None,
         busy=state in ("printing", "paused", "busy"),
-        progress_percent=progress.percent if progress else None,
+        progress_percent=percent,
         elapsed_s=progress.elapsed_min * 60 if progress else None,
-        time_left_s=progress.remaining_min * 60 if progress and progress.remaining_min is not None else None,
+        time_left_s=time_left_s,
         extruder_temp_c=status.extruder, extruder_target_c=status.extruder_target,
         bed_temp_c=status.bed, bed_target_c=_target(status, "bed"),
         filament_left_mm=status.filament_mm, actions=actions,
