@@ -28,8 +28,9 @@ MAX_REVERSAL = 1000
 KICK_SPAN = 15
 """Longest block a kick of the iterated local search moves: short blocks keep the re-optimisation after a kick
 local, so many more kicks fit in the budget (measured on stipples and scribbles, `make bench`)."""
-WORK_PER_SECOND = 100_000
-"""Lines the improvement examines per nominal second of budget (about one CPU second of one 2020s core)."""
+WORK_PER_SECOND = 80_000
+"""Lines the improvement examines per nominal second of budget: under one CPU second on a shared 2-core machine
+under load, for every drawing `make bench` plans (stipples, scribbles, circles, hatching, text)."""
 WORK_PER_LINE = 1
 """Lines examined per line of the drawing when no budget is given: one pass of the local search, about what
 vpype's greedy `linesort` costs, whatever the drawing's size."""
