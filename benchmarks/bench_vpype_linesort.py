@@ -27,7 +27,7 @@ from fabwire.vpype.passes import document_passes, plan_passes, total_figures
 
 BUDGET = 1.0
 STIPPLE_TARGET = 0.95
-PLUGIN_RUNS = 5
+PLUGIN_RUNS = 7
 T = TypeVar("T")
 SAMPLES: tuple[tuple[str, Callable[[np.random.Generator], str]], ...] = (
     ("scribbles", lambda rng: sketch(rng, 800, 6)), ("stipple", stipple), ("circles", circles),

@@ -28,8 +28,9 @@ MAX_REVERSAL = 1000
 KICK_SPAN = 15
 """Longest block a kick of the iterated local search moves: short blocks keep the re-optimisation after a kick
 local, so many more kicks fit in the budget (measured on stipples and scribbles, `make bench`)."""
-WORK_PER_SECOND = 100_000
-"""Lines the improvement examines per nominal second of budget (about one CPU second of one 2020s core)."""
+WORK_PER_SECOND = 80_000
+"""Lines the improvement examines per nominal second of budget: under one CPU second on a shared 2-core machine
+under load, for every drawing `make bench` plans (stipples, scribbles, circles, hatching, text)."""
 WORK_PER_LINE = 1
 """Lines examined per line of the drawing when no budget is given: one pass of the local search, about what
 vpype's greedy `linesort` costs, whatever the drawing's size."""
@@ -71,11 +72,9 @@ def drop_fine_points(lines: Polylines, resolution: float = RESOLUTION) -> Polyli
             else:
                 keep[last] = bool((points[last] != points[a]).any())
         resume = k
-    out = list(lines)
-    for i in np.unique(line_of).tolist():
-        a, b = int(offsets[i]), int(offsets[i + 1])
-        out[i] = points[a:b][keep[a:b]]
-    return out
+    # One selection over all points, then every line as a view of it.
+    bounds = np.concatenate([[0], np.cumsum(keep)])[offsets]
+    return np.split(points[keep], bounds[1:-1])
 
 
 def line_ends(lines: Sequence[FloatArray]) -> tuple[FloatArray, FloatArray]:
@@ -169,8 +168,9 @@ def greedy_order(
     cell = max(float(math.sqrt(span[0] * span[1] / (2 * n))) * 1.5, float(span.max()) / 4096, 1e-6)
     cols = np.floor((pts - lo) / cell).astype(np.int64)
     width = int(cols[:, 1].max()) + 1
+    cell_of = (cols[:, 0] * width + cols[:, 1]).tolist()
     cells: dict[int, set[int]] = {}
-    for e, c in enumerate((cols[:, 0] * width + cols[:, 1]).tolist()):
+    for e, c in enumerate(cell_of):
         cells.setdefault(c, set()).add(e)
     xs = pts[:, 0].tolist()
     ys = pts[:, 1].tolist()
@@ -182,11 +182,10 @@ def greedy_order(
     cx, cy = float(origin[0]), float(origin[1])
 
     def remove(e: int) -> None:
-        c = int(cols[e, 0]) * width + int(cols[e, 1])
-        bucket = cells[c]
+        bucket = cells[cell_of[e]]
         bucket.discard(e)
         if not bucket:
-            del cells[c]
+            del cells[cell_of[e]]
         alive[e] = False
 
     for _ in range(n):
