@@ -84,7 +84,8 @@ def placement_options(func: F) -> F:
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep the file's own line order and directions."),
         click.option("--optimize-time", type=FiniteRange(min=0.0), default=1.0, show_default=True,
-                     help="CPU seconds the ordering may spend improving pen-up travel."),
+                     help="Work the ordering may spend improving pen-up travel, in nominal CPU seconds (counted, "
+                          "not timed: the same plan on any machine)."),
     ]
     for option in reversed(options):
         func = option(func)
