@@ -9,10 +9,10 @@ import asyncio
 import contextlib
 import json
 import re
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable, Coroutine
 from datetime import UTC, datetime, timedelta
 from importlib import resources
-from typing import Any
+from typing import Any, TypeVar
 
 from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
@@ -36,6 +36,7 @@ from fabwire.errors import (
     RemoteProtocolError,
 )
 
+T = TypeVar("T")
 STATIC = resources.files("fabwire.agent") / "static"
 UPLOAD_QUERY = Query(..., min_length=1, max_length=200, description="The file's name; only its extension is used "
                      "(it is stored under a generated name).")
@@ -116,6 +117,32 @@ async def _json_object(request: Request) -> dict[str, Any]:
 
 def _iso(epoch: float) -> str:
     return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+async def while_connected(request: Request, work: Coroutine[Any, Any, T], body_read: asyncio.Event) -> T:
+    """`work`'s result, unless the client disconnects once its body is read (while the upload is checked): then
+    `work` is cancelled (its claim released, its file deleted, its checking thread told to stop, see
+    `fabwire.agent.offload`) and ClientDisconnect ends the request, which the boundary logs."""
+    from starlette.requests import ClientDisconnect
+
+    async def gone() -> None:
+        await body_read.wait()
+        while (await request.receive())["type"] != "http.disconnect":
+            pass
+
+    task = asyncio.ensure_future(work)
+    watch = asyncio.ensure_future(gone())
+    try:
+        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        watch.cancel()
+        if not task.done():
+            task.cancel()
+    if task.done() and not task.cancelled():
+        return task.result()
+    with contextlib.suppress(BaseException):
+        await task  # the claim is released before the request ends
+    raise ClientDisconnect()
 
 
 def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = None,
@@ -205,7 +232,15 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
     async def upload(device_id: str, request: Request, filename: str = UPLOAD_QUERY) -> dict[str, Any]:
-        return await agent.upload_job(device_id, filename, request.stream())  # claimed before a byte is read
+        read = asyncio.Event()
+
+        async def body() -> AsyncIterator[bytes]:
+            async for chunk in request.stream():
+                yield chunk
+            read.set()
+
+        # claimed before a byte is read; checked after the last, unless the uploader has gone meanwhile
+        return await while_connected(request, agent.upload_job(device_id, filename, body()), read)
 
     @api.get("/jobs", summary="Jobs, newest first (they survive a restart)")
     async def jobs(device: str | None = None, limit: int = Query(100, ge=1, le=1000)) -> list[dict[str, Any]]:
