@@ -17,6 +17,7 @@ from clitools import start_simulator
 from fabwire.agent.offload import WorkCancelled, check_cancelled, in_thread
 
 from .agenttools import RunningAgent, start_agent, wait_for
+from .doortools import multipart
 
 SMALL = b'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100"><path d="M10 10 L90 90" stroke="black"/></svg>'
 
@@ -163,6 +164,29 @@ def test_an_upload_whose_client_disconnects_while_it_is_checked_is_dropped(agent
     went = [line for line in stderr.splitlines() if "went away" in line]
     assert len(went) == 1, stderr
     assert f"/api/v1/devices/{device}/jobs" in went[0]
+
+
+def test_a_slicer_upload_that_hangs_up_while_it_is_checked_keeps_nothing(agent: RunningAgent) -> None:
+    """The OctoPrint door (`print=true` first, as PrusaSlicer sends it): the slicer hangs up while the drawing is
+    checked; the file is not kept, no job is made, the machine is free."""
+    device = _arm_online(agent)
+    body, content_type = multipart([("print", "true")], "slow.svg", _slow_svg(400))
+    host, port = agent.url.removeprefix("http://").rstrip("/").rsplit(":", 1)
+    sock = socket.create_connection((host, int(port)), timeout=60)
+    sock.sendall(f"POST /printers/arm/api/files/local HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: {content_type}"
+                 f"\r\nContent-Length: {len(body)}\r\n\r\n".encode() + body)
+    wait_for(lambda: _held_by(agent, device, "slow.svg"), "the upload being checked")
+    sock.close()
+    with agent.client() as client:
+        wait_for(lambda: client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "s.svg"}, content=SMALL,
+                                     headers={"content-type": "application/octet-stream"}).status_code == 201,
+                 "the Line-us free again")
+        assert [f["name"] for f in client.get("/printers/arm/api/files/local").json()["files"]] == []
+        assert [j["filename"] for j in client.get("/api/v1/jobs").json()] == ["s.svg"]
+    code, stderr = agent.stop()
+    assert code == 0
+    assert "Traceback" not in stderr
+    assert "/printers/arm/api/files/local: the client went away" in stderr
 
 
 def test_sigterm_while_a_drawing_is_checked_ends_the_agent_cleanly(agent: RunningAgent) -> None:

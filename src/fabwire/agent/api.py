@@ -9,10 +9,10 @@ import asyncio
 import contextlib
 import json
 import re
-from collections.abc import AsyncIterator, Callable, Coroutine
+from collections.abc import AsyncIterator, Callable
 from datetime import UTC, datetime, timedelta
 from importlib import resources
-from typing import Any, TypeVar
+from typing import Any
 
 from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
@@ -26,6 +26,7 @@ from fabwire.agent.boundary import SUBPROTOCOL, Boundary, Policy, parse_json
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
 from fabwire.agent.doors import mount_doors
 from fabwire.agent.jobs import JobNotFound
+from fabwire.agent.offload import while_connected
 from fabwire.errors import (
     DeviceBusy,
     DeviceError,
@@ -36,7 +37,6 @@ from fabwire.errors import (
     RemoteProtocolError,
 )
 
-T = TypeVar("T")
 STATIC = resources.files("fabwire.agent") / "static"
 UPLOAD_QUERY = Query(..., min_length=1, max_length=200, description="The file's name; only its extension is used "
                      "(it is stored under a generated name).")
@@ -117,32 +117,6 @@ async def _json_object(request: Request) -> dict[str, Any]:
 
 def _iso(epoch: float) -> str:
     return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-
-
-async def while_connected(request: Request, work: Coroutine[Any, Any, T], body_read: asyncio.Event) -> T:
-    """`work`'s result, unless the client disconnects once its body is read (while the upload is checked): then
-    `work` is cancelled (its claim released, its file deleted, its checking thread told to stop, see
-    `fabwire.agent.offload`) and ClientDisconnect ends the request, which the boundary logs."""
-    from starlette.requests import ClientDisconnect
-
-    async def gone() -> None:
-        await body_read.wait()
-        while (await request.receive())["type"] != "http.disconnect":
-            pass
-
-    task = asyncio.ensure_future(work)
-    watch = asyncio.ensure_future(gone())
-    try:
-        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        watch.cancel()
-        if not task.done():
-            task.cancel()
-    if task.done() and not task.cancelled():
-        return task.result()
-    with contextlib.suppress(BaseException):
-        await task  # the claim is released before the request ends
-    raise ClientDisconnect()
 
 
 def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = None,

@@ -1,5 +1,5 @@
 """Blocking work the agent hands to a thread (checking an upload, planning a drawing) that stops when nobody
-waits for it any more: the uploader went away, the job was cancelled, the agent is stopping.
+waits for it any more: the uploader went away (`while_connected`), the job was cancelled, the agent is stopping.
 
 `in_thread(func, ...)` runs `func` in a daemon thread of its own, so a stopping agent never waits for it (a
 thread of asyncio's default executor would hold the interpreter's exit until it ends). When the awaiting task is
@@ -14,8 +14,11 @@ import asyncio
 import contextlib
 import contextvars
 import threading
-from collections.abc import Callable
-from typing import Any, TypeVar
+from collections.abc import Callable, Coroutine
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from starlette.requests import Request
 
 T = TypeVar("T")
 
@@ -67,3 +70,31 @@ async def in_thread(func: Callable[..., T], /, *args: Any, cancel: threading.Eve
     except asyncio.CancelledError:
         flag.set()
         raise
+
+
+async def while_connected(request: Request, work: Coroutine[Any, Any, T], body_read: asyncio.Event | None = None
+                          ) -> T:
+    """`work`'s result, unless the client disconnects once its body is read (`body_read`; None: read already),
+    while the upload is checked: then `work` is cancelled (its claim released, its file deleted, its checking
+    thread told to stop) and ClientDisconnect ends the request, which the boundary logs."""
+    from starlette.requests import ClientDisconnect
+
+    async def gone() -> None:
+        if body_read is not None:
+            await body_read.wait()
+        while (await request.receive())["type"] != "http.disconnect":
+            pass
+
+    task = asyncio.ensure_future(work)
+    watch = asyncio.ensure_future(gone())
+    try:
+        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        watch.cancel()
+        if not task.done():
+            task.cancel()
+    if task.done() and not task.cancelled():
+        return task.result()
+    with contextlib.suppress(BaseException):
+        await task  # the claim is released before the request ends
+    raise ClientDisconnect()
