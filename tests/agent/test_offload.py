@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from clitools import start_simulator
+from fabwire.agent import offload
 from fabwire.agent.offload import WorkCancelled, check_cancelled, in_thread
 
 from .agenttools import RunningAgent, start_agent, wait_for
@@ -104,6 +105,25 @@ async def test_a_cancel_flag_set_by_its_owner_stops_the_work() -> None:
     with pytest.raises(WorkCancelled):
         await waiting
     assert stages.ran == ["first", "cancelled"]
+
+
+async def test_at_most_workers_run_at_once_even_when_their_callers_leave(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(offload, "WORKERS", 2)
+    works = [Stages() for _ in range(3)]
+    waits = [asyncio.ensure_future(in_thread(work, 1)) for work in works]
+    await _started(works[0])
+    await _started(works[1])
+    waits[0].cancel()  # its caller leaves; its thread is still in its first stage
+    with pytest.raises(asyncio.CancelledError):
+        await waits[0]
+    await asyncio.sleep(0)
+    assert not works[2].started.is_set()  # the place is still taken
+    works[0].go_on.set()  # the first thread ends (cancelled): its place goes to the third
+    await _started(works[2])
+    for work in works[1:]:
+        work.go_on.set()
+    assert [await waits[1], await waits[2]] == [2, 2]
+    assert works[0].ran == ["first", "cancelled"]
 
 
 def test_outside_the_agent_nothing_is_cancelled() -> None:

@@ -13,7 +13,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import contextvars
+import os
 import threading
+import weakref
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -21,6 +23,11 @@ if TYPE_CHECKING:
     from starlette.requests import Request
 
 T = TypeVar("T")
+
+WORKERS = min(32, (os.cpu_count() or 1) + 4)
+"""Works running at once per event loop, as many as asyncio's default executor has threads; a cancelled work keeps
+its place until its thread has ended, so the threads are bounded even when their callers leave."""
+_SLOTS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Semaphore] = weakref.WeakKeyDictionary()
 
 _FLAG: contextvars.ContextVar[threading.Event | None] = contextvars.ContextVar("fabwire_work_cancelled",
                                                                                default=None)
@@ -41,6 +48,8 @@ async def in_thread(func: Callable[..., T], /, *args: Any, cancel: threading.Eve
     """`func(*args)` in a daemon thread, its result or exception returned here; `cancel` (made when not given)
     is the flag `check_cancelled` reads, set when this call is cancelled."""
     loop = asyncio.get_running_loop()
+    slots = _SLOTS.setdefault(loop, asyncio.Semaphore(WORKERS))
+    await slots.acquire()
     done: asyncio.Future[T] = loop.create_future()
     flag = cancel if cancel is not None else threading.Event()
     context = contextvars.copy_context()
@@ -63,8 +72,13 @@ async def in_thread(func: Callable[..., T], /, *args: Any, cancel: threading.Eve
             outcome = (result, None)
         with contextlib.suppress(RuntimeError):  # the loop is closed: nobody is left to tell
             loop.call_soon_threadsafe(settle, *outcome)
+            loop.call_soon_threadsafe(slots.release)
 
-    threading.Thread(target=work, name=f"fabwire {getattr(func, '__name__', 'work')}", daemon=True).start()
+    try:
+        threading.Thread(target=work, name=f"fabwire {getattr(func, '__name__', 'work')}", daemon=True).start()
+    except BaseException:
+        slots.release()
+        raise
     try:
         return await done
     except asyncio.CancelledError:
