@@ -9,7 +9,7 @@ import asyncio
 import contextlib
 import json
 import re
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from datetime import UTC, datetime, timedelta
 from importlib import resources
 from typing import Any
@@ -26,6 +26,7 @@ from fabwire.agent.boundary import SUBPROTOCOL, Boundary, Policy, parse_json
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
 from fabwire.agent.doors import mount_doors
 from fabwire.agent.jobs import JobNotFound
+from fabwire.agent.offload import while_connected
 from fabwire.errors import (
     DeviceBusy,
     DeviceError,
@@ -205,7 +206,15 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
     async def upload(device_id: str, request: Request, filename: str = UPLOAD_QUERY) -> dict[str, Any]:
-        return await agent.upload_job(device_id, filename, request.stream())  # claimed before a byte is read
+        read = asyncio.Event()
+
+        async def body() -> AsyncIterator[bytes]:
+            async for chunk in request.stream():
+                yield chunk
+            read.set()
+
+        # claimed before a byte is read; checked after the last, unless the uploader has gone meanwhile
+        return await while_connected(request, agent.upload_job(device_id, filename, body()), read)
 
     @api.get("/jobs", summary="Jobs, newest first (they survive a restart)")
     async def jobs(device: str | None = None, limit: int = Query(100, ge=1, le=1000)) -> list[dict[str, Any]]:

@@ -22,6 +22,7 @@ and looks the route up in the live route table. Errors are the API's `{"message"
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import ipaddress
 import json
@@ -123,6 +124,14 @@ class BodyTimeout(BoundaryError):
 
 class BadJSON(BoundaryError):
     http_status = 400
+
+
+class AgentStopping(BoundaryError):
+    """The agent stopped (SIGTERM, Ctrl-C) before a request was answered: uvicorn cancels what still runs once
+    its graceful shutdown ends."""
+
+    http_status = 503
+    exit_code = 8
 
 
 # ------------------------------------------------------------------------------------------------ policy
@@ -427,6 +436,16 @@ class Boundary:
             return
         try:
             await self.app(scope, receive, send)
+        except asyncio.CancelledError:
+            if scope["type"] != "http":
+                raise
+            # One line and a 503 where the answer has not begun, never a traceback; what the request held
+            # (a claimed machine, an upload being checked) was released on the way out.
+            log.warning("%s %s: the agent stopped before answering it", scope.get("method", "GET"),
+                        scope.get("path", ""))
+            with contextlib.suppress(Exception):
+                await deny(scope, send, AgentStopping("the agent is stopping: send the request again once it is "
+                                                      "back"))
         except Exception as exc:
             from starlette.requests import ClientDisconnect
 

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
 from fabwire.agent.model import Machines, MachineView, TakesNoJobs
+from fabwire.agent.offload import in_thread
 from fabwire.errors import InputError, excerpt
 from fabwire.thumbnails import read_thumbnails
 
@@ -244,8 +245,7 @@ class Library:
         async with claim if claim is not None else contextlib.nullcontext():
             stored = await asyncio.to_thread(self._copy_in, device_id, name, src)
             try:
-                entry = await asyncio.to_thread(self._describe, device_id, name, stored, session.driver,
-                                                claim is None)
+                entry = await in_thread(self._describe, device_id, name, stored, session.driver, claim is None)
                 job = await self._feed(claim, device_id, entry, fed=claim_fed) if claim is not None else None
             except BaseException:
                 with contextlib.suppress(OSError):

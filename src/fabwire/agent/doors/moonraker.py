@@ -29,6 +29,7 @@ from fabwire import __version__
 from fabwire.agent.core import Agent
 from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, file_name_of, machine_of, read_upload
 from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.agent.offload import while_connected
 from fabwire.agent.session import JobClaim
 from fabwire.errors import FabwireError, InputError
 
@@ -327,9 +328,10 @@ class MoonrakerDoor:
                     if digest != checksum:
                         raise RpcError(422, f"checksum mismatch: the upload's SHA-256 is {digest}")
                 start = fields.get("print", "").strip().lower() == "true"
-                result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
-                                                form.adopt(), start=start, select=start,
-                                                claim=claims[0] if claims else None, claim_fed=bool(claims))
+                name = f"{fields.get('path', '')}/{file_name_of(form.filename)}"
+                result = await while_connected(request, self.library.add(  # dropped if the slicer hangs up
+                    view.id, name, form.adopt(), start=start, select=start, claim=claims[0] if claims else None,
+                    claim_fed=bool(claims)))
             finally:
                 form.close()
         except FabwireError as exc:

@@ -34,6 +34,7 @@ from fabwire.agent.doors import (
     read_upload,
 )
 from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.agent.offload import while_connected
 from fabwire.agent.session import JobClaim
 from fabwire.errors import FabwireError, InputError
 
@@ -362,9 +363,10 @@ class OctoPrintDoor:
                     return _error(400, "send the file as the multipart field 'file'")
                 start = _true(fields.get("print"))
                 select = start or _true(fields.get("select"))
-                result = await self.library.add(view.id, f"{fields.get('path', '')}/{file_name_of(form.filename)}",
-                                                form.adopt(), start=start, select=select,
-                                                claim=claims[0] if claims else None, claim_fed=bool(claims))
+                name = f"{fields.get('path', '')}/{file_name_of(form.filename)}"
+                result = await while_connected(request, self.library.add(  # dropped if the slicer hangs up
+                    view.id, name, form.adopt(), start=start, select=select, claim=claims[0] if claims else None,
+                    claim_fed=bool(claims)))
             finally:
                 form.close()
         finally:

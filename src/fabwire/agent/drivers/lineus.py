@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import asyncio
 import os
+import threading
 import time
 from collections.abc import Mapping
 from dataclasses import replace
@@ -11,17 +11,25 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from fabwire.agent.drivers.base import Action, Driver, Identity, JobHandle, JobStopped, Param, summary
+from fabwire.agent.offload import WorkCancelled, check_cancelled, in_thread
 from fabwire.agent.opening import open_lineus
 from fabwire.errors import DeviceBusy, InputError, LinkClosed
 from fabwire.lineus.client import LineUs, Position
 from fabwire.lineus.draw_cli import send_plan
 from fabwire.lineus.drawing_lock import Drawer, DrawingLock, current_drawer, drawing_alone, robot_address
 from fabwire.lineus.plot import Plan, PlanOptions
-from fabwire.lineus.plot.intake import drawing_from_bytes
-from fabwire.lineus.plot.plan import plan_drawing, plan_file, plan_text
+from fabwire.lineus.plot.intake import drawing_from_bytes, read_drawing
+from fabwire.lineus.plot.plan import plan_drawing, plan_text
 
 PLAN_TIME_BUDGET = 0.3
 """Seconds the stroke ordering may take (the agent plans while it keeps polling other machines)."""
+
+
+def _plan_file(path: Path, options: PlanOptions) -> Plan:
+    """`plan_file` in two stages, stopping between them once cancelled (see `fabwire.agent.offload`)."""
+    drawing = read_drawing(path, svg_text=options.svg_text)
+    check_cancelled()
+    return plan_drawing(drawing, options)
 
 
 def _points(stroke: Any) -> list[tuple[float, float]]:
@@ -55,6 +63,7 @@ class LineUsDriver(Driver):
         """Words for the drawing in progress: while it runs, polls read no position (the moves report it)."""
         self._progress: tuple[float, float | None] = (0.0, None)
         self._stop = False
+        self._planning: threading.Event | None = None
 
     def _client(self) -> LineUs:
         if self.arm is None:
@@ -132,9 +141,14 @@ class LineUsDriver(Driver):
 
     def check_upload(self, name: str, path: Path) -> None:
         """The drawing intake's and the planner's refusal (not SVG, unreadable, nothing to draw, coordinates no
-        arm can reach) before the upload is accepted, as `lineus draw` checks a file."""
+        arm can reach) before the upload is accepted, as `lineus draw` checks a file; run by `in_thread`, it
+        stops between its stages (WorkCancelled) once the uploader is gone."""
         try:
-            plan_drawing(drawing_from_bytes(name, path.read_bytes()), PlanOptions(optimize=False))
+            raw = path.read_bytes()
+            check_cancelled()
+            drawing = drawing_from_bytes(name, raw)
+            check_cancelled()
+            plan_drawing(drawing, PlanOptions(optimize=False))
         except InputError as exc:
             message = str(exc)
             raise InputError(message if name in message else f"{name}: {message}") from None
@@ -144,12 +158,20 @@ class LineUsDriver(Driver):
         if self.drawing:
             raise DeviceBusy(f"the Line-us is busy ({self.drawing})")
         options = PlanOptions(time_budget=PLAN_TIME_BUDGET)
-        if job_type == "text":  # along the long side of the area, as `fabwire lineus text` writes it
-            plan: Plan = await asyncio.to_thread(plan_text, params["text"], replace(options, rotate_auto=True))
-        elif path is not None:
-            plan = await asyncio.to_thread(plan_file, path, options)
-        else:
-            raise InputError("a drawing job needs a file")
+        self._stop = False
+        self._planning = threading.Event()  # set by stop_job: the plan stops between its stages
+        try:
+            if job_type == "text":  # along the long side of the area, as `fabwire lineus text` writes it
+                plan: Plan = await in_thread(plan_text, params["text"], replace(options, rotate_auto=True),
+                                             cancel=self._planning)
+            elif path is not None:
+                plan = await in_thread(_plan_file, path, options, cancel=self._planning)
+            else:
+                raise InputError("a drawing job needs a file")
+        except WorkCancelled:
+            raise JobStopped("stopped while planning, before anything was drawn") from None
+        finally:
+            self._planning = None
         strokes = plan.strokes
         for note in plan.notes:  # what `lineus draw` prints: parts of the file left out, and why
             handle.note(note)
@@ -175,7 +197,6 @@ class LineUsDriver(Driver):
             if self._stop:
                 raise JobStopped(f"stopped after stroke {index + 1} of {len(strokes)}")
 
-        self._stop = False
         what = repr(params["text"]) if job_type == "text" else path.name if path is not None else "a drawing"
         try:
             async with drawing_alone(arm, what, command=f"fabwire serve ({self.spec.name})"):
@@ -191,5 +212,8 @@ class LineUsDriver(Driver):
         return f"{drew} (planner: {notes})" if notes else drew
 
     async def stop_job(self) -> None:
-        """Stop after the stroke being drawn (a move in flight cannot be called back) and lift the pen."""
+        """Stop planning at the end of its stage, or drawing after the stroke being drawn (a move in flight cannot
+        be called back) and lift the pen."""
         self._stop = True
+        if self._planning is not None:
+            self._planning.set()
