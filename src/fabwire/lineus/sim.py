@@ -457,7 +457,8 @@ async def _factory(values: dict[str, str]) -> Transport:
         options = options_from(values)
     except ValueError as exc:
         raise InputError(str(exc)) from None
-    return await spawn_in_process("lineus", LineUsSim(options).serve)
+    sim = LineUsSim(options)
+    return await spawn_in_process("lineus", sim.serve, sim.close)
 
 
 register_simulator("lineus", _factory)

@@ -77,8 +77,11 @@ class _HostEnd(Transport):
             await self._task
 
 
-async def spawn_in_process(name: str, serve: DeviceServer) -> Transport:
-    """Run `serve` on the device end of a memory pair; return the host end."""
+async def spawn_in_process(name: str, serve: DeviceServer,
+                           close: Callable[[], Awaitable[None]] | None = None) -> Transport:
+    """Run `serve` on the device end of a memory pair; return the host end. `close` (the simulator's own, for one
+    with tasks of its own such as a moving arm) runs when the link ends: an in-process simulator serves one link,
+    and its tasks must not outlive the loop they run on."""
     host, device = memory_pair(name)
 
     async def run() -> None:
@@ -88,6 +91,8 @@ async def spawn_in_process(name: str, serve: DeviceServer) -> Transport:
             pass
         finally:
             await device.close()
+            if close is not None:
+                await close()
 
     task = asyncio.create_task(run(), name=f"sim:{name}")
     return _HostEnd(host, task, name)
