@@ -280,7 +280,8 @@ class Session:
                  "name": self.spec.name, "summary": summary or previous.get("summary") or offline_summary(""),
                  "status": status if status is not None else previous.get("status"), "job": self._job}
         self.state = state
-        if {k: v for k, v in state.items() if k != "ts"} != {k: v for k, v in previous.items() if k != "ts"}:
+        if not previous or any(k != "ts" and value is not previous[k] and value != previous[k]
+                               for k, value in state.items()):
             self._publish("state", state=state)
 
     def _publish(self, type_: Any, **payload: Any) -> None:
