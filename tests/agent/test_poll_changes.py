@@ -77,6 +77,14 @@ async def test_each_poll_equals_views_made_from_scratch() -> None:
         await driver.close()
 
 
+async def _polls_reach(agent: Agent, count: int) -> None:
+    for _ in range(1200):
+        if agent.health()["polls"] >= count:
+            return
+        await asyncio.sleep(0.05)
+    raise AssertionError(f"the agent did not reach {count} polls in a minute")
+
+
 def _lag_figures(agent: Agent) -> tuple[float | None, float | None]:
     lags = sorted(lag for session in agent.sessions() for lag in session.stats.lags)
     return (lags[int(0.99 * (len(lags) - 1))], lags[-1]) if lags else (None, None)
@@ -86,14 +94,11 @@ async def test_health_lags_are_those_of_the_machines_monitored(tmp_path: Path) -
     async with Agent(state_dir=tmp_path / "state") as agent:
         infos = [await agent.add_device(DeviceSpec(f"p{n}", "xyz", f"sim://xyz?speed=30&serial=LAG{n}"))
                  for n in range(3)]
-        while agent.health()["polls"] < 9:
-            await asyncio.sleep(0.05)
+        await _polls_reach(agent, 9)
         health = agent.health()
         assert (health["poll_lag_p99_s"], health["poll_lag_max_s"]) == _lag_figures(agent)
         await agent.remove_device(infos[1].id)
-        polls = agent.health()["polls"]
-        while agent.health()["polls"] < polls + 4:
-            await asyncio.sleep(0.05)
+        await _polls_reach(agent, agent.health()["polls"] + 4)
         health = agent.health()
         assert (health["poll_lag_p99_s"], health["poll_lag_max_s"]) == _lag_figures(agent)
         for info in (infos[0], infos[2]):
