@@ -4,12 +4,14 @@ does, and the views made from the previous poll equal views made from scratch.""
 from __future__ import annotations
 
 import asyncio
+import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
 from fabwire.agent.core import Agent, DeviceSpec
 from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
+from fabwire.agent.session import LinkThread
 
 
 async def _collect(subscription: AsyncIterator[dict[str, Any]], events: list[dict[str, Any]]) -> None:
@@ -104,3 +106,35 @@ async def test_health_lags_are_those_of_the_machines_monitored(tmp_path: Path) -
         for info in (infos[0], infos[2]):
             await agent.remove_device(info.id)
         assert (agent.health()["poll_lag_p99_s"], agent.health()["poll_lag_max_s"]) == (None, None)
+
+
+async def test_delivered_results_arrive_on_the_agents_loop_in_order() -> None:
+    home = asyncio.get_running_loop()
+    links = LinkThread()
+    got: list[tuple[int, int]] = []
+    errors: list[dict[str, Any]] = []
+    home.set_exception_handler(lambda loop, context: errors.append(context))
+
+    def record(n: int) -> None:
+        if n == 50:
+            raise ValueError("one result that fails")
+        got.append((n, threading.get_ident()))
+
+    def send(first: int) -> None:
+        for n in range(first, first + 100):
+            links.deliver(record, n)
+
+    try:
+        links.loop.call_soon_threadsafe(send, 0)
+        await asyncio.sleep(0.2)
+        links.loop.call_soon_threadsafe(send, 100)
+        for _ in range(200):
+            if len(got) == 199:
+                break
+            await asyncio.sleep(0.01)
+    finally:
+        links.close()
+        home.set_exception_handler(None)
+    assert [n for n, _ in got] == [n for n in range(200) if n != 50]
+    assert {thread for _, thread in got} == {threading.get_ident()}
+    assert [str(e["exception"]) for e in errors] == ["one result that fails"]
