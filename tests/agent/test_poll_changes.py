@@ -4,12 +4,14 @@ does, and the views made from the previous poll equal views made from scratch.""
 from __future__ import annotations
 
 import asyncio
+import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
 from fabwire.agent.core import Agent, DeviceSpec
 from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
+from fabwire.agent.session import LinkThread
 
 
 async def _collect(subscription: AsyncIterator[dict[str, Any]], events: list[dict[str, Any]]) -> None:
@@ -77,6 +79,14 @@ async def test_each_poll_equals_views_made_from_scratch() -> None:
         await driver.close()
 
 
+async def _polls_reach(agent: Agent, count: int) -> None:
+    for _ in range(1200):
+        if agent.health()["polls"] >= count:
+            return
+        await asyncio.sleep(0.05)
+    raise AssertionError(f"the agent did not reach {count} polls in a minute")
+
+
 def _lag_figures(agent: Agent) -> tuple[float | None, float | None]:
     lags = sorted(lag for session in agent.sessions() for lag in session.stats.lags)
     return (lags[int(0.99 * (len(lags) - 1))], lags[-1]) if lags else (None, None)
@@ -86,16 +96,45 @@ async def test_health_lags_are_those_of_the_machines_monitored(tmp_path: Path) -
     async with Agent(state_dir=tmp_path / "state") as agent:
         infos = [await agent.add_device(DeviceSpec(f"p{n}", "xyz", f"sim://xyz?speed=30&serial=LAG{n}"))
                  for n in range(3)]
-        while agent.health()["polls"] < 9:
-            await asyncio.sleep(0.05)
+        await _polls_reach(agent, 9)
         health = agent.health()
         assert (health["poll_lag_p99_s"], health["poll_lag_max_s"]) == _lag_figures(agent)
         await agent.remove_device(infos[1].id)
-        polls = agent.health()["polls"]
-        while agent.health()["polls"] < polls + 4:
-            await asyncio.sleep(0.05)
+        await _polls_reach(agent, agent.health()["polls"] + 4)
         health = agent.health()
         assert (health["poll_lag_p99_s"], health["poll_lag_max_s"]) == _lag_figures(agent)
         for info in (infos[0], infos[2]):
             await agent.remove_device(info.id)
         assert (agent.health()["poll_lag_p99_s"], agent.health()["poll_lag_max_s"]) == (None, None)
+
+
+async def test_delivered_results_arrive_on_the_agents_loop_in_order() -> None:
+    home = asyncio.get_running_loop()
+    links = LinkThread()
+    got: list[tuple[int, int]] = []
+    errors: list[dict[str, Any]] = []
+    home.set_exception_handler(lambda loop, context: errors.append(context))
+
+    def record(n: int) -> None:
+        if n == 50:
+            raise ValueError("one result that fails")
+        got.append((n, threading.get_ident()))
+
+    def send(first: int) -> None:
+        for n in range(first, first + 100):
+            links.deliver(record, n)
+
+    try:
+        links.loop.call_soon_threadsafe(send, 0)
+        await asyncio.sleep(0.2)
+        links.loop.call_soon_threadsafe(send, 100)
+        for _ in range(200):
+            if len(got) == 199:
+                break
+            await asyncio.sleep(0.01)
+    finally:
+        links.close()
+        home.set_exception_handler(None)
+    assert [n for n, _ in got] == [n for n in range(200) if n != 50]
+    assert {thread for _, thread in got} == {threading.get_ident()}
+    assert [str(e["exception"]) for e in errors] == ["one result that fails"]

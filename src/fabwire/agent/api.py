@@ -15,6 +15,7 @@ from importlib import resources
 from typing import Any
 
 from fastapi import APIRouter, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
@@ -119,6 +120,15 @@ def _iso(epoch: float) -> str:
     return datetime.fromtimestamp(epoch, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
+def published(content: Any) -> JSONResponse:
+    """What the agent already holds (a state, its health), written as JSON straight away: it is JSON already, so
+    the framework's generic conversion, a copy of every nested value, is skipped; anything else goes through it."""
+    try:
+        return JSONResponse(content)
+    except TypeError:
+        return JSONResponse(jsonable_encoder(content))
+
+
 def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = None,
                on_dashboard: Callable[[], None] | None = None) -> FastAPI:
     """The agent's application, behind its boundary (`fabwire.agent.boundary`): `policy` says which names,
@@ -147,13 +157,15 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
         session = agent.session(device_id)
         return {**session.info.to_dict(), "state": session.state}
 
-    @api.get("/agent", summary="The agent itself: version, devices, and how punctual its polls are")
-    async def about() -> dict[str, Any]:
-        return agent.health()
+    @api.get("/agent", summary="The agent itself: version, devices, and how punctual its polls are",
+             response_model=dict[str, Any])
+    async def about() -> Response:
+        return published(agent.health())
 
-    @api.get("/devices", summary="Every monitored device with its latest state")
-    async def devices() -> list[dict[str, Any]]:
-        return [device_dict(d.id) for d in agent.devices()]
+    @api.get("/devices", summary="Every monitored device with its latest state",
+             response_model=list[dict[str, Any]])
+    async def devices() -> Response:
+        return published([device_dict(d.id) for d in agent.devices()])
 
     @api.post("/devices", status_code=201, summary="Start monitoring a device")
     async def add_device(body: NewDevice) -> dict[str, Any]:
@@ -161,18 +173,19 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
         info = await agent.add_device(spec)
         return device_dict(info.id)
 
-    @api.get("/devices/{device_id}", summary="One device and its latest state")
-    async def device(device_id: str) -> dict[str, Any]:
-        return device_dict(device_id)
+    @api.get("/devices/{device_id}", summary="One device and its latest state", response_model=dict[str, Any])
+    async def device(device_id: str) -> Response:
+        return published(device_dict(device_id))
 
     @api.delete("/devices/{device_id}", status_code=204, summary="Stop monitoring a device")
     async def remove_device(device_id: str) -> Response:
         await agent.remove_device(device_id)
         return Response(status_code=204)
 
-    @api.get("/devices/{device_id}/state", summary="The latest state (the `--json` status, a summary, ts, online)")
-    async def state(device_id: str) -> dict[str, Any]:
-        return agent.state(device_id)
+    @api.get("/devices/{device_id}/state", summary="The latest state (the `--json` status, a summary, ts, online)",
+             response_model=dict[str, Any])
+    async def state(device_id: str) -> Response:
+        return published(agent.state(device_id))
 
     @api.get("/devices/{device_id}/history", summary="Samples (temperatures, progress, state) and events in a range")
     async def history(device_id: str, since: datetime | None = None, until: datetime | None = None,

@@ -14,7 +14,7 @@ import threading
 import time
 import weakref
 from collections import deque
-from collections.abc import Coroutine
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -33,6 +33,8 @@ LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
 """What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
 JOB_EVENT_EVERY_S = 0.5
 SWITCH_INTERVAL_S = 0.0005
+DELIVER_EVERY_S = 0.01
+"""How long a poll's result may wait on the links' thread for others to go to the agent's loop with it."""
 STOP_WAIT_S = 30.0
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
@@ -59,7 +61,10 @@ class LinkThread:
     does not grow with the number of machines. One per agent, started with its first session, ended with its
     last; on uvloop where it is installed."""
 
-    def __init__(self) -> None:
+    def __init__(self, home: asyncio.AbstractEventLoop | None = None) -> None:
+        self.home = home or asyncio.get_running_loop()
+        """The agent's loop, where `deliver` hands results over."""
+        self._results: list[tuple[Callable[..., None], tuple[Any, ...]]] = []
         try:
             import uvloop
         except ImportError:
@@ -73,6 +78,18 @@ class LinkThread:
         self._thread = threading.Thread(target=self.loop.run_forever, name="fabwire-links", daemon=True)
         self._thread.start()
 
+    def deliver(self, callback: Callable[..., None], *args: Any) -> None:
+        """From the links' loop: `callback(*args)` runs on the agent's loop within DELIVER_EVERY_S, after what was
+        delivered before it, together with everything else delivered meanwhile: a bench's polls wake the agent's
+        loop (and hand the interpreter over) about a hundred times a second however many machines there are."""
+        if not self._results:
+            self.loop.call_later(DELIVER_EVERY_S, self._hand_over)
+        self._results.append((callback, args))
+
+    def _hand_over(self) -> None:
+        batch, self._results = self._results, []
+        self.home.call_soon_threadsafe(_run_all, batch)
+
     async def run(self, work: Coroutine[Any, Any, T]) -> T:
         """Run `work` on the links' loop and wait for it here; cancelling the wait cancels the work."""
         return await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(work, self.loop))
@@ -83,6 +100,16 @@ class LinkThread:
         self._thread.join(STOP_WAIT_S)
         if not self._thread.is_alive():
             self.loop.close()
+
+
+def _run_all(batch: list[tuple[Callable[..., None], tuple[Any, ...]]]) -> None:
+    """Each callback as if scheduled on its own: one that fails is reported and the rest still run."""
+    for callback, args in batch:
+        try:
+            callback(*args)
+        except Exception as exc:  # as the loop reports a failed callback
+            asyncio.get_running_loop().call_exception_handler(
+                {"message": f"exception in callback {callback!r}", "exception": exc})
 
 
 _LINKS: weakref.WeakKeyDictionary[Agent, LinkThread] = weakref.WeakKeyDictionary()
@@ -247,7 +274,7 @@ class Session:
         await self._links.run(self._poll_forever())
 
     async def _poll_forever(self) -> None:
-        """On the links' loop: poll on schedule; each result goes to the agent's loop as one callback."""
+        """On the links' loop: poll on schedule; each result goes to the agent's loop (see `LinkThread.deliver`)."""
         loop = asyncio.get_running_loop()
         interval = self.driver.interval_s
         slot = loop.time() + random.uniform(0, interval)  # spread a bench's polls over the second
@@ -255,7 +282,7 @@ class Session:
         while True:
             lag = loop.time() - slot
             status, summary = await self.driver.poll()
-            self._home.call_soon_threadsafe(self._polled, status, summary, time.time(), lag, interval)
+            self._links.deliver(self._polled, status, summary, time.time(), lag, interval)
             slot += interval
             now = loop.time()
             if slot < now:
@@ -280,7 +307,8 @@ class Session:
                  "name": self.spec.name, "summary": summary or previous.get("summary") or offline_summary(""),
                  "status": status if status is not None else previous.get("status"), "job": self._job}
         self.state = state
-        if {k: v for k, v in state.items() if k != "ts"} != {k: v for k, v in previous.items() if k != "ts"}:
+        if not previous or any(k != "ts" and value is not previous[k] and value != previous[k]
+                               for k, value in state.items()):
             self._publish("state", state=state)
 
     def _publish(self, type_: Any, **payload: Any) -> None:

@@ -456,16 +456,19 @@ class Status(msgspec.Struct, frozen=True):
         extra = dict(self.extra)
         unparsed = dict(self.unparsed)
         dashed = set(self.dashed)
+        recent = _recent
         for line in lines:
-            read = _read(line) if line[1:2] == ":" else None
+            read = recent.get(line) or (_read(line) if line[1:2] == ":" else None)
             if read is None:
                 continue
             letter, attr, what, value = read
             order[letter] = None
             if what == _PARSED:
                 changes[attr] = value
-                dashed.discard(letter)
-                unparsed.pop(letter, None)
+                if dashed:
+                    dashed.discard(letter)
+                if unparsed:
+                    unparsed.pop(letter, None)
             elif what == _EXTRA:
                 extra[letter] = value
             elif what == _DASHED:
