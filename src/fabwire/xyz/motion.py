@@ -172,9 +172,10 @@ class Planner:
             return self.seconds
         columns = [np.concatenate(parts) for parts in zip(*self._pending, strict=True)]
         seconds, carry = self.seconds, self._carry
-        for start in range(0, self._count, WINDOW):
-            part, carry = _plan_window([c[start:start + WINDOW] for c in columns], self._table, carry)
-            seconds += part
+        with np.errstate(over="ignore", invalid="ignore"):  # moves no printer makes (1e305 mm) plan to inf or NaN
+            for start in range(0, self._count, WINDOW):
+                part, carry = _plan_window([c[start:start + WINDOW] for c in columns], self._table, carry)
+                seconds += part
         return seconds
 
     def _plan(self) -> None:
