@@ -96,7 +96,7 @@ def _digits_value(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
     return x
 
 
-def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
+def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint8]:
     """How many of the eight bytes (XORed with '0') are digits before the first non-digit (8 if all are)."""
     non_digit = x & _LOW7
     non_digit += _ABOVE_9
@@ -105,8 +105,8 @@ def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint64]:
     lowest = _U(0) - non_digit
     lowest &= non_digit
     lowest -= _U(1)
-    counted: NDArray[np.uint64] = np.bitwise_count(lowest).astype(np.uint64)
-    counted >>= _U(3)
+    counted: NDArray[np.uint8] = np.bitwise_count(lowest)
+    counted >>= np.uint8(3)
     return counted
 
 
@@ -125,13 +125,15 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     negative = sign == _U(ord("-") ^ 0x30)
     signed = (negative | (sign == _U(ord("+") ^ 0x30))).astype(np.uint64)
     low &= ~(signed * _U(0xFF))  # a sign reads as a leading 0
-    whole_digits = _leading_digits(low)
-    after_dot = (whole_digits + _U(1)) * _U(8)
-    dotted = (low >> (after_dot - _U(8))) & _U(0xFF) == _U(ord(".") ^ 0x30)
+    whole_digits = _leading_digits(low)  # counts and shifts in bytes: at most 8 digits, 72 bits
+    whole_bits = whole_digits << np.uint8(3)
+    dotted = (low >> whole_bits) & _U(0xFF) == _U(ord(".") ^ 0x30)
+    after_dot = whole_bits + np.uint8(8)
     fraction = (low >> after_dot) | (high << (_U(64) - after_dot))
-    fraction_digits = np.where(dotted, _leading_digits(fraction), _U(0))
-    fraction &= (_U(1) << (fraction_digits * _U(8))) - _U(1)
-    mantissa = _digits_value(low << ((_U(8) - whole_digits) * _U(8))) * _U(_SCALE) + _digits_value(fraction)
+    fraction_digits = _leading_digits(fraction)
+    fraction_digits *= dotted
+    fraction &= (_U(1) << (fraction_digits << np.uint8(3))) - _U(1)
+    mantissa = _digits_value(low << (np.uint8(64) - whole_bits)) * _U(_SCALE) + _digits_value(fraction)
     parsed: NDArray[np.float64] = mantissa.astype(np.float64) / _SCALE
     np.negative(parsed, out=parsed, where=negative)
     parsed[(whole_digits == signed) & (fraction_digits == 0)] = np.nan

@@ -240,6 +240,7 @@ class MoveAnalyzer:
                 odd_at = None if found.odd_at is None else start + found.odd_at - 1
                 if g0_words is not None and found.g0_at is not None:
                     g0_words.append(found.g0_at + (start - 1))
+            del found  # its arrays are not held while the next piece is read
             if odd is not None and odd_at is not None:
                 odd.append((odd_at, end))
             start = end

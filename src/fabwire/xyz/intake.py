@@ -451,6 +451,7 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             for start, stop in odd:
                 _check_numbers(chunk, name, lines_before, start, stop)
             odd.clear()
+        del chunk  # not held while the next block is read
         carry = text[cut:]
         if len(carry) > MAX_LINE:
             raise _long_line(name, len(carry))

@@ -172,9 +172,10 @@ class Planner:
             return self.seconds
         columns = [np.concatenate(parts) for parts in zip(*self._pending, strict=True)]
         seconds, carry = self.seconds, self._carry
-        for start in range(0, self._count, WINDOW):
-            part, carry = _plan_window([c[start:start + WINDOW] for c in columns], self._table, carry)
-            seconds += part
+        with np.errstate(over="ignore", invalid="ignore"):  # moves no printer makes (1e305 mm) plan to inf or NaN
+            for start in range(0, self._count, WINDOW):
+                part, carry = _plan_window([c[start:start + WINDOW] for c in columns], self._table, carry)
+                seconds += part
         return seconds
 
     def _plan(self) -> None:
@@ -231,21 +232,27 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     moving = length > 0
     dist = np.where(moving, length, np.abs(de))
     deltas = (dx, dy, dz, de)
-    moved = [np.flatnonzero(delta) for delta in deltas]
+    moves = [np.count_nonzero(delta) for delta in deltas]
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse_dist = 1.0 / dist
         # still moves of an axis set no limit, unless a distance too small for its inverse makes them NaN
         few = SPARSE * count if np.isfinite(inverse_dist).all() else 0.0
-        axes = [a for a in range(4) if len(moved[a]) > few or (len(moved[a]) and not few)]  # planned on every move
-        others = [a for a in range(4) if a not in axes and (len(moved[a]) or carry is not None)]
+        axes = [a for a in range(4) if moves[a] > few or (moves[a] and not few)]  # planned on every move
+        others = [a for a in range(4) if a not in axes and (moves[a] or carry is not None)]
         sparse, still = (others, []) if few else ([], others)
+        moved = {a: np.flatnonzero(deltas[a]) for a in sparse}
         unit = [deltas[a] * inverse_dist for a in axes]
         inverse = [1.0 / np.abs(u) for u in unit]  # inf for an axis that does not move
         few_unit = [deltas[a][moved[a]] * inverse_dist[moved[a]] for a in sparse]
         few_inverse = [1.0 / np.abs(u) for u in few_unit]
-        speed = np.maximum(feed / 60.0, np.where(de == 0, lim["min_travel"], lim["min_feed"]))
+        uniform = len(lim["min_feed"]) == 1  # one set of limits for the window
+        speed = np.maximum(feed / 60.0, lim["min_feed"] if uniform and lim["min_feed"] == lim["min_travel"] else
+                           np.where(de == 0, lim["min_travel"], lim["min_feed"]))
         cruise = _smallest([speed] + [lim["max_feedrate"][:, a] * inverse[k] for k, a in enumerate(axes)])
-        accel = np.where(~moving, lim["retract"], np.where(de > 0, lim["acceleration"], lim["travel"]))
+        if uniform and lim["retract"] == lim["acceleration"] == lim["travel"]:
+            accel = np.full(count, float(lim["acceleration"][0]))
+        else:
+            accel = np.where(~moving, lim["retract"], np.where(de > 0, lim["acceleration"], lim["travel"]))
         accel = _smallest([accel] + [lim["max_acceleration"][:, a] * inverse[k] for k, a in enumerate(axes)])
         for k, a in enumerate(sparse):
             rows = moved[a]
