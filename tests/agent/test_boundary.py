@@ -318,6 +318,8 @@ CONTENT_TYPES: list[tuple[str, bool, str]] = [
     ("application/octet-stream; charset", False, "RFC 9110 §5.6.6: a parameter without a value"),
     ("application/octet-stream (" + "(" * 300, False, "nested comments: the MIME parser recurses per level"),
     ("application/octet-stream" + "; a=b" * 60, False, "longer than MAX_CONTENT_TYPE"),
+    (";0*", False, "RFC 2231 §3: a bare continuation marker (the MIME parser raises HeaderParseError)"),
+    ("a/b;0*", False, "RFC 2231 §3: a parameter that is only a continuation marker"),
 ]
 """Content-Type values, accepted (the route is reached) or refused (415 before the route), each with its source."""
 

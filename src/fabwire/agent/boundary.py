@@ -279,11 +279,14 @@ def media_type(content_type: str) -> str:
         raise refusal
     try:
         parsed = _MIME_HEADERS("content-type", content_type)
-    except RecursionError:  # comments nested a few hundred deep: the parser recurses per level
+        if parsed.defects:
+            raise refusal
+        return cast(ContentTypeHeader, parsed).content_type
+    except UnsupportedMediaType:
+        raise
+    except Exception:  # the parser's own failures on hostile values (RecursionError for comments nested
+        # hundreds deep, HeaderParseError and IndexError for stray `*` parameters): all mean "not a media type"
         raise refusal from None
-    if parsed.defects:
-        raise refusal
-    return cast(ContentTypeHeader, parsed).content_type
 
 
 def request_media_type(scope: Scope) -> str:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from fastapi import FastAPI, Request
+from fastapi import APIRouter, Depends, FastAPI, Request
 from starlette.requests import HTTPConnection
 
 from fabwire.agent.core import Agent
@@ -31,6 +31,16 @@ MULTIPART_BODY: dict[str, object] = {"requestBody": {"required": True, "content"
 
 PREFIXES = ("", "/printers/{machine}")
 """Where each door's routes are mounted: the default machine at the root, every machine by name."""
+
+
+def door_router(agent: Agent, prefix: str) -> APIRouter:
+    """A door's router at one of `PREFIXES`: under `/printers/NAME` every route, whatever it answers (even
+    `/api/version`, which a slicer's "Test" button checks), is 404 for a name no machine has."""
+    async def known_machine(connection: HTTPConnection) -> None:
+        machine_of(agent, connection)
+
+    dependencies = [Depends(known_machine)] if "{machine}" in prefix else []
+    return APIRouter(prefix=prefix, include_in_schema=False, dependencies=dependencies)
 
 
 def machine_of(agent: Agent, request: HTTPConnection) -> MachineView:

@@ -22,12 +22,20 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any, BinaryIO
 
-from fastapi import APIRouter, FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 
 from fabwire import __version__
 from fabwire.agent.core import Agent
-from fabwire.agent.doors import JSON_BODY, MULTIPART_BODY, PREFIXES, file_name_of, machine_of, read_upload
+from fabwire.agent.doors import (
+    JSON_BODY,
+    MULTIPART_BODY,
+    PREFIXES,
+    door_router,
+    file_name_of,
+    machine_of,
+    read_upload,
+)
 from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.agent.offload import while_connected
 from fabwire.agent.session import JobClaim
@@ -536,7 +544,7 @@ def mount(app: FastAPI, agent: Agent) -> None:
         return await door.http(request, METHODS["server.files.delete_file"], {"path": path})
 
     for prefix in PREFIXES:
-        router = APIRouter(prefix=prefix, include_in_schema=False)
+        router = door_router(agent, prefix)
         for verb, path, rpc in HTTP_ROUTES:
             router.add_api_route(path, route(rpc), methods=[verb], openapi_extra=JSON_BODY if verb == "POST" else None)
         router.add_api_route("/server/files/upload", door.upload, methods=["POST"], openapi_extra=MULTIPART_BODY)

@@ -18,7 +18,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 from urllib.parse import quote
 
-from fastapi import APIRouter, FastAPI, Request
+from fastapi import FastAPI, Request
 from fastapi.responses import FileResponse, JSONResponse, Response
 
 from fabwire import __version__
@@ -29,6 +29,7 @@ from fabwire.agent.doors import (
     MULTIPART_BODY,
     PREFIXES,
     base_url,
+    door_router,
     file_name_of,
     machine_of,
     read_upload,
@@ -472,7 +473,7 @@ def mount(app: FastAPI, agent: Agent, appkeys: AppKeys) -> None:
         ("/plugin/appkeys/request/{app_token}", door.appkeys_poll, ["GET"]),
     ]
     for prefix in PREFIXES:
-        router = APIRouter(prefix=prefix, include_in_schema=False)
+        router = door_router(agent, prefix)
         for path, endpoint, methods in routes:
             body = MULTIPART_BODY if endpoint == door.upload else JSON_BODY if "POST" in methods else None
             router.add_api_route(path, _octoprint_errors(endpoint), methods=methods, openapi_extra=body)
