@@ -128,6 +128,8 @@ def test_flows_with_prompts(simulator: SimulatorStarter) -> None:
     no_answer = run_cli("xyz", "-d", dev, "load", input_text="")
     assert no_answer.returncode == 4
     assert "no confirmation" in no_answer.stderr
+    errors = [line for line in no_answer.stderr.splitlines() if "no confirmation" in line]
+    assert [line for line in errors if "press Enter" not in line] == errors, no_answer.stderr  # prompt line ended
     assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
 
 
@@ -139,6 +141,8 @@ def test_unfinished_calibration_releases_the_printer(simulator: SimulatorStarter
         assert result.returncode == 4, result.stderr
         assert "no confirmation" in result.stderr
         assert "printer is idle again" in result.stderr
+        errors = [line for line in result.stderr.splitlines() if "no confirmation" in line]
+        assert [line for line in errors if "press Enter" not in line] == errors, result.stderr  # prompt line ended
         assert (status_json(dev)["state"], status_json(dev)["substate"]) == (9511, 0)
     proc = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", dev, "calibrate"], env=cli_env(),
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -152,8 +152,9 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, 
               help="Named devices file (default: fabwire's devices.toml).")
 @click.option("--state-dir", type=click.Path(file_okay=False, path_type=Path),
               help="History, uploads and the access token (default: the platform's state directory).")
-@click.option("--demo", is_flag=True, help="Start the three simulators and monitor them, with a print, a drawing and "
-                                          "an MMU tool change under way (history in a temporary directory).")
+@click.option("--demo", is_flag=True, help="Start the three simulators and monitor them; a print, a drawing and an "
+                                          "MMU tool change start when the dashboard is first opened (history in a "
+                                          "temporary directory).")
 @click.option("--speed", type=FiniteRange(min=0.5, max=MAX_SPEED), default=30.0, show_default=True,
               help="With --demo: simulated time runs this many times faster.")
 @click.option("--retention", type=FiniteRange(min=0.01, max=MAX_RETENTION_H), default=24.0, show_default=True,

@@ -83,6 +83,7 @@ async def _ask(message: str) -> None:
     threading.Thread(target=read, daemon=True).start()
     line = await answer
     if not line:
+        sys.stderr.write("\n")  # end the open prompt line: the error is a line of its own
         raise InputError("no confirmation on standard input; the step was stopped")
 
 
