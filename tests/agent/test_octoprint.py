@@ -134,8 +134,11 @@ def test_a_print_that_cannot_start_now_is_refused_with_the_reason(demo: RunningA
             assert "acknowledge" in response.text
             assert "on the bed" in response.text
         assert client.get("/api/printer").json()["state"]["flags"]["ready"] is False
-        wait_idle(client)  # acknowledged
-        assert send(client, "second.gcode", prusaslicer_gcode()).status_code == 201
+        # "Print removed": once the action answers, the machine is ready for the very next upload
+        assert client.post(f"/api/v1/devices/{XYZ}/actions/acknowledge", json={}).status_code == 200
+        assert client.get("/api/printer").json()["state"]["flags"]["ready"] is True
+        sent = send(client, "second.gcode", prusaslicer_gcode())
+        assert sent.status_code == 201, sent.text
         wait_for(lambda: printing(client), "printing the second file")
 
 

@@ -342,7 +342,22 @@ class Session:
             self._background.add(task)
             task.add_done_callback(self._background.discard)
             return {"started": action}
-        return await self._links.run(self.driver.act(action, checked))
+        result, polled = await self._links.run(self._act_then_poll(action, checked))
+        if polled is not None and self.online:
+            self._set_state(online=True, summary=polled[1], status=polled[0])
+        return result
+
+    async def _act_then_poll(self, action: str, params: dict[str, Any]
+                             ) -> tuple[dict[str, Any], tuple[dict[str, Any] | None, dict[str, Any]] | None]:
+        """On the links' loop: the action, then a poll, so the state is the one the action left by the time its
+        reply goes out (an upload right after "print removed" finds the printer ready, not the state of the
+        poll before). A poll that fails leaves the state to the next scheduled one: the action itself was done."""
+        result = await self.driver.act(action, params)
+        try:
+            polled = await self.driver.poll()
+        except LINK_FAILURES:
+            polled = None
+        return result, polled
 
     async def _background_action(self, action: str, params: dict[str, Any]) -> None:
         try:
