@@ -146,7 +146,7 @@ class OctoPrintDoor:
         axes = {axis: {"speed": 6000 if axis != "e" else 300, "inverted": False} for axis in "xyze"}
         return {"profiles": {"_default": {
             "id": "_default", "name": view.name, "model": view.model or view.kind, "current": True, "default": True,
-            "heatedBed": view.bed_target_c is not None or view.bed_c is not None, "heatedChamber": False,
+            "heatedBed": _heated_bed(view), "heatedChamber": False,
             "extruder": {"count": 1 if view.kind == "xyz" else 0}, "axes": axes,
             "resource": f"{base_url(request)}/api/printerprofiles/_default"}}}
 
@@ -433,6 +433,19 @@ class OctoPrintDoor:
     async def appkeys_poll(self, request: Request, app_token: str) -> Response:
         status, body = self.appkeys.poll(app_token)
         return JSONResponse(body, status_code=status)
+
+
+def _heated_bed(view: MachineView) -> bool:
+    """Whether the machine's bed heats: a da Vinci's from its model's row (`fabwire.xyz.models`, the vendor's
+    specifications: the mini w reports a bed temperature but has no heater); other kinds have no bed."""
+    if view.kind != "xyz" or view.model is None:
+        return False
+    from fabwire.xyz.models import find_model
+
+    try:
+        return find_model(view.model).heated_bed
+    except InputError:  # a model fabwire does not know: a bed that reports a target heats
+        return view.bed_target_c is not None
 
 
 def mount(app: FastAPI, agent: Agent, appkeys: AppKeys) -> None:
