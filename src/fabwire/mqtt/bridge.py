@@ -212,7 +212,7 @@ class Bridge:
                 except MqttConnectError as exc:
                     raise LinkError(f"MQTT broker {self.broker.url} refused the connection: {exc}") from None
                 except aiomqtt.MqttError as exc:
-                    log.warning("MQTT broker %s: %s; retrying in %.1f s", self.broker.url, exc, delay)
+                    log.warning("%s; retrying in %.1f s", self.broker.failure(exc), delay)
                 except FabwireError as exc:  # the agent changed under us (a device went away mid-publish)
                     log.warning("MQTT bridge: %s; reconnecting in %.1f s", exc, delay)
                 finally:

@@ -43,7 +43,7 @@ async def read_fleet(broker: Broker, *, settle_s: float = 1.0) -> FleetView:
                 async with asyncio.timeout(settle_s):
                     await collect()
     except aiomqtt.MqttError as exc:
-        raise LinkError(f"MQTT broker {broker.url}: {exc}") from None
+        raise LinkError(broker.failure(exc)) from None
     return view
 
 

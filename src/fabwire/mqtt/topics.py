@@ -112,6 +112,16 @@ class Broker:
     def url(self) -> str:
         return f"{'mqtts' if self.tls else 'mqtt'}://{self.host}:{self.port}"
 
+    def failure(self, exc: BaseException) -> str:
+        """What went wrong with the broker, in words: a connection that failed says what to check, as for a
+        device (`fabwire.transport.tcp.connect_failure`); any other MQTT error in the client's words."""
+        cause = exc.__cause__ or exc.__context__
+        if isinstance(cause, OSError):
+            from fabwire.transport.tcp import connect_failure
+
+            return f"MQTT broker {self.url}: {connect_failure(cause, self.host, self.port)}"
+        return f"MQTT broker {self.url}: {exc}"
+
     def client_options(self) -> dict[str, Any]:
         """Keyword arguments for `aiomqtt.Client` (MQTT 5: replies carry the asker's correlation data)."""
         import aiomqtt

@@ -31,27 +31,32 @@ def _describe(writer: asyncio.StreamWriter) -> str:
     return str(peer)
 
 
+def connect_failure(exc: BaseException, host: str, port: int, timeout: float | None = None
+                    ) -> LinkError | LinkTimeout:
+    """A failed TCP connection (a TimeoutError or an OSError; anything else in its words) as the error that
+    says what to check: the one wording for every TCP peer, devices and MQTT brokers alike."""
+    where = f"{host}:{port}"
+    if isinstance(exc, TimeoutError):
+        within = f" within {timeout:g} s" if timeout is not None else ""
+        return LinkTimeout(f"no answer from {where}{within}: check the device is powered on and on this network")
+    if isinstance(exc, socket.gaierror):
+        return LinkError(f"cannot resolve host {host!r}: {exc.strerror}; check the name or use the IP address")
+    if isinstance(exc, ConnectionRefusedError):
+        return LinkError(f"connection refused by {where}: the host is up but nothing listens on port {port}; "
+                         "check the address and port")
+    if isinstance(exc, OSError) and exc.errno in (errno.EHOSTUNREACH, errno.ENETUNREACH):
+        return LinkError(f"{where} is unreachable: check the network and the device's IP address")
+    return LinkError(f"cannot connect to {where}: {getattr(exc, 'strerror', None) or exc}")
+
+
 async def open_tcp(host: str, port: int, *, timeout: float = DEFAULT_CONNECT_TIMEOUT) -> StreamTransport:
     """Connect, turning every way a connection fails into a message that says what to check."""
     where = f"{host}:{port}"
     try:
         async with asyncio.timeout(timeout):
             reader, writer = await asyncio.open_connection(host, port)
-    except TimeoutError:
-        raise LinkTimeout(
-            f"no answer from {where} within {timeout:g} s: check the device is powered on and on this network"
-        ) from None
-    except socket.gaierror as exc:
-        raise LinkError(f"cannot resolve host {host!r}: {exc.strerror}; check the name or use the IP address") from exc
-    except ConnectionRefusedError:
-        raise LinkError(
-            f"connection refused by {where}: the host is up but nothing listens on port {port}; "
-            "check the address and port"
-        ) from None
-    except OSError as exc:
-        if exc.errno in (errno.EHOSTUNREACH, errno.ENETUNREACH):
-            raise LinkError(f"{where} is unreachable: check the network and the device's IP address") from exc
-        raise LinkError(f"cannot connect to {where}: {exc.strerror or exc}") from exc
+    except (TimeoutError, OSError) as exc:
+        raise connect_failure(exc, host, port, timeout) from (None if isinstance(exc, TimeoutError) else exc)
     _nodelay(writer)
     return StreamTransport(reader, writer, url=f"tcp://{where}", peer=where)
 
