@@ -5,7 +5,11 @@ from __future__ import annotations
 
 import base64
 import io
+import logging
+import struct
+import zlib
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -13,7 +17,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from agent.doortools import preview, prusaslicer_gcode, thumbnail_block
-from fabwire.thumbnails import BLOCKS, Block, best_png, read_thumbnails
+from fabwire.thumbnails import BLOCKS, MAX_PIXELS, Block, best_png, image_size, read_thumbnails
 
 BACKGROUND, LINE = (40, 120, 200), (250, 250, 250)  # the colours of doortools.preview
 
@@ -102,3 +106,68 @@ def test_a_damaged_block_is_skipped_and_the_others_kept(damage: str) -> None:
 def test_any_bytes_give_previews_or_none_never_an_error(junk: bytes, prefix: str) -> None:
     found = read_thumbnails(io.BytesIO(prefix.encode() + junk))
     assert all(t.width > 0 and t.height > 0 for t in found)
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def png_claiming(width: int, height: int) -> bytes:
+    """A few hundred bytes of PNG whose IHDR claims `width`×`height` 8-bit grey pixels (PNG spec §11.2.2): the
+    header a decompression bomb carries, with the first rows of zeros compressed after it."""
+    rows = zlib.compress(b"\0" * (width + 1) * 4, 9)
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+            + _chunk(b"IDAT", rows) + _chunk(b"IEND", b""))
+
+
+def qoi_claiming(width: int, height: int) -> bytes:
+    """A QOI header (qoiformat.org specification: magic, width, height, channels, colorspace) claiming a size,
+    with the end marker and no pixels."""
+    return b"qoif" + struct.pack(">IIBB", width, height, 3, 0) + b"\0" * 7 + b"\1"
+
+
+def jpg_claiming(width: int, height: int) -> bytes:
+    """A real 16×16 JPEG whose SOF0 frame header (ITU T.81 §B.2.2: length, precision, height, width) is rewritten
+    to claim `width`×`height`."""
+    data = bytearray(preview(16, 16, "jpg"))
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5:sof + 9] = struct.pack(">HH", height, width)
+    return bytes(data)
+
+
+BOMBS = (
+    # (format, width, height, the header's maker): beyond MAX_PIXELS; the first beyond Pillow's own bomb limit too
+    ("png", 30000, 30000, png_claiming),
+    ("png", 3000, 3000, png_claiming),
+    ("png", 65535, 100, png_claiming),
+    ("qoi", 20000, 20000, qoi_claiming),
+    ("qoi", MAX_PIXELS + 1, 1, qoi_claiming),
+    ("jpg", 65000, 65000, jpg_claiming),
+    ("jpg", 4000, 2000, jpg_claiming),
+)
+
+
+@pytest.mark.parametrize(("fmt", "width", "height", "make"), BOMBS, ids=[f"{b[0]}-{b[1]}x{b[2]}" for b in BOMBS])
+def test_a_preview_claiming_too_many_pixels_is_dropped_and_logged(fmt: str, width: int, height: int, make: Any,
+                                                                  tmp_path: Path,
+                                                                  caplog: pytest.LogCaptureFixture) -> None:
+    bomb = make(width, height)
+    assert len(bomb) < 2000
+    assert image_size(bomb, fmt) in ((width, height), None)
+    kept = thumbnail_block(16, 16, "png")
+    path = tmp_path / "bomb.gcode"
+    path.write_bytes(_sliced(thumbnail_block(width, height, fmt, bomb), kept))
+    with caplog.at_level(logging.WARNING, logger="fabwire.thumbnails"), path.open("rb") as src:
+        found = read_thumbnails(src)
+    assert [(t.width, t.height) for t in found] == [(16, 16)]
+    assert best_png(path) == found[0].data
+    assert any("dropped" in r.getMessage() and fmt.upper() in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize("fmt", ["png", "jpg", "qoi"])
+def test_a_preview_at_the_pixel_limit_is_kept(fmt: str) -> None:
+    side = int(MAX_PIXELS ** 0.5)
+    data = {"png": png_claiming, "qoi": qoi_claiming, "jpg": jpg_claiming}[fmt](side, side)
+    assert image_size(data, fmt) == (side, side)
+    found = read_thumbnails(io.BytesIO(_sliced(thumbnail_block(side, side, fmt, data))))
+    assert [(t.width, t.height) for t in found] == [(side, side)]

@@ -14,7 +14,9 @@ from __future__ import annotations
 import base64
 import binascii
 import io
+import logging
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
@@ -23,6 +25,12 @@ MAX_SCAN = 16 << 20
 """Bytes of leading comments read at most (a 600x600 PNG preview is well under 1 MB of base64)."""
 MAX_IMAGE = 4 << 20
 """The largest single preview kept (decoded bytes; no slicer writes one this large)."""
+MAX_PIXELS = 2048 * 2048
+"""The most pixels (width × height, read from the image's own header) of a preview kept: PrusaSlicer takes
+thumbnail sizes of 1 to 999 pixels a side (src/libslic3r/GCode/Thumbnails.cpp), so this is four times its largest;
+a small file claiming more (a PNG of 30000×30000 compresses to under 1 MB) would decode to gigabytes."""
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,7 +77,7 @@ class Thumbnail:
             with Image.open(io.BytesIO(self.data), formats=[_PILLOW[self.format]]) as image:
                 out = io.BytesIO()
                 image.save(out, format="PNG")
-        except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
             raise ValueError(f"a {self.format.upper()} preview does not decode: {exc}") from None
         return out.getvalue()
 
@@ -133,7 +141,31 @@ def _finish(found: list[Thumbnail], block: Block, size: tuple[int, int], stated:
         return
     if not data.startswith(_MAGIC[block.format]) or len(data) > MAX_IMAGE or not all(size):
         return
+    pixels = image_size(data, block.format)
+    if pixels is None:
+        log.warning("a %s preview is dropped: its header does not read or claims a decompression bomb (the file "
+                    "still prints)", block.format.upper())
+        return
+    if pixels[0] * pixels[1] > MAX_PIXELS:
+        log.warning("a %s preview of %dx%d pixels is dropped: more than %d pixels (the file still prints)",
+                    block.format.upper(), pixels[0], pixels[1], MAX_PIXELS)
+        return
     found.append(Thumbnail(size[0], size[1], block.format, data))
+
+
+def image_size(data: bytes, fmt: str) -> tuple[int, int] | None:
+    """(width, height) in pixels from the header of an image of `fmt` ("png", "jpg", "qoi"), without decoding its
+    pixels; None when the header does not read or Pillow calls it a decompression bomb."""
+    from PIL import Image, UnidentifiedImageError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Image.DecompressionBombWarning)
+        try:
+            with Image.open(io.BytesIO(data), formats=[_PILLOW[fmt]]) as image:
+                return image.size
+        except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError,
+                Image.DecompressionBombWarning):
+            return None
 
 
 def best_png(path: Path) -> bytes | None:

@@ -26,6 +26,7 @@ from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 
 from fabwire import __version__
+from fabwire.agent.boundary import parse_json, request_media_type
 from fabwire.agent.core import Agent
 from fabwire.agent.doors import (
     JSON_BODY,
@@ -40,6 +41,7 @@ from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.agent.offload import while_connected
 from fabwire.agent.session import JobClaim
 from fabwire.errors import FabwireError, InputError
+from fabwire.jsontext import parse_json as parse_message
 
 MOONRAKER_VERSION = "v0.9.3"
 """The Moonraker release whose API this door follows."""
@@ -59,6 +61,45 @@ JOB_STATUS: dict[str, str] = {
     "cancelled": "cancelled", "interrupted": "server_exit",
 }
 """The agent's job state → Moonraker's history job status."""
+
+MAX_MESSAGE = 64 << 10
+"""The largest JSON-RPC message taken (bytes of UTF-8), as `fabwire serve` sets its WebSocket frames' limit (a larger
+one is closed with 1009, RFC 6455 §7.4.1); Moonraker clients' requests are well under a kilobyte."""
+
+PARSE_ERROR, INVALID_REQUEST = -32700, -32600
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """One kind of WebSocket message that is no JSON-RPC 2.0 request, and its error reply."""
+
+    what: str
+    code: int
+    check: Callable[[Any], bool]
+    """True for a parsed message this row refuses (rows are tried in order)."""
+    source: str
+
+
+def _is_id(value: object) -> bool:
+    return value is None or isinstance(value, str) or (isinstance(value, int | float) and not isinstance(value, bool))
+
+
+REFUSALS: tuple[Refusal, ...] = (
+    Refusal("a request must be a JSON object", INVALID_REQUEST, lambda m: not isinstance(m, dict),
+            "JSON-RPC 2.0 §4 Request object; §6 (an empty batch or a batch item that is no object)"),
+    Refusal('"jsonrpc" must be exactly "2.0"', INVALID_REQUEST, lambda m: m.get("jsonrpc") != "2.0",
+            "JSON-RPC 2.0 §4 (jsonrpc: MUST be exactly \"2.0\"); Moonraker answers the same -32600"),
+    Refusal('"method" must be a string', INVALID_REQUEST, lambda m: not isinstance(m.get("method"), str),
+            "JSON-RPC 2.0 §4 (method: a String containing the name of the method)"),
+    Refusal('"id" must be a string, a number or null', INVALID_REQUEST, lambda m: not _is_id(m.get("id")),
+            "JSON-RPC 2.0 §4 (id: a String, Number, or Null)"),
+    Refusal('"params" must be an object or an array', INVALID_REQUEST,
+            lambda m: m.get("params") is not None and not isinstance(m["params"], dict | list),
+            "JSON-RPC 2.0 §4 and §4.2 (params: a Structured value)"),
+)
+"""What a parsed message must be, in order (the parse errors come first: text that is not UTF-8 JSON within
+`MAX_MESSAGE` bytes and `fabwire.jsontext.MAX_DEPTH` levels, NaN or Infinity, is -32700 by JSON-RPC 2.0 §5.1 and
+RFC 8259 §6; a binary frame is -32600: Moonraker's JSON-RPC is text frames, RFC 6455 §5.6)."""
 
 CANNOT_GCODE = "these machines take whole files, not G-code scripts: upload a file and print it"
 ERROR_CODES = {"method": -32601, "params": -32602}
@@ -386,7 +427,7 @@ class MoonrakerDoor:
         connection = Connection()
         self.connections.add(connection)
         subscription = self.agent.subscribe(view.id)
-        receiver: asyncio.Future[Any] = asyncio.ensure_future(websocket.receive_text())
+        receiver: asyncio.Future[Any] = asyncio.ensure_future(_frame(websocket))
         events: asyncio.Future[Any] = asyncio.ensure_future(anext(subscription))
         try:
             while True:
@@ -396,10 +437,10 @@ class MoonrakerDoor:
                     await self._notify(websocket, connection, view.id)
                     events = asyncio.ensure_future(anext(subscription))
                 if receiver in done:
-                    reply = await self._rpc(receiver.result(), view.id, connection, str(websocket.base_url))
+                    reply = await self._message(receiver.result(), view.id, connection, str(websocket.base_url))
                     if reply is not None:
-                        await websocket.send_text(json.dumps(reply))
-                    receiver = asyncio.ensure_future(websocket.receive_text())
+                        await websocket.send_text(json.dumps(reply, allow_nan=False))
+                    receiver = asyncio.ensure_future(_frame(websocket))
         except (WebSocketDisconnect, ConnectionError, RuntimeError, StopAsyncIteration):
             pass
         finally:
@@ -426,13 +467,29 @@ class MoonrakerDoor:
             await websocket.send_text(json.dumps({"jsonrpc": "2.0", "method": "notify_status_update",
                                                   "params": [changes, time.monotonic()]}))
 
-    async def _rpc(self, text: str, device_id: str, connection: Connection, base: str) -> dict[str, Any] | None:
+    async def _message(self, frame: str | bytes, device_id: str, connection: Connection,
+                       base: str) -> dict[str, Any] | list[dict[str, Any]] | None:
+        """The reply to one WebSocket frame: a request's response, a batch's responses (JSON-RPC 2.0 §6), an
+        error response for anything else, None when only notifications came."""
+        if isinstance(frame, bytes):
+            return _rpc_error(INVALID_REQUEST, "send JSON-RPC requests as text frames, not binary")
         try:
-            message = json.loads(text)
-        except json.JSONDecodeError:
-            return {"jsonrpc": "2.0", "error": {"code": -32700, "message": "Parse error"}, "id": None}
-        if not isinstance(message, dict) or not isinstance(message.get("method"), str):
-            return {"jsonrpc": "2.0", "error": {"code": -32600, "message": "Invalid Request"}, "id": None}
+            message = parse_message(frame.encode("utf-8", "surrogatepass"), what="the message", max_bytes=MAX_MESSAGE)
+            json.dumps(message, allow_nan=False)
+        except InputError as exc:
+            return _rpc_error(PARSE_ERROR, f"Parse error: {exc}")
+        except ValueError:
+            return _rpc_error(PARSE_ERROR, "Parse error: NaN and Infinity are not JSON")
+        if isinstance(message, list) and message:
+            replies = [await self._rpc(item, device_id, connection, base) for item in message]
+            return [r for r in replies if r is not None] or None
+        return await self._rpc(message, device_id, connection, base)
+
+    async def _rpc(self, message: Any, device_id: str, connection: Connection, base: str) -> dict[str, Any] | None:
+        for refusal in REFUSALS:
+            if refusal.check(message):
+                rpc_id = message.get("id") if isinstance(message, dict) and _is_id(message.get("id")) else None
+                return _rpc_error(refusal.code, f"Invalid Request: {refusal.what}", rpc_id)
         rpc_id = message.get("id")
         method = METHODS.get(message["method"])
         params = message.get("params") or {}
@@ -448,8 +505,21 @@ class MoonrakerDoor:
             except FabwireError as exc:
                 error = {"code": _status_code(exc), "message": str(exc)}
             else:
-                return {"jsonrpc": "2.0", "result": result, "id": rpc_id} if rpc_id is not None else None
-        return {"jsonrpc": "2.0", "error": error, "id": rpc_id} if rpc_id is not None else None
+                return {"jsonrpc": "2.0", "result": result, "id": rpc_id} if "id" in message else None
+        return {"jsonrpc": "2.0", "error": error, "id": rpc_id} if "id" in message else None
+
+
+async def _frame(websocket: WebSocket) -> str | bytes:
+    """The next message's text (a text frame) or bytes (a binary frame); WebSocketDisconnect once it closes."""
+    message = await websocket.receive()
+    if message["type"] == "websocket.disconnect":
+        raise WebSocketDisconnect(message.get("code", 1000), message.get("reason"))
+    text: str | None = message.get("text")
+    return text if text is not None else bytes(message.get("bytes") or b"")
+
+
+def _rpc_error(code: int, message: str, rpc_id: Any = None) -> dict[str, Any]:
+    return {"jsonrpc": "2.0", "error": {"code": code, "message": message}, "id": rpc_id}
 
 
 def _error(status: int, message: str) -> JSONResponse:
@@ -514,12 +584,12 @@ async def _params(request: Request) -> dict[str, Any]:
             params["objects"] = objects
     else:
         params.update(request.query_params)
-    if request.method == "POST" and request.headers.get("content-type", "").startswith("application/json"):
+    if request.method == "POST" and request_media_type(request.scope) == "application/json":
         raw = await request.body()
         try:
-            body = json.loads(raw) if raw.strip() else {}
-        except (UnicodeDecodeError, json.JSONDecodeError):
-            raise RpcError(400, "the body is not JSON") from None
+            body = parse_json(raw) if raw.strip() else {}
+        except InputError as exc:
+            raise RpcError(400, str(exc)) from None
         if not isinstance(body, dict):
             raise RpcError(400, "the body must be a JSON object")
         params.update(body)
@@ -534,8 +604,8 @@ def mount(app: FastAPI, agent: Agent) -> None:
         async def endpoint(request: Request) -> Response:
             try:
                 params = await _params(request)
-            except RpcError as exc:
-                return _error(exc.code, str(exc))
+            except FabwireError as exc:
+                return _error(_status_code(exc), str(exc))
             return await door.http(request, METHODS[rpc], params)
 
         return endpoint
