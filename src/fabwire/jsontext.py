@@ -9,6 +9,7 @@ is wrong, in words.
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 from fabwire.errors import InputError
@@ -21,8 +22,9 @@ def parse_json(data: str | bytes, *, what: str = "the JSON", max_bytes: int | No
                max_depth: int = MAX_DEPTH) -> Any:
     """`data` (UTF-8 bytes or text) as a JSON value.
 
-    Raises InputError naming `what` when the text is longer than `max_bytes`, is not UTF-8, is not JSON, or
-    nests arrays and objects deeper than `max_depth` levels."""
+    Raises InputError naming `what` when the text is longer than `max_bytes`, is not UTF-8, is not JSON (NaN and
+    Infinity included: RFC 8259 §6 has no such numbers, though Python's parser takes them), or nests arrays and
+    objects deeper than `max_depth` levels."""
     if max_bytes is not None and len(data) > max_bytes:
         raise InputError(f"{what} is larger than {max_bytes} bytes")
     try:
@@ -30,13 +32,24 @@ def parse_json(data: str | bytes, *, what: str = "the JSON", max_bytes: int | No
     except UnicodeDecodeError:
         raise InputError(f"{what} must be UTF-8 text") from None
     try:
-        value = json.loads(text)
+        value = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
     except RecursionError:
         raise InputError(f"{what} nests deeper than {max_depth} levels") from None
     except ValueError as exc:
         raise InputError(f"{what} is not valid JSON ({exc})") from None
     if depth_exceeds(value, max_depth):
         raise InputError(f"{what} nests deeper than {max_depth} levels")
+    return value
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number (RFC 8259 §6)")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text[:40]} is beyond the largest number a double holds")
     return value
 
 
