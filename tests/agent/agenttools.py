@@ -52,9 +52,16 @@ class RunningAgent:
         return self.process.returncode, "".join(self.stderr_lines) + err
 
 
-def start_agent(state_dir: Path, *args: str, env: dict[str, str] | None = None) -> RunningAgent:
-    """`fabwire serve --listen 127.0.0.1:0 --state-dir STATE ARGS…`, waited for until it announces its URL."""
-    command = [sys.executable, "-m", "fabwire", "serve", "--state-dir", str(state_dir), *args]
+def start_agent(state_dir: Path, *args: str, env: dict[str, str] | None = None,
+                constants: dict[str, float] | None = None) -> RunningAgent:
+    """`fabwire serve --listen 127.0.0.1:0 --state-dir STATE ARGS…`, waited for until it announces its URL.
+    `constants` ({"fabwire.agent.boundary.BODY_GRACE_S": 2.0}) are set in the agent's process before it starts,
+    as monkeypatch does in-process: a limit that takes half a minute is reached in seconds."""
+    start = ["-m", "fabwire"]
+    if constants:
+        sets = "".join(f"import {name.rpartition('.')[0]}; {name} = {value!r}; " for name, value in constants.items())
+        start = ["-c", f"import sys; sys.argv[0] = 'fabwire'; {sets}from fabwire.__main__ import run; run()"]
+    command = [sys.executable, *start, "serve", "--state-dir", str(state_dir), *args]
     if "--listen" not in args:
         command += ["--listen", "127.0.0.1:0"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

@@ -405,3 +405,46 @@ async def test_a_body_that_stops_arriving_ends_the_request(monkeypatch: pytest.M
     assert sent[0]["status"] == 408, sent
     assert b"stopped arriving" in b"".join(m.get("body", b"") for m in sent)
     assert not REACHED
+
+
+@given(received=st.integers(0, 10**10), more=st.integers(0, 10**6),
+       grace=st.floats(0, 3600, allow_nan=False), rate=st.floats(1, 10**7, allow_nan=False))
+def test_a_body_is_too_slow_exactly_when_its_average_falls_under_the_rate(received: int, more: int, grace: float,
+                                                                          rate: float) -> None:
+    """Never before the grace; until then and until `received` bytes average `rate`, the body is in time; more bytes
+    never bring the moment nearer."""
+    from fabwire.agent.boundary import too_slow_after
+
+    after = too_slow_after(received, grace, rate)
+    assert after >= grace
+    assert received >= rate * after * (1 - 1e-9) or after == grace  # in time up to that moment
+    assert after == grace or received / after <= rate * (1 + 1e-9)  # and under the rate right past it
+    assert too_slow_after(received + more, grace, rate) >= after
+
+
+async def test_a_body_that_trickles_ends_the_request(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A body that keeps coming, a byte at a time and never BODY_IDLE_S apart, but under BODY_MIN_RATE: 408 once
+    the grace is over, whether the boundary reads the body or the route streams it."""
+    import asyncio
+
+    from fabwire.agent import boundary
+
+    monkeypatch.setattr(boundary, "BODY_GRACE_S", 0.3)
+    for path, content_type in ((START, "application/json"), (FILES, "multipart/form-data; boundary=x")):
+        sent: list[dict[str, Any]] = []
+
+        async def receive() -> dict[str, Any]:
+            await asyncio.sleep(0.05)
+            return {"type": "http.request", "body": b" ", "more_body": True}
+
+        async def send(message: dict[str, Any]) -> None:
+            sent.append(message)  # noqa: B023 - each loop's own list, used within the loop
+
+        headers = [(b"host", b"127.0.0.1:8765"), (b"content-length", b"1000"), (b"content-type", content_type.encode())]
+        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
+                 "scheme": "http", "path": path, "raw_path": path.encode(), "query_string": b"", "root_path": "",
+                 "headers": headers, "client": ("127.0.0.1", 1), "server": ("127.0.0.1", 8765)}
+        await asyncio.wait_for(app_with_doors()(scope, receive, send), 30)
+        assert sent[0]["status"] == 408, sent
+        assert b"arrives too slowly" in b"".join(m.get("body", b"") for m in sent)
+    assert not REACHED

@@ -209,3 +209,57 @@ def test_the_events_socket_refuses_a_foreign_page_on_a_real_server(agent: Runnin
     assert json.loads(refused.value.response.body or b"{}")["error"] == "CrossOrigin"
     with connect(agent.ws_url, origin=agent.url.rstrip("/")) as ws:  # type: ignore[arg-type]
         assert json.loads(ws.recv(timeout=30))["type"] == "state"
+
+
+TRICKLED = {
+    "native": ("/api/v1/devices/{device}/jobs?filename=slow.gcode", None),
+    "octoprint": ("/api/files/local", [("print", "true"), ("path", "")]),  # PrusaSlicer's OctoPrint upload
+    "moonraker": ("/server/files/upload", [("root", "gcodes"), ("print", "true")]),  # SuperSlicer's Moonraker upload
+}
+"""The uploads that claim the machine before their file arrives: the API's own, and the doors' with print first."""
+
+
+@pytest.mark.parametrize("door", TRICKLED, ids=list(TRICKLED))
+def test_a_trickled_upload_is_408_and_the_machine_is_free_after(tmp_path: Path, door: str) -> None:
+    """A client that sends a first piece and then 2 bytes now and then, with a large Content-Length: the body
+    averages far under BODY_MIN_RATE, so past the grace (shortened here) the request is 408 and the machine is
+    taken by the owner's next upload."""
+    from .doortools import multipart
+
+    agent = start_agent(tmp_path / "state", "--device", PRINTER, constants={"fabwire.agent.boundary.BODY_GRACE_S": 2.0})
+    try:
+        device = printer_online(agent)
+        path, fields = TRICKLED[door]
+        if fields is None:
+            body, ctype = GCODE, "application/octet-stream"
+        else:
+            body, ctype = multipart(fields, "slow.gcode", GCODE)
+        first = body[:body.index(b"G28\n") + 2000]
+        head = (f"POST {path.format(device=device)} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: {ctype}\r\n"
+                f"Content-Length: {len(body)}\r\n\r\n").encode()
+        sock = raw_request(agent, head, first)
+        with agent.client() as client:
+            busy = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "b.gcode"}, content=GCODE[:100])
+            assert busy.status_code == 409, busy.text  # the trickle holds the machine …
+            answer = b""
+            for _ in range(240):  # (a bound against a hang, not a timing check)
+                sock.settimeout(0.5)
+                try:
+                    answer += sock.recv(65536)
+                except TimeoutError:
+                    with contextlib.suppress(OSError):
+                        sock.sendall(b";\n")
+                    continue
+                if b"\r\n\r\n" in answer and answer.endswith(b"}"):
+                    break
+            sock.close()
+            status, _, rest = answer.partition(b"\r\n\r\n")
+            assert status.startswith(b"HTTP/1.1 408"), answer
+            assert "arrives too slowly" in json.dumps(json.loads(rest)), rest  # (each door's own error shape)
+            mine = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "mine.gcode"},
+                               content=GCODE[:20_000], headers={"content-type": "application/octet-stream"})
+            assert mine.status_code == 201, mine.text  # … until it is refused, then the owner's upload is taken
+            assert [j["id"] for j in client.get("/api/v1/jobs").json()] == [mine.json()["id"]]
+    finally:
+        _, stderr = agent.stop()
+    assert "Traceback" not in stderr

@@ -328,3 +328,58 @@ def test_a_file_the_intake_refuses_is_400_and_not_kept_whether_printed_or_not(de
         assert "no commands" in response.json()["error"]
         assert "comment_only.gcode" not in [f["name"] for f in client.get("/api/files").json()["files"]]
         assert not printing(client)
+
+
+EMPTY_PARTS = {"bare": b"\r\n\r\n", "unnamed headers": b"A:b\r\nC:d\r\n\r\n\r\n",
+               "named empty": b'Content-Disposition: form-data; name=""\r\n\r\n\r\n'}
+"""Parts that carry no field: no headers at all, headers without a Content-Disposition, an empty name."""
+
+
+@pytest.mark.parametrize("file_first", [False, True], ids=["parts-then-file", "file-then-parts"])
+@pytest.mark.parametrize("shape", EMPTY_PARTS, ids=list(EMPTY_PARTS))
+def test_a_form_of_more_parts_than_a_slicer_sends_is_400_and_nothing_is_kept(demo: RunningAgent, shape: str,
+                                                                           file_first: bool) -> None:
+    """FIELDS_MAX + 1 parts that are no field, before or after a valid file part: refused at the part past
+    PARTS_MAX, the file not kept."""
+    from fabwire.agent.doors import FIELDS_MAX, PARTS_MAX
+
+    boundary = "B" + uuid.uuid4().hex
+    name = f"manyparts_{shape.replace(' ', '_')}_{file_first}.gcode"
+    empties = (f"--{boundary}\r\n".encode() + EMPTY_PARTS[shape]) * (FIELDS_MAX + 1)
+    file_part = (f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="{name}"\r\n'
+                 "Content-Type: application/octet-stream\r\n\r\n").encode() + prusaslicer_gcode() + b"\r\n"
+    body = (file_part + empties if file_first else empties + file_part) + f"--{boundary}--\r\n".encode()
+    with demo.client() as client:
+        response = client.post("/api/files/local", content=body,
+                               headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+        assert response.status_code == 400, response.text
+        assert f"over {PARTS_MAX} parts" in response.json()["error"]
+        assert name not in [f["name"] for f in client.get("/api/files").json()["files"]]
+
+
+def test_a_part_with_more_header_bytes_than_the_limit_is_400(demo: RunningAgent) -> None:
+    """A few long header lines in one part, each and their count within python-multipart's own limits."""
+    from fabwire.agent.doors import PART_HEADERS_MAX
+
+    boundary = "B" + uuid.uuid4().hex
+    pads = b"".join(b"X-Pad-%d: " % i + b"a" * 3000 + b"\r\n" for i in range(PART_HEADERS_MAX // 3000 + 1))
+    body = (f"--{boundary}\r\n".encode() + pads
+            + b'Content-Disposition: form-data; name="file"; filename="padded.gcode"\r\n\r\n'
+            + prusaslicer_gcode() + f"\r\n--{boundary}--\r\n".encode())
+    with demo.client() as client:
+        response = client.post("/api/files/local", content=body,
+                               headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+        assert response.status_code == 400, response.text
+        assert "bytes of headers" in response.json()["error"]
+        assert "padded.gcode" not in [f["name"] for f in client.get("/api/files").json()["files"]]
+
+
+def test_a_form_of_as_many_fields_as_allowed_passes(demo: RunningAgent) -> None:
+    """FIELDS_MAX fields (PrusaSlicer's print and path among them) and the file: PARTS_MAX parts, accepted."""
+    from fabwire.agent.doors import FIELDS_MAX
+
+    fields = [("print", "false"), ("path", "")] + [(f"extra{i}", "x") for i in range(FIELDS_MAX - 2)]
+    with demo.client() as client:
+        response = send(client, "manyfields.gcode", prusaslicer_gcode(), fields=fields)
+        assert response.status_code == 201, response.text
+        assert client.delete("/api/files/local/manyfields.gcode").status_code == 204

@@ -13,7 +13,8 @@ Every HTTP request and WebSocket handshake passes, in this order:
   4. the body — each route declares the bodies it takes (a pydantic/Form/File body, or `openapi_extra`'s
      `requestBody` content); anything else is 415. JSON bodies are read here, at most `JSON_BODY_LIMIT` bytes,
      parsed and checked for depth (400) before the route sees them; uploads are counted as they arrive and cut
-     off past `--max-upload` (413); a body that stops arriving for `BODY_IDLE_S` ends the request (408).
+     off past `--max-upload` (413); a body that stops arriving for `BODY_IDLE_S`, or that averages under
+     `BODY_MIN_RATE` once `BODY_GRACE_S` have passed, ends the request (408), and what the route held with it.
 
 A route added later is covered by all four without doing anything: the middleware wraps the whole application
 and looks the route up in the live route table. Errors are the API's `{"message", "exit_code", "error"}`.
@@ -81,6 +82,11 @@ MULTIPART_OVERHEAD = 64 * 1024
 """What a multipart upload may carry besides its file (boundaries, part headers, small fields)."""
 BODY_IDLE_S = 30.0
 """How long a request's body may stop arriving before the request is ended (408)."""
+BODY_GRACE_S = 30.0
+"""Seconds of waiting for a body before its average rate is checked: a connection that starts slowly still passes."""
+BODY_MIN_RATE = 1024.0
+"""Bytes per second a body must average past `BODY_GRACE_S` (over the time spent waiting for it): slow Wi-Fi and a
+Raspberry Pi upload at tens of KiB/s or more; a trickle that only keeps a machine claimed is far below."""
 
 JSON_TYPE = "application/json"
 RAW_TYPE = "application/octet-stream"
@@ -482,22 +488,16 @@ class Boundary:
                                    f"(the token is in the agent's state directory, file {TOKEN_FILE})")
 
     async def _buffered(self, scope: Scope, receive: Receive, rule: BodyRule) -> Receive:
-        """Read a small body whole (bounded, with the idle timeout), check JSON, and replay it."""
+        """Read a small body whole (bounded, with the body's timeouts), check JSON, and replay it."""
         chunks: list[bytes] = []
-        size = 0
-        more = True
-        while more:
-            message = await _receive_within(receive)
+        counted = _Counted(receive, rule)
+        while not counted.done:
+            message = await counted()
             if message["type"] == "http.disconnect":
                 from starlette.requests import ClientDisconnect
 
                 raise ClientDisconnect()
-            chunk = message.get("body", b"")
-            size += len(chunk)
-            if size > rule.limit:
-                raise BodyTooLarge(_too_large(rule, None))
-            chunks.append(chunk)
-            more = message.get("more_body", False)
+            chunks.append(message.get("body", b""))
         body = b"".join(chunks)
         if body.strip() and request_media_type(scope) == JSON_TYPE:
             parse_json(body)
@@ -521,28 +521,44 @@ def _too_large(rule: BodyRule, size: int | None) -> str:
     return f"{what} {said} {rule.limit:,} bytes" + (" (--max-upload)" if what == "the upload" else "")
 
 
-async def _receive_within(receive: Receive) -> Message:
-    try:
-        async with asyncio.timeout(BODY_IDLE_S):
-            return await receive()
-    except TimeoutError:
-        raise BodyTimeout(f"the body stopped arriving for {BODY_IDLE_S:g} s") from None
+def too_slow_after(received: int, grace: float, rate: float) -> float:
+    """The seconds of waiting after which a body that has brought `received` bytes averages under `rate` bytes/s,
+    never before `grace`: its next bytes must come before then (`BODY_GRACE_S`, `BODY_MIN_RATE`)."""
+    return max(grace, received / rate)
 
 
 class _Counted:
-    """`receive` that raises BodyTooLarge once the body passes the rule's limit, and BodyTimeout when it
-    stops arriving (both reach the route as exceptions, so whatever it held is released); `size` is what came."""
+    """`receive` that raises BodyTooLarge once the body passes the rule's limit, and BodyTimeout when it stops
+    arriving for `BODY_IDLE_S` or averages under `BODY_MIN_RATE` past `BODY_GRACE_S` (both reach the route as
+    exceptions, so whatever it held is released); `size` is what came, `waited` the seconds spent waiting for it
+    (a route's own work between reads is not counted against the client)."""
 
     def __init__(self, receive: Receive, rule: BodyRule) -> None:
         self.receive = receive
         self.rule = rule
         self.size = 0
+        self.waited = 0.0
         self.done = False
 
     async def __call__(self) -> Message:
         if self.done:
             return await self.receive()  # only the disconnect is left to wait for
-        message = await _receive_within(self.receive)
+        slow = too_slow_after(self.size, BODY_GRACE_S, BODY_MIN_RATE) - self.waited
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        try:
+            if slow <= 0:
+                raise TimeoutError
+            async with asyncio.timeout(min(BODY_IDLE_S, slow)):
+                message = await self.receive()
+        except TimeoutError:
+            if slow < BODY_IDLE_S:
+                raise BodyTimeout(f"the body arrives too slowly: {self.size:,} bytes in {self.waited + slow:.0f} s; "
+                                  f"after the first {BODY_GRACE_S:g} s it must average at least "
+                                  f"{BODY_MIN_RATE / 1024:g} KiB/s") from None
+            raise BodyTimeout(f"the body stopped arriving for {BODY_IDLE_S:g} s") from None
+        finally:
+            self.waited += loop.time() - started
         if message["type"] == "http.request":
             self.size += len(message.get("body", b""))
             if self.size > self.rule.limit:

@@ -81,6 +81,13 @@ def mount_doors(app: FastAPI, agent: Agent) -> None:
 FIELD_MAX = 64 * 1024
 """Bytes a plain form field may hold (a folder, "true"); more is an error."""
 FIELDS_MAX = 32
+"""Plain fields a form may hold; a slicer sends two or three (PrusaSlicer: print, path; Cura: select, print)."""
+PARTS_MAX = FIELDS_MAX + 1
+"""Parts a form may hold, named or not, empty or not: the fields and the file. Each part costs parser callbacks
+on the agent's event loop, so a body of millions of empty parts is refused at the first one past this."""
+PART_HEADERS_MAX = 8 * 1024
+"""Bytes of one part's header lines (names, values, ':' and CRLF): a Content-Disposition with a long file name
+and a Content-Type fit many times over (python-multipart's own limits, where it has them, are per line and count)."""
 
 
 @dataclass
@@ -133,18 +140,32 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
     upload = Upload()
     part: dict[str, Any] = {}
     pending = bytearray()
+    parts = 0
 
     def begin() -> None:
+        nonlocal parts
+        parts += 1
+        if parts > PARTS_MAX:
+            raise InputError(f"the form has over {PARTS_MAX} parts: a slicer's upload has its file and a few "
+                             "fields")
         part.clear()
-        part.update(headers={}, field=b"", value=b"", data=bytearray(), name=None, filename=None)
+        part.update(headers={}, field=b"", value=b"", data=bytearray(), name=None, filename=None, header_bytes=0)
+
+    def header_bytes(count: int) -> None:
+        part["header_bytes"] += count
+        if part["header_bytes"] > PART_HEADERS_MAX:
+            raise InputError(f"a part of the form has over {PART_HEADERS_MAX:,} bytes of headers")
 
     def header_field(data: bytes, start: int, end: int) -> None:
+        header_bytes(end - start)
         part["field"] += data[start:end]
 
     def header_value(data: bytes, start: int, end: int) -> None:
+        header_bytes(end - start)
         part["value"] += data[start:end]
 
     def header_end() -> None:
+        header_bytes(3)  # ':' and CRLF
         part["headers"][part["field"].lower()] = part["value"]
         part["field"], part["value"] = b"", b""
 
