@@ -9,7 +9,16 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
+from fabwire.errors import InputError
 from fabwire.lineus.plot.geometry import FloatArray, Polylines
+
+CLIP_PIECE_POINTS = 256
+"""Points of one line handed to GEOS at a time. GEOS nodes a line against itself before cutting it, which costs the
+square of the line's length when the line retraces itself (a path circling the same ring thousands of times took
+many GB); cut piece by piece the work grows linearly, and the parts inside and outside are the same."""
+MAX_CLIP_PARTS = 1_000_000
+"""Pieces cutting may produce at most for one drawing's clip (a line crossing itself in a piece is split at every
+crossing, so a small piece can still come out as thousands of parts; beyond this the drawing is refused)."""
 
 
 def area_of_rings(rings: Sequence[FloatArray], rule: str) -> BaseGeometry:
@@ -61,8 +70,29 @@ def _parts(geometry: BaseGeometry) -> Polylines:
     return out
 
 
+def _pieces(line: FloatArray) -> list[FloatArray]:
+    """`line` split into runs of at most CLIP_PIECE_POINTS + 1 points, each sharing its last point with the next."""
+    if len(line) <= CLIP_PIECE_POINTS + 1:
+        return [line]
+    return [line[i:i + CLIP_PIECE_POINTS + 1] for i in range(0, len(line) - 1, CLIP_PIECE_POINTS)]
+
+
+def _join(out: Polylines, parts: Polylines, start: int) -> None:
+    """Append `parts` to `out`, continuing the last line of `out` (when it was added from index `start` on) where a
+    part begins at its end point: the seam between two pieces of one cut line."""
+    for part in parts:
+        if len(out) > start and len(part) > 1 and len(out[-1]) > 1 and bool((out[-1][-1] == part[0]).all()):
+            out[-1] = np.vstack([out[-1], part[1:]])
+        else:
+            out.append(part)
+
+
 def cut(lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
-    """(kept, hidden): the pieces of `lines` inside `region` and those outside it. Dots stay whole."""
+    """(kept, hidden): the pieces of `lines` inside `region` and those outside it. Dots stay whole.
+
+    Long lines are cut CLIP_PIECE_POINTS at a time and rejoined at the seams. Raises InputError when the cut comes
+    to more than MAX_CLIP_PARTS pieces (lines crossing themselves that many times are too complex to clip).
+    """
     if not lines:
         return [], []
     if region.is_empty:
@@ -80,8 +110,14 @@ def cut(lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
         elif shapely.disjoint(region, geometry):
             hidden.append(line)
         else:
-            kept.extend(_parts(shapely.intersection(geometry, region)))
-            hidden.extend(_parts(shapely.difference(geometry, region)))
+            first_kept, first_hidden = len(kept), len(hidden)
+            for piece in _pieces(line):
+                part = shapely.LineString(piece)
+                _join(kept, _parts(shapely.intersection(part, region)), first_kept)
+                _join(hidden, _parts(shapely.difference(part, region)), first_hidden)
+                if len(kept) + len(hidden) > MAX_CLIP_PARTS:
+                    raise InputError(f"lines too complex to clip: cutting them comes to more than "
+                                     f"{MAX_CLIP_PARTS:,} pieces")
     return kept, hidden
 
 

@@ -31,7 +31,7 @@ from shapely.geometry.base import BaseGeometry
 
 from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import area_of_rings, cut, cut_edge
-from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dashed
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
@@ -87,6 +87,9 @@ MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
 MAX_PATTERN_TILES = 20_000
 """Pattern tiles one fill may repeat at most; a finer pattern is drawn as the shape's outline, with a note."""
+MAX_DRAWING_DASHES = 200_000
+"""Dashes stroke-dasharray may cut one drawing's lines into: about half a day of pen strokes for a Line-us, and a
+bound on the time and memory of cutting them (a few bytes of "0.0001 0.0001" otherwise ask for tens of millions)."""
 MAX_OCCLUSION_CHECKS = 50_000_000
 """Earlier lines that opaque fills are checked against at most; beyond, later fills no longer hide lines."""
 READ_AHEAD_CHARS = 100_000
@@ -438,6 +441,8 @@ class _Reader:
         """Characters of SVG text read so far, in the whole file (bounded by svgtext.MAX_TEXT_CHARS)."""
         self.curved = False
         self.points = 0
+        self.dashes = 0
+        """Dashes stroke-dasharray cut the lines into so far (bounded by MAX_DRAWING_DASHES)."""
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
         self._read_ahead = self._read_straight_paths()
         self._patterns: tuple[str, ...] = ()
@@ -574,7 +579,7 @@ class _Reader:
         if inside.all() and not edges:
             return
         crossing = np.flatnonzero(~inside).tolist()
-        kept, hidden = cut([self.lines[k] for k in crossing], page)
+        kept, hidden = self._cut([self.lines[k] for k in crossing], page)
         lines = Ink([line for line, keep in zip(self.lines, inside.tolist(), strict=True) if keep] + kept + edges)
         self.lines = lines
         self.hidden.extend(hidden)
@@ -715,7 +720,7 @@ class _Reader:
             under = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
             if under.any():
                 hit = np.flatnonzero(under).tolist()
-                hidden, shown = cut([ink[k] for k in hit], fill.area)
+                hidden, shown = self._cut([ink[k] for k in hit], fill.area)
                 ink.drop(hit)
                 ink.extend(shown)
                 self.hidden.extend(hidden)
@@ -743,7 +748,7 @@ class _Reader:
 
     def cut_ink(self, target: Ink, region: BaseGeometry) -> None:
         """Cut lines and fills to `region`, in place: a fill is outlined along the cut as well."""
-        kept, hidden = cut(list(target), region)
+        kept, hidden = self._cut(list(target), region)
         fills: list[_Fill] = []
         for fill in target.fills:
             edges, area = cut_edge(fill.area, region)
@@ -889,6 +894,21 @@ class _Reader:
             return {}
         return {k: v for k, v in own_style(el, self.sheet).items() if k in GEOMETRY}
 
+    def _cut(self, lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
+        """`cut`, its refusals naming the file."""
+        try:
+            return cut(lines, region)
+        except InputError as exc:
+            raise InputError(f"{self.name}: {exc}") from exc
+
+    def _count_dashes(self, el: ET.Element, tag: str, count: int) -> None:
+        self.dashes += count
+        if self.dashes > MAX_DRAWING_DASHES:
+            name = f"<{tag} id={excerpt(el.get('id', ''), 40)}>" if el.get("id") else f"a <{tag}>"
+            raise InputError(f"{self.name}: stroke-dasharray of {name} cuts it into {count:,} dashes, "
+                             f"{self.dashes:,} in the drawing, more than the {MAX_DRAWING_DASHES:,} allowed; "
+                             "refusing it")
+
     def _count(self, points: int) -> None:
         self.points += points
         if self.points > MAX_POINTS:
@@ -995,7 +1015,9 @@ class _Reader:
                 pts = np.vstack([pts, pts[:1]])  # the fill's border closes the subpath
             if dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between the dashes
                 inverse = _invert(matrix)
-                pieces = affine(dashed(affine([pts], inverse)[0], dashes, offset), matrix)
+                local_pts = affine([pts], inverse)[0]
+                self._count_dashes(el, tag, dash_count(local_pts, dashes))
+                pieces = affine(dashed(local_pts, dashes, offset), matrix)
                 for piece in pieces:
                     if len(piece) > 1 or caps:
                         out.append(piece)
@@ -1092,7 +1114,7 @@ class _Reader:
             self._patterns = self._patterns[:-1]
             self._below, self._floor = outside, floor
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
-            kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
+            kept, _ = self._cut(list(tile), shapely.box(0.0, 0.0, w, h))
             tile = Ink(kept)
         if not tile:
             return
@@ -1103,7 +1125,7 @@ class _Reader:
             for j in range(j0, j1):
                 at = then(matrix, then(space, translate(x + i * w, y + j * h)))
                 placed.extend(affine(tile, at))
-        kept, _ = cut(placed, area)
+        kept, _ = self._cut(placed, area)
         self._count(sum(len(k) for k in kept))
         out.extend(kept)
 
