@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,9 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from clitools import cli_env, run_cli
 from fabwire.errors import InputError
+from fabwire.lineus.plot import clip as clip_module
 from fabwire.lineus.plot import parse_svg
 from fabwire.lineus.plot import svg as svg_module
 from fabwire.lineus.plot.clip import CLIP_PIECE_POINTS, cut
@@ -117,7 +120,8 @@ def test_dash_count_past_the_limit_is_refused_before_dashing(name: str, monkeypa
 def test_dashed_circles_are_refused_within_a_memory_cap() -> None:
     body = DASHED["circles"][0]
     done = _run_capped("""
-        from fabwire.errors import InputError
+        from clitools import cli_env, run_cli
+from fabwire.errors import InputError
         from fabwire.lineus.plot import parse_svg
         try:
             parse_svg(source)
@@ -133,3 +137,20 @@ def test_dashes_up_to_the_limit_are_drawn() -> None:
     drawing = parse_svg(f'{HEAD}<line x1="0" y1="50" x2="100" y2="50" stroke="black" stroke-dasharray="0.5 0.5"/>'
                         '</svg>')
     assert len(drawing.lines) == 100
+
+
+def test_cut_into_too_many_pieces_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(clip_module, "MAX_CLIP_PARTS", 50)
+    zigzag = ' '.join(f'L{x} {-10 if x % 2 else 10}' for x in range(1, 80))  # crosses the page's top edge 79 times
+    with pytest.raises(InputError, match=r"^SVG text: lines too complex to clip: .* more than 50 pieces$"):
+        parse_svg(f'{HEAD}<path fill="none" stroke="black" d="M0 10 {zigzag}"/></svg>')
+
+
+def test_cli_refuses_hostile_dashes_in_one_line(tmp_path: Path) -> None:
+    drawing = tmp_path / "dash.svg"
+    drawing.write_text(f"{HEAD}{DASHED['circles'][0]}</svg>")
+    done = run_cli("lineus", "preview", str(drawing), env=cli_env(tmp_path))
+    assert done.returncode == InputError.exit_code
+    assert "Traceback" not in done.stderr
+    assert f"more than the {MAX_DRAWING_DASHES:,} allowed" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
