@@ -19,7 +19,7 @@ from fabwire.errors import InputError
 from fabwire.lineus.plot import clip as clip_module
 from fabwire.lineus.plot import parse_svg
 from fabwire.lineus.plot import svg as svg_module
-from fabwire.lineus.plot.clip import CLIP_PIECE_POINTS, cut
+from fabwire.lineus.plot.clip import CLIP_PIECE_POINTS, MAX_CROSSING_RING_POINTS, cut
 from fabwire.lineus.plot.svg import MAX_DRAWING_DASHES
 
 HEAD = '<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="100mm" viewBox="0 0 100 100">'
@@ -120,8 +120,7 @@ def test_dash_count_past_the_limit_is_refused_before_dashing(name: str, monkeypa
 def test_dashed_circles_are_refused_within_a_memory_cap() -> None:
     body = DASHED["circles"][0]
     done = _run_capped("""
-        from clitools import cli_env, run_cli
-from fabwire.errors import InputError
+        from fabwire.errors import InputError
         from fabwire.lineus.plot import parse_svg
         try:
             parse_svg(source)
@@ -154,3 +153,19 @@ def test_cli_refuses_hostile_dashes_in_one_line(tmp_path: Path) -> None:
     assert "Traceback" not in done.stderr
     assert f"more than the {MAX_DRAWING_DASHES:,} allowed" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("name", sorted(RETRACED))
+def test_filled_self_retracing_ring_is_refused_within_a_memory_cap(name: str) -> None:
+    source = f'{HEAD}<path fill="black" stroke="black" d="{RETRACED[name]}"/></svg>'
+    done = _run_capped("""
+        from fabwire.errors import InputError
+        from fabwire.lineus.plot import parse_svg
+        try:
+            parse_svg(source)
+        except InputError as exc:
+            print(exc)
+    """, source)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.startswith("SVG text: a filled shape too complex to fill: a ring of ")
+    assert f"(at most {MAX_CROSSING_RING_POINTS:,})" in done.stdout

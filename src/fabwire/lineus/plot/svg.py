@@ -30,7 +30,7 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from fabwire.errors import InputError, excerpt
-from fabwire.lineus.plot.clip import area_of_rings, cut, cut_edge
+from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
 from fabwire.lineus.plot.svgpath import (
@@ -343,6 +343,8 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
             reader.clip_to_page(width, height)
     except RecursionError as exc:
         raise InputError(f"{name}: elements nested too deeply to read") from exc
+    except TooComplex as exc:
+        raise InputError(f"{name}: {exc}") from exc
     except (ValueError, TypeError, ZeroDivisionError, shapely.errors.ShapelyError) as exc:
         raise InputError(f"{name}: malformed SVG geometry ({exc})") from exc
     return SvgDrawing(list(reader.lines), dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
@@ -579,7 +581,7 @@ class _Reader:
         if inside.all() and not edges:
             return
         crossing = np.flatnonzero(~inside).tolist()
-        kept, hidden = self._cut([self.lines[k] for k in crossing], page)
+        kept, hidden = cut([self.lines[k] for k in crossing], page)
         lines = Ink([line for line, keep in zip(self.lines, inside.tolist(), strict=True) if keep] + kept + edges)
         self.lines = lines
         self.hidden.extend(hidden)
@@ -720,7 +722,7 @@ class _Reader:
             under = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
             if under.any():
                 hit = np.flatnonzero(under).tolist()
-                hidden, shown = self._cut([ink[k] for k in hit], fill.area)
+                hidden, shown = cut([ink[k] for k in hit], fill.area)
                 ink.drop(hit)
                 ink.extend(shown)
                 self.hidden.extend(hidden)
@@ -748,7 +750,7 @@ class _Reader:
 
     def cut_ink(self, target: Ink, region: BaseGeometry) -> None:
         """Cut lines and fills to `region`, in place: a fill is outlined along the cut as well."""
-        kept, hidden = self._cut(list(target), region)
+        kept, hidden = cut(list(target), region)
         fills: list[_Fill] = []
         for fill in target.fills:
             edges, area = cut_edge(fill.area, region)
@@ -893,13 +895,6 @@ class _Reader:
         if id(el) not in self.sheet.matched and not el.get("style"):
             return {}
         return {k: v for k, v in own_style(el, self.sheet).items() if k in GEOMETRY}
-
-    def _cut(self, lines: Polylines, region: BaseGeometry) -> tuple[Polylines, Polylines]:
-        """`cut`, its refusals naming the file."""
-        try:
-            return cut(lines, region)
-        except InputError as exc:
-            raise InputError(f"{self.name}: {exc}") from exc
 
     def _count_dashes(self, el: ET.Element, tag: str, count: int) -> None:
         self.dashes += count
@@ -1114,7 +1109,7 @@ class _Reader:
             self._patterns = self._patterns[:-1]
             self._below, self._floor = outside, floor
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
-            kept, _ = self._cut(list(tile), shapely.box(0.0, 0.0, w, h))
+            kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
             tile = Ink(kept)
         if not tile:
             return
@@ -1125,7 +1120,7 @@ class _Reader:
             for j in range(j0, j1):
                 at = then(matrix, then(space, translate(x + i * w, y + j * h)))
                 placed.extend(affine(tile, at))
-        kept, _ = self._cut(placed, area)
+        kept, _ = cut(placed, area)
         self._count(sum(len(k) for k in kept))
         out.extend(kept)
 
