@@ -99,6 +99,17 @@ MAX_DASHES = 1_000_000
 """Dashes one line may be cut into at most (a tiny dash array over a long line is drawn solid beyond this)."""
 
 
+def dash_count(line: FloatArray, pattern: Sequence[float]) -> int:
+    """Dashes a `pattern` (as for `dashed`) cuts `line` into, at most one more than exact, found from the line's
+    length alone (so a refusal costs no dash); 0 for a pattern with no positive period."""
+    values = list(pattern) * (2 if len(pattern) % 2 else 1)
+    period = float(sum(values))
+    if len(line) < 2 or not period > 0:
+        return 0
+    total = float(np.hypot(*np.diff(line, axis=0).T).sum())
+    return (math.floor(total / period) + 1) * (len(values) // 2)
+
+
 def dashed(line: FloatArray, pattern: Sequence[float], offset: float = 0.0) -> Polylines:
     """The dashes of `line` for a dash `pattern` (alternate dash and gap lengths, at least one positive, none
     negative; an odd count is repeated, SVG 1.1 §11.4) started `offset` along the pattern. A dash of length 0 comes
@@ -110,7 +121,7 @@ def dashed(line: FloatArray, pattern: Sequence[float], offset: float = 0.0) -> P
     steps = np.hypot(*np.diff(line, axis=0).T)
     along = np.concatenate([[0.0], np.cumsum(steps)])
     total = float(along[-1])
-    if total / period * len(values) > MAX_DASHES:
+    if dash_count(line, pattern) > MAX_DASHES:
         return [line]
     bounds = np.cumsum([0.0, *values])
     start = -(offset % period)

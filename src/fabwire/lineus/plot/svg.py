@@ -30,8 +30,8 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from fabwire.errors import InputError, excerpt
-from fabwire.lineus.plot.clip import area_of_rings, cut, cut_edge
-from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dashed
+from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
@@ -87,6 +87,9 @@ MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
 MAX_PATTERN_TILES = 20_000
 """Pattern tiles one fill may repeat at most; a finer pattern is drawn as the shape's outline, with a note."""
+MAX_DRAWING_DASHES = 200_000
+"""Dashes stroke-dasharray may cut one drawing's lines into: about half a day of pen strokes for a Line-us, and a
+bound on the time and memory of cutting them (a few bytes of "0.0001 0.0001" otherwise ask for tens of millions)."""
 MAX_OCCLUSION_CHECKS = 50_000_000
 """Earlier lines that opaque fills are checked against at most; beyond, later fills no longer hide lines."""
 READ_AHEAD_CHARS = 100_000
@@ -340,6 +343,8 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
             reader.clip_to_page(width, height)
     except RecursionError as exc:
         raise InputError(f"{name}: elements nested too deeply to read") from exc
+    except TooComplex as exc:
+        raise InputError(f"{name}: {exc}") from exc
     except (ValueError, TypeError, ZeroDivisionError, shapely.errors.ShapelyError) as exc:
         raise InputError(f"{name}: malformed SVG geometry ({exc})") from exc
     return SvgDrawing(list(reader.lines), dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
@@ -438,6 +443,8 @@ class _Reader:
         """Characters of SVG text read so far, in the whole file (bounded by svgtext.MAX_TEXT_CHARS)."""
         self.curved = False
         self.points = 0
+        self.dashes = 0
+        """Dashes stroke-dasharray cut the lines into so far (bounded by MAX_DRAWING_DASHES)."""
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
         self._read_ahead = self._read_straight_paths()
         self._patterns: tuple[str, ...] = ()
@@ -889,6 +896,14 @@ class _Reader:
             return {}
         return {k: v for k, v in own_style(el, self.sheet).items() if k in GEOMETRY}
 
+    def _count_dashes(self, el: ET.Element, tag: str, count: int) -> None:
+        self.dashes += count
+        if self.dashes > MAX_DRAWING_DASHES:
+            name = f"<{tag} id={excerpt(el.get('id', ''), 40)}>" if el.get("id") else f"a <{tag}>"
+            raise InputError(f"{self.name}: stroke-dasharray of {name} cuts it into {count:,} dashes, "
+                             f"{self.dashes:,} in the drawing, more than the {MAX_DRAWING_DASHES:,} allowed; "
+                             "refusing it")
+
     def _count(self, points: int) -> None:
         self.points += points
         if self.points > MAX_POINTS:
@@ -995,7 +1010,9 @@ class _Reader:
                 pts = np.vstack([pts, pts[:1]])  # the fill's border closes the subpath
             if dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between the dashes
                 inverse = _invert(matrix)
-                pieces = affine(dashed(affine([pts], inverse)[0], dashes, offset), matrix)
+                local_pts = affine([pts], inverse)[0]
+                self._count_dashes(el, tag, dash_count(local_pts, dashes))
+                pieces = affine(dashed(local_pts, dashes, offset), matrix)
                 for piece in pieces:
                     if len(piece) > 1 or caps:
                         out.append(piece)
