@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fabwire.lineus.plot import PlanOptions, plan_lines
@@ -39,6 +39,8 @@ def stroke_key(line: np.ndarray) -> bytes:
 
 @settings(max_examples=150, deadline=None)
 @given(drawings, st.sampled_from([None, 0.0, 0.002, 0.05]))
+@example([np.array([[606.0, 0.0], [600.0, 0.0]]), np.array([[600.0, 1.0], [606.0, 0.0]])], None)  # joined into
+# one stroke that starts farther from home than the given first line
 def test_the_order_draws_each_stroke_once_and_never_travels_more_than_the_input(lines: list[np.ndarray],
                                                                                budget: float | None) -> None:
     out = optimise(lines, time_budget=budget)

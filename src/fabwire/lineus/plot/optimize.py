@@ -533,8 +533,8 @@ def optimise(
     (then that order is kept), and the same lines and budget always give the same result."""
     thinned = drop_fine_points(lines, resolution)
     cleaned = join_touching(thinned, resolution)
-    if len(cleaned) < 2:
-        return cleaned
+    if len(cleaned) < 2:  # nothing to order, but joining may still have moved where the drawing starts
+        return cleaned if travel_length(cleaned, origin) <= travel_length(thinned, origin) else thinned
     starts, ends = line_ends(cleaned)
     work = work_budget(time_budget, len(cleaned))
     order, flips = greedy_order(starts, ends, origin)
