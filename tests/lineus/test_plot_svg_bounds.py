@@ -117,16 +117,20 @@ def test_dash_count_past_the_limit_is_refused_before_dashing(name: str, monkeypa
     assert "\n" not in message
 
 
+PRINT_REFUSAL = """
+    from fabwire.errors import InputError
+    from fabwire.lineus.plot import parse_svg
+    try:
+        parse_svg(source)
+    except InputError as exc:
+        print(exc)
+"""
+"""Run under the memory cap: the refusal's words on stdout (nothing when the drawing is accepted)."""
+
+
 def test_dashed_circles_are_refused_within_a_memory_cap() -> None:
     body = DASHED["circles"][0]
-    done = _run_capped("""
-        from fabwire.errors import InputError
-        from fabwire.lineus.plot import parse_svg
-        try:
-            parse_svg(source)
-        except InputError as exc:
-            print(exc)
-    """, f"{HEAD}{body}</svg>")
+    done = _run_capped(PRINT_REFUSAL, f"{HEAD}{body}</svg>")
     assert done.returncode == 0, done.stderr[-2000:]
     assert "dashes" in done.stdout
     assert f"{MAX_DRAWING_DASHES:,}" in done.stdout
@@ -158,14 +162,7 @@ def test_cli_refuses_hostile_dashes_in_one_line(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", sorted(RETRACED))
 def test_filled_self_retracing_ring_is_refused_within_a_memory_cap(name: str) -> None:
     source = f'{HEAD}<path fill="black" stroke="black" d="{RETRACED[name]}"/></svg>'
-    done = _run_capped("""
-        from fabwire.errors import InputError
-        from fabwire.lineus.plot import parse_svg
-        try:
-            parse_svg(source)
-        except InputError as exc:
-            print(exc)
-    """, source)
+    done = _run_capped(PRINT_REFUSAL, source)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.startswith("SVG text: a filled shape too complex to fill: a ring of ")
     assert f"(at most {MAX_CROSSING_RING_POINTS:,})" in done.stdout
