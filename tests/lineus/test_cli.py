@@ -209,6 +209,31 @@ def test_firmware1_never_gets_a_target_in_the_body_notch(simulator, tmp_path: Pa
     assert "collision" not in sim.stop()
 
 
+CLAMPED_MOVES = [
+    # (firmware, target, the one note's words): every way a target is kept out, on both firmware generations
+    ("1.0.1", ("600", "-200"), "is in the body notch that firmware 1.0.1 does not keep out of"),  # fabwire's guard
+    ("3.1.1", ("600", "-200"), "is in the notch beside the robot's body"),  # the firmware keeps out by itself
+    ("1.0.1", ("6000", "-200"), "is outside the drawing area"),
+    ("3.1.1", ("2500", "0"), "is outside the drawing area"),
+    ("3.1.1", ("-100", "500"), "is outside the drawing area"),
+]
+
+
+@pytest.mark.parametrize(("firmware", "target", "said"), CLAMPED_MOVES)
+def test_a_clamped_move_is_explained_once(firmware: str, target: tuple[str, str], said: str) -> None:
+    url = f"sim://lineus?version={firmware}"
+    moved = cli(url, "move", *target)
+    assert moved.returncode == 0, moved.stderr
+    notes = [line for line in moved.stderr.splitlines() if line.startswith(f"({target[0]}, {target[1]})")]
+    assert len(notes) == 1, moved.stderr
+    assert said in notes[0]
+    shell = run_cli("lineus", "-d", url, "shell", input_text=f"move {target[0]} {target[1]}\n")
+    assert shell.returncode == 0, shell.stderr
+    notes = [line for line in shell.stdout.splitlines() if f"({target[0]}, {target[1]})" in line]
+    assert len(notes) == 1, shell.stdout
+    assert said in notes[0]
+
+
 def test_shell_keeps_one_connection(simulator, tmp_path: Path) -> None:
     record = tmp_path / "rec.svg"
     sim = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "inf", "--record", str(record))

@@ -74,7 +74,7 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     assert code == 7
     line = "04101 FINDA DIDN'T TRIGGER (0x8001) during T1 — FINDA didn't trigger; check the filament path, then Retry"
     run_as = f"fabwire mmu -d {sim.url} --speed {SPEED}"  # what a message advises works as typed, link included
-    answers = f"`{run_as} button retry`, or `{run_as} reset`"
+    answers = f"`{run_as} button retry`, or `{run_as} reset --yes`"
     assert err.endswith(f"error: {line}; answer it with {answers}\n")
     assert err.count(line) == 4  # three automatic retries, then the error once, with what answers it
     assert err.count(f"{line} (retrying automatically)\n") == 3
@@ -286,14 +286,14 @@ def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on_and_where_it_will_stop(sim
     assert lines[-1] == (
         f"warning: nothing reports the printer's filament sensor to the MMU now; unless a host does (`{run_as} "
         f"monitor` does), T3 will stop at 04103 FSENSOR DIDN'T TRIGG. (0x8003) (Feeding to FSensor): then "
-        f"push the filament into the extruder and answer with `{run_as} button retry`, or `{run_as} reset`")
+        f"push the filament into the extruder and answer with `{run_as} button retry`, or `{run_as} reset --yes`")
     assert "Traceback" not in err
     assert poll_until(sim.url, "T3 E8003")  # a bare status poll, as a printer that reports no sensor sends it
     code, out, err = mmu(sim.url, "tool-change", "1")
     assert (code, out) == (7, "")
     assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04103 FSENSOR DIDN'T TRIGG. "
                            f"(0x8003) during T3 — answer it with `fabwire mmu -d {sim.url} --speed {SPEED} button "
-                           f"retry`, or `fabwire mmu -d {sim.url} --speed {SPEED} reset`")
+                           f"retry`, or `fabwire mmu -d {sim.url} --speed {SPEED} reset --yes`")
     code, out, err = mmu(sim.url, "button", "retry")  # this host reports the sensor: the change completes
     assert (code, out.strip()) == (0, "retry: T3 finished"), err
 
@@ -308,7 +308,7 @@ def test_a_failed_change_says_its_error_once_with_what_answers_it() -> None:
     assert done.stderr.count(final + " (retrying automatically)") == 3
     run_as = f"fabwire mmu -d '{url}' --speed {SPEED}"  # quoted for a shell: the URL has & and ?
     assert done.stderr.splitlines()[-1] == (f"fabwire: error: {final}; answer it with `{run_as} button retry`, or "
-                                            f"`{run_as} reset`")
+                                            f"`{run_as} reset --yes`")
 
 
 def test_the_advised_commands_repeat_every_link_option_the_command_was_run_with() -> None:
@@ -318,10 +318,14 @@ def test_the_advised_commands_repeat_every_link_option_the_command_was_run_with(
                    "--speed", SPEED, timeout=60)
     assert done.returncode == 7, done.stderr
     run_as = f"fabwire mmu -d '{url}' --timeout 7 --accept 3.0.4 --accept 3.0.3 --speed {SPEED}"
-    assert done.stderr.splitlines()[-1].endswith(f"; answer it with `{run_as} button retry`, or `{run_as} reset`")
+    assert done.stderr.splitlines()[-1].endswith(f"; answer it with `{run_as} button retry`, or `{run_as} reset --yes`")
     again = subprocess.run(["sh", "-c", f"{sys.executable} -m {run_as} status"],
                            env=cli_env(), capture_output=True, text=True, timeout=60)
     assert again.returncode == 0, again.stderr  # the advice works as typed in a shell
+    advised_reset = done.stderr.splitlines()[-1].rsplit("`", 2)[-2]
+    reset = subprocess.run(["sh", "-c", advised_reset.replace("fabwire", f"{sys.executable} -m fabwire", 1)],
+                           env=cli_env(), stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    assert reset.returncode == 0, reset.stderr  # the advised reset runs where nobody can answer a question
 
 
 @pytest.mark.parametrize(("slot", "code", "said"), [

@@ -76,4 +76,4 @@ def test_stop_leaves_the_error_and_fails() -> None:
     assert code == 7
     after = shown.split("stopped: T1 stays in")[-1]
     assert "error:" not in after  # a stop the person chose is not reported as an error
-    assert "answer it later with `fabwire mmu -d 'sim://mmu?speed=50&fault=tmc-short-selector' reset`" in after
+    assert "answer it later with `fabwire mmu -d 'sim://mmu?speed=50&fault=tmc-short-selector' reset --yes`" in after

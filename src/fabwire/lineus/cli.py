@@ -19,7 +19,7 @@ from fabwire.lineus import protocol as p
 from fabwire.units import json_key
 
 if TYPE_CHECKING:
-    from fabwire.lineus.client import LineUs
+    from fabwire.lineus.client import LineUs, Position
 
 T = TypeVar("T")
 
@@ -136,10 +136,13 @@ def move(dctx: DeviceContext, x: float, y: float, pen: str | None, z: float | No
         raise InputError(str(exc)) from None
     from fabwire.lineus import kinematics as kin
 
-    where = _with_arm(dctx, lambda arm: arm.move(x, y, height), moves=f"a move to ({x:g}, {y:g})")
+    async def moved(arm: LineUs) -> tuple[Position, bool]:
+        return await arm.move(x, y, height), arm.guard_body
+
+    where, guarded = _with_arm(dctx, moved, moves=f"a move to ({x:g}, {y:g})")
     clamped = abs(where.x - x) > 0.01 or abs(where.y - y) > 0.01
-    if clamped and not kin.is_reachable(x, y):
-        dctx.output.note(f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
+    if clamped and (note := kin.clamp_note(x, y, notch_guarded=guarded)):
+        dctx.output.note(note)
     dctx.output.result({**where.as_dict(), "clamped": clamped}, where.text())
 
 

@@ -267,6 +267,19 @@ def in_body_zone(x: float, y: float) -> bool:
     return x < X_MIN_LOWER - _EPS and y < 0
 
 
+def clamp_note(x: float, y: float, *, notch_guarded: bool) -> str | None:
+    """The one line a person is told when a move aimed at (x, y) ended elsewhere, or None: when (x, y) is reachable,
+    or when it lies in the body notch and the client's firmware 1.x guard has already said where the arm went
+    (`LineUs.guard_body`)."""
+    if is_reachable(x, y):
+        return None
+    notch = in_body_zone(x, y)
+    if notch and notch_guarded:
+        return None
+    where = "in the notch beside the robot's body" if notch else "outside the drawing area"
+    return f"({x:g}, {y:g}) is {where}: the arm went to the nearest point, pen up"
+
+
 def crosses_body_zone(a: Point, b: Point) -> bool:
     """True if the straight move a-b passes through the body-clearance notch (ends included).
 

@@ -83,9 +83,8 @@ class Session:
         x, y = _number(args[0]), _number(args[1])
         z = None if len(args) == 2 else kin.Z_UP if args[2].lower() == "up" else kin.Z_DOWN
         where = await self.arm.move(x, y, z)
-        if not kin.is_reachable(x, y):
-            self.emit({"notice": f"({x:g}, {y:g}) is outside the drawing area"},
-                      f"({x:g}, {y:g}) is outside the drawing area: the arm went to the nearest point, pen up")
+        if note := kin.clamp_note(x, y, notch_guarded=self.arm.guard_body):
+            self.emit({"notice": note.split(":", 1)[0]}, note)
         self._show(where)
 
     def _pen(self, z: float) -> Callable[[list[str]], Awaitable[None]]:

@@ -31,7 +31,7 @@ from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import EXIT_INTERRUPTED, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
-from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error
+from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error, reset_line
 from fabwire.mmu.faults import FAULT_NAMES, HANDS, PHYSICAL_BUTTONS, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
@@ -228,7 +228,7 @@ def with_mmu(check: Callable[[dict[str, Any]], None] | None = None,
                     dctx.output.note(f"warning: nothing reports the printer's filament sensor to the MMU now; unless a "
                                      f"host does (`{line} monitor` does), {command} will stop at {info} "
                                      f"({step.words}): then {step.remedy} and answer with `{line} "
-                                     f"button retry`, or `{line} reset`")
+                                     f"button retry`, or {reset_line(line)}")
                 raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
 
         return update_wrapper(wrapper, func)

@@ -18,7 +18,7 @@ from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
 from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes, units
-from fabwire.mmu.errors import MMUError, describe_error
+from fabwire.mmu.errors import MMUError, describe_error, reset_line
 from fabwire.mmu.evidence import end_state
 from fabwire.mmu.host import (
     INIT_REGISTERS,
@@ -343,7 +343,7 @@ class MMU:
             return DeviceError("stopped", f"the MMU stopped in {info} during {command}",
                                action=f"answer it with {info.answers(self.commands)}")
         return DeviceError("busy", f"the MMU is still busy with {command} ({status.words})",
-                           action=f"let it finish (`{self.commands} monitor`), or `{self.commands} reset`")
+                           action=f"let it finish (`{self.commands} monitor`), or {reset_line(self.commands)}")
 
     async def _confirmed(self, request: Request | None, finished: CommandFinished,
                          timeout: float | None) -> CommandFinished:
@@ -440,7 +440,8 @@ class MMU:
             return None
         if not isinstance(button, int):
             offered = ", ".join(c.label for c in info.choices)
-            then = f"reset the MMU (`{self.commands} reset`)" if button == "reset" else f"answer with one of: {offered}"
+            then = (f"reset the MMU ({reset_line(self.commands)})" if button == "reset"
+                    else f"answer with one of: {offered}")
             raise InputError(f"{info} offers {offered}, not {choice}: {then}")
         command = self.logic.status.command
         await self.press(button, timeout=timeout)

@@ -195,12 +195,12 @@ class ErrorInfo:
 
     def answers(self, command: str = "fabwire mmu") -> str:
         """The commands that answer this error as the printer's dialog would: "`fabwire mmu button retry`, or
-        `fabwire mmu reset`" (a reset always works; errors whose dialog offers no MMU button get only that)."""
+        `fabwire mmu reset --yes`" (a reset always works; errors whose dialog offers no MMU button get only that)."""
         words = {"retry": "retry", "continue": "continue"}
         by_button = {0: "right", 1: "middle", 2: "left"}
         buttons = [words.get(c.label.lower(), by_button[c.button]) for c in self.choices if isinstance(c.button, int)]
         return ", ".join(f"`{command} button {b}`" for b in dict.fromkeys(buttons)) + \
-            (", or " if buttons else "") + f"`{command} reset`"
+            (", or " if buttons else "") + reset_line(command)
 
     def explained(self, *, command: str = "", detail: str = "") -> str:
         """The one line that tells a person about it, printer code first:
@@ -217,6 +217,12 @@ class ErrorInfo:
 def _tmc_words(word: int) -> tuple[str, str]:
     flags = [f for f in TMC_FLAGS if _contains(word, f) and not (f == 0x8200 and _contains(word, 0xC200))]
     return "|".join(TMC_FLAGS[f] for f in flags), ", ".join(TMC_WORDS[f] for f in flags)
+
+
+def reset_line(command: str = "fabwire mmu") -> str:
+    """The reset a message advises, quoted: "`fabwire mmu reset --yes`". `--yes` because the advice is often run
+    where nobody can answer the reboot's question (a script, a pipe)."""
+    return f"`{command} reset --yes`"
 
 
 def describe_error(word: int) -> ErrorInfo:
