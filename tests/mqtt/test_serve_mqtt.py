@@ -147,6 +147,8 @@ def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto,
     rows = json.loads(fleet.stdout)["devices"]
     assert [(r["device"], r["kind"], r["agent_online"]) for r in rows] == [(device, "lineus", True)]
     agent_id = rows[0]["agent"]
+    assert agent.stdout is not None  # the owner is told the bridge is live, as where the agent listens
+    assert agent.stdout.readline() == f"fabwire agent publishing to {broker.url} as agent {agent_id}\n"
     # Killed without a goodbye: the broker's last will says the agent is offline.
     os.kill(agent.pid, signal.SIGKILL)
     watch.until(lambda w: w.latest.get(f"fabwire/agent/{agent_id}/status") == b"offline")

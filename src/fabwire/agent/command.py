@@ -131,6 +131,7 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, 
         def linked(bridge: Any) -> None:
             bridge.dashboard_url = dashboard_url
             bridge.discovery_mode = discovery
+            bridge.on_connected = lambda text: click.echo(f"fabwire agent {text}")
 
         result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls,
                                                        on_bridge=linked)

@@ -192,6 +192,9 @@ class Bridge:
         self._living: frozenset[str] = frozenset()
         self.commands_refused = 0
         """Commands answered "busy" or dropped because their device's queue was full."""
+        self.on_connected: Callable[[str], None] | None = None
+        """Told each time the broker takes the connection ("publishing to mqtt://… as agent …"): `fabwire serve`
+        prints it, as it prints where it listens, since a failed attempt is already shown."""
 
     # ------------------------------------------------------------------------------------------ connection
 
@@ -208,6 +211,8 @@ class Bridge:
                         client.pending_calls_threshold = 10 * OUTGOING_CALLS  # its warning is for leaks
                         delay = self.backoff[0]
                         log.info("MQTT connected to %s as agent %s", self.broker.url, self.agent_id)
+                        if self.on_connected is not None:
+                            self.on_connected(f"publishing to {self.broker.url} as agent {self.agent_id}")
                         await self._connected(client, events)
                 except MqttConnectError as exc:
                     raise LinkError(f"MQTT broker {self.broker.url} refused the connection: {exc}") from None
