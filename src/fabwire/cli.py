@@ -46,8 +46,9 @@ COMMANDS: dict[str, Lazy] = {
     "xyz": Lazy("fabwire.xyz.cli:xyz",
                 "XYZprinting da Vinci printers (XYZv3 over USB serial or Wi-Fi): status, print, maintenance."),
     "lineus": Lazy("fabwire.lineus.cli:lineus",
-                   "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery."),
-    "mmu": Lazy("fabwire.mmu.cli:mmu", "Drive a Prusa MMU3 over its serial protocol, as the printer does."),
+                   "Line-us drawing robot: draw SVGs and text, preview, move the arm, stored drawings, Wi-Fi."),
+    "mmu": Lazy("fabwire.mmu.cli:mmu",
+                "Prusa MMU3, driven as the printer does: tool changes, buttons, registers, monitor."),
     "demo": Lazy("fabwire.demo:demo", "A tour on simulators: a da Vinci print, a Line-us drawing and MMU3 tool "
                                       "changes with a fault and Retry."),
     "fleet": Lazy("fabwire.mqtt.fleet:fleet",

@@ -227,7 +227,7 @@ LINK_OPTIONS: dict[str, tuple[OptionFactory, ...]] = {
                     help="The MMU runs this many times faster than real time (a simulator's --speed); "
                          "the heartbeat and timeouts shrink to match [default: 1, or the device's setting]."),
         link_option("mmu", "accept", "--accept", multiple=True, metavar="X.Y.Z",
-                    help="Firmware versions to accept (default 3.0.2, 3.0.3, 3.0.4)."),
+                    help="MMU firmware versions to accept (repeatable; default 3.0.2, 3.0.3, 3.0.4)."),
     ),
 }
 """Each device kind's own link options, accepted anywhere on the line: before its group, on it, or after."""

@@ -126,13 +126,17 @@ def list_cmd(app: App) -> None:
 @click.argument("name")
 @pass_app
 def show(app: App, name: str) -> None:
-    """Show every setting of device NAME (defaults included) as TOML; a setting without a value is a comment."""
+    """Show every setting of device NAME as TOML: a setting at its default value says `# default`, a setting
+    without a value is a comment."""
     path = config_path()
     device = _find(load_devices(path), name, path)
     settings = msgspec.to_builtins(device.settings)
     first = {"name": name, "kind": device.kind.name, "url": settings.pop("url"), "default": settings.pop("default")}
     data = {**first, **settings}
-    lines = [f"# {key}: not set" if value is None else f"{key} = {_toml_value(value)}"
+    defaults = {f.encode_name: msgspec.to_builtins(f.default) for f in msgspec.structs.fields(device.settings)
+                if f.default is not msgspec.NODEFAULT}
+    lines = [f"# {key}: not set" if value is None
+             else f"{key} = {_toml_value(value)}" + ("  # default" if defaults.get(key, ...) == value else "")
              for key, value in data.items() if key != "name"]
     app.output.result(data, "\n".join([f"[devices.{_toml_key(name)}]", *lines]))
 

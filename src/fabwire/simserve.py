@@ -61,7 +61,7 @@ def server_options(default_port: int | None) -> Callable[[Callable[..., Any]], C
     def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
         hint = f" (default port {default_port})" if default_port else ""
         func = click.option("--link", type=click.Path(dir_okay=False, path_type=Path),
-                            help="With --pty: also make a symlink at PATH to the pty.")(func)
+                            help="With --pty: also make a symlink FILE that points to the pty.")(func)
         func = click.option("--pty", "use_pty", is_flag=True, help="Serve on a raw pseudo-terminal.")(func)
         return click.option("--listen", "listen", multiple=True, metavar="HOST:PORT",
                             help=f"Serve on TCP{hint}; repeat for several addresses.")(func)

@@ -83,3 +83,38 @@ def test_unwritable_output_is_one_clear_error(tmp_path: Path) -> None:
     assert done.returncode == 4
     assert done.stderr.strip().startswith("fabwire: error: cannot create the output directory")
     assert "Traceback" not in done.stderr
+
+
+def test_keep_running_shows_the_tour_table_before_waiting_and_ctrl_c_stops_the_simulators(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+
+    process = subprocess.Popen([sys.executable, "-m", "fabwire", "--json", "demo", "--only", "mmu", "--out",
+                                str(tmp_path / "out"), "--speed", SPEED, "--keep-running"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    try:
+        assert process.stdout is not None
+        summary = json.loads(process.stdout.readline())  # while the simulators are still up
+        assert summary["ok"] is True
+        pids = [s["pid"] for s in summary["simulators"]]
+        assert pids
+        assert process.stderr is not None
+        said = []  # the tour, then how to reach the simulators
+        for line in iter(process.stderr.readline, ""):
+            said.append(line)
+            if line == "Press Ctrl-C to stop them.\n":
+                break
+        assert said[-1] == "Press Ctrl-C to stop them.\n", said
+        assert all(_alive(pid) for pid in pids)
+        process.send_signal(signal.SIGINT)
+        process.wait(60)
+        rest, err = process.stdout.read(), process.stderr.read()  # the same buffered readers as above
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait(10)
+    assert process.returncode == 0, err
+    assert rest == ""  # the table is said once
+    assert err == "stopping the simulators …\n"
+    assert not [pid for pid in pids if _alive(pid)]

@@ -165,6 +165,10 @@ def test_show_prints_the_entry_as_toml_that_reads_back(tmp_path: Path) -> None:
     entry = tomllib.loads(shown.stdout)["devices"]["office"]
     assert entry == {"kind": "xyz", "url": "192.168.1.50", "default": False, "link": "wifi", "timeout": 5.0}
     assert "# reply_timeout: not set" in shown.stdout.splitlines()
+    lines = shown.stdout.splitlines()  # what the file sets is told apart from a default
+    assert 'link = "wifi"' in lines
+    assert "timeout = 5.0  # default" in lines
+    assert "default = false  # default" in lines
 
 
 def test_a_name_that_reads_as_an_address_is_refused(tmp_path: Path) -> None:

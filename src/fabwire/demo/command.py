@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import signal
-import time
+import threading
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 from types import FrameType
@@ -94,6 +94,7 @@ def demo(app: App, speed: float, only: tuple[str, ...], out_dir: Path, keep_runn
     previous = signal.signal(signal.SIGTERM, _terminate)
     sims: dict[str, SimulatorProcess] = {}
     failure: BaseException | None = None
+    reported = False
     try:
         err.print(f"starting {len(devices)} simulator(s) on 127.0.0.1 at speed ×{speed:g} …")
         with summary.step("all", "start simulators") as step:
@@ -106,8 +107,14 @@ def demo(app: App, speed: float, only: tuple[str, ...], out_dir: Path, keep_runn
         asyncio.run(_tour(ctx, sims, devices))
         if "lineus" in sims and record is not None:
             _collect_record(ctx, sims, record, speed)
-        if keep_running:
-            _keep_running(ctx, sims, speed)
+        if keep_running:  # the tour's table now, not after the time the simulators are left up
+            try:
+                summary.finish()
+                reported = True  # before: a Ctrl-C as soon as the table shows must not show it again
+                _report(app, summary)
+                _keep_running(ctx, sims, speed)
+            except KeyboardInterrupt:  # the way to end it, once the tour is done
+                ctx.say("stopping the simulators …")
     except BaseException as exc:
         failure = exc
         raise
@@ -118,8 +125,9 @@ def demo(app: App, speed: float, only: tuple[str, ...], out_dir: Path, keep_runn
             failure = problems[0]
         if failure is not None:
             summary.error = str(failure) or type(failure).__name__
-        summary.finish()
-        _report(app, summary)
+        if not reported:
+            summary.finish()
+            _report(app, summary)
     if problems:
         raise problems[0]
 
@@ -146,13 +154,21 @@ def _keep_running(ctx: DemoContext, sims: dict[str, SimulatorProcess], speed: fl
     for device in DEVICES:
         if device in sims:
             ctx.say("  " + EXAMPLES[device].format(url=sims[device].url, speed=speed))
-    ctx.say("Press Ctrl-C to stop them.")
+    stop = threading.Event()  # a flag, not KeyboardInterrupt: a Ctrl-C must not cut a line being printed
+
+    def asked(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    previous = {sig: signal.signal(sig, asked) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
+        ctx.say("Press Ctrl-C to stop them.")
         while all(s.running() for name, s in sims.items() if name in DEVICES):
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        ctx.say("stopping the simulators …")
-        return
+            if stop.wait(0.5):
+                ctx.say("stopping the simulators …")
+                return
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     stopped = [name for name, s in sims.items() if name in DEVICES and not s.running()]
     raise FabwireError(f"the {stopped[0]} simulator stopped on its own")
 

@@ -24,7 +24,8 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 
 
-@device_group(LINEUS, "Line-us drawing robot: move the arm, stored drawings, name, Wi-Fi, discovery.", lazy={
+@device_group(LINEUS, "Line-us drawing robot: draw SVGs and text, preview, move the arm, stored drawings, Wi-Fi.",
+              lazy={
     "draw": Lazy("fabwire.lineus.draw_cli:draw",
                  "Draw an SVG, SVGZ or Line-us G-code FILE ('-' reads it from standard input).", "lineus"),
     "text": Lazy("fabwire.lineus.draw_cli:text", "Write TEXT in a single-stroke font (\\n starts a new line, \\t moves "

@@ -249,7 +249,8 @@ def _write_args(kwargs: dict[str, Any]) -> None:
     _parse_value(kwargs["value"])
 
 
-@device_group(MMU_KIND, "Drive a Prusa MMU3 over its serial protocol, as the printer does.", LINK_OPTIONS["mmu"])
+@device_group(MMU_KIND, "Prusa MMU3, driven as the printer does: tool changes, buttons, registers, monitor.",
+              LINK_OPTIONS["mmu"])
 def mmu() -> None:
     pass
 
