@@ -87,7 +87,7 @@ def test_stuck_fault_fails_clearly_then_button_retry(simulator: SimulatorStarter
     assert f"error         {line}\n" in out
     code, _, err = mmu(sim.url, "tool-change", "2")  # the MMU still waits in T1's error
     assert code == 7
-    assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04101 FINDA DIDN'T TRIGGER "
+    assert err.strip() == ("fabwire: error: the MMU stopped in 04101 FINDA DIDN'T TRIGGER "
                            f"(0x8001) during T1 — answer it with {answers}")
     code, out, err = mmu(sim.url, "button", "retry")  # the fourth failure was the last: this Retry heals
     assert (code, out.strip()) == (0, "retry: T1 finished"), err
@@ -291,7 +291,7 @@ def test_ctrl_c_in_a_tool_change_says_the_mmu_goes_on_and_where_it_will_stop(sim
     assert poll_until(sim.url, "T3 E8003")  # a bare status poll, as a printer that reports no sensor sends it
     code, out, err = mmu(sim.url, "tool-change", "1")
     assert (code, out) == (7, "")
-    assert err.strip() == ("fabwire: error: device error stopped: the MMU stopped in 04103 FSENSOR DIDN'T TRIGG. "
+    assert err.strip() == ("fabwire: error: the MMU stopped in 04103 FSENSOR DIDN'T TRIGG. "
                            f"(0x8003) during T3 — answer it with `fabwire mmu -d {sim.url} --speed {SPEED} button "
                            f"retry`, or `fabwire mmu -d {sim.url} --speed {SPEED} reset --yes`")
     code, out, err = mmu(sim.url, "button", "retry")  # this host reports the sensor: the change completes

@@ -340,9 +340,9 @@ class MMU:
         command = status.command if status.command[:1] in "TLUEKHM" else str(self.logic.command)
         if status.kind == "E":
             info = describe_error(status.value)
-            return DeviceError("stopped", f"the MMU stopped in {info} during {command}",
+            return DeviceError("", f"the MMU stopped in {info} during {command}",  # its code is in the words
                                action=f"answer it with {info.answers(self.commands)}")
-        return DeviceError("busy", f"the MMU is still busy with {command} ({status.words})",
+        return DeviceError("", f"the MMU is still busy with {command} ({status.words})",
                            action=f"let it finish (`{self.commands} monitor`), or {reset_line(self.commands)}")
 
     async def _confirmed(self, request: Request | None, finished: CommandFinished,
