@@ -2,27 +2,31 @@
 
 from __future__ import annotations
 
+import compileall
+import io
+import os
 import random
 import subprocess
 import sys
+import tarfile
 import tempfile
 from pathlib import Path
 
-from common import Figure, cpu_seconds, ratio_figure, run_command
+from common import Figure, cpu_seconds, interleaved, ratio_figure
 from fabwire.xyz.threew import convert_3w_to_gcode, convert_gcode_file
 
 SIZE = 50_000_000
 TARGET_MB_S = 100.0
 TARGET_RSS_MB = 100.0
-BEFORE_PLANNER_CPU_S = 0.82
-"""Whole-command CPU (user + system) of `fabwire xyz convert` of the 50 MB G-code without a slicer header, as it was
-before conversions planned each move's acceleration and read every move for the build volume and arcs (the time
-was path over feed rate then): the median of interleaved runs beside the present code on the benchmark machine
-(2 shared cores)."""
+BEFORE_PLANNER = "df25052"
+"""The commit whose `fabwire xyz convert` is the baseline of the no-header conversion: the last one before
+conversions planned each move's acceleration and read every move for the build volume and arcs (the time was path
+over feed rate then). Its sources are taken from the git history and run side by side with the present ones."""
 MINIMOVER_BEFORE, MINIMOVER_TARGET = 0.57, 0.6
-"""That conversion took 0.57x the CPU of the reference client miniMover's; the target is 0.6x. miniMover is not
-installed here, so the target is stated against the figure from before: 0.6 / 0.57 of it."""
-RUNS = 3
+"""That conversion took 0.57x the CPU of the reference client miniMover's; the target is 0.6x. Measured against
+the code from before, the target is 0.6 / 0.57 of its figure."""
+RUNS = 5
+ROOT = Path(__file__).resolve().parent.parent
 
 _RSS_PROBE = """
 import resource, subprocess, sys
@@ -69,6 +73,45 @@ def peak_rss_mb(direction: str, src: Path, dst: Path) -> float:
     return int(done.stdout.strip()) / 1024
 
 
+def sources_at(commit: str, into: Path) -> tuple[Path | None, str]:
+    """(the `src` directory of `commit` extracted under `into` and byte-compiled, "") or (None, why not)."""
+    try:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit, "src"],
+                                 capture_output=True, check=False, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return None, f"git did not run ({exc})"
+    if archive.returncode != 0:
+        said = archive.stderr.decode(errors="replace").strip().splitlines()
+        return None, f"git history of {commit} not available ({said[-1] if said else archive.returncode})"
+    with tarfile.open(fileobj=io.BytesIO(archive.stdout), mode="r:") as tar:
+        tar.extractall(into, filter="data")
+    src = into / "src"
+    compileall.compile_dir(src, quiet=1)
+    env = {**os.environ, "PYTHONPATH": str(src)}
+    where = subprocess.run([sys.executable, "-c", "import fabwire; print(fabwire.__file__)"], env=env,
+                           capture_output=True, text=True, check=False).stdout.strip()
+    if not where.startswith(str(src)):
+        return None, f"the sources of {commit} do not take precedence over the installed ones ({where})"
+    return src, ""
+
+
+def against_before(src: Path, work: Path) -> list[Figure]:
+    """The no-header conversion as a whole command, interleaved with the same command of the code from before the
+    planner: median CPU of RUNS rounds each."""
+    name = "xyz convert 50 MB, no header: whole-command CPU"
+    convert = [sys.executable, "-m", "fabwire", "xyz", "convert", str(src)]
+    commands = {"now": ([*convert, str(work / "now.3w")], None)}
+    old, why = sources_at(BEFORE_PLANNER, work / "before")
+    if old is not None:
+        commands["before"] = ([*convert, str(work / "before.3w")], {**os.environ, "PYTHONPATH": str(old)})
+    runs = interleaved(commands, RUNS)
+    now = runs["now"].cpu
+    if old is None:
+        return [Figure(f"{name} (no side-by-side baseline: {why})", now, "s")]
+    return [ratio_figure(f"{name} vs before the planner ({BEFORE_PLANNER}, same run)", now, "s", runs["before"].cpu,
+                         "before", MINIMOVER_TARGET / MINIMOVER_BEFORE)]
+
+
 def run() -> list[Figure]:
     figures: list[Figure] = []
     with tempfile.TemporaryDirectory() as scratch:
@@ -95,11 +138,7 @@ def run() -> list[Figure]:
                     figures.append(Figure(f"peak RSS, {direction} 50 MB (subprocess)", rss, "MB",
                                           f"< {TARGET_RSS_MB:.0f}", rss < TARGET_RSS_MB))
             else:
-                runs = [run_command([sys.executable, "-m", "fabwire", "xyz", "convert", str(src), str(out)]).cpu
-                        for _ in range(RUNS)]
-                figures.append(ratio_figure(
-                    "xyz convert 50 MB, no header: whole-command CPU vs before the planner (no miniMover here)",
-                    sorted(runs)[RUNS // 2], "s", BEFORE_PLANNER_CPU_S, "before", MINIMOVER_TARGET / MINIMOVER_BEFORE))
+                figures.extend(against_before(src, work))
                 rss = peak_rss_mb("encode", src, out)
                 figures.append(Figure("peak RSS, encode 50 MB, metadata computed (subprocess)", rss, "MB",
                                       f"< {TARGET_RSS_MB:.0f}", rss < TARGET_RSS_MB))

@@ -102,8 +102,10 @@ IMPORTS: list[tuple[str, str, set[str]]] = [
     ("status", "xyz -d {address} status",  # the panel: rich, which loads random itself
      NOT_XYZ | XYZ_PRINTER_SIDE | HEAVY - {"rich", "dataclasses"} | STATUS_SPARES - {"random"}),
     # a .3w printed with standard error on a pipe: plain lines (no rich), the file checked without G-code scanning
+    # and without the table of slicer wordings
     ("status", "xyz -d {address} print {job} --no-wait",
-     NOT_XYZ | {"numpy", "rich", "fabwire.xyz.gcodeinfo", "fabwire.xyz.printer", "fabwire.xyz.sim"}),
+     NOT_XYZ | {"numpy", "rich", "fabwire.xyz.gcodeinfo", "fabwire.xyz.printer", "fabwire.xyz.sim",
+                "fabwire.xyz.slicerfigures"}),
 ]
 
 

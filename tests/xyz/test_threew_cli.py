@@ -268,3 +268,55 @@ def test_any_stated_figure_is_believed_or_set_aside_never_a_crash(tmp_path_facto
     if digits >= 19 and "facets" not in line:
         assert stated.notes  # no print has such a figure: said so, and computed
         assert computed is not None
+
+
+_LOADED = ("import sys\nfrom fabwire.__main__ import run\nsys.argv = ['fabwire', *sys.argv[1:]]\n"
+           "try:\n    run()\nexcept SystemExit as exc:\n    code = exc.code\n"
+           "print('rich' in sys.modules, file=sys.stderr)\nsys.exit(code)\n")
+
+
+def _big_gcode(path: Path) -> Path:
+    from fabwire.xyz.threew_cli import BAR_THRESHOLD
+
+    line = b"G1 X10.5 Y20.25 E0.125\nG1 X30.5 Y40.25 E0.25\n"
+    path.write_bytes(b"M83\nG28\n" + line * (BAR_THRESHOLD // len(line) + 1))
+    return path
+
+
+def test_a_large_conversion_off_a_terminal_draws_no_bar_and_loads_no_rich(tmp_path: Path) -> None:
+    src = _big_gcode(tmp_path / "big.gcode")
+    done = subprocess.run([sys.executable, "-c", _LOADED, "xyz", "convert", str(src), str(tmp_path / "big.3w")],
+                          capture_output=True, timeout=300, env=cli_env(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.decode().splitlines() == ["False"]  # nothing drawn, and rich never imported
+    assert b"wrote" in done.stdout
+    assert read_3w(tmp_path / "big.3w").gcode.endswith(b"G1 X30.5 Y40.25 E0.25\n")
+
+
+def test_a_large_conversion_on_a_terminal_draws_its_bar(tmp_path: Path) -> None:
+    import pty
+    import select
+
+    src = _big_gcode(tmp_path / "big.gcode")
+    env = cli_env(tmp_path)
+    env["TERM"] = "xterm"
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: the command on the terminal
+        os.execve(sys.executable, [sys.executable, "-m", "fabwire", "xyz", "convert", str(src),
+                                   str(tmp_path / "big.3w")], env)
+    said = b""
+    try:
+        while select.select([fd], [], [], 120)[0]:  # a bound against hanging, not a pass/fail window
+            try:
+                chunk = os.read(fd, 65536)
+            except OSError:  # the child closed the terminal
+                break
+            if not chunk:
+                break
+            said += chunk
+        _, status = os.waitpid(pid, 0)
+    finally:
+        os.close(fd)
+    assert os.waitstatus_to_exitcode(status) == 0, said[-2000:]
+    assert b"encoding big.3w" in said
+    assert b"wrote" in said

@@ -25,7 +25,6 @@ from typing import TYPE_CHECKING, BinaryIO
 
 from fabwire import units
 from fabwire.errors import InputError, excerpt
-from fabwire.xyz import slicerfigures
 from fabwire.xyz.models import PrinterModel
 
 if TYPE_CHECKING:  # the move analysis (numpy) is loaded when G-code is read, not to decode a .3w
@@ -664,6 +663,8 @@ def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, forc
 def _check_plausible(meta: GcodeMetadata, name: str, how: str, why: str) -> None:
     """InputError when the figures say the file is no print at all: coordinates far outside any build volume
     (a Z of 1e23 mm) add up to centuries of printing, and the printer would show that as its time left."""
+    from fabwire.xyz import slicerfigures  # its wordings are for G-code: a .3w sent as it is never loads them
+
     too_long = meta.print_time_s is not None and meta.print_time_s > slicerfigures.MAX_PRINT_S
     too_much = meta.filament_mm is not None and not meta.filament_mm <= slicerfigures.MAX_FILAMENT_MM
     too_many = [f"{units.count(n, noun)}" for n, noun in ((meta.layers, "layer"), (meta.facets, "facet"))

@@ -218,11 +218,21 @@ def _at(column: Floats, rows: NDArray[np.intp]) -> Floats:
     return column if len(column) == 1 else column[rows]
 
 
-def _jerk(v_exit: Floats, v_entry: Floats) -> Floats:
-    """An axis's speed change at junctions: the larger of the two speeds where it reverses."""
-    jerk: Floats = np.where(v_exit * v_entry < 0, np.maximum(np.abs(v_exit), np.abs(v_entry)),
-                            np.abs(v_exit - v_entry))
+def _jerk(v_exit: Floats, v_entry: Floats, entry_speed: Floats | None = None) -> Floats:
+    """An axis's speed change at junctions: the larger of the two speeds where it reverses (`entry_speed`: the
+    magnitude of `v_entry`, when known)."""
+    jerk: Floats = np.where(v_exit * v_entry < 0, np.maximum(np.abs(v_exit), np.abs(v_entry) if entry_speed is None
+                                                             else entry_speed), np.abs(v_exit - v_entry))
     return jerk
+
+
+def _with_next(rows: NDArray[np.intp], count: int) -> NDArray[np.intp]:
+    """The sorted rows `rows` (ascending) of `count`, the rows just after them and row 0."""
+    marked = np.zeros(count, dtype=bool)
+    marked[0] = True
+    marked[rows] = True
+    marked[rows[rows + 1 < count] + 1] = True
+    return np.flatnonzero(marked)
 
 
 def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | None) -> tuple[float, _Carry]:
@@ -232,7 +242,9 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     moving = length > 0
     dist = np.where(moving, length, np.abs(de))
     deltas = (dx, dy, dz, de)
-    moves = [np.count_nonzero(delta) for delta in deltas]
+    nonzero = [delta != 0 for delta in deltas]
+    moves = [np.count_nonzero(moved) for moved in nonzero]
+    ones, zeros = np.ones(count), np.zeros(count + 1)  # minimum/maximum with an array: faster than with a number
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse_dist = 1.0 / dist
         # still moves of an axis set no limit, unless a distance too small for its inverse makes them NaN
@@ -240,14 +252,14 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
         axes = [a for a in range(4) if moves[a] > few or (moves[a] and not few)]  # planned on every move
         others = [a for a in range(4) if a not in axes and (moves[a] or carry is not None)]
         sparse, still = (others, []) if few else ([], others)
-        moved = {a: np.flatnonzero(deltas[a]) for a in sparse}
+        moved = {a: np.flatnonzero(nonzero[a]) for a in sparse}
         unit = [deltas[a] * inverse_dist for a in axes]
         inverse = [1.0 / np.abs(u) for u in unit]  # inf for an axis that does not move
         few_unit = [deltas[a][moved[a]] * inverse_dist[moved[a]] for a in sparse]
         few_inverse = [1.0 / np.abs(u) for u in few_unit]
         uniform = len(lim["min_feed"]) == 1  # one set of limits for the window
-        speed = np.maximum(feed / 60.0, lim["min_feed"] if uniform and lim["min_feed"] == lim["min_travel"] else
-                           np.where(de == 0, lim["min_travel"], lim["min_feed"]))
+        speed = np.maximum(feed / 60.0, ones * lim["min_feed"] if uniform and lim["min_feed"] == lim["min_travel"]
+                           else np.where(de == 0, lim["min_travel"], lim["min_feed"]))
         cruise = _smallest([speed] + [lim["max_feedrate"][:, a] * inverse[k] for k, a in enumerate(axes)])
         if uniform and lim["retract"] == lim["acceleration"] == lim["travel"]:
             accel = np.full(count, float(lim["acceleration"][0]))
@@ -258,10 +270,11 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
             rows = moved[a]
             cruise[rows] = np.minimum(cruise[rows], _at(lim["max_feedrate"][:, a], rows) * few_inverse[k])
             accel[rows] = np.minimum(accel[rows], _at(lim["max_acceleration"][:, a], rows) * few_inverse[k])
-    velocity = [cruise * u for u in unit]
-    jerk_limit = [lim["jerk"][:, a] for a in axes]
-    safe = _smallest([cruise] + [np.where(np.abs(v) > limit, limit, np.inf) for v, limit in zip(velocity, jerk_limit,
-                                                                                            strict=True)])
+        velocity = [cruise * u for u in unit]
+        speeds = [np.abs(v) for v in velocity]
+        # the jerk limit where an axis's speed exceeds it, else inf (limits are positive: see `_sane`)
+        safe = _smallest([cruise] + [np.divide(lim["jerk"][:, a], s > lim["jerk"][:, a]) for s, a in zip(
+            speeds, axes, strict=True)])
     if safe is cruise:
         safe = cruise.copy()
     few_velocity = []
@@ -278,16 +291,16 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     first = carry is None
     prev_cruise = np.concatenate(([cruise[0] if carry is None else carry.cruise], cruise[:-1]))
     prev_safe = np.concatenate(([safe[0] if carry is None else carry.safe], safe[:-1]))
-    factor = np.ones(len(cruise))
+    factor = ones
     with np.errstate(divide="ignore", invalid="ignore"):
-        slower = np.minimum(1.0, cruise / prev_cruise)  # the previous move's speeds as it slows to this one's
+        slower = np.minimum(ones, cruise / prev_cruise)  # the previous move's speeds as it slows to this one's
         for k, a in enumerate(axes + still):
-            v_entry = velocity[k] if k < len(axes) else np.zeros(count)
+            v_entry, s_entry = (velocity[k], speeds[k]) if k < len(axes) else (zeros[:count], zeros[:count])
             before = v_entry[0] if carry is None else carry.velocity[a]
             v_exit = np.concatenate(([before], v_entry[:-1])) * slower
-            factor = np.minimum(factor, lim["jerk"][:, a] / _jerk(v_exit, v_entry))
+            factor = np.minimum(factor, lim["jerk"][:, a] / _jerk(v_exit, v_entry, s_entry))
         for k, a in enumerate(sparse):  # the moves of the axis and the ones after them (and the window's first)
-            rows = np.union1d(np.append(moved[a], 0), (moved[a] + 1)[moved[a] + 1 < count])
+            rows = _with_next(moved[a], count)
             v_entry = few_velocity[k][rows]
             v_before = few_velocity[k][rows - 1]
             v_before[rows == 0] = v_entry[0] if carry is None else carry.velocity[a]
@@ -301,22 +314,25 @@ def _plan_window(columns: list[Floats], table: list[Limits], carry: _Carry | Non
     limit_sq = np.concatenate((junction * junction, [safe[-1] * safe[-1]]))
 
     # Reverse then forward pass: squared entry speeds, each within reach of the next and of the previous move.
-    gain = 2.0 * accel * dist
-    prefix = np.concatenate(([0.0], np.cumsum(gain)))
+    twice_accel = 2.0 * accel
+    prefix = np.empty(count + 1)
+    prefix[0] = 0.0
+    np.cumsum(twice_accel * dist, out=prefix[1:])
     reverse = np.minimum.accumulate((limit_sq + prefix)[::-1])[::-1] - prefix
     reach = math.inf if carry is None else carry.reach
     forward = np.minimum.accumulate(np.concatenate(([reach], reverse - prefix)))[1:] + prefix
-    forward = np.maximum(forward, 0.0)
-    v0 = np.minimum(np.sqrt(forward[:-1]), cruise)
-    v1 = np.minimum(np.sqrt(forward[1:]), cruise)
+    forward = np.maximum(forward, zeros)
+    root = np.sqrt(forward)
+    v0 = np.minimum(root[:-1], cruise)
+    v1 = np.minimum(root[1:], cruise)
 
     # Each move's trapezoid: up to its peak speed (the cruise speed, or less when the move is too short to reach
     # it), any cruise, down to the exit speed.
     v0_sq, v1_sq = v0 * v0, v1 * v1
-    peak = np.minimum(cruise, np.sqrt(accel * dist + (v0_sq + v1_sq) / 2))
+    peak = np.minimum(cruise, np.sqrt(accel * dist + (v0_sq + v1_sq) * 0.5))
     peak = np.maximum(peak, np.maximum(v0, v1))
-    ramps = (2 * cruise * cruise - v0_sq - v1_sq) / (2 * accel)
-    times = (2 * peak - v0 - v1) / accel + np.maximum(dist - ramps, 0.0) / cruise
+    ramps = (2 * cruise * cruise - v0_sq - v1_sq) / twice_accel
+    times = (2 * peak - v0 - v1) / accel + np.maximum(dist - ramps, zeros[:count]) / cruise
     last = np.zeros(4)
     last[axes] = [v[-1] for v in velocity]
     last[sparse] = [v[-1] for v in few_velocity]

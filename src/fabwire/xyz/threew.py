@@ -20,13 +20,14 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO, Literal
-
-from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
+from typing import TYPE_CHECKING, Any, BinaryIO, Literal
 
 from fabwire.errors import InputError
 from fabwire.xyz import intake
 from fabwire.xyz.models import PrinterModel, default_model, find_model, model_for_file_id
+
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.ciphers import Cipher
 
 MAGIC = intake.MAGIC
 BODY_OFFSET = 0x2000
@@ -134,8 +135,16 @@ def _unpad(data: bytes) -> tuple[bytes, bool]:
     return data, False
 
 
+def _aes(key: bytes, *, cbc: bool = False) -> Cipher[Any]:
+    """AES under `key`: ECB, or CBC from a zero IV. The cipher library loads on first use: a command that only
+    sends or lists files needs none."""
+    from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
+
+    return Cipher(algorithms.AES(key), modes.CBC(bytes(16)) if cbc else modes.ECB())
+
+
 def _cbc128(data: bytes, *, decrypt: bool = False) -> bytes:
-    cipher = Cipher(algorithms.AES(KEY_128), modes.CBC(bytes(16)))
+    cipher = _aes(KEY_128, cbc=True)
     ctx = cipher.decryptor() if decrypt else cipher.encryptor()
     return ctx.update(data) + ctx.finalize()
 
@@ -185,7 +194,7 @@ def _stored_header(container: int, header: bytes) -> bytes:
 
 def _encrypt_ecb(pieces: Iterator[bytes], out: BinaryIO) -> tuple[int, int, int]:
     """Returns (crc of stored body, stored size, plaintext size)."""
-    encryptor = Cipher(algorithms.AES(KEY_256), modes.ECB()).encryptor()  # buffers partial blocks itself
+    encryptor = _aes(KEY_256).encryptor()  # buffers partial blocks itself
     crc = size = plain = 0
     for piece in pieces:
         plain += len(piece)
@@ -463,7 +472,7 @@ def _decrypt_ecb(
             plain += len(block)
         return crc, plain, True, False
     _refuse_ragged(body_size, name)
-    decryptor = Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor()
+    decryptor = _aes(KEY_256).decryptor()
     held = b""
     plain = 0
     block = first
@@ -625,7 +634,7 @@ def check_3w(data_or_path: bytes | str | Path) -> ThreeWCheck:
         if first[:1] != b";":  # an encrypted body (a plain one starts with its header's comments)
             _refuse_ragged(body_size, name)
             start = first[:SNIFF_BLOCK]
-            _refuse_undecryptable(Cipher(algorithms.AES(KEY_256), modes.ECB()).decryptor().update(start), name)
+            _refuse_undecryptable(_aes(KEY_256).decryptor().update(start), name)
         crc = zlib.crc32(first)
         while block := src.read(piece):
             crc = zlib.crc32(block, crc)

@@ -9,8 +9,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import click
-from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
-from rich.table import Table
 
 from fabwire import units
 from fabwire.cli_support import App
@@ -29,7 +27,7 @@ from fabwire.xyz.threew import (
 )
 
 BAR_THRESHOLD = 8 << 20
-"""Files at least this large get a progress bar."""
+"""Files at least this large get a progress bar (where rich draws one: on a terminal)."""
 
 
 def _app(ctx: click.Context) -> App:
@@ -38,9 +36,11 @@ def _app(ctx: click.Context) -> App:
 
 @contextlib.contextmanager
 def _progress(app: App, label: str, size: int) -> Iterator[ProgressCallback | None]:
-    if size < BAR_THRESHOLD:
+    if size < BAR_THRESHOLD or not app.output.lines_err().is_terminal:  # off a terminal the bar is never drawn
         yield None
         return
+    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
+
     columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                TimeRemainingColumn())
     with Progress(*columns, console=app.output.err, transient=True) as bar:
@@ -193,6 +193,8 @@ def info(ctx: click.Context, file: Path) -> None:
     data = {"file": str(file), "size_bytes": size, **_info_data(details)}
 
     def human() -> None:
+        from rich.table import Table
+
         table = Table(show_header=False, box=None)
         table.add_column(style="bold")
         table.add_column()
