@@ -36,6 +36,21 @@ def raw_request(agent: RunningAgent, head: bytes, body: bytes = b"") -> socket.s
     return sock
 
 
+def ended_by_server(sock: socket.socket) -> bool:
+    """Whether the server closes the connection (end of stream, or a reset for bytes it left unread) while this
+    side keeps quiet."""
+    sock.settimeout(0.5)
+    for _ in range(120):  # (a bound against a hang, not a timing check)
+        try:
+            if not sock.recv(65536):
+                return True
+        except TimeoutError:
+            continue
+        except ConnectionResetError:
+            return True
+    return False
+
+
 @pytest.fixture
 def agent(tmp_path: Path) -> Iterator[RunningAgent]:
     running = start_agent(tmp_path / "state", "--device", PRINTER)
@@ -252,9 +267,13 @@ def test_a_trickled_upload_is_408_and_the_machine_is_free_after(tmp_path: Path, 
                     continue
                 if b"\r\n\r\n" in answer and answer.endswith(b"}"):
                     break
+            closed = ended_by_server(sock)
             sock.close()
             status, _, rest = answer.partition(b"\r\n\r\n")
             assert status.startswith(b"HTTP/1.1 408"), answer
+            # the rest of the body may still be on its way: the answer ends the connection (RFC 9110 §15.5.9)
+            assert b"\r\nconnection: close\r\n" in status.lower() + b"\r\n", status
+            assert closed
             assert "arrives too slowly" in json.dumps(json.loads(rest)), rest  # (each door's own error shape)
             mine = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "mine.gcode"},
                                content=GCODE[:20_000], headers={"content-type": "application/octet-stream"})

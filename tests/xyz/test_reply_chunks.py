@@ -51,3 +51,39 @@ def test_a_status_reply_keeps_its_letter_lines_in_order() -> None:
         events, noise = _events(link, p.Query("a"), wire, [7, 30])
         assert [e.lines for e in events] == [tuple(line.rstrip(" ") for line in STATUS_LINES)]  # type: ignore[attr-defined]
         assert noise == 0
+
+
+def _line_by_line(link: p.Link, command: p.Command, wire: bytes) -> tuple[list[object], int, str | None]:
+    """The reader's rule for one line (`_note`), applied to each line in turn: what reading them in one pass
+    must give."""
+    reader = ReplyReader(link)
+    reader.send(command, now=0.0)
+    events: list[object] = []
+    for line in wire.decode("latin-1").split("\n")[:-1]:
+        reader._note(line.rstrip("\r "))
+        while (event := reader.next_event(0.01)) is not None:
+            events.append(event)
+    while (event := reader.next_event(100.0)) is not None:
+        events.append(event)
+    return events, reader.noise, reader.noise_sample
+
+
+@settings(max_examples=300)
+@given(lines=st.lists(st.one_of(st.sampled_from(STATUS_LINES + OTHER_LINES),
+                                st.text(alphabet=": \r\t$Eokaj0{}\"x\x00\xff", max_size=8)), max_size=40),
+       bulk=st.integers(0, 300), link=st.sampled_from([p.Link.SERIAL, p.Link.WIFI]),
+       letters=st.sampled_from(["a", "jt"]))
+def test_reading_lines_in_one_pass_is_reading_them_one_by_one(lines: list[str], bulk: int, link: p.Link,
+                                                               letters: str) -> None:
+    """Control characters, blanks and colons anywhere, and status replies past the reader's bound (256 lines)."""
+    wire = b"".join(line.encode("latin-1") + b"\n" for line in [*(["t:1,22,0 \r"] * bulk), *lines, "$"])
+    command = p.Query(letters)
+    reader = ReplyReader(link)
+    reader.send(command, now=0.0)
+    events: list[object] = []
+    reader.receive(wire, 0.01)
+    while (event := reader.next_event(0.01)) is not None:
+        events.append(event)
+    while (event := reader.next_event(100.0)) is not None:
+        events.append(event)
+    assert (events, reader.noise, reader.noise_sample) == _line_by_line(link, command, wire)

@@ -23,7 +23,7 @@ from pydantic import BaseModel, Field, StrictBool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from fabwire import __version__
-from fabwire.agent.boundary import SUBPROTOCOL, Boundary, Policy, parse_json
+from fabwire.agent.boundary import SUBPROTOCOL, Boundary, Policy, connection_headers, parse_json
 from fabwire.agent.core import Agent, DeviceSpec, UnknownDevice, exit_code_of
 from fabwire.agent.doors import mount_doors
 from fabwire.agent.jobs import JobNotFound
@@ -101,7 +101,8 @@ def _status_for(exc: BaseException) -> int:
 
 
 def error_response(status: int, message: str, exit_code: int, error: str) -> JSONResponse:
-    return JSONResponse({"message": message, "exit_code": exit_code, "error": error}, status_code=status)
+    return JSONResponse({"message": message, "exit_code": exit_code, "error": error}, status_code=status,
+                        headers=connection_headers(status))
 
 
 async def _json_object(request: Request) -> dict[str, Any]:

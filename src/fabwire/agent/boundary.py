@@ -577,6 +577,19 @@ def _public(path: str) -> bool:
         KEY_REQUEST_PATH.match(path) is not None
 
 
+CLOSES_CONNECTION: dict[int, str] = {
+    408: "RFC 9110 §15.5.9 Request Timeout: the server SHOULD send the `close` connection option, since a 408 "
+         "implies it has decided to close the connection rather than continue waiting (the rest of the body may "
+         "still be on its way: the connection is in no state to carry another request)",
+}
+"""The statuses whose answer ends the connection (`Connection: close`, RFC 9112 §9.6), each with its source."""
+
+
+def connection_headers(status: int) -> dict[str, str]:
+    """The `Connection` header an answer with `status` carries: `close` for CLOSES_CONNECTION, else none."""
+    return {"connection": "close"} if status in CLOSES_CONNECTION else {}
+
+
 def error_body(exc: FabwireError) -> bytes:
     return json.dumps({"message": str(exc), "exit_code": exc.exit_code, "error": type(exc).__name__}).encode()
 
@@ -586,8 +599,7 @@ async def deny(scope: Scope, send: Send, exc: BoundaryError) -> None:
     headers = [(b"content-type", b"application/json")]
     if isinstance(exc, AccessDenied):
         headers.append((b"www-authenticate", b"Bearer"))
-    if isinstance(exc, BodyTimeout):
-        headers.append((b"connection", b"close"))  # (a refused body that keeps coming is read and dropped)
+    headers += [(k.encode(), v.encode()) for k, v in connection_headers(exc.http_status).items()]
     body = error_body(exc)
     headers.append((b"content-length", str(len(body)).encode()))
     if scope["type"] == "http":

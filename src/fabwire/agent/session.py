@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import random
 import sys
 import threading
@@ -35,8 +36,28 @@ JOB_EVENT_EVERY_S = 0.5
 SWITCH_INTERVAL_S = 0.0005
 DELIVER_EVERY_S = 0.01
 """How long a poll's result may wait on the links' thread for others to go to the agent's loop with it."""
+POLL_TICK_S = 0.02
+"""Polls start on a grid of this step (`on_poll_grid`): the polls of a bench that fall within one step wake the links'
+thread once, together, and their replies are read in the same turns of its loop. A wake-up of the thread, not the
+work of a poll, is most of what a poll costs; a poll starts at most this much after its slot (1 s, the interval,
+is a whole number of steps: the slots themselves lie on the grid)."""
+GRID_SLACK = 1e-6
+"""Steps a slot may lie past a grid point and still count as on it (a float's rounding)."""
 STOP_WAIT_S = 30.0
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
+
+
+def on_poll_grid(when: float) -> float:
+    """The first instant of the poll grid (every POLL_TICK_S of the loop's clock) at or after `when`."""
+    return math.ceil(when / POLL_TICK_S - GRID_SLACK) * POLL_TICK_S
+
+
+def next_slot(slot: float, interval: float) -> float:
+    """The slot `interval` after `slot`; put back on the grid when the interval is a whole number of steps, so that
+    the float sum of many intervals does not drift off it."""
+    later = slot + interval
+    steps = interval / POLL_TICK_S
+    return on_poll_grid(later) if abs(steps - round(steps)) < GRID_SLACK else later
 
 
 def make_driver(spec: DeviceSpec, emit: Any) -> Driver:
@@ -277,17 +298,17 @@ class Session:
         """On the links' loop: poll on schedule; each result goes to the agent's loop (see `LinkThread.deliver`)."""
         loop = asyncio.get_running_loop()
         interval = self.driver.interval_s
-        slot = loop.time() + random.uniform(0, interval)  # spread a bench's polls over the second
+        slot = on_poll_grid(loop.time() + random.uniform(0, interval))  # spread a bench's polls over the second
         await asyncio.sleep(slot - loop.time())
         while True:
             lag = loop.time() - slot
             status, summary = await self.driver.poll()
             self._links.deliver(self._polled, status, summary, time.time(), lag, interval)
-            slot += interval
+            slot = next_slot(slot, interval)
             now = loop.time()
             if slot < now:
-                slot = now  # fell behind: start again from now rather than firing a burst
-            await asyncio.sleep(slot - now)
+                slot = on_poll_grid(now)  # fell behind: start again from now rather than firing a burst
+            await asyncio.sleep(on_poll_grid(slot) - now)
 
     def _polled(self, status: dict[str, Any] | None, summary: dict[str, Any], at: float, lag: float,
                 interval: float) -> None:

@@ -86,6 +86,11 @@ def time_scale_for(address: str) -> float:
     return float(speed) if re.fullmatch(r"\d+(\.\d*)?", speed) and float(speed) > 0 else 1.0
 
 
+def _release(waiter: asyncio.Future[None] | None) -> None:
+    if waiter is not None and not waiter.done():
+        waiter.set_result(None)
+
+
 class UploadResult(msgspec.Struct, frozen=True):
     name: str
     size: int
@@ -112,7 +117,8 @@ class XYZPrinter(Maintenance):
         self.time_scale = time_scale_for(transport.url)  # printer seconds per wall second
         self.last_status: Status = Status()
         self.stats: deque[ActionStat] = deque(maxlen=200)
-        self._wake = asyncio.Event()
+        self._waiter: asyncio.Future[None] | None = None
+        """What a request waits on while the reader task reads its reply (see `_wait_for_pump`)."""
         self._lock = asyncio.Lock()
         self._lost: LinkError | None = None
         self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="xyz-reader")
@@ -194,10 +200,14 @@ class XYZPrinter(Maintenance):
             while True:
                 data = await self.transport.read()
                 self.reader.receive(data, self.clock())
-                self._wake.set()
+                self._wake()
         except LinkError as exc:
             self._lost = exc
-        self._wake.set()
+        self._wake()
+
+    def _wake(self) -> None:
+        """From the reader task: the request waiting (if any) looks at what came."""
+        _release(self._waiter)
 
     def _check_link(self, doing: str) -> None:
         if self._lost is not None:
@@ -242,11 +252,17 @@ class XYZPrinter(Maintenance):
                 await self._wait_for_pump(doing)
 
     async def _wait_for_pump(self, doing: str) -> None:
+        """Until the reader task has read something, or the reply's deadline (a NoReply) has come: one future and
+        one timer, the least a wait with a limit takes (a poll makes one of these each second per printer)."""
         self._check_link(doing)
-        self._wake.clear()
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(self._wait_time()):
-                await self._wake.wait()
+        loop = asyncio.get_running_loop()
+        waiter = self._waiter = loop.create_future()
+        timer = loop.call_later(self._wait_time(), _release, waiter)
+        try:
+            await waiter
+        finally:
+            timer.cancel()
+            self._waiter = None
 
     async def _read_once(self, doing: str) -> None:
         try:
@@ -277,7 +293,8 @@ class XYZPrinter(Maintenance):
         """A Wi-Fi printer may hang up between commands; on a new connection the command is sent again."""
         if self.per_command and self.address is not None and self._lost is None:
             self._lost = LinkClosed("a new connection for every command")
-        await self._reconnect()
+        if self._lost is not None:
+            await self._reconnect()
         try:
             return await self._request(command, timeout)
         except LinkClosed as exc:

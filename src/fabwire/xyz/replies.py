@@ -64,6 +64,10 @@ _STAT = re.compile(r"^([A-Za-z][A-Za-z0-9_]+):(\{.*\})$")
 MAX_STATUS_LINES = 256
 """Lines kept of one status reply: a full `query=a` is about 30, one per letter."""
 _NUMBER = re.compile(r"-?\d{1,12}")  # fullmatch: a reading, never a 5000-digit int()
+_STATUS_RUN = re.compile(r"(?:[^\n]:[^\n]*\n)*")
+"""Lines whose second character is `:` (`x:value`), one after the other."""
+_STATUS_LINE = re.compile(r"([^\n]:[^\n]*?)[\r ]*\n")
+"""One of them without its line end and trailing spaces (as `str.rstrip("\r ")`)."""
 
 
 def parse_stat_line(line: str) -> ActionStat | None:
@@ -154,7 +158,8 @@ class ReplyReader:
     def discard(self) -> None:
         """Forget buffered input (the stale replies a client drains before each command)."""
         self._buffer.clear()
-        self._events = [e for e in self._events if isinstance(e, ActionStat)]
+        if self._events:
+            self._events = [e for e in self._events if isinstance(e, ActionStat)]
 
     def receive(self, data: bytes, now: float) -> None:
         self._buffer += data
@@ -164,18 +169,11 @@ class ReplyReader:
         if p is None or type(p.command) not in RAW_REPLIES:
             # No reply read by byte count can start while these lines are read (a command is armed only
             # between receives): every complete line at once, one decode for all of them.
-            end = self._buffer.rfind(b"\n")
-            if end >= 0:
+            end = self._buffer.rfind(b"\n") + 1
+            if end:
                 text = self._buffer[:end].decode("latin-1")
-                del self._buffer[: end + 1]
-                for line in text.split("\n"):
-                    line = line.rstrip("\r ")
-                    p = self._pending
-                    if p is not None and p.expect is Expect.STATUS and line[1:2] == ":" and not p.wanted \
-                            and len(p.lines) < MAX_STATUS_LINES:
-                        p.lines.append(line)  # the bulk of a status reply, as `_line` takes it
-                    else:
-                        self._note(line)
+                del self._buffer[:end]
+                self._lines(text)
             self._bound()
             return
         while True:
@@ -192,6 +190,26 @@ class ReplyReader:
             del self._buffer[: end + 1]
             self._note(raw.decode("latin-1").rstrip("\r "))
         self._bound()
+
+    def _lines(self, text: str) -> None:
+        """Complete lines (`text` ends with `\n`), each as `_note` takes it; a run of status lines, the bulk of a
+        status reply, is read in one pass (they go straight to the reply: see `_line`)."""
+        at, size = 0, len(text)
+        while at < size:
+            p = self._pending
+            if p is not None and p.expect is Expect.STATUS and not p.wanted:
+                run = _STATUS_RUN.match(text, at)
+                if run is not None and run.end() > at:
+                    lines = _STATUS_LINE.findall(text, at, run.end())
+                    room = max(0, MAX_STATUS_LINES - len(p.lines))
+                    p.lines += lines[:room]
+                    for line in lines[room:]:
+                        self._note(line)  # past the bound: noise
+                    at = run.end()
+                    continue
+            end = text.index("\n", at)
+            self._note(text[at:end].rstrip("\r "))
+            at = end + 1
 
     def _bound(self) -> None:
         if len(self._buffer) > 65536:  # a line this long is not XYZv3; keep the reader bounded

@@ -626,13 +626,15 @@ class Status(msgspec.Struct, frozen=True):
     def firmware_version(self) -> str | None:
         return ",".join(self.firmware) if self.firmware else None
 
-    def to_dict(self, since: tuple[Status, dict[str, Any]] | None = None) -> dict[str, Any]:
+    def to_dict(self, since: tuple[Status, dict[str, Any]] | None = None, *,
+                changed: frozenset[str] | None = None) -> dict[str, Any]:
         """A typed, JSON-ready view with units in the key names (°C, mm, s); absent values are null. The wire
         lines, letter by letter, are under `raw`.
 
         `since`, an earlier status and its view, spares the work for what did not change (a printer polled each
-        second answers mostly the same): only the parts whose fields differ are made again. The result is equal to
-        a view made from scratch, key order included; it is a new dict either way."""
+        second answers mostly the same): only the parts whose fields differ are made again (`changed`, when the
+        caller has it already, is `changed_fields(since[0], self)`). The result is equal to a view made from
+        scratch, key order included; it is a new dict either way."""
         if since is None:
             out: dict[str, Any] = {}
             for _, section in VIEW_SECTIONS:
@@ -640,28 +642,35 @@ class Status(msgspec.Struct, frozen=True):
             out["raw"] = self._raw()
             return out
         before, view = since
-        changed = changed_fields(before, self)
+        if changed is None:
+            changed = changed_fields(before, self)
         out = dict(view)
         for fields, section in VIEW_SECTIONS:
             if not changed.isdisjoint(fields):
                 out.update(section(self))
-        if not changed:
-            out["raw"] = view["raw"]
-        elif changed.isdisjoint(("extra", "unparsed", "dashed")):
-            out["raw"] = self._raw(view["raw"], {FIELD_LETTERS[f] for f in changed if f in FIELD_LETTERS})
-        else:
-            out["raw"] = self._raw()
+        out["raw"] = view["raw"] if not changed else self._raw_since(view["raw"], changed)
         return out
 
-    def _raw(self, before: dict[str, str] | None = None, changed: set[str] | None = None) -> dict[str, str]:
-        """The wire value of each letter, in the printer's order; the letters not in `changed` taken from
-        `before` (an earlier status's, whose `extra`, `unparsed` and `dashed` were these)."""
+    def _raw(self) -> dict[str, str]:
+        """The wire value of each letter, in the printer's order."""
         out: dict[str, str] = {}
         for letter in self.order:
-            if before is not None and changed is not None and letter not in changed and letter in before:
-                out[letter] = before[letter]
-            elif (line := self.line(letter)) is not None:
+            if (line := self.line(letter)) is not None:
                 out[letter] = line[2:]
+        return out
+
+    def _raw_since(self, before: dict[str, str], changed: frozenset[str]) -> dict[str, str]:
+        """`_raw` from an earlier status's (`before`), where the letters and their order are the same and only
+        parsed values changed (the fields `changed`): those letters are written again, the rest kept."""
+        if not changed.isdisjoint(_LAYOUT_FIELDS):
+            return self._raw()
+        out = dict(before)
+        for field in changed:
+            letter = FIELD_LETTERS[field]
+            line = self.line(letter)
+            if line is None or letter not in out:
+                return self._raw()
+            out[letter] = line[2:]
         return out
 
 
@@ -717,6 +726,8 @@ VIEW_SECTIONS: tuple[tuple[frozenset[str], Callable[[Status], dict[str, Any]]], 
 """`Status.to_dict` but `raw`, part by part in its key order, each part with the fields it is made of."""
 
 FIELD_LETTERS = {spec[0]: letter for letter, spec in LETTERS.items()}
+_LAYOUT_FIELDS = frozenset({"order", "extra", "unparsed", "dashed"})
+"""The fields that say which letters came, in what order and in which form: a change there rewrites `raw` whole."""
 _FIELDS: tuple[str, ...] = Status.__struct_fields__
 _SHARED_FIELDS = frozenset(LETTERS[letter][0] for letter in SHARED_LETTERS) | {"order", "extra", "unparsed",
                                                                                  "dashed"}

@@ -26,7 +26,7 @@ from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 
 from fabwire import __version__
-from fabwire.agent.boundary import parse_json, request_media_type
+from fabwire.agent.boundary import connection_headers, parse_json, request_media_type
 from fabwire.agent.core import Agent
 from fabwire.agent.doors import (
     JSON_BODY,
@@ -520,7 +520,8 @@ def _rpc_error(code: int, message: str, rpc_id: Any = None) -> dict[str, Any]:
 
 
 def _error(status: int, message: str) -> JSONResponse:
-    return JSONResponse({"error": {"code": status, "message": message, "traceback": None}}, status_code=status)
+    return JSONResponse({"error": {"code": status, "message": message, "traceback": None}}, status_code=status,
+                        headers=connection_headers(status))
 
 
 def _sha256(file: BinaryIO) -> str:

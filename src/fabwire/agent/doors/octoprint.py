@@ -23,6 +23,7 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 
 from fabwire import __version__
 from fabwire.agent.appkeys import AppKeys
+from fabwire.agent.boundary import connection_headers
 from fabwire.agent.core import Agent
 from fabwire.agent.doors import (
     JSON_BODY,
@@ -74,7 +75,8 @@ def unique_id(view: MachineView) -> str:
 
 
 def _error(status: int, message: str) -> JSONResponse:
-    return JSONResponse({"error": message, "message": message}, status_code=status)
+    return JSONResponse({"error": message, "message": message}, status_code=status,
+                        headers=connection_headers(status))
 
 
 def _true(value: object) -> bool:

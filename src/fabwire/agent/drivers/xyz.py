@@ -158,10 +158,9 @@ class XYZDriver(Driver):
         last = self._last
         if last is None:
             last = (status, status.to_dict(), printer_summary(status))
-        elif last[0] is not status and last[0] != status:
+        elif last[0] is not status and (changed := changed_fields(last[0], status)):
             # only what changed since the last poll is worked out again
-            changed = changed_fields(last[0], status)
-            last = (status, status.to_dict(since=(last[0], last[1])),
+            last = (status, status.to_dict(since=(last[0], last[1]), changed=changed),
                     printer_summary(status) if not changed.isdisjoint(SUMMARY_FIELDS) else last[2])
         self._last = last
         if self.prompt is not None:
