@@ -23,6 +23,7 @@ from fabwire.cli_support import App, DeviceContext, FiniteRange, pass_app, pass_
 from fabwire.console import Output
 from fabwire.errors import InputError, LinkError
 from fabwire.files import same_file
+from fabwire.lineus.draw_options import PEN_Z
 from fabwire.lineus.kinematics import UNITS_PER_MM
 from fabwire.lineus.plot import (
     MoveTo,
@@ -99,10 +100,6 @@ RESTART = click.option("--restart", is_flag=True,
 def _one_start(resume: bool, restart: bool) -> None:
     if resume and restart:
         raise InputError("--resume and --restart exclude each other: carry on, or start over")
-
-
-PEN_Z = click.option("--pen-z", type=FiniteRange(0, 499), default=0.0, show_default=True,
-                     help="Pen-down height; about 300 presses less and smears less where the pen lands.")
 
 
 SVG_TEXT = click.option("--svg-text", type=click.Choice(TEXT_MODES), default=TEXT_MODES[0], show_default=True,

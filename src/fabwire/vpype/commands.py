@@ -4,6 +4,9 @@
 
 Every command leaves the document as it found it except `lineus-fit`, which places it on the Line-us page. Errors
 leave vpype as one line and fabwire's exit code (4 bad input, 8 link lost, 9 timeout).
+
+vpype imports every plugin each time it starts, whatever the pipeline: what only drawing, previews and the text
+figures need (the link, progress bars, pictures) is imported by the commands that use it.
 """
 
 from __future__ import annotations
@@ -18,14 +21,10 @@ import click
 import vpype_cli
 
 from fabwire import units
-from fabwire.cli_support import App, DeviceContext
-from fabwire.devices import LINEUS
 from fabwire.errors import FabwireError, InputError
-from fabwire.lineus.draw_cli import PEN_Z, figures_text
+from fabwire.lineus.draw_options import PEN_Z
 from fabwire.lineus.kinematics import UNITS_PER_MM
 from fabwire.lineus.plot import PlanOptions
-from fabwire.lineus.render import write_drawing
-from fabwire.vpype.drawing import ask_on_stdin, draw_passes
 from fabwire.vpype.passes import (
     PassPlan,
     document_passes,
@@ -116,6 +115,8 @@ def _print_figures(plans: list[PassPlan], as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(_figures(plans)))
         return
+    from fabwire.lineus.draw_cli import figures_text
+
     for one in plans:
         click.echo(f"{one.layer.label}:")
         click.echo("  " + figures_text(one.plan).replace("\n", "\n  "))
@@ -171,6 +172,8 @@ def lineus_stat(document: Any, clip: bool, no_optimize: bool, optimize_time: flo
 def lineus_preview(document: Any, outputs: tuple[Path, ...], clip: bool, no_optimize: bool, optimize_time: float | None,
                    layer: Any, as_json: bool) -> Any:
     """Write a picture of what the Line-us pen will do (pen-up travel dashed) and print the plan's figures."""
+    from fabwire.lineus.render import write_drawing
+
     with fabwire_errors():
         plans = _plans(document, layer, _plan_options(clip, no_optimize, optimize_time))
         strokes = [stroke for one in plans for stroke in one.plan.strokes]
@@ -200,6 +203,10 @@ def lineus_draw(document: Any, device: str | None, timeout: float, clip: bool, n
     Between layers the arm parks at home and waits for Enter on standard input while you change the pen. Progress
     is saved after every stroke: after a lost link, run the same pipeline with --resume.
     """
+    from fabwire.cli_support import App, DeviceContext
+    from fabwire.devices import LINEUS
+    from fabwire.vpype.drawing import ask_on_stdin, draw_passes
+
     with fabwire_errors():
         app = App(device=device, timeout=timeout)
         dctx = DeviceContext(app, LINEUS)

@@ -5,6 +5,7 @@ asked for."""
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +46,22 @@ class Box:
         return (self.cx - hw, self.cy - hh, self.cx + hw, self.cy + hh)
 
 
+_OUTLINE_SAMPLES = 48
+_OUTLINE_T = np.linspace(0.0, 1.0, _OUTLINE_SAMPLES)
+_OUTLINE_STEP = 5.0
+
+
+@functools.lru_cache(maxsize=256)
+def _step_t(n: int) -> FloatArray:
+    """Where `outside_length` samples a segment it cuts into `n` steps: the middle of each step."""
+    t: FloatArray = (np.arange(n) + 0.5) / n
+    return t
+
+
 def _box_inside(cx: float, cy: float, w: float, h: float, margin: float, full: bool) -> bool:
+    """Whether the box (with `margin` around it) lies in the area: its corners reachable, its outline reachable
+    at 48 points a side and at the middle of every 5-unit step of each side (the points `outside_length` samples
+    at that step, computed the same way), all in one `reachable_mask` call."""
     x0, y0 = cx - w / 2 - margin, cy - h / 2 - margin
     x1, y1 = cx + w / 2 + margin, cy + h / 2 + margin
     if not full:
@@ -54,13 +70,16 @@ def _box_inside(cx: float, cy: float, w: float, h: float, margin: float, full: b
             return False
     if not all(is_reachable(x, y) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))):
         return False  # the corners alone, without arrays: most boxes tried fail here
-    n = 48
-    t = np.linspace(0.0, 1.0, n)
-    xs = np.concatenate([x0 + (x1 - x0) * t, np.full(n, x1), x1 - (x1 - x0) * t, np.full(n, x0)])
-    ys = np.concatenate([np.full(n, y0), y0 + (y1 - y0) * t, np.full(n, y1), y1 - (y1 - y0) * t])
-    if not bool(reachable_mask(xs, ys).all()):
-        return False
-    return outside_length([(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)], step=5.0) == 0.0
+    t = _OUTLINE_T
+    # The four sides from (x0, y0) anticlockwise, as start + direction x t.
+    sides = ((x0, y0, x1 - x0, 0.0), (x1, y0, 0.0, y1 - y0), (x1, y1, x0 - x1, 0.0), (x0, y1, 0.0, y0 - y1))
+    steps = [_step_t(min(max(1, math.ceil(math.hypot(dx, dy) / _OUTLINE_STEP)), 1 << 20))
+             for _, _, dx, dy in sides]
+    xs = np.concatenate([x0 + (x1 - x0) * t, np.full(len(t), x1), x1 - (x1 - x0) * t, np.full(len(t), x0),
+                         *(ax + dx * st for (ax, _, dx, _), st in zip(sides, steps, strict=True))])
+    ys = np.concatenate([np.full(len(t), y0), y0 + (y1 - y0) * t, np.full(len(t), y1), y1 - (y1 - y0) * t,
+                         *(ay + dy * st for (_, ay, _, dy), st in zip(sides, steps, strict=True))])
+    return bool(reachable_mask(xs, ys).all())
 
 
 @functools.lru_cache(maxsize=64)
