@@ -25,7 +25,11 @@ over feed rate then). Its sources are taken from the git history and run side by
 MINIMOVER_BEFORE, MINIMOVER_TARGET = 0.57, 0.6
 """That conversion took 0.57x the CPU of the reference client miniMover's; the target is 0.6x. Measured against
 the code from before, the target is 0.6 / 0.57 of its figure."""
-RUNS = 5
+MINIMOVER = "MINIMOVER"
+"""Environment variable naming a miniMover binary (github.com/reality-boy/miniMover, its console program built
+with its Makefile's `_DEBUG`, which converts for the miniMaker without a printer); when set, the conversion is
+also run side by side with `minimover -c` on the same file."""
+RUNS = 7
 ROOT = Path(__file__).resolve().parent.parent
 
 _RSS_PROBE = """
@@ -104,12 +108,20 @@ def against_before(src: Path, work: Path) -> list[Figure]:
     old, why = sources_at(BEFORE_PLANNER, work / "before")
     if old is not None:
         commands["before"] = ([*convert, str(work / "before.3w")], {**os.environ, "PYTHONPATH": str(old)})
+    minimover = os.environ.get(MINIMOVER)
+    if minimover:  # it writes the .3w beside its input, and waits for a key at its end: none comes from /dev/null
+        commands["miniMover"] = (["sh", "-c", 'exec "$0" -c "$1" < /dev/null', minimover, str(src)], None)
     runs = interleaved(commands, RUNS)
     now = runs["now"].cpu
-    if old is None:
-        return [Figure(f"{name} (no side-by-side baseline: {why})", now, "s")]
-    return [ratio_figure(f"{name} vs before the planner ({BEFORE_PLANNER}, same run)", now, "s", runs["before"].cpu,
-                         "before", MINIMOVER_TARGET / MINIMOVER_BEFORE)]
+    figures = [ratio_figure(f"{name} vs before the planner ({BEFORE_PLANNER}, same run)", now, "s",
+                            runs["before"].cpu, "before", MINIMOVER_TARGET / MINIMOVER_BEFORE) if old is not None
+               else Figure(f"{name} (no side-by-side baseline: {why})", now, "s")]
+    if minimover:
+        figures.append(ratio_figure(f"{name} vs miniMover's whole process (minimover -c, same run)", now, "s",
+                                    runs["miniMover"].cpu, "miniMover", MINIMOVER_TARGET))
+    else:
+        figures.append(Figure(f"{name} vs miniMover: not measured ({MINIMOVER} names no binary)", now, "s"))
+    return figures
 
 
 def run() -> list[Figure]:

@@ -10,26 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fabwire.xyz.gcodearrays import PAD, parse_numbers, sixteen_bytes
+from fabwire.xyz.gcodearrays import PAD, parse_numbers
 from fabwire.xyz.gcodeinfo import MoveAnalyzer
 
 NUMBER = re.compile(rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)")
-
-
-@settings(max_examples=300, deadline=None)
-@given(st.binary(min_size=24, max_size=200), st.data(), st.integers(0, 7))
-def test_sixteen_bytes_at_each_offset_aligned_or_not(text: bytes, data: st.DataObject, skew: int) -> None:
-    """Joined from aligned words (a buffer on an 8-byte boundary) or gathered unaligned (any other): the bytes."""
-    offsets = data.draw(st.lists(st.integers(0, len(text) - 24), min_size=1, max_size=30))
-    store = np.zeros(len(text) + 16, dtype=np.uint8)
-    start = -store.ctypes.data % 8 + skew
-    view = store[start:start + len(text)]
-    view[:] = np.frombuffer(text, dtype=np.uint8)
-    assert view.ctypes.data % 8 == skew
-    at = np.array(offsets, dtype=np.intp)
-    low, high = sixteen_bytes(view, at)
-    assert low.tolist() == [int.from_bytes(text[a:a + 8], "little") for a in offsets]
-    assert high.tolist() == [int.from_bytes(text[a + 8:a + 16], "little") for a in offsets]
 
 
 @settings(max_examples=300, deadline=None)

@@ -13,7 +13,6 @@ import functools
 import math
 import re
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,34 +110,6 @@ def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint8]:
     return counted
 
 
-def sixteen_bytes(data: NDArray[np.uint8], at: NDArray[np.intp]) -> tuple[NDArray[np.uint64], NDArray[np.uint64]]:
-    """The 16 bytes at each offset `at` of `data` (at least 24 bytes from each offset to its end: PAD is more) as
-    two little-endian 64-bit words (the first byte lowest).
-
-    Where `data` starts on an 8-byte boundary, each pair is joined from three aligned words by shifts: a gather of
-    unaligned words takes several times as long."""
-    if data.ctypes.data % 8:
-        words = np.ndarray(shape=(len(data) - 7,), dtype="<u8", buffer=data, strides=(1,))  # 8 bytes at each offset
-        return words[at], words[at + 8]
-    aligned = data[:len(data) // 8 * 8].view("<u8")
-    index = at >> 3
-    shift = (at & 7).astype(np.uint64)
-    shift <<= _U(3)
-    back = _U(63) - shift  # shifting by 1 then by this is a shift by 64 - shift that gives 0 for a shift of 64
-    first: NDArray[np.uint64] = aligned[index]
-    second: NDArray[np.uint64] = aligned[index + 1]
-    third: NDArray[np.uint64] = aligned[index + 2]
-    first >>= shift
-    low: NDArray[np.uint64] = second << _U(1)
-    low <<= back
-    low |= first
-    second >>= shift
-    high: NDArray[np.uint64] = third << _U(1)
-    high <<= back
-    high |= second
-    return low, high
-
-
 def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
     """The numbers starting at offsets `at` of some text followed by PAD zero bytes (`padded`, and `data` viewing
     it), as float() reads them; NaN where no number starts.
@@ -146,8 +117,8 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    pair: tuple[NDArray[Any], NDArray[Any]] = sixteen_bytes(data, at)  # the arithmetic below stays uint64
-    low, high = pair
+    words = np.ndarray(shape=(len(data) - 7,), dtype="<u8", buffer=data, strides=(1,))  # 8 bytes at each offset
+    low, high = words[at], words[at + 8]
     low ^= _ZEROS
     high ^= _ZEROS
     sign = low & _U(0xFF)
