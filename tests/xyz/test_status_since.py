@@ -135,3 +135,9 @@ def test_the_line_memory_is_bounded() -> None:
     for n in range(3 * status_module.LINE_MEMORY):
         Status.parse([f"L:1,{n},0,0"])
     assert len(status_module._recent) + len(status_module._older) <= 2 * status_module.LINE_MEMORY
+
+
+def test_a_letter_that_turns_from_unreadable_to_dashed_is_dashed_only() -> None:
+    """A partial query merges into the last status: `b:x` (not a number) then `b:--` leaves `b` dashed."""
+    merged = Status.parse(["b:x", "j:9511,0"]).update(["b:--"])
+    assert merged.lines() == Status.parse(["b:--", "j:9511,0"]).lines() == ["b:--", "j:9511,0"]

@@ -428,8 +428,8 @@ class Boundary:
             return
         try:
             self.check_request(scope)
-            route = find_route(self.router.routes, scope)
             if scope["type"] == "http" and scope["method"] not in SAFE_METHODS:
+                route = find_route(self.router.routes, scope)  # (a request without a body needs no rule)
                 rule = body_rule(route, self.policy) if route is not None else BodyRule(limit=JSON_BODY_LIMIT)
                 if route is not None:
                     check_body_type(rule, request_media_type(scope), _has_body(scope))

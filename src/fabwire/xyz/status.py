@@ -473,6 +473,8 @@ class Status(msgspec.Struct, frozen=True):
                 extra[letter] = value
             elif what == _DASHED:
                 dashed.add(letter)
+                if unparsed:
+                    unparsed.pop(letter, None)
                 changes[attr] = None
             else:
                 dashed.discard(letter)
