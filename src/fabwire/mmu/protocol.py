@@ -458,18 +458,19 @@ class _Decoder:
                 else:
                     line = data[pos:nl]
                     message = memo.get(line)
-                    seen = message is not None
-                    if message is None:
-                        message = self._fast(line)
-                        if message is not None and len(line) <= _MEMO_LINE:
-                            if len(memo) >= _CACHE_LIMIT:
-                                memo.clear()
-                            memo[line] = message
                     if message is not None:
                         self._completed(message, events)
                         pos = nl + 1
-                        if not seen:  # traffic the memo does not know: take what follows as one block
-                            pos = self._block(data, pos, events)
+                        continue
+                    message = self._fast(line)
+                    if message is not None:
+                        if len(line) <= _MEMO_LINE:
+                            if len(memo) >= _CACHE_LIMIT:
+                                memo.clear()
+                            memo[line] = message
+                        self._completed(message, events)
+                        # Traffic the memo does not know: take what follows as one block.
+                        pos = self._block(data, nl + 1, events)
                         continue
                     end = nl + 1
             else:
