@@ -271,6 +271,37 @@ async def test_wedged_device_times_out() -> None:
             await arm.position()
 
 
+async def test_cancelling_a_wait_is_a_cancellation_not_a_timeout() -> None:
+    """A caller that cancels its own wait gets CancelledError (the reply timer only turns its own cancels into
+    LinkTimeout), and the wait's deadline passing later ends nothing."""
+    hello = p.Hello("3.2.0", "line-us", "1").encode()
+    async with impostor(hello) as port, connected(port, reply_timeout=0.3) as arm:
+        waiting = asyncio.create_task(arm.position())
+        await asyncio.sleep(0.05)
+        waiting.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await waiting
+        await asyncio.sleep(0.5)
+        assert arm._failure is None
+        assert not arm._deadlines
+        assert not arm._expired
+
+
+async def test_each_wait_times_out_at_its_own_deadline() -> None:
+    """Two tasks waiting at once (look-ahead) with different limits: the shorter runs out first, and a wait that
+    ends in time leaves no timer behind that could cancel its task later."""
+    hello = p.Hello("3.2.0", "line-us", "1").encode()
+    async with impostor(hello) as port, connected(port, reply_timeout=5.0, lookahead=True) as arm:
+        short = asyncio.create_task(arm.send(p.GetPosition(), timeout=0.2))
+        long = asyncio.create_task(arm.send(p.GetPosition(), timeout=0.6))
+        with pytest.raises(LinkTimeout, match=r"within 0\.2 s"):
+            await short
+        with pytest.raises((LinkTimeout, LinkClosed)):
+            await long
+        assert not arm._deadlines
+        assert not arm._expired
+
+
 def test_file_list_parsing() -> None:
     assert parse_file_list("/0000001.txt-109291;/cal-29;/key-344; ") == [StoredDrawing(1, 109291, "/0000001.txt")]
     assert parse_file_list("") == []

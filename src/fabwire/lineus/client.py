@@ -133,6 +133,12 @@ class LineUs:
         self.notices: list[str] = []
         """What the client changed on the way (clamped targets, detours), for the caller to show."""
         self._failure: BaseException | None = None
+        self._deadlines: dict[asyncio.Task[Any], float] = {}
+        """Per task waiting for a reply: the loop time its wait runs out."""
+        self._expired: set[asyncio.Task[Any]] = set()
+        self._watchdog: asyncio.TimerHandle | None = None
+        """One timer for every wait: it fires at the earliest deadline it knows of, cancels the waits past theirs and
+        sets itself for the rest, so a reply that comes in time costs no timer of its own."""
         self._read_task = asyncio.create_task(self._read_loop(), name="lineus-replies") if lookahead else None
         """With one command in flight the waiting caller reads its own reply (no task hop per command)."""
 
@@ -209,6 +215,9 @@ class LineUs:
             self._read_task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await self._read_task
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
         self._fail(LinkClosed("the connection to the Line-us is closed"))
 
     async def __aenter__(self) -> Self:
@@ -302,18 +311,47 @@ class LineUs:
         return future
 
     async def _await_reply(self, command: p.Command, future: asyncio.Future[p.Reply], timeout: float | None) -> p.Reply:
+        """The reply `future` will hold, within `timeout` (default: sized to the move); LinkTimeout ends the link.
+        Like `asyncio.timeout`, a wait that runs out cancels the waiting task and turns that cancellation (and only
+        that one) into the timeout, but through one shared timer (`_watchdog`) instead of one per command."""
         limit = timeout if timeout is not None else self._timeout_for(self._spans.get(future))
+        task = asyncio.current_task()
+        if task is None:
+            raise RuntimeError("a Line-us connection is used from asyncio tasks")
+        loop = asyncio.get_running_loop()
+        cancelling = task.cancelling()
+        deadline = self._deadlines[task] = loop.time() + limit
+        if self._watchdog is None or self._watchdog.when() > deadline:
+            if self._watchdog is not None:
+                self._watchdog.cancel()
+            self._watchdog = loop.call_at(deadline, self._watch)
         try:
-            async with asyncio.timeout(limit):
-                if self._read_task is None:
-                    while not future.done():
-                        await self._pump()
-                reply = await asyncio.shield(future)
-        except TimeoutError:
-            exc = LinkTimeout(f"no reply to {command.text()!r} within {limit:.1f} s: the Line-us may be wedged")
-            self._fail(exc)
-            raise exc from None
-        return reply
+            if self._read_task is None:
+                while not future.done():
+                    await self._pump()
+            return future.result() if future.done() else await asyncio.shield(future)
+        except asyncio.CancelledError:
+            if task in self._expired and task.uncancel() <= cancelling:
+                exc = LinkTimeout(f"no reply to {command.text()!r} within {limit:.1f} s: the Line-us may be wedged")
+                self._fail(exc)
+                raise exc from None
+            raise
+        finally:
+            del self._deadlines[task]
+            self._expired.discard(task)
+
+    def _watch(self) -> None:
+        """The shared reply timer: cancel each wait past its deadline, then set the timer for the next one."""
+        self._watchdog = None
+        loop = asyncio.get_running_loop()
+        now = loop.time()
+        for task, deadline in self._deadlines.items():
+            if deadline <= now and task not in self._expired:
+                self._expired.add(task)
+                task.cancel()
+        later = [deadline for task, deadline in self._deadlines.items() if task not in self._expired]
+        if later:
+            self._watchdog = loop.call_at(min(later), self._watch)
 
     def _span(self, command: p.Move | p.Home | p.RawMove) -> tuple[float, Point3]:
         """How far (longest axis, machine units) the move goes from where the moves sent so far leave the arm,
