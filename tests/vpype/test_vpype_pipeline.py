@@ -168,3 +168,28 @@ def test_clip_keeps_only_the_reachable_part(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     stat = json.loads(result.stdout)
     assert 0 < stat["pen_down_length_mm"] < 1200  # part of the 1200 mm outline
+
+
+PLOTTING_ONLY = ("fabwire.lineus.draw_cli", "fabwire.lineus.render", "fabwire.vpype.drawing", "fabwire.lineus.client",
+                 "rich", "PIL")
+"""What only lineus-draw, lineus-preview and the text figures use (modules and packages)."""
+PROBE = """
+import runpy, sys
+sys.argv = [VPYPE, "rect", "0", "0", "4cm", "3cm", "lineus-fit", "lineus-stat", "--json"]
+try:
+    runpy.run_path(VPYPE, run_name="__main__")
+except SystemExit as exc:
+    assert not exc.code, exc.code
+print(sorted(m for m in sys.modules if m in PLOTTING_ONLY or m.split(".")[0] in PLOTTING_ONLY), file=sys.stderr)
+"""
+
+
+def test_vpype_starts_without_the_drawing_machinery(tmp_path: Path) -> None:
+    """vpype loads every plugin each time it starts, whatever the pipeline: placing and planning (lineus-fit,
+    lineus-stat --json) run without importing the link, the progress bars or the picture code."""
+    script = f"VPYPE = {VPYPE!r}\nPLOTTING_ONLY = {PLOTTING_ONLY!r}\n{PROBE}"
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                            env=cli_env(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["strokes"] == 1
+    assert result.stderr.strip().splitlines()[-1] == "[]"
