@@ -118,3 +118,38 @@ def test_keep_running_shows_the_tour_table_before_waiting_and_ctrl_c_stops_the_s
     assert rest == ""  # the table is said once
     assert err == "stopping the simulators …\n"
     assert not [pid for pid in pids if _alive(pid)]
+
+
+def test_keep_running_keeps_the_drawing_of_your_session(tmp_path: Path) -> None:
+    import re
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "fabwire", "demo", "--only", "lineus", "--out", str(out),
+                                "--speed", SPEED, "--keep-running"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    try:
+        assert process.stderr is not None
+        said = []
+        for line in iter(process.stderr.readline, ""):
+            said.append(line)
+            if line == "Press Ctrl-C to stop them.\n":
+                break
+        advice = next(line for line in said if "fabwire lineus -d " in line)
+        url = re.search(r"-d (\S+)", advice)
+        assert url is not None, advice
+        drawn = run_cli("lineus", "-d", url.group(1), "text", "hi", timeout=120, env=cli_env(tmp_path))
+        assert drawn.returncode == 0, drawn.stderr
+        process.send_signal(signal.SIGINT)
+        process.wait(60)
+        err = process.stderr.read()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait(10)
+    assert process.returncode == 0, err
+    session = out / "lineus-session.png"
+    assert f"what the arm drew in your session: {session}" in " ".join(err.split())
+    _assert_png(session)

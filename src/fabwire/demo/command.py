@@ -120,6 +120,9 @@ def demo(app: App, speed: float, only: tuple[str, ...], out_dir: Path, keep_runn
         raise
     finally:
         problems = stop_all(list(sims.values()))
+        session = out_dir / "lineus-session.png"
+        if keep_running and "lineus" in sims and session.exists():
+            err.print(f"what the arm drew in your session: {session}")
         signal.signal(signal.SIGTERM, previous)
         if failure is None and problems:
             failure = problems[0]
@@ -148,6 +151,7 @@ def _collect_record(ctx: DemoContext, sims: dict[str, SimulatorProcess], record:
 def _keep_running(ctx: DemoContext, sims: dict[str, SimulatorProcess], speed: float) -> None:
     if "lineus-drawn" in sims:
         session = ctx.out_dir / "lineus-session.png"
+        session.unlink(missing_ok=True)  # only this session's drawing is named at the end
         sims["lineus"] = start_simulators([("lineus", _sim_args("lineus", speed, ctx.out_dir, session))])[0]
         ctx.say(f"(a fresh Line-us simulator records your session to {session} when it stops)")
     ctx.say("\n[bold]The simulators are still running.[/bold] Try, in another terminal:", markup=True)

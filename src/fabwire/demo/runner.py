@@ -42,6 +42,7 @@ class SimulatorProcess:
     log: IO[bytes]
     url: str = ""
     stopped_at: float | None = field(default=None)
+    _terminated: bool = field(default=False, repr=False)
 
     @property
     def pid(self) -> int:
@@ -85,10 +86,17 @@ class SimulatorProcess:
                         self.url = line.split(ANNOUNCEMENT, 1)[1].split()[0]
                         return self.url
 
+    def terminate(self) -> None:
+        """SIGTERM, once: the simulator then writes what it records, and a second SIGTERM would kill it mid-file."""
+        if not self._terminated and self.process.poll() is None:
+            self._terminated = True
+            with contextlib.suppress(OSError):
+                self.process.send_signal(signal.SIGTERM)
+
     def stop(self, timeout: float = STOP_TIMEOUT) -> int:
-        """SIGTERM (the simulator then writes what it records), wait, and SIGKILL if it will not go."""
+        """SIGTERM (once), wait, and SIGKILL if it will not go."""
         if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
+            self.terminate()
             try:
                 self.process.wait(timeout)
             except subprocess.TimeoutExpired:
@@ -137,9 +145,7 @@ def stop_all(simulators: Sequence[SimulatorProcess]) -> list[FabwireError]:
     """Stop every simulator (SIGTERM to all first, so they wind down together); returns problems, never raises."""
     problems: list[FabwireError] = []
     for sim in simulators:
-        if sim.running():
-            with contextlib.suppress(OSError):
-                sim.process.send_signal(signal.SIGTERM)
+        sim.terminate()
     for sim in simulators:
         try:
             code = sim.stop()
