@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -30,6 +31,11 @@ T = TypeVar("T")
 OptionFactory = Callable[[], click.Option]
 
 
+PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)",
+                          re.IGNORECASE)
+"""A number as people type it on a command line (ASCII digits); nan and inf pass here to be refused by name."""
+
+
 class FiniteRange(click.FloatRange):
     """A FloatRange that also refuses nan and ±inf (nan passes every comparison, inf makes a wait endless)."""
 
@@ -42,6 +48,10 @@ class FiniteRange(click.FloatRange):
         self.open_ended = open_ended
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if isinstance(value, str) and not PLAIN_NUMBER.fullmatch(value.strip()):
+            # Python's float() also takes "1_000" and other scripts' digits: what a person typed is not read as a
+            # number they did not mean
+            self.fail(f"{value!r} is not a number (digits 0-9, an optional sign, point and exponent).", param, ctx)
         number = click.FLOAT.convert(value, param, ctx)  # the finiteness first: "inf" is no number, not too large
         if not math.isfinite(number) and not (self.open_ended and number == math.inf):
             self.fail(f"{value!r} is not a finite number.", param, ctx)

@@ -50,3 +50,20 @@ def test_a_non_finite_number_is_a_usage_error_before_anything_runs(line: list[st
     assert result.returncode == 2, result.stderr
     assert "is not a finite number" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+NOT_TYPED_NUMBERS = ["1_000", "١٠٠٠", "１０", "0x10", "1e", "--1", "1,5", ""]
+"""Strings Python's float() may take (underscores, other scripts' digits) or that are no number at all."""
+
+
+@pytest.mark.parametrize("text", NOT_TYPED_NUMBERS)
+def test_every_float_parameter_takes_only_plain_digits(text: str) -> None:
+    for _path, _name, param in _float_params():
+        with pytest.raises(click.BadParameter, match="is not a number"):
+            param.type.convert(text, param, None)
+
+
+def test_a_number_in_another_script_is_a_usage_error() -> None:
+    result = run_cli("lineus", "-d", "sim://lineus?speed=inf", "move", "1_000", "1000", timeout=60)
+    assert result.returncode == 2
+    assert "'1_000' is not a number" in result.stderr

@@ -216,6 +216,7 @@ CLAMPED_MOVES = [
     ("1.0.1", ("6000", "-200"), "is outside the drawing area"),
     ("3.1.1", ("2500", "0"), "is outside the drawing area"),
     ("3.1.1", ("-100", "500"), "is outside the drawing area"),
+    ("3.1.1", ("-100000", "-100000"), "is outside the drawing area"),  # below and left, but far beyond the notch
 ]
 
 

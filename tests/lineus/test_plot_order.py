@@ -11,9 +11,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from fabwire.errors import InputError
 from fabwire.lineus.plot import PlanOptions, plan_lines
 from fabwire.lineus.plot.optimize import (
     WORK_PER_LINE,
@@ -118,6 +120,7 @@ import sys, hashlib
 import numpy as np
 sys.path.insert(0, sys.argv[1])
 from test_plot_order import scattered_dashes
+from fabwire.errors import InputError
 from fabwire.lineus.plot import PlanOptions, plan_lines
 plan = plan_lines(scattered_dashes(9, 600), PlanOptions(fit=False, time_budget=0.1), fit_default=False)
 digest = hashlib.sha256()
@@ -146,3 +149,9 @@ def test_the_same_drawing_plans_the_same_in_separate_processes_busy_or_idle() ->
     assert idle.strip()
     assert outputs == [idle, idle]
 
+
+
+@pytest.mark.parametrize("budget", [math.nan, math.inf, -1.0, 1e20, 600.5])
+def test_a_plan_refuses_an_ordering_budget_out_of_range(budget: float) -> None:
+    with pytest.raises(InputError, match="0 to 600 s"):
+        PlanOptions(time_budget=budget)

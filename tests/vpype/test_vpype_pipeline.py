@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import vpype_cli
 
 from clitools import cli_env, run_cli
@@ -193,3 +194,11 @@ def test_vpype_starts_without_the_drawing_machinery(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["strokes"] == 1
     assert result.stderr.strip().splitlines()[-1] == "[]"
+
+
+@pytest.mark.parametrize("budget", ["nan", "inf", "-1", "1e20", "1e308", "601"])
+def test_an_ordering_budget_out_of_range_is_one_line_not_a_traceback(budget: str, tmp_path: Path) -> None:
+    result = vpype("rect", "0", "0", "10", "10", "lineus-stat", "--optimize-time", budget, tmp_path=tmp_path)
+    assert result.returncode != 0
+    assert "Traceback" not in result.stderr
+    assert "600" in result.stderr.strip().splitlines()[-1]  # the limit is named

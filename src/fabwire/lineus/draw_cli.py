@@ -37,6 +37,7 @@ from fabwire.lineus.plot import (
     read_drawing,
 )
 from fabwire.lineus.plot.intake import STDIN
+from fabwire.lineus.plot.optimize import MAX_TIME_BUDGET_S
 from fabwire.lineus.plot.svgtext import TEXT_MODES
 from fabwire.lineus.plot.text import DEFAULT_FONT
 from fabwire.lineus.render import DEFAULT_DPI, dpi_scale, write_drawing
@@ -84,7 +85,7 @@ def placement_options(func: F) -> F:
                                                   "refusing the drawing."),
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep the file's own line order and directions."),
-        click.option("--optimize-time", type=FiniteRange(min=0.0), default=1.0, show_default=True,
+        click.option("--optimize-time", type=FiniteRange(0.0, MAX_TIME_BUDGET_S), default=1.0, show_default=True,
                      help="Work the ordering may spend improving pen-up travel, in nominal CPU seconds (counted, "
                           "not timed: the same plan on any machine)."),
     ]

@@ -273,7 +273,7 @@ def clamp_note(x: float, y: float, *, notch_guarded: bool) -> str | None:
     (`LineUs.guard_body`)."""
     if is_reachable(x, y):
         return None
-    notch = in_body_zone(x, y)
+    notch = in_body_zone(x, y) and is_reachable(x, y, x_min_lower=X_MIN_LOWER_FW1)  # only the notch keeps it out
     if notch and notch_guarded:
         return None
     where = "in the notch beside the robot's body" if notch else "outside the drawing area"

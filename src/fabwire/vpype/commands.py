@@ -25,6 +25,7 @@ from fabwire.errors import FabwireError, InputError
 from fabwire.lineus.draw_options import PEN_Z
 from fabwire.lineus.kinematics import UNITS_PER_MM
 from fabwire.lineus.plot import PlanOptions
+from fabwire.lineus.plot.optimize import MAX_TIME_BUDGET_S
 from fabwire.vpype.passes import (
     PassPlan,
     document_passes,
@@ -85,7 +86,7 @@ def plan_options(func: F) -> F:
         click.option("--clip", is_flag=True, help="Leave out lines outside the area instead of refusing them."),
         click.option("--no-optimize", "no_optimize", is_flag=True,
                      help="Keep vpype's line order and directions (as after linesort)."),
-        click.option("--optimize-time", type=click.FloatRange(min=0.0), default=None,
+        click.option("--optimize-time", type=click.FloatRange(0.0, MAX_TIME_BUDGET_S), default=None,
                      help="Work per layer the ordering may spend improving pen-up travel, in nominal CPU seconds "
                           "(counted, not timed: the same plan on any machine). Default: in proportion to the "
                           "number of lines, about what linesort costs."),

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from fabwire.errors import InputError
 from fabwire.lineus.kinematics import HOME
 from fabwire.lineus.plot.geometry import BoolArray, FloatArray, IntArray, Polylines, flatten, inner_segments
 
@@ -507,12 +508,19 @@ def _result(
     return new_order, new_flips
 
 
+MAX_TIME_BUDGET_S = 600.0
+"""The largest ordering budget taken, in nominal CPU seconds (ten minutes): beyond it the work count would outgrow
+any drawing's use and a typo (1e20) would never end."""
+
+
 def work_budget(seconds: float | None, lines: int) -> int:
     """The work (lines examined, see `improve`) of a budget of nominal CPU `seconds`, or with None, in
     proportion to the number of `lines` (`WORK_PER_LINE` each). A count, so a plan never depends on how busy or
-    fast the machine is."""
+    fast the machine is. Raises InputError for a budget that is not 0 to `MAX_TIME_BUDGET_S`."""
     if seconds is None:
         return WORK_PER_LINE * lines
+    if not 0.0 <= seconds <= MAX_TIME_BUDGET_S:  # nan too
+        raise InputError(f"an ordering budget is 0 to {MAX_TIME_BUDGET_S:g} s of work, not {seconds!r}")
     return max(0, round(seconds * WORK_PER_SECOND))
 
 

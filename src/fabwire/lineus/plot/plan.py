@@ -30,7 +30,7 @@ from fabwire.lineus.plot.geometry import (
 from fabwire.lineus.plot.intake import FLATTEN_TOLERANCE, Drawing, read_drawing
 from fabwire.lineus.plot.intake import PAGE_ORIGIN as PAGE_ORIGIN
 from fabwire.lineus.plot.intake import SVG_UNITS_PER_PX as SVG_UNITS_PER_PX
-from fabwire.lineus.plot.optimize import RESOLUTION, optimise
+from fabwire.lineus.plot.optimize import RESOLUTION, optimise, work_budget
 from fabwire.lineus.plot.text import DEFAULT_FONT, text_lines
 
 
@@ -190,6 +190,10 @@ class PlanOptions:
     motion: MotionModel = field(default_factory=MotionModel)
     svg_text: str = "hershey"
     """SVG `<text>`: 'hershey' draws it in single-stroke letters, 'outline' leaves it out with a note."""
+
+    def __post_init__(self) -> None:
+        if self.time_budget is not None:
+            work_budget(self.time_budget, 0)  # refuses a budget out of range (nan included) when it is given
 
 
 def file_digest(path: str | Path) -> str:
