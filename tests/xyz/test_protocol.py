@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import math
+import re
 import struct
 import zlib
 
@@ -363,3 +366,17 @@ def test_sim_control_vectors() -> None:
     assert p.encode(p.SimControl("fault:door-open:on"), Link.WIFI) == b"XYZv3/simctl=fault:door-open:on\r\n"
     assert p.parse_command("simctl=clear") == p.SimControl("clear")
     assert isinstance(p.parse_command("simctl=rm -rf"), p.UnknownCommand)
+
+
+@given(st.floats(min_value=p.JOG_STEP, max_value=p.JOG_LIMIT), st.sampled_from([1, -1]))
+def test_a_jog_length_is_a_plain_decimal_of_at_most_three_places(distance: float, sign: int) -> None:
+    body = p.Jog("x", sign * distance).body
+    length = json.loads(body.removeprefix("action=jog:"))["len"]
+    assert re.fullmatch(r"[0-9]+(\.[0-9]{1,3})?", length), length
+    assert abs(float(length) - distance) <= 0.0005 + 1e-12
+
+
+@pytest.mark.parametrize("distance", [1e-5, 9.99989e-321, 0.0009, -0.0009, 300.5, math.nan, math.inf])
+def test_a_jog_too_small_or_large_to_write_is_refused(distance: float) -> None:
+    with pytest.raises(LocalProtocolError, match=r"jog distance must be 0\.001 to 300 mm"):
+        p.Jog("x", distance)

@@ -357,6 +357,9 @@ class Home(Command, frozen=True):
 
 
 JOG_LIMIT = 300
+JOG_STEP = 0.001
+"""The finest jog written: `len` is a quoted plain decimal (reference, Jog), three places at most, never an
+exponent (`1e-05`), which a firmware reading digits would take as 1 mm."""
 
 
 class Jog(Command, frozen=True):
@@ -367,13 +370,14 @@ class Jog(Command, frozen=True):
     def __post_init__(self) -> None:
         if self.axis not in ("x", "y", "z"):
             raise LocalProtocolError(f"jog axis must be x, y or z, not {self.axis!r}")
-        if not (0 < abs(self.distance) <= JOG_LIMIT):
-            raise LocalProtocolError(f"jog distance must be non-zero and at most {JOG_LIMIT} mm")
+        if not (JOG_STEP <= abs(self.distance) <= JOG_LIMIT):  # nan too
+            raise LocalProtocolError(f"jog distance must be {JOG_STEP:g} to {JOG_LIMIT} mm either way, "
+                                     f"not {self.distance:g}")
 
     @property
     def body(self) -> str:
         sign = "-" if self.distance < 0 else "+"
-        length = f"{abs(self.distance):g}"
+        length = f"{abs(self.distance):.3f}".rstrip("0").rstrip(".")
         return f'action=jog:{{"axis":"{self.axis}","dir":"{sign}","len":"{length}"}}'
 
 
