@@ -414,3 +414,28 @@ def test_discover_takes_host_and_port_as_every_address_does(simulator: Simulator
     told = run_cli("-v", "xyz", "discover", "--host", "127.0.0.1:1")
     assert told.returncode == 0
     assert "127.0.0.1:1: no printer" in told.stderr
+
+
+def test_a_print_cancelled_from_elsewhere_ends_the_follow_with_its_own_error(simulator: SimulatorStarter,
+                                                                             tmp_path: Path) -> None:
+    sim = simulator("xyz", "--listen", "127.0.0.1:0", "--speed", "1")  # the 600 s job runs far longer than the test
+    dev = device(sim.url)
+    gcode = tmp_path / "long.gcode"
+    gcode.write_bytes(GCODE)
+    follow = subprocess.Popen([sys.executable, "-m", "fabwire", "xyz", "-d", dev, "print", str(gcode)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    try:
+        assert follow.stderr is not None
+        for line in iter(follow.stderr.readline, ""):  # the job runs: the printer prints it
+            if line.startswith("printing"):
+                break
+        cancelled = run_cli("xyz", "-d", dev, "cancel", "--yes", timeout=120)
+        assert cancelled.returncode == 0, cancelled.stderr
+        out, err = follow.communicate(timeout=120)
+    finally:
+        if follow.poll() is None:
+            follow.kill()
+            follow.wait(10)
+    assert follow.returncode == 7, err  # not "idle" and 0: the print did not finish
+    assert err.strip().splitlines()[-1].startswith("fabwire: error: the print was cancelled before it finished")
+    assert out == ""

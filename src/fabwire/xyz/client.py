@@ -31,11 +31,22 @@ from fabwire.transport import Transport, open_transport
 from fabwire.transport.limits import refusal
 from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
+from fabwire.xyz.codes import PRINT_STOP
 from fabwire.xyz.maintenance import Maintenance
 from fabwire.xyz.maintenance import StatusCallback as StatusCallback  # also the sync client's
 from fabwire.xyz.models import PrinterModel
 from fabwire.xyz.protocol import ActionStat, ErrorReply, Link, NoReply, Reply, ReplyReader
-from fabwire.xyz.status import FILE_CHECK, FILE_REJECTED, IDLE, PAUSED, PRINT_DONE, PRINTING, ErrorWord, Status
+from fabwire.xyz.status import (
+    CANCELLING,
+    FILE_CHECK,
+    FILE_REJECTED,
+    IDLE,
+    PAUSED,
+    PRINT_DONE,
+    PRINTING,
+    ErrorWord,
+    Status,
+)
 
 if TYPE_CHECKING:
     from fabwire.xyz.sync import SyncXYZPrinter
@@ -54,6 +65,9 @@ REPLY_ERRORS = {
 TRANSIENT_RETRIES = 20
 FILE_CHECK_LIMIT = 120.0  # printer seconds of "checking file" (9520) before a print is stuck; real checks take seconds
 CHECKING_NOTE_EVERY = 15.0  # seconds between "still checking the file" notes
+FINISHED_PERCENT = 99
+"""Progress from which a print that goes idle counts as finished: the firmware may show idle for a moment between
+printing and 9509 (reference §3.2), and rounds its percentage."""
 UPLOAD_READ_BUFFER = 1 << 20
 """Bytes read from a file being uploaded at a time (it travels in blocks of a few KiB: one read per block would
 be a system call each)."""
@@ -535,10 +549,16 @@ class XYZPrinter(Maintenance):
     async def follow_job(self, on_status: StatusCallback | None = None, *, limit: float | None = None,
                          on_note: Callable[[str], None] | None = None) -> Status:
         """Poll until the job ends (9509 done or idle); a printer error is DeviceError, a file check (9520) over
-        FILE_CHECK_LIMIT printer seconds LinkTimeout, `on_note` told every CHECKING_NOTE_EVERY s meanwhile."""
+        FILE_CHECK_LIMIT printer seconds LinkTimeout, `on_note` told every CHECKING_NOTE_EVERY s meanwhile.
+
+        A print that ends in idle after 9602 (cancelling) or 9512 (stopped), or before its progress came near the
+        end (`FINISHED_PERCENT`; the firmware may show idle briefly between 9505 and 9509, reference §3.2), was
+        cancelled: DeviceError, since it did not finish."""
         end = None if limit is None else self.clock() + limit
         checking_since: float | None = None
         noted = 0  # notes given so far
+        stopped = False  # 9602 or 9512 seen
+        percent: int | None = None  # the last progress shown while printing
         while True:
             status = await self.status()
             words = status.error_words
@@ -559,6 +579,13 @@ class XYZPrinter(Maintenance):
             else:
                 checking_since = None
                 noted = 0
+            if status.state_code in (CANCELLING, PRINT_STOP):
+                stopped = True
+            elif status.state_code == PRINTING and status.progress is not None:
+                percent = status.progress.percent
+            if status.state_code == IDLE and (stopped or (percent is not None and percent < FINISHED_PERCENT)):
+                raise DeviceError("", "the print was cancelled before it finished"
+                                  + (f" (at {percent} %)" if percent is not None else ""))
             if status.state_code in (PRINT_DONE, IDLE):
                 return status
             if end is not None and self.clock() > end:

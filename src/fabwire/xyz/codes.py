@@ -25,6 +25,7 @@ SUBSTATE_NAMES: dict[tuple[int, int], str] = {
     (9536, 51): "warming up", (9536, 52): "ready to clean", (9539, 30): "place object",
 }
 IDLE, PRINTING, PRINT_DONE, FILE_CHECK, PAUSED, CANCELLING = 9511, 9505, 9509, 9520, 9601, 9602
+PRINT_STOP = 9512
 
 
 def translate_state(code: int) -> int:
