@@ -155,3 +155,21 @@ def test_the_same_drawing_plans_the_same_in_separate_processes_busy_or_idle() ->
 def test_a_plan_refuses_an_ordering_budget_out_of_range(budget: float) -> None:
     with pytest.raises(InputError, match="0 to 600 s"):
         PlanOptions(time_budget=budget)
+
+
+@settings(max_examples=60, deadline=None)
+@given(drawings, st.sampled_from([0.05, 0.2]))
+def test_stopping_once_every_kick_failed_plans_exactly_as_spending_the_whole_budget(
+        lines: list[np.ndarray], budget: float) -> None:
+    import fabwire.lineus.plot.optimize as optimize
+
+    early = optimise(lines, time_budget=budget)
+    limit = optimize.KICK_ENUMERATION_LIMIT
+    optimize.KICK_ENUMERATION_LIMIT = 0  # no counting: every kick the budget allows is drawn
+    try:
+        whole = optimise(lines, time_budget=budget)
+    finally:
+        optimize.KICK_ENUMERATION_LIMIT = limit
+    assert len(early) == len(whole)
+    assert all(np.array_equal(a, b) for a, b in zip(early, whole, strict=True))
+

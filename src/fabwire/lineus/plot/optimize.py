@@ -468,6 +468,11 @@ def improve(
     rng = random.Random(n)
     span = max(4, min(KICK_SPAN, n // 4))
     saved = settled
+    # A kick is deterministic from the tour it starts on: once every possible kick has failed on the same tour,
+    # every later one fails too, and a small drawing stops there instead of spending its whole budget (the plan
+    # is the same either way).
+    possible = _kick_count(last, span) if n * span * span <= KICK_ENUMERATION_LIMIT else None
+    failed: set[tuple[int, int, int]] = set()
     while spent[0] < work and n >= 8:
         spent[0] += 1
         p1 = rng.randrange(1, last - 2)
@@ -485,15 +490,34 @@ def improve(
         finished = local_search()
         if added - before - gained[0] < -eps:
             saved = (tour[:], ix[:], iy[:], ox[:], oy[:], pos[:])
+            failed.clear()
         else:
             tour[:], ix[:], iy[:], ox[:], oy[:], pos[:] = saved
             queue.clear()
             queued[:] = bytes(n + 1)
-        if not finished:
+            failed.add((p1, p2, p3))
+        if not finished or (possible is not None and len(failed) >= possible):
             break
     if length() > settled_len:  # the kicks' sums of small gains could drift: never hand back a longer tour
         tour[:], ix[:], iy[:], ox[:], oy[:], pos[:] = settled
     return _result(tour, ix, iy, starts, ends)
+
+
+KICK_ENUMERATION_LIMIT = 100_000
+"""Drawings with up to this many kicks (lines x span²) count their distinct kicks, to stop once all have failed."""
+
+
+def _kick_count(last: int, span: int) -> int:
+    """The distinct kicks (p1, p2, p3) that `improve` can draw on a tour whose last position is `last`."""
+    kicks = set()
+    for p1 in range(1, last - 2):
+        for r2 in range(1, span):
+            p2 = min(last - 1, p1 + r2)
+            for r3 in range(1, span):
+                p3 = min(last, p2 + r3)
+                if p1 < p2 < p3:
+                    kicks.add((p1, p2, p3))
+    return len(kicks)
 
 
 def _result(
