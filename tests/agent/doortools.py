@@ -6,6 +6,7 @@ import base64
 import io
 import uuid
 from collections.abc import Iterable
+from typing import Any
 
 import httpx
 from PIL import Image
@@ -80,14 +81,20 @@ def multipart(fields: list[tuple[str, str]], filename: str, data: bytes, *, file
 def wait_idle(client: httpx.Client, device: str = XYZ, timeout: float = 90) -> None:
     """Until the machine is idle with no job: a finished print is acknowledged (the printer's OK button)."""
 
+    seen: list[Any] = []
+
     def idle() -> bool:
         state = summary(client, device)
         if state["state"] == "done" and "acknowledge" in state["actions"]:
             client.post(f"/api/v1/devices/{device}/actions/acknowledge", json={})
         running = client.get("/api/v1/jobs", params={"device": device}).json()
+        seen[:] = [state, running[:3]]  # said if it never comes: the machine's state and its latest jobs
         return state["state"] == "idle" and not any(j["state"] in ("queued", "running") for j in running)
 
-    wait_for(idle, f"{device} idle", timeout)
+    try:
+        wait_for(idle, f"{device} idle", timeout)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; the machine: {seen[0]}; its latest jobs: {seen[1]}") from None
 
 
 def printing(client: httpx.Client, device: str = XYZ) -> bool:
