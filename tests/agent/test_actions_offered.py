@@ -24,6 +24,11 @@ def _printing(client: httpx.Client, device: str) -> str:
     return "printing"
 
 
+def _idle(client: httpx.Client, device: str) -> str:
+    wait_for(lambda: summary(client, device)["state"] == "idle", "the printer idle")
+    return "idle"
+
+
 def _drawing(client: httpx.Client, device: str) -> str:
     started = client.post(f"/api/v1/devices/{device}/actions/text", json={"text": "a long line of words to draw"})
     assert started.status_code == 200, started.text
@@ -41,13 +46,15 @@ def _mmu_error(client: httpx.Client, device: str) -> str:
 NOT_OFFERED: dict[str, tuple[str, Callable[[httpx.Client, str], str], str, dict[str, Any]]] = {
     "xyz-jog-while-printing": ("xyz", _printing, "jog", {"axis": "x", "distance_mm": 10}),
     "xyz-acknowledge-while-printing": ("xyz", _printing, "acknowledge", {}),
+    "xyz-confirm-with-no-step-waiting": ("xyz", _idle, "confirm", {}),  # (a flow's prompt offers confirm)
+    "xyz-stop-flow-with-no-step-waiting": ("xyz", _idle, "stop_flow", {}),
     "lineus-move-while-drawing": ("lineus", _drawing, "move", {"x": 1000, "y": 0}),
     "lineus-pen-up-while-drawing": ("lineus", _drawing, "pen_up", {}),
     "mmu-tool-change-in-error": ("mmu", _mmu_error, "tool_change", {"slot": 2}),
 }
 """(kind, how to bring the machine to a state, an action that state's `actions` do not hold, its parameters):
-each driver's table of what a state offers (xyz: printing offers pause and cancel; Line-us: drawing offers nothing;
-MMU3: an error offers retry or continue, and stop)."""
+each driver's table of what a state offers (xyz: printing offers pause and cancel, idle no flow's answers; Line-us:
+drawing offers nothing; MMU3: an error offers retry or continue, and stop)."""
 
 
 @pytest.mark.timeout(600)
