@@ -407,19 +407,40 @@ async def test_a_body_that_stops_arriving_ends_the_request(monkeypatch: pytest.M
     assert not REACHED
 
 
-@given(received=st.integers(0, 10**10), more=st.integers(0, 10**6),
-       grace=st.floats(0, 3600, allow_nan=False), rate=st.floats(1, 10**7, allow_nan=False))
-def test_a_body_is_too_slow_exactly_when_its_average_falls_under_the_rate(received: int, more: int, grace: float,
-                                                                          rate: float) -> None:
-    """Never before the grace; until then and until `received` bytes average `rate`, the body is in time; more bytes
-    never bring the moment nearer."""
-    from fabwire.agent.boundary import too_slow_after
+@given(grace=st.integers(1, 100), rate=st.integers(1, 1000),
+       arrivals=st.lists(st.tuples(st.integers(0, 150), st.integers(0, 200_000)), max_size=40))
+def test_a_body_is_too_slow_exactly_when_a_window_past_the_grace_brings_too_little(
+        grace: int, rate: int, arrivals: list[tuple[int, int]]) -> None:
+    """`BodyPace` against its definition: checked at each arrival's moment (seconds of waiting), the body is too
+    slow exactly when some window [grace + k·grace, grace + (k+1)·grace) that has ended brought under rate × grace
+    bytes; what came during the grace, or in an earlier window, counts for nothing later."""
+    from fabwire.agent.boundary import BodyPace
 
-    after = too_slow_after(received, grace, rate)
-    assert after >= grace
-    assert received >= rate * after * (1 - 1e-9) or after == grace  # in time up to that moment
-    assert after == grace or received / after <= rate * (1 + 1e-9)  # and under the rate right past it
-    assert too_slow_after(received + more, grace, rate) >= after
+    pace = BodyPace(float(grace), float(rate))
+    seen: list[tuple[int, int]] = []
+    now = 0
+    for gap, size in arrivals:
+        now += gap
+        ended = range(grace, now - grace + 1, grace)  # the starts of the windows that have ended by now
+        short = any(sum(n for t, n in seen if start <= t < start + grace) < rate * grace for start in ended)
+        assert pace.too_slow(float(now)) == short
+        if short:
+            return
+        pace.arrived(size, float(now))
+        seen.append((now, size))
+
+
+def test_a_burst_buys_no_time_for_the_windows_after_it() -> None:
+    """However much came at first, a window that then brings under its share ends the body at its end."""
+    from fabwire.agent.boundary import BodyPace
+
+    pace = BodyPace(30.0, 1024.0)
+    pace.arrived(63 * 1024 * 1024, 0.5)  # 63 MiB in the first half second
+    pace.arrived(64 * 1024, 31.0)  # a full first window
+    assert not pace.too_slow(60.0)
+    pace.arrived(1, 70.0)
+    assert not pace.too_slow(89.0)
+    assert pace.too_slow(90.0)
 
 
 async def test_a_body_that_trickles_ends_the_request(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -350,8 +350,6 @@ def test_demo_uses_a_temporary_state_directory_and_gets_busy_once_looked_at(brow
     ("xyz", "zoffset", {"mm": 99}, "must be from -20 to 20"),
     ("xyz", "zoffset", {"mm": "2.45"}, "must be a finite number"),
     ("xyz", "zoffset_step", {"direction": "sideways"}, "must be one of up, down"),
-    ("xyz", "confirm", {}, "no step is waiting"),
-    ("xyz", "stop_flow", {}, "no step is waiting"),
     ("xyz", "calibrate", {"points": 9}, "takes no parameter 'points'"),
     ("lineus", "pen_height", {"z": 2000}, "must be from 0 to 1000"),
     ("lineus", "delete_drawing", {"slot": 1}, "send \"confirm\": true"),

@@ -13,8 +13,9 @@ Every HTTP request and WebSocket handshake passes, in this order:
   4. the body — each route declares the bodies it takes (a pydantic/Form/File body, or `openapi_extra`'s
      `requestBody` content); anything else is 415. JSON bodies are read here, at most `JSON_BODY_LIMIT` bytes,
      parsed and checked for depth (400) before the route sees them; uploads are counted as they arrive and cut
-     off past `--max-upload` (413); a body that stops arriving for `BODY_IDLE_S`, or that averages under
-     `BODY_MIN_RATE` once `BODY_GRACE_S` have passed, ends the request (408), and what the route held with it.
+     off past `--max-upload` (413); a body that stops arriving for `BODY_IDLE_S`, or that brings under
+     `BODY_MIN_RATE` × `BODY_GRACE_S` bytes in any window of `BODY_GRACE_S` after the first (`BodyPace`), ends the
+     request (408, `Connection: close`), and what the route held with it.
 
 A route added later is covered by all four without doing anything: the middleware wraps the whole application
 and looks the route up in the live route table. Errors are the API's `{"message", "exit_code", "error"}`.
@@ -83,10 +84,12 @@ MULTIPART_OVERHEAD = 64 * 1024
 BODY_IDLE_S = 30.0
 """How long a request's body may stop arriving before the request is ended (408)."""
 BODY_GRACE_S = 30.0
-"""Seconds of waiting for a body before its average rate is checked: a connection that starts slowly still passes."""
+"""Seconds of waiting for a body before its pace is checked (a connection that starts slowly still passes), and the
+length of each window its pace is then checked over (`BodyPace`)."""
 BODY_MIN_RATE = 1024.0
-"""Bytes per second a body must average past `BODY_GRACE_S` (over the time spent waiting for it): slow Wi-Fi and a
-Raspberry Pi upload at tens of KiB/s or more; a trickle that only keeps a machine claimed is far below."""
+"""Bytes per second a body must bring in every window of `BODY_GRACE_S` past the first (over the time spent waiting
+for it): slow Wi-Fi and a Raspberry Pi upload at tens of KiB/s or more; a trickle that only keeps a machine claimed
+is far below, however much it sent at first."""
 
 JSON_TYPE = "application/json"
 RAW_TYPE = "application/octet-stream"
@@ -521,17 +524,50 @@ def _too_large(rule: BodyRule, size: int | None) -> str:
     return f"{what} {said} {rule.limit:,} bytes" + (" (--max-upload)" if what == "the upload" else "")
 
 
-def too_slow_after(received: int, grace: float, rate: float) -> float:
-    """The seconds of waiting after which a body that has brought `received` bytes averages under `rate` bytes/s,
-    never before `grace`: its next bytes must come before then (`BODY_GRACE_S`, `BODY_MIN_RATE`)."""
-    return max(grace, received / rate)
+class BodyPace:
+    """The pace a body must keep, on the clock of the seconds spent waiting for it: nothing is asked during the
+    first `grace` seconds (a connection that starts slowly passes); from then on, each successive window of
+    `grace` seconds must bring at least `rate` × `grace` bytes. A burst never buys time for later windows, so a
+    client that sends most of a file at once and then a byte now and then fails at the end of the first window
+    that its trickle does not fill (`BODY_GRACE_S`, `BODY_MIN_RATE`)."""
+
+    def __init__(self, grace: float, rate: float) -> None:
+        self.window = max(grace, 1e-3)
+        self.rate = rate
+        self.start = max(grace, 0.0)
+        """When the current window began (seconds of waiting)."""
+        self.got = 0
+        """Bytes that came in the current window."""
+
+    @property
+    def need(self) -> float:
+        """The bytes each window must bring."""
+        return self.rate * self.window
+
+    def due(self) -> float:
+        """The seconds of waiting by which the current window must be full."""
+        return self.start + self.window
+
+    def arrived(self, size: int, waited: float) -> None:
+        """Count `size` bytes that came after `waited` seconds of waiting (bytes of the grace count for nothing)."""
+        if waited >= self.start:
+            self.got += size
+
+    def too_slow(self, waited: float) -> bool:
+        """Whether a window that ended by `waited` seconds of waiting brought under `need` bytes; windows that
+        were full are passed, and the next one begins."""
+        while waited >= self.due():
+            if self.got < self.need:
+                return True
+            self.start, self.got = self.due(), 0
+        return False
 
 
 class _Counted:
     """`receive` that raises BodyTooLarge once the body passes the rule's limit, and BodyTimeout when it stops
-    arriving for `BODY_IDLE_S` or averages under `BODY_MIN_RATE` past `BODY_GRACE_S` (both reach the route as
-    exceptions, so whatever it held is released); `size` is what came, `waited` the seconds spent waiting for it
-    (a route's own work between reads is not counted against the client)."""
+    arriving for `BODY_IDLE_S` or falls behind `BodyPace` (both reach the route as exceptions, so whatever it held
+    is released); `size` is what came, `waited` the seconds spent waiting for it (a route's own work between reads
+    is not counted against the client)."""
 
     def __init__(self, receive: Receive, rule: BodyRule) -> None:
         self.receive = receive
@@ -539,28 +575,37 @@ class _Counted:
         self.size = 0
         self.waited = 0.0
         self.done = False
+        self.pace = BodyPace(BODY_GRACE_S, BODY_MIN_RATE)
+
+    def _slow(self) -> BodyTimeout:
+        pace = self.pace
+        return BodyTimeout(f"the body arrives too slowly: {pace.got:,} bytes in the last {pace.window:g} s "
+                           f"({self.size:,} in all); after the first {pace.window:g} s every {pace.window:g} s must "
+                           f"bring at least {pace.need:,.0f} bytes ({pace.rate / 1024:g} KiB/s)")
 
     async def __call__(self) -> Message:
         if self.done:
             return await self.receive()  # only the disconnect is left to wait for
-        slow = too_slow_after(self.size, BODY_GRACE_S, BODY_MIN_RATE) - self.waited
+        if self.pace.too_slow(self.waited):
+            raise self._slow()
+        slow = self.pace.due() - self.waited
         loop = asyncio.get_running_loop()
         started = loop.time()
         try:
-            if slow <= 0:
-                raise TimeoutError
             async with asyncio.timeout(min(BODY_IDLE_S, slow)):
                 message = await self.receive()
         except TimeoutError:
-            if slow < BODY_IDLE_S:
-                raise BodyTimeout(f"the body arrives too slowly: {self.size:,} bytes in {self.waited + slow:.0f} s; "
-                                  f"after the first {BODY_GRACE_S:g} s it must average at least "
-                                  f"{BODY_MIN_RATE / 1024:g} KiB/s") from None
-            raise BodyTimeout(f"the body stopped arriving for {BODY_IDLE_S:g} s") from None
-        finally:
             self.waited += loop.time() - started
+            if slow < BODY_IDLE_S:
+                if self.pace.too_slow(max(self.waited, self.pace.due())):
+                    raise self._slow() from None
+                return await self()  # the window was full: wait on in the next one
+            raise BodyTimeout(f"the body stopped arriving for {BODY_IDLE_S:g} s") from None
+        self.waited += loop.time() - started
         if message["type"] == "http.request":
-            self.size += len(message.get("body", b""))
+            size = len(message.get("body", b""))
+            self.size += size
+            self.pace.arrived(size, self.waited)
             if self.size > self.rule.limit:
                 raise BodyTooLarge(_too_large(self.rule, None))
             self.done = not message.get("more_body", False)

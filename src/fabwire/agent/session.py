@@ -349,12 +349,29 @@ class Session:
         if not self.online:
             raise LinkError(f"{self.spec.name} is offline ({self._reason})")
 
+    def _require_offered(self, action: str) -> None:
+        """DeviceBusy (HTTP 409) naming the machine's state unless its summary's `actions` (the driver's table of
+        what each state offers, as the last poll or action left it) holds `action`: what the machine cannot do
+        now is refused before anything is sent, never accepted and then failed out of sight."""
+        summary = self.state.get("summary") or {}
+        offered = summary.get("actions")
+        if offered is None or action in offered:
+            return
+        state = summary.get("state") or "busy"
+        text = summary.get("state_text")
+        now = f"{state} ({text})" if text and text != state else state
+        can = f"it offers {', '.join(offered)} now" if offered else "it offers no action until that ends"
+        if summary.get("busy"):
+            raise DeviceBusy(f"{self.spec.name} is busy and cannot {action} now: it is {now}; {can}")
+        raise DeviceBusy(f"{self.spec.name} cannot {action} now: it is {now}; {can}")
+
     async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
         spec = self.driver.action(action)
         checked = checked_params(spec, params)
         self._require_online()
         if action == "cancel" and self._job is not None:  # the print is this agent's job: end the job with it
             return await self.cancel_job(self._job["id"], confirm=True)
+        self._require_offered(action)
         if spec.job:
             async with self.claim_job(None, action) as claim:
                 job = await claim.start(checked)

@@ -124,7 +124,8 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
 
     `before_file(fields, filename)` runs when the file part begins, with the fields sent before it (PrusaSlicer,
     OrcaSlicer and the Moonraker hosts send `print` first), before a byte of the file is read: a print that
-    cannot start is refused there. InputError for a body that is no such form, UploadTooLarge over `limit`;
+    cannot start is refused there. InputError for a body that is no such form or ends before its closing
+    boundary (a cut-off upload: nothing of it is kept), UploadTooLarge over `limit`;
     `file` is None when the form has no file part. Each of `sinks` (which `before_file` may fill: a job claim's
     `write`) gets the file's bytes too, as they arrive."""
     from python_multipart import MultipartParser
@@ -141,6 +142,7 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
     part: dict[str, Any] = {}
     pending = bytearray()
     parts = 0
+    ended: list[bool] = []
 
     def begin() -> None:
         nonlocal parts
@@ -202,7 +204,7 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
     parser = MultipartParser(boundary, {
         "on_part_begin": begin, "on_header_field": header_field, "on_header_value": header_value,
         "on_header_end": header_end, "on_headers_finished": headers_finished, "on_part_data": data,
-        "on_part_end": part_end})
+        "on_part_end": part_end, "on_end": lambda: ended.append(True)})
     try:
         async for chunk in request.stream():
             parser.write(chunk)
@@ -213,6 +215,9 @@ async def read_upload(request: Request, limit: int, before_file: Callable[[dict[
                 for sink in sinks or ():
                     await sink(piece)
         parser.finalize()
+        if not ended:  # RFC 7578 §4.1 / RFC 2046 §5.1.1: a form ends with its close-delimiter "--BOUNDARY--"
+            raise InputError("the multipart form ends before its closing boundary: the upload was cut off, so "
+                             "nothing was kept; send it again")
     except MultipartParseError as exc:
         upload.close()
         raise InputError(f"the multipart form is malformed: {exc}") from None

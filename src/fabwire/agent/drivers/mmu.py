@@ -51,6 +51,11 @@ class MMUDriver(Driver):
         self.active_slot: int | None = None
         self._failure: str | None = None
         self._unsubscribe: Any = None
+        self._error: int | None = None
+        """The error the last poll found (its status value), or None."""
+        self._pressed: tuple[str, int] | None = None
+        """A button pressed on that error (the action, the error's value): until the MMU reports anything else,
+        the error is no longer offered its buttons (a second Retry would reach an MMU already retrying)."""
 
     def _client(self) -> MMU:
         if self.mmu is None:
@@ -66,6 +71,8 @@ class MMUDriver(Driver):
 
     def _heard(self, event: HostEvent) -> None:
         if isinstance(event, StatusUpdated):
+            if self._pressed is not None and (event.status.kind != "E" or event.status.value != self._pressed[1]):
+                self._pressed = None  # the MMU has moved on from the error the button was pressed on
             return  # polled into the state each second
         if isinstance(event, LinkFailed):
             self._failure = event.info.explained(detail=event.detail)
@@ -85,7 +92,13 @@ class MMUDriver(Driver):
         status = await mmu.status()
         busy = mmu.logic.busy
         error = describe_error(status.value) if status.kind == "E" else None
-        if error is not None:
+        self._error = status.value if error is not None else None
+        if self._pressed is not None and self._pressed[1] != self._error:
+            self._pressed = None
+        if error is not None and self._pressed is not None:
+            state, busy, actions = "busy", True, []
+            text = f"{self._pressed[0]} pressed on: {error.explained(command=status.command)}"
+        elif error is not None:
             state, text = "error", error.explained(command=status.command)
             actions = ["retry" if error.retryable else "continue", "stop"]
         elif busy:
@@ -120,6 +133,8 @@ class MMUDriver(Driver):
             finished = await mmu.run(Home(0), timeout=limit)
         elif action in ("retry", "continue", "stop"):
             await mmu.press(action)
+            if self._error is not None:
+                self._pressed = (action, self._error)
             return {"ok": True, "action": action}
         else:
             version = await mmu.reset(timeout=limit)

@@ -109,19 +109,31 @@ class XYZDriver(Driver):
 
     def check_upload(self, name: str, path: Path) -> None:
         """The printer intake's refusal for what no printer takes (binary data, images, SVG, G-code without
-        commands), so a bad file is refused at upload rather than failing the job later; read from disk in
-        pieces, never whole."""
+        commands, G-code beyond this printer's build volume), so a bad file is refused at upload rather than
+        failing the job later; read from disk in pieces, never whole."""
         self.describe_upload(name, path)
 
     def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
         """`check_upload`, and the figures the intake reads for the .3w header (a G-code's comments, or its
-        moves where the comments are silent); with `check` False, only what the figures need is read."""
+        moves where the comments are silent); with `check` False, only what the figures need is read. With
+        `check`, a G-code that extrudes beyond the connected model's build volume is refused (InputError) as
+        `fabwire xyz print` refuses it, so the refusal is the answer to the upload or to the start."""
         kind, head = intake.sniff(path, name)
         intake.require_printable(kind, name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
+            model = self._last[0].model if self._last is not None and check else None
             with intake.open_input(path, name) as source:
                 stated, computed = intake.stream_metadata(source, name, every_line=check)
-            meta = stated.merged(computed) if computed is not None else stated
+                meta = stated.merged(computed) if computed is not None else stated
+                if model is not None:  # as `xyz print` refuses it, in words for an API user
+                    reach = meta
+                    if computed is None:  # the comments told the figures: the moves are read for their extent
+                        source.seek(0)
+                        reach = intake.prepare(source, name, model, name, 0, None, force=True).metadata
+                    beyond = intake.check_build_volume(reach, name, model, force=True)
+                    if beyond is not None:  # (its last clause names the command line's --force)
+                        raise InputError(f"{beyond.rpartition('; ')[0]}; slice it for this printer and send it "
+                                         "again")
             return {"print_time_s": meta.print_time_s, "filament_mm": meta.filament_mm, "layers": meta.layers,
                     "slicer": meta.slicer}
         if kind is intake.Kind.THREEW and check:
