@@ -29,9 +29,9 @@ from common import Figure  # noqa: E402
 
 PRINTERS = 500
 AGENTS = 2
-SECONDS = 20.0
+SECONDS = 12.0
 WARMUP = 4.0
-COMMANDS = 400
+COMMANDS = 240
 
 
 def _now() -> str:

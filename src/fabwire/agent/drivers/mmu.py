@@ -3,6 +3,7 @@ they happen; commands and the printer-dialog buttons go through `MMU`."""
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from fabwire.agent.drivers.base import Action, Driver, Identity, Param, summary
@@ -16,6 +17,9 @@ from fabwire.mmu.protocol import Cut, Eject, Home, Load, Request, ToolChange, Un
 
 IDLE_ACTIONS = ("tool_change", "load", "unload", "eject", "cut", "home", "reset")
 SLOT = Param("slot", "int", "filament slot 0 to 4", 0, 4)
+PRESS_SETTLE_S = 3.0
+"""Seconds after a button press in which the same error is taken as the MMU still acting on it (it answers the
+press within a heartbeat, 1 s of MMU time): past them, the error's buttons are offered again."""
 PARKED = 5
 
 
@@ -53,9 +57,10 @@ class MMUDriver(Driver):
         self._unsubscribe: Any = None
         self._error: int | None = None
         """The error the last poll found (its status value), or None."""
-        self._pressed: tuple[str, int] | None = None
-        """A button pressed on that error (the action, the error's value): until the MMU reports anything else,
-        the error is no longer offered its buttons (a second Retry would reach an MMU already retrying)."""
+        self._pressed: tuple[str, int, float] | None = None
+        """A button pressed on that error (the action, the error's value, when): until the MMU reports anything
+        else, or PRESS_SETTLE_S have passed, the error is not offered its buttons (a second Retry would reach an MMU
+        already retrying; a retry that fails at once back into the same error is offered them again)."""
 
     def _client(self) -> MMU:
         if self.mmu is None:
@@ -93,7 +98,8 @@ class MMUDriver(Driver):
         busy = mmu.logic.busy
         error = describe_error(status.value) if status.kind == "E" else None
         self._error = status.value if error is not None else None
-        if self._pressed is not None and self._pressed[1] != self._error:
+        if self._pressed is not None and (self._pressed[1] != self._error
+                                          or time.monotonic() - self._pressed[2] > PRESS_SETTLE_S):
             self._pressed = None
         if error is not None and self._pressed is not None:
             state, busy, actions = "busy", True, []
@@ -134,7 +140,7 @@ class MMUDriver(Driver):
         elif action in ("retry", "continue", "stop"):
             await mmu.press(action)
             if self._error is not None:
-                self._pressed = (action, self._error)
+                self._pressed = (action, self._error, time.monotonic())
             return {"ok": True, "action": action}
         else:
             version = await mmu.reset(timeout=limit)
