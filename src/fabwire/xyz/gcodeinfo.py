@@ -34,7 +34,7 @@ class GcodeMetadata:
     notes: tuple[str, ...] = ()
     """Why a figure was set aside (a slicer's placeholder, a zero, a value no print has)."""
     extent: tuple[tuple[float, float], ...] | None = None
-    """(lowest, highest) X, Y and Z of the extruding moves in mm, from the moves; None when none extrude."""
+    """(lowest, highest) X, Y and Z in mm the moves reach, travel included (`REACH`); None when nothing moves."""
     arcs: int = 0
     """G2/G3 arc moves in the file (counted from the moves)."""
 
@@ -174,6 +174,72 @@ def words_of(params: bytes) -> dict[bytes, float]:
     return _words(params)
 
 
+@dataclass(frozen=True, slots=True)
+class ReachRule:
+    """How one kind of move widens the extent the build volume check compares with the machine."""
+
+    construct: str
+    counted: str
+    source: str
+
+
+REACH: tuple[ReachRule, ...] = (
+    ReachRule("G0/G1 with X, Y or Z, extruding or not", "its start and end points",
+              "RepRap wiki G-code, G0 & G1; travel goes beyond the volume as surely as printing does, and no public "
+              "source says a da Vinci has software endstops to stop it"),
+    ReachRule("G1 with Z only and E (extruding while it rises)", "its start and end points, like any move",
+              "RepRap wiki G-code, G0 & G1 (the axes named move, extruding or not)"),
+    ReachRule("G1 with E only (extruding where the nozzle stands)", "the point it extrudes at (its start and end)",
+              "RepRap wiki G-code, G0 & G1"),
+    ReachRule("G2/G3 with I and J (centre offsets)", "the whole arc: its end points and every axis extreme "
+              "(centre ± radius) its swept angle crosses; a start that equals the end is a full circle",
+              "Marlin G2-G3 Arc or Circle Move (marlinfw.org/docs/gcode/G002-G003.html); Marlin plan_arc"),
+    ReachRule("G2/G3 with R (radius; negative for the longer way round)", "the whole arc as for I and J, its centre "
+              "on the chord's bisector; an R shorter than half the chord puts the centre mid-chord (a half circle)",
+              "Marlin G2-G3 Arc or Circle Move, R form; Marlin gcode/motion/G2_G3.cpp (h = 0 when R is too short)"),
+    ReachRule("G2/G3 without I, J or R", "its end points (a straight move at most)",
+              "Marlin G2-G3 (refuses the move); arcwork passes it on as G1"),
+    ReachRule("G92 (set position)", "nothing by itself: moves after it count from the position it sets",
+              "RepRap wiki G-code, G92"),
+)
+"""What the extent of a G-code counts, per construct (tests/xyz/test_reach.py has one test per row)."""
+
+
+def arc_box(x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.float64], y1: NDArray[np.float64],
+            i: NDArray[np.float64], j: NDArray[np.float64], r: NDArray[np.float64],
+            clockwise: NDArray[np.bool_]) -> tuple[NDArray[np.float64], ...]:
+    """(lowest X, highest X, lowest Y, highest Y) in mm of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1) with
+    centre offsets I, J (NaN when not given) or radius R (`REACH`): the end points, the point at the end's angle on
+    the start's circle, and each of the four axis extremes of that circle that the swept angle crosses. NaN results
+    (coordinates no float holds) are infinite."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        centred = ~(np.isnan(i) & np.isnan(j))
+        dx, dy = x1 - x0, y1 - y0
+        chord = np.hypot(dx, dy)
+        radius_r = np.nan_to_num(r)
+        h = np.sqrt(np.maximum(0.0, radius_r * radius_r - chord * chord / 4))
+        side = np.where(clockwise ^ (radius_r < 0), -1.0, 1.0) * h / chord
+        cx = np.where(centred, x0 + np.nan_to_num(i), (x0 + x1) / 2 - side * dy)
+        cy = np.where(centred, y0 + np.nan_to_num(j), (y0 + y1) / 2 + side * dx)
+        has_centre = centred | (~np.isnan(r) & (chord > 0))
+        radius = np.hypot(x0 - cx, y0 - cy)
+        begin, end = np.arctan2(y0 - cy, x0 - cx), np.arctan2(y1 - cy, x1 - cx)
+        sweep = np.where(clockwise, begin - end, end - begin) % (2 * math.pi)
+        sweep = np.where(sweep < 1e-9, 2 * math.pi, sweep)
+        # an end off the start's circle (I and J disagreeing with it): the arc runs on that circle to the end's angle
+        last_x = np.where(has_centre, cx + radius * np.cos(end), x1)
+        last_y = np.where(has_centre, cy + radius * np.sin(end), y1)
+        box = [np.minimum(np.minimum(x0, x1), last_x), np.maximum(np.maximum(x0, x1), last_x),
+               np.minimum(np.minimum(y0, y1), last_y), np.maximum(np.maximum(y0, y1), last_y)]
+        for quarter, (k, centre, sign) in enumerate(((1, cx, 1.0), (3, cy, 1.0), (0, cx, -1.0), (2, cy, -1.0))):
+            angle = quarter * math.pi / 2
+            crossed = has_centre & (np.where(clockwise, begin - angle, angle - begin) % (2 * math.pi) <= sweep)
+            extreme = centre + sign * radius
+            box[k] = np.where(crossed, (np.maximum if sign > 0 else np.minimum)(box[k], extreme), box[k])
+            box[k] = np.where(crossed & np.isnan(extreme), np.inf, box[k])
+    return tuple(np.where(np.isnan(side), np.inf, side) for side in box)
+
+
 class MoveAnalyzer:
     """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
 
@@ -208,7 +274,7 @@ class MoveAnalyzer:
         self.arcs = 0
         self.low = [math.inf] * 3
         self.high = [-math.inf] * 3
-        """The extent (mm, per axis) of the extruding moves, start and end points."""
+        """The extent (mm, per axis) the moves reach, as `REACH` counts it."""
         self._held: list[tuple[float, float, float, float, float, float]] = []
         gcodearrays.reuse_freed_memory()
 
@@ -312,17 +378,19 @@ class MoveAnalyzer:
             x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
                 x, y, target_x, target_y, words.get(b"I", nan), words.get(b"J", nan), words.get(b"R", nan)))
             flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, np.array([arc == 2]))[0])
+            self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, np.array([arc == 2])))
             length = math.sqrt(flat * flat + dz * dz)
         else:
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
         self.path_seconds += (length or abs(de)) * 60.0 / self.feed
         self.filament += de
-        if de > 0 and (dx or dy or arc or not math.isfinite(dx + dy)):
+        if dx or dy or dz or de or arc or not math.isfinite(dx + dy + dz + de):  # any move, travel too (REACH)
             for k, (start, end) in enumerate(((x, target_x), (y, target_y), (z, target_z))):
                 # a coordinate that is no number (NaN, or beyond a float) reaches beyond any build volume
                 start, end = (v if not math.isnan(v) else math.inf for v in (start, end))
                 self.low[k] = min(self.low[k], start, end)
                 self.high[k] = max(self.high[k], start, end)
+        if de > 0 and (dx or dy or arc or not math.isfinite(dx + dy)):
             if dz:
                 self.vase_rise += max(0.0, dz)
             else:
@@ -402,9 +470,11 @@ class MoveAnalyzer:
             per_move = np.repeat(feed, np.diff(np.append(runs, count)))
             self.path_seconds += float(np.sum(np.where(length > 0, length, np.abs(de)) * 60.0 / per_move))
             self.filament += float(np.sum(de))
+            moving = (dx != 0) | (dy != 0) | (dz != 0) | (de != 0) | (arc != 0) | np.isnan(dx + dy + dz + de)
+            if moving.any():  # travel too: the machine goes there whether or not it extrudes (REACH)
+                self._reach(axes, after, moving, first, count)
             printing = (de > 0) & ((dx != 0) | (dy != 0) | (arc != 0))
             if printing.any():
-                self._reach(axes, after, printing, first, count)
                 rising = printing & (dz != 0)
                 if rising.any():
                     self.vase_rise += float(np.sum(np.maximum(dz[rising], 0.0)))
@@ -422,22 +492,22 @@ class MoveAnalyzer:
             self.e = float(after[3][-1])
         self.feed = float(feed[-1])
 
-    def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], printing: NDArray[np.bool_], first: int,
+    def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], moving: NDArray[np.bool_], first: int,
                count: int) -> None:
-        """Widen the extent with the start and end points of the printing moves (arcs: their end points).
+        """Widen the extent with the start and end points of the `moving` lines (arcs: see `_widen_arcs`).
 
-        A point is the position after a printing line or after the line before one; on each axis that is the value
-        of the last word at or before that line, so a word counts when a printing line or the line before one lies
+        A point is the position after a moving line or after the line before one; on each axis that is the value
+        of the last word at or before that line, so a word counts when a moving line or the line before one lies
         in its reign (from its line to the next word's), and the position before the piece counts when one lies
         before the axis's first word."""
-        wanted = printing.copy()
-        wanted[:-1] |= printing[1:]
+        wanted = moving.copy()
+        wanted[:-1] |= moving[1:]
         marks = np.concatenate(([0], np.cumsum(wanted)))
         for k in range(3):
             lines = axes[k].lines - first
             reigns = marks[np.append(lines[1:], count)] - marks[lines]
             points = after[k][reigns > 0]
-            if not len(lines) or marks[lines[0]] > 0 or printing[0]:
+            if not len(lines) or marks[lines[0]] > 0 or moving[0]:
                 points = np.append(points, self.pos[k])
             # a coordinate that is no number (NaN, or beyond what a float holds) reaches beyond any build volume
             points = np.where(np.isnan(points), np.inf, points)
@@ -465,9 +535,18 @@ class MoveAnalyzer:
         i, j, r = offsets
         flat = motion.arc_lengths(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
                                   arc[rows] == 2)
+        self._widen_arcs(arc_box(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
+                                 arc[rows] == 2))
         out = length.copy()
         out[rows] = np.sqrt(flat * flat + dz[rows] * dz[rows])
         return out
+
+    def _widen_arcs(self, box: tuple[NDArray[np.float64], ...]) -> None:
+        """Widen the X and Y extent with arcs' bounding boxes (`arc_box`)."""
+        low_x, high_x, low_y, high_y = box
+        for k, low, high in ((0, low_x, high_x), (1, low_y, high_y)):
+            self.low[k] = min(self.low[k], float(low.min()))
+            self.high[k] = max(self.high[k], float(high.max()))
 
     @property
     def absurd(self) -> bool:

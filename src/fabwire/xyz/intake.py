@@ -638,12 +638,13 @@ def _metadata(
 
 
 BUILD_MARGIN_MM = 1.0
-"""How far past the build volume an extrusion may reach before the file is refused (slicers' rounding)."""
+"""How far past the build volume a move may reach before the file is refused (slicers' rounding)."""
 
 
 def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, force: bool) -> str | None:
-    """InputError when the extrusions reach beyond `model`'s build volume (G-code sliced for a larger printer),
-    naming the extent; with `force`, the note saying so instead. None when they fit or nothing extrudes."""
+    """InputError when the moves (travel, extrusion and whole arcs, as `gcodeinfo.REACH` counts them) reach beyond
+    `model`'s build volume (G-code sliced for a larger printer), naming the extent; with `force`, the note saying so
+    instead. None when they fit or nothing moves."""
     if meta.extent is None:
         return None
     beyond = [axis for axis, (low, high), size in zip("XYZ", meta.extent, model.build_volume_mm, strict=True)
@@ -653,7 +654,7 @@ def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, forc
     reach = ", ".join(f"{axis} {low:.1f} to {high:.1f} mm" for axis, (low, high) in zip("XYZ", meta.extent,
                                                                                         strict=True))
     volume = " × ".join(str(v) for v in model.build_volume_mm)
-    text = (f"{name} extrudes beyond the {model.name}'s build volume of {volume} mm ({reach}): it was sliced for "
+    text = (f"{name} moves beyond the {model.name}'s build volume of {volume} mm ({reach}): it was sliced for "
             "another printer")
     if not force:
         raise InputError(f"{text}; slice it for this printer, or give --force to print it anyway")
