@@ -48,6 +48,65 @@ _ODD_CLASSES = bytes(1 if byte in b"0123456789." else 2 if byte in b"Ee" else 4 
                      for byte in range(256))
 
 
+@dataclass(frozen=True, slots=True)
+class LineRule:
+    """A kind of G-code line that firmwares read differently, so that no check of ours stands for what the printer
+    does: refused with the line's number, what it holds (`reading`) and what to do (`advice`)."""
+
+    construct: str
+    example: bytes
+    reading: str
+    advice: str
+    source: str
+
+
+LINE_RULES: tuple[LineRule, ...] = (
+    LineRule("a number with an exponent, or no number (X1e3, X nan)", b"G1 X1e3 Y10 E5",
+             "is a number with an exponent or no number at all, which printers read differently (a move to "
+             "infinity)", "write it as plain decimals",
+             "Marlin GCodeParser::value_float (strtod reads exponents); RepRap wiki G-code, 'Fields' (plain numbers)"),
+    LineRule("a letter given twice in one move", b"G1 X10 X1000 Y10 E5",
+             "gives a letter twice: Marlin's fast parser takes the last one, other readers the first",
+             "write each letter once",
+             "Marlin src/gcode/parser.cpp (FASTER_GCODE_PARSER: a repeated letter overwrites the earlier one)"),
+    LineRule("a second command word on a line", b"G1 X10 G1 X1000 Y10 E5",
+             "holds a second command word: RepRapFirmware runs both commands, Marlin reads the second as a parameter",
+             "put each command on its own line",
+             "RepRap wiki G-code ('a line holds one command'); RepRapFirmware GCodes (several commands on one line)"),
+    LineRule("a command subcode on a move, position or unit command (G1.0)", b"G1.0 X1000 Y10 E5",
+             "has a subcode: a firmware that ignores subcodes runs the command itself, others refuse the line",
+             "write the command without `.n`",
+             "RepRap wiki G-code, 'Codes with subcodes'; Marlin GCodeParser (USE_GCODE_SUBCODES is optional)"),
+    LineRule("a line break other than LF or CR in the code of a line (form feed, vertical tab, U+0085, U+2028, "
+             "U+2029; a comment is any text)",
+             b"G1 X10\fG1 X1000 Y10 E5",
+             "holds a form feed, vertical tab, U+0085, U+2028 or U+2029, which some readers take as a line break",
+             "remove it (end lines with LF or CR LF only)",
+             "Unicode Standard Annex #14 (mandatory breaks) as Python's str.splitlines reads them; Marlin "
+             "GCodeQueue ends a line only at LF or CR"),
+    LineRule("inch units (G20)", b"G20\nG1 X50 Y10 E5",
+             "sets inch units: a firmware with INCH_MODE_SUPPORT moves 25.4 times as far, others stay in mm",
+             "slice in millimetres (G21)", "Marlin G20 Inch Units (marlinfw.org/docs/gcode/G020.html)"),
+)
+"""Lines refused because printers read them differently (the first row is `ODD_NUMBER`; the others are found by
+the move analysis, `gcodeinfo.MoveAnalyzer`, which raises `Ambiguous`)."""
+EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES = LINE_RULES
+SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
+"""Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
+_REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
+"""A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
+_COMMAND_FLAGS = bytes(int(byte in b"GMgm") for byte in range(256))
+
+
+class Ambiguous(Exception):
+    """A line `LINE_RULES` refuses, at `offset` (the line's start) in the text the analysis was given."""
+
+    def __init__(self, rule: LineRule, offset: int = 0) -> None:
+        super().__init__(rule.construct)
+        self.rule = rule
+        self.offset = offset
+
+
 def may_hold_odd_number(text: bytes) -> bool:
     """Whether `text` may hold a match of `ODD_NUMBER` (False proves it holds none): a digit or dot right before
     an E, or three of the letters of NAN and INF in a row."""
@@ -180,6 +239,8 @@ def scan(padded: bytes) -> Scan | None:
     starts = newlines[:-1] + 1
     if not len(starts):
         return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
+    if any(separator in padded for separator in SEPARATORS):
+        return None  # the line reader refuses it
     c0, c1, c2, c3 = (data[starts + i] for i in range(4))
     command = (c0 == ord("G")) | (c0 == ord("M"))
     if (_ODD_FIRST[c0] | (command & (
@@ -200,6 +261,8 @@ def scan(padded: bytes) -> Scan | None:
         if line < suspect and padded[newlines[line] + 1] == 71 and ODD_NUMBER.search(  # G
                 padded, int(newlines[line]), int(newlines[line + 1])):
             suspect = line
+        if _REFUSED_COMMAND.match(padded, int(newlines[line])):
+            return None  # the line reader refuses it
         found = _CONTROL.match(padded, int(newlines[line]))
         if found is None:
             continue
@@ -224,6 +287,10 @@ def scan(padded: bytes) -> Scan | None:
         odd_line = np.searchsorted(newlines, odd) - 1
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
+    letters = np.flatnonzero(np.frombuffer(padded.translate(_COMMAND_FLAGS), dtype=np.bool_))
+    letter_line = np.searchsorted(newlines, letters) - 1
+    if (is_row[letter_line] & (letters > starts[letter_line]) & (letters < code_end[letter_line])).any():
+        return None  # a second command word in a move: the line reader refuses it
     read = len(AXES) if arcs.any() else _PLAIN_AXES
     # I, J and R words are found (and checked) everywhere, and kept only where arcs are
     where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))

@@ -15,7 +15,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fabwire.xyz import gcodearrays, motion, slicerfigures
-from fabwire.xyz.gcodearrays import VALUE, Words
+from fabwire.xyz.gcodearrays import (
+    INCHES,
+    REPEATED,
+    SECOND_COMMAND,
+    SEPARATOR,
+    SEPARATORS,
+    SUBCODE,
+    VALUE,
+    Ambiguous,
+    Words,
+)
 
 DEFAULT_FACETS = 50
 DEFAULT_FEED_MM_MIN = 1500.0
@@ -88,8 +98,11 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
 # `G1X10E5` is X10 E5 and `X1E5` is X1 E5); `;` ends the code of a line, `(...)` is a comment and `*` starts the
 # checksum. A command word opens the line, after blanks and an optional N line number.
 _COMMAND = re.compile(
-    rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(?![0-9.])([^\n;]*)",
+    rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(\.[0-9]*)?(?![0-9.])([^\n;]*)",
 )
+_SECOND_COMMAND = re.compile(rb"[GM][ \t]*[-+.0-9]")
+_NO_SUBCODE = {b"G0", b"G1", b"G2", b"G3", b"G92", b"G20", b"G21"}
+"""Commands refused with a subcode (`gcodearrays.SUBCODE`): they move, set the position or set units."""
 _WORD = re.compile(rb"([A-Z])[ \t]*(" + VALUE + rb")")
 _PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
 _PIECE = 1 << 20
@@ -136,10 +149,15 @@ def _code(params: bytes) -> bytes:
 
 
 def _words(params: bytes) -> dict[bytes, float]:
-    """Letter -> value of upper-cased parameters; the first word wins when a letter repeats, as in Marlin."""
+    """Letter -> value of upper-cased parameters; `gcodearrays.Ambiguous` when a letter repeats (Marlin's parsers
+    disagree on which one wins)."""
+    code = _code(params)
+    found = _WORD.findall(code)
     words: dict[bytes, float] = {}
-    for letter, value in _WORD.findall(_code(params)):
+    for letter, value in found:
         words.setdefault(letter, float(value))
+    if len(words) < len(found) and not gcodearrays.ODD_NUMBER.search(code):  # `X1e3 E5`: the exponent's refusal
+        raise Ambiguous(REPEATED)
     return words
 
 
@@ -240,6 +258,28 @@ def arc_box(x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.flo
     return tuple(np.where(np.isnan(side), np.inf, side) for side in box)
 
 
+def _separated(chunk: bytes, separator: bytes) -> int:
+    """The start (offset in b"\n" + `chunk`) of the first line with `separator` in its code (before any `;`: a
+    comment is any text), or len(chunk) + 1."""
+    at = chunk.find(separator)
+    while at >= 0:
+        start = chunk.rfind(b"\n", 0, at) + 1
+        if b";" not in chunk[start:at]:
+            return start
+        at = chunk.find(separator, at + 1)
+    return len(chunk) + 1
+
+
+def _ambiguous_at(piece: bytes, found: Ambiguous) -> int:
+    """The offset in `piece` of the first line `gcodearrays.LINE_RULES` refuses (where the line reader finds it;
+    `found`'s own offset when it finds none)."""
+    try:
+        MoveAnalyzer(timing=False)._lines(piece)
+    except Ambiguous as exc:
+        return exc.offset
+    return found.offset
+
+
 class MoveAnalyzer:
     """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
 
@@ -297,12 +337,17 @@ class MoveAnalyzer:
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
             found = gcodearrays.scan(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD))))
+            try:
+                if found is None:
+                    self._lines(chunk[start:end] + ended)
+                else:
+                    self._feed_arrays(found)
+            except Ambiguous as exc:  # the line reader, started afresh on the piece, says where
+                raise Ambiguous(exc.rule, start + _ambiguous_at(chunk[start:end] + ended, exc)) from None
             if found is None:
-                self._lines(chunk[start:end] + ended)
                 odd_at: int | None = start
                 g0_words = None
             else:
-                self._feed_arrays(found)
                 odd_at = None if found.odd_at is None else start + found.odd_at - 1
                 if g0_words is not None and found.g0_at is not None:
                     g0_words.append(found.g0_at + (start - 1))
@@ -330,8 +375,31 @@ class MoveAnalyzer:
             at = text.find(b";", end + 1) if end >= 0 else -1
 
     def _lines(self, chunk: bytes) -> None:
-        for letter, number, params in _COMMAND.findall(b"\n" + chunk):
-            self._command(letter.upper() + number.lstrip(b"0").rjust(1, b"0"), params.upper())
+        """Analyse the commands of whole lines one by one; `gcodearrays.Ambiguous` (with the line's offset in
+        `chunk`) for a line `gcodearrays.LINE_RULES` refuses."""
+        text = b"\n" + chunk
+        separated = len(text)  # the start of the first line with a separator: the lines before it come first
+        if any(separator in chunk for separator in SEPARATORS):
+            separated = min((_separated(chunk, separator) for separator in SEPARATORS), default=separated)
+        found: re.Match[bytes] | None = None
+        try:
+            for found in _COMMAND.finditer(text, 0, separated):
+                letter, number, subcode, params = found.groups()
+                command = letter.upper() + number.lstrip(b"0").rjust(1, b"0")
+                params = params.upper()
+                if letter in b"Gg":
+                    if subcode is not None and command in _NO_SUBCODE:
+                        raise Ambiguous(SUBCODE)
+                    if command == b"G20":
+                        raise Ambiguous(INCHES)
+                    if _SECOND_COMMAND.search(_code(params)):
+                        raise Ambiguous(SECOND_COMMAND)
+                if subcode is None:
+                    self._command(command, params)
+        except Ambiguous as exc:
+            raise Ambiguous(exc.rule, 0 if found is None else found.start()) from None
+        if separated < len(text):
+            raise Ambiguous(SEPARATOR, separated)
         self._release()
 
     def _command(self, command: bytes, params: bytes) -> None:
