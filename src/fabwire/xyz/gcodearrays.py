@@ -2,9 +2,9 @@
 with whole-array operations instead of one line at a time.
 
 The rules are Marlin's (see `gcodeinfo`): a word is a letter, optional blanks, then a decimal number without exponent;
-`;` ends the code of a line; the first word wins when a letter repeats. Layouts these arrays do not cover (indented or
-numbered lines, lower-case command letters, `(...)` comments, checksums, repeated letters) are left to the
-line-by-line reader: `scan` says None for them.
+`;` ends the code of a line; a letter repeated in a move is refused (`LINE_RULES`). Layouts these arrays do not
+cover (indented or numbered lines, lower-case command letters, `(...)` comments, checksums, repeated letters, the
+lines `LINE_RULES` refuses) are left to the line-by-line reader: `scan` says None for them.
 """
 
 from __future__ import annotations

@@ -188,7 +188,8 @@ VASE_LAYER_MM = 0.2
 
 
 def words_of(params: bytes) -> dict[bytes, float]:
-    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value, the first wins)."""
+    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value); a repeated letter is
+    `gcodearrays.Ambiguous`."""
     return _words(params)
 
 
