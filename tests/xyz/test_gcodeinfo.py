@@ -220,6 +220,8 @@ def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int],
     assert fast.filament == pytest.approx(slow.filament, rel=1e-9, abs=1e-9)
     assert fast.pos == pytest.approx(slow.pos, rel=1e-12, abs=1e-9)
     assert fast.e == pytest.approx(slow.e, rel=1e-12, abs=1e-9)
+    assert fast.low == pytest.approx(slow.low, rel=1e-9, abs=1e-9)  # the extent the build volume check uses
+    assert fast.high == pytest.approx(slow.high, rel=1e-9, abs=1e-9)
 
 
 @settings(max_examples=200, deadline=None)

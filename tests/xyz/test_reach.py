@@ -108,3 +108,15 @@ def test_the_box_holds_the_segments_written_and_no_more(x0: float, y0: float, x1
     assert box[1] - max(xs) <= step
     assert min(ys) - box[2] <= step
     assert box[3] - max(ys) <= step
+
+
+@pytest.mark.parametrize("arc", [b"G2 I500 J0\n", b"G3 J-400\n", b"G2 R300\n"])
+def test_a_piece_of_arcs_without_axis_words_is_counted(arc: bytes) -> None:
+    analyzer = MoveAnalyzer()
+    analyzer.feed_chunk(BASE)
+    analyzer.feed_chunk(arc * 3)  # a piece whose only words are centre offsets or radii
+    (low_x, high_x), (low_y, high_y), _z = analyzer.result().extent or ()
+    if b"R" in arc:  # R with the same start and end point is no arc (Marlin): the nozzle stays
+        assert (low_x, high_x, low_y, high_y) == pytest.approx((0.0, 10.0, 0.0, 10.0))
+    else:
+        assert max(high_x - low_x, high_y - low_y) >= 800

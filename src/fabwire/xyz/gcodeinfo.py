@@ -447,13 +447,15 @@ class MoveAnalyzer:
             x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
                 x, y, target_x, target_y, words.get(b"I", nan), words.get(b"J", nan), words.get(b"R", nan)))
             flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, np.array([arc == 2]))[0])
-            self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, np.array([arc == 2])))
+            if any(letter in words for letter in (b"I", b"J", b"R")):  # else its end points, as a straight move
+                self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, np.array([arc == 2])))
             length = math.sqrt(flat * flat + dz * dz)
         else:
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
         self.path_seconds += (length or abs(de)) * 60.0 / self.feed
         self.filament += de
-        if dx or dy or dz or de or arc or not math.isfinite(dx + dy + dz + de):  # any move, travel too (REACH)
+        centred = arc and any(letter in words for letter in (b"I", b"J", b"R"))
+        if dx or dy or dz or de or centred or not math.isfinite(dx + dy + dz + de):  # any move, travel too (REACH)
             for k, (start, end) in enumerate(((x, target_x), (y, target_y), (z, target_z))):
                 # a coordinate that is no number (NaN, or beyond a float) reaches beyond any build volume
                 start, end = (v if not math.isnan(v) else math.inf for v in (start, end))
@@ -513,7 +515,7 @@ class MoveAnalyzer:
 
     def _segment(self, axes: list[Words], arcs: NDArray[np.int8]) -> None:
         """The moves and G92s between two other commands: every axis's words, on lines counted from the piece's."""
-        given = [words for words in axes[:5] if len(words.lines)]
+        given = [words for words in axes if len(words.lines)]  # `G2 I5 J0` alone is a full circle
         if not given:
             return
         first = min(int(words.lines[0]) for words in given)
