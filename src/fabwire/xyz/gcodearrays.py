@@ -95,7 +95,8 @@ SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 """Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
 """A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
-_COMMAND_FLAGS = bytes(int(byte in b"GMgm") for byte in range(256))
+_COMMAND_FLAGS = bytes(1 if byte in b"GMgm" else 2 if byte in b"\x0b\x0c\x85\xa8\xa9" else 0 for byte in range(256))
+"""bytes.translate table: 1 for a command letter, 2 for a byte that may be (the end of) one of SEPARATORS."""
 
 
 class Ambiguous(Exception):
@@ -239,8 +240,12 @@ def scan(padded: bytes) -> Scan | None:
     starts = newlines[:-1] + 1
     if not len(starts):
         return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
-    if any(separator in padded for separator in SEPARATORS):
-        return None  # the line reader refuses it
+    flags = np.frombuffer(padded.translate(_COMMAND_FLAGS), dtype=np.uint8)
+    letters = np.flatnonzero(flags)
+    if (flags[letters] == 2).any():
+        if any(separator in padded for separator in SEPARATORS):
+            return None  # the line reader refuses it (in the code of a line) or reads the comment
+        letters = letters[flags[letters] == 1]
     c0, c1, c2, c3 = (data[starts + i] for i in range(4))
     command = (c0 == ord("G")) | (c0 == ord("M"))
     if (_ODD_FIRST[c0] | (command & (
@@ -287,7 +292,6 @@ def scan(padded: bytes) -> Scan | None:
         odd_line = np.searchsorted(newlines, odd) - 1
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
-    letters = np.flatnonzero(np.frombuffer(padded.translate(_COMMAND_FLAGS), dtype=np.bool_))
     letter_line = np.searchsorted(newlines, letters) - 1
     if (is_row[letter_line] & (letters > starts[letter_line]) & (letters < code_end[letter_line])).any():
         return None  # a second command word in a move: the line reader refuses it
