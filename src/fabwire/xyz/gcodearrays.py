@@ -21,8 +21,6 @@ AXES = b"XYZEFIJR"
 """The words read: the axes, the feed rate, and the centre offsets and radius of G2/G3 arcs."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
-_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
-"""bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
 _PLAIN_AXES = 5
 """X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
@@ -95,8 +93,10 @@ SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 """Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
 """A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
-_COMMAND_FLAGS = bytes(1 if byte in b"GMgm" else 2 if byte in b"\x0b\x0c\x85\xa8\xa9" else 0 for byte in range(256))
-"""bytes.translate table: 1 for a command letter, 2 for a byte that may be (the end of) one of SEPARATORS."""
+_SCAN_FLAGS = bytes(1 if _AXIS_INDEX[byte] >= 0 else 2 if byte in b"GMgm" else 3 if byte in b"\x0b\x0c\x85\xa8\xa9"
+                    else 0 for byte in range(256))
+"""bytes.translate table: 1 for an axis letter, 2 for a command letter, 3 for a byte that may be (the end of) one of
+SEPARATORS, 0 for anything else."""
 
 
 class Ambiguous(Exception):
@@ -240,12 +240,11 @@ def scan(padded: bytes) -> Scan | None:
     starts = newlines[:-1] + 1
     if not len(starts):
         return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
-    flags = np.frombuffer(padded.translate(_COMMAND_FLAGS), dtype=np.uint8)
-    letters = np.flatnonzero(flags)
-    if (flags[letters] == 2).any():
-        if any(separator in padded for separator in SEPARATORS):
-            return None  # the line reader refuses it (in the code of a line) or reads the comment
-        letters = letters[flags[letters] == 1]
+    flags = np.frombuffer(padded.translate(_SCAN_FLAGS), dtype=np.uint8)
+    where = np.flatnonzero(flags)
+    kind = flags[where]
+    if (kind == 3).any() and any(separator in padded for separator in SEPARATORS):
+        return None  # the line reader refuses it (in the code of a line) or reads the comment
     c0, c1, c2, c3 = (data[starts + i] for i in range(4))
     command = (c0 == ord("G")) | (c0 == ord("M"))
     if (_ODD_FIRST[c0] | (command & (
@@ -292,17 +291,18 @@ def scan(padded: bytes) -> Scan | None:
         odd_line = np.searchsorted(newlines, odd) - 1
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
-    letter_line = np.searchsorted(newlines, letters) - 1
-    if (is_row[letter_line] & (letters > starts[letter_line]) & (letters < code_end[letter_line])).any():
-        return None  # a second command word in a move: the line reader refuses it
     read = len(AXES) if arcs.any() else _PLAIN_AXES
     # I, J and R words are found (and checked) everywhere, and kept only where arcs are
-    where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of]
     if inline_comments:
         keep &= where < code_end[line_of]
-    where, line_of = where[keep], line_of[keep]
+    where, line_of, kind = where[keep], line_of[keep], kind[keep]
+    command_letter = kind == 2
+    if (where[command_letter] > starts[line_of[command_letter]]).any():
+        return None  # a second command word in a move: the line reader refuses it
+    axis_letter = kind == 1
+    where, line_of = where[axis_letter], line_of[axis_letter]
     at = where + 1
     blank = (data[at] == 32) | (data[at] == 9)
     while blank.any():  # blanks between a letter and its number

@@ -541,7 +541,7 @@ class MoveAnalyzer:
             per_move = np.repeat(feed, np.diff(np.append(runs, count)))
             self.path_seconds += float(np.sum(np.where(length > 0, length, np.abs(de)) * 60.0 / per_move))
             self.filament += float(np.sum(de))
-            moving = (dx != 0) | (dy != 0) | (dz != 0) | (de != 0) | (arc != 0) | np.isnan(dx + dy + dz + de)
+            moving = (dx != 0) | (dy != 0) | (dz != 0) | (de != 0) | (arc != 0)  # a NaN move is != 0 too
             if moving.any():  # travel too: the machine goes there whether or not it extrudes (REACH)
                 self._reach(axes, after, moving, first, count)
             printing = (de > 0) & ((dx != 0) | (dy != 0) | (arc != 0))
