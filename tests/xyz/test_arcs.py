@@ -111,7 +111,7 @@ def test_gcode_beyond_the_build_volume_is_refused_unless_forced(tmp_path: Path) 
     src.write_bytes(b"G28\nG1 Z0.2 F600\nG1 X10 Y10 F3000\nG1 X198 Y10 E5 F1200\nG1 X198 Y100 E9\n")
     refused = run_cli("xyz", "convert", str(src), str(tmp_path / "b.3w"), "-m", "mini w", env=cli_env())
     assert refused.returncode == 4
-    assert "X 10.0 to 198.0 mm" in refused.stderr
+    assert "X 0.0 to 198.0 mm" in refused.stderr  # the travel from home counts too
     assert "150 × 150 × 150 mm" in refused.stderr
     assert len(refused.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "b.3w").exists()

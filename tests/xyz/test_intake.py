@@ -110,6 +110,22 @@ def test_text_as_editors_write_it_gives_the_same_body_and_metadata(spelling: str
     assert decoded.layers == 3
 
 
+@pytest.mark.parametrize(("before", "length", "after"), [
+    (b"G28\n", 3 << 20, b"\nG28\n"),  # longer than a read: carried across reads
+    (b"G28\nG1 X1\n", (1 << 20) + 10, b"\n"),  # found inside one read
+    (b"G28\n" * 1_200_000, 2 << 20, b""),  # after many reads, at the end without a newline
+    (b"G28\r\n" * 1000, 3 << 20, b"\r\nG28\r\n"),
+])
+def test_a_line_over_the_limit_is_named_by_its_number_and_the_limit(tmp_path: Path, before: bytes, length: int,
+                                                                     after: bytes) -> None:
+    src = tmp_path / "long.gcode"
+    src.write_bytes(before + b";" + b"x" * length + after)
+    line = before.count(b"\n") + 1
+    with pytest.raises(InputError) as caught:
+        convert_gcode_file(src, tmp_path / "long.3w")
+    assert f"has a line of over {intake.MAX_LINE} bytes, the limit (line {line})" in str(caught.value)
+
+
 def test_a_line_over_the_limit_is_refused_and_memory_stays_bounded(tmp_path: Path) -> None:
     src = tmp_path / "long.gcode"
     with src.open("wb") as out:
@@ -191,7 +207,7 @@ def test_any_leading_comment_block_converts_for_every_model_and_decodes_to_the_s
     assert len(decoded.header) < 8192
 
 
-_BODY_LINES = [b"G0 X1 Y2", b"G00 X3", b"G0X4", b"G01 X5 E1", b"G000 X6", b"G0.5", b"G0\tX7", b"G0", b"G00", b"G10",
+_BODY_LINES = [b"G0 X1 Y2", b"G00 X3", b"G0X4", b"G01 X5 E1", b"G000 X6", b"G10.5", b"G0\tX7", b"G0", b"G00", b"G10",
                b"G1 X8 Y9 E2", b"; G0 X1 comment", b"", b"M117 G0", b"G28", b"G92 E0", b"  G0 X1", b"N5 G0 X2",
                b"g0 x3", b"G 0 X4", b";LAYER_CHANGE", b"G2 X1 Y1 I1 J0 E3"]
 

@@ -4,6 +4,7 @@ file of any size; the number formats; figures that are not believed."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -162,3 +163,34 @@ def test_info_says_why_a_figure_was_computed(tmp_path: Path) -> None:
     assert any("placeholder" in note for note in info["notes"])
     text = run_cli("xyz", "info", str(path), env=cli_env())
     assert "CuraEngine's placeholder" in text.stdout
+
+
+@pytest.mark.parametrize(("row", "example"), list(zip(WORDINGS, EXAMPLES, strict=True)),
+                         ids=[f"{w.slicer}-{w.figure}-{i}" for i, w in enumerate(WORDINGS)])
+@pytest.mark.parametrize("exponent", [b"e1", b"E+3", b"e-2"])
+def test_each_wording_with_an_exponent_is_not_believed(row: object, example: tuple[bytes, float],
+                                                        exponent: bytes) -> None:
+    text = example[0].split(b"\n")[0]
+    found = row.pattern.search(text)  # type: ignore[attr-defined]
+    assert found is not None
+    number = re.search(rb"[0-9.]+", text[found.start(1):])
+    assert number is not None
+    at = found.start(1) + number.end()
+    meta = header_metadata(text[:at] + exponent + text[at:] + b"\nG28\n")
+    figure = {"time": "print time", "filament": "filament", "layers": "layer count"}[row.figure]  # type: ignore[attr-defined]
+    assert getattr(meta, {"time": "print_time_s", "filament": "filament_mm", "layers": "layers"}[
+        row.figure]) is None  # type: ignore[attr-defined]
+    notes = [note for note in meta.notes if note.startswith(f"the stated {figure} is not believed")]
+    assert len(notes) <= 1
+    assert all("exponent" in note for note in notes)
+
+
+@pytest.mark.parametrize("text", [b";Filament used: 1e5m", b"; filament used [mm] = 1e5", b";TIME:1e5",
+                                  b";Filament used: 2.5e1m", b";LAYER_COUNT:1e3", b";Filament used: 1e309m"])
+def test_info_computes_figures_written_with_exponents(tmp_path: Path, text: bytes) -> None:
+    src = tmp_path / "fh.gcode"
+    src.write_bytes(text + b"\nG28\nG1 Z0.2 F1200\nG1 X10 Y10 E1 F1500\nG1 X20 Y20 E2\n")
+    shown = run_cli("xyz", "info", str(src), env=cli_env())
+    assert shown.returncode == 0, shown.stderr
+    assert "(stated)" not in shown.stdout
+    assert "exponent" in shown.stdout + shown.stderr

@@ -330,14 +330,13 @@ def test_input_without_final_newline() -> None:
         (b"G04 P100", b"G04 P100"),
         (b"G05 X1", b"G05 X1"),  # G2/G3 arcs become segments (test_arcs.py)
         (b"G10", b"G10"),
-        (b"G0.5", b"G0.5"),
+        (b"G10.5", b"G10.5"),
         (b"G 0 X5", b"G 1 X5"),
         (b"G\t00 X5", b"G\t01 X5"),
         (b"G 1 X5", b"G 1 X5"),
         (b"G1 X10 ; G0 in a comment", b"G1 X10 ; G0 in a comment"),
         (b"; G0 in a comment", b"; G0 in a comment"),
         (b"M117 G0 done", b"M117 G0 done"),
-        (b"G1 X5 G0", b"G1 X5 G0"),
     ],
 )
 def test_only_g0_command_words_become_g1(line: bytes, expected: bytes) -> None:

@@ -43,7 +43,7 @@ gcode_line = st.one_of(
     st.sampled_from(["G0 X1 Y2", "G00 X5", "G01 Y1", "G1 X1 E0.5 F1200", "  G0 X3", "N5 G0 Z1", "g0 x1", "G0",
                      "G 0 X1", "G\t00",
                      "; G0 in a comment", ";TIME:42", "; print_time = 7", ";LAYER_COUNT:3", "M82", "G92 E0", "",
-                     "G0X1", "G04 P1", "G0.5", "M117 G0"]),
+                     "G0X1", "G04 P1", "G10.5", "M117 G0"]),
     st.text(st.characters(codec="utf-8", exclude_characters="\n\r\x0b\x0c\x1c\x1d\x1e\x1f\x85\u2028\u2029"),
             max_size=40),
 )

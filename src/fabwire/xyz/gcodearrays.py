@@ -2,9 +2,9 @@
 with whole-array operations instead of one line at a time.
 
 The rules are Marlin's (see `gcodeinfo`): a word is a letter, optional blanks, then a decimal number without exponent;
-`;` ends the code of a line; the first word wins when a letter repeats. Layouts these arrays do not cover (indented or
-numbered lines, lower-case command letters, `(...)` comments, checksums, repeated letters) are left to the
-line-by-line reader: `scan` says None for them.
+`;` ends the code of a line; a letter repeated in a move is refused (`LINE_RULES`). Layouts these arrays do not
+cover (indented or numbered lines, lower-case command letters, `(...)` comments, checksums, repeated letters, the
+lines `LINE_RULES` refuses) are left to the line-by-line reader: `scan` says None for them.
 """
 
 from __future__ import annotations
@@ -21,8 +21,6 @@ AXES = b"XYZEFIJR"
 """The words read: the axes, the feed rate, and the centre offsets and radius of G2/G3 arcs."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
-_AXIS_FLAGS = bytes(int(_AXIS_INDEX[byte] >= 0) for byte in range(256))
-"""bytes.translate table: 1 for an axis letter, 0 for anything else (a boolean array's nonzero is the fastest)."""
 _PLAIN_AXES = 5
 """X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
@@ -46,6 +44,68 @@ ODD_NUMBER = re.compile(rb"[XYZEFIJR][ \t]*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)E
 where a reader of plain decimals sees `X1`, so no check of ours would stand for what the printer does."""
 _ODD_CLASSES = bytes(1 if byte in b"0123456789." else 2 if byte in b"Ee" else 4 if byte in b"NnAaIiFf" else 0
                      for byte in range(256))
+
+
+@dataclass(frozen=True, slots=True)
+class LineRule:
+    """A kind of G-code line that firmwares read differently, so that no check of ours stands for what the printer
+    does: refused with the line's number, what it holds (`reading`) and what to do (`advice`)."""
+
+    construct: str
+    example: bytes
+    reading: str
+    advice: str
+    source: str
+
+
+LINE_RULES: tuple[LineRule, ...] = (
+    LineRule("a number with an exponent, or no number (X1e3, X nan)", b"G1 X1e3 Y10 E5",
+             "is a number with an exponent or no number at all, which printers read differently (a move to "
+             "infinity)", "write it as plain decimals",
+             "Marlin GCodeParser::value_float (strtod reads exponents); RepRap wiki G-code, 'Fields' (plain numbers)"),
+    LineRule("a letter given twice in one move", b"G1 X10 X1000 Y10 E5",
+             "gives a letter twice: Marlin's fast parser takes the last one, other readers the first",
+             "write each letter once",
+             "Marlin src/gcode/parser.cpp (FASTER_GCODE_PARSER: a repeated letter overwrites the earlier one)"),
+    LineRule("a second command word on a line", b"G1 X10 G1 X1000 Y10 E5",
+             "holds a second command word: RepRapFirmware runs both commands, Marlin reads the second as a parameter",
+             "put each command on its own line",
+             "RepRap wiki G-code ('a line holds one command'); RepRapFirmware GCodes (several commands on one line)"),
+    LineRule("a command subcode on a move, position or unit command (G1.0)", b"G1.0 X1000 Y10 E5",
+             "has a subcode: a firmware that ignores subcodes runs the command itself, others refuse the line",
+             "write the command without `.n`",
+             "RepRap wiki G-code, 'Codes with subcodes'; Marlin GCodeParser (USE_GCODE_SUBCODES is optional)"),
+    LineRule("a line break other than LF or CR in the code of a line (form feed, vertical tab, U+0085, U+2028, "
+             "U+2029; a comment is any text)",
+             b"G1 X10\fG1 X1000 Y10 E5",
+             "holds a form feed, vertical tab, U+0085, U+2028 or U+2029, which some readers take as a line break",
+             "remove it (end lines with LF or CR LF only)",
+             "Unicode Standard Annex #14 (mandatory breaks) as Python's str.splitlines reads them; Marlin "
+             "GCodeQueue ends a line only at LF or CR"),
+    LineRule("inch units (G20)", b"G20\nG1 X50 Y10 E5",
+             "sets inch units: a firmware with INCH_MODE_SUPPORT moves 25.4 times as far, others stay in mm",
+             "slice in millimetres (G21)", "Marlin G20 Inch Units (marlinfw.org/docs/gcode/G020.html)"),
+)
+"""Lines refused because printers read them differently (the first row is `ODD_NUMBER`; the others are found by
+the move analysis, `gcodeinfo.MoveAnalyzer`, which raises `Ambiguous`)."""
+EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES = LINE_RULES
+SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
+"""Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
+_REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
+"""A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
+_SCAN_FLAGS = bytes(1 if _AXIS_INDEX[byte] >= 0 else 2 if byte in b"GMgm" else 3 if byte in b"\x0b\x0c\x85\xa8\xa9"
+                    else 0 for byte in range(256))
+"""bytes.translate table: 1 for an axis letter, 2 for a command letter, 3 for a byte that may be (the end of) one of
+SEPARATORS, 0 for anything else."""
+
+
+class Ambiguous(Exception):
+    """A line `LINE_RULES` refuses, at `offset` (the line's start) in the text the analysis was given."""
+
+    def __init__(self, rule: LineRule, offset: int = 0) -> None:
+        super().__init__(rule.construct)
+        self.rule = rule
+        self.offset = offset
 
 
 def may_hold_odd_number(text: bytes) -> bool:
@@ -180,6 +240,11 @@ def scan(padded: bytes) -> Scan | None:
     starts = newlines[:-1] + 1
     if not len(starts):
         return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
+    flags = np.frombuffer(padded.translate(_SCAN_FLAGS), dtype=np.uint8)
+    where = np.flatnonzero(flags)
+    kind = flags[where]
+    if (kind == 3).any() and any(separator in padded for separator in SEPARATORS):
+        return None  # the line reader refuses it (in the code of a line) or reads the comment
     c0, c1, c2, c3 = (data[starts + i] for i in range(4))
     command = (c0 == ord("G")) | (c0 == ord("M"))
     if (_ODD_FIRST[c0] | (command & (
@@ -200,6 +265,8 @@ def scan(padded: bytes) -> Scan | None:
         if line < suspect and padded[newlines[line] + 1] == 71 and ODD_NUMBER.search(  # G
                 padded, int(newlines[line]), int(newlines[line + 1])):
             suspect = line
+        if _REFUSED_COMMAND.match(padded, int(newlines[line])):
+            return None  # the line reader refuses it
         found = _CONTROL.match(padded, int(newlines[line]))
         if found is None:
             continue
@@ -226,12 +293,16 @@ def scan(padded: bytes) -> Scan | None:
             return None
     read = len(AXES) if arcs.any() else _PLAIN_AXES
     # I, J and R words are found (and checked) everywhere, and kept only where arcs are
-    where = np.flatnonzero(np.frombuffer(padded.translate(_AXIS_FLAGS), dtype=np.bool_))
     line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of]
     if inline_comments:
         keep &= where < code_end[line_of]
-    where, line_of = where[keep], line_of[keep]
+    where, line_of, kind = where[keep], line_of[keep], kind[keep]
+    command_letter = kind == 2
+    if (where[command_letter] > starts[line_of[command_letter]]).any():
+        return None  # a second command word in a move: the line reader refuses it
+    axis_letter = kind == 1
+    where, line_of = where[axis_letter], line_of[axis_letter]
     at = where + 1
     blank = (data[at] == 32) | (data[at] == 9)
     while blank.any():  # blanks between a letter and its number

@@ -15,7 +15,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fabwire.xyz import gcodearrays, motion, slicerfigures
-from fabwire.xyz.gcodearrays import VALUE, Words
+from fabwire.xyz.gcodearrays import (
+    INCHES,
+    REPEATED,
+    SECOND_COMMAND,
+    SEPARATOR,
+    SEPARATORS,
+    SUBCODE,
+    VALUE,
+    Ambiguous,
+    Words,
+)
 
 DEFAULT_FACETS = 50
 DEFAULT_FEED_MM_MIN = 1500.0
@@ -34,7 +44,7 @@ class GcodeMetadata:
     notes: tuple[str, ...] = ()
     """Why a figure was set aside (a slicer's placeholder, a zero, a value no print has)."""
     extent: tuple[tuple[float, float], ...] | None = None
-    """(lowest, highest) X, Y and Z of the extruding moves in mm, from the moves; None when none extrude."""
+    """(lowest, highest) X, Y and Z in mm the moves reach, travel included (`REACH`); None when nothing moves."""
     arcs: int = 0
     """G2/G3 arc moves in the file (counted from the moves)."""
 
@@ -88,8 +98,11 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
 # `G1X10E5` is X10 E5 and `X1E5` is X1 E5); `;` ends the code of a line, `(...)` is a comment and `*` starts the
 # checksum. A command word opens the line, after blanks and an optional N line number.
 _COMMAND = re.compile(
-    rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(?![0-9.])([^\n;]*)",
+    rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(\.[0-9]*)?(?![0-9.])([^\n;]*)",
 )
+_SECOND_COMMAND = re.compile(rb"[GM][ \t]*[-+.0-9]")
+_NO_SUBCODE = {b"G0", b"G1", b"G2", b"G3", b"G92", b"G20", b"G21"}
+"""Commands refused with a subcode (`gcodearrays.SUBCODE`): they move, set the position or set units."""
 _WORD = re.compile(rb"([A-Z])[ \t]*(" + VALUE + rb")")
 _PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
 _PIECE = 1 << 20
@@ -136,10 +149,15 @@ def _code(params: bytes) -> bytes:
 
 
 def _words(params: bytes) -> dict[bytes, float]:
-    """Letter -> value of upper-cased parameters; the first word wins when a letter repeats, as in Marlin."""
+    """Letter -> value of upper-cased parameters; `gcodearrays.Ambiguous` when a letter repeats (Marlin's parsers
+    disagree on which one wins)."""
+    code = _code(params)
+    found = _WORD.findall(code)
     words: dict[bytes, float] = {}
-    for letter, value in _WORD.findall(_code(params)):
+    for letter, value in found:
         words.setdefault(letter, float(value))
+    if len(words) < len(found) and not gcodearrays.ODD_NUMBER.search(code):  # `X1e3 E5`: the exponent's refusal
+        raise Ambiguous(REPEATED)
     return words
 
 
@@ -170,8 +188,97 @@ VASE_LAYER_MM = 0.2
 
 
 def words_of(params: bytes) -> dict[bytes, float]:
-    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value, the first wins)."""
+    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value); a repeated letter is
+    `gcodearrays.Ambiguous`."""
     return _words(params)
+
+
+@dataclass(frozen=True, slots=True)
+class ReachRule:
+    """How one kind of move widens the extent the build volume check compares with the machine."""
+
+    construct: str
+    counted: str
+    source: str
+
+
+REACH: tuple[ReachRule, ...] = (
+    ReachRule("G0/G1 with X, Y or Z, extruding or not", "its start and end points",
+              "RepRap wiki G-code, G0 & G1; travel goes beyond the volume as surely as printing does, and no public "
+              "source says a da Vinci has software endstops to stop it"),
+    ReachRule("G1 with Z only and E (extruding while it rises)", "its start and end points, like any move",
+              "RepRap wiki G-code, G0 & G1 (the axes named move, extruding or not)"),
+    ReachRule("G1 with E only (extruding where the nozzle stands)", "the point it extrudes at (its start and end)",
+              "RepRap wiki G-code, G0 & G1"),
+    ReachRule("G2/G3 with I and J (centre offsets)", "the whole arc: its end points and every axis extreme "
+              "(centre ± radius) its swept angle crosses; a start that equals the end is a full circle",
+              "Marlin G2-G3 Arc or Circle Move (marlinfw.org/docs/gcode/G002-G003.html); Marlin plan_arc"),
+    ReachRule("G2/G3 with R (radius; negative for the longer way round)", "the whole arc as for I and J, its centre "
+              "on the chord's bisector; an R shorter than half the chord puts the centre mid-chord (a half circle)",
+              "Marlin G2-G3 Arc or Circle Move, R form; Marlin gcode/motion/G2_G3.cpp (h = 0 when R is too short)"),
+    ReachRule("G2/G3 without I, J or R", "its end points (a straight move at most)",
+              "Marlin G2-G3 (refuses the move); arcwork passes it on as G1"),
+    ReachRule("G92 (set position)", "nothing by itself: moves after it count from the position it sets",
+              "RepRap wiki G-code, G92"),
+)
+"""What the extent of a G-code counts, per construct (tests/xyz/test_reach.py has one test per row)."""
+
+
+def arc_box(x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.float64], y1: NDArray[np.float64],
+            i: NDArray[np.float64], j: NDArray[np.float64], r: NDArray[np.float64],
+            clockwise: NDArray[np.bool_]) -> tuple[NDArray[np.float64], ...]:
+    """(lowest X, highest X, lowest Y, highest Y) in mm of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1) with
+    centre offsets I, J (NaN when not given) or radius R (`REACH`): the end points, the point at the end's angle on
+    the start's circle, and each of the four axis extremes of that circle that the swept angle crosses. NaN results
+    (coordinates no float holds) are infinite."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        centred = ~(np.isnan(i) & np.isnan(j))
+        dx, dy = x1 - x0, y1 - y0
+        chord = np.hypot(dx, dy)
+        radius_r = np.nan_to_num(r)
+        h = np.sqrt(np.maximum(0.0, radius_r * radius_r - chord * chord / 4))
+        side = np.where(clockwise ^ (radius_r < 0), -1.0, 1.0) * h / chord
+        cx = np.where(centred, x0 + np.nan_to_num(i), (x0 + x1) / 2 - side * dy)
+        cy = np.where(centred, y0 + np.nan_to_num(j), (y0 + y1) / 2 + side * dx)
+        has_centre = centred | (~np.isnan(r) & (chord > 0))
+        radius = np.hypot(x0 - cx, y0 - cy)
+        begin, end = np.arctan2(y0 - cy, x0 - cx), np.arctan2(y1 - cy, x1 - cx)
+        sweep = np.where(clockwise, begin - end, end - begin) % (2 * math.pi)
+        sweep = np.where(sweep < 1e-9, 2 * math.pi, sweep)
+        # an end off the start's circle (I and J disagreeing with it): the arc runs on that circle to the end's angle
+        last_x = np.where(has_centre, cx + radius * np.cos(end), x1)
+        last_y = np.where(has_centre, cy + radius * np.sin(end), y1)
+        box = [np.minimum(np.minimum(x0, x1), last_x), np.maximum(np.maximum(x0, x1), last_x),
+               np.minimum(np.minimum(y0, y1), last_y), np.maximum(np.maximum(y0, y1), last_y)]
+        for quarter, (k, centre, sign) in enumerate(((1, cx, 1.0), (3, cy, 1.0), (0, cx, -1.0), (2, cy, -1.0))):
+            angle = quarter * math.pi / 2
+            crossed = has_centre & (np.where(clockwise, begin - angle, angle - begin) % (2 * math.pi) <= sweep)
+            extreme = centre + sign * radius
+            box[k] = np.where(crossed, (np.maximum if sign > 0 else np.minimum)(box[k], extreme), box[k])
+            box[k] = np.where(crossed & np.isnan(extreme), np.inf, box[k])
+    return tuple(np.where(np.isnan(side), np.inf, side) for side in box)
+
+
+def _separated(chunk: bytes, separator: bytes) -> int:
+    """The start (offset in b"\n" + `chunk`) of the first line with `separator` in its code (before any `;`: a
+    comment is any text), or len(chunk) + 1."""
+    at = chunk.find(separator)
+    while at >= 0:
+        start = chunk.rfind(b"\n", 0, at) + 1
+        if b";" not in chunk[start:at]:
+            return start
+        at = chunk.find(separator, at + 1)
+    return len(chunk) + 1
+
+
+def _ambiguous_at(piece: bytes, found: Ambiguous) -> int:
+    """The offset in `piece` of the first line `gcodearrays.LINE_RULES` refuses (where the line reader finds it;
+    `found`'s own offset when it finds none)."""
+    try:
+        MoveAnalyzer(timing=False)._lines(piece)
+    except Ambiguous as exc:
+        return exc.offset
+    return found.offset
 
 
 class MoveAnalyzer:
@@ -208,7 +315,7 @@ class MoveAnalyzer:
         self.arcs = 0
         self.low = [math.inf] * 3
         self.high = [-math.inf] * 3
-        """The extent (mm, per axis) of the extruding moves, start and end points."""
+        """The extent (mm, per axis) the moves reach, as `REACH` counts it."""
         self._held: list[tuple[float, float, float, float, float, float]] = []
         gcodearrays.reuse_freed_memory()
 
@@ -231,12 +338,17 @@ class MoveAnalyzer:
             end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
             ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
             found = gcodearrays.scan(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD))))
+            try:
+                if found is None:
+                    self._lines(chunk[start:end] + ended)
+                else:
+                    self._feed_arrays(found)
+            except Ambiguous as exc:  # the line reader, started afresh on the piece, says where
+                raise Ambiguous(exc.rule, start + _ambiguous_at(chunk[start:end] + ended, exc)) from None
             if found is None:
-                self._lines(chunk[start:end] + ended)
                 odd_at: int | None = start
                 g0_words = None
             else:
-                self._feed_arrays(found)
                 odd_at = None if found.odd_at is None else start + found.odd_at - 1
                 if g0_words is not None and found.g0_at is not None:
                     g0_words.append(found.g0_at + (start - 1))
@@ -264,8 +376,31 @@ class MoveAnalyzer:
             at = text.find(b";", end + 1) if end >= 0 else -1
 
     def _lines(self, chunk: bytes) -> None:
-        for letter, number, params in _COMMAND.findall(b"\n" + chunk):
-            self._command(letter.upper() + number.lstrip(b"0").rjust(1, b"0"), params.upper())
+        """Analyse the commands of whole lines one by one; `gcodearrays.Ambiguous` (with the line's offset in
+        `chunk`) for a line `gcodearrays.LINE_RULES` refuses."""
+        text = b"\n" + chunk
+        separated = len(text)  # the start of the first line with a separator: the lines before it come first
+        if any(separator in chunk for separator in SEPARATORS):
+            separated = min((_separated(chunk, separator) for separator in SEPARATORS), default=separated)
+        found: re.Match[bytes] | None = None
+        try:
+            for found in _COMMAND.finditer(text, 0, separated):
+                letter, number, subcode, params = found.groups()
+                command = letter.upper() + number.lstrip(b"0").rjust(1, b"0")
+                params = params.upper()
+                if letter in b"Gg":
+                    if subcode is not None and command in _NO_SUBCODE:
+                        raise Ambiguous(SUBCODE)
+                    if command == b"G20":
+                        raise Ambiguous(INCHES)
+                    if _SECOND_COMMAND.search(_code(params)):
+                        raise Ambiguous(SECOND_COMMAND)
+                if subcode is None:
+                    self._command(command, params)
+        except Ambiguous as exc:
+            raise Ambiguous(exc.rule, 0 if found is None else found.start()) from None
+        if separated < len(text):
+            raise Ambiguous(SEPARATOR, separated)
         self._release()
 
     def _command(self, command: bytes, params: bytes) -> None:
@@ -312,17 +447,21 @@ class MoveAnalyzer:
             x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
                 x, y, target_x, target_y, words.get(b"I", nan), words.get(b"J", nan), words.get(b"R", nan)))
             flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, np.array([arc == 2]))[0])
+            if any(letter in words for letter in (b"I", b"J", b"R")):  # else its end points, as a straight move
+                self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, np.array([arc == 2])))
             length = math.sqrt(flat * flat + dz * dz)
         else:
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
         self.path_seconds += (length or abs(de)) * 60.0 / self.feed
         self.filament += de
-        if de > 0 and (dx or dy or arc or not math.isfinite(dx + dy)):
+        centred = arc and any(letter in words for letter in (b"I", b"J", b"R"))
+        if dx or dy or dz or de or centred or not math.isfinite(dx + dy + dz + de):  # any move, travel too (REACH)
             for k, (start, end) in enumerate(((x, target_x), (y, target_y), (z, target_z))):
                 # a coordinate that is no number (NaN, or beyond a float) reaches beyond any build volume
                 start, end = (v if not math.isnan(v) else math.inf for v in (start, end))
                 self.low[k] = min(self.low[k], start, end)
                 self.high[k] = max(self.high[k], start, end)
+        if de > 0 and (dx or dy or arc or not math.isfinite(dx + dy)):
             if dz:
                 self.vase_rise += max(0.0, dz)
             else:
@@ -376,7 +515,7 @@ class MoveAnalyzer:
 
     def _segment(self, axes: list[Words], arcs: NDArray[np.int8]) -> None:
         """The moves and G92s between two other commands: every axis's words, on lines counted from the piece's."""
-        given = [words for words in axes[:5] if len(words.lines)]
+        given = [words for words in axes if len(words.lines)]  # `G2 I5 J0` alone is a full circle
         if not given:
             return
         first = min(int(words.lines[0]) for words in given)
@@ -402,9 +541,11 @@ class MoveAnalyzer:
             per_move = np.repeat(feed, np.diff(np.append(runs, count)))
             self.path_seconds += float(np.sum(np.where(length > 0, length, np.abs(de)) * 60.0 / per_move))
             self.filament += float(np.sum(de))
+            moving = (dx != 0) | (dy != 0) | (dz != 0) | (de != 0) | (arc != 0)  # a NaN move is != 0 too
+            if moving.any():  # travel too: the machine goes there whether or not it extrudes (REACH)
+                self._reach(axes, after, moving, first, count)
             printing = (de > 0) & ((dx != 0) | (dy != 0) | (arc != 0))
             if printing.any():
-                self._reach(axes, after, printing, first, count)
                 rising = printing & (dz != 0)
                 if rising.any():
                     self.vase_rise += float(np.sum(np.maximum(dz[rising], 0.0)))
@@ -422,22 +563,22 @@ class MoveAnalyzer:
             self.e = float(after[3][-1])
         self.feed = float(feed[-1])
 
-    def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], printing: NDArray[np.bool_], first: int,
+    def _reach(self, axes: list[Words], after: list[NDArray[np.float64]], moving: NDArray[np.bool_], first: int,
                count: int) -> None:
-        """Widen the extent with the start and end points of the printing moves (arcs: their end points).
+        """Widen the extent with the start and end points of the `moving` lines (arcs: see `_widen_arcs`).
 
-        A point is the position after a printing line or after the line before one; on each axis that is the value
-        of the last word at or before that line, so a word counts when a printing line or the line before one lies
+        A point is the position after a moving line or after the line before one; on each axis that is the value
+        of the last word at or before that line, so a word counts when a moving line or the line before one lies
         in its reign (from its line to the next word's), and the position before the piece counts when one lies
         before the axis's first word."""
-        wanted = printing.copy()
-        wanted[:-1] |= printing[1:]
+        wanted = moving.copy()
+        wanted[:-1] |= moving[1:]
         marks = np.concatenate(([0], np.cumsum(wanted)))
         for k in range(3):
             lines = axes[k].lines - first
             reigns = marks[np.append(lines[1:], count)] - marks[lines]
             points = after[k][reigns > 0]
-            if not len(lines) or marks[lines[0]] > 0 or printing[0]:
+            if not len(lines) or marks[lines[0]] > 0 or moving[0]:
                 points = np.append(points, self.pos[k])
             # a coordinate that is no number (NaN, or beyond what a float holds) reaches beyond any build volume
             points = np.where(np.isnan(points), np.inf, points)
@@ -465,9 +606,18 @@ class MoveAnalyzer:
         i, j, r = offsets
         flat = motion.arc_lengths(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
                                   arc[rows] == 2)
+        self._widen_arcs(arc_box(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
+                                 arc[rows] == 2))
         out = length.copy()
         out[rows] = np.sqrt(flat * flat + dz[rows] * dz[rows])
         return out
+
+    def _widen_arcs(self, box: tuple[NDArray[np.float64], ...]) -> None:
+        """Widen the X and Y extent with arcs' bounding boxes (`arc_box`)."""
+        low_x, high_x, low_y, high_y = box
+        for k, low, high in ((0, low_x, high_x), (1, low_y, high_y)):
+            self.low[k] = min(self.low[k], float(low.min()))
+            self.high[k] = max(self.high[k], float(high.max()))
 
     @property
     def absurd(self) -> bool:

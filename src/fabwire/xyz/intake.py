@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # the move analysis (numpy) is loaded when G-code is read, no
     import numpy as np
     from numpy.typing import NDArray
 
+    from fabwire.xyz.gcodearrays import LineRule
     from fabwire.xyz.gcodeinfo import GcodeMetadata
 
 MAGIC = b"3DPFNKG13WTW"
@@ -300,8 +301,9 @@ def normalise(window: bytes, *, first: bool = False) -> bytes:
     return window
 
 
-def _check_lines(text: bytes, name: str, line_offset: int) -> None:
-    """Refuse a line longer than MAX_LINE: probe windows of MAX_LINE/2 (any such line covers one) for newlines."""
+def _check_lines(text: bytes, name: str, line_offset: int, lines_before: Callable[[], int]) -> None:
+    """Refuse a line longer than MAX_LINE: probe windows of MAX_LINE/2 (any such line covers one) for newlines;
+    `line_offset` bytes of the first line came before `text`, after `lines_before()` whole lines."""
     step = MAX_LINE // 2
     for at in range(0, len(text) - step + 1, step):
         if text.find(b"\n", at, at + step) < 0:
@@ -309,7 +311,7 @@ def _check_lines(text: bytes, name: str, line_offset: int) -> None:
             end = text.find(b"\n", at)
             length = (len(text) if end < 0 else end) - start + (line_offset if start == 0 else 0)
             if length > MAX_LINE:
-                raise _long_line(name, length)
+                raise _long_line(name, lines_before() + text.count(b"\n", 0, start) + 1)
 
 
 _MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
@@ -338,9 +340,16 @@ def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int], star
                          "plain decimals")
 
 
-def _long_line(name: str, length: int) -> InputError:
-    return InputError(f"{name} has a line of over {length} bytes (the limit is {MAX_LINE}): not G-code as a "
-                      "printer reads it")
+def ambiguous_line(name: str, line: int, text: bytes, rule: LineRule) -> InputError:
+    """The one-line refusal of line number `line` (its `text`) by a row of `gcodearrays.LINE_RULES`."""
+    shown = excerpt(text.decode("utf-8", "replace"), 40)
+    return InputError(f"{name}: line {line}: {shown} {rule.reading}; {rule.advice}")
+
+
+def _long_line(name: str, line: int) -> InputError:
+    """The refusal of line number `line`, which is longer than MAX_LINE."""
+    return InputError(f"{name} has a line of over {MAX_LINE} bytes, the limit (line {line}): not G-code as a printer "
+                      "reads it (firmware line buffers hold about 100 bytes)")
 
 
 def content_end(src: BinaryIO) -> int:
@@ -424,8 +433,8 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         text = normalise(block)
         if b"\0" in text:
             text = _without_nuls(text, name, _lines_before(src, begin) - carried_cr, repaired)
-        _check_lines(text, name, len(carry))
         lines_before = functools.partial(_lines_after_crs, src, begin, carried_cr)
+        _check_lines(text, name, len(carry), lines_before)
         cut = text.rfind(b"\n") + 1
         if odd is None:
             checked = True
@@ -438,11 +447,11 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
             if not checked:  # an error in the lines before comes first
                 _check_numbers(carry + text, name, lines_before)
-            raise _long_line(name, len(carry) + max(0, text.find(b"\n")))
+            raise _long_line(name, lines_before() + 1)
         if cut == 0:
             carry += text
             if len(carry) > MAX_LINE:
-                raise _long_line(name, len(carry))
+                raise _long_line(name, lines_before() + 1)
             continue
         chunk = carry + text[:cut] if carry else text[:cut]
         yield chunk
@@ -453,7 +462,7 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         del chunk  # not held while the next block is read
         carry = text[cut:]
         if len(carry) > MAX_LINE:
-            raise _long_line(name, len(carry))
+            raise _long_line(name, lines_before() + text.count(b"\n") + 1)
         if progress is not None:
             progress(done - len(carry), total)
     if carry or held_cr:
@@ -620,6 +629,7 @@ def _metadata(
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
     `always`); `g0_words` collects where the G0 command words are (see `MoveAnalyzer`) when the moves are read."""
+    from fabwire.xyz.gcodearrays import Ambiguous
     from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
 
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
@@ -627,8 +637,14 @@ def _metadata(
         return stated, None
     analyzer = MoveAnalyzer(timing=stated.print_time_s is None, g0_words=g0_words)  # a stated time: no planning
     odd: list[tuple[int, int]] = []
+    lines = 0
     for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None, odd=odd):
-        analyzer.feed_chunk(chunk, odd)
+        try:
+            analyzer.feed_chunk(chunk, odd)
+        except Ambiguous as exc:
+            raise ambiguous_line(name, lines + chunk.count(b"\n", 0, exc.offset) + 1,
+                                 chunk[exc.offset:chunk.find(b"\n", exc.offset)], exc.rule) from None
+        lines += chunk.count(b"\n")
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
                          "this is not a print file")
@@ -638,12 +654,13 @@ def _metadata(
 
 
 BUILD_MARGIN_MM = 1.0
-"""How far past the build volume an extrusion may reach before the file is refused (slicers' rounding)."""
+"""How far past the build volume a move may reach before the file is refused (slicers' rounding)."""
 
 
 def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, force: bool) -> str | None:
-    """InputError when the extrusions reach beyond `model`'s build volume (G-code sliced for a larger printer),
-    naming the extent; with `force`, the note saying so instead. None when they fit or nothing extrudes."""
+    """InputError when the moves (travel, extrusion and whole arcs, as `gcodeinfo.REACH` counts them) reach beyond
+    `model`'s build volume (G-code sliced for a larger printer), naming the extent; with `force`, the note saying so
+    instead. None when they fit or nothing moves."""
     if meta.extent is None:
         return None
     beyond = [axis for axis, (low, high), size in zip("XYZ", meta.extent, model.build_volume_mm, strict=True)
@@ -653,7 +670,7 @@ def check_build_volume(meta: GcodeMetadata, name: str, model: PrinterModel, forc
     reach = ", ".join(f"{axis} {low:.1f} to {high:.1f} mm" for axis, (low, high) in zip("XYZ", meta.extent,
                                                                                         strict=True))
     volume = " × ".join(str(v) for v in model.build_volume_mm)
-    text = (f"{name} extrudes beyond the {model.name}'s build volume of {volume} mm ({reach}): it was sliced for "
+    text = (f"{name} moves beyond the {model.name}'s build volume of {volume} mm ({reach}): it was sliced for "
             "another printer")
     if not force:
         raise InputError(f"{text}; slice it for this printer, or give --force to print it anyway")

@@ -30,6 +30,9 @@ ABSURD = 10**18
 """Stands for a stated number too long to be real (hundreds of digits)."""
 
 _NUMBER = rb"[0-9]+(?:\.[0-9]*)?|\.[0-9]+"
+_EXPONENT = re.compile(rb"[0-9.][eE][-+]?[0-9]")
+"""A number written with an exponent (`1e5`, `2.5E+1`): no slicer of `WORDINGS` writes one, and the plain decimal
+reading takes `1e5m` for 5 m, so such a figure is set aside (not believed) and computed from the moves."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,10 +196,12 @@ class Stated:
 
 
 def _find(wording: Wording, windows: Sequence[bytes]) -> tuple[bytes, float] | None:
-    """(the matched text, its value) for the first window where `wording` matches with a number."""
+    """(the matched text, its value) for the first window where `wording` matches with a number; NaN for a number
+    with an exponent (`_EXPONENT`)."""
     for window in windows:
         found = list(wording.pattern.finditer(window)) if wording.every else [wording.pattern.search(window)]
-        read = [(m.group(0), read_value(m.group(1), wording.unit)) for m in found if m is not None]
+        read = [(m.group(0), math.nan if _EXPONENT.search(m.group(1)) else read_value(m.group(1), wording.unit))
+                for m in found if m is not None]
         values = [(text, v) for text, v in read if v is not None]
         if values:
             return values[0][0].strip(), sum(v for _t, v in values)
@@ -205,6 +210,8 @@ def _find(wording: Wording, windows: Sequence[bytes]) -> tuple[bytes, float] | N
 
 def _implausible(figure: Figure, value: float) -> str | None:
     limit = {"time": MAX_PRINT_S, "filament": MAX_FILAMENT_MM, "layers": MAX_COUNT}[figure]
+    if math.isnan(value):
+        return "a number with an exponent, which no slicer writes and readers take differently"
     if value <= 0:
         return "zero"
     if value > limit:
@@ -244,7 +251,7 @@ def stated_figures(windows: Sequence[bytes]) -> Stated:
             continue
         found[wording.figure] = value
         rows.append((wording.figure, wording))
-    rejected = [(figure, why) for figure, why in rejected if figure not in found]
+    rejected = list(dict.fromkeys((figure, why) for figure, why in rejected if figure not in found))
     time_s = found.get("time")
     layers = found.get("layers")
     return Stated(
