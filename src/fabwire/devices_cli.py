@@ -32,6 +32,7 @@ from fabwire.config import (
 )
 from fabwire.devices import KINDS
 from fabwire.errors import ConfigError, InputError, excerpt
+from fabwire.transport.urls import parse_url
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 
@@ -176,12 +177,20 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
         key, value = _parse_setting(item, lists)
         if key in ("kind", "url", "default"):
             raise InputError(f"give {key} as an argument or option, not with --set")
+        if isinstance(value, str) and not value.isprintable():
+            raise InputError(f"{key}: {excerpt(value, 40)} holds a control character (a line break, a tab …): "
+                             "a setting is one line of text")
         values[key] = value
     unknown = [k for k in values if k != "kind" and k not in schema.__struct_fields__]
     if unknown:
         raise InputError(f"{KINDS[kind_name].title} has no setting {unknown[0]!r}"
                          f"{closest(unknown[0], schema.__struct_fields__)}")
     validate_settings(KINDS[kind_name], {k: v for k, v in values.items() if k != "kind"}, what="setting")
+    parse_url(url, KINDS[kind_name])  # the address as -d reads it: refused here, before the file is touched
+    if kind_name == "xyz" and isinstance(values.get("model"), str):
+        from fabwire.xyz.models import find_model
+
+        find_model(values["model"])  # a model the printer table does not know would only fail at print time
     section = f"[devices.{_toml_key(name)}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items())
     separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
     _write(path, text + separator + section)

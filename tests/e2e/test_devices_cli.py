@@ -181,3 +181,21 @@ def test_a_name_that_reads_as_an_address_is_refused(tmp_path: Path) -> None:
     assert not path.exists()
     kept = run_cli("devices", "add", "lab.mini", "127.0.0.1:9100", "--kind", "xyz", env=env)
     assert kept.returncode == 0, kept.stderr
+
+
+@pytest.mark.parametrize(("args", "said"), [
+    (["x6", "bad url with spaces", "--kind", "xyz"], "malformed device address 'bad url with spaces'"),
+    (["x7", "127.0.0.1", "--kind", "xyz", "--set", "model=no such"], "unknown printer model 'no such'"),
+    (["x8", "127.0.0.1", "--kind", "xyz", "--set", "model=mini\nw"], "model: "),
+])
+def test_an_entry_that_cannot_work_is_refused_before_the_file_is_touched(args: list[str], said: str,
+                                                                          tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    env = env_for(path)
+    assert run_cli("devices", "add", "first", "127.0.0.1", "--kind", "xyz", env=env).returncode == 0
+    before = path.read_bytes()
+    refused = run_cli("devices", "add", *args, env=env)
+    assert refused.returncode == InputError.exit_code, refused.stderr
+    assert said in refused.stderr
+    assert ", line " not in refused.stderr  # the file has no such line: the entry was never written
+    assert path.read_bytes() == before

@@ -74,8 +74,8 @@ def reference(text: str) -> tuple[float, float, set[int], float]:
     return seconds, filament, heights, rise
 
 
-def coordinate() -> st.SearchStrategy[str]:
-    return st.builds(lambda v, d: f"{v:.{d}f}", st.floats(-300, 300, allow_nan=False), st.integers(0, 5))
+def coordinate(places: int = 5) -> st.SearchStrategy[str]:
+    return st.builds(lambda v, d: f"{v:.{d}f}", st.floats(-300, 300, allow_nan=False), st.integers(0, places))
 
 
 @st.composite
@@ -86,13 +86,16 @@ def program(draw: st.DrawFn) -> str:
         kind = draw(st.sampled_from(["move"] * 6 + ["set", "mode", "comment"]))
         if kind == "move":
             letters = draw(st.lists(st.sampled_from("XYZEF"), unique=True, max_size=5))
-            words = [a + draw(st.integers(1, 9000).map(str) if a == "F" else coordinate()) for a in letters]
+            # Z to the micrometre, as layer heights are counted: a relative Z sum that lands on half a micrometre
+            # rounds either way depending on the order the floats are added in, which says nothing about layers
+            words = [a + draw(st.integers(1, 9000).map(str) if a == "F" else coordinate(3 if a == "Z" else 5))
+                     for a in letters]
             line = " ".join([draw(st.sampled_from(["G0", "G1"])), *words])
             if draw(st.booleans()):
                 line += draw(st.sampled_from([" ; X9 E9", ";G92 E0"]))
         elif kind == "set":
             letters = draw(st.lists(st.sampled_from("XYZE"), unique=True, min_size=1, max_size=4))
-            line = " ".join(["G92", *(a + draw(coordinate()) for a in letters)])
+            line = " ".join(["G92", *(a + draw(coordinate(3 if a == "Z" else 5)) for a in letters)])
         elif kind == "mode":
             line = draw(st.sampled_from(["G90", "G91", "M82", "M83"]))
         else:
