@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
+from fabwire.errors import DeviceBusy, DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.mmu import codes, units
 from fabwire.mmu.errors import MMUError, describe_error, reset_line
 from fabwire.mmu.evidence import end_state
@@ -333,7 +333,7 @@ class MMU:
             raise
         return await self._confirmed(request, finished, timeout)
 
-    def busy_error(self) -> DeviceError:
+    def busy_error(self) -> DeviceError | DeviceBusy:
         """Why a new command cannot start: the one the MMU runs, or the error it stopped in and what answers it
         (reference §5.1: every command is refused until the running one ends or its error is answered)."""
         status = self.logic.status
@@ -342,8 +342,8 @@ class MMU:
             info = describe_error(status.value)
             return DeviceError("", f"the MMU stopped in {info} during {command}",  # its code is in the words
                                action=f"answer it with {info.answers(self.commands)}")
-        return DeviceError("", f"the MMU is still busy with {command} ({status.words})",
-                           action=f"let it finish (`{self.commands} monitor`), or {reset_line(self.commands)}")
+        return DeviceBusy(f"the MMU is still busy with {command} ({status.words}): let it finish "
+                          f"(`{self.commands} monitor`), or {reset_line(self.commands)}")
 
     async def _confirmed(self, request: Request | None, finished: CommandFinished,
                          timeout: float | None) -> CommandFinished:

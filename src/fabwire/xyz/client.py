@@ -25,7 +25,7 @@ import msgspec
 
 from fabwire.config import XYZSettings
 from fabwire.devices import XYZ
-from fabwire.errors import DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
+from fabwire.errors import DeviceBusy, DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
 from fabwire.transport.limits import refusal
@@ -387,18 +387,18 @@ class XYZPrinter(Maintenance):
         return model
 
     async def require_idle(self, doing: str, command: p.Command | None = None) -> Status:
-        """A busy printer or one reporting an error cannot start something new: say which, in words."""
+        """A busy printer or one reporting an error cannot start something new: say which, in words (a state that
+        passes is DeviceBusy, exit 4, as every machine's; an error the printer reports is DeviceError, exit 7)."""
         status = await self.status()
         if command is not None:
             await self._supports(command)
         for word in status.error_words:
             raise DeviceError(f"0x{word.raw:08X}", word.meaning, action=f"cannot {doing}")
         if status.state_code == PRINT_DONE:
-            raise DeviceError(str(status.state_code), "the last print is finished but not yet acknowledged",
-                              action=f"take it off the bed and acknowledge it (fabwire xyz acknowledge) to {doing}")
+            raise DeviceBusy("the last print is finished but not yet acknowledged: take it off the bed and "
+                             f"acknowledge it (fabwire xyz acknowledge) to {doing}")
         if status.state_code != IDLE:
-            raise DeviceError(str(status.state_code), f"the printer is busy ({status.state_name})",
-                              action=f"cannot {doing}")
+            raise DeviceBusy(f"the printer is busy ({status.state_name}): cannot {doing}")
         return status
 
     # ------------------------------------------------------------------------------------------ printing
