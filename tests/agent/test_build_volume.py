@@ -44,7 +44,7 @@ def mini(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningAgent]:
 
 def _refused(response: httpx.Response, client: httpx.Client, name: str) -> None:
     assert response.status_code == 400, response.text
-    assert "extrudes beyond the da Vinci mini w's build volume" in response.text
+    assert "moves beyond the da Vinci mini w's build volume" in response.text
     assert "slice it for this printer" in response.text
     assert "--force" not in response.text  # (a command-line flag an API user cannot give)
     assert client.get("/api/v1/jobs").json() == []  # no job recorded, none failed later

@@ -349,14 +349,24 @@ class Session:
         if not self.online:
             raise LinkError(f"{self.spec.name} is offline ({self._reason})")
 
-    def _require_offered(self, action: str) -> None:
+    def _offered(self, action: str) -> bool:
+        offered = (self.state.get("summary") or {}).get("actions")
+        return offered is None or action in offered
+
+    async def _require_offered(self, action: str) -> None:
         """DeviceBusy (HTTP 409) naming the machine's state unless its summary's `actions` (the driver's table of
-        what each state offers, as the last poll or action left it) holds `action`: what the machine cannot do
-        now is refused before anything is sent, never accepted and then failed out of sight."""
-        summary = self.state.get("summary") or {}
-        offered = summary.get("actions")
-        if offered is None or action in offered:
+        what each state offers) holds `action`: what the machine cannot do now is refused before anything is sent,
+        never accepted and then failed out of sight. A refusal is checked against a fresh poll first: the last
+        one may be from before the machine became free (a job just ended)."""
+        if self._offered(action):
             return
+        polled = await self._links.run(self._poll_now())
+        if polled is not None and self.online:
+            self._set_state(online=True, summary=polled[1], status=polled[0])
+        if self._offered(action):
+            return
+        summary = self.state.get("summary") or {}
+        offered = summary.get("actions") or []
         state = summary.get("state") or "busy"
         text = summary.get("state_text")
         now = f"{state} ({text})" if text and text != state else state
@@ -371,7 +381,7 @@ class Session:
         self._require_online()
         if action == "cancel" and self._job is not None:  # the print is this agent's job: end the job with it
             return await self.cancel_job(self._job["id"], confirm=True)
-        self._require_offered(action)
+        await self._require_offered(action)
         if spec.job:
             async with self.claim_job(None, action) as claim:
                 job = await claim.start(checked)
@@ -386,17 +396,20 @@ class Session:
             self._set_state(online=True, summary=polled[1], status=polled[0])
         return result
 
+    async def _poll_now(self) -> tuple[dict[str, Any] | None, dict[str, Any]] | None:
+        """On the links' loop: a poll out of turn, or None when it fails (the scheduled polls report that)."""
+        try:
+            return await self.driver.poll()
+        except LINK_FAILURES:
+            return None
+
     async def _act_then_poll(self, action: str, params: dict[str, Any]
                              ) -> tuple[dict[str, Any], tuple[dict[str, Any] | None, dict[str, Any]] | None]:
         """On the links' loop: the action, then a poll, so the state is the one the action left by the time its
         reply goes out (an upload right after "print removed" finds the printer ready, not the state of the
         poll before). A poll that fails leaves the state to the next scheduled one: the action itself was done."""
         result = await self.driver.act(action, params)
-        try:
-            polled = await self.driver.poll()
-        except LINK_FAILURES:
-            polled = None
-        return result, polled
+        return result, await self._poll_now()
 
     async def _background_action(self, action: str, params: dict[str, Any]) -> None:
         try:
