@@ -148,7 +148,7 @@ def _code(params: bytes) -> bytes:
     return params.partition(b"*")[0]
 
 
-def _words(params: bytes) -> dict[bytes, float]:
+def words_of(params: bytes) -> dict[bytes, float]:
     """Letter -> value of upper-cased parameters; `gcodearrays.Ambiguous` when a letter repeats (Marlin's parsers
     disagree on which one wins)."""
     code = _code(params)
@@ -185,12 +185,6 @@ _MARKERS = re.compile(rb"\n;(?:" + b"|".join(b"(" + m.pattern + b")" for m in LA
 _ARC = {b"G2": 2, b"G3": 3}
 VASE_LAYER_MM = 0.2
 """Layer height assumed for a spiral vase without any flat layer to learn it from."""
-
-
-def words_of(params: bytes) -> dict[bytes, float]:
-    """The words of a command's upper-cased parameters as Marlin reads them (letter -> value); a repeated letter is
-    `gcodearrays.Ambiguous`."""
-    return _words(params)
 
 
 @dataclass(frozen=True, slots=True)
@@ -422,13 +416,13 @@ class MoveAnalyzer:
             self.absolute_e = False
         elif command in motion.LIMIT_COMMANDS:
             self._release()
-            self.planner.set_limits(motion.apply_command(self.planner.limits, command, _words(params)))
+            self.planner.set_limits(motion.apply_command(self.planner.limits, command, words_of(params)))
 
     def _move(self, params: bytes, arc: int = 0) -> None:
         x, y, z = self.pos
         e = self.e
         target_x, target_y, target_z, target_e = x, y, z, e
-        words = _words(params)
+        words = words_of(params)
         for axis, number in words.items():
             if axis == b"X":
                 target_x = number if self.absolute else x + number
@@ -481,7 +475,7 @@ class MoveAnalyzer:
                 self.planner.add((dx, dy, dz, de), length, feed)
 
     def _set_position(self, params: bytes) -> None:
-        words = _words(params)
+        words = words_of(params)
         if not words:
             self.pos = [0.0, 0.0, 0.0]
             self.e = 0.0
@@ -497,7 +491,7 @@ class MoveAnalyzer:
             self.pos[b"XYZ".index(axis)] = 0.0
 
     def _dwell(self, params: bytes) -> None:
-        words = _words(params)  # S (seconds) overrides P (milliseconds), as in Marlin
+        words = words_of(params)  # S (seconds) overrides P (milliseconds), as in Marlin
         seconds = words[b"S"] if b"S" in words else words[b"P"] / 1000.0 if b"P" in words else 0.0
         self.dwell += seconds
         self.path_seconds += seconds
