@@ -85,10 +85,11 @@ def wait_idle(client: httpx.Client, device: str = XYZ, timeout: float = 90) -> N
     seen: list[Any] = []
 
     def idle() -> bool:
+        # the jobs first: a job's end is recorded after the state it left, so a state read after them is current
+        running = client.get("/api/v1/jobs", params={"device": device}).json()
         state = summary(client, device)
         if "acknowledge" in state["actions"]:
             client.post(f"/api/v1/devices/{device}/actions/acknowledge", json={})
-        running = client.get("/api/v1/jobs", params={"device": device}).json()
         seen[:] = [state, running[:3]]  # said if it never comes: the machine's state and its latest jobs
         return state["state"] == "idle" and not any(j["state"] in ("queued", "running") for j in running)
 

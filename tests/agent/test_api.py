@@ -107,6 +107,10 @@ def test_print_job_from_upload_to_done(bench: Bench) -> None:
         assert max(temps) > min(temps) + 50  # it heated up, and the history kept the curve
         listed = client.get("/api/v1/jobs", params={"device": printer["id"]}).json()
         assert [j["id"] for j in listed] == [job["id"]]
+        # the finished print waits on the bed until its owner takes it off: this module's next test finds it free
+        assert summary(client, printer["id"])["actions"] == ["acknowledge"]
+        assert client.post(f"/api/v1/devices/{printer['id']}/actions/acknowledge", json={}).status_code == 200
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle once acknowledged")
 
 
 def test_errors_are_json_with_the_cli_exit_code(bench: Bench) -> None:

@@ -11,8 +11,9 @@ import pytest
 from websockets.sync.client import ClientConnection, connect
 
 from clitools import start_simulator
+from fabwire.samples import SAMPLE_GCODE, sample_path
 
-from .agenttools import device_of, start_agent, wait_for
+from .agenttools import device_of, start_agent, summary, wait_for
 from .conftest import Bench
 
 
@@ -56,6 +57,25 @@ def test_link_loss_and_reconnect_while_subscribed(bench: Bench) -> None:
     kinds = [e["type"] for e in events]
     assert "offline" in kinds
     assert kinds.index("offline") < len(kinds) - 1 - kinds[::-1].index("online")
+
+
+def test_a_job_ends_after_the_state_it_left(bench: Bench) -> None:
+    """Whoever sees a print's job end sees the finished print on the bed (the OK button offered), never the
+    state of a poll from before the end: a client that reads jobs and then the state acts on the machine as it is."""
+    with bench.agent.client() as client:
+        printer = wait_for(lambda: (d := device_of(client, "xyz"))["state"]["online"] and d, "the printer online")
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle")
+        with connect(f"{bench.agent.ws_url}?device={printer['id']}", subprotocols=["fabwire"]) as ws:  # type: ignore[list-item]
+            response = client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "square.gcode"},
+                                   content=sample_path(SAMPLE_GCODE).read_bytes(),
+                                   headers={"content-type": "application/octet-stream"})
+            assert response.status_code == 201, response.text
+            states: list[dict[str, Any]] = []
+            ended = _next_event(ws, lambda e: (e["type"] == "state" and states.append(e["state"]["summary"])) or (
+                e["type"] == "job" and e["job"]["state"] not in ("queued", "running")), "the job's end", 180)
+        assert ended["job"]["state"] == "done", ended
+        assert (states[-1]["state"], states[-1]["actions"]) == ("done", ["acknowledge"]), states[-1]
+        assert summary(client, printer["id"])["actions"] == ["acknowledge"]
 
 
 def test_subscription_to_an_unknown_device_is_refused(bench: Bench) -> None:

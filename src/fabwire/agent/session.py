@@ -360,9 +360,7 @@ class Session:
         one may be from before the machine became free (a job just ended)."""
         if self._offered(action):
             return
-        polled = await self._links.run(self._poll_now())
-        if polled is not None and self.online:
-            self._set_state(online=True, summary=polled[1], status=polled[0])
+        await self._refresh_state()
         if self._offered(action):
             return
         summary = self.state.get("summary") or {}
@@ -395,6 +393,15 @@ class Session:
         if polled is not None and self.online:
             self._set_state(online=True, summary=polled[1], status=polled[0])
         return result
+
+    async def _refresh_state(self) -> None:
+        """The machine's state from a poll out of turn. A job's end is recorded after it, so whoever sees the job
+        ended also sees the state the job left (a finished print on the bed), never a poll from before the job."""
+        if not self.online:
+            return
+        polled = await self._links.run(self._poll_now())
+        if polled is not None and self.online:
+            self._set_state(online=True, summary=polled[1], status=polled[0])
 
     async def _poll_now(self) -> tuple[dict[str, Any] | None, dict[str, Any]] | None:
         """On the links' loop: a poll out of turn, or None when it fails (the scheduled polls report that)."""
@@ -479,10 +486,12 @@ class Session:
             else:
                 # the stored file's path is the agent's business: messages name the upload as it was sent
                 shown = str(exc).replace(str(path), job["filename"] or "the upload") if path else str(exc)
+                await self._refresh_state()
                 await self._job_changed(state="failed", finished=now_iso(), message=shown)
                 self._publish("error", message=f"job {job['id']}: {shown}", exit_code=exit_code_of(exc),
                               job=job["id"])
         else:
+            await self._refresh_state()
             await self._job_changed(state="done", finished=now_iso(), progress_percent=100.0, time_left_s=0.0,
                                     message=message)
         finally:
