@@ -27,6 +27,7 @@ from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
+from fabwire.transport.peers import wrong_peer
 from fabwire.units import json_key
 
 if TYPE_CHECKING:
@@ -156,8 +157,9 @@ class LineUs:
                     reader.feed(await transport.read())
                     pending = reader.pending
                     if pending and pending[:5] != b"hello"[: len(pending[:5])]:
-                        if (busy := refusal(bytes(pending), where)) is not None:
-                            raise busy
+                        if (wrong := refusal(bytes(pending), where) or wrong_peer(
+                                bytes(pending), "a Line-us", LINEUS.name, where)) is not None:
+                            raise wrong
                         raise RemoteProtocolError(
                             f"{where} is not a Line-us: it greeted with {excerpt(pending, 40)} instead of 'hello …'")
                     message = reader.next_message()

@@ -44,6 +44,7 @@ from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChan
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
+from fabwire.transport.peers import wrong_peer
 
 if TYPE_CHECKING:
     from fabwire.mmu.sync import SyncMMU
@@ -223,8 +224,10 @@ class MMU:
         try:
             while True:
                 data = await self.transport.read(4096)
-                if self.logic.version is None and (busy := refusal(data, self.transport.peer or "the MMU")) is not None:
-                    self._fail(busy)
+                if self.logic.version is None and (
+                        wrong := refusal(data, where := self.transport.peer or "the MMU")
+                        or wrong_peer(data, "a Prusa MMU3", MMU_KIND.name, where)) is not None:
+                    self._fail(wrong)
                     return
                 self.logic.receive(data, self._clock())
                 self._dispatch()

@@ -29,6 +29,7 @@ from fabwire.errors import DeviceBusy, DeviceError, InputError, LinkClosed, Link
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
 from fabwire.transport.limits import refusal
+from fabwire.transport.peers import wrong_peer
 from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
 from fabwire.xyz.codes import PRINT_STOP
@@ -260,10 +261,20 @@ class XYZPrinter(Maintenance):
                 return reply
             if event is not None:
                 continue
+            if not self._heard:
+                self._check_peer()
             if direct:
                 await self._read_once(doing)
             else:
                 await self._wait_for_pump(doing)
+
+    def _check_peer(self) -> None:
+        """Before the printer was ever heard: a line from another kind of machine or server ends the wait at once."""
+        sample = self.reader.noise_sample
+        said = sample.encode("latin-1", "replace") if sample is not None else self.reader.unfinished
+        where = self.transport.peer or self.transport.url
+        if said and (wrong := wrong_peer(said, "an XYZv3 printer", XYZ.name, where)):
+            raise wrong
 
     async def _wait_for_pump(self, doing: str) -> None:
         """Until the reader task has read something, or the reply's deadline (a NoReply) has come: one future and

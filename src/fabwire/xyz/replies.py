@@ -155,6 +155,11 @@ class ReplyReader:
         """Stop waiting for the reply in flight (its command failed or was given up)."""
         self._pending = None
 
+    @property
+    def unfinished(self) -> bytes:
+        """The start of a line still waiting for its end (what a peer that sends no line ends said so far)."""
+        return bytes(self._buffer[:64])
+
     def discard(self) -> None:
         """Forget buffered input (the stale replies a client drains before each command)."""
         self._buffer.clear()
