@@ -289,6 +289,7 @@ def test_preview_writes_gcode_that_files_save_accepts_and_draw_replays(simulator
     plan_gcode = tmp_path / "plan.gcode"
     made = run_cli("lineus", "preview", str(svg), "-o", str(plan_gcode), "--pen-z", "300")
     assert made.returncode == 0, made.stderr
+    assert made.stdout.splitlines()[-1] == f"wrote {plan_gcode}"  # said, as `xyz convert` says it
     lines = plan_gcode.read_text().splitlines()
     assert lines[0] == "G01 Z1000"
     assert "G01 Z300" in lines

@@ -126,11 +126,12 @@ def figures_text(plan: Plan) -> str:
     return "\n".join(lines)
 
 
-def _report(output: Output, plan: Plan, extra: dict[str, Any] | None = None) -> None:
+def _report(output: Output, plan: Plan, extra: dict[str, Any] | None = None, written: tuple[Path, ...] = ()) -> None:
+    """The plan's notes and figures, and a line for each file `written`."""
     for note in plan.notes:
         output.note(note)
     data = {**plan.figures().as_dict(), **(extra or {})}
-    output.result(data, figures_text(plan))
+    output.result(data, "\n".join([figures_text(plan), *(f"wrote {path}" for path in written)]))
 
 
 # -- resume state ---------------------------------------------------------------------------------------------------
@@ -485,4 +486,4 @@ def preview(app: App, file: Path, outputs: tuple[Path, ...], fit: bool | None, m
             write_drawing(out, plan.strokes, plan.travel(),
                           title="standard input" if str(file) == "-" else file.name, hidden=plan.hidden,
                           scale=dpi_scale(dpi))
-    _report(app.output, plan, {"file": str(file), "outputs": [str(o) for o in outputs]})
+    _report(app.output, plan, {"file": str(file), "outputs": [str(o) for o in outputs]}, written=outputs)
