@@ -10,6 +10,8 @@ import termios
 import time
 from pathlib import Path
 
+import httpx
+
 from clitools import cli_env, run_cli
 
 from .agenttools import start_agent, wait_for
@@ -123,3 +125,25 @@ def test_a_verbose_agent_with_an_unread_stderr_keeps_serving(tmp_path: Path) -> 
                 time.sleep(0.2)
     finally:
         agent.stop()
+
+
+def test_an_agent_with_no_machines_on_every_address_says_what_to_do_and_where_to_open_it(tmp_path: Path) -> None:
+    agent = start_agent(tmp_path / "state", "--listen", "0.0.0.0:0")
+    port = agent.url.rstrip("/").rsplit(":", 1)[1]
+    assert agent.url.startswith("http://0.0.0.0:")
+    with httpx.Client(base_url=f"http://127.0.0.1:{port}") as client:  # serving (this needs its token: 401)
+        assert client.get("/api/v1/devices").status_code == 401
+    code, stderr = agent.stop()
+    assert code == 0, stderr
+    assert "no machines to watch: add one with `fabwire devices add NAME ADDRESS --kind KIND`" in stderr
+    assert f"open it at http://127.0.0.1:{port}/" in stderr  # 0.0.0.0 is no address a browser opens
+
+
+def test_an_agent_with_machines_on_loopback_says_neither(tmp_path: Path) -> None:
+    agent = start_agent(tmp_path / "state", "--demo", "--speed", "30")
+    with agent.client() as client:
+        assert client.get("/api/v1/devices").status_code == 200
+    code, stderr = agent.stop()
+    assert code == 0, stderr
+    assert "no machines to watch" not in stderr
+    assert "open it at" not in stderr

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import ipaddress
 import logging
 import signal
 import socket
@@ -253,7 +254,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
-    from fabwire.agent.advertise import Advertiser
+    from fabwire.agent.advertise import Advertiser, lan_addresses
     from fabwire.agent.api import create_app
     from fabwire.logsink import log_in_background
 
@@ -277,6 +278,9 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):
                 click.echo(f"fabwire: not monitoring {spec.name}: {result}", err=True)
+        if not agent.sessions():
+            click.echo("fabwire: no machines to watch: add one with `fabwire devices add NAME ADDRESS --kind KIND` "
+                       "and start again (or POST /api/v1/devices), or try `fabwire serve --demo`", err=True)
         opened = asyncio.Event()
         if demo:
             show = asyncio.create_task(_demo_show(agent, opened))
@@ -290,6 +294,9 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
         sys.stdout.flush()
+        if ipaddress.ip_address(bound_host).is_unspecified:  # the wildcard is no address a browser can open
+            reach = [f"http://{a}:{bound_port}/" for a in ["127.0.0.1", *lan_addresses(bound_host)]]
+            click.echo(f"fabwire: open it at {', '.join(reach)}", err=True)
         if bridge is not None:
             bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port)),
                                                           server))
