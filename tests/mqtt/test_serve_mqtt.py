@@ -233,3 +233,49 @@ def test_per_entity_discovery_from_serve(broker: Mosquitto, agents: Agents, watc
         assert check_entity_discovery(topic, payload) == [], topic
         assert payload["device"]["configuration_url"] == agents.urls["a"]
     assert not watch.latest.get(f"homeassistant/device/fabwire_{device}/config")
+
+
+def _retained(broker: Mosquitto) -> dict[str, bytes]:
+    """Every retained message under fabwire/ and homeassistant/, as a newcomer to the broker gets them: the marker
+    published after subscribing comes back after all of them."""
+    fresh = Watch(broker)
+    try:
+        fresh.client.publish("fabwire/test/marker", b"end", qos=1).wait_for_publish(10)
+        fresh.until(lambda w: "fabwire/test/marker" in w.latest)
+        return {t: p for t, p in fresh.latest.items() if p and t != "fabwire/test/marker"}
+    finally:
+        fresh.close()
+
+
+@pytest.mark.parametrize("state_dir", [False, True], ids=["no-state-dir", "state-dir"])
+def test_a_demo_leaves_no_ghost_machines_on_the_broker(broker: Mosquitto, watch: Watch, tmp_path: Path,
+                                                      state_dir: bool) -> None:
+    """The demo's machines exist while it runs: a clean stop takes them off the broker with their Home Assistant
+    discovery; an agent whose id is new each run (no --state-dir) takes its own records too, and with a state
+    directory it stays, offline, as any agent does."""
+    args = [sys.executable, "-m", "fabwire", "serve", "--demo", "--speed", "30", "--listen", "127.0.0.1:0",
+            "--mqtt", broker.url, *(["--state-dir", str(tmp_path / "state")] if state_dir else [])]
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    try:
+        assert process.stdout is not None
+        assert process.stdout.readline().startswith(ANNOUNCEMENT)
+        demo = ("xyz-demo", "lineus-demo", "mmu-demo")
+        watch.until(lambda w: all(w.latest.get(f"homeassistant/device/fabwire_{d}/config") for d in demo)
+                    and all(w.latest.get(f"fabwire/device/{d}/availability") == b"online" for d in demo))
+        agent = watch.until(lambda w: next((t.split("/")[2] for t, p in w.latest.items()
+                                            if t.startswith("fabwire/agent/") and t.endswith("/info") and p), None))
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=60)
+        assert process.returncode == 0, stderr
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    left = _retained(broker)
+    assert not [t for t in left if "-demo" in t], left
+    kept = sorted(t for t in left if t.startswith(f"fabwire/agent/{agent}/"))
+    if state_dir:
+        assert kept == [f"fabwire/agent/{agent}/info", f"fabwire/agent/{agent}/status"]
+        assert left[f"fabwire/agent/{agent}/status"] == b"offline"
+    else:
+        assert kept == []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import gc
 import ipaddress
 import logging
@@ -128,10 +129,13 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, 
     except ImportError:
         raise InputError("MQTT support not installed: pip install 'fabwire[mqtt]'") from None
 
-    def start(agent: Agent, dashboard_url: str) -> Coroutine[Any, Any, None]:
+    def start(agent: Agent, dashboard_url: str, passing: frozenset[str] = frozenset(),
+              passing_agent: bool = False) -> Coroutine[Any, Any, None]:
         def linked(bridge: Any) -> None:
             bridge.dashboard_url = dashboard_url
             bridge.discovery_mode = discovery
+            bridge.passing = passing
+            bridge.passing_agent = passing_agent
             bridge.on_connected = lambda text: click.echo(f"fabwire agent {text}")
 
         result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls,
@@ -213,6 +217,8 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
                 click.echo(f"access token: the one in {directory}", err=True)
         policy = Policy.for_listen(address.host, allow_hosts, token=secret,
                                    max_upload_bytes=int(max_upload * 1024 * 1024))
+        if bridge is not None and demo_dir is not None:  # a new agent id each run: it leaves no trace
+            bridge = functools.partial(bridge, passing_agent=True)
         interrupted = _run(_serve(sock, specs, directory, demo, speed, retention * 3600.0, policy, bridge,
                                   notifier))
     finally:
@@ -262,6 +268,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
 
     server_class = _server_class()
     simulators: list[Any] = []
+    passing: frozenset[str] = frozenset()
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=policy.max_upload_bytes)
     bridge_task: asyncio.Task[None] | None = None
     notify_task: asyncio.Task[None] | None = None
@@ -270,6 +277,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
+            passing = frozenset(spec.fixed_id for spec in demo_specs if spec.fixed_id)
             specs = demo_specs + specs
         await agent.start()
         if notifier is not None:  # subscribed before the devices come: their first states arm it
@@ -298,7 +306,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
             reach = [f"http://{a}:{bound_port}/" for a in ["127.0.0.1", *lan_addresses(bound_host)]]
             click.echo(f"fabwire: open it at {', '.join(reach)}", err=True)
         if bridge is not None:
-            bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port)),
+            bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port), passing),
                                                           server))
         advertiser = Advertiser(agent, bound_host, bound_port)
         await advertiser.start()

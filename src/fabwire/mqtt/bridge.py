@@ -192,6 +192,12 @@ class Bridge:
         self._living: frozenset[str] = frozenset()
         self.commands_refused = 0
         """Commands answered "busy" or dropped because their device's queue was full."""
+        self.passing: frozenset[str] = frozenset()
+        """Devices that exist only while this agent runs (the demo's simulators): a clean stop takes them off the
+        broker, discovery included, instead of leaving them offline for good."""
+        self.passing_agent = False
+        """This agent itself exists for one run (a demo with no state directory: a new id each time): a clean stop
+        takes its own status and info off the broker too."""
         self.on_connected: Callable[[str], None] | None = None
         """Told each time the broker takes the connection ("publishing to mqtt://… as agent …"): `fabwire serve`
         prints it, as it prints where it listens, since a failed attempt is already shown."""
@@ -281,10 +287,21 @@ class Bridge:
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await asyncio.gather(*(client.publish(device_topic(device, "availability"), OFFLINE, qos=1,
-                                                      retain=True) for device in sorted(self.owned)))
+                                                      retain=True) for device in sorted(self.owned - self.passing)))
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(2.0):
+                await asyncio.gather(*(client.publish(topic, b"", qos=1, retain=True)
+                                       for device in sorted(self.owned & self.passing)
+                                       for topic in (*self._retained_topics(device),
+                                                     claim_topic(device, self.agent_id))))
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await client.publish(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
+        if self.passing_agent:
+            with contextlib.suppress(Exception):
+                async with asyncio.timeout(2.0):
+                    await asyncio.gather(*(client.publish(agent_topic(self.agent_id, leaf), b"", qos=1, retain=True)
+                                           for leaf in ("status", "info")))
 
     async def _publish(self, topic: str, payload: str | bytes, *, retain: bool = True, qos: int = 1,
                        properties: Any = None) -> None:
@@ -507,16 +524,19 @@ class Bridge:
                                                  self.discovery_mode):
             await self._publish(topic, _dump(payload))
 
+    def _retained_topics(self, device: str) -> list[str]:
+        """Every retained topic a device of this agent is published on, its discovery included (its claims aside)."""
+        return [*discovery_topics(device, self.discovery_mode),
+                *(device_topic(device, leaf) for leaf in ("state", "info", "availability"))]
+
     async def _remove(self, device: str) -> None:
         """Clean up a device this agent stopped monitoring: its discovery and retained topics go unless another
         online agent still claims it (that agent then takes over); this agent's claim goes in any case."""
         others = [a for a in self.view.devices.get(device, _NO_VIEW).claims
                   if a != self.agent_id and self.view.alive(a, time.monotonic())]
         if not others:
-            for topic in discovery_topics(device, self.discovery_mode):
+            for topic in self._retained_topics(device):
                 await self._publish(topic, b"")
-            for leaf in ("state", "info", "availability"):
-                await self._publish(device_topic(device, leaf), b"")
         self.owned.discard(device)
         self._pending.pop(device, None)
         self._availability.pop(device, None)
