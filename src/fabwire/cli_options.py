@@ -154,8 +154,9 @@ def _set_faults(app: App, value: str) -> None:
     app.faults = FaultPlan.parse(value)
 
 
-def _device_names(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
-    """Shell completion for -d: the configured names (of the command's device kind, when known)."""
+def device_names(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
+    """Completion of a device name (-d, `devices show|remove NAME`): the configured names (of the command's
+    device kind, when known)."""
     from fabwire.config import load_devices
     from fabwire.errors import FabwireError
 
@@ -195,7 +196,7 @@ def device_option(setting: str, *decls: str, apply: Callable[[App, Any], None], 
 
 DEVICE_OPTIONS: tuple[OptionFactory, ...] = (
     device_option("device", "-d", "--device", metavar="DEVICE", apply=lambda app, v: setattr(app, "device", v),
-                  shell_complete=_device_names,
+                  shell_complete=device_names,
                   help="Address (host[:port], tcp://…, /dev/tty…, sim://KIND) or a configured device name."),
     device_option("trace", "--trace", type=click.Path(dir_okay=False, path_type=Path),
                   apply=lambda app, v: setattr(app, "trace", v), help="Record the wire to FILE."),

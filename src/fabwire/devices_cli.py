@@ -18,6 +18,7 @@ from typing import Any, get_origin, get_type_hints
 import click
 import msgspec
 
+from fabwire.cli_options import device_names
 from fabwire.cli_support import App, pass_app
 from fabwire.config import (
     SCHEMAS,
@@ -124,7 +125,7 @@ def list_cmd(app: App) -> None:
 
 
 @devices.command("show")
-@click.argument("name")
+@click.argument("name", shell_complete=device_names)
 @pass_app
 def show(app: App, name: str) -> None:
     """Show every setting of device NAME as TOML: a setting at its default value says `# default`, a setting
@@ -198,7 +199,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
 
 
 @devices.command("remove")
-@click.argument("name")
+@click.argument("name", shell_complete=device_names)
 @pass_app
 def remove(app: App, name: str) -> None:
     """Forget device NAME (the rest of the file stays as it is)."""

@@ -40,6 +40,12 @@ def test_device_names_complete_for_their_kind(tmp_path: Path) -> None:
     assert complete("fabwire xyz st", tmp_path) == ["status"]
 
 
+@pytest.mark.parametrize("command", ["show", "remove"])
+def test_the_devices_commands_complete_every_configured_name(tmp_path: Path, command: str) -> None:
+    assert complete(f"fabwire devices {command} b", tmp_path) == ["basement", "bench"]
+    assert complete(f"fabwire devices {command} ", tmp_path) == ["basement", "bench", "office"]
+
+
 def test_the_readme_installs_bash_completion_as_typed_on_a_fresh_home(tmp_path: Path) -> None:
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
     block, = (b for b in re.findall(r"```sh\n(.*?)```", readme, flags=re.DOTALL) if "completion bash" in b)
