@@ -80,3 +80,22 @@ def test_library_and_queue_on_the_dashboard(demo: RunningAgent, page: Page) -> N
     expect(row.locator("button", has_text="Print")).to_be_disabled()
     machine.locator("li[data-queued='hook.gcode'] button[title='remove from the queue']").click()
     expect(machine.locator(".queue-list li")).to_have_text(["clip.gcode ↑↓✕"])
+
+
+STAR_SVG = (b"<svg xmlns='http://www.w3.org/2000/svg' width='40mm' height='40mm' viewBox='0 0 40 40'>"
+            b"<path d='M20 2 L25 15 L38 15 L27 23 L31 37 L20 28 L9 37 L13 23 L2 15 L15 15 Z' fill='none' "
+            b"stroke='black'/></svg>")
+
+
+def test_the_line_us_library_speaks_of_drawings(demo: RunningAgent, page: Page) -> None:
+    machine = page.locator(".library-machine[data-device=lineus-demo]")
+    expect(machine.locator("p.empty")).to_have_text(
+        "No drawings yet: send an SVG or Line-us G-code to this machine's print-host address (/printers/NAME).")
+    with demo.client() as client:
+        body, ctype = multipart([("print", "false"), ("path", "")], "star.svg", STAR_SVG)
+        kept = client.post("/printers/line-us/api/files/local", content=body, headers={"Content-Type": ctype})
+        assert kept.status_code == 201, kept.text
+    row = machine.locator("tr[data-file='star.svg']")
+    expect(row.locator("button", has_text="Draw")).to_have_count(1)
+    expect(machine.locator("button", has_text="Print")).to_have_count(0)
+    expect(machine.locator("th")).to_contain_text(["Preview", "File", "Drawing time"])

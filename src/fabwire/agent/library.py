@@ -233,8 +233,7 @@ class Library:
         print now) and nothing is kept when it refuses, unless its queue is on (then the file waits). InputError
         for a name or a file the machine cannot take (the intake's own words); nothing is kept then either."""
         view = self.machines.view(device)
-        if not view.takes_jobs:
-            raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
+        view.require_files()
         device_id = view.id
         name = clean_name(name)
         session = self.agent.session(device_id)

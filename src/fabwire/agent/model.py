@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from fabwire.agent.core import Subscription
+from fabwire.devices import KINDS
 from fabwire.errors import DeviceBusy, InputError
 
 if TYPE_CHECKING:
@@ -85,20 +86,28 @@ class MachineView:
     def printing(self) -> bool:
         return self.phase in ("printing", "pausing", "paused", "resuming", "cancelling")
 
+    def require_files(self) -> None:
+        """TakesNoJobs (HTTP 409) unless the machine takes files: the doors and the library refuse an MMU alike."""
+        if not self.takes_jobs:
+            raise TakesNoJobs(f"{self.name} is a {KINDS[self.kind].title}: it takes no files")
+
     def refusal(self) -> str | None:
         """Why a job cannot start now (words for the owner, with what to do), or None when it can."""
         name = self.name
         if not self.takes_jobs:
-            return f"{name} is a {self.kind} device and takes no jobs"
+            return f"{name} is a {KINDS[self.kind].title} and takes no jobs"
         if self.phase == "offline":
             return f"{name} is offline ({self.message})"
+        # a Line-us draws: the phases' OctoPrint words (printing, paused …) are said as a drawing's
+        phase, work = (self.phase.replace("printing", "drawing"), "drawing") if self.kind == "lineus" else (
+            self.phase, "print")
         if self.job is not None:
             shown = self.job.get("filename") or self.job.get("type")
-            return (f"{name} is busy with job {self.job['id']} ({shown}, {self.phase}): wait for it to finish "
+            return (f"{name} is busy with job {self.job['id']} ({shown}, {phase}): wait for it to finish "
                     "or cancel it")
         if self.printing:
-            return f"{name} is {self.phase}: wait for the print to finish or cancel it"
-        if self.phase == "done":
+            return f"{name} is {phase}: wait for the {work} to finish or cancel it"
+        if self.phase == "done" and self.kind == "xyz":  # only a printer waits for its work to be taken away
             return (f"{name} has finished a print that is still on the bed: take it off and acknowledge it "
                     "(the printer's OK button, or Acknowledge on the dashboard), then send again")
         if self.phase == "error":

@@ -352,8 +352,7 @@ class MoonrakerDoor:
         sinks: list[Callable[[bytes], Awaitable[None]]] = []
         try:
             view = machine_of(self.agent, request)
-            if not view.takes_jobs:
-                raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
+            view.require_files()
 
             def before_file(fields: dict[str, str], filename: str) -> None:
                 if fields.get("print", "").strip().lower() == "true" and fields.get("root", ROOT) == ROOT:

@@ -35,7 +35,7 @@ from fabwire.agent.doors import (
     machine_of,
     read_upload,
 )
-from fabwire.agent.model import MachineView, TakesNoJobs
+from fabwire.agent.model import MachineView
 from fabwire.agent.offload import while_connected
 from fabwire.agent.session import JobClaim
 from fabwire.errors import FabwireError, InputError
@@ -343,8 +343,7 @@ class OctoPrintDoor:
         """POST /api/files/local: multipart `file`, `path` (its folder), `select`, `print` ("true"). With print
         sent before the file (PrusaSlicer, OrcaSlicer), the machine is claimed before the file is read."""
         view = machine_of(self.agent, request)
-        if not view.takes_jobs:
-            raise TakesNoJobs(f"{view.name} is a {view.kind} device: it takes no files")
+        view.require_files()
         claims: list[JobClaim] = []
         sinks: list[Callable[[bytes], Awaitable[None]]] = []
 

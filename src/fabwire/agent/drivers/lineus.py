@@ -189,11 +189,11 @@ class LineUsDriver(Driver):
             done_s += per_stroke[index]
             last = strokes[index][-1]
             self.position = Position(float(last[0]), float(last[1]), 1000.0)
-            self.drawing = f"drawing: stroke {min(index + 2, len(strokes))} of {len(strokes)}"
+            drawing = f"stroke {min(index + 2, len(strokes))} of {len(strokes)}"  # the one under the pen now
+            self.drawing = f"drawing: {drawing}"
             self._progress = (100.0 * done_s / total, max(0.0, total - done_s))
             handle.stroke(_points(strokes[index]))
-            handle.progress(self._progress[0], time_left_s=self._progress[1],
-                            message=f"stroke {index + 1} of {len(strokes)}")
+            handle.progress(self._progress[0], time_left_s=self._progress[1], message=drawing)
             if self._stop:
                 raise JobStopped(f"stopped after stroke {index + 1} of {len(strokes)}")
 

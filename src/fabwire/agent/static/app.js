@@ -106,7 +106,7 @@ async function upload(card, input) {
   }
 }
 
-const LABELS = {pause: "Pause", resume: "Resume", cancel: "Cancel", acknowledge: "Taken off the bed",
+const LABELS = {pause: "Pause", resume: "Resume", cancel: "Cancel", acknowledge: "Acknowledge",
   home: "Home", unload_filament: "Unload filament", retry: "Retry", continue: "Continue", stop: "Stop",
   unload: "Unload", pen_up: "Pen up", pen_down: "Pen down", reset: "Restart MMU"};
 const CONFIRM = {reset: "Restart the MMU? A running command is lost."};

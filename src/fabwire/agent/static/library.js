@@ -48,8 +48,17 @@ function libraryPath(device, name) {
   return `/devices/${encodeURIComponent(device)}/library/${name.split("/").map(encodeURIComponent).join("/")}`;
 }
 
+// What each kind of machine does with a file, and where its files come from, in its own words.
+const WORK = {
+  lineus: {verb: "Draw", doing: "drawing", time: "Drawing time",
+    empty: "No drawings yet: send an SVG or Line-us G-code to this machine's print-host address (/printers/NAME)."},
+  xyz: {verb: "Print", doing: "printing", time: "Print time",
+    empty: "No files yet: send one from your slicer."},
+};
+
 async function machineLibrary(device, listing) {
   const base = `/devices/${encodeURIComponent(device.id)}`;
+  const work = WORK[device.kind] || WORK.xyz;
   const rows = await Promise.all(listing.files.map(async (entry) => {
     const meta = entry.meta;
     return el("tr", {"data-file": entry.name},
@@ -60,9 +69,9 @@ async function machineLibrary(device, listing) {
       el("td", {}, meta.layers ?? "–"), el("td", {}, meta.slicer || "–"), el("td", {}, megabytes(entry.size)),
       el("td", {}, `${entry.prints.success} ✓ ${entry.prints.failure} ✗`),
       el("td", {class: "buttons"},
-        el("button", {type: "button", onclick: () => libraryDo(`printing ${entry.name}`, "POST",
+        el("button", {type: "button", onclick: () => libraryDo(`${work.doing} ${entry.name}`, "POST",
           `${libraryPath(device.id, entry.name)}/print`), disabled: !listing.ready, title: listing.refusal || ""},
-          "Print"),
+          work.verb),
         el("button", {type: "button", onclick: () => libraryDo(`${entry.name} queued`, "POST", `${base}/queue`,
           {name: entry.name})}, "Queue"),
         el("button", {type: "button", class: "danger", onclick: () => window.confirm(`Delete ${entry.name}?`)
@@ -83,10 +92,11 @@ async function machineLibrary(device, listing) {
     el("button", {type: "button", title: "remove from the queue",
       onclick: () => libraryDo(`${name} left the queue`, "PUT", `${base}/queue`, {order: move(index, null)})}, "✕")));
   return el("div", {class: "library-machine", "data-device": device.id},
-    el("h3", {}, device.name, " ", el("span", {class: "kind"}, listing.ready ? "ready" : listing.refusal || "")),
+    el("h3", {}, device.name, " ", listing.ready ? el("span", {class: "kind"}, "ready")
+      : el("span", {class: "refusal"}, listing.refusal || "")),
     listing.files.length ? el("table", {class: "library"}, el("thead", {}, el("tr", {},
-      ...["Preview", "File", "Print time", "Filament", "Layers", "Slicer", "Size", "Prints", ""].map((h) => el("th", {}, h)))),
-      el("tbody", {}, rows)) : el("p", {class: "empty"}, "No files yet: send one from your slicer."),
+      ...["Preview", "File", work.time, "Filament", "Layers", "Slicer", "Size", `${work.verb}s`, ""].map((h) => el("th", {}, h)))),
+      el("tbody", {}, rows)) : el("p", {class: "empty"}, work.empty),
     el("div", {class: "queue"},
       el("label", {}, el("input", {type: "checkbox", checked: listing.queue_enabled, onchange: (event) =>
         libraryDo(event.target.checked ? "queue on" : "queue off", "PUT", `${base}/queue`,
