@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -255,6 +257,18 @@ def test_several_simulators_on_loopback_aliases(simulator: SimulatorStarter) -> 
     subnet = run_cli("--json", "xyz", "discover", "--subnet", "127.0.0.0/30", "--port", str(port),
                      "--probe-timeout", "0.5")
     assert {entry["address"] for entry in json.loads(subnet.stdout)} == {f"127.0.0.2:{port}"}
+
+
+def test_discover_with_nothing_found_says_how_to_search_the_network() -> None:
+    """Without --host or --subnet only USB is looked at (no USB printer here): said, with the command that searches
+    this computer's network."""
+    result = run_cli("xyz", "discover")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "no printers found on USB"
+    hint = re.search(r"to search the network too: fabwire xyz discover --subnet (\S+) \(or --host ADDRESS\)",
+                     result.stderr)
+    assert hint is not None, result.stderr
+    assert ipaddress.ip_network(hint[1]).prefixlen == 24
 
 
 def test_pty_simulator_and_state_file(simulator: SimulatorStarter, tmp_path: Path) -> None:

@@ -524,11 +524,11 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 @pass_app
 def discover(app: App, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
              concurrency: int) -> None:
-    """List XYZprinting USB serial ports and printers answering on TCP 9100."""
+    """List XYZprinting USB serial ports, and with --host or --subnet the printers answering on TCP 9100."""
     import msgspec
 
     from fabwire.transport.urls import parse_url
-    from fabwire.xyz.discovery import hosts_in, probe_hosts, usb_printers
+    from fabwire.xyz.discovery import hosts_in, probe_hosts, this_subnet, usb_printers
 
     probed = msgspec.structs.replace(XYZ, default_port=port)  # a bare host is probed on --port
     targets = [(e.host, e.port) for e in (parse_url(text, probed) for text in hosts)]
@@ -543,7 +543,10 @@ def discover(app: App, hosts: tuple[str, ...], subnet: str | None, port: int, pr
 
     def human() -> None:
         if not found:
-            app.output.out.print("no printers found")
+            app.output.out.print("no printers found" + ("" if targets else " on USB"))
+        if not found and not targets:  # the network is searched only where asked: say how
+            subnet = this_subnet() or "192.168.1.0/24"
+            app.output.note(f"to search the network too: fabwire xyz discover --subnet {subnet} (or --host ADDRESS)")
         for f in found:
             app.output.out.print(f"{f.address}  {f.name or '?'}  {f.serial or ''}  {f.detail}")
 

@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
+import socket
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -48,6 +49,18 @@ def usb_printers() -> list[Found]:
         hint = USB_MODELS.get(port.pid or 0, f"USB product 0x{port.pid or 0:04X}")
         found.append(Found(port.device, None, port.product, port.serial_number, hint))
     return found
+
+
+def this_subnet() -> str | None:
+    """The /24 around this computer's address on its default route (where a printer on the same Wi-Fi or LAN
+    would be), e.g. "192.168.1.0/24"; None without an IPv4 route. Nothing is sent: a UDP socket's connect only
+    picks the route."""
+    with contextlib.suppress(OSError), socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.connect(("192.0.2.1", 9))  # TEST-NET-1 (RFC 5737): any routable address picks the default route
+        address = ipaddress.ip_address(sock.getsockname()[0])
+        if not address.is_loopback and not address.is_unspecified:
+            return str(ipaddress.ip_network(f"{address}/24", strict=False))
+    return None
 
 
 def hosts_in(subnet: str) -> list[str]:
