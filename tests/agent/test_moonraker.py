@@ -119,7 +119,9 @@ def test_home_assistant_moonraker_client_follows_a_print(demo: RunningAgent) -> 
         assert image.status_code == 200
         assert Image.open(io.BytesIO(image.content)).size == (220, 124)
         wait_for(lambda: client.get("/printer/objects/query", params={"print_stats": ""}).json()
-                 ["result"]["status"]["print_stats"]["state"] == "standby", "the print cancelled")
+                 ["result"]["status"]["print_stats"]["state"] == "cancelled", "the print cancelled (Klipper's word)")
+        assert client.get("/printer/objects/query", params={"webhooks": ""}).json()["result"]["status"][
+            "webhooks"]["state"] == "ready"
         history = client.get("/server/history/list").json()["result"]["jobs"]
         assert history[0]["status"] == "cancelled"
 

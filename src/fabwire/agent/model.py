@@ -81,6 +81,9 @@ class MachineView:
     elapsed_s: float | None
     time_left_s: float | None
     takes_jobs: bool
+    last_outcome: str | None = None
+    """How the machine's last job ended ("done", "failed", "cancelled", "interrupted") while nothing has started
+    since; None before its first job here, and while a job runs."""
 
     @property
     def printing(self) -> bool:
@@ -124,6 +127,8 @@ class Machines:
         self.agent = agent
         self._requested: dict[str, tuple[str, float]] = {}
         self._ended: dict[str, tuple[str, object]] = {}
+        self._outcomes: dict[str, str] = {}
+        """device → how its last job ended (kept until the next job: Klipper's print_stats keeps "cancelled")."""
         """device → (how its last job ended, the status the machine had last reported then)."""
 
     def start(self) -> None:
@@ -135,6 +140,7 @@ class Machines:
         (a cancelled print's "printing"), so the job's outcome tells the phase."""
         with contextlib.suppress(InputError):
             self._ended[device_id] = (outcome, self.agent.session(device_id).state.get("status"))
+        self._outcomes[device_id] = outcome
 
     def view(self, device: str) -> MachineView:
         """UnknownDevice (an InputError) when no machine has that name or id."""
@@ -197,4 +203,5 @@ class Machines:
             progress_percent=(job or {}).get("progress_percent") if job else summary.get("progress_percent"),
             elapsed_s=summary.get("elapsed_s"),
             time_left_s=(job or {}).get("time_left_s") or summary.get("time_left_s"),
-            takes_jobs=bool(session.driver.job_types))
+            takes_jobs=bool(session.driver.job_types),
+            last_outcome=None if job is not None else self._outcomes.get(session.info.id))

@@ -56,6 +56,14 @@ PRINT_STATE: dict[str, str] = {
 }
 """Phase → Klipper's print_stats.state (standby, printing, paused, complete, cancelled, error)."""
 
+def print_state(view: MachineView) -> str:
+    """Klipper's print_stats.state: a cancelled print stays "cancelled" until the next one starts (Klipper's
+    print_stats.py sets it on cancel and resets only when a new print begins); otherwise by the phase."""
+    if view.phase == "standby" and view.last_outcome == "cancelled":
+        return "cancelled"
+    return PRINT_STATE[view.phase]
+
+
 JOB_STATUS: dict[str, str] = {
     "queued": "in_progress", "running": "in_progress", "done": "completed", "failed": "error",
     "cancelled": "cancelled", "interrupted": "server_exit",
@@ -169,7 +177,7 @@ class MoonrakerDoor:
                          "state_message": "Printer is ready" if view.online else view.message},
             "print_stats": {"filename": filename, "total_duration": elapsed, "print_duration": elapsed,
                             "filament_used": round(filament * fraction, 1) if filament else 0.0,
-                            "state": PRINT_STATE[view.phase],
+                            "state": print_state(view),
                             "message": view.error or (view.message if view.phase != "standby" else ""),
                             "info": {"total_layer": meta.get("layers"), "current_layer": None}},
             "virtual_sdcard": {"file_path": filename or None, "progress": fraction, "is_active": view.printing,
