@@ -206,3 +206,11 @@ def test_cli_latin_in_a_greek_font_is_refused_with_a_pointer() -> None:
     done = run_cli("lineus", "text", "abc", "--font", "greek", "--dry-run", env=cli_env())
     assert done.returncode == 4
     assert "font 'greek' (Greek) has no strokes for 'abc'; for Latin use --font futural" in done.stderr
+
+
+def test_cli_a_long_text_no_font_draws_is_quoted_short() -> None:
+    done = run_cli("lineus", "text", "-", "--dry-run", env=cli_env(), input_text="日本" * 5000)
+    assert done.returncode == 4
+    line, = done.stderr.splitlines()
+    assert line.startswith("fabwire: error: font 'futural' (Latin) has no strokes for '日本日本")
+    assert len(line) < 200

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from HersheyFonts import HersheyFonts
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.geometry import FloatArray, Polylines
 
 DEFAULT_FONT = "futural"
@@ -300,7 +300,7 @@ def text_lines(text: str, *, font: str = DEFAULT_FONT, cap_height: float = 1.0,
                 x += float(glyph.char_width)  # type: ignore[attr-defined]
     script = face.coverage.script
     if not result:
-        raise InputError(f"font {font!r} ({script}) has no strokes for {text!r}{_suggestion(missing)}")
+        raise InputError(f"font {font!r} ({script}) has no strokes for {excerpt(text, 40)}{_suggestion(missing)}")
     if notes is not None:
         if script == "symbols":
             notes.append(f"font {font!r} draws signs, not letters: each character typed draws the sign on its key")
