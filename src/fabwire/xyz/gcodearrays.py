@@ -118,6 +118,11 @@ def may_hold_odd_number(text: bytes) -> bool:
     return bool((letter[:-2] & letter[1:-1] & letter[2:]).any())
 
 
+def line_count(text: bytes) -> int:
+    """How many LF bytes `text` holds (numpy counts them about 20 times as fast as `bytes.count`)."""
+    return int(np.count_nonzero(np.frombuffer(text, dtype=np.uint8) == 10))
+
+
 PAD = 32
 """Zero bytes after the text, so reads of a number's 16 bytes never run past the buffer."""
 
@@ -170,6 +175,21 @@ def _leading_digits(x: NDArray[np.uint64]) -> NDArray[np.uint8]:
     return counted
 
 
+def _eight_bytes(data: NDArray[np.uint8], at: NDArray[np.intp]) -> tuple[NDArray[np.uint64], NDArray[np.uint64]]:
+    """The 8 bytes at each offset `at` of `data` and the 8 after them, as little-endian numbers (the last 24 bytes
+    of `data` must be PAD), joined from aligned words: gathering aligned words is several times as fast."""
+    aligned = np.frombuffer(data, dtype="<u8", count=len(data) // 8)
+    word = at >> 3
+    first, second, third = aligned[word], aligned[word + 1], aligned[word + 2]
+    shift = (at & 7).astype(np.uint64) << _U(3)
+    rest = _U(64) - shift  # numpy shifts a 64-bit number by 64 to 0
+    first >>= shift
+    first |= second << rest
+    second >>= shift
+    second |= third << rest
+    return first, second
+
+
 def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
     """The numbers starting at offsets `at` of some text followed by PAD zero bytes (`padded`, and `data` viewing
     it), as float() reads them; NaN where no number starts.
@@ -177,8 +197,7 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    words = np.ndarray(shape=(len(data) - 7,), dtype="<u8", buffer=data, strides=(1,))  # 8 bytes at each offset
-    low, high = words[at], words[at + 8]
+    low, high = _eight_bytes(data, at)
     low ^= _ZEROS
     high ^= _ZEROS
     sign = low & _U(0xFF)
@@ -189,7 +208,7 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     whole_bits = whole_digits << np.uint8(3)
     dotted = (low >> whole_bits) & _U(0xFF) == _U(ord(".") ^ 0x30)
     after_dot = whole_bits + np.uint8(8)
-    fraction = (low >> after_dot) | (high << (_U(64) - after_dot))
+    fraction = np.bitwise_or(low >> after_dot, high << (_U(64) - after_dot))
     fraction_digits = _leading_digits(fraction)
     fraction_digits *= dotted
     fraction &= (_U(1) << (fraction_digits << np.uint8(3))) - _U(1)
@@ -241,7 +260,7 @@ def scan(padded: bytes) -> Scan | None:
     if not len(starts):
         return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
     flags = np.frombuffer(padded.translate(_SCAN_FLAGS), dtype=np.uint8)
-    where = np.flatnonzero(flags)
+    where = np.flatnonzero(flags != 0)  # numpy finds the True of a bool array several times faster than nonzero bytes
     kind = flags[where]
     if (kind == 3).any() and any(separator in padded for separator in SEPARATORS):
         return None  # the line reader refuses it (in the code of a line) or reads the comment
@@ -297,12 +316,10 @@ def scan(padded: bytes) -> Scan | None:
     keep = is_row[line_of]
     if inline_comments:
         keep &= where < code_end[line_of]
-    where, line_of, kind = where[keep], line_of[keep], kind[keep]
-    command_letter = kind == 2
-    if (where[command_letter] > starts[line_of[command_letter]]).any():
+    if np.count_nonzero(keep & (kind == 2)) > np.count_nonzero(is_row):  # each of these lines starts with a G
         return None  # a second command word in a move: the line reader refuses it
-    axis_letter = kind == 1
-    where, line_of = where[axis_letter], line_of[axis_letter]
+    keep &= kind == 1
+    where, line_of = where[keep], line_of[keep]
     at = where + 1
     blank = (data[at] == 32) | (data[at] == 9)
     while blank.any():  # blanks between a letter and its number
