@@ -93,10 +93,11 @@ SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 """Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
 """A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
+_NEWLINE, _SEMICOLON = 4, 5
 _SCAN_FLAGS = bytes(1 if _AXIS_INDEX[byte] >= 0 else 2 if byte in b"GMgm" else 3 if byte in b"\x0b\x0c\x85\xa8\xa9"
-                    else 0 for byte in range(256))
+                    else _NEWLINE if byte == 10 else _SEMICOLON if byte == 59 else 0 for byte in range(256))
 """bytes.translate table: 1 for an axis letter, 2 for a command letter, 3 for a byte that may be (the end of) one of
-SEPARATORS, 0 for anything else."""
+SEPARATORS, `_NEWLINE` for LF, `_SEMICOLON` for `;`, 0 for anything else."""
 
 
 class Ambiguous(Exception):
@@ -197,13 +198,11 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    low, high = _eight_bytes(data, at)
+    sign = data[at]
+    negative = sign == ord("-")
+    low, high = _eight_bytes(data, at + (negative | (sign == ord("+"))))  # the digits after any sign
     low ^= _ZEROS
     high ^= _ZEROS
-    sign = low & _U(0xFF)
-    negative = sign == _U(ord("-") ^ 0x30)
-    signed = (negative | (sign == _U(ord("+") ^ 0x30))).astype(np.uint64)
-    low &= ~(signed * _U(0xFF))  # a sign reads as a leading 0
     whole_digits = _leading_digits(low)  # counts and shifts in bytes: at most 8 digits, 72 bits
     whole_bits = whole_digits << np.uint8(3)
     dotted = (low >> whole_bits) & _U(0xFF) == _U(ord(".") ^ 0x30)
@@ -215,7 +214,7 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     mantissa = _digits_value(low << (np.uint8(64) - whole_bits)) * _U(_SCALE) + _digits_value(fraction)
     parsed: NDArray[np.float64] = mantissa.astype(np.float64) / _SCALE
     np.negative(parsed, out=parsed, where=negative)
-    parsed[(whole_digits == signed) & (fraction_digits == 0)] = np.nan
+    parsed[(whole_digits == 0) & (fraction_digits == 0)] = np.nan
     for i in np.flatnonzero((whole_digits == 8) | (fraction_digits == 8)).tolist():  # long: the float parser's
         found = _NUMBER.match(padded, int(at[i]))
         parsed[i] = float(found.group(0)) if found else math.nan
@@ -255,13 +254,16 @@ def scan(padded: bytes) -> Scan | None:
     size = len(padded) - PAD
     data = np.frombuffer(padded, dtype=np.uint8)
     text = data[:size]
-    newlines = np.flatnonzero(text == 10)
-    starts = newlines[:-1] + 1
-    if not len(starts):
-        return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
     flags = np.frombuffer(padded.translate(_SCAN_FLAGS), dtype=np.uint8)
     where = np.flatnonzero(flags != 0)  # numpy finds the True of a bool array several times faster than nonzero bytes
     kind = flags[where]
+    is_newline = kind == _NEWLINE
+    newlines = where[is_newline]
+    starts = newlines[:-1] + 1
+    if not len(starts):
+        return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
+    # the line of each flagged byte before the last newline (the last flagged byte)
+    where, kind, line_of = where[:-1], kind[:-1], np.cumsum(is_newline[:-1]) - 1
     if (kind == 3).any() and any(separator in padded for separator in SEPARATORS):
         return None  # the line reader refuses it (in the code of a line) or reads the comment
     c0, c1, c2, c3 = (data[starts + i] for i in range(4))
@@ -299,8 +301,8 @@ def scan(padded: bytes) -> Scan | None:
     code_end = newlines[1:]
     inline_comments = False  # a `;` after the code of a move (comment lines are no moves)
     if b";" in padded:
-        semis = np.flatnonzero(text == ord(";"))
-        semi_lines = np.searchsorted(newlines, semis) - 1
+        is_semi = kind == _SEMICOLON
+        semis, semi_lines = where[is_semi], line_of[is_semi]
         first = np.diff(semi_lines, prepend=-1) != 0  # the first `;` of each line ends its code
         inline_comments = bool(is_row[semi_lines].any())
         code_end = code_end.copy()
@@ -312,7 +314,6 @@ def scan(padded: bytes) -> Scan | None:
             return None
     read = len(AXES) if arcs.any() else _PLAIN_AXES
     # I, J and R words are found (and checked) everywhere, and kept only where arcs are
-    line_of = np.repeat(np.arange(len(starts)), np.diff(np.searchsorted(where, newlines)))  # fewer lines than words
     keep = is_row[line_of]
     if inline_comments:
         keep &= where < code_end[line_of]
