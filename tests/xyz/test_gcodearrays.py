@@ -10,10 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fabwire.xyz.gcodearrays import PAD, parse_numbers
+from fabwire.xyz.gcodearrays import PAD, line_count, parse_numbers
 from fabwire.xyz.gcodeinfo import MoveAnalyzer
 
 NUMBER = re.compile(rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)")
+
+
+@given(st.binary(max_size=300))
+def test_lines_are_counted_as_bytes_count_them(text: bytes) -> None:
+    assert line_count(text) == text.count(b"\n")
 
 
 @settings(max_examples=300, deadline=None)

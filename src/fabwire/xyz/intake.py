@@ -629,7 +629,7 @@ def _metadata(
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
     `always`); `g0_words` collects where the G0 command words are (see `MoveAnalyzer`) when the moves are read."""
-    from fabwire.xyz.gcodearrays import Ambiguous
+    from fabwire.xyz.gcodearrays import Ambiguous, line_count
     from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
 
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
@@ -644,7 +644,7 @@ def _metadata(
         except Ambiguous as exc:
             raise ambiguous_line(name, lines + chunk.count(b"\n", 0, exc.offset) + 1,
                                  chunk[exc.offset:chunk.find(b"\n", exc.offset)], exc.rule) from None
-        lines += chunk.count(b"\n")
+        lines += line_count(chunk)
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
                          "this is not a print file")
