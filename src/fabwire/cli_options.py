@@ -18,13 +18,15 @@ import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 import msgspec
 
 from fabwire.console import Output
-from fabwire.transport.faults import FaultPlan
+
+if TYPE_CHECKING:
+    from fabwire.transport.faults import FaultPlan
 
 T = TypeVar("T")
 
@@ -151,6 +153,8 @@ def _add_verbose(app: App, value: int) -> None:
 
 
 def _set_faults(app: App, value: str) -> None:
+    from fabwire.transport.faults import FaultPlan  # the transports load only for commands that open a device
+
     app.faults = FaultPlan.parse(value)
 
 

@@ -3,7 +3,6 @@ arguments, the device context and opening devices, confirmations, running async 
 
 from __future__ import annotations
 
-import asyncio
 import importlib
 import os
 import re
@@ -269,7 +268,10 @@ def confirm(action: str, yes: bool) -> None:
 
 
 def run(coro: Coroutine[Any, Any, T]) -> T:
-    """Run a command's coroutine to completion on a fresh event loop."""
+    """Run a command's coroutine to completion on a fresh event loop (asyncio is imported here: a command that
+    only reads and writes files, such as `xyz convert`, starts without it)."""
+    import asyncio
+
     return asyncio.run(coro)
 
 
@@ -280,7 +282,7 @@ def async_command(func: Callable[P, Awaitable[T]]) -> Callable[P, T]:
         async def main() -> T:
             return await func(*args, **kwargs)
 
-        return asyncio.run(main())
+        return run(main())
 
     return update_wrapper(wrapper, func)
 
