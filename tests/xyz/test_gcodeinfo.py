@@ -204,6 +204,7 @@ def chunks(text: bytes, cuts: list[int]) -> list[bytes]:
 @example(b"G1 X1 S2 s3\n", [], [])  # a letter no analysis reads, repeated
 @example(b"G2 X0\n", [], [])  # an arc without I, J or R that ends where it starts: no move
 @example(b"G1 X5\nG3 X5 Y0 E1\nG2 X5 Y0 I0 J0\n", [], [])  # a centre on the start: a circle of no size
+@example(b"G2\nG03 ; c\n", [], [])  # arcs without words are still arcs (converted to segments)
 def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int], slow_cuts: list[int]) -> None:
     fast, slow = MoveAnalyzer(), MoveAnalyzer()
     refused = []
@@ -226,6 +227,7 @@ def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int],
     assert fast.e == pytest.approx(slow.e, rel=1e-12, abs=1e-9)
     assert fast.low == pytest.approx(slow.low, rel=1e-9, abs=1e-9)  # the extent the build volume check uses
     assert fast.high == pytest.approx(slow.high, rel=1e-9, abs=1e-9)
+    assert fast.arcs == slow.arcs  # whether (and how many) arcs are converted to segments
 
 
 @settings(max_examples=200, deadline=None)
@@ -264,3 +266,10 @@ def test_a_letter_repeated_on_a_move_is_refused_by_both_readers(letter: str, rea
         with pytest.raises(Ambiguous) as refused:
             analyse(text, lines=reader == "lines")
         assert (refused.value.rule, refused.value.offset) == (REPEATED, 14), line
+
+
+@pytest.mark.parametrize("reader", ["arrays", "lines"])
+@pytest.mark.parametrize("arc", [b"G2", b"G03 ", b"G3\t; a comment", b"G02 F1200", b"G2 E1", b"G3 X"])
+def test_an_arc_without_words_for_its_path_is_counted(arc: bytes, reader: str) -> None:
+    analyzer = analyse(b"G1 X10 Y10 E1\n" + arc + b"\nG1 X20 Y20 E2\n" + arc + b"\n", lines=reader == "lines")
+    assert analyzer.arcs == 2

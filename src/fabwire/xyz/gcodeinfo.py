@@ -495,6 +495,7 @@ class MoveAnalyzer:
 
     def _feed_arrays(self, found: gcodearrays.Scan) -> None:
         """Analyse a piece read into arrays."""
+        self.arcs += int(np.count_nonzero(found.arcs))  # `G2` alone too: a line the printer is given as an arc
         start = [0] * len(found.axes)
         for line, code, params in [*found.controls, (len(found.arcs) + 1, b"", b"")]:
             ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
@@ -588,7 +589,6 @@ class MoveAnalyzer:
         extent by their whole arc (`REACH`), the others by their end points as a straight move."""
         dx, dy, dz = moves[:3]
         rows = np.flatnonzero(arc)
-        self.arcs += len(rows)
         ends = []
         for k in range(2):  # the position after each line
             at = np.full(count, np.nan)
