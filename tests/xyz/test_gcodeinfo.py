@@ -1,10 +1,10 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from fabwire.xyz.gcodearrays import Ambiguous
+from fabwire.xyz.gcodearrays import REPEATED, Ambiguous
 from fabwire.xyz.gcodeinfo import GcodeMetadata, MoveAnalyzer, finish, header_metadata
 
 
@@ -200,6 +200,11 @@ def chunks(text: bytes, cuts: list[int]) -> list[bytes]:
 
 @settings(max_examples=300, deadline=None)
 @given(gcode(), st.lists(st.integers(0, 4000), max_size=4), st.lists(st.integers(0, 4000), max_size=4))
+@example(b"G0 I+5 I0\n", [], [])  # a letter kept only on arcs, repeated on a line
+@example(b"G1 X1 S2 s3\n", [], [])  # a letter no analysis reads, repeated
+@example(b"G2 X0\n", [], [])  # an arc without I, J or R that ends where it starts: no move
+@example(b"G1 X5\nG3 X5 Y0 E1\nG2 X5 Y0 I0 J0\n", [], [])  # a centre on the start: a circle of no size
+@example(b"G2\nG03 ; c\n", [], [])  # arcs without words are still arcs (converted to segments)
 def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int], slow_cuts: list[int]) -> None:
     fast, slow = MoveAnalyzer(), MoveAnalyzer()
     refused = []
@@ -222,6 +227,7 @@ def test_array_analysis_matches_line_analysis(text: bytes, fast_cuts: list[int],
     assert fast.e == pytest.approx(slow.e, rel=1e-12, abs=1e-9)
     assert fast.low == pytest.approx(slow.low, rel=1e-9, abs=1e-9)  # the extent the build volume check uses
     assert fast.high == pytest.approx(slow.high, rel=1e-9, abs=1e-9)
+    assert fast.arcs == slow.arcs  # whether (and how many) arcs are converted to segments
 
 
 @settings(max_examples=200, deadline=None)
@@ -247,3 +253,23 @@ def test_a_chunk_without_its_last_newline_ends_its_last_line() -> None:
     cut, whole = analyse(text), analyse(text + b"\n")
     assert (cut.pos, cut.e, cut.seconds, cut.layer_heights) == (whole.pos, whole.e, whole.seconds, {0})
     assert (cut.pos, cut.e) == ([5.0, 9.0, 0.0], 3.0)
+
+
+@pytest.mark.parametrize("reader", ["arrays", "lines"])
+@pytest.mark.parametrize("letter", sorted(set("ABCDEFHIJKLNOPQRSTUVWXYZ")))
+def test_a_letter_repeated_on_a_move_is_refused_by_both_readers(letter: str, reader: str) -> None:
+    """Whatever the letter (an axis, the feed rate, an arc's I, J or R, or one no analysis reads), whatever the
+    command (moves without arcs read no I, J or R) and whatever its case."""
+    for line in (f"G0 {letter}1 {letter}2", f"G1 X1 {letter.lower()}+5 {letter}0 ; {letter}9",
+                 f"G2 {letter}1\t{letter}1", f"G3 X1 Y1 I1 {letter}1 {letter} 1 J0"):
+        text = b"G1 X10 Y10 E1\n" + line.encode() + b"\nG1 X20 Y20 E2\n"
+        with pytest.raises(Ambiguous) as refused:
+            analyse(text, lines=reader == "lines")
+        assert (refused.value.rule, refused.value.offset) == (REPEATED, 14), line
+
+
+@pytest.mark.parametrize("reader", ["arrays", "lines"])
+@pytest.mark.parametrize("arc", [b"G2", b"G03 ", b"G3\t; a comment", b"G02 F1200", b"G2 E1", b"G3 X"])
+def test_an_arc_without_words_for_its_path_is_counted(arc: bytes, reader: str) -> None:
+    analyzer = analyse(b"G1 X10 Y10 E1\n" + arc + b"\nG1 X20 Y20 E2\n" + arc + b"\n", lines=reader == "lines")
+    assert analyzer.arcs == 2

@@ -19,7 +19,8 @@ TAIL = b"G1 X20 Y20 E2\nM84\n"
 
 MORE: dict[str, list[bytes]] = {
     "a letter given twice in one move": [b"G1 X10 Y10 Y1000 E5", b"G0 Z1 Z900", b"G1 E1 E500", b"G1 X10 x1000 E5",
-                                         b"G92 E0 E-100"],
+                                         b"G92 E0 E-100", b"G0 I+5 I0", b"G1 X10 J1 j2 E5", b"G0 R1 R2",
+                                         b"G1 X10 S100 S200 E5", b"G1 X10 E5 T0 t1"],
     "a second command word on a line": [b"G1 X10 M400", b"G1 X10 g1 X1000", b"G0 Y5 G 1 Y900", b"G1 X1 G1",
                                         b"G1 X5 G0"],
     "a command subcode on a move, position or unit command (G1.0)": [b"G0.1 X1000", b"G0.5", b"G1. X5", b"G92.1 X0",

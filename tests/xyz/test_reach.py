@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from clitools import cli_env, run_cli
@@ -79,17 +79,44 @@ def test_a_full_circle_reaches_its_whole_diameter() -> None:
     assert (low_x, high_x, low_y, high_y) == pytest.approx((0.0, 1010.0, -490.0, 510.0))
 
 
+TINY_CHORDS = [
+    # (x0, y0, x1, y1): chords so short that R over the chord is beyond a float (the centre is still R away)
+    (0.0, 0.0, 0.0, 2.2250738585072014e-308), (0.0, 0.0, 5e-324, 0.0), (10.0, 10.0, 10.0, 10.000000000000002),
+    (0.0, 0.0, -1e-300, 1e-300), (-50.0, 3.0, -50.0, 3.0000000000000004), (0.0, 0.0, 1e-320, -1e-320),
+]
+
+
+@pytest.mark.parametrize("clockwise", [False, True])
+@pytest.mark.parametrize("r", [4.0, -4.0, 150.0, -0.5])
+@pytest.mark.parametrize("ends", TINY_CHORDS)
+def test_an_r_arc_with_a_tiny_chord_has_a_finite_box(ends: tuple[float, float, float, float], r: float,
+                                                     clockwise: bool) -> None:
+    x0, y0, x1, y1 = ends
+    box = [float(v[0]) for v in arc_box(*(np.array([v]) for v in (x0, y0, x1, y1, math.nan, math.nan, r)),
+                                        np.array([clockwise]))]
+    assert all(math.isfinite(v) for v in box)
+    _assert_box_holds_segments(x0, y0, x1, y1, (math.nan, math.nan, r), clockwise)
+
+
 @settings(max_examples=300, deadline=None)
 @given(st.floats(-200, 200), st.floats(-200, 200), st.floats(-200, 200), st.floats(-200, 200),
        st.one_of(st.tuples(st.floats(-200, 200), st.floats(-200, 200), st.just(math.nan)),
                  st.tuples(st.just(math.nan), st.just(math.nan), st.floats(-300, 300))),
        st.booleans())
+@example(0.0, 0.0, 0.0, 2.2250738585072014e-308, (math.nan, math.nan, 4.0), False)
 def test_the_box_holds_the_segments_written_and_no_more(x0: float, y0: float, x1: float, y1: float,
                                                          centre: tuple[float, float, float], clockwise: bool) -> None:
     i, j, r = centre
     words = {b"X": x1, b"Y": y1} | ({b"I": i, b"J": j} if math.isnan(r) else {b"R": r})
+    assume(segments((x0, y0, 0.0, 0.0), words, clockwise) is not None)
+    _assert_box_holds_segments(x0, y0, x1, y1, centre, clockwise)
+
+
+def _assert_box_holds_segments(x0: float, y0: float, x1: float, y1: float, centre: tuple[float, float, float],
+                               clockwise: bool) -> None:
+    i, j, r = centre
+    words = {b"X": x1, b"Y": y1} | ({b"I": i, b"J": j} if math.isnan(r) else {b"R": r})
     lines = segments((x0, y0, 0.0, 0.0), words, clockwise)
-    assume(lines is not None)
     assert lines is not None
     xs = [x0] + [float(line.split()[1][1:]) for line in lines]
     ys = [y0] + [float(line.split()[2][1:]) for line in lines]

@@ -14,6 +14,9 @@ from __future__ import annotations
 import math
 import re
 
+import numpy as np
+
+from fabwire.xyz import motion
 from fabwire.xyz.gcodeinfo import MoveAnalyzer, words_of
 
 TOLERANCE_MM = 0.01
@@ -49,10 +52,8 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
         chord = math.hypot(x1 - x0, y1 - y0)
         if abs(r) < chord / 2:
             return None
-        side = -1.0 if clockwise ^ (r < 0) else 1.0
-        h = math.sqrt(max(0.0, r * r - chord * chord / 4))
-        cx = (x0 + x1) / 2 + side * h * -(y1 - y0) / chord
-        cy = (y0 + y1) / 2 + side * h * (x1 - x0) / chord
+        cx, cy = (float(v) for v in motion.radius_centre(np.array(x0), np.array(y0), np.array(x1), np.array(y1),
+                                                          np.array(r), np.array(clockwise)))
     else:
         return None
     radius = math.hypot(x0 - cx, y0 - cy)

@@ -19,8 +19,10 @@ from numpy.typing import NDArray
 
 AXES = b"XYZEFIJR"
 """The words read: the axes, the feed rate, and the centre offsets and radius of G2/G3 arcs."""
+_LETTERS = AXES + bytes(sorted(set(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ") - set(AXES + b"GM")))
+"""Every parameter letter: `AXES`, then the others, which are only checked (a letter repeated in a move)."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
-_AXIS_INDEX[list(AXES)] = _AXIS_INDEX[list(AXES.lower())] = np.arange(len(AXES))
+_AXIS_INDEX[list(_LETTERS)] = _AXIS_INDEX[list(_LETTERS.lower())] = np.arange(len(_LETTERS))
 _PLAIN_AXES = 5
 """X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
@@ -96,8 +98,8 @@ _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
 _NEWLINE, _SEMICOLON = 4, 5
 _SCAN_FLAGS = bytes(1 if _AXIS_INDEX[byte] >= 0 else 2 if byte in b"GMgm" else 3 if byte in b"\x0b\x0c\x85\xa8\xa9"
                     else _NEWLINE if byte == 10 else _SEMICOLON if byte == 59 else 0 for byte in range(256))
-"""bytes.translate table: 1 for an axis letter, 2 for a command letter, 3 for a byte that may be (the end of) one of
-SEPARATORS, `_NEWLINE` for LF, `_SEMICOLON` for `;`, 0 for anything else."""
+"""bytes.translate table: 1 for a parameter letter, 2 for a command letter, 3 for a byte that may be (the end of)
+one of SEPARATORS, `_NEWLINE` for LF, `_SEMICOLON` for `;`, 0 for anything else."""
 
 
 class Ambiguous(Exception):
@@ -313,7 +315,7 @@ def scan(padded: bytes) -> Scan | None:
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
     read = len(AXES) if arcs.any() else _PLAIN_AXES
-    # I, J and R words are found (and checked) everywhere, and kept only where arcs are
+    # I, J and R words (and the letters no analysis reads) are found and checked everywhere, kept only where arcs are
     keep = is_row[line_of]
     if inline_comments:
         keep &= where < code_end[line_of]
@@ -332,6 +334,11 @@ def scan(padded: bytes) -> Scan | None:
     if not known.all():  # bare letters are not words (and may be a NaN or an infinity)
         suspect = min(suspect, int(line_of[~known][0]))
         axis, line_of, numbers, where = axis[known], line_of[known], numbers[known], where[known]
+    unread = np.flatnonzero(axis >= read)
+    if len(unread):  # letters not kept (rare on moves) are only checked: the line reader refuses a repeated one
+        named = line_of[unread] * len(_LETTERS) + axis[unread]
+        if len(np.unique(named)) < len(named):
+            return None
     axes = []
     for k in range(len(AXES)):
         if k >= read:

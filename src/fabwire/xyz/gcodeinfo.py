@@ -227,13 +227,10 @@ def arc_box(x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.flo
     (coordinates no float holds) are infinite."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         centred = ~(np.isnan(i) & np.isnan(j))
-        dx, dy = x1 - x0, y1 - y0
-        chord = np.hypot(dx, dy)
-        radius_r = np.nan_to_num(r)
-        h = np.sqrt(np.maximum(0.0, radius_r * radius_r - chord * chord / 4))
-        side = np.where(clockwise ^ (radius_r < 0), -1.0, 1.0) * h / chord
-        cx = np.where(centred, x0 + np.nan_to_num(i), (x0 + x1) / 2 - side * dy)
-        cy = np.where(centred, y0 + np.nan_to_num(j), (y0 + y1) / 2 + side * dx)
+        chord = np.hypot(x1 - x0, y1 - y0)
+        by_radius = motion.radius_centre(x0, y0, x1, y1, np.nan_to_num(r), clockwise)
+        cx = np.where(centred, x0 + np.nan_to_num(i), by_radius[0])
+        cy = np.where(centred, y0 + np.nan_to_num(j), by_radius[1])
         has_centre = centred | (~np.isnan(r) & (chord > 0))
         radius = np.hypot(x0 - cx, y0 - cy)
         begin, end = np.arctan2(y0 - cy, x0 - cx), np.arctan2(y1 - cy, x1 - cx)
@@ -498,6 +495,7 @@ class MoveAnalyzer:
 
     def _feed_arrays(self, found: gcodearrays.Scan) -> None:
         """Analyse a piece read into arrays."""
+        self.arcs += int(np.count_nonzero(found.arcs))  # `G2` alone too: a line the printer is given as an arc
         start = [0] * len(found.axes)
         for line, code, params in [*found.controls, (len(found.arcs) + 1, b"", b"")]:
             ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
@@ -527,15 +525,19 @@ class MoveAnalyzer:
             dx, dy, dz, de = moves
             length = np.sqrt(dx * dx + dy * dy + dz * dz)
             arc = arcs[first:first + count]
+            centred = np.zeros(count, dtype=bool)  # arcs with I, J or R: they move even where they end as they start
             if arc.any():
-                length = self._arc_lengths(axes, after, arc, first, count, moves, length)
+                for words in axes[5:8]:
+                    centred[words.lines - first] = True
+                centred &= arc != 0
+                length = self._arc_lengths(axes, after, arc, centred, first, count, moves, length)
             feeds = axes[4]
             valid = feeds.values > 0
             runs, feed = _runs(feeds.lines[valid] - first, feeds.values[valid], self.feed)
             per_move = np.repeat(feed, np.diff(np.append(runs, count)))
             self.path_seconds += float(np.sum(np.where(length > 0, length, np.abs(de)) * 60.0 / per_move))
             self.filament += float(np.sum(de))
-            moving = (dx != 0) | (dy != 0) | (dz != 0) | (de != 0) | (arc != 0)  # a NaN move is != 0 too
+            moving = (dx != 0) | (dy != 0) | (dz != 0) | (de != 0) | centred  # a NaN move is != 0 too
             if moving.any():  # travel too: the machine goes there whether or not it extrudes (REACH)
                 self._reach(axes, after, moving, first, count)
             printing = (de > 0) & ((dx != 0) | (dy != 0) | (arc != 0))
@@ -580,12 +582,13 @@ class MoveAnalyzer:
                 self.low[k] = min(self.low[k], float(points.min()))
                 self.high[k] = max(self.high[k], float(points.max()))
 
-    def _arc_lengths(self, axes: list[Words], after: list[NDArray[np.float64]], arc: NDArray[np.int8], first: int,
-                     count: int, moves: list[NDArray[np.float64]], length: NDArray[np.float64]) -> NDArray[np.float64]:
-        """`length` with each arc's own length in place of its chord."""
+    def _arc_lengths(self, axes: list[Words], after: list[NDArray[np.float64]], arc: NDArray[np.int8],
+                     centred: NDArray[np.bool_], first: int, count: int, moves: list[NDArray[np.float64]],
+                     length: NDArray[np.float64]) -> NDArray[np.float64]:
+        """`length` with each arc's own length in place of its chord; the `centred` ones (with I, J or R) widen the
+        extent by their whole arc (`REACH`), the others by their end points as a straight move."""
         dx, dy, dz = moves[:3]
         rows = np.flatnonzero(arc)
-        self.arcs += len(rows)
         ends = []
         for k in range(2):  # the position after each line
             at = np.full(count, np.nan)
@@ -598,10 +601,12 @@ class MoveAnalyzer:
             value[words.lines - first] = words.values
             offsets.append(value[rows])
         i, j, r = offsets
-        flat = motion.arc_lengths(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
-                                  arc[rows] == 2)
-        self._widen_arcs(arc_box(end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows], i, j, r,
-                                 arc[rows] == 2))
+        x0, y0, x1, y1 = end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows]
+        flat = motion.arc_lengths(x0, y0, x1, y1, i, j, r, arc[rows] == 2)
+        boxed = centred[rows]
+        if boxed.any():
+            self._widen_arcs(arc_box(x0[boxed], y0[boxed], x1[boxed], y1[boxed], i[boxed], j[boxed], r[boxed],
+                                     arc[rows][boxed] == 2))
         out = length.copy()
         out[rows] = np.sqrt(flat * flat + dz[rows] * dz[rows])
         return out

@@ -100,6 +100,20 @@ def _sane(limits: Limits) -> Limits:
                   max(0.0, limits.min_travel_feedrate) if math.isfinite(limits.min_travel_feedrate) else 0.0)
 
 
+def radius_centre(x0: Floats, y0: Floats, x1: Floats, y1: Floats, r: Floats,
+                  clockwise: NDArray[np.bool_]) -> tuple[Floats, Floats]:
+    """Centres (X, Y in mm) of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1) with radius R (negative: the
+    longer way round), as Marlin's G2_G3.cpp finds them: h from the chord's middle along the chord's unit normal,
+    h² = (|R| - chord / 2)(|R| + chord / 2), h = 0 (mid-chord) when R is shorter than half the chord. The unit
+    normal is taken first, so a chord of 1e-308 mm neither overflows nor underflows; NaN where start and end meet."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        dx, dy = x1 - x0, y1 - y0
+        chord = np.hypot(dx, dy)
+        h = np.sqrt(np.maximum(0.0, (np.abs(r) - chord / 2) * (np.abs(r) + chord / 2)))
+        side = np.where(clockwise ^ (r < 0), -h, h)
+        return (x0 + x1) / 2 - side * (dy / chord), (y0 + y1) / 2 + side * (dx / chord)
+
+
 def arc_lengths(x0: Floats, y0: Floats, x1: Floats, y1: Floats, i: Floats, j: Floats, r: Floats,
                 clockwise: NDArray[np.bool_]) -> Floats:
     """Lengths in the XY plane of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1), centre at offset (I, J) from
