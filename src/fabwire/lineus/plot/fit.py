@@ -26,6 +26,7 @@ from fabwire.lineus.plot.geometry import (
     bbox,
     compose,
     drawn_length,
+    extent,
     flatten,
     inner_segments,
     scale_translate,
@@ -182,8 +183,7 @@ def check_placed(lines: Polylines, *, clip: bool) -> tuple[Polylines, float]:
     """Refuse (or with `clip`, cut away) pen-down lines outside the area; returns the kept lines and the length
     outside."""
     points, offsets = flatten(lines)
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    if rectangle_inside(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])):
+    if rectangle_inside(*extent(points)):
         return lines, 0.0  # what a fitted drawing always passes, at the cost of four sides
     inner = inner_segments(offsets)
     outside = segments_outside(points[:-1][inner], points[1:][inner])
