@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fabwire.errors import InputError
+from fabwire.importing import collection_paused
 from fabwire.lineus.kinematics import HOME
 from fabwire.lineus.plot.geometry import (
     BoolArray,
@@ -156,9 +157,20 @@ def travel_length(lines: Sequence[FloatArray], origin: tuple[float, float] = HOM
     """Pen-up distance to draw `lines` in the given order and direction, starting at `origin`."""
     if not lines:
         return 0.0
-    starts, ends = line_ends(lines)
+    return _travel(*line_ends(lines), origin)
+
+
+def _travel(starts: FloatArray, ends: FloatArray, origin: tuple[float, float]) -> float:
+    """`travel_length` of lines with these first and last points (one or more lines)."""
     prev = np.vstack([np.asarray(origin, dtype=float), ends[:-1]])
     return float(np.hypot(*(starts - prev).T).sum())
+
+
+def _arranged_ends(starts: FloatArray, ends: FloatArray, order: IntArray, flips: BoolArray
+                   ) -> tuple[FloatArray, FloatArray]:
+    """`line_ends(arrange(lines, order, flips))` from the lines' own ends, without touching their points."""
+    turned = flips[:, None]
+    return np.where(turned, ends[order], starts[order]), np.where(turned, starts[order], ends[order])
 
 
 def greedy_order(
@@ -331,8 +343,7 @@ def improve(
         block = tour[a : b + 1]
         block.reverse()
         tour[a : b + 1] = block
-        for p in range(a, b + 1):
-            v = tour[p]
+        for p, v in enumerate(block, a):
             pos[v] = p
             ix[v], ox[v] = ox[v], ix[v]
             iy[v], oy[v] = oy[v], iy[v]
@@ -545,8 +556,8 @@ def _result(
     tour: list[int], ix: list[float], iy: list[float], starts: FloatArray, ends: FloatArray
 ) -> tuple[IntArray, BoolArray]:
     new_order = np.asarray(tour[1:], dtype=np.int64)
-    new_flips = np.asarray([ix[v] != float(starts[v, 0]) or iy[v] != float(starts[v, 1]) for v in tour[1:]],
-                           dtype=bool)
+    entered = np.asarray(ix)[new_order], np.asarray(iy)[new_order]
+    new_flips = (entered[0] != starts[new_order, 0]) | (entered[1] != starts[new_order, 1])
     # A line whose two ends coincide is the same either way round; keep its original direction.
     closed = np.all(starts[new_order] == ends[new_order], axis=1)
     new_flips[closed] = False
@@ -584,6 +595,12 @@ def optimise(
     """The whole pass: fine points out, touching lines joined, then ordered for least pen-up travel, improving
     on greedy within `time_budget` (see `work_budget`). Never travels more than the lines in their given order
     (then that order is kept), and the same lines and budget always give the same result."""
+    with collection_paused(freeze=False):  # many small tables, no reference cycles
+        return _optimise(lines, origin, resolution, time_budget)
+
+
+def _optimise(lines: Polylines, origin: tuple[float, float], resolution: float, time_budget: float | None
+              ) -> Polylines:
     thinned = drop_fine_points(lines, resolution)
     cleaned = join_touching(thinned, resolution)
     if len(cleaned) < 2:  # nothing to order, but joining may still have moved where the drawing starts
@@ -593,16 +610,22 @@ def optimise(
     order, flips = greedy_order(starts, ends, origin)
     order, flips = improve(starts, ends, order, flips, origin, work=work - work // 10)
     ordered = arrange(cleaned, order, flips)
+    ordered_ends = _arranged_ends(starts, ends, order, flips)
+    travel = _travel(*ordered_ends, origin)
     if work // 10 > 0:
-        ordered = _reorder_runs(ordered, origin, work // 10)
-    return ordered if travel_length(ordered, origin) <= travel_length(thinned, origin) else thinned
+        by_runs = _reorder_runs(ordered, origin, work // 10, ordered_ends)
+        if by_runs is not ordered:
+            ordered, travel = by_runs, travel_length(by_runs, origin)
+    return ordered if travel <= travel_length(thinned, origin) else thinned
 
 
-def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int) -> Polylines:
+def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int,
+                  lines_ends: tuple[FloatArray, FloatArray] | None = None) -> Polylines:
     """Order again at a coarser grain: runs of lines joined by short hops (a hatched patch, a word) move as one
     piece, either way round. Moves of single lines cannot carry a patch of many lines across the page; this
-    can. Kept only when it shortens the travel; `work` as for `improve`."""
-    starts, ends = line_ends(lines)
+    can. Kept only when it shortens the travel (else `lines` itself is returned); `work` as for `improve`;
+    `lines_ends` is `line_ends(lines)` when known."""
+    starts, ends = line_ends(lines) if lines_ends is None else lines_ends
     hops = np.hypot(*(starts[1:] - ends[:-1]).T)
     if len(hops) < 3:
         return lines
@@ -625,7 +648,7 @@ def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int) -> P
             out.extend(lines[a:b])
     sizes = [runs[index][1] - runs[index][0] for index in order.tolist()]
     candidates = [lines, out, orient_runs(lines, [b - a for a, b in runs], origin), orient_runs(out, sizes, origin)]
-    return min(candidates, key=lambda c: travel_length(c, origin))
+    return min(candidates, key=lambda c: _travel(starts, ends, origin) if c is lines else travel_length(c, origin))
 
 
 def orient_runs(lines: Polylines, sizes: Sequence[int], origin: tuple[float, float] = HOME) -> Polylines:
