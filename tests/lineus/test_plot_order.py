@@ -4,6 +4,7 @@ drawing's own order."""
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import subprocess
@@ -17,6 +18,7 @@ from hypothesis import strategies as st
 
 from fabwire.errors import InputError
 from fabwire.lineus.plot import PlanOptions, plan_lines
+from fabwire.lineus.plot.geometry import extent, flatten, split_at
 from fabwire.lineus.plot.optimize import (
     WORK_PER_LINE,
     WORK_PER_SECOND,
@@ -173,3 +175,42 @@ def test_stopping_once_every_kick_failed_plans_exactly_as_spending_the_whole_bud
     assert len(early) == len(whole)
     assert all(np.array_equal(a, b) for a, b in zip(early, whole, strict=True))
 
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_the_ordering_collects_no_garbage_and_leaves_the_collector_as_it_found_it(enabled: bool) -> None:
+    """Thousands of lines make thousands of small tables: no collection runs meanwhile (inside vpype one walks the
+    whole document; at most the youngest objects are collected once, as the collector resumes), and the collector
+    is on or off afterwards as it was before."""
+    rng = np.random.default_rng(5)
+    lines = [rng.random((4, 2)) * 900 + (700.0, -450.0) for _ in range(3000)]
+    collections: list[int] = []
+
+    def seen(phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            collections.append(info["generation"])
+
+    was = gc.isenabled()
+    (gc.enable if enabled else gc.disable)()
+    gc.collect()  # nothing pending: a collection from here on would be the ordering's
+    gc.callbacks.append(seen)
+    try:
+        ordered = optimise(lines, time_budget=None)
+        assert gc.isenabled() == enabled
+    finally:
+        gc.callbacks.remove(seen)
+        (gc.enable if was else gc.disable)()
+    assert collections in ([], [0])
+    assert len(ordered) == len(join_touching(drop_fine_points(lines)))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(min_value=1, max_value=5), min_size=1, max_size=30))
+def test_lines_split_back_as_numpy_splits_them_and_their_extent_is_the_columns_bounds(sizes: list[int]) -> None:
+    rng = np.random.default_rng(len(sizes))
+    lines = [rng.normal(size=(size, 2)) * 1000 for size in sizes]
+    points, offsets = flatten(lines)
+    parts = split_at(points, offsets)
+    assert [part.tobytes() for part in parts] == [part.tobytes() for part in np.split(points, offsets[1:-1])]
+    assert all(np.shares_memory(part, points) for part in parts)  # views, not copies
+    assert extent(points) == (points[:, 0].min(), points[:, 1].min(), points[:, 0].max(), points[:, 1].max())

@@ -21,7 +21,7 @@ from fabwire.lineus.kinematics import APP_AREA, UNITS_PER_MM
 from fabwire.lineus.plot import Plan, PlanFigures, PlanOptions, plan_lines
 from fabwire.lineus.plot.export import gcode_lines
 from fabwire.lineus.plot.fit import fit_placement
-from fabwire.lineus.plot.geometry import FloatArray, Polylines, compose
+from fabwire.lineus.plot.geometry import FloatArray, Polylines, compose, split_at
 from fabwire.lineus.plot.intake import PAGE_ORIGIN, SVG_UNITS_PER_PX
 
 LAYER_NAME = "vp_name"
@@ -69,10 +69,11 @@ def document_passes(document: Any, layer_ids: Iterable[int] | None = None) -> li
         layer = document.layers[layer_id]
         lines = [line for line in layer if len(line)]
         if lines:
-            sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
+            offsets = np.zeros(len(lines) + 1, dtype=np.int64)
+            np.cumsum(np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines)), out=offsets[1:])
             placed = to_machine(np.concatenate(lines))  # one conversion for the whole layer, then split (views)
             name = layer.property(LAYER_NAME)
-            passes.append(Pass(layer_id, str(name) if name else None, np.split(placed, np.cumsum(sizes)[:-1])))
+            passes.append(Pass(layer_id, str(name) if name else None, split_at(placed, offsets)))
     return passes
 
 

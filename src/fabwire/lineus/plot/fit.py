@@ -26,6 +26,7 @@ from fabwire.lineus.plot.geometry import (
     bbox,
     compose,
     drawn_length,
+    extent,
     flatten,
     inner_segments,
     scale_translate,
@@ -48,6 +49,8 @@ class Box:
 
 _OUTLINE_SAMPLES = 48
 _OUTLINE_T = np.linspace(0.0, 1.0, _OUTLINE_SAMPLES)
+_OUTLINE_ONES = np.ones(_OUTLINE_SAMPLES)
+"""A side's constant coordinate is this times the coordinate: exactly it, without a `np.full` each time."""
 _OUTLINE_STEP = 5.0
 
 
@@ -68,18 +71,25 @@ def _box_inside(cx: float, cy: float, w: float, h: float, margin: float, full: b
         ax0, ay0, ax1, ay1 = APP_AREA
         if x0 < ax0 or y0 < ay0 or x1 > ax1 or y1 > ay1:
             return False
-    if not all(is_reachable(x, y) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))):
+    if not (is_reachable(x0, y0) and is_reachable(x1, y0) and is_reachable(x1, y1) and is_reachable(x0, y1)):
         return False  # the corners alone, without arrays: most boxes tried fail here
     t = _OUTLINE_T
     # The four sides from (x0, y0) anticlockwise, as start + direction x t.
     sides = ((x0, y0, x1 - x0, 0.0), (x1, y0, 0.0, y1 - y0), (x1, y1, x0 - x1, 0.0), (x0, y1, 0.0, y0 - y1))
     steps = [_step_t(min(max(1, math.ceil(math.hypot(dx, dy) / _OUTLINE_STEP)), 1 << 20))
              for _, _, dx, dy in sides]
-    xs = np.concatenate([x0 + (x1 - x0) * t, np.full(len(t), x1), x1 - (x1 - x0) * t, np.full(len(t), x0),
+    xs = np.concatenate([x0 + (x1 - x0) * t, _OUTLINE_ONES * x1, x1 - (x1 - x0) * t, _OUTLINE_ONES * x0,
                          *(ax + dx * st for (ax, _, dx, _), st in zip(sides, steps, strict=True))])
-    ys = np.concatenate([np.full(len(t), y0), y0 + (y1 - y0) * t, np.full(len(t), y1), y1 - (y1 - y0) * t,
+    ys = np.concatenate([_OUTLINE_ONES * y0, y0 + (y1 - y0) * t, _OUTLINE_ONES * y1, y1 - (y1 - y0) * t,
                          *(ay + dy * st for (_, ay, _, dy), st in zip(sides, steps, strict=True))])
     return bool(reachable_mask(xs, ys).all())
+
+
+_COARSE_CX = np.linspace(850.0, 1500.0, 27).tolist()
+_COARSE_CY = np.linspace(-500.0, 500.0, 21).tolist()
+_FINE_DX = np.linspace(-25.0, 25.0, 9).tolist()
+_FINE_DY = np.linspace(-50.0, 50.0, 9).tolist()
+"""The centres `largest_box` tries: a coarse grid over the area, then a finer one around the best of it."""
 
 
 @functools.lru_cache(maxsize=64)
@@ -104,14 +114,14 @@ def largest_box(aspect: float, margin: float = 0.0, full: bool = False) -> Box:
         if lo > best.height:
             best = Box(cx, cy, lo * aspect, lo)
 
-    for cy in np.linspace(-500.0, 500.0, 21):
-        for cx in np.linspace(850.0, 1500.0, 27):
-            grow(float(cx), float(cy))
+    for cy in _COARSE_CY:
+        for cx in _COARSE_CX:
+            grow(cx, cy)
     # Then finer around the best centre found (the coarse grid steps are 25 and 50 units).
     centre = (best.cx, best.cy)
-    for dy in np.linspace(-50.0, 50.0, 9):
-        for dx in np.linspace(-25.0, 25.0, 9):
-            grow(centre[0] + float(dx), centre[1] + float(dy))
+    for dy in _FINE_DY:
+        for dx in _FINE_DX:
+            grow(centre[0] + dx, centre[1] + dy)
     if best.height <= 0:
         raise InputError(f"a margin of {margin / UNITS_PER_MM:g} mm leaves no room in the drawing area")
     return best
@@ -182,8 +192,7 @@ def check_placed(lines: Polylines, *, clip: bool) -> tuple[Polylines, float]:
     """Refuse (or with `clip`, cut away) pen-down lines outside the area; returns the kept lines and the length
     outside."""
     points, offsets = flatten(lines)
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    if rectangle_inside(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])):
+    if rectangle_inside(*extent(points)):
         return lines, 0.0  # what a fitted drawing always passes, at the cost of four sides
     inner = inner_segments(offsets)
     outside = segments_outside(points[:-1][inner], points[1:][inner])

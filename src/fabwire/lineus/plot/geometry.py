@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 
@@ -23,6 +24,19 @@ def flatten(lines: Sequence[FloatArray]) -> tuple[FloatArray, IntArray]:
     np.cumsum(sizes, out=offsets[1:])
     points = np.concatenate(lines).reshape(-1, 2) if lines else np.zeros((0, 2))
     return points.astype(float, copy=False), offsets
+
+
+def split_at(points: FloatArray, offsets: IntArray) -> Polylines:
+    """The inverse of `flatten`: each line as a view of `points`, from `offsets` (len(lines) + 1 of them). What
+    `np.split` gives, in a fraction of its time for thousands of lines."""
+    return [points[a:b] for a, b in itertools.pairwise(offsets.tolist())]
+
+
+def extent(points: FloatArray) -> tuple[float, float, float, float]:
+    """(x_min, y_min, x_max, y_max) of an (N, 2) array with N >= 1: column by column, which numpy reduces many
+    times faster than along the short axis of the whole array."""
+    xs, ys = points[:, 0], points[:, 1]
+    return (float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max()))
 
 
 def inner_segments(offsets: IntArray) -> BoolArray:
@@ -48,10 +62,7 @@ def bbox(lines: Sequence[FloatArray]) -> tuple[float, float, float, float]:
     """(x_min, y_min, x_max, y_max) of all points; ValueError when there are none."""
     if not lines:
         raise ValueError("no points")
-    allp = np.concatenate(lines)
-    lo = allp.min(axis=0)
-    hi = allp.max(axis=0)
-    return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    return extent(np.concatenate(lines).reshape(-1, 2))
 
 
 def segment_count(lines: Sequence[FloatArray]) -> int:

@@ -16,8 +16,18 @@ from collections.abc import Sequence
 import numpy as np
 
 from fabwire.errors import InputError
+from fabwire.importing import collection_paused
 from fabwire.lineus.kinematics import HOME
-from fabwire.lineus.plot.geometry import BoolArray, FloatArray, IntArray, Polylines, flatten, inner_segments
+from fabwire.lineus.plot.geometry import (
+    BoolArray,
+    FloatArray,
+    IntArray,
+    Polylines,
+    extent,
+    flatten,
+    inner_segments,
+    split_at,
+)
 
 RESOLUTION = 1.0
 """Smallest step worth sending, in machine units (0.05 mm): finer points are dropped."""
@@ -74,8 +84,7 @@ def drop_fine_points(lines: Polylines, resolution: float = RESOLUTION) -> Polyli
                 keep[last] = bool((points[last] != points[a]).any())
         resume = k
     # One selection over all points, then every line as a view of it.
-    bounds = np.concatenate([[0], np.cumsum(keep)])[offsets]
-    return np.split(points[keep], bounds[1:-1])
+    return split_at(points[keep], np.concatenate([[0], np.cumsum(keep)])[offsets])
 
 
 def line_ends(lines: Sequence[FloatArray]) -> tuple[FloatArray, FloatArray]:
@@ -148,9 +157,20 @@ def travel_length(lines: Sequence[FloatArray], origin: tuple[float, float] = HOM
     """Pen-up distance to draw `lines` in the given order and direction, starting at `origin`."""
     if not lines:
         return 0.0
-    starts, ends = line_ends(lines)
+    return _travel(*line_ends(lines), origin)
+
+
+def _travel(starts: FloatArray, ends: FloatArray, origin: tuple[float, float]) -> float:
+    """`travel_length` of lines with these first and last points (one or more lines)."""
     prev = np.vstack([np.asarray(origin, dtype=float), ends[:-1]])
     return float(np.hypot(*(starts - prev).T).sum())
+
+
+def _arranged_ends(starts: FloatArray, ends: FloatArray, order: IntArray, flips: BoolArray
+                   ) -> tuple[FloatArray, FloatArray]:
+    """`line_ends(arrange(lines, order, flips))` from the lines' own ends, without touching their points."""
+    turned = flips[:, None]
+    return np.where(turned, ends[order], starts[order]), np.where(turned, starts[order], ends[order])
 
 
 def greedy_order(
@@ -164,8 +184,7 @@ def greedy_order(
     if n == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
     pts = np.vstack([starts, ends])
-    lo = pts.min(axis=0)
-    span = np.maximum(pts.max(axis=0) - lo, 1e-9)
+    lo, span = _origin_span(pts)
     cell = max(float(math.sqrt(span[0] * span[1] / (2 * n))) * 1.5, float(span.max()) / 4096, 1e-6)
     cols = np.floor((pts - lo) / cell).astype(np.int64)
     width = int(cols[:, 1].max()) + 1
@@ -181,38 +200,36 @@ def greedy_order(
     order: list[int] = []
     flips: list[bool] = []
     cx, cy = float(origin[0]), float(origin[1])
-
-    def remove(e: int) -> None:
-        bucket = cells[cell_of[e]]
-        bucket.discard(e)
-        if not bucket:
-            del cells[cell_of[e]]
-        alive[e] = False
+    lox, loy = float(lo[0]), float(lo[1])
+    # Each ring of cells around the pen's cell, as (dx, dy) steps and as steps of the cell key, in the order the
+    # search visits them (the order decides between ends at equal distances).
+    rings = [[(dx, dy) for dx in range(-r, r + 1) for dy in range(-r, r + 1, 1 if abs(dx) == r else max(2 * r, 1))]
+             for r in range(max_ring + 1)]
+    ring_keys = [[dx * width + dy for dx, dy in ring] for ring in rings]
+    reach = [r * cell for r in range(max_ring + 1)]
+    get, floor, sqrt = cells.get, math.floor, math.sqrt
 
     for _ in range(n):
-        gx = math.floor((cx - lo[0]) / cell)
-        gy = math.floor((cy - lo[1]) / cell)
+        gx = floor((cx - lox) / cell)
+        gy = floor((cy - loy) / cell)
+        here = gx * width + gy
         best = -1
         best_d = math.inf
         for r in range(max_ring + 1):
-            for dx in range(-r, r + 1):
-                xcol = gx + dx
-                if xcol < 0 or xcol >= ncx:
-                    continue
-                step = 1 if abs(dx) == r else 2 * r
-                for dy in range(-r, r + 1, max(step, 1)):
-                    ycol = gy + dy
-                    if ycol < 0 or ycol >= width:
-                        continue
-                    bucket = cells.get(xcol * width + ycol)
-                    if bucket:
-                        for e in bucket:
-                            d = (xs[e] - cx) ** 2 + (ys[e] - cy) ** 2
-                            if d < best_d:
-                                best_d, best = d, e
-            if best >= 0 and math.sqrt(best_d) <= r * cell:
+            if r <= gx < ncx - r and r <= gy < width - r:  # the whole ring on the grid
+                buckets = [get(here + key) for key in ring_keys[r]]
+            else:
+                buckets = [get((gx + dx) * width + gy + dy) for dx, dy in rings[r]
+                           if 0 <= gx + dx < ncx and 0 <= gy + dy < width]
+            for bucket in buckets:
+                if bucket:
+                    for e in bucket:
+                        d = (xs[e] - cx) ** 2 + (ys[e] - cy) ** 2
+                        if d < best_d:
+                            best_d, best = d, e
+            if best >= 0 and sqrt(best_d) <= reach[r]:
                 break
-        if best < 0 or math.sqrt(best_d) > max_ring * cell:
+        if best < 0 or sqrt(best_d) > reach[max_ring]:
             idx = np.flatnonzero(alive)
             dd = (pts[idx, 0] - cx) ** 2 + (pts[idx, 1] - cy) ** 2
             best = int(idx[int(np.argmin(dd))])
@@ -220,11 +237,22 @@ def greedy_order(
         rev = best >= n
         order.append(node)
         flips.append(rev)
-        remove(node)
-        remove(node + n)
+        for e in (node, node + n):
+            bucket = cells[cell_of[e]]
+            bucket.discard(e)
+            if not bucket:
+                del cells[cell_of[e]]
+            alive[e] = False
         exit_e = node if rev else node + n
         cx, cy = xs[exit_e], ys[exit_e]
     return np.asarray(order, dtype=np.int64), np.asarray(flips, dtype=bool)
+
+
+def _origin_span(pts: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The lower-left corner of the points' bounding box and its size (at least 1e-9 on each axis)."""
+    x0, y0, x1, y1 = extent(pts)
+    lo = np.array([x0, y0])
+    return lo, np.maximum(np.array([x1, y1]) - lo, 1e-9)
 
 
 def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[int]]:
@@ -233,8 +261,7 @@ def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[
     n = len(starts)
     pts = np.vstack([starts, ends])
     m = len(pts)
-    lo = pts.min(axis=0)
-    span = np.maximum(pts.max(axis=0) - lo, 1e-9)
+    lo, span = _origin_span(pts)
     cell = max(float(math.sqrt(span[0] * span[1] / m)) * 1.6, float(span.max()) / 2048, 1e-6)
     g = np.floor((pts - lo) / cell).astype(np.int64)
     w = int(g[:, 1].max()) + 3
@@ -253,8 +280,13 @@ def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[
     valid = (slot[None, None, :] < count[:, :, None]).reshape(m, -1)
     cand = sort[np.minimum(base[:, :, None] + slot[None, None, :], m - 1)].reshape(m, -1)
     node_of = cand % n
-    d = np.hypot(pts[cand, 0] - pts[:, None, 0], pts[cand, 1] - pts[:, None, 1])
-    d[~valid | (node_of == (np.arange(m) % n)[:, None])] = np.inf
+    # Distances to the real candidates only (other lines' ends), inf in the table's empty slots.
+    real = valid & (node_of != (np.arange(m) % n)[:, None])
+    flat = np.flatnonzero(real)
+    other, row = cand.ravel()[flat], flat // cand.shape[1]
+    xs, ys = pts[:, 0].copy(), pts[:, 1].copy()
+    d = np.full(cand.shape, np.inf)
+    d.ravel()[flat] = np.hypot(xs[other] - xs[row], ys[other] - ys[row])
     kk = min(k, d.shape[1])
     nearest = np.argpartition(d, kk - 1, axis=1)[:, :kk] if d.shape[1] > kk else np.argsort(d, axis=1)
     picked = np.take_along_axis(node_of, nearest, axis=1)
@@ -262,7 +294,8 @@ def _neighbour_lists(starts: FloatArray, ends: FloatArray, k: int) -> list[list[
     # Both ends of a line together, each other line once.
     both = np.sort(np.concatenate([picked[:n], picked[n:]], axis=1), axis=1)
     both[:, 1:][both[:, 1:] == both[:, :-1]] = -1
-    return [[v for v in row if v >= 0] for row in both.tolist()]
+    both.sort(axis=1)  # the -1s (none, or repeated) first, each row's lines after them in increasing order
+    return [row[skip:] for row, skip in zip(both.tolist(), (both < 0).sum(axis=1).tolist(), strict=True)]
 
 
 def improve(
@@ -310,8 +343,7 @@ def improve(
         block = tour[a : b + 1]
         block.reverse()
         tour[a : b + 1] = block
-        for p in range(a, b + 1):
-            v = tour[p]
+        for p, v in enumerate(block, a):
             pos[v] = p
             ix[v], ox[v] = ox[v], ix[v]
             iy[v], oy[v] = oy[v], iy[v]
@@ -524,8 +556,8 @@ def _result(
     tour: list[int], ix: list[float], iy: list[float], starts: FloatArray, ends: FloatArray
 ) -> tuple[IntArray, BoolArray]:
     new_order = np.asarray(tour[1:], dtype=np.int64)
-    new_flips = np.asarray([ix[v] != float(starts[v, 0]) or iy[v] != float(starts[v, 1]) for v in tour[1:]],
-                           dtype=bool)
+    entered = np.asarray(ix)[new_order], np.asarray(iy)[new_order]
+    new_flips = (entered[0] != starts[new_order, 0]) | (entered[1] != starts[new_order, 1])
     # A line whose two ends coincide is the same either way round; keep its original direction.
     closed = np.all(starts[new_order] == ends[new_order], axis=1)
     new_flips[closed] = False
@@ -563,6 +595,12 @@ def optimise(
     """The whole pass: fine points out, touching lines joined, then ordered for least pen-up travel, improving
     on greedy within `time_budget` (see `work_budget`). Never travels more than the lines in their given order
     (then that order is kept), and the same lines and budget always give the same result."""
+    with collection_paused(freeze=False):  # many small tables, no reference cycles
+        return _optimise(lines, origin, resolution, time_budget)
+
+
+def _optimise(lines: Polylines, origin: tuple[float, float], resolution: float, time_budget: float | None
+              ) -> Polylines:
     thinned = drop_fine_points(lines, resolution)
     cleaned = join_touching(thinned, resolution)
     if len(cleaned) < 2:  # nothing to order, but joining may still have moved where the drawing starts
@@ -572,16 +610,22 @@ def optimise(
     order, flips = greedy_order(starts, ends, origin)
     order, flips = improve(starts, ends, order, flips, origin, work=work - work // 10)
     ordered = arrange(cleaned, order, flips)
+    ordered_ends = _arranged_ends(starts, ends, order, flips)
+    travel = _travel(*ordered_ends, origin)
     if work // 10 > 0:
-        ordered = _reorder_runs(ordered, origin, work // 10)
-    return ordered if travel_length(ordered, origin) <= travel_length(thinned, origin) else thinned
+        by_runs = _reorder_runs(ordered, origin, work // 10, ordered_ends)
+        if by_runs is not ordered:
+            ordered, travel = by_runs, travel_length(by_runs, origin)
+    return ordered if travel <= travel_length(thinned, origin) else thinned
 
 
-def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int) -> Polylines:
+def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int,
+                  lines_ends: tuple[FloatArray, FloatArray] | None = None) -> Polylines:
     """Order again at a coarser grain: runs of lines joined by short hops (a hatched patch, a word) move as one
     piece, either way round. Moves of single lines cannot carry a patch of many lines across the page; this
-    can. Kept only when it shortens the travel; `work` as for `improve`."""
-    starts, ends = line_ends(lines)
+    can. Kept only when it shortens the travel (else `lines` itself is returned); `work` as for `improve`;
+    `lines_ends` is `line_ends(lines)` when known."""
+    starts, ends = line_ends(lines) if lines_ends is None else lines_ends
     hops = np.hypot(*(starts[1:] - ends[:-1]).T)
     if len(hops) < 3:
         return lines
@@ -604,7 +648,7 @@ def _reorder_runs(lines: Polylines, origin: tuple[float, float], work: int) -> P
             out.extend(lines[a:b])
     sizes = [runs[index][1] - runs[index][0] for index in order.tolist()]
     candidates = [lines, out, orient_runs(lines, [b - a for a, b in runs], origin), orient_runs(out, sizes, origin)]
-    return min(candidates, key=lambda c: travel_length(c, origin))
+    return min(candidates, key=lambda c: _travel(starts, ends, origin) if c is lines else travel_length(c, origin))
 
 
 def orient_runs(lines: Polylines, sizes: Sequence[int], origin: tuple[float, float] = HOME) -> Polylines:

@@ -144,13 +144,13 @@ class Plan:
         hop = starts - here
         inner = inner_segments(offsets)
         step = np.diff(points, axis=0)
-        drawn = _steps(np.abs(step).max(axis=1), m.draw_step) * inner
+        drawn = _steps(_longer_axis(step), m.draw_step) * inner
         per_stroke = np.add.reduceat(np.append(drawn, 0.0), offsets[:-1])
         sizes = offsets[1:] - offsets[:-1]
         per_stroke[sizes < 2] = 0.0  # a dot has no segment of its own (reduceat hands it the next one)
         segments = sizes - 1
         # Travel (one command), drop and lift (one command and a pen move each), one command per segment.
-        hops = _steps(np.abs(hop).max(axis=1), m.travel_step)
+        hops = _steps(_longer_axis(hop), m.travel_step)
         seconds = (hops + per_stroke) * m.step_time + (3 + segments) * m.command_time + 2 * m.pen_time
         figures = PlanFigures(
             strokes=len(self.strokes),
@@ -161,6 +161,12 @@ class Plan:
             estimated_seconds=float(seconds.sum()),
         )
         return figures, seconds
+
+
+def _longer_axis(moves: FloatArray) -> FloatArray:
+    """Each (dx, dy) move's span on its longer axis (column by column: many times faster than along axis 1)."""
+    span: FloatArray = np.maximum(np.abs(moves[:, 0]), np.abs(moves[:, 1]))
+    return span
 
 
 def _steps(span: FloatArray, step: float) -> FloatArray:
