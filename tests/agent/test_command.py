@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import importlib.util
 import signal
+import socket
 import sys
 import termios
+import threading
 import time
 from pathlib import Path
 
@@ -36,8 +39,6 @@ def test_demo_starts_three_simulators_and_stops_them(tmp_path: Path) -> None:
         code, stderr = agent.stop()
     assert code == 0, stderr
     assert "Traceback" not in stderr
-    import socket
-
     for port in ports:  # the simulators went with the agent
         with socket.socket() as sock:
             assert sock.connect_ex(("127.0.0.1", port)) != 0
@@ -147,3 +148,42 @@ def test_an_agent_with_machines_on_loopback_says_neither(tmp_path: Path) -> None
     assert code == 0, stderr
     assert "no machines to watch" not in stderr
     assert "open it at" not in stderr
+
+
+def test_a_printer_that_never_answers_gets_each_connection_closed_before_the_next(tmp_path: Path) -> None:
+    """A machine that accepts TCP and says nothing: every attempt's link is shut when its handshake fails, before
+    the agent tries again (never left open for the garbage collector, with its reader task pending)."""
+    server = socket.create_server(("127.0.0.1", 0))
+    accepted: list[socket.socket] = []
+    closed: list[threading.Event] = []
+    open_when_next: list[bool] = []
+
+    def read_until_closed(conn: socket.socket, gone: threading.Event) -> None:
+        with contextlib.suppress(OSError):
+            while conn.recv(4096):
+                pass
+        gone.set()
+
+    def accept() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                if closed:
+                    open_when_next.append(not closed[-1].wait(5.0))
+                accepted.append(conn)
+                closed.append(threading.Event())
+                threading.Thread(target=read_until_closed, args=(conn, closed[-1]), daemon=True).start()
+
+    threading.Thread(target=accept, daemon=True).start()
+    port = server.getsockname()[1]
+    agent = start_agent(tmp_path / "state", "--device", f"mute:xyz=127.0.0.1:{port}")
+    try:
+        wait_for(lambda: len(open_when_next) >= 2, "three connection attempts", timeout=90.0)
+    finally:
+        code, stderr = agent.stop()
+        server.close()
+        for conn in accepted:
+            conn.close()
+    assert open_when_next[:2] == [False, False]
+    assert "Task was destroyed" not in stderr
+    assert code == 0, stderr

@@ -261,6 +261,8 @@ class Session:
                 self._identity = await self._links.run(self.driver.connect())
             except LINK_FAILURES as exc:
                 self._reason = str(exc) or type(exc).__name__
+                with contextlib.suppress(*LINK_FAILURES):  # a link opened before the handshake failed is shut
+                    await self._links.run(self.driver.close())
                 self._first_attempt.set()
                 await self._id_ready.wait()
                 await self._went_offline(delay)
