@@ -3,11 +3,14 @@ the simulated arm, the last will when an agent is killed, two agents on one devi
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -220,6 +223,31 @@ def test_fleet_command_errors_are_one_line(tmp_path: Path) -> None:
     assert "Traceback" not in down.stderr
     assert "nothing listens on port" in down.stderr  # what to check, as for a device; no raw errno
     assert "Errno" not in down.stderr
+
+
+def test_fleet_at_a_port_where_no_broker_speaks_says_to_check_for_a_broker(tmp_path: Path) -> None:
+    """Another server there (it greets as SSH does, then answers no CONNACK): the broker's check, not a device's."""
+    server = socket.create_server(("127.0.0.1", 0))
+    held: list[socket.socket] = []
+
+    def greet() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                conn.sendall(b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n")
+
+    threading.Thread(target=greet, daemon=True).start()
+    try:
+        told = run_cli("fleet", "--mqtt", f"mqtt://127.0.0.1:{server.getsockname()[1]}", env=cli_env(tmp_path))
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+    assert told.returncode == 8, told.stderr
+    line, = told.stderr.splitlines()
+    assert "check that an MQTT broker listens there (port 1883, 8883 with TLS)" in line, line
+    assert "device" not in line
 
 
 def test_per_entity_discovery_from_serve(broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any) -> None:

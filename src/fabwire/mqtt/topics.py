@@ -98,6 +98,10 @@ def default_agent_id(state_dir: object | None = None) -> str:
     return f"{host}-{hashlib.sha256(str(state_dir).encode()).hexdigest()[:6]}"
 
 
+BROKER_CHECK = "that an MQTT broker listens there (port 1883, 8883 with TLS) on this network"
+"""What to check when a broker's address answers nothing a broker says (nothing at all, or another protocol)."""
+
+
 @dataclass(frozen=True)
 class Broker:
     """Where the broker is and how to log in."""
@@ -119,7 +123,7 @@ class Broker:
         if isinstance(cause, OSError):
             from fabwire.transport.tcp import connect_failure
 
-            return f"MQTT broker {self.url}: {connect_failure(cause, self.host, self.port)}"
+            return f"MQTT broker {self.url}: {connect_failure(cause, self.host, self.port, peer=BROKER_CHECK)}"
         return f"MQTT broker {self.url}: {exc}"
 
     def client_options(self) -> dict[str, Any]:

@@ -31,14 +31,15 @@ def _describe(writer: asyncio.StreamWriter) -> str:
     return str(peer)
 
 
-def connect_failure(exc: BaseException, host: str, port: int, timeout: float | None = None
-                    ) -> LinkError | LinkTimeout:
+def connect_failure(exc: BaseException, host: str, port: int, timeout: float | None = None, *,
+                    peer: str = "the device is powered on and on this network") -> LinkError | LinkTimeout:
     """A failed TCP connection (a TimeoutError or an OSError; anything else in its words) as the error that
-    says what to check: the one wording for every TCP peer, devices and MQTT brokers alike."""
+    says what to check: the one wording for every TCP peer, devices and MQTT brokers alike (`peer` says what
+    to check of it when nothing answers)."""
     where = f"{host}:{port}"
     if isinstance(exc, TimeoutError):
         within = f" within {timeout:g} s" if timeout is not None else ""
-        return LinkTimeout(f"no answer from {where}{within}: check the device is powered on and on this network")
+        return LinkTimeout(f"no answer from {where}{within}: check {peer}")
     if isinstance(exc, socket.gaierror):
         return LinkError(f"cannot resolve host {host!r}: {exc.strerror}; check the name or use the IP address")
     if isinstance(exc, ConnectionRefusedError):
