@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fabwire.devices import LINEUS, MMU, XYZ
@@ -75,6 +75,9 @@ def test_endpoint_url_is_canonical() -> None:
               st.one_of(st.integers(-10, 10**6).map(str), st.text(alphabet="0123456789٣²", min_size=1, max_size=30),
                         st.just("9" * 5000))),
 ))
+@example(text="0000000000000\x1f" * 11 + "\U00012544" * 40)  # a host of wide characters, quoted in the message
+@example(text="tcp://h:1/?" + "\U00012544" * 60)
+@example(text="\U00012544" * 50 + "://h")
 def test_any_address_text_parses_or_is_one_short_input_error(text: str) -> None:
     message = ""
     try:

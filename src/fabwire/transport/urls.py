@@ -61,7 +61,7 @@ def _check_host(text: str, host: str) -> str:
         ipaddress.ip_address(host)
     except ValueError:
         if not _HOSTNAME.match(host):
-            raise _bad(text, f"{host!r} is not a valid host name or IP address") from None
+            raise _bad(text, f"{excerpt(host, 40)} is not a valid host name or IP address") from None
     return host
 
 
@@ -119,6 +119,6 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
         try:
             options = dict(parse_qsl(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query)))
         except ValueError:
-            raise _bad(text, f"unreadable options {parts.query!r}") from None
+            raise _bad(text, f"unreadable options {excerpt(parts.query, 40)}") from None
         return Endpoint("sim", host=name, options=options)
-    raise _bad(text, f"unknown scheme {scheme!r}")
+    raise _bad(text, f"unknown scheme {excerpt(scheme, 20)}")
