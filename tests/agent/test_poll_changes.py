@@ -4,6 +4,7 @@ does, and the views made from the previous poll equal views made from scratch.""
 from __future__ import annotations
 
 import asyncio
+import socket
 import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -11,7 +12,7 @@ from typing import Any
 
 from fabwire.agent.core import Agent, DeviceSpec
 from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
-from fabwire.agent.session import LinkThread
+from fabwire.agent.session import DELIVER_PER_TURN, LinkThread
 
 
 async def _collect(subscription: AsyncIterator[dict[str, Any]], events: list[dict[str, Any]]) -> None:
@@ -108,6 +109,46 @@ async def test_health_lags_are_those_of_the_machines_monitored(tmp_path: Path) -
         assert (agent.health()["poll_lag_p99_s"], agent.health()["poll_lag_max_s"]) == (None, None)
 
 
+def _counts(agent: Agent) -> dict[str, int]:
+    sessions = agent.sessions()
+    return {"devices": len(sessions), "online": sum(s.online for s in sessions),
+            "polls": sum(s.stats.polls for s in sessions), "late_polls": sum(s.stats.late for s in sessions)}
+
+
+async def test_health_counts_are_those_of_the_machines_monitored(tmp_path: Path) -> None:
+    """Health reads running counts: they equal the sums over the sessions through a link that never comes up, a
+    link lost, and machines removed."""
+    refused = socket.socket()
+    refused.bind(("127.0.0.1", 0))  # bound, never listening: every connection is refused
+    async with Agent(state_dir=tmp_path / "state", backoff=(0.05, 0.1)) as agent:
+        infos = [await agent.add_device(DeviceSpec(f"p{n}", "xyz", f"sim://xyz?speed=30&serial=TALLY{n}"))
+                 for n in range(3)]
+        down = await agent.add_device(DeviceSpec("gone", "xyz", f"tcp://127.0.0.1:{refused.getsockname()[1]}"))
+        await _polls_reach(agent, 9)
+        health = agent.health()
+        assert {k: health[k] for k in _counts(agent)} == _counts(agent)
+        assert health["online"] == 3
+        await agent.remove_device(infos[1].id)
+        await agent.remove_device(down.id)
+        await _polls_reach(agent, agent.health()["polls"] + 4)
+        health = agent.health()
+        assert {k: health[k] for k in _counts(agent)} == _counts(agent)
+        assert health["online"] == 2
+        session = agent.session(infos[0].id)
+        subscription = agent.subscribe(infos[0].id)
+        await session._links.run(session.driver.close())  # the link is lost under the session
+        for wanted, online in (("offline", 1), ("online", 2)):
+            async with asyncio.timeout(30):
+                async for event in subscription:
+                    if event["type"] == wanted:
+                        break
+            health = agent.health()
+            assert {k: health[k] for k in _counts(agent)} == _counts(agent)
+            assert health["online"] == online
+        await subscription.aclose()
+    refused.close()
+
+
 async def test_delivered_results_arrive_on_the_agents_loop_in_order() -> None:
     home = asyncio.get_running_loop()
     links = LinkThread()
@@ -138,3 +179,32 @@ async def test_delivered_results_arrive_on_the_agents_loop_in_order() -> None:
     assert [n for n, _ in got] == [n for n in range(200) if n != 50]
     assert {thread for _, thread in got} == {threading.get_ident()}
     assert [str(e["exception"]) for e in errors] == ["one result that fails"]
+
+
+async def test_a_bench_of_results_leaves_turns_of_the_agents_loop_to_others() -> None:
+    """Results handed over together run DELIVER_PER_TURN per turn of the agent's loop: work scheduled there
+    meanwhile (a request's next step) runs after at most that many of them, however many arrived."""
+    home = asyncio.get_running_loop()
+    links = LinkThread()
+    order: list[str] = []
+    finished = asyncio.Event()
+
+    def result(n: int) -> None:
+        order.append(f"result {n}")
+        if n == 0:
+            home.call_soon(order.append, "request")
+        if n == 199:
+            finished.set()
+
+    def send() -> None:
+        for n in range(200):
+            links.deliver(result, n)
+
+    try:
+        links.loop.call_soon_threadsafe(send)
+        async with asyncio.timeout(30):
+            await finished.wait()
+    finally:
+        links.close()
+    assert [x for x in order if x != "request"] == [f"result {n}" for n in range(200)]
+    assert order.index("request") == DELIVER_PER_TURN

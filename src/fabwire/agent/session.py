@@ -36,6 +36,10 @@ JOB_EVENT_EVERY_S = 0.5
 SWITCH_INTERVAL_S = 0.0005
 DELIVER_EVERY_S = 0.01
 """How long a poll's result may wait on the links' thread for others to go to the agent's loop with it."""
+DELIVER_PER_TURN = 16
+"""Poll results handled in one turn of the agent's loop: a request that arrives behind a bench's results waits for
+at most this many (about a third of a millisecond), however many machines there are; the rest follow in the next
+turns, in order."""
 POLL_TICK_S = 0.05
 """Polls start on a grid of this step (`on_poll_grid`): the polls of a bench that fall within one step wake the links'
 thread once, together, and their replies are read in the same turns of its loop. A wake-up of the thread, not the
@@ -87,6 +91,9 @@ class LinkThread:
         self.home = home or asyncio.get_running_loop()
         """The agent's loop, where `deliver` hands results over."""
         self._results: list[tuple[Callable[..., None], tuple[Any, ...]]] = []
+        self._arrived: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
+        """Handed over and not yet run, on the agent's loop."""
+        self._draining = False
         try:
             import uvloop
         except ImportError:
@@ -103,14 +110,36 @@ class LinkThread:
     def deliver(self, callback: Callable[..., None], *args: Any) -> None:
         """From the links' loop: `callback(*args)` runs on the agent's loop within DELIVER_EVERY_S, after what was
         delivered before it, together with everything else delivered meanwhile: a bench's polls wake the agent's
-        loop (and hand the interpreter over) about a hundred times a second however many machines there are."""
+        loop (and hand the interpreter over) about a hundred times a second however many machines there are. The
+        agent's loop runs DELIVER_PER_TURN of them per turn, so its requests are served between."""
         if not self._results:
             self.loop.call_later(DELIVER_EVERY_S, self._hand_over)
         self._results.append((callback, args))
 
     def _hand_over(self) -> None:
         batch, self._results = self._results, []
-        self.home.call_soon_threadsafe(_run_all, batch)
+        self.home.call_soon_threadsafe(self._receive, batch)
+
+    def _receive(self, batch: list[tuple[Callable[..., None], tuple[Any, ...]]]) -> None:
+        self._arrived.extend(batch)
+        if not self._draining:
+            self._draining = True
+            self._drain()
+
+    def _drain(self) -> None:
+        """Each callback as if scheduled on its own (one that fails is reported and the rest still run),
+        DELIVER_PER_TURN per turn of the agent's loop."""
+        arrived = self._arrived
+        for _ in range(min(DELIVER_PER_TURN, len(arrived))):
+            callback, args = arrived.popleft()
+            try:
+                callback(*args)
+            except Exception as exc:  # as the loop reports a failed callback
+                self.home.call_exception_handler({"message": f"exception in callback {callback!r}", "exception": exc})
+        if arrived:
+            self.home.call_soon(self._drain)
+        else:
+            self._draining = False
 
     async def run(self, work: Coroutine[Any, Any, T]) -> T:
         """Run `work` on the links' loop and wait for it here; cancelling the wait cancels the work."""
@@ -122,16 +151,6 @@ class LinkThread:
         self._thread.join(STOP_WAIT_S)
         if not self._thread.is_alive():
             self.loop.close()
-
-
-def _run_all(batch: list[tuple[Callable[..., None], tuple[Any, ...]]]) -> None:
-    """Each callback as if scheduled on its own: one that fails is reported and the rest still run."""
-    for callback, args in batch:
-        try:
-            callback(*args)
-        except Exception as exc:  # as the loop reports a failed callback
-            asyncio.get_running_loop().call_exception_handler(
-                {"message": f"exception in callback {callback!r}", "exception": exc})
 
 
 _LINKS: weakref.WeakKeyDictionary[Agent, LinkThread] = weakref.WeakKeyDictionary()
@@ -154,38 +173,68 @@ def _release_links(agent: Agent) -> None:
             links.close()
 
 
+class Tally:
+    """What the agent's health reports of every machine monitored, kept up to date as each poll and each change of
+    link happens: a request reads it without visiting a session, so its cost does not grow with the fleet."""
+
+    def __init__(self) -> None:
+        self.lags: SortedList = SortedList()
+        """The recent poll lags of every machine, in order: health reads their p99 without sorting them."""
+        self.polls = 0
+        self.late = 0
+        self.online = 0
+
+
 class PollStats:
-    """How punctual the polls are: a poll is late when it starts more than half an interval after its slot."""
+    """A machine's link and how punctual its polls are: a poll is late when it starts more than half an interval
+    after its slot. Counted in the agent's `Tally` too once joined."""
 
     def __init__(self) -> None:
         self.polls = 0
         self.late = 0
+        self.online = False
         self.lags: deque[float] = deque(maxlen=600)
         """The last ten minutes' lags at 1 Hz."""
-        self._window: SortedList | None = None
+        self._tally: Tally | None = None
 
     def record(self, lag: float, interval: float) -> None:
+        late = lag > interval / 2
         self.polls += 1
-        if lag > interval / 2:
-            self.late += 1
+        self.late += late
         lags = self.lags
-        if self._window is not None:
+        tally = self._tally
+        if tally is not None:
+            tally.polls += 1
+            tally.late += late
             if len(lags) == lags.maxlen:
-                self._window.remove(lags[0])
-            self._window.add(lag)
+                tally.lags.remove(lags[0])
+            tally.lags.add(lag)
         lags.append(lag)
 
-    def join(self, window: SortedList) -> None:
-        """Keep `window` (the agent's, for every machine) holding this machine's lags too, in order."""
-        window.update(self.lags)
-        self._window = window
+    def set_online(self, online: bool) -> None:
+        if online != self.online:
+            self.online = online
+            if self._tally is not None:
+                self._tally.online += 1 if online else -1
+
+    def join(self, tally: Tally) -> None:
+        """Count this machine in `tally` (the agent's, for every machine) from now on."""
+        self._count(tally, 1)
+        tally.lags.update(self.lags)
+        self._tally = tally
 
     def leave(self) -> None:
-        """Take this machine's lags out of the window it joined."""
-        window, self._window = self._window, None
-        if window is not None:
+        """Take this machine out of the tally it joined."""
+        tally, self._tally = self._tally, None
+        if tally is not None:
+            self._count(tally, -1)
             for lag in self.lags:
-                window.remove(lag)
+                tally.lags.remove(lag)
+
+    def _count(self, tally: Tally, sign: int) -> None:
+        tally.polls += sign * self.polls
+        tally.late += sign * self.late
+        tally.online += sign * self.online
 
 
 class Session:
@@ -198,7 +247,6 @@ class Session:
         self._links = _links_of(agent)
         self.driver = make_driver(spec, self._device_event_from_link)
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
-        self.online = False
         self.stats = PollStats()
         self.state: dict[str, Any] = {}
         self.drawing: dict[str, list[list[tuple[float, float]]]] = {"preview": [], "ink": []}
@@ -215,6 +263,15 @@ class Session:
         self._reason = "not connected yet"
         self._stopping = False
         self._cancelling = False
+
+    @property
+    def online(self) -> bool:
+        """Whether the link is up (the agent's tally counts it)."""
+        return self.stats.online
+
+    @online.setter
+    def online(self, online: bool) -> None:
+        self.stats.set_online(online)
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
