@@ -8,11 +8,17 @@ import socket
 import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
+import httpx
+import pytest
+
+from fabwire.agent import session as session_module
+from fabwire.agent.boundary import Boundary, Policy
 from fabwire.agent.core import Agent, DeviceSpec
 from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
-from fabwire.agent.session import DELIVER_PER_TURN, LinkThread
+from fabwire.agent.session import LinkThread, RequestsFirst
 
 
 async def _collect(subscription: AsyncIterator[dict[str, Any]], events: list[dict[str, Any]]) -> None:
@@ -181,30 +187,51 @@ async def test_delivered_results_arrive_on_the_agents_loop_in_order() -> None:
     assert [str(e["exception"]) for e in errors] == ["one result that fails"]
 
 
-async def test_a_bench_of_results_leaves_turns_of_the_agents_loop_to_others() -> None:
-    """Results handed over together run DELIVER_PER_TURN per turn of the agent's loop: work scheduled there
-    meanwhile (a request's next step) runs after at most that many of them, however many arrived."""
-    home = asyncio.get_running_loop()
-    links = LinkThread()
-    order: list[str] = []
-    finished = asyncio.Event()
 
-    def result(n: int) -> None:
-        order.append(f"result {n}")
-        if n == 0:
-            home.call_soon(order.append, "request")
-        if n == 199:
-            finished.set()
+def test_the_links_thread_steps_aside_while_a_request_is_answered(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A poll waits for the requests in flight and goes on when the last is answered; an idle API costs no wait."""
+    monkeypatch.setattr(session_module, "STEP_ASIDE_S", 600.0)
+    first = RequestsFirst()
+    first.step_aside()  # no request in flight: no wait
+    first.begin()
+    first.begin()
+    links = threading.Thread(target=first.step_aside)
+    links.start()
+    links.join(0.2)
+    assert links.is_alive()  # held while requests are in flight
+    first.end()
+    links.join(0.2)
+    assert links.is_alive()  # one is still being answered
+    first.end()
+    links.join(30)
+    assert not links.is_alive()
 
-    def send() -> None:
-        for n in range(200):
-            links.deliver(result, n)
 
-    try:
-        links.loop.call_soon_threadsafe(send)
-        async with asyncio.timeout(30):
-            await finished.wait()
-    finally:
-        links.close()
-    assert [x for x in order if x != "request"] == [f"result {n}" for n in range(200)]
-    assert order.index("request") == DELIVER_PER_TURN
+def test_the_links_thread_steps_aside_for_a_bounded_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A request that lasts (a slow reader) holds the polls STEP_ASIDE_S at most, and not again for as long after."""
+    monkeypatch.setattr(session_module, "STEP_ASIDE_S", 0.01)
+    first = RequestsFirst()
+    first.begin()
+    first.step_aside()  # returns though the request is still in flight
+    monkeypatch.setattr(session_module, "STEP_ASIDE_S", 600.0)  # a second wait now would never end
+    first.step_aside()  # within the first wait's STEP_ASIDE_S after it: no wait
+    first.end()
+
+
+@pytest.mark.parametrize(("method", "held"), [("GET", True), ("HEAD", True), ("OPTIONS", True), ("POST", False),
+                                              ("PUT", False), ("DELETE", False)])
+async def test_a_reading_request_holds_the_polls_while_it_is_answered(method: str, held: bool) -> None:
+    first = RequestsFirst()
+    seen: list[bool] = []
+
+    async def app(scope: dict[str, object], receive: object, send: object) -> None:
+        seen.append(not first._idle.is_set())
+        await send({"type": "http.response.start", "status": 200, "headers": []})  # type: ignore[operator]
+        await send({"type": "http.response.body", "body": b"ok"})  # type: ignore[operator]
+
+    guarded = Boundary(app, policy=Policy(), router=SimpleNamespace(routes=[]), requests_first=first)
+    async with httpx.AsyncClient(transport=httpx.ASGITransport(app=guarded), base_url="http://localhost") as client:
+        response = await client.request(method, "/api/v1/agent", headers={"content-type": "application/json"})
+    assert response.status_code == 200
+    assert seen == [held]
+    assert first._idle.is_set()  # answered: the polls go on

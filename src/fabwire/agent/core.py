@@ -158,7 +158,7 @@ class Agent:
         from fabwire.agent.history import History
         from fabwire.agent.jobs import JobStore
         from fabwire.agent.library import Library
-        from fabwire.agent.session import Tally
+        from fabwire.agent.session import RequestsFirst, Tally
 
         self.state_dir = state_dir
         self.backoff = backoff
@@ -168,6 +168,8 @@ class Agent:
         self.library = Library(self, state_dir / "library" if state_dir else None)
         """Uploads kept per machine, their previews and the print queues (see `fabwire.agent.library`)."""
         self._sessions: dict[str, Session] = {}
+        self.requests = RequestsFirst()
+        """The API marks the requests it is answering; the polls step aside for them."""
         self._tally = Tally()
         """Health's counts over every machine monitored, kept as they change (see `PollStats`)."""
         self._subscribers: set[Subscription] = set()

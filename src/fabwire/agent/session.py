@@ -36,10 +36,6 @@ JOB_EVENT_EVERY_S = 0.5
 SWITCH_INTERVAL_S = 0.0005
 DELIVER_EVERY_S = 0.01
 """How long a poll's result may wait on the links' thread for others to go to the agent's loop with it."""
-DELIVER_PER_TURN = 16
-"""Poll results handled in one turn of the agent's loop: a request that arrives behind a bench's results waits for
-at most this many (about a third of a millisecond), however many machines there are; the rest follow in the next
-turns, in order."""
 POLL_TICK_S = 0.05
 """Polls start on a grid of this step (`on_poll_grid`): the polls of a bench that fall within one step wake the links'
 thread once, together, and their replies are read in the same turns of its loop. A wake-up of the thread, not the
@@ -48,6 +44,9 @@ quarter, 50 ms by a third more). A poll starts at most this much after its slot;
 number of steps, the slots themselves lie on the grid and a poll starts on time."""
 GRID_SLACK = 1e-6
 """Steps a slot may lie past a grid point and still count as on it (a float's rounding)."""
+STEP_ASIDE_S = 0.005
+"""How long the links' thread waits for the agent's requests in flight before it goes on with its polls; it then
+works at least as long before it steps aside again, so a flood of requests slows the polls to half speed at most."""
 STOP_WAIT_S = 30.0
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
@@ -91,9 +90,6 @@ class LinkThread:
         self.home = home or asyncio.get_running_loop()
         """The agent's loop, where `deliver` hands results over."""
         self._results: list[tuple[Callable[..., None], tuple[Any, ...]]] = []
-        self._arrived: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
-        """Handed over and not yet run, on the agent's loop."""
-        self._draining = False
         try:
             import uvloop
         except ImportError:
@@ -110,36 +106,14 @@ class LinkThread:
     def deliver(self, callback: Callable[..., None], *args: Any) -> None:
         """From the links' loop: `callback(*args)` runs on the agent's loop within DELIVER_EVERY_S, after what was
         delivered before it, together with everything else delivered meanwhile: a bench's polls wake the agent's
-        loop (and hand the interpreter over) about a hundred times a second however many machines there are. The
-        agent's loop runs DELIVER_PER_TURN of them per turn, so its requests are served between."""
+        loop (and hand the interpreter over) about a hundred times a second however many machines there are."""
         if not self._results:
             self.loop.call_later(DELIVER_EVERY_S, self._hand_over)
         self._results.append((callback, args))
 
     def _hand_over(self) -> None:
         batch, self._results = self._results, []
-        self.home.call_soon_threadsafe(self._receive, batch)
-
-    def _receive(self, batch: list[tuple[Callable[..., None], tuple[Any, ...]]]) -> None:
-        self._arrived.extend(batch)
-        if not self._draining:
-            self._draining = True
-            self._drain()
-
-    def _drain(self) -> None:
-        """Each callback as if scheduled on its own (one that fails is reported and the rest still run),
-        DELIVER_PER_TURN per turn of the agent's loop."""
-        arrived = self._arrived
-        for _ in range(min(DELIVER_PER_TURN, len(arrived))):
-            callback, args = arrived.popleft()
-            try:
-                callback(*args)
-            except Exception as exc:  # as the loop reports a failed callback
-                self.home.call_exception_handler({"message": f"exception in callback {callback!r}", "exception": exc})
-        if arrived:
-            self.home.call_soon(self._drain)
-        else:
-            self._draining = False
+        self.home.call_soon_threadsafe(_run_all, batch)
 
     async def run(self, work: Coroutine[Any, Any, T]) -> T:
         """Run `work` on the links' loop and wait for it here; cancelling the wait cancels the work."""
@@ -151,6 +125,16 @@ class LinkThread:
         self._thread.join(STOP_WAIT_S)
         if not self._thread.is_alive():
             self.loop.close()
+
+
+def _run_all(batch: list[tuple[Callable[..., None], tuple[Any, ...]]]) -> None:
+    """Each callback as if scheduled on its own: one that fails is reported and the rest still run."""
+    for callback, args in batch:
+        try:
+            callback(*args)
+        except Exception as exc:  # as the loop reports a failed callback
+            asyncio.get_running_loop().call_exception_handler(
+                {"message": f"exception in callback {callback!r}", "exception": exc})
 
 
 _LINKS: weakref.WeakKeyDictionary[Agent, LinkThread] = weakref.WeakKeyDictionary()
@@ -171,6 +155,43 @@ def _release_links(agent: Agent) -> None:
         if links.users <= 0:
             del _LINKS[agent]
             links.close()
+
+
+class RequestsFirst:
+    """The agent's requests before its polls. Both loops share one interpreter lock: while a request is answered on
+    the agent's loop (`serving`), a polling links' thread would take the lock from it at every turn of its handling,
+    and under load each hand-over costs a wait for the scheduler. So at its next poll the links' thread steps aside
+    (`step_aside`, waiting without the lock) until the requests in flight are answered, STEP_ASIDE_S at most: a
+    request is answered alike whether a thousand machines are polled or ten. One per agent."""
+
+    def __init__(self) -> None:
+        self._idle = threading.Event()
+        self._idle.set()
+        self._in_flight = 0
+        self._resume_at = 0.0
+        """When the links' thread may step aside again (its own clock, read on that thread only)."""
+
+    def begin(self) -> None:
+        """On the agent's loop: a request is being answered."""
+        self._in_flight += 1
+        self._idle.clear()
+
+    def end(self) -> None:
+        """On the agent's loop: that request is answered."""
+        self._in_flight -= 1
+        if self._in_flight <= 0:
+            self._in_flight = 0
+            self._idle.set()
+
+    def step_aside(self) -> None:
+        """On the links' thread, between polls: while requests are in flight, wait for them (at most STEP_ASIDE_S,
+        and not again within STEP_ASIDE_S of the last wait's end)."""
+        if self._idle.is_set():
+            return
+        if time.monotonic() < self._resume_at:
+            return
+        self._idle.wait(STEP_ASIDE_S)
+        self._resume_at = time.monotonic() + STEP_ASIDE_S
 
 
 class Tally:
@@ -361,6 +382,7 @@ class Session:
         while True:
             lag = loop.time() - slot
             status, summary = await self.driver.poll()
+            self.agent.requests.step_aside()
             self._links.deliver(self._polled, status, summary, time.time(), lag, interval)
             slot = next_slot(slot, interval)
             now = loop.time()
