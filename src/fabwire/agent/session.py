@@ -44,7 +44,7 @@ quarter, 50 ms by a third more). A poll starts at most this much after its slot;
 number of steps, the slots themselves lie on the grid and a poll starts on time."""
 GRID_SLACK = 1e-6
 """Steps a slot may lie past a grid point and still count as on it (a float's rounding)."""
-STEP_ASIDE_S = 0.005
+STEP_ASIDE_S = 0.02
 """How long the links' thread waits for the agent's requests in flight before it goes on with its polls; it then
 works at least as long before it steps aside again, so a flood of requests slows the polls to half speed at most."""
 STOP_WAIT_S = 30.0
