@@ -292,5 +292,5 @@ def create_app(agent: Agent, *, max_upload_bytes: int, policy: Policy | None = N
         return error_response(500, f"internal error: {exc!r}", exit_code_of(exc), type(exc).__name__)
 
     app.add_middleware(Boundary, policy=policy or Policy(max_upload_bytes=max_upload_bytes),
-                       router=app.router)
+                       router=app.router, requests_first=agent.requests)
     return app

@@ -34,10 +34,13 @@ import socket
 from collections.abc import Awaitable, Callable, Iterable, Iterator, MutableMapping
 from dataclasses import dataclass, field
 from email.headerregistry import ContentTypeHeader, HeaderRegistry
-from typing import Any, ClassVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 from fabwire import jsontext
 from fabwire.errors import FabwireError, InputError, excerpt
+
+if TYPE_CHECKING:
+    from fabwire.agent.session import RequestsFirst
 
 log = logging.getLogger("fabwire.agent")
 
@@ -417,12 +420,15 @@ def _has_body(scope: Scope) -> bool:
 
 class Boundary:
     """The ASGI middleware (see the module's docstring). `router` is the router of the app behind it (its
-    `routes` are read at each request, so routes added later are looked up too)."""
+    `routes` are read at each request, so routes added later are looked up too). `requests_first`, the agent's,
+    is told of each reading request (GET, HEAD, OPTIONS) while it is answered, so the polls step aside for it."""
 
-    def __init__(self, app: ASGIApp, *, policy: Policy, router: Any) -> None:
+    def __init__(self, app: ASGIApp, *, policy: Policy, router: Any, requests_first: RequestsFirst | None = None
+                 ) -> None:
         self.app = app
         self.policy = policy
         self.router = router
+        self.requests_first = requests_first
         self._token = policy.token.encode() if policy.token else None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -446,6 +452,9 @@ class Boundary:
         except BoundaryError as exc:
             await deny(scope, send, exc)
             return
+        first = self.requests_first if scope["type"] == "http" and scope["method"] in SAFE_METHODS else None
+        if first is not None:
+            first.begin()
         try:
             await self.app(scope, receive, send)
         except asyncio.CancelledError:
@@ -466,6 +475,9 @@ class Boundary:
             got = f" after {receive.size:,} bytes" if isinstance(receive, _Counted) else ""
             log.warning("%s %s: the client went away%s, before its request was complete; nothing was kept",
                         scope.get("method", "GET"), scope.get("path", ""), got)
+        finally:
+            if first is not None:
+                first.end()
 
     def check_request(self, scope: Scope) -> None:
         host = header(scope, b"host")

@@ -26,8 +26,6 @@ from fabwire import __version__
 from fabwire.errors import FabwireError, InputError, excerpt
 
 if TYPE_CHECKING:
-    from sortedcontainers import SortedList
-
     from fabwire.agent.session import JobClaim, Session
 
 Kind = Literal["xyz", "lineus", "mmu"]
@@ -157,11 +155,10 @@ class Agent:
     def __init__(self, *, state_dir: Path | None = None, retention_s: float = 24 * 3600.0,
                  max_upload_bytes: int = 64 * 1024 * 1024, backoff: tuple[float, float] = (0.5, 30.0),
                  first_attempt_s: float = 10.0) -> None:
-        from sortedcontainers import SortedList
-
         from fabwire.agent.history import History
         from fabwire.agent.jobs import JobStore
         from fabwire.agent.library import Library
+        from fabwire.agent.session import RequestsFirst, Tally
 
         self.state_dir = state_dir
         self.backoff = backoff
@@ -171,9 +168,10 @@ class Agent:
         self.library = Library(self, state_dir / "library" if state_dir else None)
         """Uploads kept per machine, their previews and the print queues (see `fabwire.agent.library`)."""
         self._sessions: dict[str, Session] = {}
-        self._lags: SortedList = SortedList()
-        """The recent poll lags of every machine monitored, in order (see `PollStats`): health reads its p99
-        without sorting a bench's lags for each request."""
+        self.requests = RequestsFirst()
+        """The API marks the requests it is answering; the polls step aside for them."""
+        self._tally = Tally()
+        """Health's counts over every machine monitored, kept as they change (see `PollStats`)."""
         self._subscribers: set[Subscription] = set()
         self._started = False
         self._added = 0
@@ -251,7 +249,7 @@ class Agent:
         self._added += 1
         await session.start()
         self._sessions[session.info.id] = session
-        session.stats.join(self._lags)
+        session.stats.join(self._tally)
         await self.history.remember_device(session.info)
         return session.info
 
@@ -286,11 +284,12 @@ class Agent:
         return await self.session(job["device"]).cancel_job(job_id, confirm=confirm)
 
     def health(self) -> dict[str, Any]:
-        """Counts and poll punctuality (a poll is late when it starts over half an interval after its slot)."""
-        sessions = list(self._sessions.values())
-        lags = self._lags
-        return {"version": __version__, "devices": len(sessions), "online": sum(s.online for s in sessions),
-                "polls": sum(s.stats.polls for s in sessions), "late_polls": sum(s.stats.late for s in sessions),
+        """Counts and poll punctuality (a poll is late when it starts over half an interval after its slot), read
+        from the agent's tally: the same work for one machine or a thousand."""
+        tally = self._tally
+        lags = tally.lags
+        return {"version": __version__, "devices": len(self._sessions), "online": tally.online,
+                "polls": tally.polls, "late_polls": tally.late,
                 "poll_lag_p99_s": lags[int(0.99 * (len(lags) - 1))] if lags else None,
                 "poll_lag_max_s": lags[-1] if lags else None, "subscribers": len(self._subscribers)}
 

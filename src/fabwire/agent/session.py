@@ -44,6 +44,9 @@ quarter, 50 ms by a third more). A poll starts at most this much after its slot;
 number of steps, the slots themselves lie on the grid and a poll starts on time."""
 GRID_SLACK = 1e-6
 """Steps a slot may lie past a grid point and still count as on it (a float's rounding)."""
+STEP_ASIDE_S = 0.02
+"""How long the links' thread waits for the agent's requests in flight before it goes on with its polls; it then
+works at least as long before it steps aside again, so a flood of requests slows the polls to half speed at most."""
 STOP_WAIT_S = 30.0
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
@@ -154,38 +157,105 @@ def _release_links(agent: Agent) -> None:
             links.close()
 
 
+class RequestsFirst:
+    """The agent's requests before its polls. Both loops share one interpreter lock: while a request is answered on
+    the agent's loop (`serving`), a polling links' thread would take the lock from it at every turn of its handling,
+    and under load each hand-over costs a wait for the scheduler. So at its next poll the links' thread steps aside
+    (`step_aside`, waiting without the lock) until the requests in flight are answered, STEP_ASIDE_S at most: a
+    request is answered alike whether a thousand machines are polled or ten. One per agent."""
+
+    def __init__(self) -> None:
+        self._idle = threading.Event()
+        self._idle.set()
+        self._in_flight = 0
+        self._resume_at = 0.0
+        """When the links' thread may step aside again (its own clock, read on that thread only)."""
+
+    def begin(self) -> None:
+        """On the agent's loop: a request is being answered."""
+        self._in_flight += 1
+        self._idle.clear()
+
+    def end(self) -> None:
+        """On the agent's loop: that request is answered."""
+        self._in_flight -= 1
+        if self._in_flight <= 0:
+            self._in_flight = 0
+            self._idle.set()
+
+    def step_aside(self) -> None:
+        """On the links' thread, between polls: while requests are in flight, wait for them (at most STEP_ASIDE_S,
+        and not again within STEP_ASIDE_S of the last wait's end)."""
+        if self._idle.is_set():
+            return
+        if time.monotonic() < self._resume_at:
+            return
+        self._idle.wait(STEP_ASIDE_S)
+        self._resume_at = time.monotonic() + STEP_ASIDE_S
+
+
+class Tally:
+    """What the agent's health reports of every machine monitored, kept up to date as each poll and each change of
+    link happens: a request reads it without visiting a session, so its cost does not grow with the fleet."""
+
+    def __init__(self) -> None:
+        self.lags: SortedList = SortedList()
+        """The recent poll lags of every machine, in order: health reads their p99 without sorting them."""
+        self.polls = 0
+        self.late = 0
+        self.online = 0
+
+
 class PollStats:
-    """How punctual the polls are: a poll is late when it starts more than half an interval after its slot."""
+    """A machine's link and how punctual its polls are: a poll is late when it starts more than half an interval
+    after its slot. Counted in the agent's `Tally` too once joined."""
 
     def __init__(self) -> None:
         self.polls = 0
         self.late = 0
+        self.online = False
         self.lags: deque[float] = deque(maxlen=600)
         """The last ten minutes' lags at 1 Hz."""
-        self._window: SortedList | None = None
+        self._tally: Tally | None = None
 
     def record(self, lag: float, interval: float) -> None:
+        late = lag > interval / 2
         self.polls += 1
-        if lag > interval / 2:
-            self.late += 1
+        self.late += late
         lags = self.lags
-        if self._window is not None:
+        tally = self._tally
+        if tally is not None:
+            tally.polls += 1
+            tally.late += late
             if len(lags) == lags.maxlen:
-                self._window.remove(lags[0])
-            self._window.add(lag)
+                tally.lags.remove(lags[0])
+            tally.lags.add(lag)
         lags.append(lag)
 
-    def join(self, window: SortedList) -> None:
-        """Keep `window` (the agent's, for every machine) holding this machine's lags too, in order."""
-        window.update(self.lags)
-        self._window = window
+    def set_online(self, online: bool) -> None:
+        if online != self.online:
+            self.online = online
+            if self._tally is not None:
+                self._tally.online += 1 if online else -1
+
+    def join(self, tally: Tally) -> None:
+        """Count this machine in `tally` (the agent's, for every machine) from now on."""
+        self._count(tally, 1)
+        tally.lags.update(self.lags)
+        self._tally = tally
 
     def leave(self) -> None:
-        """Take this machine's lags out of the window it joined."""
-        window, self._window = self._window, None
-        if window is not None:
+        """Take this machine out of the tally it joined."""
+        tally, self._tally = self._tally, None
+        if tally is not None:
+            self._count(tally, -1)
             for lag in self.lags:
-                window.remove(lag)
+                tally.lags.remove(lag)
+
+    def _count(self, tally: Tally, sign: int) -> None:
+        tally.polls += sign * self.polls
+        tally.late += sign * self.late
+        tally.online += sign * self.online
 
 
 class Session:
@@ -198,7 +268,6 @@ class Session:
         self._links = _links_of(agent)
         self.driver = make_driver(spec, self._device_event_from_link)
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
-        self.online = False
         self.stats = PollStats()
         self.state: dict[str, Any] = {}
         self.drawing: dict[str, list[list[tuple[float, float]]]] = {"preview": [], "ink": []}
@@ -215,6 +284,15 @@ class Session:
         self._reason = "not connected yet"
         self._stopping = False
         self._cancelling = False
+
+    @property
+    def online(self) -> bool:
+        """Whether the link is up (the agent's tally counts it)."""
+        return self.stats.online
+
+    @online.setter
+    def online(self, online: bool) -> None:
+        self.stats.set_online(online)
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -306,6 +384,7 @@ class Session:
         while True:
             lag = loop.time() - slot
             status, summary = await self.driver.poll()
+            self.agent.requests.step_aside()
             self._links.deliver(self._polled, status, summary, time.time(), lag, interval)
             slot = next_slot(slot, interval)
             now = loop.time()
