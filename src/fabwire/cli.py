@@ -30,7 +30,7 @@ from fabwire.console import MAX_WIDTH, help_width
 from fabwire.devices import KINDS
 from fabwire.errors import EXIT_INTERRUPTED, ConfigWarning, FabwireError, InputError, RemoteProtocolError
 from fabwire.extras import missing_extra
-from fabwire.simserve import SERVE_OPTIONS
+from fabwire.simoptions import SERVE_OPTIONS
 
 if TYPE_CHECKING:
     from fabwire.transport.tap import TraceRecord

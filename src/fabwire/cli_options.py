@@ -78,7 +78,7 @@ class App(msgspec.Struct):
     """Link options typed on the command line at a group's level, by settings name: (option, the group's path);
     the command finally run refuses those it does not use."""
     server_options: dict[str, Any] = msgspec.field(default_factory=dict)
-    """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simserve`."""
+    """A simulator's serving options (connection limit, idle timeout, trace), see `fabwire.simoptions`."""
 
     @property
     def json(self) -> bool:

@@ -163,7 +163,7 @@ def serve_arguments(listen: str, state_dir: str, config: Path | None, devices: S
                     mqtt_discovery: str = "device") -> tuple[str, ...]:
     """The `fabwire serve` options for the unit, each checked as `serve` checks it."""
     from fabwire.agent.command import DEFAULT_PORT, parse_device_option
-    from fabwire.simserve import parse_listen
+    from fabwire.simoptions import parse_listen
 
     parse_listen(listen, DEFAULT_PORT)
     args = ["--listen", listen, "--state-dir", state_dir]
@@ -272,7 +272,7 @@ def install(user_mode: bool, listen: str, config: Path | None, devices: tuple[st
 def _next_steps(user_mode: bool, account: str, listen: str) -> str:
     from fabwire.agent.auth import TOKEN_FILE, is_loopback
     from fabwire.agent.command import DEFAULT_PORT
-    from fabwire.simserve import parse_listen
+    from fabwire.simoptions import parse_listen
 
     ctl = "systemctl --user" if user_mode else "sudo systemctl"
     journal = "journalctl --user -u fabwire" if user_mode else "sudo journalctl -u fabwire"

@@ -1,5 +1,5 @@
 """The lines `--help` and completion show for commands not loaded yet are each command's own, for every lazy group
-in the tree; and what `--help`, completion and a status query import, as a table of command lines."""
+in the tree; and what `--help`, completion, a status query and the file commands import, as a table of command lines."""
 
 from __future__ import annotations
 
@@ -78,6 +78,10 @@ HEAVY = {"numpy", "rich", "serialx", "termios", "cryptography", "svgelements", "
 XYZ_PRINTER_SIDE = {"fabwire.xyz.device", "fabwire.xyz.printer", "fabwire.xyz.sim", "fabwire.xyz.threew",
                     "fabwire.xyz.gcodeinfo", "fabwire.xyz.intake", "fabwire.xyz.threew_cli"}
 NOT_XYZ = {"fabwire.lineus", "fabwire.mmu", "fabwire.agent", "fabwire.mqtt", "fabwire.demo", "fabwire.vpype"}
+DEVICE_SIDE = {"asyncio", "ssl", "concurrent.futures", "socket", "fabwire.transport", "fabwire.simserve",
+               "fabwire.xyz.client", "fabwire.xyz.live", "fabwire.xyz.maintenance", "fabwire.xyz.sim",
+               "fabwire.xyz.device", "fabwire.xyz.printer", "fabwire.xyz.discovery", "fabwire.sync"}
+"""The event loop and what reaches a device (links, client, live view, simulator): a command on files loads none."""
 STATUS_SPARES = {"random", "click.shell_completion", "concurrent.futures.thread"}
 """Loaded only where needed: fault injection, completion, a thread pool."""
 DEVICES = ('[devices.office]\nkind = "xyz"\nurl = "10.0.0.5"\n[devices.bench]\nkind = "mmu"\nurl = "/dev/ttyACM0"\n'
@@ -106,6 +110,11 @@ IMPORTS: list[tuple[str, str, set[str]]] = [
     ("status", "xyz -d {address} print {job} --no-wait",
      NOT_XYZ | {"numpy", "rich", "fabwire.xyz.gcodeinfo", "fabwire.xyz.printer", "fabwire.xyz.sim",
                 "fabwire.xyz.slicerfigures"}),
+    # the file commands: G-code to .3w and back, and what a file holds
+    ("file", "xyz convert {gcode} {out}.3w --model miniMaker", NOT_XYZ | DEVICE_SIDE),
+    ("file", "xyz convert {job} {out}.gcode", NOT_XYZ | DEVICE_SIDE),
+    ("file", "xyz info {gcode}", NOT_XYZ | DEVICE_SIDE),
+    ("file", "xyz info --json {job}", NOT_XYZ | DEVICE_SIDE),
 ]
 
 
@@ -113,7 +122,8 @@ def imported(how: str, line: str, config: Path, address: str) -> tuple[int, str,
     """Run one command line in a fresh interpreter: its exit code, output and every module it imported."""
     env = cli_env()
     env["FABWIRE_CONFIG"] = str(config)
-    argv = line.format(address=address, job=config.with_name("part.3w")).split()
+    argv = line.format(address=address, job=config.with_name("part.3w"), gcode=config.with_name("part.gcode"),
+                       out=config.with_name("out")).split()
     if how == "complete":
         env.update(_FABWIRE_COMPLETE="bash_complete", COMP_WORDS=line,
                    COMP_CWORD=str(len(argv) - (0 if line.endswith(" ") else 1)))
@@ -131,7 +141,7 @@ def test_a_command_imports_only_what_it_uses(how: str, line: str, forbidden: set
                                              simulator: SimulatorStarter) -> None:
     config = tmp_path / "devices.toml"
     config.write_text(DEVICES)
-    if "{job}" in line:
+    if "{job}" in line or "{gcode}" in line:
         gcode = tmp_path / "part.gcode"
         gcode.write_text(";FLAVOR:Marlin\nG28\nG1 X10 Y10 E1 F1800\nG1 X20 Y10 E2\n")
         convert_gcode_file(gcode, tmp_path / "part.3w", find_model("dv1MW0A000"))

@@ -11,7 +11,8 @@ import pytest
 from rich.console import Console
 
 from fabwire.units import ABSENT
-from fabwire.xyz.cli import job_line, render_status
+from fabwire.xyz.cli import render_status
+from fabwire.xyz.live import job_line
 from fabwire.xyz.status import Status
 
 DATA = Path(__file__).parent / "data"

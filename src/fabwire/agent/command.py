@@ -25,7 +25,7 @@ from fabwire.agent.core import KINDS, Agent, DeviceSpec
 from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import FabwireError, InputError
 from fabwire.mqtt.options import BrokerURL
-from fabwire.simserve import ListenAddress, parse_listen
+from fabwire.simoptions import ListenAddress, parse_listen
 
 DEFAULT_PORT = 8765
 DEMO_DEVICES = (("printer", "xyz"), ("line-us", "lineus"), ("mmu", "mmu"))

@@ -9,8 +9,9 @@ from rich.progress import BarColumn, Progress, TaskID, TextColumn
 from fabwire.demo.context import DemoContext
 from fabwire.errors import DeviceError
 from fabwire.samples import SAMPLE_GCODE, sample_path
-from fabwire.xyz.cli import job_line, render_status
+from fabwire.xyz.cli import render_status
 from fabwire.xyz.client import XYZPrinter
+from fabwire.xyz.live import job_line
 from fabwire.xyz.status import PRINT_DONE, Status
 from fabwire.xyz.threew import convert_gcode_file
 from fabwire.xyz.threew_cli import metadata_summary

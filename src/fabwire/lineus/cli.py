@@ -374,7 +374,8 @@ def sim_lineus(app: App, listen: tuple[str, ...], speed: float, version: str, na
     """A Line-us on TCP that the official clients cannot tell from the robot."""
     from fabwire.lineus.discovery import Advertiser
     from fabwire.lineus.sim import LineUsSim, SimOptions, farewell, resolve_version
-    from fabwire.simserve import parse_listen, serve
+    from fabwire.simoptions import parse_listen
+    from fabwire.simserve import serve
 
     if record is not None:
         _check_record_path(record)

@@ -51,7 +51,8 @@ from fabwire.mmu.host import (
     StatusUpdated,
 )
 from fabwire.mmu.units import DEFAULT_FLOAT, FLOAT_FORMATS
-from fabwire.simserve import parse_listen, serve, server_options
+from fabwire.simoptions import parse_listen, server_options
+from fabwire.simserve import serve
 from fabwire.transport.tcp import serve_tcp
 
 F = TypeVar("F", bound=Callable[..., Any])

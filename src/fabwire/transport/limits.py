@@ -19,12 +19,11 @@ from collections.abc import Callable
 import msgspec
 
 from fabwire.errors import LinkClosed, LinkError
+from fabwire.simoptions import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CONNECTIONS
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 
 log = logging.getLogger("fabwire.sim")
 
-DEFAULT_MAX_CONNECTIONS = 32
-DEFAULT_IDLE_TIMEOUT = 600.0
 BUSY_FOR = 1.0
 """A connection with traffic in the last second is busy: it is never closed to make room."""
 

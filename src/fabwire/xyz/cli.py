@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import math
 import sys
@@ -28,13 +27,10 @@ from fabwire.cli_support import (
 from fabwire.devices import XYZ
 from fabwire.errors import FollowInterrupted, InputError, LinkError, LinkTimeout
 from fabwire.files import read_bounded
-from fabwire.simserve import server_options
+from fabwire.simoptions import server_options
 from fabwire.units import ABSENT, known
 from fabwire.xyz import userinput
-from fabwire.xyz.client import XYZPrinter
 from fabwire.xyz.commands import JOG_LIMIT
-from fabwire.xyz.live import JobKeys, JobView, now_iso
-from fabwire.xyz.live import job_line as job_line  # also the demo's
 from fabwire.xyz.models import PrinterModel, find_model
 from fabwire.xyz.protocol import Link
 from fabwire.xyz.status import Status
@@ -42,6 +38,11 @@ from fabwire.xyz.status import Status
 if TYPE_CHECKING:
     from rich.console import Console
     from rich.panel import Panel
+
+    from fabwire.xyz.client import XYZPrinter
+
+# The event loop, the client and the live view are imported by the commands that reach a printer: `xyz convert` and
+# `xyz info` load this group too, and work on files alone.
 
 T = TypeVar("T")
 
@@ -56,6 +57,10 @@ def xyz() -> None:
 
 
 def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[T]]) -> T:
+    import asyncio
+
+    from fabwire.xyz.client import XYZPrinter
+
     async def main() -> T:
         async with dctx.open(XYZPrinter) as printer:
             return await action(printer)
@@ -65,6 +70,8 @@ def _with_printer(dctx: DeviceContext, action: Callable[[XYZPrinter], Awaitable[
 
 async def _ask(message: str) -> None:
     """Wait for Enter on stdin; end of input means nobody is there to confirm."""
+    import asyncio
+
     sys.stderr.write(f"{message} [press Enter] ")
     sys.stderr.flush()
     loop = asyncio.get_running_loop()
@@ -171,6 +178,8 @@ RECONNECT_MOST = 30.0
 
 def _watch(dctx: DeviceContext, interval: float, count: int | None) -> None:
     """Poll until `count` statuses were shown; a lost link is reopened with backoff once the printer was reached."""
+    from fabwire.xyz.live import JobView
+
     left = [count]
     reached = [False]
     delay = RECONNECT_FIRST
@@ -226,8 +235,9 @@ def print_cmd(dctx: DeviceContext, file: Path, no_wait: bool, model_text: str | 
 
 def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: PrinterModel | None,
            upload_name: str | None, save_to_sd: bool, force: bool = False) -> None:
-    out = dctx.output
+    from fabwire.xyz.live import JobKeys, JobView, now_iso
 
+    out = dctx.output
     started = [False]
 
     async def run(printer: XYZPrinter) -> Status:
@@ -293,6 +303,8 @@ def jog(dctx: DeviceContext, axis: str, distance: float) -> None:
 
 
 def _progress_note(dctx: DeviceContext) -> Callable[[Status], None]:
+    from fabwire.xyz.live import job_line
+
     last = [""]
 
     def note(st: Status) -> None:
@@ -525,6 +537,8 @@ def firmware(dctx: DeviceContext, file: Path, yes: bool) -> None:
 def discover(app: App, hosts: tuple[str, ...], subnet: str | None, port: int, probe_timeout: float,
              concurrency: int) -> None:
     """List XYZprinting USB serial ports, and with --host or --subnet the printers answering on TCP 9100."""
+    import asyncio
+
     import msgspec
 
     from fabwire.transport.urls import parse_url
@@ -577,6 +591,8 @@ def sim_xyz(app: App, listen: tuple[str, ...], use_pty: bool, link: Path | None,
             faults: tuple[str, ...], state_file: Path | None, store: Path | None, strict: bool,
             link_style: str, no_control: bool, max_upload_mb: int) -> None:
     """A da Vinci printer on TCP 9100 and/or a raw pty that real clients cannot tell from the machine."""
+    import asyncio
+
     from fabwire.simserve import serve
     from fabwire.xyz.sim import XYZSimulator
 
