@@ -417,7 +417,7 @@ class MachineName(Command):
 
     def __post_init__(self) -> None:
         if self.name is not None and (not isinstance(self.name, str) or not NAME_RE.fullmatch(self.name)):
-            raise LocalProtocolError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {self.name!r}")
+            raise LocalProtocolError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {excerpt(self.name, 40)}")
 
     def params(self) -> list[str]:
         return [f"P{self.name}"] if self.name is not None else []
