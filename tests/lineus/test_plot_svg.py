@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import svgelements as se
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
@@ -492,3 +492,12 @@ def test_many_short_paths_under_their_own_transforms_read_as_one_by_one() -> Non
         rotate = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
         user = np.array([[i, 0], [i, 10], [i + 2, 10], [i + 2, i % 7], [i, 0]], dtype=float)
         assert np.allclose(line, (user - 50) @ rotate.T + 150)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.tuples(st.sampled_from(["a", "html", "é", "svg-"]), st.integers(1, 20_000)).map(lambda t: t[0] * t[1]))
+@example("a" * 10_000)
+def test_a_root_that_is_not_svg_is_named_in_one_short_line(tag: str) -> None:
+    with pytest.raises(InputError, match="not <svg>") as caught:
+        parse_svg(f"<{tag}/>".encode())
+    assert len(str(caught.value)) <= 160

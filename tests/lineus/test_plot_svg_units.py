@@ -10,12 +10,20 @@ import shutil
 from collections.abc import Iterator
 
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 from playwright.sync_api import Page, sync_playwright
 
 from fabwire.lineus.plot import parse_svg
-from fabwire.lineus.plot.svgunits import ABSOLUTE_UNITS, FONT_METRICS, Font, font_metrics, length, line_height
+from fabwire.lineus.plot.svgunits import (
+    ABSOLUTE_UNITS,
+    FONT_METRICS,
+    Font,
+    css_transform,
+    font_metrics,
+    length,
+    line_height,
+)
 
 FONT_UNITS = ("ex", "ch", "cap", "lh", "ic")
 VIEWPORT_UNITS = {"vw": 3.0, "vi": 3.0, "vh": 1.0, "vb": 1.0, "vmin": 1.0, "vmax": 3.0}
@@ -161,3 +169,17 @@ def test_a_clip_path_transform_is_in_user_space_outside_bounding_box_units(trans
     points = [p for line in drawing.lines for p in line.tolist()]
     xs, ys = [p[0] for p in points], [p[1] for p in points]
     assert (min(xs), min(ys), max(xs), max(ys)) == pytest.approx(box)
+
+
+@given(st.sampled_from(["rotate", "translate", "scale", "skewX", "matrix"]),
+       st.tuples(st.text(alphabet="1a.e-xpdgt ,", min_size=1, max_size=6), st.integers(1, 3000)).map(
+           lambda t: t[0] * t[1]))
+@example("rotate", "a" * 5000)
+@example("translate", "1px" * 2000)
+def test_a_css_transform_in_error_is_told_in_one_short_line(name: str, args: str) -> None:
+    message = ""
+    try:
+        css_transform(f"{name}({args})", (100.0, 100.0))
+    except ValueError as e:
+        message = str(e)
+    assert len(message) <= 120

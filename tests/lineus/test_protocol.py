@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import LocalProtocolError, RemoteProtocolError
@@ -330,3 +330,38 @@ def test_position_reply_bytes_match_the_reply_codec() -> None:
     assert p.encode_position(1000, -0.001, 0, True) == b"ok X:1000.00 Y:0.00 Z:0.00\r\n\x00"
     assert p.encode_position(1200.4, 0, 1000, False) == p.Reply(
         True, (("X", "1200"), ("Y", "0"), ("Z", "1000"))).encode()
+
+
+LONG_TOKENS = st.tuples(st.text(alphabet="ok:GMXYZ\"ab \x01é", max_size=8), st.integers(1, 60_000)).map(
+    lambda t: t[0] * (t[1] // max(1, len(t[0]))))
+"""Text up to a whole reply buffer long, built from a few characters repeated."""
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(LONG_TOKENS, max_size=3).map(" ".join))
+@example("ok " + "x" * 60_000)
+@example("y" * 60_000)
+@example("ok a:" + "\x01" * 20_000)
+def test_a_bad_device_message_is_refused_in_one_short_line(text: str) -> None:
+    message = ""
+    try:
+        p.parse_message(text)
+    except RemoteProtocolError as e:
+        message = str(e)
+    assert len(message) <= 120
+    assert "\n" not in message
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(LONG_TOKENS, max_size=3).map(" ".join))
+@example("G01 X" + "9" * 1000)
+@example("Q" * 1000)
+@example("G01 " + "X" * 1000)
+def test_a_bad_command_line_is_refused_in_one_short_line(text: str) -> None:
+    message = ""
+    try:
+        p.parse_command(text[: p.MAX_LINE])
+    except (RemoteProtocolError, LocalProtocolError) as e:
+        message = str(e)
+    assert len(message) <= 120
+    assert "\n" not in message

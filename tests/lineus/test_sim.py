@@ -7,6 +7,8 @@ import math
 import time
 
 import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
 
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus.sim import SimOptions, resolve_version
@@ -491,3 +493,31 @@ async def test_stored_drawings_cannot_outgrow_the_flash(lineus_sim, raw_peer) ->
     assert await peer.ask(b"G01 X1200 Y0 Z0\x00") == b"ok\r\n\x00"
     assert (await peer.ask(b"M29\x00")).startswith(b"ok")
     assert running.sim.files[1] == "G01 X1200 Y0 Z0\n"
+
+
+LONG_JUNK = st.tuples(st.text(alphabet='x9."é \x01', min_size=1, max_size=4), st.integers(1, 5000)).map(
+    lambda t: t[0] * t[1])
+
+
+@given(LONG_JUNK)
+@example("x" * 5000)
+def test_a_firmware_version_that_is_not_one_is_refused_in_one_short_line(text: str) -> None:
+    message = ""
+    try:
+        resolve_version(text)
+    except ValueError as e:
+        message = str(e)
+    assert len(message) <= 120
+
+
+@given(LONG_JUNK)
+@example("x" * 5000)
+@example('"' * 5000)
+def test_a_machine_name_or_serial_that_is_not_one_is_refused_in_one_short_line(text: str) -> None:
+    for options in ({"name": text}, {"serial": text}):
+        message = ""
+        try:
+            SimOptions(**options)
+        except ValueError as e:
+            message = str(e)
+        assert len(message) <= 120

@@ -77,7 +77,7 @@ class Position:
         try:
             return cls(float(fields["X"]), float(fields["Y"]), float(fields["Z"]))
         except (KeyError, ValueError):
-            raise RemoteProtocolError(f"reply {reply.text()!r} does not carry X, Y and Z") from None
+            raise RemoteProtocolError(f"reply {excerpt(reply.text(), 40)} does not carry X, Y and Z") from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +101,7 @@ def parse_file_list(text: str) -> list[StoredDrawing]:
         path, sep, size = entry.rpartition("-")
         name = path.removeprefix("/").removesuffix(".txt")
         if not sep or not size.isdigit():
-            raise RemoteProtocolError(f"file entry {entry!r} is not /NNNNNNN.txt-SIZE")
+            raise RemoteProtocolError(f"file entry {excerpt(entry, 40)} is not /NNNNNNN.txt-SIZE")
         if name.isdigit() and path.endswith(".txt"):
             out.append(StoredDrawing(int(name), int(size), path))
     return out
@@ -166,7 +166,8 @@ class LineUs:
                     if message is None:
                         continue
                     if not isinstance(message, p.Hello):
-                        raise RemoteProtocolError(f"{where} is not a Line-us: first message {message.text()!r}")
+                        raise RemoteProtocolError(
+                            f"{where} is not a Line-us: first message {excerpt(message.text(), 40)}")
                     break
         except TimeoutError:
             await transport.close()
@@ -246,7 +247,7 @@ class LineUs:
                     self._fail(gone)  # the simulator's connection limit closed us: its reason, not a reply's
                     return
                 if not self._waiting:
-                    raise RemoteProtocolError(f"unexpected message from the Line-us: {message.text()!r}")
+                    raise RemoteProtocolError(f"unexpected message from the Line-us: {excerpt(message.text(), 40)}")
                 _, future = self._waiting.popleft()
                 if not future.done():
                     if isinstance(message, p.Hello):
@@ -486,7 +487,7 @@ class LineUs:
         try:
             return {key: float(value) for key, value in reply.fields}
         except ValueError:
-            raise RemoteProtocolError(f"servo angles {reply.text()!r} are not numbers") from None
+            raise RemoteProtocolError(f"servo angles {excerpt(reply.text(), 40)} are not numbers") from None
 
     async def set_origin(self, x: float = 0.0, y: float = 0.0, scale: float = 1.0) -> None:
         """G54 for this connection: machine = drawing × scale + (x, y)."""
@@ -520,14 +521,14 @@ class LineUs:
         try:
             return {key: int(value) for key, value in reply.fields}
         except ValueError:
-            raise RemoteProtocolError(f"storage figures {reply.text()!r} are not numbers") from None
+            raise RemoteProtocolError(f"storage figures {excerpt(reply.text(), 40)} are not numbers") from None
 
     async def zmap(self) -> tuple[float, ...]:
         reply = await self.request(p.ZMap())
         try:
             return tuple(float(v) for v in (reply.get("ZMap") or "").split(";") if v.strip())
         except ValueError:
-            raise RemoteProtocolError(f"Z map {reply.text()!r} is not four numbers") from None
+            raise RemoteProtocolError(f"Z map {excerpt(reply.text(), 40)} is not four numbers") from None
 
     async def set_zmap(self, corners: tuple[float, float, float, float] | None) -> None:
         """G31 with four corner offsets (TL, TR, BR, BL), or None to clear the map."""

@@ -11,7 +11,7 @@ import re
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
-from fabwire.errors import LocalProtocolError
+from fabwire.errors import LocalProtocolError, excerpt
 
 REPLY_TERMINATOR = b"\r\n\x00"
 COMMAND_TERMINATOR = b"\x00"
@@ -62,10 +62,10 @@ _NUMBER_RE = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)")
 def parse_number(text: str, what: str) -> float:
     """A decimal number as the device reads it; exponents, NaN and infinities are refused."""
     if not _NUMBER_RE.fullmatch(text):
-        raise LocalProtocolError(f"{what}: {text!r} is not a number")
+        raise LocalProtocolError(f"{what}: {excerpt(text, 40)} is not a number")
     value = float(text)
     if abs(value) > COORD_LIMIT:
-        raise LocalProtocolError(f"{what}: {text} is out of range")
+        raise LocalProtocolError(f"{what}: {excerpt(text, 40)[1:-1]} is out of range")
     return value + 0.0
 
 
@@ -91,7 +91,7 @@ def quote_value(value: str, always: bool = False) -> str:
     """A reply or parameter value, double-quoted when it holds blanks or is empty (or `always`)."""
     if always or value == "" or _NEEDS_QUOTES.search(value):
         if '"' in value:
-            raise LocalProtocolError(f"a value cannot contain a double quote: {value!r}")
+            raise LocalProtocolError(f"a value cannot contain a double quote: {excerpt(value, 40)}")
         return f'"{value}"'
     return value
 
@@ -417,7 +417,7 @@ class MachineName(Command):
 
     def __post_init__(self) -> None:
         if self.name is not None and (not isinstance(self.name, str) or not NAME_RE.fullmatch(self.name)):
-            raise LocalProtocolError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {self.name!r}")
+            raise LocalProtocolError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {excerpt(self.name, 40)}")
 
     def params(self) -> list[str]:
         return [f"P{self.name}"] if self.name is not None else []

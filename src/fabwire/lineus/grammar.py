@@ -8,7 +8,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from fabwire.errors import LocalProtocolError, RemoteProtocolError
+from fabwire.errors import LocalProtocolError, RemoteProtocolError, excerpt
 from fabwire.lineus.commands import (
     COORD_LIMIT,
     Capabilities,
@@ -79,7 +79,7 @@ _CODE_RE = re.compile(r"([GM])(\d{1,3})")
 def _normalise_code(word: str) -> str:
     match = _CODE_RE.fullmatch(word.upper())
     if match is None:
-        raise RemoteProtocolError(f"not a command: {word!r}")
+        raise RemoteProtocolError(f"not a command: {excerpt(word, 40)}")
     letter, digits = match.groups()
     number = int(digits)
     return f"{letter}{number:02d}" if letter == "G" else f"M{number}"
@@ -102,7 +102,7 @@ class _Params:
         if raw is None:
             return None
         if not re.fullmatch(r"[+-]?\d{1,6}", raw):
-            raise LocalProtocolError(f"{self.code} {letter}: {raw!r} is not a whole number")
+            raise LocalProtocolError(f"{self.code} {letter}: {excerpt(raw, 40)} is not a whole number")
         return int(raw)
 
     def finish(self) -> None:
@@ -170,7 +170,7 @@ def _parse(line: str) -> Command:
     for token in tokens[1:]:
         letter, value = token[0].upper(), token[1:]
         if not letter.isalpha():
-            raise RemoteProtocolError(f"{code}: bad parameter {token!r}")
+            raise RemoteProtocolError(f"{code}: bad parameter {excerpt(token, 40)}")
         if letter in p.values or letter in flags:
             raise RemoteProtocolError(f"{code}: parameter {letter} given twice")
         if value:

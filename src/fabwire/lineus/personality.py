@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
+from fabwire.errors import excerpt
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
 
@@ -41,7 +42,7 @@ def resolve_version(text: str) -> str:
         return VERSIONS["3"]
     match = _VERSION.match(short)
     if match is None or '"' in short or not short.isascii() or not short.isprintable():
-        raise ValueError(f"a firmware version starts with its number (1.0.1, 3.2.0 …), got {text!r}")
+        raise ValueError(f"a firmware version starts with its number (1.0.1, 3.2.0 …), got {excerpt(text, 40)}")
     number = tuple(int(part) for part in match.groups())
     if not RELEASED[0] <= number <= RELEASED[1]:
         raise ValueError(f"Line-us firmware {match.group(0)} was never released: the releases run from 1.0.0 to "
@@ -77,9 +78,9 @@ class SimOptions:
         if self.reply not in ("complete", "accept"):
             raise ValueError("reply policy is 'complete' or 'accept'")
         if not p.NAME_RE.fullmatch(self.name):
-            raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {self.name!r}")
+            raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {excerpt(self.name, 40)}")
         if not self.serial.isascii() or not self.serial or any(c in self.serial for c in ' "'):
-            raise ValueError(f"bad serial {self.serial!r}")
+            raise ValueError(f"bad serial {excerpt(self.serial, 40)}")
 
     @property
     def firmware(self) -> tuple[int, ...]:

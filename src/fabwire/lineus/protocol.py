@@ -206,9 +206,9 @@ class Reply:
     def __post_init__(self) -> None:
         for key, value in self.fields:
             if not key or not key.isascii() or _BAD_KEY.search(key):
-                raise LocalProtocolError(f"bad reply key {key!r}")
+                raise LocalProtocolError(f"bad reply key {excerpt(key, 40)}")
             if not value.isascii() or _BAD_VALUE.search(value):
-                raise LocalProtocolError(f"bad reply value {value!r}")
+                raise LocalProtocolError(f"bad reply value {excerpt(value, 40)}")
 
     def get(self, key: str, default: str | None = None) -> str | None:
         for k, v in self.fields:
@@ -280,7 +280,7 @@ def parse_message(text: str) -> Message:
         raise RemoteProtocolError("empty reply")
     status = tokens[0]
     if status not in ("ok", "error", "hello"):
-        raise RemoteProtocolError(f"reply starts with {status!r}, not ok/error/hello")
+        raise RemoteProtocolError(f"reply starts with {excerpt(status, 40)}, not ok/error/hello")
     pairs: list[tuple[str, str]] = []
     # Unquoted text splits at whitespace (CR and LF included), so only a NUL could reach a token: one look at the
     # whole text answers for every token.
@@ -288,9 +288,9 @@ def parse_message(text: str) -> Message:
     for token in tokens[1:]:
         key, sep, value = token.partition(":")
         if not sep or not key:
-            raise RemoteProtocolError(f"reply field {token!r} is not KEY:value")
+            raise RemoteProtocolError(f"reply field {excerpt(token, 40)} is not KEY:value")
         if not checked and _FORBIDDEN.search(token):
-            raise RemoteProtocolError(f"reply field {token!r} holds a forbidden character")
+            raise RemoteProtocolError(f"reply field {excerpt(token, 40)} holds a forbidden character")
         pairs.append((key, value))
     if status != "hello":
         # Every field was checked above (ASCII text, no quote or terminator byte), which is all Reply checks.

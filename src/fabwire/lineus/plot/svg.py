@@ -288,7 +288,8 @@ def _read_root(source: str | Path | bytes) -> tuple[ET.Element, str]:
     except (RecursionError, ValueError, UnicodeError) as exc:
         raise InputError(f"{name}: not a readable SVG ({type(exc).__name__})") from exc
     if local(root.tag) != "svg":
-        raise InputError(f"{name}: not a readable SVG (the root element is <{local(root.tag)}>, not <svg>)")
+        tag = excerpt(local(root.tag), 40)[1:-1]
+        raise InputError(f"{name}: not a readable SVG (the root element is <{tag}>, not <svg>)")
     return root, name
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fabwire.errors import excerpt
 from fabwire.lineus.plot.geometry import FloatArray
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -284,7 +285,7 @@ def css_transform(value: str, viewport: tuple[float, float], font_size: float | 
 def _angle(text: str) -> float:
     match = _CSS_ARG.fullmatch(text)
     if match is None or match.group(2).lower() not in ANGLE_UNITS:
-        raise ValueError(f"{text!r} is not an angle")
+        raise ValueError(f"{excerpt(text, 40)} is not an angle")
     return float(match.group(1)) * ANGLE_UNITS[match.group(2).lower()]
 
 
@@ -292,7 +293,7 @@ def _css_function(name: str, args: list[str], viewport: tuple[float, float], fon
     def size(text: str, axis: int) -> float:
         result = length(text, viewport[axis], default=math.nan, font_size=font_size)
         if not math.isfinite(result):
-            raise ValueError(f"{text!r} is not a length")
+            raise ValueError(f"{excerpt(text, 40)} is not a length")
         return result
 
     if name in _CSS_TRANSLATE_AXES and 1 <= len(args) <= len(_CSS_TRANSLATE_AXES[name]):
@@ -319,7 +320,7 @@ def number_or_percent(text: str) -> float:
     """A plain number, or a percentage as a fraction; ValueError otherwise."""
     match = _CSS_ARG.fullmatch(text)
     if match is None or match.group(2) not in ("", "%"):
-        raise ValueError(f"{text!r} is not a number")
+        raise ValueError(f"{excerpt(text, 40)} is not a number")
     return float(match.group(1)) / (100.0 if match.group(2) else 1.0)
 
 
