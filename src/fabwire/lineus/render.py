@@ -90,7 +90,8 @@ def write_drawing(
         image = _png_image(strokes_l, travel_l, hidden_l, title=title, scale=scale)
         _write(out, lambda: image.save(out, format="PNG"))
     else:
-        raise InputError(f"{out}: preview files must end in .svg or .png, not {out.suffix or 'nothing'!r}")
+        raise InputError(f"{out}: preview files must end in .svg or .png (.gcode for the plan), "
+                         f"not {out.suffix or 'nothing'!r}")
     return out
 
 

@@ -292,6 +292,7 @@ class Bridge:
             async with asyncio.timeout(2.0):
                 await asyncio.gather(*(client.publish(topic, b"", qos=1, retain=True)
                                        for device in sorted(self.owned & self.passing)
+                                       if not self._claimed_by_others(device)
                                        for topic in (*self._retained_topics(device),
                                                      claim_topic(device, self.agent_id))))
         with contextlib.suppress(Exception):
@@ -529,12 +530,15 @@ class Bridge:
         return [*discovery_topics(device, self.discovery_mode),
                 *(device_topic(device, leaf) for leaf in ("state", "info", "availability"))]
 
+    def _claimed_by_others(self, device: str) -> bool:
+        """Whether another live agent claims `device` too (it then keeps the device's topics)."""
+        return any(a != self.agent_id and self.view.alive(a, time.monotonic())
+                   for a in self.view.devices.get(device, _NO_VIEW).claims)
+
     async def _remove(self, device: str) -> None:
         """Clean up a device this agent stopped monitoring: its discovery and retained topics go unless another
         online agent still claims it (that agent then takes over); this agent's claim goes in any case."""
-        others = [a for a in self.view.devices.get(device, _NO_VIEW).claims
-                  if a != self.agent_id and self.view.alive(a, time.monotonic())]
-        if not others:
+        if not self._claimed_by_others(device):
             for topic in self._retained_topics(device):
                 await self._publish(topic, b"")
         self.owned.discard(device)

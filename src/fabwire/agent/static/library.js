@@ -100,7 +100,7 @@ async function machineLibrary(device, listing) {
     el("div", {class: "queue"},
       el("label", {}, el("input", {type: "checkbox", checked: listing.queue_enabled, onchange: (event) =>
         libraryDo(event.target.checked ? "queue on" : "queue off", "PUT", `${base}/queue`,
-          {enabled: event.target.checked})}), " Queue prints sent while busy"),
+          {enabled: event.target.checked})}), ` Queue ${work.doing === "drawing" ? "drawings" : "prints"} sent while busy`),
       queue.length ? el("ol", {class: "queue-list"}, queueItems) : el("span", {class: "empty"}, " (queue empty)"),
       el("button", {type: "button", disabled: !queue.length || !listing.ready,
         onclick: () => libraryDo("starting the next file", "POST", `${base}/queue/next`)}, "Start next")));
