@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Iterator
 
 import pytest
@@ -15,6 +16,12 @@ from clitools import RunningSimulator, SimulatorStarter, start_simulator
 settings.register_profile("ci", derandomize=True, database=None)
 settings.register_profile("hunt", max_examples=2000, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+
+# A suite started in the background of a shell without job control (`make test &`, nohup) inherits an ignored
+# Ctrl-C, which every command it starts would inherit too: the tests of Ctrl-C need the user's default.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
