@@ -467,3 +467,30 @@ def test_text_from_standard_input_and_named_in_the_json(simulator, tmp_path: Pat
     too_long = run_cli("lineus", "-d", sim.url, "text", "-", input_text="x" * 70_000, env=env)
     assert too_long.returncode == 4
     assert too_long.stderr == "fabwire: error: the text on standard input is longer than 65536 characters\n"
+
+
+PREVIEW_OUTPUT_REFUSALS = [  # (output name, what the one-line refusal says): every output is checked first
+    ("q4.jpg", "a picture file ends in .svg or .png (or .gcode for the plan), not '.jpg'"),
+    ("q5.PDF", "not '.PDF'"),
+    ("p8", "and this name has no extension"),
+    ("nodir/q2.png", "there is no folder"),
+]
+
+
+@pytest.mark.parametrize(("name", "said"), PREVIEW_OUTPUT_REFUSALS)
+def test_preview_checks_every_output_before_writing_any(tmp_path: Path, name: str, said: str) -> None:
+    first = tmp_path / "first.png"
+    done = run_cli("lineus", "preview", str(DATA / "svg" / "arcs.svg"), "-o", str(first), "-o", str(tmp_path / name))
+    assert done.returncode == 4
+    assert said in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not first.exists()
+
+
+def test_preview_says_which_outputs_it_wrote_before_one_failed(tmp_path: Path) -> None:
+    first = tmp_path / "first.svg"
+    done = run_cli("lineus", "preview", str(DATA / "svg" / "arcs.svg"), "-o", str(first), "-o", "/proc/self/x.png")
+    assert done.returncode == 4
+    assert f"wrote {first}" in done.stderr
+    assert "cannot write /proc/self/x.png" in done.stderr
+    assert first.read_text().startswith("<")

@@ -344,8 +344,10 @@ def _check_record_path(record: Path) -> None:
     """Refuse (InputError, exit 4) a --record file the drawing could not be saved to when the simulator stops."""
     import tempfile
 
-    if record.suffix.lower() not in (".svg", ".png"):
-        raise InputError(f"--record {record}: the file must end in .svg or .png")
+    from fabwire.lineus.render import PICTURE_SUFFIXES, picture_suffix_problem
+
+    if record.suffix.lower() not in PICTURE_SUFFIXES:
+        raise InputError(f"--record {record}: {picture_suffix_problem(record)}")
     try:  # a real file in the same folder: existence, permissions, read-only mounts, all at once
         with tempfile.NamedTemporaryFile(dir=record.parent, prefix=f".{record.name}.", suffix=".probe"):
             pass

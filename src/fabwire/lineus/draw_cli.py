@@ -40,7 +40,7 @@ from fabwire.lineus.plot.intake import STDIN
 from fabwire.lineus.plot.optimize import MAX_TIME_BUDGET_S
 from fabwire.lineus.plot.svgtext import TEXT_MODES
 from fabwire.lineus.plot.text import DEFAULT_FONT
-from fabwire.lineus.render import DEFAULT_DPI, dpi_scale, write_drawing
+from fabwire.lineus.render import DEFAULT_DPI, PICTURE_SUFFIXES, dpi_scale, picture_suffix_problem, write_drawing
 
 if TYPE_CHECKING:
     from fabwire.lineus.client import LineUs
@@ -475,15 +475,24 @@ def preview(app: App, file: Path, outputs: tuple[Path, ...], fit: bool | None, m
 
     if json_output:
         app.output.json_mode = True
-    for out in outputs:
+    for out in outputs:  # every output is checked before the first is written
         if str(file) != "-" and same_file(out, file):
             raise InputError(f"{out} is the drawing being previewed: name another output file")
+        if out.suffix.lower() not in (*PICTURE_SUFFIXES, *GCODE_SUFFIXES):
+            raise InputError(f"{out}: {picture_suffix_problem(out, ' (or .gcode for the plan)')}")
+        if not out.parent.is_dir():
+            raise InputError(f"{out}: there is no folder {out.parent}")
     plan = plan_file(file, _options(fit, margin, rotate, clip, no_optimize, optimize_time, full_area))
-    for out in outputs:
-        if out.suffix.lower() in GCODE_SUFFIXES:
-            write_gcode(out, plan, pen_z=pen_z)
-        else:
-            write_drawing(out, plan.strokes, plan.travel(),
-                          title="standard input" if str(file) == "-" else file.name, hidden=plan.hidden,
-                          scale=dpi_scale(dpi))
+    for done, out in enumerate(outputs):
+        try:
+            if out.suffix.lower() in GCODE_SUFFIXES:
+                write_gcode(out, plan, pen_z=pen_z)
+            else:
+                write_drawing(out, plan.strokes, plan.travel(),
+                              title="standard input" if str(file) == "-" else file.name, hidden=plan.hidden,
+                              scale=dpi_scale(dpi))
+        except InputError:
+            for path in outputs[:done]:  # what is on disk already is said, so nothing is left unexplained
+                app.output.note(f"wrote {path}")
+            raise
     _report(app.output, plan, {"file": str(file), "outputs": [str(o) for o in outputs]}, written=outputs)

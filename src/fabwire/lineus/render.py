@@ -90,9 +90,18 @@ def write_drawing(
         image = _png_image(strokes_l, travel_l, hidden_l, title=title, scale=scale)
         _write(out, lambda: image.save(out, format="PNG"))
     else:
-        raise InputError(f"{out}: preview files must end in .svg or .png (.gcode for the plan), "
-                         f"not {out.suffix or 'nothing'!r}")
+        raise InputError(f"{out}: {picture_suffix_problem(out)}")
     return out
+
+
+PICTURE_SUFFIXES = (".svg", ".png")
+"""The picture formats `write_drawing` writes, chosen by the file name's suffix."""
+
+
+def picture_suffix_problem(out: Path, also: str = "") -> str:
+    """Why `out` names no picture format: the formats, `also` (other outputs the caller accepts), and the suffix."""
+    given = f"not {out.suffix!r}" if out.suffix else "and this name has no extension"
+    return f"a picture file ends in .svg or .png{also}, {given}"
 
 
 def _points(line: Polyline) -> FloatArray:
