@@ -80,3 +80,31 @@ async def test_the_oldest_files_go_beyond_the_limit_but_never_a_queued_one(agent
     assert len(agent.library.files(device_id)) == 2
     stored = list((tmp_path / "state" / "library" / device_id / "files").iterdir())
     assert len(stored) == 2
+
+
+async def test_a_drawing_carries_its_plans_figures_and_picture(tmp_path: Path) -> None:
+    """A Line-us's library shows a drawing's own figures (the planner's, as `lineus preview` gives them) and a
+    picture of the plan, since an SVG carries no preview of its own."""
+    from fabwire.lineus.plot import PlanOptions
+    from fabwire.lineus.plot.intake import drawing_from_bytes
+    from fabwire.lineus.plot.plan import plan_drawing
+
+    svg = (b"<svg xmlns='http://www.w3.org/2000/svg' width='40mm' height='40mm' viewBox='0 0 40 40'>"
+           b"<path d='M2 2 H38 V38 H2 Z M10 10 H30' fill='none' stroke='black'/></svg>")
+    async with Agent(state_dir=tmp_path / "state") as running:
+        info = await running.add_device(DeviceSpec("arm", "lineus", "sim://lineus?speed=inf"))
+        for _ in range(100):
+            if running.state(info.id)["online"]:
+                break
+            await asyncio.sleep(0.1)
+        entry = (await running.library.add("arm", "square.svg", io.BytesIO(svg)))["file"]
+        expected = plan_drawing(drawing_from_bytes("square.svg", svg), PlanOptions()).figures().as_dict()
+        assert entry["meta"]["strokes"] == expected["strokes"] == 2
+        assert entry["meta"]["pen_down_mm"] == pytest.approx(expected["pen_down_length_mm"])
+        assert entry["meta"]["print_time_s"] == pytest.approx(expected["estimated_s"], rel=0.2)
+        assert set(entry["meta"]) == {"print_time_s", "pen_down_mm", "strokes"}
+        image, media = running.library.thumbnail(info.id, "square.svg")
+        assert media == "image/png"
+        assert image.startswith(b"\x89PNG\r\n\x1a\n")
+        assert [(t["width"], t["height"]) for t in entry["thumbnails"]] == [
+            (int.from_bytes(image[16:20], "big"), int.from_bytes(image[20:24], "big"))]

@@ -4,6 +4,7 @@ Playwright, on `fabwire serve --demo`: previews, figures, reprint, queue order, 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -90,7 +91,8 @@ STAR_SVG = (b"<svg xmlns='http://www.w3.org/2000/svg' width='40mm' height='40mm'
 def test_the_line_us_library_speaks_of_drawings(demo: RunningAgent, page: Page) -> None:
     machine = page.locator(".library-machine[data-device=lineus-demo]")
     expect(machine.locator("p.empty")).to_have_text(
-        "No drawings yet: send an SVG or Line-us G-code to this machine's print-host address (/printers/NAME).")
+        "No drawings yet: send an SVG or Line-us G-code to this machine's print-host address, "
+        f"{demo.url.rstrip('/')}/printers/line-us.")
     with demo.client() as client:
         body, ctype = multipart([("print", "false"), ("path", "")], "star.svg", STAR_SVG)
         kept = client.post("/printers/line-us/api/files/local", content=body, headers={"Content-Type": ctype})
@@ -98,4 +100,13 @@ def test_the_line_us_library_speaks_of_drawings(demo: RunningAgent, page: Page) 
     row = machine.locator("tr[data-file='star.svg']")
     expect(row.locator("button", has_text="Draw")).to_have_count(1)
     expect(machine.locator("button", has_text="Print")).to_have_count(0)
-    expect(machine.locator("th")).to_contain_text(["Preview", "File", "Drawing time"])
+    # a drawing's own figures and the plan's picture, never a 3D printer's columns left empty
+    expect(machine.locator("th")).to_have_text(["Preview", "File", "Drawing time", "Pen down", "Strokes", "Size",
+                                                "Draws", ""])
+    cells = row.locator("td")
+    expect(cells.nth(2)).to_have_text(re.compile(r"^\d+ s$"))  # the planner's drawing-time estimate
+    expect(cells.nth(3)).to_have_text(re.compile(r"^\d+ mm$"))
+    expect(cells.nth(4)).to_have_text("1")  # the star is one stroke
+    image = row.locator("img.preview")
+    wait_for(lambda: image.evaluate("i => i.complete && i.naturalWidth > 0"), "the plan's picture drawn")
+    expect(machine.locator("label", has_text="Queue drawings sent while busy")).to_have_count(1)

@@ -1,12 +1,13 @@
 """The file library and the print queue of each machine, shared by every door.
 
 Uploads are kept per machine under `STATE/library/<machine id>/` (stored under generated names; the name a
-slicer gave is only shown), with the figures the printer intake reads (print time, filament, layers, slicer;
-see `Driver.describe_upload`) and the slicer's embedded previews (see `fabwire.thumbnails`). The index of a
-machine is `index.json` there: `{"files": {NAME: entry}, "queue": [NAME …], "queue_enabled": bool,
-"selected": NAME | None}`. An entry is `{"name", "size", "uploaded" (epoch s), "stored", "sha256",
-"meta": {"print_time_s", "filament_mm", "layers", "slicer"}, "thumbnails": [{"width", "height", "format",
-"stored"}], "prints": {"success", "failure", "last": {"date" (epoch s), "success"} | None}}`.
+slicer gave is only shown), with the figures the machine's intake reads (`META_FIGURES`; see
+`Driver.describe_upload`) and the slicer's embedded previews (see `fabwire.thumbnails`), or else the machine's own
+picture of the job (a drawing's plan). The index of a machine is `index.json` there: `{"files": {NAME: entry},
+"queue": [NAME …], "queue_enabled": bool, "selected": NAME | None}`. An entry is `{"name", "size", "uploaded"
+(epoch s), "stored", "sha256", "meta": {figure: value | None, for those of META_FIGURES the machine's kind tells},
+"thumbnails": [{"width", "height", "format", "stored"}], "prints": {"success", "failure", "last": {"date" (epoch s),
+"success"} | None}}`.
 
 The library keeps at most `keep` files per machine: the oldest that is neither queued nor printing goes first.
 With the queue turned on, a print asked for while the machine is busy waits in the queue and starts once the
@@ -43,6 +44,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("fabwire.agent")
 KEEP = 100
+META_FIGURES = ("print_time_s", "filament_mm", "layers", "slicer", "pen_down_mm", "strokes")
+"""What a file says of its job, where the machine's intake can tell (None where a file of that kind does not say):
+a 3D print's time (s), filament (mm), layer count and slicer; a drawing's time (s), pen-down length (mm) and stroke
+count."""
 CHUNK = 1 << 20
 """Files kept per machine by default."""
 QUEUE_MAX = 100
@@ -423,6 +428,14 @@ class Library:
             handle.seek(0)
             found = read_thumbnails(handle)
         thumbs = []
+        picture = meta.get("picture")
+        if picture is not None and not found:  # the machine's own picture of what it will do, e.g. a drawing's plan
+            image, (width, height) = picture
+            thumb_name = f"{path.stem}-{width}x{height}.png"
+            (base / "thumbs").mkdir(parents=True, exist_ok=True)
+            (base / "thumbs" / thumb_name).write_bytes(image)
+            thumbs.append({"width": width, "height": height, "format": "PNG", "stored": thumb_name,
+                           "size": len(image)})
         for thumb in found:
             try:
                 image, _ = thumb.web_image()
@@ -435,7 +448,7 @@ class Library:
                            "stored": thumb_name, "size": len(image)})
         return {"name": name, "size": path.stat().st_size, "uploaded": time.time(), "stored": path.name,
                 "sha256": digest.hexdigest(),
-                "meta": {k: meta.get(k) for k in ("print_time_s", "filament_mm", "layers", "slicer")},
+                "meta": {k: meta[k] for k in META_FIGURES if k in meta},
                 "thumbnails": thumbs, "prints": {"success": 0, "failure": 0, "last": None}}
 
     def _remove(self, device_id: str, index: dict[str, Any], name: str) -> None:

@@ -8,6 +8,7 @@ which smooths (anti-aliases) every edge.
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -102,6 +103,20 @@ def picture_suffix_problem(out: Path, also: str = "") -> str:
     """Why `out` names no picture format: the formats, `also` (other outputs the caller accepts), and the suffix."""
     given = f"not {out.suffix!r}" if out.suffix else "and this name has no extension"
     return f"a picture file ends in .svg or .png{also}, {given}"
+
+
+LIBRARY_PICTURE_DPI = 20.0
+"""The resolution of the picture a file library shows beside a drawing: a thumbnail about 150 pixels high."""
+
+
+def picture_png(strokes: Iterable[Polyline], travel: Iterable[Polyline] = (), *, dpi: float = LIBRARY_PICTURE_DPI,
+                hidden: Iterable[Polyline] = ()) -> tuple[bytes, tuple[int, int]]:
+    """The drawing as `write_drawing` draws it in a .png, as PNG bytes and their (width, height) in pixels."""
+    image = _png_image([_points(s) for s in strokes], [_points(t) for t in travel], [_points(h) for h in hidden],
+                       title=None, scale=dpi_scale(dpi))
+    out = io.BytesIO()
+    image.save(out, format="PNG")
+    return out.getvalue(), image.size
 
 
 def _points(line: Polyline) -> FloatArray:

@@ -168,8 +168,9 @@ class Driver(ABC):
 
     def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
         """`check_upload` (unless `check` is False: the job about to start checks the file itself), and what the
-        file says about itself for a file library: `print_time_s`, `filament_mm`, `layers`, `slicer` (None where
-        it does not say; kinds without such figures say nothing)."""
+        file says about itself for a file library: any of `fabwire.agent.library.META_FIGURES` (absent where it
+        does not say; kinds without such figures say nothing), and optionally `picture`, (PNG bytes, (width,
+        height)), shown where the file carries no preview of its own."""
         if check:
             self.check_upload(name, path)
         return {}

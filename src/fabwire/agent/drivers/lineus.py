@@ -20,6 +20,7 @@ from fabwire.lineus.drawing_lock import Drawer, DrawingLock, current_drawer, dra
 from fabwire.lineus.plot import Plan, PlanOptions
 from fabwire.lineus.plot.intake import drawing_from_bytes, read_drawing
 from fabwire.lineus.plot.plan import plan_drawing, plan_text
+from fabwire.lineus.render import picture_png
 
 PLAN_TIME_BUDGET = 0.3
 """Seconds the stroke ordering may take (the agent plans while it keeps polling other machines)."""
@@ -30,6 +31,18 @@ def _plan_file(path: Path, options: PlanOptions) -> Plan:
     drawing = read_drawing(path, svg_text=options.svg_text)
     check_cancelled()
     return plan_drawing(drawing, options)
+
+
+def _plan_upload(name: str, path: Path, options: PlanOptions) -> Plan:
+    """An uploaded drawing planned as `lineus draw` plans a file, stopping between the stages once cancelled;
+    refusals (InputError) name the upload."""
+    try:
+        drawing = drawing_from_bytes(name, path.read_bytes())
+        check_cancelled()
+        return plan_drawing(drawing, options)
+    except InputError as exc:
+        message = str(exc)
+        raise InputError(message if name in message else f"{name}: {message}") from None
 
 
 def _points(stroke: Any) -> list[tuple[float, float]]:
@@ -139,19 +152,21 @@ class LineUsDriver(Driver):
         pos = self.position
         return {"ok": True, "action": action, "position": pos.as_dict() if pos else None}
 
+    def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
+        """What a file library shows of a drawing, from the plan a job would draw (the same placement and ordering
+        budget): `print_time_s` (the planner's drawing-time estimate), `pen_down_mm`, `strokes`, and `picture`
+        (PNG bytes, (width, height)); refuses (InputError) what `check_upload` refuses, whatever `check` says,
+        since the figures need the plan."""
+        plan = _plan_upload(name, path, PlanOptions(time_budget=PLAN_TIME_BUDGET))
+        figures = plan.figures().as_dict()
+        return {"print_time_s": figures["estimated_s"], "pen_down_mm": figures["pen_down_length_mm"],
+                "strokes": figures["strokes"], "picture": picture_png(plan.strokes, plan.travel(), hidden=plan.hidden)}
+
     def check_upload(self, name: str, path: Path) -> None:
         """The drawing intake's and the planner's refusal (not SVG, unreadable, nothing to draw, coordinates no
         arm can reach) before the upload is accepted, as `lineus draw` checks a file; run by `in_thread`, it
         stops between its stages (WorkCancelled) once the uploader is gone."""
-        try:
-            raw = path.read_bytes()
-            check_cancelled()
-            drawing = drawing_from_bytes(name, raw)
-            check_cancelled()
-            plan_drawing(drawing, PlanOptions(optimize=False))
-        except InputError as exc:
-            message = str(exc)
-            raise InputError(message if name in message else f"{name}: {message}") from None
+        _plan_upload(name, path, PlanOptions(optimize=False))
 
     async def run_job(self, path: Path | None, job_type: str, handle: JobHandle, params: dict[str, Any]) -> str:
         arm = self._client()

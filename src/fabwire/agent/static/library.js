@@ -48,12 +48,19 @@ function libraryPath(device, name) {
   return `/devices/${encodeURIComponent(device)}/library/${name.split("/").map(encodeURIComponent).join("/")}`;
 }
 
-// What each kind of machine does with a file, and where its files come from, in its own words.
+// What each kind of machine does with a file, the figures its library shows, and where its files come from, in
+// its own words. Each column: its heading and what it shows of an entry's `meta` ("–" where a file does not say).
 const WORK = {
-  lineus: {verb: "Draw", doing: "drawing", time: "Drawing time",
-    empty: "No drawings yet: send an SVG or Line-us G-code to this machine's print-host address (/printers/NAME)."},
-  xyz: {verb: "Print", doing: "printing", time: "Print time",
-    empty: "No files yet: send one from your slicer."},
+  lineus: {verb: "Draw", doing: "drawing", things: "drawings",
+    columns: [["Drawing time", (meta) => duration(meta.print_time_s)],
+      ["Pen down", (meta) => meta.pen_down_mm ? `${Math.round(meta.pen_down_mm)} mm` : null],
+      ["Strokes", (meta) => meta.strokes]],
+    empty: (address) => `No drawings yet: send an SVG or Line-us G-code to this machine's print-host address, ${address}.`},
+  xyz: {verb: "Print", doing: "printing", things: "prints",
+    columns: [["Print time", (meta) => duration(meta.print_time_s)],
+      ["Filament", (meta) => meta.filament_mm ? `${(meta.filament_mm / 1000).toFixed(2)} m` : null],
+      ["Layers", (meta) => meta.layers], ["Slicer", (meta) => meta.slicer]],
+    empty: (address) => `No files yet: send one from your slicer to this machine's print-host address, ${address}.`},
 };
 
 async function machineLibrary(device, listing) {
@@ -64,9 +71,7 @@ async function machineLibrary(device, listing) {
     return el("tr", {"data-file": entry.name},
       el("td", {}, await previewImage(device.id, entry)),
       el("td", {class: "file-name"}, entry.name, listing.selected === entry.name ? el("span", {class: "kind"}, " selected") : null),
-      el("td", {}, duration(meta.print_time_s) || "–"),
-      el("td", {}, meta.filament_mm ? `${(meta.filament_mm / 1000).toFixed(2)} m` : "–"),
-      el("td", {}, meta.layers ?? "–"), el("td", {}, meta.slicer || "–"), el("td", {}, megabytes(entry.size)),
+      ...work.columns.map(([, shown]) => el("td", {}, shown(meta) || "–")), el("td", {}, megabytes(entry.size)),
       el("td", {}, `${entry.prints.success} ✓ ${entry.prints.failure} ✗`),
       el("td", {class: "buttons"},
         el("button", {type: "button", onclick: () => libraryDo(`${work.doing} ${entry.name}`, "POST",
@@ -95,12 +100,14 @@ async function machineLibrary(device, listing) {
     el("h3", {}, device.name, " ", listing.ready ? el("span", {class: "kind"}, "ready")
       : el("span", {class: "refusal"}, listing.refusal || "")),
     listing.files.length ? el("table", {class: "library"}, el("thead", {}, el("tr", {},
-      ...["Preview", "File", work.time, "Filament", "Layers", "Slicer", "Size", `${work.verb}s`, ""].map((h) => el("th", {}, h)))),
-      el("tbody", {}, rows)) : el("p", {class: "empty"}, work.empty),
+      ...["Preview", "File", ...work.columns.map(([heading]) => heading), "Size", `${work.verb}s`, ""]
+        .map((h) => el("th", {}, h)))),
+      el("tbody", {}, rows)) : el("p", {class: "empty"},
+        work.empty(`${location.origin}/printers/${encodeURIComponent(device.name)}`)),
     el("div", {class: "queue"},
       el("label", {}, el("input", {type: "checkbox", checked: listing.queue_enabled, onchange: (event) =>
         libraryDo(event.target.checked ? "queue on" : "queue off", "PUT", `${base}/queue`,
-          {enabled: event.target.checked})}), ` Queue ${work.doing === "drawing" ? "drawings" : "prints"} sent while busy`),
+          {enabled: event.target.checked})}), ` Queue ${work.things} sent while busy`),
       queue.length ? el("ol", {class: "queue-list"}, queueItems) : el("span", {class: "empty"}, " (queue empty)"),
       el("button", {type: "button", disabled: !queue.length || !listing.ready,
         onclick: () => libraryDo("starting the next file", "POST", `${base}/queue/next`)}, "Start next")));
