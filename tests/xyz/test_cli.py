@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -453,3 +454,44 @@ def test_a_print_cancelled_from_elsewhere_ends_the_follow_with_its_own_error(sim
     assert follow.returncode == 7, err  # not "idle" and 0: the print did not finish
     assert err.strip().splitlines()[-1].startswith("fabwire: error: the print was cancelled before it finished")
     assert out == ""
+
+
+def _silent_listener() -> tuple[socket.socket, str]:
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    return server, f"127.0.0.1:{server.getsockname()[1]}"
+
+
+DISCOVER_MISSES = [  # (what the named host is, how to make it, what discover says of it without -v)
+    ("a name that does not resolve", lambda sim: "nosuch.invalid", "cannot resolve host 'nosuch.invalid'"),
+    ("nothing listening", lambda sim: "127.0.0.1:1", "nothing listens on port 1"),
+    ("a Line-us", lambda sim: device(sim("lineus", "--listen", "127.0.0.1:0").url), "not a da Vinci printer"),
+    ("an MMU simulator on TCP", lambda sim: device(sim("mmu", "--listen", "127.0.0.1:0").url),
+     "not a da Vinci printer"),
+]
+
+
+@pytest.mark.parametrize(("what", "make", "said"), DISCOVER_MISSES, ids=[row[0] for row in DISCOVER_MISSES])
+def test_discover_says_why_a_named_host_is_no_printer(simulator: SimulatorStarter, what: str,
+                                                      make: Callable[[SimulatorStarter], str], said: str) -> None:
+    """A host asked for by name gets a line saying why it is not listed (a subnet's empty addresses do not)."""
+    printer = device(simulator("xyz", "--listen", "127.0.0.1:0").url)
+    address = make(simulator)
+    found = run_cli("--json", "xyz", "discover", "--host", address, "--host", printer, "--probe-timeout", "1")
+    assert found.returncode == 0, found.stderr
+    assert [f["address"] for f in json.loads(found.stdout)] == [printer]
+    told = [line for line in found.stderr.splitlines() if line]
+    assert len(told) == 1, found.stderr
+    assert told[0].startswith(f"{address if ':' in address else address + ':9100'}: not a da Vinci printer: ")
+    assert said in told[0]
+
+
+def test_discover_does_not_list_a_subnets_empty_addresses(simulator: SimulatorStarter) -> None:
+    server, address = _silent_listener()
+    with server:
+        port = address.rpartition(":")[2]
+        scanned = run_cli("xyz", "discover", "--subnet", "127.0.0.0/30", "--port", port, "--probe-timeout", "0.5")
+    assert scanned.returncode == 0, scanned.stderr
+    assert scanned.stdout.strip() == "no printers found"
+    assert scanned.stderr == ""

@@ -542,16 +542,20 @@ def discover(app: App, hosts: tuple[str, ...], subnet: str | None, port: int, pr
     import msgspec
 
     from fabwire.transport.urls import parse_url
-    from fabwire.xyz.discovery import hosts_in, probe_hosts, this_subnet, usb_printers
+    from fabwire.xyz.discovery import Found, hosts_in, probe_hosts, this_subnet, usb_printers
 
     probed = msgspec.structs.replace(XYZ, default_port=port)  # a bare host is probed on --port
-    targets = [(e.host, e.port) for e in (parse_url(text, probed) for text in hosts)]
-    if any(not host for host, _ in targets):
+    named = [(e.host, e.port) for e in (parse_url(text, probed) for text in hosts)]
+    if any(not host for host, _ in named):
         raise InputError("--host takes a host name or address, with an optional :PORT")
-    targets += [(host, port) for host in (hosts_in(subnet) if subnet else [])]
+    targets = named + [(host, port) for host in (hosts_in(subnet) if subnet else [])]
     found = usb_printers()
     if targets:
-        found += asyncio.run(probe_hosts(targets, timeout=probe_timeout, concurrency=concurrency))
+        results = asyncio.run(probe_hosts(targets, timeout=probe_timeout, concurrency=concurrency))
+        found += [r for r in results if isinstance(r, Found)]
+        for result in results[:len(named)]:  # a host asked for by name is told about; a subnet's silence is not
+            if not isinstance(result, Found):
+                app.output.note(f"{result.address}: not a da Vinci printer: {result.reason}")
     data = [{"address": f.address, "model_number": f.model_number, "model": f.name, "serial": f.serial,
              "detail": f.detail} for f in found]
 

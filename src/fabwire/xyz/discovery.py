@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import serialx
 
-from fabwire.errors import FabwireError, InputError
+from fabwire.errors import FabwireError, InputError, excerpt
 from fabwire.transport.tcp import open_tcp
 from fabwire.xyz import protocol as p
 from fabwire.xyz.protocol import Link, Reply, ReplyReader
@@ -74,8 +74,19 @@ def hosts_in(subnet: str) -> list[str]:
     return [str(h) for h in hosts]
 
 
-async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | None:
-    """Ask one host for its status; None if nothing printer-like answers in time."""
+@dataclass(frozen=True, slots=True)
+class Missed:
+    """A probed host that is not a da Vinci printer, and why (in the link's own words)."""
+
+    address: str
+    """`host:port`."""
+    reason: str
+
+
+async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | Missed:
+    """Ask one host for its status: what answered, or why no printer did (no answer within `timeout` seconds, a
+    name that does not resolve, nothing listening, a reply that is no XYZv3 status)."""
+    address = f"{host}:{port}"
     try:
         async with asyncio.timeout(timeout):
             transport = await open_tcp(host, port, timeout=timeout)
@@ -90,30 +101,34 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | No
                         break
             finally:
                 await transport.close()
-    except (TimeoutError, FabwireError, OSError) as exc:
-        log.info("%s:%d: no printer (%s)", host, port, exc or "no answer in time")
-        return None
+    except TimeoutError:
+        return _missed(address, f"no answer to 'query=a' within {timeout:g} s")
+    except (FabwireError, OSError) as exc:
+        return _missed(address, str(exc) or type(exc).__name__)
     if not isinstance(event, Reply):
-        log.info("%s:%d: no printer (it answered %r)", host, port, event)
-        return None
+        return _missed(address, f"it answered {excerpt(str(event), 80)}, not an XYZv3 status")
     status = Status.parse(event.lines)
     if status.model_number is None:
-        return None
+        return _missed(address, "its status names no model number")
     model = status.model
-    return Found(f"{host}:{port}", status.model_number, model.name if model else None, status.serial,
-                 status.state_name)
+    return Found(address, status.model_number, model.name if model else None, status.serial, status.state_name)
+
+
+def _missed(address: str, reason: str) -> Missed:
+    log.info("%s: no printer (%s)", address, reason)
+    return Missed(address, reason)
 
 
 async def probe_hosts(targets: Iterable[tuple[str, int]], *, timeout: float = 1.0,
-                      concurrency: int = 64) -> list[Found]:
-    """Probe many (host, port) targets at once, at most `concurrency` in flight."""
+                      concurrency: int = 64) -> list[Found | Missed]:
+    """Probe many (host, port) targets at once, at most `concurrency` in flight; one result per target, in order."""
     limit = asyncio.Semaphore(max(1, concurrency))
 
-    async def one(host: str, port: int) -> Found | None:
+    async def one(host: str, port: int) -> Found | Missed:
         async with limit:
-            with contextlib.suppress(Exception):
+            try:
                 return await probe(host, port, timeout)
-            return None
+            except Exception as exc:  # one odd host never ends a scan of the others
+                return _missed(f"{host}:{port}", f"probe failed: {exc}")
 
-    results = await asyncio.gather(*(one(host, port) for host, port in targets))
-    return [r for r in results if r is not None]
+    return list(await asyncio.gather(*(one(host, port) for host, port in targets)))
