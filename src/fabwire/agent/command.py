@@ -19,6 +19,7 @@ from typing import Any
 
 import click
 
+from fabwire import __version__
 from fabwire.agent.auth import is_loopback, load_or_create_token
 from fabwire.agent.boundary import Policy, normal_host, split_authority
 from fabwire.agent.core import KINDS, Agent, DeviceSpec
@@ -37,6 +38,9 @@ MAX_RETENTION_H = 100 * 365 * 24.0
 MAX_SPEED = 10_000.0
 """The fastest --demo simulation: a print of hours in a second."""
 
+SERVER = f"fabwire/{__version__}"
+"""The agent's Server header (RFC 9110 §10.2.4), on every answer: a client of a machine pointed at the agent's port
+by mistake names it from this (`fabwire.transport.peers`)."""
 CONNECTION_SETTINGS: dict[str, Any] = {
     "timeout_keep_alive": 5,        # uvicorn's default: an idle keep-alive connection is closed after 5 s
     "limit_concurrency": 1000,      # uvicorn answers 503 beyond this many connections and tasks
@@ -297,6 +301,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         logging.getLogger("uvicorn.error").addFilter(_Repeats())
         server = server_class(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
                                                ws="websockets-sansio", http=_http_protocol(), log_config=None,
+                                               server_header=False, headers=[("server", SERVER)],
                                                **CONNECTION_SETTINGS))
         bound_host, bound_port = sock.getsockname()[:2]
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
@@ -380,6 +385,7 @@ def _raise_open_files() -> None:
 def _http_protocol() -> Any:
     """uvicorn's h11 protocol with a deadline for the request head (uvicorn has none of its own: its
     keep-alive timer stops at the first byte of a request)."""
+    import h11
     from uvicorn.protocols.http.h11_impl import H11Protocol
 
     class HeadDeadline(H11Protocol):
@@ -397,6 +403,15 @@ def _http_protocol() -> Any:
             if self._head_timer is not None:
                 self._head_timer.cancel()
             super().connection_lost(exc)
+
+        def send_400_response(self, msg: str) -> None:
+            """uvicorn's refusal of a request it cannot read, with the Server header its other answers carry."""
+            headers = [(b"content-type", b"text/plain; charset=utf-8"), (b"connection", b"close"),
+                       (b"server", SERVER.encode())]
+            for event in (h11.Response(status_code=400, headers=headers, reason=b"Bad Request"),
+                          h11.Data(data=msg.encode("ascii")), h11.EndOfMessage()):
+                self.transport.write(self.conn.send(event) or b"")
+            self.transport.close()
 
         def _arm_head_deadline(self) -> None:
             if self._head_timer is not None:

@@ -20,14 +20,14 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import LineUsSettings
 from fabwire.devices import LINEUS
-from fabwire.errors import DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
+from fabwire.errors import DeviceError, FabwireError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
 from fabwire.lineus import kinematics as kin
 from fabwire.lineus import protocol as p
 from fabwire.lineus.interpreter import HOME3, Interpreter, Point3
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
-from fabwire.transport.peers import wrong_peer
+from fabwire.transport.peers import FirstBytes, name_peer, undecided, wrong_peer
 from fabwire.units import json_key
 
 if TYPE_CHECKING:
@@ -36,6 +36,7 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 log = logging.getLogger("fabwire.lineus")
 
+NOT_A_LINEUS = "a Line-us"
 HELLO_TIMEOUT = 10.0
 """The hello can take a few seconds while the arm waves."""
 REPLY_TIMEOUT = 5.0
@@ -107,6 +108,19 @@ def parse_file_list(text: str) -> list[StoredDrawing]:
     return out
 
 
+def _greeting_error(said: bytes | bytearray, where: str) -> FabwireError | None:
+    """The error the first bytes of a greeting (`said`, as gathered so far) already show: another peer they name,
+    or a start that can be neither a hello nor another peer's words; None while they may still be either."""
+    if not said or said[:5] == b"hello"[: len(said[:5])]:
+        return None
+    if (wrong := refusal(said, where) or wrong_peer(said, NOT_A_LINEUS, LINEUS.name, where)) is not None:
+        return wrong
+    if undecided(said, LINEUS.name):
+        return None
+    return RemoteProtocolError(f"{where} is not {NOT_A_LINEUS}: it greeted with {excerpt(bytes(said), 40)} instead of "
+                               "'hello …'")
+
+
 class LineUs:
     """An open connection to one Line-us (or its simulator)."""
 
@@ -151,17 +165,15 @@ class LineUs:
         """Read the hello (firmware 1 needs it read before anything is sent), then return the connection."""
         reader = p.ReplyReader(max_size=4096)
         where = transport.peer or transport.url
+        first = FirstBytes()
         try:
             async with asyncio.timeout(hello_timeout):
                 while True:
-                    reader.feed(await transport.read())
-                    pending = reader.pending
-                    if pending and pending[:5] != b"hello"[: len(pending[:5])]:
-                        if (wrong := refusal(bytes(pending), where) or wrong_peer(
-                                bytes(pending), "a Line-us", LINEUS.name, where)) is not None:
-                            raise wrong
-                        raise RemoteProtocolError(
-                            f"{where} is not a Line-us: it greeted with {excerpt(pending, 40)} instead of 'hello …'")
+                    data = await transport.read()
+                    first.feed(data)
+                    reader.feed(data)
+                    if (wrong := _greeting_error(first.data, where)) is not None:
+                        raise wrong
                     message = reader.next_message()
                     if message is None:
                         continue
@@ -171,11 +183,15 @@ class LineUs:
                     break
         except TimeoutError:
             await transport.close()
+            if (wrong := await name_peer(first.data, transport.url, NOT_A_LINEUS, LINEUS.name, where)) is not None:
+                raise wrong from None
             raise LinkTimeout(
                 f"no hello from {where} within {hello_timeout:g} s: either not a Line-us, or a wedged one "
                 "(accepts TCP but sends no greeting: power-cycle it)") from None
         except LinkClosed:
             await transport.close()
+            if (wrong := await name_peer(first.data, transport.url, NOT_A_LINEUS, LINEUS.name, where)) is not None:
+                raise wrong from None
             raise LinkClosed(f"{where} closed the connection before greeting: not a Line-us?") from None
         except BaseException:
             await transport.close()

@@ -16,7 +16,16 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 from fabwire.config import MMUSettings
 from fabwire.devices import MMU as MMU_KIND
-from fabwire.errors import DeviceBusy, DeviceError, InputError, LinkClosed, LinkTimeout, RemoteProtocolError, excerpt
+from fabwire.errors import (
+    DeviceBusy,
+    DeviceError,
+    InputError,
+    LinkClosed,
+    LinkError,
+    LinkTimeout,
+    RemoteProtocolError,
+    excerpt,
+)
 from fabwire.mmu import codes, units
 from fabwire.mmu.errors import MMUError, describe_error, reset_line
 from fabwire.mmu.evidence import end_state
@@ -44,7 +53,7 @@ from fabwire.mmu.protocol import Cut, Eject, Home, Load, Mode, Request, ToolChan
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport
 from fabwire.transport.limits import refusal
-from fabwire.transport.peers import wrong_peer
+from fabwire.transport.peers import FirstBytes, name_peer, wrong_peer
 
 if TYPE_CHECKING:
     from fabwire.mmu.sync import SyncMMU
@@ -55,6 +64,7 @@ CONNECT_SECONDS = 5.0
 """Default time for the handshake, in MMU seconds: an MMU that is up answers S0 at once; one that is booting
 needs ≈4 s (reference §1)."""
 EventCallback = Callable[[HostEvent], None]
+NOT_AN_MMU = "a Prusa MMU3"
 
 
 def check_slot(slot: int) -> int:
@@ -103,6 +113,8 @@ class MMU:
         self._write_lock = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
         self._failure: BaseException | None = None
+        self._first = FirstBytes()
+        """The first bytes the peer sent: what names a peer that is no MMU."""
         self._ready = asyncio.Event()
         self._kick = asyncio.Event()
         self.owns_transport = False
@@ -165,14 +177,29 @@ class MMU:
                 await self._until(lambda: self._ready.is_set())
         except TimeoutError:
             await self.close()
+            if (named := await self._name_peer()) is not None:
+                raise named from None
             if self._failure is not None:
                 raise self._failure from None
             raise LinkTimeout(f"the MMU on {self.transport.peer or self.transport.url} did not complete the "
                               f"handshake within {self.connect_timeout:g} s ({self._silence_words()}): "
                               "check the address, power and cable") from None
+        except (LinkClosed, LinkTimeout) as exc:
+            await self.close()
+            if (named := await self._name_peer()) is not None:
+                raise named from exc
+            raise
         except BaseException:
             await self.close()
             raise
+
+    async def _name_peer(self) -> LinkError | RemoteProtocolError | None:
+        """Why a peer never heard as an MMU gave no firmware version: the error naming what it is (from its first
+        bytes, or from its answer to a probe when it said nothing), or None when nothing names it."""
+        if self.logic.version is not None:
+            return None
+        return await name_peer(self._first.data, self.transport.url, NOT_AN_MMU, MMU_KIND.name,
+                               self.transport.peer or self.transport.url)
 
     def _silence_words(self) -> str:
         reason = self.logic.last_drop_out
@@ -224,11 +251,12 @@ class MMU:
         try:
             while True:
                 data = await self.transport.read(4096)
-                if self.logic.version is None and (
-                        wrong := refusal(data, where := self.transport.peer or "the MMU")
-                        or wrong_peer(data, "a Prusa MMU3", MMU_KIND.name, where)) is not None:
-                    self._fail(wrong)
-                    return
+                if self.logic.version is None:
+                    self._first.feed(data)
+                    said, where = self._first.data, self.transport.peer or self.transport.url
+                    if (wrong := refusal(said, where) or wrong_peer(said, NOT_AN_MMU, MMU_KIND.name, where)):
+                        self._fail(wrong)
+                        return
                 self.logic.receive(data, self._clock())
                 self._dispatch()
                 await self._flush()

@@ -58,7 +58,7 @@ def _replaced(what: str, count: int) -> str:
 _GOODBYE = re.compile(rb"((?:[a-z]+ )?simulator) (busy|replaced this quiet connection): all ([0-9]{1,6}) connections")
 
 
-def refusal(data: bytes, peer: str) -> LinkError | None:
+def refusal(data: bytes | bytearray, peer: str) -> LinkError | None:
     """The error to raise when `data` (what a peer sent) holds a simulator's farewell, written by
     `ConnectionPool.admit` below, or None: a client shows it instead of calling the peer the wrong device or the
     link broken. LinkError for a newcomer turned away, LinkClosed for a quiet connection closed to make room."""

@@ -25,11 +25,19 @@ import msgspec
 
 from fabwire.config import XYZSettings
 from fabwire.devices import XYZ
-from fabwire.errors import DeviceBusy, DeviceError, InputError, LinkClosed, LinkError, LinkTimeout, RemoteProtocolError
+from fabwire.errors import (
+    DeviceBusy,
+    DeviceError,
+    InputError,
+    LinkClosed,
+    LinkError,
+    LinkTimeout,
+    RemoteProtocolError,
+    excerpt,
+)
 from fabwire.opening import DeviceLink, DeviceTarget, Opening
 from fabwire.transport import Transport, open_transport
-from fabwire.transport.limits import refusal
-from fabwire.transport.peers import wrong_peer
+from fabwire.transport.peers import name_peer, wrong_peer
 from fabwire.xyz import protocol as p
 from fabwire.xyz import userinput
 from fabwire.xyz.codes import PRINT_STOP
@@ -64,6 +72,7 @@ REPLY_ERRORS = {
     7: "the printer is busy finishing a job",
 }
 TRANSIENT_RETRIES = 20
+NOT_A_PRINTER = "an XYZv3 printer"
 FILE_CHECK_LIMIT = 120.0  # printer seconds of "checking file" (9520) before a print is stuck; real checks take seconds
 CHECKING_NOTE_EVERY = 15.0  # seconds between "still checking the file" notes
 FINISHED_PERCENT = 99
@@ -269,12 +278,22 @@ class XYZPrinter(Maintenance):
                 await self._wait_for_pump(doing)
 
     def _check_peer(self) -> None:
-        """Before the printer was ever heard: a line from another kind of machine or server ends the wait at once."""
-        sample = self.reader.noise_sample
-        said = sample.encode("latin-1", "replace") if sample is not None else self.reader.unfinished
-        where = self.transport.peer or self.transport.url
-        if said and (wrong := wrong_peer(said, "an XYZv3 printer", XYZ.name, where)):
+        """Before the printer was ever heard: words from another kind of machine or server end the wait as soon as
+        the first bytes the peer sent name it."""
+        said = self.reader.first.data
+        if said and (wrong := wrong_peer(said, NOT_A_PRINTER, XYZ.name, self.transport.peer or self.transport.url)):
             raise wrong
+
+    async def _name_peer(self) -> LinkError | RemoteProtocolError | None:
+        """Why a peer never heard as a printer did not answer: the error naming what it is (from its first bytes,
+        or from its answer to a probe when it said nothing), or None when nothing names it."""
+        where = self.transport.peer or self.transport.url
+        if (named := await name_peer(self.reader.first.data, self.transport.url, NOT_A_PRINTER, XYZ.name, where)):
+            return named
+        sample = self.reader.noise_sample
+        if sample is None:  # the start of a reply cut short, or nothing that is a line: the link's own error
+            return None
+        return RemoteProtocolError(f"{where} is not {NOT_A_PRINTER}: it answered {excerpt(sample, 60)}")
 
     async def _wait_for_pump(self, doing: str) -> None:
         """Until the reader task has read something, or the reply's deadline (a NoReply) has come: one future and
@@ -339,13 +358,8 @@ class XYZPrinter(Maintenance):
             await self._write(data, doing)
             reply = await self._event(command, doing, direct=self._pump_task.done())
         except (LinkClosed, LinkTimeout) as exc:
-            sample = self.reader.noise_sample
-            if sample is not None and not self._heard:
-                busy = refusal(sample.encode("latin-1", "replace"), self.transport.peer or self.transport.url)
-                if busy is not None:
-                    raise busy from exc
-                raise RemoteProtocolError(f"{self.transport.peer or self.transport.url} is not an XYZv3 printer: "
-                                          f"it answered {sample!r}") from exc
+            if not self._heard and (named := await self._name_peer()) is not None:
+                raise named from exc
             raise
         except DeviceError:
             self._heard = True

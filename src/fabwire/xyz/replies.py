@@ -10,6 +10,7 @@ import re
 import msgspec
 
 from fabwire.errors import LocalProtocolError
+from fabwire.transport.peers import HEAD_BYTES, FirstBytes
 from fabwire.xyz.commands import (
     RAW_REPLIES,
     Command,
@@ -127,6 +128,8 @@ class ReplyReader:
         self.noise = 0
         self.noise_sample: str | None = None
         """The first line that fitted nothing: evidence when the peer is not an XYZv3 printer at all."""
+        self.first = FirstBytes()
+        """The first bytes the peer sent, whatever became of them: what names a peer that is no printer."""
 
     @property
     def busy(self) -> bool:
@@ -155,11 +158,6 @@ class ReplyReader:
         """Stop waiting for the reply in flight (its command failed or was given up)."""
         self._pending = None
 
-    @property
-    def unfinished(self) -> bytes:
-        """The start of a line still waiting for its end (what a peer that sends no line ends said so far)."""
-        return bytes(self._buffer[:64])
-
     def discard(self) -> None:
         """Forget buffered input (the stale replies a client drains before each command)."""
         self._buffer.clear()
@@ -167,6 +165,8 @@ class ReplyReader:
             self._events = [e for e in self._events if isinstance(e, ActionStat)]
 
     def receive(self, data: bytes, now: float) -> None:
+        if len(self.first.data) < HEAD_BYTES:
+            self.first.feed(data)
         self._buffer += data
         p = self._pending
         if p is not None:
