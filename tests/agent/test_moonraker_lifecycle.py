@@ -30,8 +30,10 @@ from fabwire.agent.doors.klipper_objects import (
     MIN_EXTRUDE_TEMP_C,
     STATES,
     Attribute,
+    facts,
 )
 from fabwire.agent.history import epoch
+from fabwire.agent.model import MachineView
 
 from .agenttools import RunningAgent, start_agent, summary, wait_for
 from .doortools import multipart, prusaslicer_gcode
@@ -405,3 +407,20 @@ def test_octoprint_reports_a_bed_without_heater_in_numbers(tmp_path: Path) -> No
     assert raw["bed"]["target"] == 0.0
     assert all(isinstance(v, int | float) for pair in temperatures.values() for v in pair), temperatures
     assert set(temperatures) == {"tool0", "bed"}
+
+
+@pytest.mark.parametrize("attribute", [*ATTRIBUTES, *HISTORY_FIELDS], ids=lambda a: f"{a.obj}.{a.name}")
+def test_every_row_names_its_source_and_a_rule_for_every_state(attribute: Attribute) -> None:
+    view = MachineView(id="p", name="p", kind="xyz", model="dv1MW0A000", online=True, phase="standby",
+                       message="idle", error=None, extruder_c=20.0, extruder_target_c=None, bed_c=20.0,
+                       bed_target_c=None, job=None, progress_percent=None, elapsed_s=None, time_left_s=None,
+                       takes_jobs=True)
+    known = set(facts(view, None, "")) | {"job_id", "exists", "status", "start_time", "end_time", "metadata"}
+    states = HISTORY_STATES if attribute in HISTORY_FIELDS else STATES
+    assert set(attribute.rules) == set(states)
+    assert "docs" in attribute.source or "Status_Reference" in attribute.source
+    for rule in attribute.rules.values():
+        if rule.startswith("="):
+            json.loads(rule[1:])  # a literal is JSON
+        else:
+            assert rule in known, rule
