@@ -45,7 +45,8 @@ CREATE TABLE IF NOT EXISTS devices (kind TEXT NOT NULL, address TEXT NOT NULL, i
 """
 
 
-def _epoch(iso: str) -> float:
+def epoch(iso: str) -> float:
+    """Epoch seconds of an ISO-8601 time (`fabwire.agent.core.now_iso`'s form, "Z" or an offset)."""
     return datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp()
 
 
@@ -108,7 +109,7 @@ class History:
 
     def record_event(self, event: dict[str, Any]) -> None:
         if event["type"] in KEPT_EVENTS and not event.get("stroke") and not event.get("preview"):
-            self._events.append((event["device"], _epoch(event["ts"]), event["type"], json.dumps(event)))
+            self._events.append((event["device"], epoch(event["ts"]), event["type"], json.dumps(event)))
 
     async def _flusher(self) -> None:
         last_prune = time.monotonic()
@@ -178,7 +179,7 @@ class History:
         def write(db: sqlite3.Connection) -> None:
             with db:
                 db.execute("INSERT OR REPLACE INTO jobs VALUES (?, ?, ?, ?)",
-                           (job["id"], job["device"], _epoch(job["created"]), data))
+                           (job["id"], job["device"], epoch(job["created"]), data))
 
         await self._call(write)
 

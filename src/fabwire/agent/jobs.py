@@ -3,7 +3,11 @@
 A job record is `{"id", "device", "type" ("print" | "draw" | "text"), "filename" (as uploaded, shown only),
 "stored" (the generated file name or None), "size_bytes", "params", "state" ("queued" | "running" | "done" |
 "failed" | "cancelled" | "interrupted"), "created", "started", "finished" (ISO-8601), "progress_percent",
-"time_left_s", "message"}`. Jobs that were running when the agent stopped are marked "interrupted" at start.
+"time_left_s", "message", "file_meta" (the library's figures of the file: `print_time_s`, `filament_mm`,
+`layers`, `slicer`; None for a file sent otherwise), "paused_s" (seconds spent paused, closed pauses),
+"paused_since" and "resumed_at" (epoch seconds, agent clock, or None), "printer_elapsed" ([seconds the printer
+reported, epoch when it first said so] or None)}`. Jobs that were running when the agent stopped are marked
+"interrupted" at start.
 
 An upload is written as it arrives to `uploads/.ID.part` (0600), at most `max_upload_bytes`, and renamed to
 `uploads/ID.EXT` once complete; a stored file goes when its job record does (the history's retention), and a
@@ -93,14 +97,18 @@ class JobStore:
                 await self.history.save_job(job)
 
     async def create(self, device: str, job_type: str, filename: str | None, upload: UploadWriter | None,
-                     params: dict[str, Any], job_id: str | None = None) -> dict[str, Any]:
-        """Record a new job (state "queued"); `upload` is its complete file, if it has one."""
+                     params: dict[str, Any], job_id: str | None = None,
+                     file_meta: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Record a new job (state "queued"); `upload` is its complete file, if it has one; `file_meta` the
+        library's figures of that file."""
         job_id = job_id or new_job_id()
         shown = (filename or "")[:SHOWN_NAME].replace("\x00", "") or None
         job = {"id": job_id, "device": device, "type": job_type, "filename": shown,
                "stored": upload.name if upload else None, "size_bytes": upload.size if upload else None,
                "params": params, "state": "queued", "created": now_iso(), "started": None, "finished": None,
-               "progress_percent": 0.0, "time_left_s": None, "message": None}
+               "progress_percent": 0.0, "time_left_s": None, "message": None,
+               "file_meta": dict(file_meta) if file_meta else None, "paused_s": 0.0, "paused_since": None,
+               "resumed_at": None, "printer_elapsed": None}
         await self.history.save_job(job)
         if upload is not None:
             self._live.discard(upload.name)  # on record now: it goes with the record
@@ -121,6 +129,26 @@ class JobStore:
 
     async def list(self, device: str | None = None, limit: int = 100) -> list[dict[str, Any]]:
         return await self.history.jobs(device, limit)
+
+
+def note_course(job: dict[str, Any], summary: dict[str, Any], now: float) -> None:
+    """Follow a running job from one of its machine's states (`fabwire.agent.drivers.base` summary): its pauses
+    ("paused_s", "paused_since", "resumed_at") and the printer's own elapsed time ("printer_elapsed", with when it
+    first said that value: a da Vinci counts whole minutes). `now` is epoch seconds."""
+    if job.get("state") != "running":
+        return
+    paused = summary.get("state") == "paused"
+    since = job.get("paused_since")
+    if paused and since is None:
+        job["paused_since"] = now
+    elif not paused and since is not None:
+        job["paused_s"] = float(job.get("paused_s") or 0.0) + max(0.0, now - since)
+        job["paused_since"] = None
+        job["resumed_at"] = now
+    elapsed = summary.get("elapsed_s")
+    seen = job.get("printer_elapsed")
+    if isinstance(elapsed, int | float) and not isinstance(elapsed, bool) and (seen is None or seen[0] != elapsed):
+        job["printer_elapsed"] = [float(elapsed), now]
 
 
 class JobNotFound(InputError):

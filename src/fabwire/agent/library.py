@@ -114,6 +114,8 @@ class Library:
         self._watcher: asyncio.Task[None] | None = None
         self._job_files: dict[str, tuple[str, str]] = {}
         """job id → (machine id, library name): whose print statistics a job's end updates."""
+        self._ended_files: dict[str, tuple[str, tuple[str, str]]] = {}
+        """device → (its last ended job's id, (device, file name)): the doors still name a finished job's file."""
 
     # ------------------------------------------------------------------------------------------ lifecycle
 
@@ -180,6 +182,9 @@ class Library:
     def file_of_job(self, job: dict[str, Any] | None) -> dict[str, Any] | None:
         """The library entry a job prints (None for a job started otherwise, or a file since removed)."""
         owner = self._job_files.get(job["id"]) if job else None
+        if owner is None and job is not None:
+            ended = self._ended_files.get(str(job.get("device")))
+            owner = ended[1] if ended is not None and ended[0] == job["id"] else None
         if owner is None:
             return None
         entry = self.index(owner[0])["files"].get(owner[1])
@@ -340,7 +345,7 @@ class Library:
             with self.path_of(device_id, entry).open("rb") as handle:
                 while chunk := await asyncio.to_thread(handle.read, CHUNK):
                     await claim.write(chunk)
-        job = await claim.start()
+        job = await claim.start(file_meta=entry.get("meta"))
         self._job_files[job["id"]] = (device_id, entry["name"])
         return job
 
@@ -366,6 +371,7 @@ class Library:
                     owner = self._job_files.get(job["id"])
                     if owner is not None and job["state"] in ("done", "failed", "cancelled", "interrupted"):
                         del self._job_files[job["id"]]
+                        self._ended_files[owner[0]] = (job["id"], owner)
                         await self._count(owner, job["state"] == "done")
                 elif event["type"] == "state":
                     await self._start_next(event["device"])

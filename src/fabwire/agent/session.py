@@ -23,6 +23,7 @@ from sortedcontainers import SortedList
 
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
 from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
+from fabwire.agent.jobs import note_course
 from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, excerpt
 
 if TYPE_CHECKING:
@@ -402,6 +403,8 @@ class Session:
     def _set_state(self, *, online: bool, summary: dict[str, Any] | None, status: dict[str, Any] | None = None
                    ) -> None:
         previous = self.state
+        if self._job is not None and summary is not None and online:
+            note_course(self._job, summary, time.time())
         if previous and status is not None and status is previous["status"] and summary is previous["summary"] \
                 and online == previous["online"] and self._job is previous["job"]:
             self.state = {**previous, "ts": now_iso()}  # the same objects as last time: nothing to compare
@@ -588,8 +591,11 @@ class Session:
         self._publish("job", job=dict(self._job))
 
     def job_progress(self, percent: float, time_left_s: float | None, message: str | None) -> None:
+        """A running job's progress: it only goes forward (a printer that stops says 0, a da Vinci's `d:0,0,0` is
+        "no job", and the job keeps how far it came: a cancelled print's figures are those at its end)."""
         if self._job is None:
             return
+        percent = max(percent, float(self._job.get("progress_percent") or 0.0))
         self._job.update(progress_percent=round(percent, 1), time_left_s=time_left_s,
                          message=message or self._job.get("message"))
         now = time.monotonic()
@@ -707,9 +713,10 @@ class JobClaim:
             raise InputError(f"a {self.job_type} job takes no file")
         await self._upload.write(chunk)
 
-    async def start(self, params: dict[str, Any] | None = None) -> dict[str, Any]:
-        """Complete the upload, check it as the CLI would (InputError naming the upload), record the job and
-        start it; returns the job record."""
+    async def start(self, params: dict[str, Any] | None = None, *, file_meta: dict[str, Any] | None = None
+                    ) -> dict[str, Any]:
+        """Complete the upload, check it as the CLI would (InputError naming the upload), record the job (with the
+        library's `file_meta` figures of its file, when it has them) and start it; returns the job record."""
         session = self.session
         if self._started or session._claim is not self:
             raise RuntimeError("this claim is already used or released")
@@ -719,7 +726,7 @@ class JobClaim:
 
             await in_thread(session.driver.check_upload, self.filename or path.name, path)
         job = await session.agent.jobs.create(session.info.id, self.job_type, self.filename, self._upload,
-                                              params or {}, job_id=self.job_id)
+                                              params or {}, job_id=self.job_id, file_meta=file_meta)
         self._started = True
         return session._begin(job)
 

@@ -19,7 +19,6 @@ import socket
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from datetime import datetime
 from typing import Any, BinaryIO
 
 from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
@@ -37,6 +36,7 @@ from fabwire.agent.doors import (
     machine_of,
     read_upload,
 )
+from fabwire.agent.doors.klipper_objects import history_job, printer_objects
 from fabwire.agent.model import MachineView, TakesNoJobs
 from fabwire.agent.offload import while_connected
 from fabwire.agent.session import JobClaim
@@ -48,27 +48,6 @@ MOONRAKER_VERSION = "v0.9.3"
 API_VERSION = (1, 5, 0)
 ROOT = "gcodes"
 THUMBS = ".thumbs"
-
-PRINT_STATE: dict[str, str] = {
-    "standby": "standby", "printing": "printing", "pausing": "printing", "paused": "paused",
-    "resuming": "paused", "cancelling": "printing", "done": "complete", "busy": "standby", "error": "error",
-    "offline": "error",
-}
-"""Phase → Klipper's print_stats.state (standby, printing, paused, complete, cancelled, error)."""
-
-def print_state(view: MachineView) -> str:
-    """Klipper's print_stats.state: a cancelled print stays "cancelled" until the next one starts (Klipper's
-    print_stats.py sets it on cancel and resets only when a new print begins); otherwise by the phase."""
-    if view.phase == "standby" and view.last_outcome == "cancelled":
-        return "cancelled"
-    return PRINT_STATE[view.phase]
-
-
-JOB_STATUS: dict[str, str] = {
-    "queued": "in_progress", "running": "in_progress", "done": "completed", "failed": "error",
-    "cancelled": "cancelled", "interrupted": "server_exit",
-}
-"""The agent's job state → Moonraker's history job status."""
 
 MAX_MESSAGE = 64 << 10
 """The largest JSON-RPC message taken (bytes of UTF-8), as `fabwire serve` sets its WebSocket frames' limit (a larger
@@ -125,10 +104,6 @@ def _status_code(exc: BaseException) -> int:
     return exc.code if isinstance(exc, RpcError) and exc.code > 0 else _status_for(exc)
 
 
-def _epoch(iso: str | None) -> float | None:
-    return datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp() if iso else None
-
-
 @dataclass
 class Call:
     """One method call: the machine addressed and the parameters (query/form/JSON for HTTP, `params` for RPC)."""
@@ -164,36 +139,11 @@ class MoonrakerDoor:
     # ------------------------------------------------------------------------------------------ objects
 
     def objects(self, view: MachineView) -> dict[str, dict[str, Any]]:
-        """Every printer object this machine has, with every attribute (Klipper's status reference)."""
-        entry = self.library.file_of_job(view.job)
-        filename = entry["name"] if entry else ((view.job or {}).get("filename") or "")
-        meta = (entry or {}).get("meta") or {}
-        active = view.job is not None or view.printing
-        fraction = round((view.progress_percent or 0.0) / 100.0, 4) if active else 0.0
-        elapsed = float(view.elapsed_s or 0.0) if active else 0.0
-        filament = meta.get("filament_mm")
-        out: dict[str, dict[str, Any]] = {
-            "webhooks": {"state": "ready" if view.online else "shutdown",
-                         "state_message": "Printer is ready" if view.online else view.message},
-            "print_stats": {"filename": filename, "total_duration": elapsed, "print_duration": elapsed,
-                            "filament_used": round(filament * fraction, 1) if filament else 0.0,
-                            "state": print_state(view),
-                            "message": view.error or (view.message if view.phase != "standby" else ""),
-                            "info": {"total_layer": meta.get("layers"), "current_layer": None}},
-            "virtual_sdcard": {"file_path": filename or None, "progress": fraction, "is_active": view.printing,
-                               "file_position": 0, "file_size": (entry or {}).get("size") or 0},
-            "display_status": {"progress": fraction, "message": view.message},
-            "pause_resume": {"is_paused": view.phase == "paused"},
-            "idle_timeout": {"state": "Printing" if view.printing else "Idle", "printing_time": elapsed},
-            "toolhead": {"homed_axes": "", "position": [0.0, 0.0, 0.0, 0.0], "status": "Ready",
-                         "print_time": elapsed, "estimated_print_time": float(meta.get("print_time_s") or 0)},
-        }
-        if view.extruder_c is not None or view.extruder_target_c is not None:
-            out["extruder"] = {"temperature": view.extruder_c, "target": view.extruder_target_c or 0.0,
-                               "power": None, "can_extrude": True}
-        if view.bed_c is not None or view.bed_target_c is not None:
-            out["heater_bed"] = {"temperature": view.bed_c, "target": view.bed_target_c or 0.0, "power": None}
-        return out
+        """Every printer object this machine has, with every attribute (`klipper_objects.ATTRIBUTES`)."""
+        entry = self.library.file_of_job(view.shown_job)
+        figures = view.figures()
+        filename = entry["name"] if entry else (figures.filename if figures else "")
+        return printer_objects(view, figures, filename)
 
     @staticmethod
     def _wanted(objects: object) -> dict[str, list[str] | None]:
@@ -325,16 +275,7 @@ class MoonrakerDoor:
             raise RpcError(400, "limit and start must be whole numbers") from None
         jobs = await self.agent.jobs.list(call.view.id, limit + start)
         names = {e["name"].rsplit("/", 1)[-1] for e in self.library.files(call.view.id)}
-        out = []
-        for job in jobs[start:]:
-            began, ended = _epoch(job.get("started")), _epoch(job.get("finished"))
-            duration = (ended or time.time()) - began if began else 0.0
-            out.append({"job_id": job["id"], "filename": job.get("filename") or job["type"],
-                        "exists": job.get("filename") in names, "status": JOB_STATUS.get(job["state"], "error"),
-                        "start_time": began or _epoch(job.get("created")), "end_time": ended,
-                        "print_duration": duration, "total_duration": duration, "filament_used": 0.0,
-                        "metadata": {"size": job.get("size_bytes")}, "auxiliary_data": []})
-        return {"count": len(out), "jobs": out}
+        return {"count": len(jobs[start:]), "jobs": [history_job(job, names) for job in jobs[start:]]}
 
     async def websocket_id(self, call: Call) -> dict[str, Any]:
         return {"websocket_id": call.connection.id if call.connection else 0}

@@ -155,11 +155,14 @@ class OctoPrintDoor:
     # ------------------------------------------------------------------------------------------ printer
 
     def _temperatures(self, view: MachineView) -> dict[str, Any]:
+        """OctoPrint's temperature data: a heater is there only when the firmware reports its temperature
+        (`comm.py` parses `T:`/`B:` from M105; `get_current_temperatures` leaves out what was never reported),
+        always numbers: a sensor without a heater (the mini w's bed) reads `B:actual /0.0`."""
         temps: dict[str, Any] = {}
-        if view.extruder_c is not None or view.extruder_target_c is not None:
-            temps["tool0"] = {"actual": view.extruder_c, "target": view.extruder_target_c, "offset": 0}
-        if view.bed_c is not None or view.bed_target_c is not None:
-            temps["bed"] = {"actual": view.bed_c, "target": view.bed_target_c, "offset": 0}
+        for key, actual, target in (("tool0", view.extruder_c, view.extruder_target_c),
+                                    ("bed", view.bed_c, view.bed_target_c)):
+            if actual is not None:
+                temps[key] = {"actual": actual, "target": target if target is not None else 0.0, "offset": 0}
         return temps
 
     @staticmethod
@@ -231,24 +234,34 @@ class OctoPrintDoor:
                 "date": int(entry["uploaded"])}
 
     async def job(self, request: Request) -> dict[str, Any]:
+        """GET /api/job: the running job, else the last one (as the Moonraker door's print_stats), else the
+        selected file; a finished print shows completion 100 with its time, as OctoPrint's
+        `on_comm_print_job_done` leaves it."""
         view = machine_of(self.agent, request)
-        job = view.job
+        job = view.shown_job
         entry = self.library.file_of_job(job)
-        if job is None and view.takes_jobs:
+        if view.job is None and view.takes_jobs:
             selected = self.library.selected(view.id)
-            entry = self.library.get(view.id, selected) if selected else None
-        meta = (entry or {}).get("meta") or {}
+            if selected and (entry is None or entry["name"] != selected):  # chosen since the last job
+                entry, job = self.library.get(view.id, selected), None
+        figures = view.figures() if job is not None or view.printing else None
+        meta = (entry or {}).get("meta") or (job or {}).get("file_meta") or {}
         length = meta.get("filament_mm")
-        active = job is not None or view.printing
+        active = view.job is not None or view.printing
+        done = not active and figures is not None and figures.state == "done"
+        shown = figures is not None and (active or done)
+        left = view.time_left_s if active else 0 if done else None
         body: dict[str, Any] = {
             "job": {"file": self._file_ref(request, view, entry, job),
-                    "estimatedPrintTime": meta.get("print_time_s"), "lastPrintTime": None,
+                    "estimatedPrintTime": meta.get("print_time_s"),
+                    "lastPrintTime": figures.total_s if done and figures else None,
                     "filament": {"tool0": {"length": length, "volume": None}} if length is not None else None,
                     "user": None},
-            "progress": {"completion": view.progress_percent if active else None, "filepos": None,
-                         "printTime": int(view.elapsed_s) if active and view.elapsed_s is not None else None,
-                         "printTimeLeft": int(view.time_left_s) if active and view.time_left_s is not None else None,
-                         "printTimeLeftOrigin": "estimate" if active and view.time_left_s is not None else None},
+            "progress": {"completion": round(figures.fraction * 100, 2) if shown and figures else None,
+                         "filepos": figures.position if shown and figures and figures.size else None,
+                         "printTime": int(figures.total_s) if shown and figures else None,
+                         "printTimeLeft": int(left) if left is not None else None,
+                         "printTimeLeftOrigin": "estimate" if active and left is not None else None},
             "state": STATE_TEXT[view.phase]}
         if view.phase == "error":
             body["error"] = view.error or view.message
