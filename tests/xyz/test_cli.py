@@ -466,10 +466,27 @@ def _silent_listener() -> tuple[socket.socket, str]:
 DISCOVER_MISSES = [  # (what the named host is, how to make it, what discover says of it without -v)
     ("a name that does not resolve", lambda sim: "nosuch.invalid", "cannot resolve host 'nosuch.invalid'"),
     ("nothing listening", lambda sim: "127.0.0.1:1", "nothing listens on port 1"),
-    ("a Line-us", lambda sim: device(sim("lineus", "--listen", "127.0.0.1:0").url), "not a da Vinci printer"),
-    ("an MMU simulator on TCP", lambda sim: device(sim("mmu", "--listen", "127.0.0.1:0").url),
-     "not a da Vinci printer"),
+    ("a Line-us", lambda sim: device(sim("lineus", "--listen", "127.0.0.1:0").url),
+     "it is a Line-us drawing robot (it said 'hello "),
+    ("an MMU on TCP", lambda sim: _booted_mmu(sim), "it is a Prusa MMU3"),  # silent first: named from a probe
+    ("a web server", lambda sim: _web_server(), "it is a web server"),
 ]
+
+
+def _booted_mmu(simulator: SimulatorStarter) -> str:
+    """A simulated MMU that has finished booting (as a real one answers only once booted)."""
+    address = device(simulator("mmu", "--listen", "127.0.0.1:0").url)
+    assert run_cli("mmu", "-d", address, "version").returncode == 0
+    return address
+
+
+def _web_server() -> str:
+    """A real HTTP server (the standard library's), answering in a thread until the test process ends."""
+    import http.server
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return f"127.0.0.1:{server.server_address[1]}"
 
 
 @pytest.mark.parametrize(("what", "make", "said"), DISCOVER_MISSES, ids=[row[0] for row in DISCOVER_MISSES])

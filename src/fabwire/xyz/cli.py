@@ -551,7 +551,8 @@ def discover(app: App, hosts: tuple[str, ...], subnet: str | None, port: int, pr
     targets = named + [(host, port) for host in (hosts_in(subnet) if subnet else [])]
     found = usb_printers()
     if targets:
-        results = asyncio.run(probe_hosts(targets, timeout=probe_timeout, concurrency=concurrency))
+        results = asyncio.run(probe_hosts(targets, timeout=probe_timeout, concurrency=concurrency,
+                                          named=len(named)))
         found += [r for r in results if isinstance(r, Found)]
         for result in results[:len(named)]:  # a host asked for by name is told about; a subnet's silence is not
             if not isinstance(result, Found):

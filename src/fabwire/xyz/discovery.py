@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import serialx
 
-from fabwire.errors import FabwireError, InputError, excerpt
+from fabwire.errors import FabwireError, InputError, RemoteProtocolError, excerpt
+from fabwire.transport.peers import FirstBytes, name_peer
 from fabwire.transport.tcp import open_tcp
 from fabwire.xyz import protocol as p
 from fabwire.xyz.protocol import Link, Reply, ReplyReader
@@ -83,10 +84,13 @@ class Missed:
     reason: str
 
 
-async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | Missed:
+async def probe(host: str, port: int = PORT, timeout: float = 1.0, *, named: bool = False) -> Found | Missed:
     """Ask one host for its status: what answered, or why no printer did (no answer within `timeout` seconds, a
-    name that does not resolve, nothing listening, a reply that is no XYZv3 status)."""
+    name that does not resolve, nothing listening, another kind of server, named from what it sent; a `named`
+    host, one asked for by name, that said nothing is also asked what it is, as every client asks)."""
     address = f"{host}:{port}"
+    heard = FirstBytes()
+    event: object = None
     try:
         async with asyncio.timeout(timeout):
             transport = await open_tcp(host, port, timeout=timeout)
@@ -94,19 +98,20 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | Mi
                 reader = ReplyReader(Link.WIFI)
                 query = p.Query("a")
                 await transport.write(reader.send(query, 0.0, timeout))
-                while True:
-                    reader.receive(await transport.read(), 0.0)
+                while event is None:
+                    chunk = await transport.read()
+                    heard.feed(chunk)
+                    reader.receive(chunk, 0.0)
                     event = reader.next_event(0.0)
-                    if event is not None:
-                        break
             finally:
                 await transport.close()
     except TimeoutError:
-        return _missed(address, f"no answer to 'query=a' within {timeout:g} s")
+        return await _not_a_printer(host, port, heard, named, f"no answer to 'query=a' within {timeout:g} s")
     except (FabwireError, OSError) as exc:
-        return _missed(address, str(exc) or type(exc).__name__)
+        return await _not_a_printer(host, port, heard, named and bool(heard), str(exc) or type(exc).__name__)
     if not isinstance(event, Reply):
-        return _missed(address, f"it answered {excerpt(str(event), 80)}, not an XYZv3 status")
+        return await _not_a_printer(host, port, heard, False,
+                                    f"it answered {excerpt(str(event), 80)}, not an XYZv3 status")
     status = Status.parse(event.lines)
     if status.model_number is None:
         return _missed(address, "its status names no model number")
@@ -114,21 +119,34 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0) -> Found | Mi
     return Found(address, status.model_number, model.name if model else None, status.serial, status.state_name)
 
 
+async def _not_a_printer(host: str, port: int, heard: FirstBytes, ask: bool, otherwise: str) -> Missed:
+    """Why the peer at host:port is no printer: the server its first bytes (`heard`) name, or, with `ask` and
+    nothing heard, the one its answer to a probe names (as every client names a wrong peer), else `otherwise`."""
+    address = f"{host}:{port}"
+    if heard or ask:
+        expected = "an XYZv3 printer"
+        named_peer = await name_peer(heard.data, f"tcp://{host}:{port}", expected, "xyz", address)
+        if isinstance(named_peer, RemoteProtocolError):
+            return _missed(address, str(named_peer).removeprefix(f"{address} is not {expected}: "))
+    return _missed(address, otherwise)
+
+
 def _missed(address: str, reason: str) -> Missed:
     log.info("%s: no printer (%s)", address, reason)
     return Missed(address, reason)
 
 
-async def probe_hosts(targets: Iterable[tuple[str, int]], *, timeout: float = 1.0,
-                      concurrency: int = 64) -> list[Found | Missed]:
-    """Probe many (host, port) targets at once, at most `concurrency` in flight; one result per target, in order."""
+async def probe_hosts(targets: Iterable[tuple[str, int]], *, timeout: float = 1.0, concurrency: int = 64,
+                      named: int = 0) -> list[Found | Missed]:
+    """Probe many (host, port) targets at once, at most `concurrency` in flight; one result per target, in order.
+    The first `named` targets were asked for by name (see `probe`)."""
     limit = asyncio.Semaphore(max(1, concurrency))
 
-    async def one(host: str, port: int) -> Found | Missed:
+    async def one(index: int, host: str, port: int) -> Found | Missed:
         async with limit:
             try:
-                return await probe(host, port, timeout)
+                return await probe(host, port, timeout, named=index < named)
             except Exception as exc:  # one odd host never ends a scan of the others
                 return _missed(f"{host}:{port}", f"probe failed: {exc}")
 
-    return list(await asyncio.gather(*(one(host, port) for host, port in targets)))
+    return list(await asyncio.gather(*(one(index, host, port) for index, (host, port) in enumerate(targets))))
