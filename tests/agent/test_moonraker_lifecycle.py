@@ -135,6 +135,8 @@ def snapshots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Snapshot]:
             taken["standby"] = _snapshot(agent, client, "p", "standby", "", 0, default=True)
 
             _upload(client, "p", "long.gcode", LONG)
+            taken["started"] = Snapshot("printing", "p", "long.gcode", len(LONG), served={"http": client.get(
+                "/printers/p/printer/objects/query", params=dict.fromkeys(OBJECTS, "")).json()["result"]["status"]})
             wait_for(lambda: _job(client, "p")["progress_percent"] > 0, "the print under way")
             taken["printing"] = _snapshot(agent, client, "p", "printing", "long.gcode", len(LONG), default=True)
 
@@ -354,6 +356,17 @@ def test_history_field_by_job_status(snapshots: dict[str, Snapshot], history_fie
         assert value >= 0  # no print_stats to compare with: the agent stopped during the job
     else:
         assert checks[rule](value), (history_field.name, status, value, rule, history_field.source)
+
+
+def test_a_print_is_printing_as_soon_as_its_upload_is_answered(snapshots: dict[str, Snapshot]) -> None:
+    """Klipper's print_stats says "printing" from SDCARD_PRINT_FILE on: so does the door while the file goes to the
+    machine and it heats, before the machine reports any progress."""
+    status = snapshots["started"].served["http"]
+    assert status["print_stats"]["state"] == "printing"
+    assert status["print_stats"]["filename"] == "long.gcode"
+    assert status["virtual_sdcard"]["is_active"] is True
+    assert status["virtual_sdcard"]["file_size"] == len(LONG)
+    assert status["idle_timeout"]["state"] == "Printing"
 
 
 def test_the_cancelled_print_keeps_how_far_it_came(snapshots: dict[str, Snapshot]) -> None:

@@ -204,6 +204,8 @@ class Machines:
         if isinstance(code, int) and code in STATE_CODE_PHASE:
             phase = STATE_CODE_PHASE[code]
         job = state.get("job")
+        if job is not None and online and phase == "standby":  # its file on the way to the machine: at work already
+            phase = "printing"
         ended = self._ended.get(session.info.id)
         if ended is not None and job is None and online:
             outcome, status_then = ended

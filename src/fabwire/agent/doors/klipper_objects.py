@@ -44,9 +44,9 @@ PHASE_STATE: dict[str, str] = {
 
 def print_state(view: MachineView) -> str:
     """Klipper's print_stats.state: a machine standing by after a job keeps how that job ended ("complete",
-    "cancelled", "error"; print_stats.py `_note_finish`, reset only by a new print or SDCARD_RESET_FILE);
-    otherwise by the phase."""
-    if view.phase in ("standby", "busy") and view.last_job is not None:
+    "cancelled", "error"; print_stats.py `_note_finish`, reset only by a new print or SDCARD_RESET_FILE); otherwise
+    by the phase (a job here is "printing" from its start, as `note_start` is at SDCARD_PRINT_FILE)."""
+    if view.phase in ("standby", "busy") and view.job is None and view.last_job is not None:
         return END_STATE.get(str(view.last_job["state"]), "standby")
     return PHASE_STATE[view.phase]
 
