@@ -81,6 +81,8 @@ RULES: dict[str, Rule] = {
     # ------------------------------------------------------------------------------------------ sim:// addresses
     "sim-path": Rule("address", "a path after sim://name", "a sim:// address takes no path",
                      "RFC 3986 §3.3: sim:// names a simulator by its host part; only options follow"),
+    "fragment": Rule("address", "a '#fragment' after an address", "a device address takes no '#' fragment",
+                     "RFC 3986 §3.5: a fragment is for the client, never sent; here it would be dropped unseen"),
     "sim-query": Rule("address", "options that are not name=value pairs joined by '&'",
                       "unreadable options {query}",
                       "WHATWG URL Standard §5.1, application/x-www-form-urlencoded parsing"),
@@ -101,11 +103,11 @@ RULES: dict[str, Rule] = {
     "name-length": Rule("name", f"an empty name, or one longer than {MAX_NAME} characters",
                         f"a device name is 1 to {MAX_NAME} characters, not {{length}}",
                         "one bound for every door: the agent API's NewDevice.name (64), a line of `devices list`"),
-    "name-address": Rule("name", "a name -d would read as an address (':' or '/' in it, an IP address)",
+    "name-address": Rule("name", "a name -d would read as an address (':' or '/' in it, an IP address, COM3)",
                          "{name} reads as an address, so as a name it would hide that address from -d: choose a name "
                          "without ':', '/' or an IP address's form",
                          "fabwire.config.resolve_target: a -d value with ':' or '/' is an address; "
-                         "RFC 791 / RFC 4291 §2.2 address forms"),
+                         "RFC 791 / RFC 4291 §2.2 address forms; Windows serial port names (COM1-COM256)"),
     "name-characters": Rule("name", "a name with characters other than letters, digits, '.', '_' and '-', or one "
                                     "starting with '.', '_' or '-'",
                             f"a device name is {NAME_CHARACTERS}, not {{name}}",

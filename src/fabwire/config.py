@@ -27,7 +27,7 @@ from fabwire.checks import MAX_NAME, refuse
 from fabwire.devices import KINDS, DeviceKind
 from fabwire.errors import ConfigError, ConfigWarning, InputError, closest, excerpt
 from fabwire.files import read_bounded
-from fabwire.transport.urls import Endpoint, parse_url
+from fabwire.transport.urls import WINDOWS_PORT, Endpoint, parse_url
 
 CONFIG_ENV = "FABWIRE_CONFIG"
 MAX_DEVICES = 10_000
@@ -342,7 +342,7 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 
 def reads_as_address(name: str) -> bool:
     """True for a name `-d` would otherwise take as an address: an IP address, host:port, a URL or a path."""
-    if _looks_like_address(name):
+    if _looks_like_address(name) or WINDOWS_PORT.match(name):
         return True
     try:
         ipaddress.ip_address(name)

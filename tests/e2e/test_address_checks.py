@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 
 from clitools import cli_env, run_cli
 from fabwire.checks import RULES
+from fabwire.devices import KINDS
 from fabwire.errors import InputError
 
 LONG = "a" * 5000
@@ -38,6 +39,7 @@ ADDRESS_CASES: dict[str, list[tuple[str, str]]] = {
     "serial-path": [("xyz", "serial://dev/ttyACM0")],
     "sim-path": [("mmu", "sim://mmu/path")],
     "sim-query": [("xyz", "sim://xyz?speed")],
+    "fragment": [("xyz", "sim://xyz?speed=5#x"), ("mmu", "sim://mmu#")],
     "sim-unknown": [("xyz", "sim://nosuch"), ("xyz", "sim://" + "x" * 300), ("xyz", "sim://xyz:1")],
     "sim-kind": [("lineus", "sim://xyz"), ("xyz", "sim://lineus"), ("lineus", "sim://mmu?speed=5"),
                  ("mmu", "sim://xyz")],
@@ -58,7 +60,7 @@ ADDRESS_CASES: dict[str, list[tuple[str, str]]] = {
 }
 NAME_CASES: dict[str, list[str]] = {
     "name-length": ["n" * 65, "x" * 5000],
-    "name-address": ["127.0.0.1", "::1", "10.0.0.5:9100", "tcp://office", "/dev/ttyUSB0", "fe80::1"],
+    "name-address": ["127.0.0.1", "::1", "10.0.0.5:9100", "tcp://office", "/dev/ttyUSB0", "fe80::1", "COM3"],
     "name-characters": ["my printer", "tab\there", "bench\u00e9", "_hidden", ".dot", "semi;colon", "a$b", "q'uote",
                         "\U0001f600", "star*"],
 }
@@ -71,6 +73,7 @@ SETTING_CASES: dict[str, list[tuple[str, str]]] = {
                   ("lineus", "lookahead=maybe"), ("mmu", "speed=1e400")],
     "set-model": [("xyz", "model=miniMakr"), ("xyz", f"model={LONG}")],
 }
+ADDRESS_ROWS = [(code, kind, address) for code, cases in ADDRESS_CASES.items() for kind, address in cases]
 MAX_LINE = 300
 """A refusal's line, however long the input: short enough to read on one terminal line or two."""
 
@@ -136,9 +139,7 @@ def short(value: object) -> object:
     return value[:30] if isinstance(value, str) else value
 
 
-@pytest.mark.parametrize(("code", "kind", "address"),
-                         [(code, kind, address) for code, cases in ADDRESS_CASES.items() for kind, address in cases],
-                         ids=short)
+@pytest.mark.parametrize(("code", "kind", "address"), ADDRESS_ROWS, ids=short)
 def test_an_address_is_refused_alike_by_every_door(code: str, kind: str, address: str, tmp_path: Path) -> None:
     refused_alike(code, doors(kind, address, tmp_path), tmp_path)
 
@@ -156,6 +157,33 @@ def test_a_name_is_refused_alike_by_every_door(code: str, name: str, tmp_path: P
 def test_a_setting_is_refused_in_one_short_line(code: str, kind: str, setting: str, tmp_path: Path) -> None:
     refused_alike(code, {"devices add": ["devices", "add", "bench", "/dev/ttyACM0", "--kind", kind, "--set", setting]},
                   tmp_path)
+
+
+@pytest.mark.parametrize(("code", "kind", "address"), ADDRESS_ROWS, ids=short)
+def test_the_config_file_and_the_api_refuse_an_address_in_the_same_words(code: str, kind: str, address: str,
+                                                                         tmp_path: Path) -> None:
+    """The two doors that are not command lines: a devices.toml written by hand (its line named) and the agent
+    API's device list (a 400 with the message)."""
+    import json
+
+    from fabwire.agent.api import NewDevice, checked_address
+    from fabwire.config import parse_devices
+    from fabwire.errors import ConfigError
+    from fabwire.transport.urls import parse_url
+
+    with pytest.raises(InputError) as expected:
+        parse_url(address, KINDS[kind])
+    words = str(expected.value)
+    assert fixed_words(code) in words
+    path = tmp_path / "devices.toml"
+    written = json.dumps(address, ensure_ascii=False).replace("\x7f", "\\u007f")  # TOML's escapes of JSON's
+    with pytest.raises(ConfigError) as in_file:
+        parse_devices(f'[devices.bench]\nkind = "{kind}"\nurl = {written}\n', path)
+    assert str(in_file.value) == f"{path}, line 3: device 'bench': {words}"
+    if len(address) <= 300:  # the API's bound on an address's length (a 422 before any check)
+        with pytest.raises(InputError) as over_api:
+            checked_address(NewDevice(name="bench", kind=kind, address=address))
+        assert str(over_api.value) == words
 
 
 def test_a_misspelt_setting_suggests_only_what_set_takes(tmp_path: Path) -> None:

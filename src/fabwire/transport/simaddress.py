@@ -194,11 +194,13 @@ def check_simulator(text: str, kind: DeviceKind | None) -> tuple[str, dict[str, 
     if kind is not None and name in KINDS and name != kind.name:
         raise refuse("sim-kind", name=name, simulated=KINDS[name].a_title, wanted=kind.a_title)
     if parts.path not in ("", "/"):
-        raise refuse("sim-path")
+        raise refuse("sim-path", address=excerpt(text, 60))
+    if parts.fragment or text.endswith("#"):
+        raise refuse("fragment", address=excerpt(text, 60))
     try:
         pairs = parse_qsl(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
     except ValueError:
-        raise refuse("sim-query", query=excerpt(parts.query, 40)) from None
+        raise refuse("sim-query", address=excerpt(text, 60), query=excerpt(parts.query, 40)) from None
     options: dict[str, str] = {}
     for key, value in pairs:
         control = CONTROL.search(key + value)  # %0A decodes to a line break

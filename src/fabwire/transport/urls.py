@@ -12,7 +12,7 @@ from fabwire.checks import CONTROL, MAX_PATH, refuse
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError, excerpt
 
-_WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
+WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
 """`COM3`: a serial port on Windows (no host is called that)."""
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_-]{1,63})*\.?$")
 
@@ -103,7 +103,7 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
     control = CONTROL.search(text)
     if control:
         raise _bad(text, "control", char=repr(control.group()))
-    if text.startswith("/") or _WINDOWS_PORT.match(text):
+    if text.startswith("/") or WINDOWS_PORT.match(text):
         return _serial(text, text)
     if "://" not in text:
         return _tcp(text, text, kind)
