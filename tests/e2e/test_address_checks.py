@@ -301,3 +301,24 @@ def test_a_saved_simulator_answers_through_dash_d(tmp_path: Path) -> None:
         assert added.returncode == 0, added.stderr
         done = run_cli(*[part.replace("{}", name) for part in COMMAND[kind]], env=env)
         assert done.returncode == 0, done.stderr
+
+
+@settings(max_examples=200, deadline=None)
+@given(kind=st.sampled_from(["xyz", "lineus", "mmu"]), serial=st.none() | st.text(max_size=600),
+       address=st.text(max_size=5000) | st.builds(lambda n: f"sim://xyz?state=/{'a' * n}", st.integers(0, 4000)))
+@example(kind="xyz", serial=None, address="sim://xyz?model=" + LONG)
+@example(kind="xyz", serial="S" * 500, address="127.0.0.1")
+def test_a_device_id_fits_a_file_name_and_a_topic_level(kind: str, serial: str | None, address: str) -> None:
+    """The agent names a device's folders and MQTT topics by its id: at most MAX_DEVICE_ID of a-z, 0-9 and '-'
+    (within NAME_MAX, and no MQTT wildcard or level separator), and two long addresses keep two ids."""
+    import re
+
+    from fabwire.agent.core import MAX_DEVICE_ID, device_id
+
+    made = device_id(kind, serial, address, host="bench-pc")
+    assert len(made) <= MAX_DEVICE_ID
+    assert re.fullmatch(r"[a-z0-9-]+", made)
+    if len(made) == MAX_DEVICE_ID:  # cut: the hash of the whole keeps a longer neighbour apart
+        other = device_id(kind, serial + "x", address, host="bench-pc") if serial and serial.strip() else \
+            device_id(kind, serial, address + "x", host="bench-pc")
+        assert other != made
