@@ -24,6 +24,7 @@ import click
 import msgspec
 
 from fabwire.console import Output
+from fabwire.errors import excerpt
 
 if TYPE_CHECKING:
     from fabwire.transport.faults import FaultPlan
@@ -53,10 +54,11 @@ class FiniteRange(click.FloatRange):
         if isinstance(value, str) and not PLAIN_NUMBER.fullmatch(value.strip()):
             # Python's float() also takes "1_000" and other scripts' digits: what a person typed is not read as a
             # number they did not mean
-            self.fail(f"{value!r} is not a number (digits 0-9, an optional sign, point and exponent).", param, ctx)
+            self.fail(f"{excerpt(str(value), 30)} is not a number (digits 0-9, an optional sign, point and "
+                      "exponent).", param, ctx)
         number = click.FLOAT.convert(value, param, ctx)  # the finiteness first: "inf" is no number, not too large
         if not math.isfinite(number) and not (self.open_ended and number == math.inf):
-            self.fail(f"{value!r} is not a finite number.", param, ctx)
+            self.fail(f"{excerpt(str(value), 30)} is not a finite number.", param, ctx)
         return super().convert(number, param, ctx)
 
 
@@ -160,7 +162,10 @@ def _set_faults(app: App, value: str) -> None:
 
 def device_names(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
     """Completion of a device name (-d, `devices show|remove NAME`): the configured names (of the command's
-    device kind, when known)."""
+    device kind, when known), each as one shell word: a name written by hand with a space in it comes quoted
+    (`devices add` takes only names that need no quotes)."""
+    import shlex
+
     from fabwire.config import load_devices
     from fabwire.errors import FabwireError
 
@@ -174,7 +179,7 @@ def device_names(ctx: click.Context, param: click.Parameter, incomplete: str) ->
         kinds.add(current.info_name)
         current = current.parent
     wanted = kinds & {"xyz", "lineus", "mmu"}
-    return sorted(name for name, device in devices.items()
+    return sorted(shlex.quote(name) for name, device in devices.items()
                   if name.startswith(incomplete) and (not wanted or device.kind.name in wanted))
 
 

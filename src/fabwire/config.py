@@ -14,6 +14,7 @@ address (see `resolve_target`).
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import re
 import warnings
@@ -22,10 +23,11 @@ from typing import Annotated, Any, Literal, get_args, get_type_hints
 
 import msgspec
 
+from fabwire.checks import MAX_NAME, refuse
 from fabwire.devices import KINDS, DeviceKind
-from fabwire.errors import ConfigError, ConfigWarning, InputError
+from fabwire.errors import ConfigError, ConfigWarning, InputError, closest, excerpt
 from fabwire.files import read_bounded
-from fabwire.transport.urls import Endpoint, parse_url
+from fabwire.transport.urls import WINDOWS_PORT, Endpoint, parse_url
 
 CONFIG_ENV = "FABWIRE_CONFIG"
 MAX_DEVICES = 10_000
@@ -119,15 +121,6 @@ def state_path() -> Path:
     return user_state_path("fabwire", appauthor=False)
 
 
-def closest(word: str, choices: object) -> str:
-    """` (did you mean 'x'?)` for the nearest choice, or nothing."""
-    import difflib
-
-    names = [str(c) for c in choices]  # type: ignore[attr-defined]
-    match = difflib.get_close_matches(word, names, n=1, cutoff=0.6)
-    return f" (did you mean {match[0]!r}?)" if match else ""
-
-
 _HEADER = re.compile(r"""^[ \t]*\[[ \t]*devices[ \t]*\.[ \t]*(?:"([^"\n]*)"|'([^'\n]*)'|([A-Za-z0-9_-]+))[ \t]*\]""",
                      re.MULTILINE)
 
@@ -218,7 +211,7 @@ def _describe(error: msgspec.ValidationError, schema: type[AnySettings]) -> str:
     unknown = re.match(r"Object contains unknown field `([^`]*)`", message)
     if unknown:
         key = unknown.group(1)
-        return f"unknown key {key!r}{closest(key, schema.__struct_fields__)}"
+        return f"unknown key {excerpt(key, 40)}{closest(key, schema.__struct_fields__)}"
     where = re.search(r" - at `\$\.?([^`]*)`", message)
     what = message.split(" - at ")[0]
     if not (where and where.group(1)):
@@ -231,7 +224,8 @@ def _describe(error: msgspec.ValidationError, schema: type[AnySettings]) -> str:
     bad = re.match(r"Invalid enum value (.*)", what)
     if bad and choices:
         word = bad.group(1).strip("'")
-        return f"{key!r}: expected one of {', '.join(map(repr, choices))}, not {bad.group(1)}{closest(word, choices)}"
+        return (f"{key!r}: expected one of {', '.join(map(repr, choices))}, not {excerpt(word, 40)}"
+                f"{closest(word, choices)}")
     return f"{key!r}: {what[0].lower()}{what[1:]}"
 
 
@@ -242,7 +236,7 @@ def validate_settings(kind: DeviceKind, values: dict[str, Any], *, what: str = "
         return msgspec.convert({**values, "kind": kind.name}, type=schema)
     except msgspec.ValidationError as exc:
         problem = describe_problem(exc, schema).replace("unknown key", f"unknown {what}")
-        raise InputError(f"{kind.title}: {problem}") from None
+        raise refuse("set-value", title=kind.title, problem=problem) from None
 
 
 def _entry(path: Path, text: str, name: str, table: object, line: int) -> NamedDevice:
@@ -251,15 +245,16 @@ def _entry(path: Path, text: str, name: str, table: object, line: int) -> NamedD
 
     def fail(problem: str, key: str | None = None) -> ConfigError:
         at = _key_line(text, name, key, line)
-        return ConfigError(f"{path}, line {at}: device {name!r}: {problem}" if at else
-                           f"{path}: device {name!r}: {problem}")
+        return ConfigError(f"{path}, line {at}: device {excerpt(name, 64)}: {problem}" if at else
+                           f"{path}: device {excerpt(name, 64)}: {problem}")
 
     if not isinstance(table, dict):
         raise fail("must be a table like [devices.NAME]")
     kind_name = table.get("kind")
     if not isinstance(kind_name, str) or kind_name not in KINDS:
         hint = closest(kind_name, KINDS) if isinstance(kind_name, str) else ""
-        raise fail(f"'kind' must be one of {', '.join(KINDS)} (got {kind_name!r}){hint}", "kind")
+        got = excerpt(kind_name, 20) if isinstance(kind_name, str) else excerpt(repr(kind_name), 20)[1:-1]
+        raise fail(f"'kind' must be one of {', '.join(KINDS)} (got {got}){hint}", "kind")
     schema = SCHEMAS[kind_name]
     try:
         settings = msgspec.convert(table, type=schema)
@@ -290,7 +285,7 @@ def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
     unknown = set(data) - {"devices"}
     if unknown:
         key = sorted(unknown)[0]
-        raise ConfigError(f"{path}: unknown top-level key {key!r}{closest(key, ['devices'])}; "
+        raise ConfigError(f"{path}: unknown top-level key {excerpt(key, 40)}{closest(key, ['devices'])}; "
                           "expected [devices.NAME] sections")
     devices = data.get("devices", {})
     if not isinstance(devices, dict):
@@ -304,8 +299,8 @@ def parse_devices(text: str, path: Path) -> dict[str, NamedDevice]:
         if device.default:
             other = defaults.setdefault(device.kind.name, device.name)
             if other != device.name:
-                raise ConfigError(f"{path}: devices {other!r} and {device.name!r} are both the default "
-                                  f"{device.kind.title}: keep `default = true` on one")
+                raise ConfigError(f"{path}: devices {excerpt(other, 64)} and {excerpt(device.name, 64)} are both "
+                                  f"the default {device.kind.title}: keep `default = true` on one")
     return found
 
 
@@ -341,6 +336,34 @@ def _looks_like_address(text: str) -> bool:
     return "/" in text or ":" in text
 
 
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+"""A device name: POSIX's portable filename characters, not starting with '.', '_' or '-' (`checks.RULES`)."""
+
+
+def reads_as_address(name: str) -> bool:
+    """True for a name `-d` would otherwise take as an address: an IP address, host:port, a URL or a path."""
+    if _looks_like_address(name) or WINDOWS_PORT.match(name):
+        return True
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
+def check_device_name(name: str) -> str:
+    """`name` if every door may take it as a device name (`fabwire.checks.RULES`, door "name"): 1 to 64 of
+    letters, digits, '.', '_' and '-', starting with a letter or digit, and not an address's form; an InputError
+    worded by the rule it breaks otherwise."""
+    if not 0 < len(name) <= MAX_NAME:
+        raise refuse("name-length", length=len(name))
+    if reads_as_address(name):
+        raise refuse("name-address", name=excerpt(name, 64))
+    if not _NAME.fullmatch(name):
+        raise refuse("name-characters", name=excerpt(name, 64))
+    return name
+
+
 def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = None) -> Target:
     """A -d value may name a configured device or be an address; no -d picks the kind's default device.
 
@@ -357,7 +380,8 @@ def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = Non
         if device is None or _names_a_section(device, path):
             raise
         # one location for every caller, so a command that resolves twice warns once
-        warnings.warn(ConfigWarning(f"{problem}; the file is skipped and {device!r} taken as an address"), stacklevel=1)
+        warnings.warn(ConfigWarning(f"{problem}; the file is skipped and {excerpt(device, 64)} taken as an address"),
+                      stacklevel=1)
         return Target(parse_url(device, kind))
     if device is None:
         mine = [d for d in devices.values() if d.kind is kind]
@@ -370,11 +394,11 @@ def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = Non
     elif device in devices:
         found = devices[device]
         if found.kind is not kind:
-            raise ConfigError(f"device {device!r} is a {found.kind.title}, not a {kind.title}")
+            raise ConfigError(f"device {excerpt(device, 64)} is {found.kind.a_title}, not {kind.a_title}")
     else:
         hint = _hint(device, devices)
         if hint:
-            raise ConfigError(f"no device named {device!r}{hint}")
+            raise ConfigError(f"no device named {excerpt(device, 64)}{hint}")
         return Target(parse_url(device, kind))
     return Target(found.endpoint, found.name, found.options)
 

@@ -6,7 +6,6 @@ and the result is validated by the schema before it replaces the file.
 
 from __future__ import annotations
 
-import ipaddress
 import json
 import os
 import re
@@ -18,12 +17,13 @@ from typing import Any, get_origin, get_type_hints
 import click
 import msgspec
 
+from fabwire.checks import refuse
 from fabwire.cli_options import device_names
 from fabwire.cli_support import App, pass_app
 from fabwire.config import (
     SCHEMAS,
     NamedDevice,
-    closest,
+    check_device_name,
     config_path,
     load_devices,
     parse_devices,
@@ -32,10 +32,12 @@ from fabwire.config import (
     validate_settings,
 )
 from fabwire.devices import KINDS
-from fabwire.errors import ConfigError, InputError, excerpt
+from fabwire.errors import ConfigError, InputError, closest, excerpt, nearest
 from fabwire.transport.urls import parse_url
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+_ARGUMENTS = {"kind": "--kind", "url": "the ADDRESS argument", "default": "--default"}
+"""What `devices add` takes as its own arguments and options, never with --set: how it is given instead."""
 
 
 def _toml_key(name: str) -> str:
@@ -59,7 +61,7 @@ def _parse_setting(text: str, lists: frozenset[str]) -> tuple[str, Any]:
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise InputError(f"--set takes KEY=VALUE, not {text!r}")
+        raise refuse("set-form", text=excerpt(text, 40))
     if key in lists and not raw.lstrip().startswith("["):
         return key, [item.strip() for item in raw.split(",") if item.strip()]
     try:
@@ -95,7 +97,7 @@ def _row(device: NamedDevice) -> dict[str, Any]:
 
 def _find(devices: dict[str, NamedDevice], name: str, path: Path) -> NamedDevice:
     if name not in devices:
-        raise ConfigError(f"no device named {name!r} in {path}{closest(name, devices)}")
+        raise ConfigError(f"no device named {excerpt(name, 64)} in {path}{closest(name, devices)}")
     return devices[name]
 
 
@@ -153,45 +155,49 @@ def show(app: App, name: str) -> None:
                    "separated by commas, e.g. accept=3.0.3,3.0.4.")
 @pass_app
 def add(app: App, name: str, url: str, kind_name: str, is_default: bool, settings: tuple[str, ...]) -> None:
-    """Name the device at URL (any address -d takes), with its settings."""
-    if not name or "\n" in name or len(name) > 64:
-        raise InputError("a device name is 1 to 64 characters on one line")
-    if _reads_as_address(name):
-        raise InputError(f"{excerpt(name, 64)} reads as an address, so as a name it would hide that address from "
-                         "-d: choose a name without ':', '/' or an IP address's form")
+    """Name the device at URL (any address -d takes), with its settings.
+
+    NAME is 1 to 64 letters, digits, '.', '_' and '-', starting with a letter or digit. Every check -d and
+    `fabwire serve` make of the address and the settings is made here, before the file is touched."""
     for given in (name, url, *settings):
         try:
             given.encode("utf-8")
         except UnicodeEncodeError:  # bytes that are not UTF-8 arrive as lone surrogates
             raise InputError(f"{excerpt(given, 40)} is not valid text (the config file is UTF-8)") from None
+    check_device_name(name)
     path = config_path()
     text = read_config_text(path)
     existing = parse_devices(text, path) if text else {}
     if name in existing:
         raise ConfigError(f"{path} already has a device named {name!r}: remove it first")
+    kind = KINDS[kind_name]
     values: dict[str, Any] = {"kind": kind_name, "url": url}
     if is_default:
         values["default"] = True
     schema = SCHEMAS[kind_name]
     lists = frozenset(k for k, hint in get_type_hints(schema).items() if get_origin(hint) is list)
+    settable = [f for f in schema.__struct_fields__ if f not in _ARGUMENTS]  # no hint at what --set refuses
     for item in settings:
         key, value = _parse_setting(item, lists)
-        if key in ("kind", "url", "default"):
-            raise InputError(f"give {key} as an argument or option, not with --set")
+        if key in _ARGUMENTS:
+            raise refuse("set-reserved", key=key)
+        if key not in settable:
+            hint = closest(key, settable)
+            argument = None if hint else nearest(key, _ARGUMENTS)
+            raise refuse("set-unknown", title=kind.title, key=excerpt(key, 40),
+                         hint=hint or (f" (give {argument} with {_ARGUMENTS[argument]})" if argument else ""))
         if isinstance(value, str) and not value.isprintable():
-            raise InputError(f"{key}: {excerpt(value, 40)} holds a control character (a line break, a tab …): "
-                             "a setting is one line of text")
+            raise refuse("set-control", key=key, value=excerpt(value, 40))
         values[key] = value
-    unknown = [k for k in values if k != "kind" and k not in schema.__struct_fields__]
-    if unknown:
-        raise InputError(f"{KINDS[kind_name].title} has no setting {unknown[0]!r}"
-                         f"{closest(unknown[0], schema.__struct_fields__)}")
-    validate_settings(KINDS[kind_name], {k: v for k, v in values.items() if k != "kind"}, what="setting")
-    parse_url(url, KINDS[kind_name])  # the address as -d reads it: refused here, before the file is touched
+    validate_settings(kind, {k: v for k, v in values.items() if k != "kind"}, what="setting")
+    parse_url(url, kind)  # the address as -d reads it: refused here, before the file is touched
     if kind_name == "xyz" and isinstance(values.get("model"), str):
         from fabwire.xyz.models import find_model
 
-        find_model(values["model"])  # a model the printer table does not know would only fail at print time
+        try:
+            find_model(values["model"])  # a model the printer table does not know would only fail at print time
+        except InputError as exc:
+            raise refuse("set-model", problem=str(exc)) from None
     section = f"[devices.{_toml_key(name)}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items())
     separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
     _write(path, text + separator + section)
@@ -210,7 +216,8 @@ def remove(app: App, name: str) -> None:
         _find(parse_devices(text, path) if text else {}, name, path)
     lines = text.splitlines(keepends=True)
     if name not in headers:
-        raise ConfigError(f"{name!r} is not written as a [devices.NAME] section in {path}: edit the file by hand")
+        raise ConfigError(f"{excerpt(name, 64)} is not written as a [devices.NAME] section in {path}: "
+                          "edit the file by hand")
     start = headers[name] - 1
     end = start + 1
     while end < len(lines) and not lines[end].lstrip().startswith("["):
@@ -219,14 +226,3 @@ def remove(app: App, name: str) -> None:
         end -= 1  # comments just above the next section belong to it
     _write(path, "".join(lines[:start] + lines[end:]))
     app.output.result({"removed": name, "file": str(path)}, f"removed {name} from {path}")
-
-
-def _reads_as_address(name: str) -> bool:
-    """True for a name `-d` would otherwise take as an address: an IP address, host:port, a URL or a path."""
-    if ":" in name or "/" in name:
-        return True
-    try:
-        ipaddress.ip_address(name)
-    except ValueError:
-        return False
-    return True

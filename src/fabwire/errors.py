@@ -103,6 +103,21 @@ def excerpt(value: str | bytes, limit: int = 40) -> str:
     return quoted[:-1] + "…" + quoted[-1]
 
 
+def nearest(word: str, choices: object) -> str | None:
+    """The choice nearest `word` as a typo is near it (difflib), or None."""
+    import difflib
+
+    names = [str(c) for c in choices]  # type: ignore[attr-defined]
+    match = difflib.get_close_matches(word[:100], names, n=1, cutoff=0.6)
+    return match[0] if match else None
+
+
+def closest(word: str, choices: object) -> str:
+    """` (did you mean 'x'?)` for the choice nearest `word`, or nothing."""
+    match = nearest(word, choices)
+    return f" (did you mean {excerpt(match)}?)" if match else ""
+
+
 _CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
 """Control characters (C0 and C1, tab and newline excepted) that outside text must not bring to a terminal."""
 

@@ -41,7 +41,7 @@ def test_a_busy_line_us_and_a_busy_printer_in_their_words() -> None:
 @pytest.mark.parametrize("kind", sorted(KINDS))
 def test_a_machine_that_takes_no_files_is_named_by_its_kind(kind: str) -> None:
     none = view(kind, "standby", takes_jobs=False)
-    with pytest.raises(TakesNoJobs, match=f"^bench is a {KINDS[kind].title}: it takes no files$"):
+    with pytest.raises(TakesNoJobs, match=f"^bench is {KINDS[kind].a_title}: it takes no files$"):
         none.require_files()
-    assert none.refusal() == f"bench is a {KINDS[kind].title} and takes no jobs"
+    assert none.refusal() == f"bench is {KINDS[kind].a_title} and takes no jobs"
     replace(none, takes_jobs=True).require_files()  # one that does: nothing raised

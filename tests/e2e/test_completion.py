@@ -46,6 +46,22 @@ def test_the_devices_commands_complete_every_configured_name(tmp_path: Path, com
     assert complete(f"fabwire devices {command} ", tmp_path) == ["basement", "bench", "office"]
 
 
+def test_a_name_written_by_hand_with_a_space_completes_as_one_quoted_word(tmp_path: Path) -> None:
+    config = tmp_path / "devices.toml"
+    config.write_text('[devices."my printer"]\nkind = "xyz"\nurl = "10.0.0.5"\n')
+    env = cli_env()
+    env.update(FABWIRE_CONFIG=str(config), _FABWIRE_COMPLETE="bash_complete", COMP_WORDS="fabwire devices show m",
+               COMP_CWORD="3")
+    offered = [line.split(",", 1)[1] for line in run_cli(env=env).stdout.splitlines()]
+    assert offered == ["'my printer'"]
+    env = cli_env()
+    env["FABWIRE_CONFIG"] = str(config)
+    shown = subprocess.run(["bash", "-c", f"{sys.executable} -m fabwire devices show {offered[0]}"],
+                           capture_output=True, text=True, timeout=60, env=env)
+    assert shown.returncode == 0, shown.stderr
+    assert shown.stdout.startswith('[devices."my printer"]')
+
+
 def test_the_readme_installs_bash_completion_as_typed_on_a_fresh_home(tmp_path: Path) -> None:
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
     block, = (b for b in re.findall(r"```sh\n(.*?)```", readme, flags=re.DOTALL) if "completion bash" in b)

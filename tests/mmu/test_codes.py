@@ -53,7 +53,7 @@ async def test_sim_url_options() -> None:
             with pytest.raises(MMUError, match=r"^04101 FINDA DIDN'T TRIGGER \(0x8001\) during T1"):
                 await mmu.tool_change(1, timeout=5)
     await transport.close()
-    with pytest.raises(InputError, match="speed must be a number"):
+    with pytest.raises(InputError, match=r"sim://mmu option 'speed': expected a number from 0\.01 to 10000, not"):
         await open_transport("sim://mmu?speed=fast")
     with pytest.raises(InputError, match="unknown MMU firmware"):
         await open_transport("sim://mmu?version=9.9.9")

@@ -62,7 +62,7 @@ def test_missing_file_means_no_devices(tmp_path: Path) -> None:
 
 def test_device_of_another_kind_is_refused(tmp_path: Path) -> None:
     path = write(tmp_path, GOOD)
-    with pytest.raises(ConfigError, match="'arm' is a Line-us, not a XYZprinting"):
+    with pytest.raises(ConfigError, match="'arm' is a Line-us, not an XYZprinting"):
         resolve_target("arm", XYZ, path)
 
 

@@ -76,7 +76,7 @@ async def test_an_open_transport_is_taken_over() -> None:
     (MMU, "sped", "speed"), (XYZPrinter, "reply_timout", "reply_timeout"), (LineUs, "look_ahead", "lookahead")])
 async def test_an_unknown_option_names_the_closest_one(client: Any, option: str, hint: str) -> None:
     with pytest.raises(InputError, match=f"unknown option '{option}' \\(did you mean '{hint}'\\?\\)"):
-        await client.open("sim://x", **{option: 1})
+        await client.open("sim://", **{option: 1})
 
 
 async def test_a_misspelt_name_is_a_config_error(tmp_path: Path) -> None:

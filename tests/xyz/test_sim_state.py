@@ -87,7 +87,7 @@ def test_a_sim_url_with_an_impossible_speed_is_bad_input(url: str) -> None:
     done = run_cli("xyz", "-d", url, "status", timeout=60)
     assert done.returncode == 4
     assert done.stderr.strip().splitlines() == [
-        f"fabwire: error: speed must be a number from 0.01 to 10000, not {float(url.split('=')[1])}"]
+        f"fabwire: error: sim://xyz option 'speed': expected a number from 0.01 to 10000, not {url.split('=')[1]!r}"]
 
 
 @pytest.mark.parametrize("store", ["/dev/null", "/proc/no-such-dir/x"])

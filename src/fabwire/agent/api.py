@@ -36,6 +36,7 @@ from fabwire.errors import (
     LinkError,
     LinkTimeout,
     RemoteProtocolError,
+    excerpt,
 )
 
 STATIC = resources.files("fabwire.agent") / "static"
@@ -66,14 +67,17 @@ SERIAL_PORT = re.compile(r"^/dev/(tty[A-Za-z0-9_.-]+|cu\.[A-Za-z0-9_.-]+|serial/
 
 
 def checked_address(body: NewDevice) -> str:
-    """The address as the agent will open it; over the API, a path must be a serial port's."""
+    """The address as the agent will open it, the name and address checked as every door checks them
+    (`fabwire.checks.RULES`); over the API, a path must be a serial port's."""
+    from fabwire.config import check_device_name
     from fabwire.devices import KINDS as DEVICE_KINDS
     from fabwire.transport.urls import parse_url
 
+    check_device_name(body.name)
     endpoint = parse_url(body.address, DEVICE_KINDS[body.kind])
     if endpoint.scheme == "serial" and (not SERIAL_PORT.match(endpoint.path) or ".." in endpoint.path):
-        raise InputError(f"{endpoint.path!r} is not a serial port: over the API a device path must look like "
-                         "/dev/ttyACM0 or /dev/serial/by-id/…")
+        raise InputError(f"{excerpt(endpoint.path, 60)} is not a serial port: over the API a device path must "
+                         "look like /dev/ttyACM0 or /dev/serial/by-id/…")
     return endpoint.url
 
 

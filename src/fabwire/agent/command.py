@@ -24,7 +24,7 @@ from fabwire.agent.auth import is_loopback, load_or_create_token
 from fabwire.agent.boundary import Policy, normal_host, split_authority
 from fabwire.agent.core import KINDS, Agent, DeviceSpec
 from fabwire.cli_support import App, FiniteRange, pass_app
-from fabwire.errors import FabwireError, InputError
+from fabwire.errors import FabwireError, InputError, excerpt
 from fabwire.mqtt.options import BrokerURL
 from fabwire.simoptions import ListenAddress, parse_listen
 
@@ -74,14 +74,32 @@ def configured_devices(path: Path | None) -> list[DeviceSpec]:
             for d in load_devices(path).values()]
 
 
-def parse_device_option(text: str, index: int) -> DeviceSpec:
-    """`--device KIND=ADDRESS` or `--device NAME:KIND=ADDRESS`."""
+def device_option_form(text: str, index: int) -> DeviceSpec:
+    """`--device KIND=ADDRESS` or `--device NAME:KIND=ADDRESS` split into its parts (the name and address are not
+    checked yet: `checked_device`); an InputError when it has neither form."""
     head, sep, address = text.partition("=")
     name, _, kind = head.rpartition(":")
     if not sep or kind not in KINDS or not address:
         raise InputError(f"--device takes KIND=ADDRESS or NAME:KIND=ADDRESS with KIND one of {', '.join(KINDS)}, "
-                         f"not {text!r}")
+                         f"not {excerpt(text, 60)}")
     return DeviceSpec(name or f"{kind}-{index}", kind, address)
+
+
+def checked_device(spec: DeviceSpec) -> DeviceSpec:
+    """`spec` if its name and address pass the checks `fabwire devices add` makes (`fabwire.checks.RULES`): the
+    same InputError, in the same words, otherwise."""
+    from fabwire.config import check_device_name
+    from fabwire.devices import KINDS as DEVICE_KINDS
+    from fabwire.transport.urls import parse_url
+
+    check_device_name(spec.name)
+    parse_url(spec.address, DEVICE_KINDS[spec.kind])
+    return spec
+
+
+def parse_device_option(text: str, index: int) -> DeviceSpec:
+    """`--device KIND=ADDRESS` or `--device NAME:KIND=ADDRESS`, its name and address checked."""
+    return checked_device(device_option_form(text, index))
 
 
 def _usage(convert: Any) -> Any:
@@ -101,7 +119,7 @@ def _listen(text: str) -> ListenAddress:
 
 
 def _devices(texts: tuple[str, ...]) -> list[DeviceSpec]:
-    return [parse_device_option(text, i) for i, text in enumerate(texts, 1)]
+    return [device_option_form(text, i) for i, text in enumerate(texts, 1)]
 
 
 def _allow_hosts(texts: tuple[str, ...]) -> tuple[str, ...]:
@@ -111,7 +129,7 @@ def _allow_hosts(texts: tuple[str, ...]) -> tuple[str, ...]:
         parsed = split_authority(text)
         name = normal_host(parsed[0]) if parsed and parsed[1] is None else ""
         if not name or len(name) > 253 or not all(c.isalnum() or c in "-._:" for c in name):
-            raise InputError(f"--allow-host takes a host name such as printers.lan, not {text!r}")
+            raise InputError(f"--allow-host takes a host name such as printers.lan, not {excerpt(text, 60)}")
         names.append(name)
     return tuple(names)
 
@@ -205,7 +223,7 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
                          "could run the machines (leave out --no-token, or listen on 127.0.0.1)")
     bridge = _bridge(mqtt_url, mqtt_user, mqtt_password, mqtt_tls, mqtt_discovery)
     notifier = _notifier(notify_urls, notify_offline_after)
-    specs = list(devices)
+    specs = [checked_device(spec) for spec in devices]  # as `devices add` refuses them: exit 4, one line
     if not demo:
         specs = configured_devices(config) + specs
     demo_dir = tempfile.TemporaryDirectory(prefix="fabwire-demo-") if demo and state_dir is None else None

@@ -90,16 +90,31 @@ def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "device"
 
 
+MAX_DEVICE_ID = 100
+"""The longest device id. An id names the device's folders (`library/ID/`), so it must stay under a file name's
+limit (NAME_MAX, 255 bytes on Linux filesystems) and it is a level of MQTT topics and Home Assistant unique ids;
+a longer one is cut and ends with a hash of the whole, so two long addresses keep two ids."""
+
+
 def device_id(kind: str, serial: str | None, address: str, host: str | None = None) -> str:
-    """`{kind}-{serial}` when the machine reports a serial number, else `{kind}-{address}` made URL-safe.
+    """`{kind}-{serial}` when the machine reports a serial number, else `{kind}-{address}` made URL-safe (a-z, 0-9
+    and '-'), at most MAX_DEVICE_ID characters.
 
     A loopback, serial-port or in-process address means something only on this computer, so it is
     qualified with the host name: two agents' `127.0.0.1:9100` are two different machines."""
     if serial and serial.strip():
-        return f"{kind}-{_slug(serial)}"
+        return _bounded(f"{kind}-{_slug(serial)}")
     if _LOCAL.match(address):
-        return f"{kind}-{_slug(host or socket.gethostname())}-{_slug(address)}"
-    return f"{kind}-{_slug(address)}"
+        return _bounded(f"{kind}-{_slug(host or socket.gethostname())}-{_slug(address)}")
+    return _bounded(f"{kind}-{_slug(address)}")
+
+
+def _bounded(slug: str) -> str:
+    if len(slug) <= MAX_DEVICE_ID:
+        return slug
+    import hashlib
+
+    return f"{slug[:MAX_DEVICE_ID - 9].rstrip('-')}-{hashlib.sha256(slug.encode()).hexdigest()[:8]}"
 
 
 def make_event(device: str, type_: EventType, **payload: Any) -> dict[str, Any]:

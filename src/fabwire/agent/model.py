@@ -116,13 +116,13 @@ class MachineView:
     def require_files(self) -> None:
         """TakesNoJobs (HTTP 409) unless the machine takes files: the doors and the library refuse an MMU alike."""
         if not self.takes_jobs:
-            raise TakesNoJobs(f"{self.name} is a {KINDS[self.kind].title}: it takes no files")
+            raise TakesNoJobs(f"{self.name} is {KINDS[self.kind].a_title}: it takes no files")
 
     def refusal(self) -> str | None:
         """Why a job cannot start now (words for the owner, with what to do), or None when it can."""
         name = self.name
         if not self.takes_jobs:
-            return f"{name} is a {KINDS[self.kind].title} and takes no jobs"
+            return f"{name} is {KINDS[self.kind].a_title} and takes no jobs"
         if self.phase == "offline":
             return f"{name} is offline ({self.message})"
         # a Line-us draws: the phases' OctoPrint words (printing, paused …) are said as a drawing's

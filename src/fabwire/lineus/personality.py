@@ -50,6 +50,25 @@ def resolve_version(text: str) -> str:
     return short
 
 
+def check_name(text: str) -> str:
+    """`text` if it is a machine name the firmware takes (M550: 1-32 of A-Z a-z 0-9 -); ValueError otherwise."""
+    if not p.NAME_RE.fullmatch(text):
+        raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {excerpt(text, 40)}")
+    return text
+
+
+MAX_SERIAL = 32
+"""The longest serial the simulator says in its hello (real machines have 6 digits)."""
+
+
+def check_serial(text: str) -> str:
+    """`text` if it fits the hello's `SERIAL:"…"` field: 1-32 printable ASCII characters, no space or quote."""
+    if not (text.isascii() and text.isprintable() and 0 < len(text) <= MAX_SERIAL) or any(c in text for c in ' "'):
+        raise ValueError(f"a serial is 1-{MAX_SERIAL} ASCII characters without spaces or quotes, "
+                         f"got {excerpt(text, 20)}")
+    return text
+
+
 def guards_body(firmware: tuple[int, ...]) -> bool:
     """False for firmware 1.0.1 and older, which let the pen into the body notch (README "CAUTION")."""
     return not firmware or firmware > (1, 0, 1)
@@ -77,10 +96,8 @@ class SimOptions:
             raise ValueError(f"speed factor must be positive (or 0/inf for no delay), got {self.speed}")
         if self.reply not in ("complete", "accept"):
             raise ValueError("reply policy is 'complete' or 'accept'")
-        if not p.NAME_RE.fullmatch(self.name):
-            raise ValueError(f"a machine name is 1-32 of A-Z a-z 0-9 -, got {excerpt(self.name, 40)}")
-        if not self.serial.isascii() or not self.serial or any(c in self.serial for c in ' "'):
-            raise ValueError(f"bad serial {excerpt(self.serial, 40)}")
+        check_name(self.name)
+        check_serial(self.serial)
 
     @property
     def firmware(self) -> tuple[int, ...]:

@@ -435,29 +435,18 @@ def farewell(reason: str) -> bytes:
 
 
 def options_from(values: dict[str, str]) -> SimOptions:
-    """`sim://lineus?speed=inf&version=1.0.1&name=bot&serial=42&reply=accept` options."""
-    known = {"speed", "version", "name", "serial", "reply", "step_time"}
-    unknown = set(values) - known
-    if unknown:
-        raise ValueError(f"unknown lineus simulator option(s): {', '.join(sorted(unknown))}")
-    return SimOptions(
-        version=resolve_version(values.get("version", "3")),
-        name=values.get("name", DEFAULT_NAME),
-        serial=values.get("serial", DEFAULT_SERIAL),
-        speed=float(values.get("speed", "inf")),
-        reply="accept" if values.get("reply") == "accept" else "complete",
-        step_time=float(values.get("step_time", "0.010")),
-    )
+    """`sim://lineus?speed=inf&version=1.0.1&name=bot&serial=42&reply=accept&step_time=0.01` options, read by the
+    one table of simulator options (`fabwire.transport.simaddress.LINEUS_OPTIONS`)."""
+    from fabwire.transport.simaddress import read_options
+
+    given = read_options("lineus", values)
+    return SimOptions(version=given.get("version", VERSIONS["3"]), name=given.get("name", DEFAULT_NAME),
+                      serial=given.get("serial", DEFAULT_SERIAL), speed=given.get("speed", math.inf),
+                      reply=given.get("reply", "complete"), step_time=given.get("step_time", 0.010))
 
 
 async def _factory(values: dict[str, str]) -> Transport:
-    from fabwire.errors import InputError
-
-    try:
-        options = options_from(values)
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
-    sim = LineUsSim(options)
+    sim = LineUsSim(options_from(values))
     return await spawn_in_process("lineus", sim.serve, sim.close)
 
 

@@ -16,7 +16,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from fabwire.errors import InputError, excerpt
+from fabwire.errors import InputError, closest, excerpt
 from fabwire.mmu.errors import TMC_FLAGS, TMC_WORDS, format_error, tmc_error
 
 Recovery = Literal["retry", "reset"]
@@ -191,7 +191,8 @@ def parse_fault(text: str) -> Fault:
     if name.startswith("tmc-") and name.removeprefix("tmc-") in TMC_KINDS:
         name += "-pulley"
     if name not in FAULTS and name not in LINE_FAULTS:
-        raise InputError(f"unknown MMU fault {excerpt(name, 40)}; known: {', '.join(sorted(FAULT_NAMES))}")
+        raise InputError(f"unknown MMU fault {excerpt(name, 40)}{closest(name[:100], FAULT_NAMES)}; "
+                         "`fabwire sim mmu --help` lists them")
     count_text = count_text.strip()
     if not count_text:
         return Fault(name, skip=skip)

@@ -49,7 +49,8 @@ def firmware(version: str) -> codes.FirmwareVersion:
     try:
         return codes.FIRMWARES[version]
     except KeyError:
-        raise InputError(f"unknown MMU firmware {version!r}; choose one of {', '.join(codes.FIRMWARES)}") from None
+        raise InputError(f"unknown MMU firmware {excerpt(version, 20)}; choose one of "
+                         f"{', '.join(codes.FIRMWARES)}") from None
 
 
 class MMUSimulator:
@@ -248,15 +249,14 @@ class MMUSimulator:
 
 
 def options_to_simulator(options: dict[str, str]) -> MMUSimulator:
-    speed_text = options.get("speed", "1")
-    try:
-        speed = float(speed_text)
-    except ValueError:
-        raise InputError(f"sim://mmu speed must be a number, not {speed_text!r}") from None
-    faults = [f for f in options.get("fault", "").split(",") if f.strip()]
-    return MMUSimulator(options.get("version", "3.0.4"), speed=speed, faults=faults,
-                        arithmetic=options.get("arithmetic", units.DEFAULT_FLOAT),
-                        phantom_requests=options.get("phantom_requests", "") in ("1", "true", "yes"))
+    """Build a simulator from `sim://mmu?speed=…&version=…&fault=…&arithmetic=…&phantom_requests=1`, read by the
+    one table of simulator options (`fabwire.transport.simaddress.MMU_OPTIONS`)."""
+    from fabwire.transport.simaddress import read_options
+
+    given = read_options("mmu", options)
+    return MMUSimulator(given.get("version", "3.0.4"), speed=given.get("speed", 1.0), faults=given.get("fault", ()),
+                        arithmetic=given.get("arithmetic", units.DEFAULT_FLOAT),
+                        phantom_requests=given.get("phantom_requests", False))
 
 
 async def _factory(options: dict[str, str]) -> Transport:

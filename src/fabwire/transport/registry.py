@@ -7,10 +7,12 @@ import contextlib
 import importlib
 from collections.abc import Awaitable, Callable
 
+from fabwire.checks import refuse
 from fabwire.devices import KINDS
-from fabwire.errors import InputError, LinkClosed
+from fabwire.errors import LinkClosed, excerpt
 from fabwire.transport.base import DEFAULT_READ_SIZE, Transport
 from fabwire.transport.memory import memory_pair
+from fabwire.transport.simaddress import SimOption, register_options
 
 SimulatorFactory = Callable[[dict[str, str]], Awaitable[Transport]]
 """Given the URL's options, start a simulator and return the host's end of the link to it."""
@@ -20,8 +22,11 @@ DeviceServer = Callable[[Transport], Awaitable[None]]
 _FACTORIES: dict[str, SimulatorFactory] = {}
 
 
-def register_simulator(name: str, factory: SimulatorFactory) -> None:
+def register_simulator(name: str, factory: SimulatorFactory, options: dict[str, SimOption] | None = None) -> None:
+    """Make `sim://name` start `factory`; `options` is its table of options (`fabwire.transport.simaddress`), which
+    every address naming it is checked against (None: any options are passed on unchecked)."""
     _FACTORIES[name] = factory
+    register_options(name, options)
 
 
 async def open_simulator(name: str, options: dict[str, str]) -> Transport:
@@ -29,8 +34,7 @@ async def open_simulator(name: str, options: dict[str, str]) -> Transport:
         importlib.import_module(KINDS[name].sim_module)
     factory = _FACTORIES.get(name)
     if factory is None:
-        known = ", ".join(sorted(set(_FACTORIES) | set(KINDS)))
-        raise InputError(f"no simulator called {name!r} (known: {known})")
+        raise refuse("sim-unknown", name=excerpt(name, 20), known=", ".join(sorted(set(_FACTORIES) | set(KINDS))))
     return await factory(options)
 
 

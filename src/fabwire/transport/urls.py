@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import ipaddress
 import re
-from urllib.parse import parse_qsl, urlsplit
+from urllib.parse import quote, urlencode
 
 import msgspec
 
+from fabwire.checks import CONTROL, MAX_PATH, refuse
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError, excerpt
 
-_WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
+WINDOWS_PORT = re.compile(r"^COM\d{1,3}$", re.IGNORECASE)
 """`COM3`: a serial port on Windows (no host is called that)."""
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_-]{1,63})*\.?$")
 
@@ -32,36 +33,33 @@ class Endpoint(msgspec.Struct, frozen=True):
             return f"tcp://{host}:{self.port}"
         if self.scheme == "serial":
             return f"serial://{self.path}"
-        query = "&".join(f"{k}={v}" for k, v in self.options.items())
+        query = urlencode(self.options, quote_via=quote, safe="/:,@")  # reads back as the same options
         return f"sim://{self.host}" + (f"?{query}" if query else "")
 
 
-def _bad(text: str, why: str) -> InputError:
-    return InputError(
-        f"malformed device address {excerpt(text, 60)}: {why} "
-        "(use host, host:port, tcp://host:port, /dev/ttyX, serial:///dev/ttyX or sim://name)"
-    )
+def _bad(text: str, code: str, **fields: object) -> InputError:
+    """Rule `code`'s refusal of address `text` (`fabwire.checks.RULES`)."""
+    return refuse(code, address=excerpt(text, 60), **fields)
 
 
 def _port(text: str, raw: str) -> int:
     if not re.fullmatch(r"[0-9]{1,5}", raw):  # ASCII digits only, and few: int() of 5,000 digits raises
-        shown = excerpt(raw, 12)
         what = "too long to be a port" if raw.isascii() and raw.isdigit() else "not a number"
-        raise _bad(text, f"port {shown} is {what}")
+        raise _bad(text, "port-digits", port=excerpt(raw, 12), what=what)
     port = int(raw)
     if not 1 <= port <= 65535:
-        raise _bad(text, f"port {port} is outside 1-65535")
+        raise _bad(text, "port-range", port=port)
     return port
 
 
 def _check_host(text: str, host: str) -> str:
     if not host:
-        raise _bad(text, "no host name")
+        raise _bad(text, "no-host")
     try:
         ipaddress.ip_address(host)
     except ValueError:
         if not _HOSTNAME.match(host):
-            raise _bad(text, f"{excerpt(host, 40)} is not a valid host name or IP address") from None
+            raise _bad(text, "host", host=excerpt(host, 40)) from None
     return host
 
 
@@ -69,33 +67,44 @@ def _tcp(text: str, netloc: str, kind: DeviceKind | None) -> Endpoint:
     if netloc.startswith("["):
         end = netloc.find("]")
         if end < 0:
-            raise _bad(text, "unclosed '[' in IPv6 address")
+            raise _bad(text, "bracket")
         host, rest = netloc[1:end], netloc[end + 1 :]
         if rest and not rest.startswith(":"):
-            raise _bad(text, "unexpected text after ']'")
+            raise _bad(text, "after-bracket")
         port_text = rest[1:] if rest else ""
     elif netloc.count(":") > 1:
         host, port_text = netloc, ""  # a bare IPv6 address
     else:
         host, _, port_text = netloc.partition(":")
         if ":" in netloc and not port_text:
-            raise _bad(text, "empty port after ':'")
+            raise _bad(text, "empty-port")
     _check_host(text, host)
     if port_text:
         return Endpoint("tcp", host=host, port=_port(text, port_text))
     if kind is None or kind.default_port is None:
-        name = kind.title if kind else "this device"
-        raise _bad(text, f"no port given and {name} has no default TCP port")
+        raise _bad(text, "no-port", kind=kind.title if kind else "this device")
     return Endpoint("tcp", host=host, port=kind.default_port)
 
 
+def _serial(text: str, path: str) -> Endpoint:
+    if len(path) > MAX_PATH:
+        raise _bad(text, "path-too-long", length=len(path))
+    return Endpoint("serial", path=path)
+
+
 def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
-    """Parse a device address; `kind` supplies the default TCP port for a bare host."""
+    """Parse and check a device address; `kind` supplies the default TCP port for a bare host and is the kind a
+    sim:// address must simulate. Every refusal is an InputError worded by its row of `fabwire.checks.RULES`: a
+    sim:// address's options are checked here, by the simulator's own table (`simaddress.SIMULATORS`), so an
+    address accepted here opens."""
     text = text.strip()
     if not text:
-        raise _bad(text, "it is empty")
-    if text.startswith("/") or _WINDOWS_PORT.match(text):
-        return Endpoint("serial", path=text)
+        raise _bad(text, "empty")
+    control = CONTROL.search(text)
+    if control:
+        raise _bad(text, "control", char=repr(control.group()))
+    if text.startswith("/") or WINDOWS_PORT.match(text):
+        return _serial(text, text)
     if "://" not in text:
         return _tcp(text, text, kind)
     scheme, _, rest = text.partition("://")
@@ -103,22 +112,15 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
     if scheme == "tcp":
         netloc = rest.rstrip("/")
         if "/" in netloc or "?" in netloc:
-            raise _bad(text, "a tcp:// address takes no path or options")
+            raise _bad(text, "tcp-path")
         return _tcp(text, netloc, kind)
     if scheme == "serial":
         if not rest.startswith("/"):
-            raise _bad(text, "a serial:// address needs an absolute device path, e.g. serial:///dev/ttyACM0")
-        return Endpoint("serial", path=rest)
+            raise _bad(text, "serial-path")
+        return _serial(text, rest)
     if scheme == "sim":
-        parts = urlsplit(text)
-        name = parts.netloc or (kind.name if kind else "")
-        if not name:
-            raise _bad(text, "no simulator name")
-        if parts.path not in ("", "/"):
-            raise _bad(text, "a sim:// address takes no path")
-        try:
-            options = dict(parse_qsl(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query)))
-        except ValueError:
-            raise _bad(text, f"unreadable options {excerpt(parts.query, 40)}") from None
+        from fabwire.transport.simaddress import check_simulator
+
+        name, options = check_simulator(text, kind)
         return Endpoint("sim", host=name, options=options)
-    raise _bad(text, f"unknown scheme {excerpt(scheme, 20)}")
+    raise _bad(text, "scheme", scheme=excerpt(scheme, 20))

@@ -7,7 +7,7 @@ import re
 
 import msgspec
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 
 
 class FileFormat(enum.Enum):
@@ -148,12 +148,35 @@ _INDEX = _index()
 
 
 def find_model(text: str) -> PrinterModel:
-    """The model named by a model number (`p:`), a name or a common alias, in any case."""
+    """The model named by a model number (`p:`), a name or a common alias, in any case.
+
+    An unknown one is an InputError of one short line: the text shortened, the closest names (difflib), and a few
+    known names rather than all of them."""
     cleaned = text.strip()
     model = (_INDEX.get(cleaned.lower()) or _INDEX.get(_key(cleaned))) if cleaned else None
     if model is None:
-        known = ", ".join(f"{m.model_number} ({m.name})" for m in MODELS)
-        raise InputError(f"unknown printer model {text!r}; known models: {known}")
+        raise InputError(f"unknown printer model {excerpt(text, 40)}{_nearest(cleaned)}")
+    return model
+
+
+def _nearest(text: str) -> str:
+    """` (did you mean 'miniMaker'?)` for the name closest to `text`, else a few known names to go by."""
+    import difflib
+
+    names = {_key(m.name): m.name.removeprefix("da Vinci ") for m in MODELS}
+    names |= {m.model_number.lower(): m.model_number for m in MODELS}
+    close = difflib.get_close_matches(_key(text[:100]) or text[:100].lower(), list(names), n=1, cutoff=0.7)
+    if close:
+        return f" (did you mean {names[close[0]]!r}?)"
+    return (f"; give a model number or name such as {DEFAULT_MODEL_NUMBER}, miniMaker, mini w, nano, Jr. 1.0 Pro "
+            f"or Super ({len(MODELS)} models are known)")
+
+
+def simulated_model(text: str) -> PrinterModel:
+    """The model `text` names, if it speaks XYZv3 (so the simulator can be it); an InputError otherwise."""
+    model = find_model(text)
+    if not model.v3_protocol:
+        raise InputError(f"{model.name} ({model.model_number}) does not speak XYZv3; it cannot be simulated here")
     return model
 
 

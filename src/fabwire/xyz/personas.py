@@ -6,8 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from fabwire.errors import InputError
-from fabwire.xyz.models import FileFormat, PrinterModel, find_model
+from fabwire.xyz.models import FileFormat, PrinterModel, simulated_model
 from fabwire.xyz.status import Nozzle
 
 
@@ -63,10 +62,9 @@ _SEED_ORDER = "bcdwefijLmopstvnXlzV4"
 
 
 def personality(model_text: str = "dv1MW0A000", *, serial: str | None = None) -> Personality:
-    """The personality shipped for a model; unknown models are an InputError naming the known ones."""
-    model = find_model(model_text)
-    if not model.v3_protocol:
-        raise InputError(f"{model.name} ({model.model_number}) does not speak XYZv3; it cannot be simulated here")
+    """The personality shipped for a model; an unknown model, or one that does not speak XYZv3, is an
+    InputError (`simulated_model`)."""
+    model = simulated_model(model_text)
     prefix = model.serial_prefixes[0] if model.serial_prefixes else "3FXXXX"
     generated = f"{prefix}US5SIM{sum(model.model_number.encode()) % 1000000:06d}"[:18]
     short = model.name.removeprefix("da Vinci ").strip()

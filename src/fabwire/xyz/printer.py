@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fabwire.errors import InputError
+from fabwire.errors import InputError, excerpt
 from fabwire.xyz import intake
 from fabwire.xyz import protocol as p
 from fabwire.xyz.models import FileFormat
@@ -77,7 +77,7 @@ class Printer:
                  seed: int = 0) -> None:
         for fault in faults:
             if fault not in FAULTS:
-                raise InputError(f"unknown fault {fault!r}; known: {', '.join(FAULTS)}")
+                raise InputError(f"unknown fault {excerpt(fault, 30)}; known: {', '.join(FAULTS)}")
         self.persona = persona
         self.state_file = state_file
         defaults = Settings(name=persona.name, zoffset=persona.zoffset, ip=persona.ip,
@@ -107,7 +107,7 @@ class Printer:
 
     def inject(self, fault: str, on: bool = True) -> None:
         if fault not in FAULTS:
-            raise InputError(f"unknown fault {fault!r}; known: {', '.join(FAULTS)}")
+            raise InputError(f"unknown fault {excerpt(fault, 30)}; known: {', '.join(FAULTS)}")
         (self.faults.add if on else self.faults.discard)(fault)
         self.errors = [e for e in self.errors if e not in (NO_CARTRIDGE, DOOR_OPEN)]
         self._apply_static_faults()

@@ -16,12 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from fabwire.errors import InputError, LinkClosed
+from fabwire.errors import InputError, LinkClosed, excerpt
 from fabwire.simspeed import checked_speed
 from fabwire.transport import Transport, register_simulator, spawn_in_process
 from fabwire.xyz import protocol as p
 from fabwire.xyz.personas import personality
-from fabwire.xyz.printer import FAULTS, FileVerdict, Printer
+from fabwire.xyz.printer import FileVerdict, Printer
 from fabwire.xyz.protocol import Block, DeviceDecoder, Garbage, Link, Received, UploadStalled
 
 log = logging.getLogger(__name__)
@@ -100,7 +100,7 @@ class XYZSimulator:
             try:
                 store.mkdir(parents=True, exist_ok=True)
             except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
-                raise InputError(f"cannot keep received files in {str(store)!r}: "
+                raise InputError(f"cannot keep received files in {excerpt(str(store), 60)}: "
                                  f"{getattr(exc, 'strerror', None) or exc}") from None
 
     # ------------------------------------------------------------------------------------- control API
@@ -371,27 +371,17 @@ class _Connection:
 
 
 def simulator_from_options(options: dict[str, str]) -> XYZSimulator:
-    """Build a simulator from `sim://xyz?model=…&speed=…&link=serial|wifi&fault=…&strict=1&control=0`."""
-    unknown = set(options) - {"model", "speed", "link", "fault", "strict", "state", "store", "serial", "control"}
-    if unknown:
-        raise InputError(f"unknown sim://xyz option(s): {', '.join(sorted(unknown))}")
-    try:
-        speed = float(options.get("speed", "1"))
-    except ValueError:
-        raise InputError(f"speed must be a number, not {options['speed']!r}") from None
-    link_text = options.get("link", "serial")
-    if link_text not in ("serial", "wifi"):
-        raise InputError("link must be serial or wifi")
-    faults = tuple(f for f in options.get("fault", "").split("+") if f)
-    for fault in faults:
-        if fault not in FAULTS:
-            raise InputError(f"unknown fault {fault!r}; known: {', '.join(FAULTS)}")
+    """Build a simulator from `sim://xyz?model=…&speed=…&link=serial|wifi&fault=…&strict=1&control=0`, read by the
+    one table of simulator options (`fabwire.transport.simaddress.XYZ_OPTIONS`)."""
+    from fabwire.transport.simaddress import read_options
+
+    given = read_options("xyz", options)
     return XYZSimulator(
-        options.get("model", "dv1MW0A000"), speed=speed, faults=faults, link=Link(link_text),
-        strict=options.get("strict", "0") in ("1", "true", "yes"),
-        state_file=Path(options["state"]) if "state" in options else None,
-        store=Path(options["store"]) if "store" in options else None, serial=options.get("serial"),
-        control=options.get("control", "1") not in ("0", "false", "no"),
+        given.get("model", "dv1MW0A000"), speed=given.get("speed", 1.0), faults=given.get("fault", ()),
+        link=Link(given.get("link", "serial")), strict=given.get("strict", False),
+        state_file=Path(given["state"]) if "state" in given else None,
+        store=Path(given["store"]) if "store" in given else None, serial=given.get("serial"),
+        control=given.get("control", True),
     )
 
 
