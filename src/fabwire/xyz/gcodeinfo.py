@@ -156,7 +156,7 @@ def words_of(params: bytes) -> dict[bytes, float]:
     words: dict[bytes, float] = {}
     for letter, value in found:
         words.setdefault(letter, float(value))
-    if len(words) < len(found) and not gcodearrays.ODD_NUMBER.search(code):  # `X1e3 E5`: the exponent's refusal
+    if len(words) < len(found) and not gcodearrays.MALFORMED.search(code):  # `X1e3 E5`: the exponent's refusal
         raise Ambiguous(REPEATED)
     return words
 
@@ -320,7 +320,7 @@ class MoveAnalyzer:
         """Analyse whole lines; `chunk` must start at a line start (its end ends its last line).
 
         `odd` collects the (start, end) offsets of the parts of `chunk`, from a line start to a line end, outside
-        which no G line holds a word `gcodearrays.ODD_NUMBER` matches in its code."""
+        which no G line holds a word of `gcodearrays.NUMBER_FORMS` in its code."""
         self._count_markers(chunk)
         start = 0
         view = memoryview(chunk)
