@@ -23,6 +23,7 @@ _LETTERS = AXES + bytes(sorted(set(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ") - set(AXES + b
 """Every parameter letter: `AXES`, then the others, which are only checked (a letter repeated in a move)."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(_LETTERS)] = _AXIS_INDEX[list(_LETTERS.lower())] = np.arange(len(_LETTERS))
+_TURNS_INDEX = _LETTERS.index(b"P")
 _PLAIN_AXES = 5
 """X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
@@ -213,10 +214,22 @@ LINE_RULES: tuple[LineRule, ...] = (
     LineRule("inch units (G20)", b"G20\nG1 X50 Y10 E5",
              "sets inch units: a firmware with INCH_MODE_SUPPORT moves 25.4 times as far, others stay in mm",
              "slice in millimetres (G21)", "Marlin G20 Inch Units (marlinfw.org/docs/gcode/G020.html)"),
+    LineRule("an arc without a centre (R0, I0 J0, an R arc that ends where it starts)", b"G2 X20 Y10 R0 E5",
+             "is an arc whose centre offset is zero: Marlin refuses it ('G2/G3 bad parameters') and does not move, "
+             "while a reader that runs it as a straight line extrudes along it",
+             "give the centre with I and J, or a radius R other than 0 and an end point away from the start",
+             "Marlin gcode/motion/G2_G3.cpp (arc_offset of zero: STR_ERR_ARC_ARGS, no move); Marlin G2-G3 "
+             "(marlinfw.org/docs/gcode/G002-G003.html)"),
+    LineRule("an arc's full-turn count P that is not a whole number from 0 to 100", b"G2 X10 Y10 I5 J0 P1000000000 E5",
+             "has a full-turn count Marlin does not run as written: ARC_P_CIRCLES takes 0 to 100 turns and reports "
+             "'G2/G3 bad parameters' for others, firmwares without it ignore P",
+             "write P as a whole number of turns from 0 to 100",
+             "Marlin gcode/motion/G2_G3.cpp (ARC_P_CIRCLES: P outside 0-100 is STR_ERR_ARC_ARGS); Marlin G2-G3 "
+             "(marlinfw.org/docs/gcode/G002-G003.html, P: full circles)"),
 )
 """Lines refused because printers read them differently (the first row stands for `NUMBER_FORMS`; the others are
 found by the move analysis, `gcodeinfo.MoveAnalyzer`, which raises `Ambiguous`)."""
-EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES = LINE_RULES
+EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES, CENTRELESS, TURNS = LINE_RULES
 SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 """Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
@@ -477,6 +490,8 @@ def scan(padded: bytes) -> Scan | None:
         suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
     if not known.all():
         axis, line_of, numbers, where = axis[known], line_of[known], numbers[known], where[known]
+    if arcs.any() and arcs[line_of[axis == _TURNS_INDEX]].any():
+        return None  # an arc's full turns (P) are read line by line
     unread = np.flatnonzero(axis >= read)
     if len(unread):  # letters not kept (rare on moves) are only checked: the line reader refuses a repeated one
         named = line_of[unread] * len(_LETTERS) + axis[unread]
@@ -492,6 +507,8 @@ def scan(padded: bytes) -> Scan | None:
         if (lines[1:] == lines[:-1]).any():
             return None  # a letter repeats within a line
         axes.append(Words(lines, numbers[picked], is_set[lines]))
+    if suspect < len(starts) and arcs.any():
+        return None  # the line reader refuses an arc Marlin refuses after any malformed number in that line
     return Scan(tuple(axes), controls, arcs, g0_at, int(newlines[suspect]) + 1 if suspect < len(starts) else None)
 
 
