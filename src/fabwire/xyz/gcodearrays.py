@@ -140,26 +140,28 @@ _MOVE = rb"(?:[0-3]|92)(?![0-9])"
 SUSPECT_LINE = re.compile(
     rb"^(?![ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*0*(?:" + _MOVE + rb"(?:\.[0-9]*)?(?:" + _FULL_WORD + _PARENS + rb")*+"
     rb"|(?!" + _MOVE + rb")[0-9]+(?:\.[0-9]*)?(?:" + _ANY_WORD + _PARENS + rb")*+)[ \t]*(?:[;(*\n]|$))"
-    rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE | re.MULTILINE)
+    rb"[ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*[0-9]", re.IGNORECASE | re.MULTILINE)
 """The start of a G line whose code is not plain words (a letter, blanks, one plain decimal number, no E or X
 glued to it; bare letters only off G0-G3/G92): each valid line is read once, so this finds the few others fast.
 `malformed_word` says which word of such a line is at fault."""
 
 
-_COMMAND_WORD = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*[0-9]*(?:\.[0-9]*)?", re.IGNORECASE)
+_COMMAND_WORD = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*[0-9]+(?:\.[0-9]*)?", re.IGNORECASE)
 _JUNK_FIRST = re.compile(rb"[ \t]*([^A-Z \t])", re.IGNORECASE)
 
 
 def malformed_word(line: bytes) -> tuple[bytes, NumberForm] | None:
-    """The first word of a G line (without its line break) whose value is one of `NUMBER_FORMS`, or a bare letter
-    on G0-G3/G92 (`EMPTY_VALUE`), with its form; None when its code holds none. Comments (`;`, `(...)`) and a
-    checksum are not code."""
+    """The first word of a G command line (without its line break) whose value is one of `NUMBER_FORMS`, or a bare
+    letter on G0-G3/G92 (`EMPTY_VALUE`), with its form; None when its code holds none or it is no G command (`G`
+    without a number). Comments (`;`, `(...)`) and a checksum are not code."""
     code = line.partition(b";")[0].partition(b"*")[0]
     if b"(" in code:
         code = re.sub(rb"\([^)]*\)?", lambda found: b" " * len(found.group(0)), code)
     command = _COMMAND_WORD.match(code)
-    found = MALFORMED.search(code, command.end() if command else 0)
-    if command is not None and (found is None or found.start() > command.end()):
+    if command is None:
+        return None  # no G command (`G` without a number)
+    found = MALFORMED.search(code, command.end())
+    if found is None or found.start() > command.end():
         junk = _JUNK_FIRST.match(code, command.end())
         if junk is not None:  # a value with no letter before it
             return code[junk.start(1):].split()[0], NUMBER_FORMS[-1]

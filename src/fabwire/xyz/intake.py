@@ -317,6 +317,10 @@ def _check_lines(text: bytes, name: str, line_offset: int, lines_before: Callabl
 _MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
 
 
+def _plus(count: Callable[[], int], more: int) -> int:
+    return count() + more
+
+
 def _lines_after_crs(src: BinaryIO, begin: int, carried_cr: bool) -> int:
     return _lines_before(src, begin) - carried_cr
 
@@ -415,7 +419,7 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
 
     src.seek(0)
     carry = b""
-    carry_line = 0  # the lines before `carry`
+    carry_lines: Callable[[], int] = functools.partial(int, 0)  # counts the lines before `carry` (when asked)
     held_cr = False
     first = True
     done = 0
@@ -463,13 +467,13 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             odd.clear()
         del chunk  # not held while the next block is read
         carry = text[cut:]
-        carry_line = lines_before() + text.count(b"\n")
+        carry_lines = functools.partial(_plus, lines_before, text.count(b"\n", 0, cut))
         if len(carry) > MAX_LINE:
-            raise _long_line(name, carry_line + 1)
+            raise _long_line(name, carry_lines() + 1)
         if progress is not None:
             progress(done - len(carry), total)
     if carry or held_cr:
-        _check_numbers(carry + b"\n", name, lambda: carry_line)  # the last line, whole now
+        _check_numbers(carry + b"\n", name, carry_lines)  # the last line, whole now
         yield carry + b"\n"
     if progress is not None:
         progress(total, total)
