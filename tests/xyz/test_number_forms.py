@@ -90,26 +90,31 @@ def test_plain_forms_slicers_write_still_convert(tmp_path: Path, line: bytes) ->
 
 
 _PLAIN_WORD = rb"[ \t]*[A-Z][ \t]*([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))(?![EX0-9.])"
-_PLAIN_CODE = re.compile(rb"G1(?:" + _PLAIN_WORD + rb")*[ \t]*", re.IGNORECASE)
+_PLAIN_CODE = re.compile(rb"G[0-9]+(?:" + _PLAIN_WORD + rb")*[ \t]*", re.IGNORECASE)
 """A move as every firmware reads it alike: words of a letter and one plain decimal number (Marlin valid_float,
 without the exponent and hexadecimal that strtod would read)."""
 VALUE_TEXT = st.text(alphabet=list("0123456789.+- \teExXnNaAiIfF,_#\u2212\uff11\u00b7Y"), max_size=12)
 
 
-def _accepted(text: bytes) -> bool:
+def _refusal(text: bytes) -> str | None:
     try:
         intake.stream_metadata(io.BytesIO(text), "f")
-    except InputError:
-        return False
-    return True
+    except InputError as exc:
+        return str(exc)
+    return None
 
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(value=VALUE_TEXT, indented=st.booleans())
-def test_an_accepted_value_is_exactly_one_finite_plain_number(value: str, indented: bool) -> None:
-    line = b"G1 X" + value.encode() + b" Y10 E5"
+@given(value=VALUE_TEXT, indented=st.booleans(), command=st.sampled_from([b"G1", b"G0", b"G92"]),
+       letter=st.sampled_from([b"X", b"Z", b"E", b"F", b"x"]))
+def test_an_accepted_value_is_exactly_one_finite_plain_number(value: str, indented: bool, command: bytes,
+                                                              letter: bytes) -> None:
+    line = command + b" " + letter + value.encode() + b" Y10"
     text = BASE + (b"  " if indented else b"") + line + b"\n" + TAIL
-    if not _accepted(text):
+    refused = _refusal(text)
+    if re.fullmatch(r"[ \t]*[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[ \t]*", value):  # a plain value is never refused as one
+        assert refused is None or "plain decimal" not in refused, refused
+    if refused is not None:
         return
     found = _PLAIN_CODE.fullmatch(line)
     assert found is not None, line
