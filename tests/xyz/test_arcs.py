@@ -70,11 +70,66 @@ def test_marlins_arc_rules(words: dict[bytes, float], clockwise: bool, centre: t
     sagitta_ok((0.0, 0.0), points(lines), centre, radius)
 
 
-def test_no_centre_or_a_radius_too_small_is_a_straight_move() -> None:
+def test_no_centre_is_a_straight_move_and_a_radius_too_small_a_half_circle_on_the_chord() -> None:
     assert segments((0, 0, 0, 0), {b"X": 10.0, b"Y": 0.0}, True) is None
-    assert segments((0, 0, 0, 0), {b"X": 20.0, b"Y": 0.0, b"R": 5.0}, True) is None
     expander = ArcExpander()
-    assert expander.expand(b"G1 X5 Y5\nG2 X20 Y5 R2 E3\n") == b"G1 X5 Y5\nG1 X20 Y5 R2 E3\n"
+    assert expander.expand(b"G1 X5 Y5\nG2 X20 Y5 E3\n") == b"G1 X5 Y5\nG1 X20 Y5 E3\n"
+    for clockwise, side in ((True, 1.0), (False, -1.0)):  # Marlin's G2_G3.cpp: h = 0, the centre mid-chord
+        lines = segments((0, 0, 0, 0), {b"X": 20.0, b"Y": 0.0, b"R": 5.0}, clockwise)
+        assert lines is not None
+        pts = points(lines)
+        sagitta_ok((0.0, 0.0), pts, (10.0, 0.0), 10.0)
+        assert pts[-1][:2] == pytest.approx((20.0, 0.0))
+        assert max(side * p[1] for p in pts) == pytest.approx(10.0, abs=1e-3)  # G2 over the top, G3 below
+
+
+@pytest.mark.parametrize("turns", [0, 1, 3, 100])
+def test_full_turns_come_before_the_arc_with_z_and_e_spread_over_the_whole_path(turns: int) -> None:
+    lines = segments((0.0, 0.0, 0.2, 0.0), {b"X": 10.0, b"Y": 0.0, b"I": 5.0, b"Z": 1.2, b"E": 10.0,
+                                            b"P": float(turns)}, False)
+    assert lines is not None
+    pts = points(lines)
+    sagitta_ok((0.0, 0.0), pts, (5.0, 0.0), 5.0)
+    assert len(pts) <= (turns + 1) * MOST_SEGMENTS
+    travelled = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip([(0.0, 0.0), *pts], pts, strict=False))
+    assert travelled == pytest.approx((turns + 0.5) * 2 * math.pi * 5, rel=1e-3)
+    assert pts[-1] == pytest.approx((10.0, 0.0, 1.2, 10.0))
+    for k, p in enumerate(pts):  # E grows with the path: evenly spread, as Marlin's plan_arc spreads it
+        assert p[3] == pytest.approx(10.0 * (k + 1) / len(pts), abs=1e-4)
+
+
+def test_the_analysis_counts_the_full_turns() -> None:
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+    analyzer = MoveAnalyzer(timing=False)
+    analyzer.feed_chunk(b"G1 X0 Y0 F600\nG2 X0 Y0 I5 P2 E1\n")
+    assert analyzer.seconds == pytest.approx(3 * 2 * math.pi * 5 / 10)  # 3 circles at 10 mm/s
+
+
+BASE = b"G28\nG1 Z0.2 F1200\nG1 X10 Y10 E1 F1500\n"
+
+
+@pytest.mark.parametrize("layout", ["arrays", "indented"])
+@pytest.mark.parametrize(("line", "why"), [
+    (b"G2 X20 Y10 R0 E5", "centre offset is zero"), (b"G3 X20 Y10 R-0.0 E5", "centre offset is zero"),
+    (b"G2 X20 Y10 I0 J0 E5", "centre offset is zero"), (b"G2 X20 Y10 I0 E5", "centre offset is zero"),
+    (b"G03 X20 Y10 J0.000 E5", "centre offset is zero"), (b"G3 X10 Y10 R5 E5", "centre offset is zero"),
+    (b"G2 R7 E5", "centre offset is zero"), (b"G2 X10 Y10 I5 P101 E5", "full-turn count"),
+    (b"G2 X10 Y10 I5 P-1 E5", "full-turn count"), (b"G2 X10 Y10 I5 P2.5 E5", "full-turn count"),
+    (b"G2 X10 Y10 I5 J0 P1000000000 E5", "full-turn count"), (b"G3 X10 Y10 R5 P1 E5", "centre offset is zero"),
+])
+def test_arcs_marlin_refuses_are_refused_with_their_line(tmp_path: Path, line: bytes, why: str, layout: str) -> None:
+    code = BASE + line + b"\nG1 X20 Y20 E6\n"
+    if layout == "indented":
+        code = b"".join(b"  " + each + b"\n" for each in code.splitlines())
+    src = tmp_path / "in.gcode"
+    src.write_bytes(code)
+    done = run_cli("xyz", "convert", str(src), str(tmp_path / "o.3w"), env=cli_env(tmp_path))
+    assert done.returncode == 4, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert ": line 4: " in done.stderr
+    assert why in done.stderr
+    assert not (tmp_path / "o.3w").exists()
 
 
 def test_relative_modes_are_followed() -> None:

@@ -93,7 +93,7 @@ def test_full_circle_arcs_take_as_long_as_the_circle(by_lines: bool) -> None:
     pytest.param("G2 X10 Y10 R10", math.pi * 10 / 2, id="radius-short-way"),
     pytest.param("G2 X10 Y10 R-10", 3 * math.pi * 10 / 2, id="radius-long-way"),
     pytest.param("G3 X0 Y0 I5 J0", 2 * math.pi * 5, id="full-circle"),
-    pytest.param("G2 X20 Y0 R5", 20, id="radius-too-small-is-its-chord"),
+    pytest.param("G2 X20 Y0 R5", math.pi * 10, id="radius-too-small-is-the-half-circle-on-its-chord"),
     pytest.param("G2 X10 Y10", math.hypot(10, 10), id="no-centre-is-its-chord"),
     pytest.param("G3 X0 Y0 Z4 I5 J0", math.hypot(2 * math.pi * 5, 4), id="helix"),
 ])

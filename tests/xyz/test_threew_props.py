@@ -3,7 +3,7 @@ from __future__ import annotations
 import re
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from fabwire.errors import InputError
@@ -14,6 +14,16 @@ XYZ_KEYS = re.compile(
     rb"^[ \t]*;[ \t]*(?:filename|print_time|machine|facets|total_layers|version|total_filament)[ \t]*="
 )
 G0_WORD = re.compile(rb"^([ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0?)0(?![0-9.])")
+ARC = re.compile(rb"^[ \t]*(?:[Nn][0-9]+[ \t]*)?[Gg][ \t]*0*[23](?![0-9.])(.*)$", re.DOTALL)
+"""A G2/G3 line: without I, J or R it is written as `G1` and its words (`arcwork`), with them as segments."""
+
+
+def _as_written(line: bytes) -> bytes:
+    arc = ARC.match(line)
+    if arc is None:
+        return G0_WORD.sub(rb"\g<1>1", line)
+    assume(not re.search(rb"[IiJjRr]", arc.group(1).partition(b";")[0]))  # segments: see test_arcs
+    return b"G1" + arc.group(1)
 
 
 def expected_body(text: bytes) -> bytes | None:
@@ -35,7 +45,7 @@ def expected_body(text: bytes) -> bytes | None:
         return None
     first = code[0]
     header = [line for line in lines[:first] if not XYZ_KEYS.match(line)]
-    rest = [G0_WORD.sub(rb"\g<1>1", line) for line in lines[first:]]
+    rest = [_as_written(line) for line in lines[first:]]
     return b"".join(line + b"\n" for line in header + rest)
 
 

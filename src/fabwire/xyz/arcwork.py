@@ -17,7 +17,7 @@ import re
 import numpy as np
 
 from fabwire.xyz import motion
-from fabwire.xyz.gcodeinfo import MoveAnalyzer, words_of
+from fabwire.xyz.gcodeinfo import MoveAnalyzer, arc_turns, words_of
 
 TOLERANCE_MM = 0.01
 """Largest distance between a segment and the arc it stands for."""
@@ -33,9 +33,11 @@ def _number(value: float, places: int) -> str:
 
 def segments(start: tuple[float, float, float, float], words: dict[bytes, float], clockwise: bool, *,
              absolute: bool = True, absolute_e: bool = True) -> list[str] | None:
-    """The G1 lines for an arc from `start` (X, Y, Z, E) with these words, or None when the arc has no centre
-    (no I, J or R; an R too small for its chord; a circle too wide for a float to step across), which a printer runs
-    as a straight move."""
+    """The G1 lines for an arc from `start` (X, Y, Z, E) with these words, after the full turns its P asks for
+    (`gcodeinfo.arc_turns`; Z and E spread over the whole path, as Marlin's plan_arc does), or None when the arc
+    has no centre (no I, J or R; an R arc that ends where it starts; a circle too wide for a float to step
+    across), which a printer runs as a straight move. An R shorter than half the chord puts the centre mid-chord,
+    as Marlin does. At most MOST_SEGMENTS lines per turn."""
     x0, y0, z0, e0 = start
 
     def target(letter: bytes, begin: float, is_absolute: bool) -> float:
@@ -49,9 +51,6 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
         cx, cy = x0 + words.get(b"I", 0.0), y0 + words.get(b"J", 0.0)
     elif b"R" in words and (x1, y1) != (x0, y0):
         r = words[b"R"]
-        chord = math.hypot(x1 - x0, y1 - y0)
-        if abs(r) < chord / 2:
-            return None
         cx, cy = (float(v) for v in motion.radius_centre(np.array(x0), np.array(y0), np.array(x1), np.array(y1),
                                                           np.array(r), np.array(clockwise)))
     else:
@@ -63,6 +62,7 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
     sweep = ((begin - end) if clockwise else (end - begin)) % (2 * math.pi)
     if sweep < 1e-9:
         sweep = 2 * math.pi
+    sweep += arc_turns(words) * 2 * math.pi
     step = 2 * math.acos(max(-1.0, 1 - TOLERANCE_MM / radius)) if radius > TOLERANCE_MM else math.pi
     step = max(step, 2 * math.pi / MOST_SEGMENTS)
     count = max(1, math.ceil(sweep / step))

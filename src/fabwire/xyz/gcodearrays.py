@@ -23,12 +23,22 @@ _LETTERS = AXES + bytes(sorted(set(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ") - set(AXES + b
 """Every parameter letter: `AXES`, then the others, which are only checked (a letter repeated in a move)."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(_LETTERS)] = _AXIS_INDEX[list(_LETTERS.lower())] = np.arange(len(_LETTERS))
+_TURNS_INDEX = _LETTERS.index(b"P")
 _PLAIN_AXES = 5
 """X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
 _NOT_CODE = np.zeros(256, dtype=bool)
 _NOT_CODE[list(b"(*")] = True
 _DIGIT_OR_DOT = np.zeros(256, dtype=bool)
 _DIGIT_OR_DOT[list(b"0123456789.")] = True
+_DIGIT = np.zeros(256, dtype=bool)
+_DIGIT[list(b"0123456789")] = True
+_GLUED = np.zeros(256, dtype=bool)
+_GLUED[list(b"EeXx")] = True
+"""Letters that, right after a number, make it an exponent or a hexadecimal number to strtod (`NUMBER_FORMS`)."""
+_WORD_END = np.zeros(256, dtype=bool)
+_WORD_END[list(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz;\n")] = True
+"""Bytes that may follow a word's number or a command word, after blanks (the arrays leave `(` and `*` to the line
+reader)."""
 _MOVE_DIGIT = np.zeros(256, dtype=bool)
 _MOVE_DIGIT[list(b"0123")] = True
 _ODD_FIRST = np.zeros(256, dtype=bool)
@@ -41,11 +51,130 @@ _NUMBER = re.compile(VALUE)
 _CONTROL = re.compile(rb"\n(?:G0*(92|90|91|28|4)|M0*(82|83|201|203|204|205))(?![0-9.])([^\n;]*)")
 _WORD = re.compile(rb"[A-Z][ \t]*" + _NUMBER.pattern)
 _SET_ONLY = re.compile(rb"[^XYZE0-9.+\- \t]")
-ODD_NUMBER = re.compile(rb"[XYZEFIJR][ \t]*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)E|NAN|INF)", re.IGNORECASE)
-"""A word whose value has an exponent or is no number: a firmware's strtod reads `X1e308` as a move to infinity
-where a reader of plain decimals sees `X1`, so no check of ours would stand for what the printer does."""
-_ODD_CLASSES = bytes(1 if byte in b"0123456789." else 2 if byte in b"Ee" else 4 if byte in b"NnAaIiFf" else 0
-                     for byte in range(256))
+_UNSIGNED = rb"(?>[0-9]+\.?[0-9]*|\.[0-9]+)"
+"""A number without sign as `VALUE` reads it; atomic, so that `1.2` is never retried as `1` and `.2`."""
+_CODE_END = rb"[A-Z;(*\n]|$"
+"""What may follow a word's value, after blanks: the next word's letter or the end of the line's code."""
+
+
+@dataclass(frozen=True, slots=True)
+class NumberForm:
+    """A word value that is not exactly one plain decimal number (`VALUE`): firmwares' number readers take it in
+    different ways, so that no check of ours stands for what the printer does. Refused on G lines with the line's
+    number and the word.
+
+    `pattern` matches the value after the word's letter and blanks (case-insensitive); `examples` are whole words;
+    `reading` says how firmwares part ways on it; `source` names the public description of that reading."""
+
+    construct: str
+    pattern: bytes
+    examples: tuple[bytes, ...]
+    reading: str
+    source: str
+
+
+NUMBER_FORMS: tuple[NumberForm, ...] = (
+    NumberForm("a number with an exponent", _UNSIGNED.join((rb"[+-]?", rb"E")), (b"X1e3", b"Y.5E2", b"Z-1e400",
+                                                                                  b"E+2e1", b"F1e9", b"X1.E2"),
+               "strtod reads X1e3 as 1000 (and X1e400 as infinity) where Marlin cuts the value at the E and reads 1",
+               "Marlin GCodeParser::value_float (cuts the value at E and X before strtof); C strtod(3) (exponents)"),
+    NumberForm("a hexadecimal number", _UNSIGNED.join((rb"[+-]?", rb"X")), (b"X0x3E8", b"Y0X10", b"F-0x1p4"),
+               "strtod reads X0x3E8 as 1000 where Marlin cuts the value at the x and reads 0",
+               "Marlin GCodeParser::value_float (cuts at E and X); C strtod(3) (0x hexadecimal floats)"),
+    NumberForm("NaN or infinity", rb"[+-]?(?:NAN|INF)", (b"Xnan", b"Y-INF", b"Zinfinity", b"X NaN", b"E+inf"),
+               "strtod reads a NaN or an infinity (a move to infinity) where Marlin finds no number",
+               "C strtod(3) (NAN, INF); Marlin GCodeParser::valid_float (a number starts [-+]?.?[0-9])"),
+    NumberForm("two signs", rb"[+-][ \t]*[+-]", (b"X--1000", b"X+-1000", b"X-+1000", b"E--5", b"Y- -5"),
+               "Marlin finds no number and leaves the axis alone, a reader that takes signs one at a time reads "
+               "X--1000 as 1000 or -1000",
+               "Marlin GCodeParser::valid_float ([-+]?.?[0-9]: one sign at most); RepRap wiki G-code, 'Fields'"),
+    NumberForm("a sign and a dot without digits", rb"[+-]\.(?![0-9])", (b"X-.", b"Y+.", b"Z-. E1"),
+               "Marlin finds no number, strtod-style readers take it as 0",
+               "Marlin GCodeParser::valid_float ([-+]?.?[0-9]: a digit is needed); C strtod(3) (no conversion)"),
+    NumberForm("a sign without digits", rb"[+-](?![ \t]*[0-9.+-])", (b"X-", b"Y+", b"E-;", b"X-Y10"),
+               "Marlin finds no number and leaves the axis alone, readers that take a missing number as 0 move to 0",
+               "Marlin GCodeParser::valid_float ([-+]?.?[0-9]); Marlin 1.0 code_value (strtod of no number is 0)"),
+    NumberForm("a dot without digits", rb"\.(?![0-9])", (b"X.", b"Y. E1", b"E.;"),
+               "Marlin finds no number and leaves the axis alone, readers that take a missing number as 0 move to 0",
+               "Marlin GCodeParser::valid_signless (.?[0-9]: a dot needs a digit after it); C strtod(3)"),
+    NumberForm("a sign after the number", _UNSIGNED.join((rb"[+-]?", rb"[+-]")), (b"X1-", b"Y10+", b"X1-5",
+                                                                                 b"E2+3"),
+               "Marlin skips the signs and digits after the number (X1-5 is 1), a reader that adds up signed "
+               "pieces reads -4",
+               "Marlin GCodeParser::parse (skips DECIMAL_SIGNED characters after a value); C strtod(3)"),
+    NumberForm("two dots", _UNSIGNED.join((rb"[+-]?", rb"\.")), (b"X1.2.3", b"Y1..", b"E.5.5"),
+               "strtod and Marlin stop at the second dot (1.2), other readers refuse the word or take 1.23",
+               "C strtod(3) (one radix character); Marlin GCodeParser::parse (skips the rest of a value)"),
+    NumberForm("a number split by blanks", _UNSIGNED.join((rb"(?:[+-]|[+-]?", rb")[ \t]+[0-9.+-]")),
+               (b"X1 0", b"X- 5", b"Y1 .5", b"X1 -2", b"E+ 1"),
+               "Marlin reads X1 0 as 1 (a blank ends a value), Grbl drops every blank first and reads 10",
+               "Marlin GCodeParser::parse (a blank ends a value); Grbl gcode.c (blanks are removed before parsing)"),
+    NumberForm("a character no number holds",
+               rb"(?:[+-]?" + _UNSIGNED + rb")?[ \t]*[^A-Z0-9.+\-;(*\n \t]",
+               (b"X10,5", "X\u22121000".encode(), "X\uff11\uff10".encode(), b"X#1", b"X1_000",
+                b"X{1}", "X1\u00b75".encode()),
+               "Marlin reads ASCII digits only (X\u22121000 is no number, X10,5 is 10), while Python's float() "
+               "takes other scripts' digits and a locale-aware reader takes the comma as a decimal point",
+               "Marlin macros.h NUMERIC ('0'-'9' only); Python float() (Unicode decimal digits, _ separators); "
+               "RepRap wiki G-code, 'Fields' (a number in ASCII digits)"),
+)
+"""The malformed word values, each refused on any G line (in the code, not in a comment). The first row that matches
+names the form."""
+EMPTY_VALUE = NumberForm(
+    "a letter without a value on a move or position command", rb"", (b"X", b"F", b"Z X1", b"E;"),
+    "Marlin leaves the axis alone, readers of the Sprinter line (Marlin 1.0 code_value) take no number as 0 "
+    "and move to 0", "Marlin GCodeParser::seenval (no value: not used by G0-G3/G92); Marlin 1.0 Marlin_main.cpp "
+    "get_coordinates (code_value is strtod of what follows)")
+"""A bare letter on G0-G3 and G92 (elsewhere, as in `G28 X Y`, a bare letter is an ordinary flag)."""
+MALFORMED = re.compile(rb"[A-Z][ \t]*(?:" + b"|".join(b"(" + form.pattern + b")" for form in NUMBER_FORMS) + b")",
+                       re.IGNORECASE)
+"""A word whose value is one of `NUMBER_FORMS` (`lastindex` - 1 is its row)."""
+EMPTY_ON_MOVE = re.compile(
+    rb"^[ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*0*(?:[0-3]|92)(?![0-9.])[^;(*\n]*?([A-Z])(?=[ \t]*(?:" + _CODE_END + rb"))",
+    re.IGNORECASE | re.MULTILINE)
+"""The first bare letter on a move or position line (`EMPTY_VALUE`; group 1 is the letter)."""
+_FULL_WORD = rb"[ \t]*[A-Z][ \t]*[+-]?" + _UNSIGNED + rb"(?![EX])"
+_ANY_WORD = rb"[ \t]*[A-Z][ \t]*(?:[+-]?" + _UNSIGNED + rb"(?![EX]))?"
+_PARENS = rb"|[ \t]*\([^)\n]*\)"
+_MOVE = rb"(?:[0-3]|92)(?![0-9])"
+SUSPECT_LINE = re.compile(
+    rb"^(?![ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*0*(?:" + _MOVE + rb"(?:\.[0-9]*)?(?:" + _FULL_WORD + _PARENS + rb")*+"
+    rb"|(?!" + _MOVE + rb")[0-9]+(?:\.[0-9]*)?(?:" + _ANY_WORD + _PARENS + rb")*+)[ \t]*(?:[;(*\n]|$))"
+    rb"[ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*[0-9]", re.IGNORECASE | re.MULTILINE)
+"""The start of a G line whose code is not plain words (a letter, blanks, one plain decimal number, no E or X
+glued to it; bare letters only off G0-G3/G92): each valid line is read once, so this finds the few others fast.
+`malformed_word` says which word of such a line is at fault."""
+
+
+_COMMAND_WORD = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G[ \t]*[0-9]+(?:\.[0-9]*)?", re.IGNORECASE)
+_JUNK_FIRST = re.compile(rb"[ \t]*([^A-Z \t])", re.IGNORECASE)
+
+
+def malformed_word(line: bytes) -> tuple[bytes, NumberForm] | None:
+    """The first word of a G command line (without its line break) whose value is one of `NUMBER_FORMS`, or a bare
+    letter on G0-G3/G92 (`EMPTY_VALUE`), with its form; None when its code holds none or it is no G command (`G`
+    without a number). Comments (`;`, `(...)`) and a checksum are not code."""
+    code = line.partition(b";")[0].partition(b"*")[0]
+    if b"(" in code:
+        code = re.sub(rb"\([^)]*\)?", lambda found: b" " * len(found.group(0)), code)
+    command = _COMMAND_WORD.match(code)
+    if command is None:
+        return None  # no G command (`G` without a number)
+    found = MALFORMED.search(code, command.end())
+    if found is None or found.start() > command.end():
+        junk = _JUNK_FIRST.match(code, command.end())
+        if junk is not None:  # a value with no letter before it
+            return code[junk.start(1):].split()[0], NUMBER_FORMS[-1]
+    bare = EMPTY_ON_MOVE.match(code + b"\n")
+    if bare is not None and (found is None or bare.start(1) < found.start()):
+        return code[bare.start(1):bare.end(1)], EMPTY_VALUE
+    if found is None:
+        return None
+    form = NUMBER_FORMS[(found.lastindex or 1) - 1]
+    end = found.end()
+    while end < len(code) and code[end:end + 1] not in b" \t":
+        end += 1  # the rest of the value, for the message
+    return code[found.start():end].strip(), form
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,10 +216,22 @@ LINE_RULES: tuple[LineRule, ...] = (
     LineRule("inch units (G20)", b"G20\nG1 X50 Y10 E5",
              "sets inch units: a firmware with INCH_MODE_SUPPORT moves 25.4 times as far, others stay in mm",
              "slice in millimetres (G21)", "Marlin G20 Inch Units (marlinfw.org/docs/gcode/G020.html)"),
+    LineRule("an arc without a centre (R0, I0 J0, an R arc that ends where it starts)", b"G2 X20 Y10 R0 E5",
+             "is an arc whose centre offset is zero: Marlin refuses it ('G2/G3 bad parameters') and does not move, "
+             "while a reader that runs it as a straight line extrudes along it",
+             "give the centre with I and J, or a radius R other than 0 and an end point away from the start",
+             "Marlin gcode/motion/G2_G3.cpp (arc_offset of zero: STR_ERR_ARC_ARGS, no move); Marlin G2-G3 "
+             "(marlinfw.org/docs/gcode/G002-G003.html)"),
+    LineRule("an arc's full-turn count P that is not a whole number from 0 to 100", b"G2 X10 Y10 I5 J0 P1000000000 E5",
+             "has a full-turn count Marlin does not run as written: ARC_P_CIRCLES takes 0 to 100 turns and reports "
+             "'G2/G3 bad parameters' for others, firmwares without it ignore P",
+             "write P as a whole number of turns from 0 to 100",
+             "Marlin gcode/motion/G2_G3.cpp (ARC_P_CIRCLES: P outside 0-100 is STR_ERR_ARC_ARGS); Marlin G2-G3 "
+             "(marlinfw.org/docs/gcode/G002-G003.html, P: full circles)"),
 )
-"""Lines refused because printers read them differently (the first row is `ODD_NUMBER`; the others are found by
-the move analysis, `gcodeinfo.MoveAnalyzer`, which raises `Ambiguous`)."""
-EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES = LINE_RULES
+"""Lines refused because printers read them differently (the first row stands for `NUMBER_FORMS`; the others are
+found by the move analysis, `gcodeinfo.MoveAnalyzer`, which raises `Ambiguous`)."""
+EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES, CENTRELESS, TURNS = LINE_RULES
 SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 """Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
@@ -109,16 +250,6 @@ class Ambiguous(Exception):
         super().__init__(rule.construct)
         self.rule = rule
         self.offset = offset
-
-
-def may_hold_odd_number(text: bytes) -> bool:
-    """Whether `text` may hold a match of `ODD_NUMBER` (False proves it holds none): a digit or dot right before
-    an E, or three of the letters of NAN and INF in a row."""
-    folded = np.frombuffer(text.translate(_ODD_CLASSES), dtype=np.uint8)
-    if ((folded[:-1] == 1) & (folded[1:] == 2)).any():
-        return True
-    letter = folded == 4
-    return bool((letter[:-2] & letter[1:-1] & letter[2:]).any())
 
 
 def line_count(text: bytes) -> int:
@@ -195,7 +326,14 @@ def _eight_bytes(data: NDArray[np.uint8], at: NDArray[np.intp]) -> tuple[NDArray
 
 def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.float64]:
     """The numbers starting at offsets `at` of some text followed by PAD zero bytes (`padded`, and `data` viewing
-    it), as float() reads them; NaN where no number starts.
+    it), as float() reads them; NaN where no number starts (`parse_words`)."""
+    return parse_words(padded, data, at)[0]
+
+
+def parse_words(padded: bytes, data: NDArray[np.uint8],
+                at: NDArray[np.intp]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """(the numbers starting at offsets `at` of some text followed by PAD zero bytes, as float() reads them, NaN
+    where no number starts; how many bytes each number spans, sign included).
 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
@@ -217,10 +355,13 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     parsed: NDArray[np.float64] = mantissa.astype(np.float64) / _SCALE
     np.negative(parsed, out=parsed, where=negative)
     parsed[(whole_digits == 0) & (fraction_digits == 0)] = np.nan
+    signed = (negative | (sign == ord("+"))).astype(np.intp)
+    spans = signed + whole_digits + dotted + fraction_digits
     for i in np.flatnonzero((whole_digits == 8) | (fraction_digits == 8)).tolist():  # long: the float parser's
         found = _NUMBER.match(padded, int(at[i]))
         parsed[i] = float(found.group(0)) if found else math.nan
-    return parsed
+        spans[i] = found.end() - found.start() if found else 0
+    return parsed, spans
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,9 +386,17 @@ class Scan:
     """Offsets in the padded piece of the `0` of each G0 (or the second of each G00) command word, which a printer
     that knows no G0 is given as G1."""
     odd_at: int | None = None
-    """Where (offset in the padded piece) the first G line starts that may hold a word `ODD_NUMBER` matches in
-    its code: a letter without a number, an E right after a digit, or such a match on another G line (None when no
-    line may)."""
+    """Where (offset in the padded piece) the first G line starts that may hold a word of `NUMBER_FORMS` in
+    its code: a letter without a number, an E or X right after a number, more after a number or the command word
+    than blanks before the next letter, or a `SUSPECT_LINE` among the other G lines (None when no line may)."""
+
+
+def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> None:
+    """Move each offset `at` past the blanks (space, tab) there, in place."""
+    blank = (data[at] == 32) | (data[at] == 9)
+    while blank.any():
+        at += blank
+        blank = (data[at] == 32) | (data[at] == 9)
 
 
 def scan(padded: bytes) -> Scan | None:
@@ -285,8 +434,8 @@ def scan(padded: bytes) -> Scan | None:
     is_set = np.zeros(len(starts), dtype=bool)
     suspect = len(starts)
     for line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
-        if line < suspect and padded[newlines[line] + 1] == 71 and ODD_NUMBER.search(  # G
-                padded, int(newlines[line]), int(newlines[line + 1])):
+        if line < suspect and padded[newlines[line] + 1] == 71 and SUSPECT_LINE.match(  # G
+                padded, int(newlines[line]) + 1):
             suspect = line
         if _REFUSED_COMMAND.match(padded, int(newlines[line])):
             return None  # the line reader refuses it
@@ -324,16 +473,27 @@ def scan(padded: bytes) -> Scan | None:
     keep &= kind == 1
     where, line_of = where[keep], line_of[keep]
     at = where + 1
-    blank = (data[at] == 32) | (data[at] == 9)
-    while blank.any():  # blanks between a letter and its number
-        at += blank
-        blank = (data[at] == 32) | (data[at] == 9)
-    numbers = parse_numbers(padded, data, at)
+    after_blanks(data, at)  # blanks between a letter and its number
+    numbers, spans = parse_words(padded, data, at)
     axis = _AXIS_INDEX[data[where]]
     known = ~np.isnan(numbers)
-    if not known.all():  # bare letters are not words (and may be a NaN or an infinity)
-        suspect = min(suspect, int(line_of[~known][0]))
+    after = at + spans
+    odd = _GLUED[data[after]]  # an exponent or a hexadecimal number
+    after_blanks(data, after)
+    odd |= ~_WORD_END[data[after]]  # more after the number than blanks before the next word or the code's end
+    odd |= ~known  # bare letters are not words (and may be a NaN or an infinity)
+    rows = np.flatnonzero(is_row)
+    command_end = starts[rows] + 1
+    while (digits := _DIGIT[data[command_end]]).any():
+        command_end += digits
+    after_blanks(data, command_end)
+    odd_lines = [line_of[odd][:1], rows[~_WORD_END[data[command_end]]][:1]]  # or more after the command word
+    if any(len(first_odd) for first_odd in odd_lines):
+        suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
+    if not known.all():
         axis, line_of, numbers, where = axis[known], line_of[known], numbers[known], where[known]
+    if arcs.any() and arcs[line_of[axis == _TURNS_INDEX]].any():
+        return None  # an arc's full turns (P) are read line by line
     unread = np.flatnonzero(axis >= read)
     if len(unread):  # letters not kept (rare on moves) are only checked: the line reader refuses a repeated one
         named = line_of[unread] * len(_LETTERS) + axis[unread]
@@ -348,11 +508,9 @@ def scan(padded: bytes) -> Scan | None:
         lines = line_of[picked]
         if (lines[1:] == lines[:-1]).any():
             return None  # a letter repeats within a line
-        if k == 3:  # an E right after a digit or dot may be an exponent
-            glued = np.flatnonzero(_DIGIT_OR_DOT[data[where[picked] - 1]])
-            if len(glued):
-                suspect = min(suspect, int(lines[glued[0]]))
         axes.append(Words(lines, numbers[picked], is_set[lines]))
+    if suspect < len(starts) and arcs.any():
+        return None  # the line reader refuses an arc Marlin refuses after any malformed number in that line
     return Scan(tuple(axes), controls, arcs, g0_at, int(newlines[suspect]) + 1 if suspect < len(starts) else None)
 
 

@@ -16,12 +16,14 @@ from numpy.typing import NDArray
 
 from fabwire.xyz import gcodearrays, motion, slicerfigures
 from fabwire.xyz.gcodearrays import (
+    CENTRELESS,
     INCHES,
     REPEATED,
     SECOND_COMMAND,
     SEPARATOR,
     SEPARATORS,
     SUBCODE,
+    TURNS,
     VALUE,
     Ambiguous,
     Words,
@@ -156,9 +158,33 @@ def words_of(params: bytes) -> dict[bytes, float]:
     words: dict[bytes, float] = {}
     for letter, value in found:
         words.setdefault(letter, float(value))
-    if len(words) < len(found) and not gcodearrays.ODD_NUMBER.search(code):  # `X1e3 E5`: the exponent's refusal
+    if len(words) < len(found) and not gcodearrays.MALFORMED.search(code):  # `X1e3 E5`: the exponent's refusal
         raise Ambiguous(REPEATED)
     return words
+
+
+MOST_TURNS = 100
+"""Full turns an arc's P may ask for: Marlin's ARC_P_CIRCLES range (G2_G3.cpp, WITHIN(circles_to_do, 0, 100))."""
+
+
+def arc_turns(words: dict[bytes, float]) -> int:
+    """The full turns (P) a G2/G3 makes before its arc, 0 without P; `gcodearrays.Ambiguous` (TURNS) for a P that
+    is not a whole number from 0 to MOST_TURNS."""
+    turns = words.get(b"P", 0.0)
+    if not (0 <= turns <= MOST_TURNS and turns == int(turns)):
+        raise Ambiguous(TURNS)
+    return int(turns)
+
+
+def centreless(x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.float64], y1: NDArray[np.float64],
+               i: NDArray[np.float64], j: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which G2/G3 arcs from (x0, y0) to (x1, y1) with centre offsets I, J or radius R (NaN when not given) give a
+    centre offset of zero, which Marlin refuses (`gcodearrays.CENTRELESS`): I and J both zero, R zero, or an R arc
+    that ends where it starts. An arc with none of I, J and R is not one of them (`REACH`)."""
+    by_offsets = ~(np.isnan(i) & np.isnan(j))
+    found: NDArray[np.bool_] = (by_offsets & (np.nan_to_num(i) == 0) & (np.nan_to_num(j) == 0)) | (
+        ~by_offsets & ~np.isnan(r) & ((r == 0) | ((x1 == x0) & (y1 == y0))))
+    return found
 
 
 @dataclass(frozen=True, slots=True)
@@ -320,7 +346,7 @@ class MoveAnalyzer:
         """Analyse whole lines; `chunk` must start at a line start (its end ends its last line).
 
         `odd` collects the (start, end) offsets of the parts of `chunk`, from a line start to a line end, outside
-        which no G line holds a word `gcodearrays.ODD_NUMBER` matches in its code."""
+        which no G line holds a word of `gcodearrays.NUMBER_FORMS` in its code."""
         self._count_markers(chunk)
         start = 0
         view = memoryview(chunk)
@@ -437,9 +463,19 @@ class MoveAnalyzer:
             nan = math.nan
             x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
                 x, y, target_x, target_y, words.get(b"I", nan), words.get(b"J", nan), words.get(b"R", nan)))
-            flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, np.array([arc == 2]))[0])
+            malformed = gcodearrays.MALFORMED.search(_code(params)) is not None  # the number's refusal comes first
+            if centreless(x0, y0, x1, y1, i, j, r)[0] and not malformed:
+                raise Ambiguous(CENTRELESS)
+            turns = arc_turns(words) if not malformed else 0
+            clockwise = np.array([arc == 2])
+            flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, clockwise)[0])
             if any(letter in words for letter in (b"I", b"J", b"R")):  # else its end points, as a straight move
-                self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, np.array([arc == 2])))
+                self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, clockwise))
+                if turns:  # whole circles first: around the start's circle
+                    cx, cy = ((x0 + np.nan_to_num(i), y0 + np.nan_to_num(j)) if b"I" in words or b"J" in words
+                              else motion.radius_centre(x0, y0, x1, y1, r, clockwise))
+                    self._widen_arcs(arc_box(x0, y0, x0, y0, cx - x0, cy - y0, r, clockwise))
+                    flat += turns * 2 * math.pi * float(np.hypot(x0 - cx, y0 - cy)[0])
             length = math.sqrt(flat * flat + dz * dz)
         else:
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -602,6 +638,8 @@ class MoveAnalyzer:
             offsets.append(value[rows])
         i, j, r = offsets
         x0, y0, x1, y1 = end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows]
+        if centreless(x0, y0, x1, y1, i, j, r).any():
+            raise Ambiguous(CENTRELESS)
         flat = motion.arc_lengths(x0, y0, x1, y1, i, j, r, arc[rows] == 2)
         boxed = centred[rows]
         if boxed.any():

@@ -317,27 +317,33 @@ def _check_lines(text: bytes, name: str, line_offset: int, lines_before: Callabl
 _MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
 
 
+def _plus(count: Callable[[], int], more: int) -> int:
+    return count() + more
+
+
 def _lines_after_crs(src: BinaryIO, begin: int, carried_cr: bool) -> int:
     return _lines_before(src, begin) - carried_cr
 
 
 def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int], start: int = 0,
                    end: int | None = None) -> None:
-    """Refuse a G line (outside its comment) with a number no printer reads as plain decimals
-    (`gcodearrays.ODD_NUMBER`), among the lines from offset `start` to `end` of `text`."""
-    from fabwire.xyz.gcodearrays import ODD_NUMBER
+    """Refuse a G line with a word whose value is not exactly one plain decimal number (`gcodearrays.NUMBER_FORMS`,
+    and a bare letter on a move: `EMPTY_VALUE`), among the whole lines from offset `start` to `end` of `text` (a
+    last line without its line break is left for when it is whole)."""
+    from fabwire.xyz.gcodearrays import SUSPECT_LINE, malformed_word
 
-    for found in ODD_NUMBER.finditer(text, start, len(text) if end is None else end):
-        start = text.rfind(b"\n", 0, found.start()) + 1
-        head = text[start:found.start()]
-        if b";" in head or b"(" in head or not _MOVE_LINE.match(text, start):
+    for found in SUSPECT_LINE.finditer(text, start, len(text) if end is None else end):
+        stop = text.find(b"\n", found.start())
+        if stop < 0:
+            return
+        word = malformed_word(text[found.start():stop])
+        if word is None:
             continue
-        line = lines_before() + text.count(b"\n", 0, start) + 1
-        end = text.find(b"\n", found.start())
-        word = text[found.start():end if end >= 0 else len(text)].split()[0]
-        raise InputError(f"{name}: line {line}: {excerpt(word.decode('latin-1'), 30)} is a number with an exponent "
-                         "or no number at all, which printers read differently (a move to infinity); write it as "
-                         "plain decimals")
+        value, form = word
+        line = lines_before() + text.count(b"\n", 0, found.start()) + 1
+        shown = excerpt(value.decode("utf-8", "replace"), 30)
+        raise InputError(f"{name}: line {line}: {shown} is not one plain decimal number ({form.construct}): "
+                         f"{form.reading}; write each value as plain decimals")
 
 
 def ambiguous_line(name: str, line: int, text: bytes, rule: LineRule) -> InputError:
@@ -404,15 +410,16 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
     CHUNK + MAX_LINE.
 
     A NUL byte before `end` is an InputError naming its line; when `repaired` is given, NULs are dropped instead and
-    the line numbers they were on are appended to it. So is a G line with a number no printer reads as plain
-    decimals (`gcodearrays.ODD_NUMBER`). When `odd` is given, the caller reads each chunk's numbers itself and lists
+    the line numbers they were on are appended to it. So is a G line with a word whose value is not one plain decimal
+    number (`gcodearrays.NUMBER_FORMS`). When `odd` is given, the caller reads each chunk's numbers itself and lists
     there, before it asks for the next chunk, the (start, end) parts of the chunk outside which no such number is
     (`MoveAnalyzer.feed_chunk` does): only those parts, and the line a read cuts in two, are searched here; the
     errors and their order stay the same."""
-    from fabwire.xyz.gcodearrays import ODD_NUMBER, may_hold_odd_number
+    from fabwire.xyz.gcodearrays import SUSPECT_LINE
 
     src.seek(0)
     carry = b""
+    carry_lines: Callable[[], int] = functools.partial(int, 0)  # counts the lines before `carry` (when asked)
     held_cr = False
     first = True
     done = 0
@@ -438,10 +445,9 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
         cut = text.rfind(b"\n") + 1
         if odd is None:
             checked = True
-            if may_hold_odd_number(carry + text if carry else text):  # carry holds no newline
-                _check_numbers(carry + text if carry else text, name, lines_before)
+            _check_numbers(carry + text if carry else text, name, lines_before)  # carry holds no newline
         else:  # the line the read cuts is searched here, the others by the caller
-            checked = cut == 0 or ODD_NUMBER.search(text, cut) is not None
+            checked = cut == 0 or SUSPECT_LINE.search(text, cut) is not None
             if checked:
                 _check_numbers(carry + text if carry else text, name, lines_before)
         if carry and len(carry) + max(0, text.find(b"\n")) > MAX_LINE:
@@ -461,11 +467,13 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             odd.clear()
         del chunk  # not held while the next block is read
         carry = text[cut:]
+        carry_lines = functools.partial(_plus, lines_before, text.count(b"\n", 0, cut))
         if len(carry) > MAX_LINE:
-            raise _long_line(name, lines_before() + text.count(b"\n") + 1)
+            raise _long_line(name, carry_lines() + 1)
         if progress is not None:
             progress(done - len(carry), total)
     if carry or held_cr:
+        _check_numbers(carry + b"\n", name, carry_lines)  # the last line, whole now
         yield carry + b"\n"
     if progress is not None:
         progress(total, total)

@@ -118,12 +118,13 @@ def arc_lengths(x0: Floats, y0: Floats, x1: Floats, y1: Floats, i: Floats, j: Fl
                 clockwise: NDArray[np.bool_]) -> Floats:
     """Lengths in the XY plane of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1), centre at offset (I, J) from
     the start, or radius R when I and J are NaN (negative R: the longer way), as Marlin's plan_arc reads them; an
-    arc that ends where it starts is a full circle. An R arc whose chord exceeds its diameter is its chord."""
+    arc that ends where it starts is a full circle. An R arc whose chord exceeds its diameter is the half circle
+    over its chord (Marlin's G2_G3.cpp puts the centre mid-chord, `radius_centre`)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         chord = np.hypot(x1 - x0, y1 - y0)
         centred = ~(np.isnan(i) & np.isnan(j))
         ii, jj = np.nan_to_num(i), np.nan_to_num(j)
-        radius = np.where(centred, np.hypot(ii, jj), np.abs(r))
+        radius = np.where(centred, np.hypot(ii, jj), np.maximum(np.abs(r), chord / 2))
         start = np.arctan2(-jj, -ii)
         end = np.arctan2(y1 - (y0 + jj), x1 - (x0 + ii))
         sweep = np.where(clockwise, start - end, end - start) % (2 * math.pi)
@@ -132,7 +133,7 @@ def arc_lengths(x0: Floats, y0: Floats, x1: Floats, y1: Floats, i: Floats, j: Fl
         by_radius = np.where(r < 0, 2 * math.pi - 2 * half, 2 * half)
         sweep = np.where(centred, sweep, by_radius)
         length = radius * sweep
-        invalid = ~np.isfinite(length) | (~centred & (chord > 2 * radius + 1e-9)) | (radius == 0)
+        invalid = ~np.isfinite(length) | (radius == 0)
     result: Floats = np.where(invalid, chord, length)
     return result
 
