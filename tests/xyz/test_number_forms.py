@@ -120,3 +120,18 @@ def test_an_accepted_value_is_exactly_one_finite_plain_number(value: str, indent
     assert found is not None, line
     for number in re.findall(_PLAIN_WORD, line, re.IGNORECASE):
         assert math.isfinite(float(number))
+
+
+@pytest.mark.parametrize("eol", [b"\n", b"\r\n", b"\r"], ids=["LF", "CRLF", "CR"])
+def test_a_malformed_last_line_after_many_blocks_is_refused_with_its_own_number(tmp_path: Path, eol: bytes) -> None:
+    """The last line, without its line break, is checked once whole, and its number counts every line of the
+    blocks before it, whatever ends them."""
+    from fabwire.xyz.intake import CHUNK
+
+    lines = [b"G28", b"G1 Z0.2 F1200"] + [b"G1 X%d Y10 E%d F1500" % (i % 100, i) for i in range(CHUNK // 12)]
+    source = tmp_path / "last.gcode"
+    source.write_bytes(eol.join(lines) + eol + b"G1 X--1000 Y10 E5")
+    done = run_cli("xyz", "convert", str(source), str(tmp_path / "last.3w"))
+    assert done.returncode == 4
+    assert f"line {len(lines) + 1}: 'X--1000' is not one plain decimal number" in done.stderr
+    assert not (tmp_path / "last.3w").exists()

@@ -317,10 +317,6 @@ def _check_lines(text: bytes, name: str, line_offset: int, lines_before: Callabl
 _MOVE_LINE = re.compile(rb"[ \t]*(?:N[0-9]+[ \t]*)?G", re.IGNORECASE)
 
 
-def _plus(count: Callable[[], int], more: int) -> int:
-    return count() + more
-
-
 def _lines_after_crs(src: BinaryIO, begin: int, carried_cr: bool) -> int:
     return _lines_before(src, begin) - carried_cr
 
@@ -467,7 +463,7 @@ def gcode_lines(src: BinaryIO, name: str, progress: Progress | None = None, tota
             odd.clear()
         del chunk  # not held while the next block is read
         carry = text[cut:]
-        carry_lines = functools.partial(_plus, lines_before, text.count(b"\n", 0, cut))
+        carry_lines = functools.partial(_lines_after_crs, src, done, held_cr)  # counted only if ever asked
         if len(carry) > MAX_LINE:
             raise _long_line(name, carry_lines() + 1)
         if progress is not None:
