@@ -35,6 +35,8 @@ _DIGIT[list(b"0123456789")] = True
 _GLUED = np.zeros(256, dtype=bool)
 _GLUED[list(b"EeXx")] = True
 """Letters that, right after a number, make it an exponent or a hexadecimal number to strtod (`NUMBER_FORMS`)."""
+_BLANK = np.zeros(256, dtype=bool)
+_BLANK[list(b" \t")] = True
 _WORD_END = np.zeros(256, dtype=bool)
 _WORD_END[list(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz;\n")] = True
 """Bytes that may follow a word's number or a command word, after blanks (the arrays leave `(` and `*` to the line
@@ -393,10 +395,27 @@ class Scan:
 
 def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> None:
     """Move each offset `at` past the blanks (space, tab) there, in place."""
-    blank = (data[at] == 32) | (data[at] == 9)
+    blank = _BLANK[data[at]]
     while blank.any():
         at += blank
-        blank = (data[at] == 32) | (data[at] == 9)
+        blank = _BLANK[data[at]]
+
+
+def _ends_word(data: NDArray[np.uint8], after: NDArray[np.intp],
+               first: NDArray[np.uint8] | None = None) -> NDArray[np.bool_]:
+    """Whether blanks at most come between each offset `after` and the next word or the code's end (`_WORD_END`);
+    `first`: the bytes at `after`, when the caller has them. One blank or none is the rule in slicers' output, so
+    only the other offsets are walked past their blanks."""
+    if first is None:
+        first = data[after]
+    ends = _WORD_END[first]
+    ends |= _BLANK[first] & _WORD_END[data[after + 1]]
+    rest = np.flatnonzero(~ends)
+    if len(rest):
+        further = after[rest]
+        after_blanks(data, further)
+        ends[rest] = _WORD_END[data[further]]
+    return ends
 
 
 def scan(padded: bytes) -> Scan | None:
@@ -478,16 +497,15 @@ def scan(padded: bytes) -> Scan | None:
     axis = _AXIS_INDEX[data[where]]
     known = ~np.isnan(numbers)
     after = at + spans
-    odd = _GLUED[data[after]]  # an exponent or a hexadecimal number
-    after_blanks(data, after)
-    odd |= ~_WORD_END[data[after]]  # more after the number than blanks before the next word or the code's end
+    following = data[after]
+    odd = _GLUED[following]  # an exponent or a hexadecimal number
+    odd |= ~_ends_word(data, after, following)  # more after the number than blanks before the next word or the end
     odd |= ~known  # bare letters are not words (and may be a NaN or an infinity)
     rows = np.flatnonzero(is_row)
     command_end = starts[rows] + 1
     while (digits := _DIGIT[data[command_end]]).any():
         command_end += digits
-    after_blanks(data, command_end)
-    odd_lines = [line_of[odd][:1], rows[~_WORD_END[data[command_end]]][:1]]  # or more after the command word
+    odd_lines = [line_of[odd][:1], rows[~_ends_word(data, command_end)][:1]]  # or more after the command word
     if any(len(first_odd) for first_odd in odd_lines):
         suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
     if not known.all():
