@@ -3,8 +3,6 @@ waiting out its reply timeout: every row of `FOREIGN`, each client kind, over re
 
 from __future__ import annotations
 
-import socket
-import threading
 from collections.abc import Iterator
 
 import pytest
@@ -13,17 +11,7 @@ from hypothesis import strategies as st
 
 from clitools import run_cli
 from fabwire.transport.peers import FOREIGN, identify
-
-SAID: dict[str, bytes] = {
-    "a Line-us drawing robot": b'hello VERSION:"3.2.0 Nov 17 2019 17:54:57" NAME:line-us SERIAL:354003\r\n\0',
-    "an SSH server": b"SSH-2.0-OpenSSH_9.2p1 Debian-2+deb12u3\r\n",
-    "a web server": b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\nContent-Length: 11\r\n\r\nBad Request",
-    "an FTP or mail server": b"220 (vsFTPd 3.0.3)\r\n",
-    "a Telnet server": b"\xff\xfd\x18\xff\xfd\x20\xff\xfd\x23\xff\xfd\x27",
-    "a Marlin or Prusa-firmware 3D printer": b"start\necho:Marlin 2.1.2.1\necho: Last Updated: 2023-05-30\n",
-}
-"""What each kind of peer says, as captured from one of its kind (a Line-us 3.2.0, OpenSSH, an HTTP server's
-answer to a line that is no request, vsftpd, a Telnet server's opening negotiation, a Marlin board's reset)."""
+from peertools import SAID, saying
 
 OWN: dict[str, list[bytes]] = {
     "xyz": [b"j:9511,0\n", b"ok\n", b"$\n", b"E4$\n", b"b:20\n", b"t:1,180,200\n"],
@@ -58,31 +46,8 @@ def test_identify_takes_any_bytes(data: bytes) -> None:
 @pytest.fixture
 def peer(request: pytest.FixtureRequest) -> Iterator[int]:
     """A TCP server that says its words on connect and again after every line it is sent."""
-    said: bytes = request.param
-    server = socket.create_server(("127.0.0.1", 0))
-    stop = threading.Event()
-
-    def serve(conn: socket.socket) -> None:
-        with conn:
-            try:
-                conn.sendall(said)
-                while not stop.is_set() and conn.recv(4096):
-                    conn.sendall(said)
-            except OSError:
-                pass
-
-    def accept() -> None:
-        while not stop.is_set():
-            try:
-                conn, _ = server.accept()
-            except OSError:
-                return
-            threading.Thread(target=serve, args=(conn,), daemon=True).start()
-
-    threading.Thread(target=accept, daemon=True).start()
-    yield server.getsockname()[1]
-    stop.set()
-    server.close()
+    with saying(request.param) as port:
+        yield port
 
 
 CASES = [(kind, row.what) for kind in CLIENTS for row in FOREIGN if row.kind != kind]

@@ -27,8 +27,11 @@ FOREIGN: tuple[Foreign, ...] = (
             "Line-us G-code spec: on connect the robot sends `hello VERSION:… NAME:… SERIAL:…`"),
     Foreign("an SSH server", "", re.compile(rb"SSH-[12]\.[0-9]+-"),
             "RFC 4253 §4.2: the identification string `SSH-protoversion-softwareversion` comes first"),
-    Foreign("a web server", "", re.compile(rb"HTTP/[0-9](?:\.[0-9])? [1-5][0-9][0-9]"),
-            "RFC 9112 §4: a response starts with its status line (a line that is no request gets 400)"),
+    Foreign("a web server", "",
+            re.compile(rb"HTTP/[0-9](?:\.[0-9])? [1-5][0-9][0-9]|\s*<(?:!DOCTYPE html|html)", re.IGNORECASE),
+            "RFC 9112 §4: a response starts with its status line (a line that is no request gets 400); RFC 1945 "
+            "§4.1: to a request line without a version (HTTP/0.9) the answer is the bare HTML document, as Python's "
+            "http.server sends it, which starts with `<!DOCTYPE html>` or `<html>` (HTML §13.1)"),
     Foreign("an FTP or mail server", "", re.compile(rb"220[ -]"),
             "RFC 959 §5.4 and RFC 5321 §4.2: the server greets with reply code 220"),
     Foreign("a Telnet server", "", re.compile(rb"\xff[\xfb-\xfe]"),
