@@ -11,6 +11,7 @@ from typing import Any
 
 import httpx
 import pytest
+from playwright.sync_api import Browser, expect
 
 from fabwire.agent.terminal import TERMINAL_LINES
 
@@ -77,3 +78,29 @@ def test_every_terminal_line_has_its_test(row: tuple[str, str, str, str]) -> Non
     file, _, name = COVERED[row[0]].rpartition("::")
     source = (Path(__file__).parents[1] / file if file else Path(__file__)).read_text()
     assert f"def {name}(" in source
+
+
+def test_the_dashboard_and_library_say_offline_once_with_the_reason(browser: Browser, tmp_path: Path,
+                                                                    simulator: Any) -> None:
+    """The card's header says "offline"; the state line under it gives the reason alone, and the library's refusal
+    says "offline" once too."""
+    robot = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0")
+    agent = start_agent(tmp_path / "state", "--device", f"wrong:xyz={robot.url}")
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    try:
+        with agent.client() as client:
+            wait_for(lambda: _offline_events(client, "wrong") >= 1, "the first attempt")
+            refusal = client.get("/api/v1/devices/wrong/library").json()["refusal"]
+        assert refusal.startswith(f"wrong is offline ({robot.url.removeprefix('tcp://')} is not an XYZv3 printer"), \
+            refusal
+        assert refusal.count("offline") == 1, refusal
+        page = context.new_page()
+        page.goto(agent.url)
+        card = page.locator("article[data-kind=xyz]")
+        expect(card.locator("header .offline")).to_have_text("offline")
+        expect(card.locator(".state")).to_contain_text("is not an XYZv3 printer: it is a Line-us")
+        assert card.inner_text().count("offline") == 1, card.inner_text()
+    finally:
+        context.close()
+        code, stderr = agent.stop()
+        assert code == 0, stderr
