@@ -33,8 +33,9 @@ def _printed(state_dir: Path, listen: str) -> tuple[list[str], str]:
         while wildcard and agent.process.stderr is not None:  # the token comes before, the addresses after
             line = agent.process.stderr.readline()
             agent.stderr_lines.append(line)
-            if (found := re.search(r"access token \(shown once; kept in .*\): (\S+)", line)) is not None:
-                token = found.group(1)
+            if (found := re.search(r"access token \(shown once; kept in (.*)\): (\S+)", line)) is not None:
+                token = found.group(2)
+                assert Path(found.group(1)).read_text().strip() == token  # the file it names holds it
             if not line or line.startswith("fabwire: open it at "):
                 urls = line.removeprefix("fabwire: open it at ").strip().split(", ")
                 break

@@ -230,3 +230,19 @@ def test_a_broker_that_is_not_there_yet_is_said_once_then_connected(agents: Agen
     assert len(said) == 1, said
     assert said[0].startswith(f"fabwire: MQTT broker {broker.url}: connection refused by 127.0.0.1:{broker.port}")
     assert said[0].rstrip().endswith("retrying in 0.5 s")
+
+
+@pytest.mark.parametrize("action", ["cancel", "pause", "resume"])
+def test_a_job_action_on_an_idle_printer_says_there_is_nothing_to_act_on(
+        broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any, action: str) -> None:
+    """Not "cancel cannot be undone: send confirm": what cannot happen now is refused as such."""
+    sim = simulator("xyz", "--listen", "127.0.0.1:0")
+    agents.start("a", broker, f"desk:xyz={sim.url}")
+    device = watch.until(lambda w: w.device_of_kind("xyz"))
+    watch.until(lambda w: (s := w.json(f"fabwire/device/{device}/state")) and s["online"]
+                and s["summary"]["state"] == "idle")
+    watch.send(device, {"action": action, "id": f"{action}-1"})
+    reply = watch.until(lambda w: w.json(f"fabwire/device/{device}/reply"))
+    assert reply["ok"] is False, reply
+    assert reply["error"].startswith(f"desk has nothing to {action}: it is idle"), reply
+    assert "confirm" not in reply["error"].split(";")[0]

@@ -19,7 +19,7 @@ from typing import Any
 
 import click
 
-from fabwire.agent.auth import is_loopback, load_or_create_token
+from fabwire.agent.auth import TOKEN_FILE, is_loopback, load_or_create_token
 from fabwire.agent.boundary import Policy, normal_host, split_authority
 from fabwire.agent.core import KINDS, Agent, DeviceSpec, demo_id
 from fabwire.agent.terminal import Terminal
@@ -271,9 +271,9 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
         if token or not local:
             secret, created = load_or_create_token(directory)
             if created:
-                click.echo(f"access token (shown once; kept in {directory}): {secret}", err=True)
+                click.echo(f"access token (shown once; kept in {directory / TOKEN_FILE}): {secret}", err=True)
             else:
-                click.echo(f"access token: the one in {directory}", err=True)
+                click.echo(f"access token: the one in {directory / TOKEN_FILE}", err=True)
         policy = Policy.for_listen(address.host, allow_hosts, token=secret,
                                    max_upload_bytes=int(max_upload * 1024 * 1024))
         if bridge is not None and demo_dir is not None:  # a new agent id each run: it leaves no trace
