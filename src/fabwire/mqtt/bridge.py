@@ -69,6 +69,8 @@ OVERFLOW_REPLIES = 64
 """"Busy" answers waiting to be published; beyond that a flood's commands are dropped unanswered."""
 FOREIGN_DEVICES = 10_000
 """Devices followed on the broker beyond this agent's own; past it, only this agent's own devices are."""
+SWEEP_AGAIN_S = 60.0
+"""How soon an agent empties again a topic a killed demo left, when the broker kept it (its ACL refused)."""
 PONG_INTERVAL_S = 0.5
 """Pings are answered at most this often: a ping flood costs one heartbeat per interval."""
 
@@ -178,6 +180,9 @@ class Bridge:
         self._client: aiomqtt.Client | None = None
         self._pending: dict[str, dict[str, Any]] = {}
         self._availability: dict[str, str] = {}
+        self._newest: dict[str, str] = {}
+        """Per device: the time (`ts`, ISO 8601 UTC with milliseconds) of the newest state published, or link event
+        followed; an older one that comes after it (an event queued before a snapshot of the state) is dropped."""
         """What this connection last published on each device's availability topic."""
         self._dirty: asyncio.Queue[str] = asyncio.Queue()
         """Devices whose newest state waits in `_pending`, oldest first (each at most once)."""
@@ -202,6 +207,8 @@ class Bridge:
         self.on_connected: Callable[[str], None] | None = None
         """Told each time the broker takes the connection ("publishing to mqtt://… as agent …"): `fabwire serve`
         prints it, as it prints where it listens, since a failed attempt is already shown."""
+        self._swept: dict[str, float] = {}
+        """Topics a killed demo left that this agent emptied, and when (see `_sweep`)."""
         self.on_trouble: Callable[[str, float], None] | None = None
         """Told why the connection failed or was lost, and in how many seconds it is tried again: `fabwire serve`
         says it on the terminal (`fabwire.agent.terminal`); without it, it is logged as a warning."""
@@ -514,23 +521,36 @@ class Bridge:
         """What a killed demo left (`RETAINED_TOPICS`): its claims on the demo's machines once its status is
         offline (its last will) or gone, a demo machine's topics once nobody claims it, and the status and info
         of a killed demo agent that had no state directory (its id is never used again)."""
+        now = time.monotonic()
         for device, view in list(self.view.devices.items()):
             if not is_demo_id(device) or device in self.known:
                 continue
             dead = sorted(a for a in view.claims if not self.view.online(a))
             for agent in dead:
-                log.info("MQTT: clearing offline agent %s's claim on the demo machine %s", agent, device)
-                await self._publish(claim_topic(device, agent), b"")
-            if not view.claims - set(dead) and (view.info is not None or view.state is not None
-                                                or view.availability is not None):
+                if self._sweep(claim_topic(device, agent), now):
+                    log.info("MQTT: clearing offline agent %s's claim on the demo machine %s", agent, device)
+                    await self._publish(claim_topic(device, agent), b"")
+            if (not view.claims - set(dead) and view.info is not None
+                    and self._sweep(device_topic(device, "info"), now)):
                 log.info("MQTT: clearing the demo machine %s that no agent claims", device)
                 for topic in dict.fromkeys(self._retained_topics(device, every_mode=True)):
                     await self._publish(topic, b"")
         for agent, info in list(self.view.agent_info.items()):
-            if agent != self.agent_id and info.get("passing") is True and not self.view.online(agent):
+            if (agent != self.agent_id and info.get("passing") is True and not self.view.online(agent)
+                    and self._sweep(agent_topic(agent, "info"), now)):
                 log.info("MQTT: clearing the records of demo agent %s, which was stopped without a goodbye", agent)
                 for leaf in ("status", "info"):
                     await self._publish(agent_topic(agent, leaf), b"")
+
+    def _sweep(self, topic: str, now: float) -> bool:
+        """Whether to empty `topic` now: at most once per SWEEP_AGAIN_S (a broker whose ACL refuses the emptying
+        leaves it there; this agent must not try again every second)."""
+        if now - self._swept.get(topic, -SWEEP_AGAIN_S) < SWEEP_AGAIN_S:
+            return False
+        if len(self._swept) >= FOREIGN_DEVICES:
+            self._swept.clear()
+        self._swept[topic] = now
+        return True
 
     # ------------------------------------------------------------------------------------------ liveness
 
@@ -596,6 +616,7 @@ class Bridge:
         self.owned.discard(device)
         self._pending.pop(device, None)
         self._availability.pop(device, None)
+        self._newest.pop(device, None)
         self.known.pop(device, None)
         await self._publish(claim_topic(device, self.agent_id), b"")
 
@@ -643,6 +664,8 @@ class Bridge:
                     self._dirty.put_nowait(device)
                 self._pending[device] = event["state"]
             elif kind in ("online", "offline"):
+                if not self._newer(device, event.get("ts")):
+                    continue  # older than a state already published: it would flip availability back
                 pending = self._pending.get(device)
                 if pending is not None and bool(pending.get("online")) != (kind == "online"):
                     del self._pending[device]  # older than this event: publishing it would flip availability back
@@ -662,8 +685,20 @@ class Bridge:
             if state is not None and device in self.owned:
                 await self._publish_state(device, state)
 
+    def _newer(self, device: str, ts: Any) -> bool:
+        """Whether what happened at `ts` is not older than what was published of `device`; it is then the newest."""
+        if not isinstance(ts, str):
+            return True
+        if ts < self._newest.get(device, ""):
+            return False
+        self._newest[device] = ts
+        return True
+
     async def _publish_state(self, device: str, state: dict[str, Any]) -> None:
-        """The state, and the availability when the state's `online` flag changed it."""
+        """The state, and the availability when the state's `online` flag changed it; never one older than a state
+        already published."""
+        if not self._newer(device, state.get("ts")):
+            return
         await self._set_availability(device, bool(state.get("online")))
         # QoS 0: TCP delivers it while the connection lasts, a reconnection republishes every state, and a newer
         # state follows within a poll; waiting for an acknowledgement per state would halve a farm's throughput.
