@@ -88,13 +88,17 @@ class App(msgspec.Struct):
 
 
 def configure_logging(verbose: int) -> None:
-    """-v: connects, retries and state changes (INFO); -vv: also every byte on the wire (DEBUG)."""
+    """-v: connects, retries and state changes (INFO); -vv: also every byte on the wire (DEBUG). Without -v the
+    warnings that still come are `fabwire: …` lines, as every other line fabwire prints; with it, each line has its
+    time and logger, as a log does."""
     root = logging.getLogger("fabwire")
-    if not any(getattr(h, "fabwire_cli", False) for h in root.handlers):
+    handler = next((h for h in root.handlers if getattr(h, "fabwire_cli", False)), None)
+    if handler is None:
         handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s: %(message)s"))
         handler.fabwire_cli = True  # type: ignore[attr-defined]
         root.addHandler(handler)
+    handler.setFormatter(logging.Formatter("fabwire: %(message)s" if verbose <= 0
+                                           else "%(asctime)s %(name)s: %(message)s"))
     root.setLevel(logging.WARNING if verbose <= 0 else logging.INFO if verbose == 1 else logging.DEBUG)
 
 

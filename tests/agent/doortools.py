@@ -13,7 +13,7 @@ from PIL import Image
 
 from .agenttools import RunningAgent, summary, wait_for
 
-XYZ = "xyz-demo"
+XYZ = "xyz_demo"
 """The demo da Vinci's id (`fabwire serve --demo`)."""
 
 

@@ -9,6 +9,7 @@ from typing import Any
 import httpx
 import pytest
 
+from fabwire.agent.session import JOB_ACTIONS
 from fabwire.samples import SAMPLE_GCODE, sample_path
 
 from .agenttools import device_of, summary, wait_for
@@ -48,6 +49,9 @@ NOT_OFFERED: dict[str, tuple[str, Callable[[httpx.Client, str], str], str, dict[
     "xyz-acknowledge-while-printing": ("xyz", _printing, "acknowledge", {}),
     "xyz-confirm-with-no-step-waiting": ("xyz", _idle, "confirm", {}),  # (a flow's prompt offers confirm)
     "xyz-stop-flow-with-no-step-waiting": ("xyz", _idle, "stop_flow", {}),
+    "xyz-cancel-with-nothing-printing": ("xyz", _idle, "cancel", {}),  # not asked to confirm what cannot happen
+    "xyz-pause-with-nothing-printing": ("xyz", _idle, "pause", {}),
+    "xyz-resume-while-printing": ("xyz", _printing, "resume", {}),
     "lineus-move-while-drawing": ("lineus", _drawing, "move", {"x": 1000, "y": 0}),
     "lineus-pen-up-while-drawing": ("lineus", _drawing, "pen_up", {}),
     "mmu-tool-change-in-error": ("mmu", _mmu_error, "tool_change", {"slot": 2}),
@@ -70,7 +74,8 @@ def test_an_action_not_offered_now_is_409_naming_the_state(bench: Bench, case: s
         refused = client.post(f"/api/v1/devices/{device}/actions/{action}", json=params)
         assert refused.status_code == 409, refused.text
         message = refused.json()["message"]
-        assert f"cannot {action} now" in message
+        assert (f"has nothing to {action}" if action in JOB_ACTIONS else f"cannot {action} now") in message
+        assert "cannot be undone" not in message
         assert state in message
         later = client.get(f"/api/v1/devices/{device}/history").json()["events"][events:]
         assert not any(e.get("type") == "error" and action in str(e) for e in later), later

@@ -10,6 +10,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mqtttools import Mosquitto
+from servetools import Agents, Watch
 
 
 @pytest.fixture
@@ -18,3 +19,17 @@ def broker(tmp_path: Path) -> Iterator[Mosquitto]:
     server.start()
     yield server
     server.stop()
+
+
+@pytest.fixture
+def agents(tmp_path: Path) -> Iterator[Agents]:
+    started = Agents(tmp_path)
+    yield started
+    started.stop_all()
+
+
+@pytest.fixture
+def watch(broker: Mosquitto) -> Iterator[Watch]:
+    w = Watch(broker)
+    yield w
+    w.close()

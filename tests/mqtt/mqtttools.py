@@ -17,7 +17,7 @@ from typing import Any
 import aiomqtt
 import pytest
 
-from fabwire.agent.core import DeviceInfo
+from fabwire.agent.core import DeviceInfo, now_iso
 from fabwire.errors import InputError
 
 
@@ -156,7 +156,7 @@ class FakeAgent:
 
     @staticmethod
     def make_state(info: DeviceInfo, state: str, **summary: Any) -> dict[str, Any]:
-        return {"ts": "2026-01-01T00:00:00.000Z", "online": True, "device": info.id, "kind": info.kind,
+        return {"ts": now_iso(), "online": True, "device": info.id, "kind": info.kind,
                 "name": info.name, "summary": {"state": state, **summary}, "status": {"state": state}, "job": None}
 
     def devices(self) -> list[DeviceInfo]:
@@ -182,7 +182,7 @@ class FakeAgent:
 
     def set_state(self, device_id: str, state: str, **summary: Any) -> None:
         self.states[device_id] = self.make_state(self.infos[device_id], state, **summary)
-        self.emit({"ts": "x", "device": device_id, "type": "state", "state": self.states[device_id]})
+        self.emit({"ts": now_iso(), "device": device_id, "type": "state", "state": self.states[device_id]})
 
 
 def printer(serial: str = "3DP01P", name: str = "office") -> DeviceInfo:

@@ -18,6 +18,7 @@ from mqtttools import FakeAgent, Mosquitto, lineus, mmu, observing, printer
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
+from fabwire.agent.core import now_iso
 from fabwire.errors import InputError, LinkError
 from fabwire.mqtt.bridge import Bridge, run_bridge
 from fabwire.mqtt.discovery import discovery_topics
@@ -121,12 +122,12 @@ async def test_events_and_availability_changes_follow_the_agent(broker: Mosquitt
     agent = FakeAgent([PRINTER])
     async with bridged(agent, broker), observing(broker, "fabwire/device/#") as seen:
         await seen.wait_for(lambda o: o.latest.get(device_topic(PRINTER.id, "availability")) == b"online")
-        agent.emit({"ts": "t", "device": PRINTER.id, "type": "offline", "reason": "link lost", "retry_in_s": 1})
+        agent.emit({"ts": now_iso(), "device": PRINTER.id, "type": "offline", "reason": "link lost", "retry_in_s": 1})
         await seen.wait_for(lambda o: o.latest.get(device_topic(PRINTER.id, "availability")) == b"offline")
-        agent.emit({"ts": "t", "device": PRINTER.id, "type": "event", "event": {"text": "filament runout"}})
+        agent.emit({"ts": now_iso(), "device": PRINTER.id, "type": "event", "event": {"text": "filament runout"}})
         event = await seen.wait_for(lambda o: o.json(device_topic(PRINTER.id, "event")))
         assert event["event"] == {"text": "filament runout"}
-        agent.emit({"ts": "t", "device": PRINTER.id, "type": "online", "info": PRINTER.to_dict()})
+        agent.emit({"ts": now_iso(), "device": PRINTER.id, "type": "online", "info": PRINTER.to_dict()})
         await seen.wait_for(lambda o: o.latest.get(device_topic(PRINTER.id, "availability")) == b"online")
 
 
@@ -276,12 +277,32 @@ async def test_a_state_older_than_a_link_event_never_flips_availability_back(bro
         await seen.wait_for(lambda o: o.latest.get(topic) == b"online")
         for _ in range(20):  # offline, then back: a state from the offline spell is queued behind the online event
             stale = {**agent.states[PRINTER.id], "online": False}
-            agent.emit({"ts": "t", "device": PRINTER.id, "type": "offline", "reason": "link lost", "retry_in_s": 1})
-            agent.emit({"ts": "t", "device": PRINTER.id, "type": "state", "state": stale})
-            agent.emit({"ts": "t", "device": PRINTER.id, "type": "online", "info": None})
+            agent.emit({"ts": now_iso(), "device": PRINTER.id, "type": "offline", "reason": "link lost",
+                        "retry_in_s": 1})
+            agent.emit({"ts": now_iso(), "device": PRINTER.id, "type": "state", "state": stale})
+            agent.emit({"ts": now_iso(), "device": PRINTER.id, "type": "online", "info": None})
             await asyncio.sleep(0.05)
         agent.set_state(PRINTER.id, "idle")
         await seen.wait_for(lambda o: o.json(device_topic(PRINTER.id, "state"))["online"] is True
                             and o.latest.get(topic) == b"online")
         flips = [payload for t, payload, _ in seen.log if t == topic]
         assert flips == [b"online"] + [b"offline", b"online"] * 20, flips
+
+
+async def test_a_state_older_than_one_published_is_never_published(broker: Mosquitto) -> None:
+    """An event queued before the bridge took a snapshot of the device (when it came to own it) arrives after
+    that snapshot went out: it is older, and neither its state nor its availability is published."""
+    agent = FakeAgent([PRINTER])
+    async with bridged(agent, broker), observing(broker, "fabwire/device/#") as seen:
+        state_topic, availability = device_topic(PRINTER.id, "state"), device_topic(PRINTER.id, "availability")
+        await seen.wait_for(lambda o: o.json(state_topic) and o.latest.get(availability) == b"online")
+        before = "2000-01-01T00:00:00.000Z"
+        old = {**agent.states[PRINTER.id], "ts": before, "online": False, "summary": {"state": "offline"}}
+        agent.emit({"ts": before, "device": PRINTER.id, "type": "offline", "reason": "not connected yet",
+                    "retry_in_s": 1})
+        agent.emit({"ts": before, "device": PRINTER.id, "type": "state", "state": old})
+        agent.set_state(PRINTER.id, "printing")
+        await seen.wait_for(lambda o: o.json(state_topic)["summary"]["state"] == "printing")
+        states = [json.loads(p)["summary"]["state"] for t, p, _ in seen.log if t == state_topic and p]
+        assert "offline" not in states, states
+        assert [p for t, p, _ in seen.log if t == availability] == [b"online"]

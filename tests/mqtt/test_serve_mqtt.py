@@ -12,114 +12,20 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import paho.mqtt.client as paho
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from hatools import check_device_discovery, check_entity_discovery
 from mqtttools import Mosquitto
+from servetools import ANNOUNCEMENT, Agents, Watch, retained
 
 from clitools import cli_env, run_cli
 from fabwire.mqtt.discovery import discovery_topics
 
 pytestmark = pytest.mark.timeout(120)
-ANNOUNCEMENT = "fabwire agent listening on "
-
-
-class Agents:
-    """`fabwire serve` processes, killed at the end."""
-
-    def __init__(self, tmp_path: Path) -> None:
-        self.tmp_path = tmp_path
-        self.processes: list[subprocess.Popen[str]] = []
-        self.urls: dict[str, str] = {}
-
-    def start(self, name: str, broker: Mosquitto, *devices: str, options: tuple[str, ...] = ()
-              ) -> subprocess.Popen[str]:
-        args = [sys.executable, "-m", "fabwire", "serve", "--listen", "127.0.0.1:0", "--state-dir",
-                str(self.tmp_path / name), "--mqtt", broker.url, *options]
-        for device in devices:
-            args += ["--device", device]
-        process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                   env=cli_env(self.tmp_path))
-        self.processes.append(process)
-        assert process.stdout is not None
-        line = process.stdout.readline()
-        assert line.startswith(ANNOUNCEMENT), line + (process.stderr.read() if process.stderr else "")
-        self.urls[name] = line.removeprefix(ANNOUNCEMENT).strip()
-        return process
-
-    def stop_all(self) -> None:
-        for process in self.processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait(10)
-            for stream in (process.stdout, process.stderr):
-                if stream:
-                    stream.close()
-
-
-@pytest.fixture
-def agents(tmp_path: Path) -> Iterator[Agents]:
-    started = Agents(tmp_path)
-    yield started
-    started.stop_all()
-
-
-class Watch:
-    """A plain (blocking) MQTT client in its own thread: each topic's latest payload, and a way to publish."""
-
-    def __init__(self, broker: Mosquitto) -> None:
-        self.latest: dict[str, bytes] = {}
-        self.log: list[tuple[str, bytes]] = []
-        self.client = paho.Client(paho.CallbackAPIVersion.VERSION2)
-        self.client.on_message = self._message
-        self.client.connect("127.0.0.1", broker.port)
-        self.client.subscribe("fabwire/#", qos=1)
-        self.client.subscribe("homeassistant/#", qos=1)
-        self.client.loop_start()
-
-    def _message(self, client: Any, userdata: Any, message: Any) -> None:
-        self.latest[message.topic] = message.payload
-        self.log.append((message.topic, message.payload))
-
-    def until(self, predicate: Any, timeout: float = 30.0) -> Any:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            value = predicate(self)
-            if value:
-                return value
-            time.sleep(0.05)
-        raise AssertionError(f"not seen in {timeout} s; topics: {sorted(self.latest)}")
-
-    def json(self, topic: str) -> Any:
-        payload = self.latest.get(topic)
-        return json.loads(payload) if payload else None
-
-    def device_of_kind(self, kind: str) -> str | None:
-        for topic, payload in list(self.latest.items()):
-            info = json.loads(payload) if topic.endswith("/info") and payload else {}
-            if topic.startswith("fabwire/device/") and info.get("kind") == kind:
-                return topic.split("/")[2]
-        return None
-
-    def send(self, device: str, body: dict[str, Any]) -> None:
-        self.client.publish(f"fabwire/device/{device}/command", json.dumps(body), qos=1).wait_for_publish(10)
-
-    def close(self) -> None:
-        self.client.loop_stop()
-        self.client.disconnect()
-
-
-@pytest.fixture
-def watch(broker: Mosquitto) -> Iterator[Watch]:
-    w = Watch(broker)
-    yield w
-    w.close()
 
 
 def test_agent_publishes_a_simulator_and_its_commands_move_it(broker: Mosquitto, agents: Agents, watch: Watch,
@@ -263,18 +169,6 @@ def test_per_entity_discovery_from_serve(broker: Mosquitto, agents: Agents, watc
     assert not watch.latest.get(f"homeassistant/device/fabwire_{device}/config")
 
 
-def _retained(broker: Mosquitto) -> dict[str, bytes]:
-    """Every retained message under fabwire/ and homeassistant/, as a newcomer to the broker gets them: the marker
-    published after subscribing comes back after all of them."""
-    fresh = Watch(broker)
-    try:
-        fresh.client.publish("fabwire/test/marker", b"end", qos=1).wait_for_publish(10)
-        fresh.until(lambda w: "fabwire/test/marker" in w.latest)
-        return {t: p for t, p in fresh.latest.items() if p and t != "fabwire/test/marker"}
-    finally:
-        fresh.close()
-
-
 @pytest.mark.parametrize("state_dir", [False, True], ids=["no-state-dir", "state-dir"])
 def test_a_demo_leaves_no_ghost_machines_on_the_broker(broker: Mosquitto, watch: Watch, tmp_path: Path,
                                                       state_dir: bool) -> None:
@@ -287,7 +181,7 @@ def test_a_demo_leaves_no_ghost_machines_on_the_broker(broker: Mosquitto, watch:
     try:
         assert process.stdout is not None
         assert process.stdout.readline().startswith(ANNOUNCEMENT)
-        demo = ("xyz-demo", "lineus-demo", "mmu-demo")
+        demo = ("xyz_demo", "lineus_demo", "mmu_demo")
         watch.until(lambda w: all(w.latest.get(f"homeassistant/device/fabwire_{d}/config") for d in demo)
                     and all(w.latest.get(f"fabwire/device/{d}/availability") == b"online" for d in demo))
         agent = watch.until(lambda w: next((t.split("/")[2] for t, p in w.latest.items()
@@ -299,11 +193,56 @@ def test_a_demo_leaves_no_ghost_machines_on_the_broker(broker: Mosquitto, watch:
         if process.poll() is None:
             process.kill()
             process.communicate()
-    left = _retained(broker)
-    assert not [t for t in left if "-demo" in t], left
+    left = retained(broker)
+    assert not [t for t in left if "_demo" in t], left
     kept = sorted(t for t in left if t.startswith(f"fabwire/agent/{agent}/"))
     if state_dir:
         assert kept == [f"fabwire/agent/{agent}/info", f"fabwire/agent/{agent}/status"]
         assert left[f"fabwire/agent/{agent}/status"] == b"offline"
     else:
         assert kept == []
+
+
+def test_a_broker_that_is_not_there_yet_is_said_once_then_connected(agents: Agents, tmp_path: Path) -> None:
+    """`fabwire: MQTT broker …; retrying` once (its retries are logged with -v only), then the connection."""
+    from mqtttools import free_port
+
+    broker = Mosquitto(tmp_path / "broker", port=free_port())
+    (tmp_path / "broker").mkdir()
+    agent = agents.start("a", broker, options=("-v",))
+    assert agent.stderr is not None
+    said = []
+    retries = 0
+    while retries < 3:  # the agent's own log (-v) shows each retry; the terminal line comes once
+        line = agent.stderr.readline()
+        assert line, said
+        said += [line] if line.startswith("fabwire: MQTT broker") else []
+        retries += "fabwire.mqtt: MQTT broker" in line and "retrying in" in line
+    broker.start()
+    try:
+        assert agent.stdout is not None
+        assert agent.stdout.readline().startswith(f"fabwire agent publishing to {broker.url} as agent ")
+    finally:
+        agent.send_signal(signal.SIGTERM)
+        _, rest = agent.communicate(timeout=60)
+        broker.stop()
+    said += [line for line in rest.splitlines(keepends=True) if line.startswith("fabwire: MQTT broker")]
+    assert len(said) == 1, said
+    assert said[0].startswith(f"fabwire: MQTT broker {broker.url}: connection refused by 127.0.0.1:{broker.port}")
+    assert said[0].rstrip().endswith("retrying in 0.5 s")
+
+
+@pytest.mark.parametrize("action", ["cancel", "pause", "resume"])
+def test_a_job_action_on_an_idle_printer_says_there_is_nothing_to_act_on(
+        broker: Mosquitto, agents: Agents, watch: Watch, simulator: Any, action: str) -> None:
+    """Not "cancel cannot be undone: send confirm": what cannot happen now is refused as such."""
+    sim = simulator("xyz", "--listen", "127.0.0.1:0")
+    agents.start("a", broker, f"desk:xyz={sim.url}")
+    device = watch.until(lambda w: w.device_of_kind("xyz"))
+    watch.until(lambda w: (s := w.json(f"fabwire/device/{device}/state")) and s["online"]
+                and s["summary"]["state"] == "idle")
+    watch.send(device, {"action": action, "id": f"{action}-1"})
+    reply = watch.until(lambda w: w.json(f"fabwire/device/{device}/reply"))
+    assert reply["ok"] is False, reply
+    assert reply["error"].startswith(f"desk has nothing to {action}: it is idle"), reply
+    assert "confirm" not in reply["error"].split(";")[0]

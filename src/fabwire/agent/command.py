@@ -20,13 +20,15 @@ from typing import Any
 import click
 
 from fabwire import __version__
-from fabwire.agent.auth import is_loopback, load_or_create_token
+from fabwire.agent.auth import TOKEN_FILE, is_loopback, load_or_create_token
 from fabwire.agent.boundary import Policy, normal_host, split_authority
-from fabwire.agent.core import KINDS, Agent, DeviceSpec
+from fabwire.agent.core import KINDS, Agent, DeviceSpec, demo_id
+from fabwire.agent.terminal import Terminal
 from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import FabwireError, InputError, excerpt
 from fabwire.mqtt.options import BrokerURL
 from fabwire.simoptions import ListenAddress, parse_listen
+from fabwire.transport.tcp import listen_failure
 
 DEFAULT_PORT = 8765
 DEMO_DEVICES = (("printer", "xyz"), ("line-us", "lineus"), ("mmu", "mmu"))
@@ -135,11 +137,60 @@ def _allow_hosts(texts: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _bind(host: str, port: int) -> socket.socket:
+    """The agent's listening socket; on the IPv6 wildcard `::` a dual-stack one (IPV6_V6ONLY off, RFC 3493
+    section 5.3) where the system has them, so IPv4 clients reach it as they do `0.0.0.0`."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    dual = family == socket.AF_INET6 and _is_wildcard(host) and socket.has_dualstack_ipv6()
     try:
-        return socket.create_server((host, port), family=family, reuse_port=False)
+        return socket.create_server((host, port), family=family, reuse_port=False, dualstack_ipv6=dual)
     except OSError as exc:
-        raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        raise listen_failure(exc, host, port) from None
+
+
+def _is_wildcard(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_unspecified
+    except ValueError:
+        return False
+
+
+OPEN_AT: tuple[tuple[str, str, str], ...] = (
+    ("0.0.0.0", "127.0.0.1, then every other IPv4 address of this computer", "ip(7) INADDR_ANY"),
+    ("::, dual-stack", "127.0.0.1 and [::1], then every other IPv4 and IPv6 address of this computer",
+     "ipv6(7) IPV6_V6ONLY off; RFC 3493 section 5.3"),
+    ("::, IPv6 only", "[::1], then every other IPv6 address of this computer", "ipv6(7) IPV6_V6ONLY on"),
+    ("one address", "none besides the one announced: it is the address to open", "ip(7), ipv6(7)"),
+)
+"""What `serve` prints to open besides the listening address, by what it listens on: (listen, printed, source).
+IPv6 link-local addresses are left out (a browser cannot open one: its URL would need a zone id)."""
+
+
+def open_at(sock: socket.socket) -> list[str]:
+    """The URLs a browser opens the agent at when `sock` listens on a wildcard address (`OPEN_AT`), else []."""
+    host, port = sock.getsockname()[:2]
+    if not _is_wildcard(host):
+        return []
+    versions = [4] if sock.family == socket.AF_INET else [6]
+    if sock.family == socket.AF_INET6 and not sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY):
+        versions = [4, 6]
+    found = [a for a in _addresses() if a.version in versions]
+    found.sort(key=lambda a: (not a.is_loopback, a.version))
+    return [f"http://{a}:{port}/" if a.version == 4 else f"http://[{a}]:{port}/" for a in found]
+
+
+def _addresses() -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
+    """This computer's addresses (its interfaces'), link-local IPv6 ones left out."""
+    import ifaddr
+
+    found: dict[ipaddress.IPv4Address | ipaddress.IPv6Address, None] = {}
+    for adapter in ifaddr.get_adapters():
+        for address in adapter.ips:
+            text = address.ip if isinstance(address.ip, str) else address.ip[0]
+            with contextlib.suppress(ValueError):
+                ip = ipaddress.ip_address(text)
+                if not (ip.version == 6 and ip.is_link_local):
+                    found[ip] = None
+    return list(found)
 
 
 def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, discovery: str = "device") -> Any:
@@ -152,13 +203,21 @@ def _bridge(url: str | None, user: str | None, password: str | None, tls: bool, 
         raise InputError("MQTT support not installed: pip install 'fabwire[mqtt]'") from None
 
     def start(agent: Agent, dashboard_url: str, passing: frozenset[str] = frozenset(),
-              passing_agent: bool = False) -> Coroutine[Any, Any, None]:
+              passing_agent: bool = False, terminal: Any = None) -> Coroutine[Any, Any, None]:
         def linked(bridge: Any) -> None:
             bridge.dashboard_url = dashboard_url
             bridge.discovery_mode = discovery
             bridge.passing = passing
             bridge.passing_agent = passing_agent
-            bridge.on_connected = lambda text: click.echo(f"fabwire agent {text}")
+
+            def connected(text: str) -> None:
+                if terminal is not None:
+                    terminal.broker_connected()
+                click.echo(f"fabwire agent {text}")
+
+            bridge.on_connected = connected
+            if terminal is not None:
+                bridge.on_trouble = terminal.broker_trouble
 
         result: Coroutine[Any, Any, None] = run_bridge(agent, url, username=user, password=password, tls=tls,
                                                        on_bridge=linked)
@@ -234,9 +293,9 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
         if token or not local:
             secret, created = load_or_create_token(directory)
             if created:
-                click.echo(f"access token (shown once; kept in {directory}): {secret}", err=True)
+                click.echo(f"access token (shown once; kept in {directory / TOKEN_FILE}): {secret}", err=True)
             else:
-                click.echo(f"access token: the one in {directory}", err=True)
+                click.echo(f"access token: the one in {directory / TOKEN_FILE}", err=True)
         policy = Policy.for_listen(address.host, allow_hosts, token=secret,
                                    max_upload_bytes=int(max_upload * 1024 * 1024))
         if bridge is not None and demo_dir is not None:  # a new agent id each run: it leaves no trace
@@ -282,18 +341,20 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     """Serve until a signal; True when it was SIGINT (Ctrl-C), False for SIGTERM (a service manager's stop)."""
     import uvicorn
 
-    from fabwire.agent.advertise import Advertiser, lan_addresses
+    from fabwire.agent.advertise import Advertiser
     from fabwire.agent.api import create_app
     from fabwire.logsink import log_in_background
 
     log_in_background(also=("uvicorn",))  # a stderr nobody reads must not freeze the agent
 
     server_class = _server_class()
+    terminal = Terminal()
     simulators: list[Any] = []
     passing: frozenset[str] = frozenset()
     agent = Agent(state_dir=state_dir, retention_s=retention_s, max_upload_bytes=policy.max_upload_bytes)
     bridge_task: asyncio.Task[None] | None = None
     notify_task: asyncio.Task[None] | None = None
+    terminal_task: asyncio.Task[None] | None = None
     show: asyncio.Task[None] | None = None
     advertiser: Advertiser | None = None
     try:
@@ -302,6 +363,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
             passing = frozenset(spec.fixed_id for spec in demo_specs if spec.fixed_id)
             specs = demo_specs + specs
         await agent.start()
+        terminal_task = asyncio.create_task(terminal.run(agent))  # subscribed before the devices come
         if notifier is not None:  # subscribed before the devices come: their first states arm it
             notify_task = asyncio.create_task(notifier.run(agent))
         results = await asyncio.gather(*(agent.add_device(s) for s in specs), return_exceptions=True)
@@ -325,12 +387,12 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
         sys.stdout.flush()
-        if ipaddress.ip_address(bound_host).is_unspecified:  # the wildcard is no address a browser can open
-            reach = [f"http://{a}:{bound_port}/" for a in ["127.0.0.1", *lan_addresses(bound_host)]]
+        reach = open_at(sock)  # the wildcard is no address a browser can open
+        if reach:
             click.echo(f"fabwire: open it at {', '.join(reach)}", err=True)
         if bridge is not None:
-            bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port), passing),
-                                                          server))
+            bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port), passing,
+                                                                 terminal=terminal), server))
         advertiser = Advertiser(agent, bound_host, bound_port)
         await advertiser.start()
         _freeze_startup_objects()
@@ -339,7 +401,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     finally:
         if advertiser is not None:
             await advertiser.stop()
-        for task in (show, bridge_task, notify_task):
+        for task in (show, bridge_task, notify_task, terminal_task):
             if task is not None:
                 task.cancel()
                 with contextlib.suppress(BaseException):
@@ -521,18 +583,19 @@ async def _demo_show(agent: Agent, opened: asyncio.Event) -> None:
             click.echo(f"fabwire: demo: {device}: {exc}", err=True)
 
     async def mmu() -> None:
-        finished = asyncio.ensure_future(until("mmu-demo", lambda e: e["type"] == "event"
+        finished = asyncio.ensure_future(until(demo_id("mmu"), lambda e: e["type"] == "event"
                                                and e["event"].get("event") == "action-done"))
         await asyncio.sleep(0)  # subscribed before the tool change starts
-        await agent.act("mmu-demo", "tool_change", {"slot": 0})
+        await agent.act(demo_id("mmu"), "tool_change", {"slot": 0})
         await finished
-        await agent.act("mmu-demo", "tool_change", {"slot": 1})
+        await agent.act(demo_id("mmu"), "tool_change", {"slot": 1})
 
     await asyncio.gather(
-        step("xyz-demo", lambda: agent.start_job("xyz-demo", SAMPLE_GCODE,
-                                                 sample_path(SAMPLE_GCODE).read_bytes())),
-        step("lineus-demo", lambda: agent.start_job("lineus-demo", SAMPLE_SVG, sample_path(SAMPLE_SVG).read_bytes())),
-        step("mmu-demo", mmu))
+        step(demo_id("xyz"), lambda: agent.start_job(demo_id("xyz"), SAMPLE_GCODE,
+                                                     sample_path(SAMPLE_GCODE).read_bytes())),
+        step(demo_id("lineus"), lambda: agent.start_job(demo_id("lineus"), SAMPLE_SVG,
+                                                        sample_path(SAMPLE_SVG).read_bytes())),
+        step(demo_id("mmu"), mmu))
 
 
 def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
@@ -543,6 +606,6 @@ def _start_demo(speed: float) -> tuple[list[Any], list[DeviceSpec]]:
             "mmu": ["--speed", f"{speed:g}", "--fault", FAULT]}
     sims = start_simulators([(kind, args[kind]) for _, kind in DEMO_DEVICES])
     specs = [DeviceSpec(name, kind, sim.url, {"speed": speed, "auto_retries": 0} if kind == "mmu" else {},  # type: ignore[arg-type]
-                        fixed_id=f"{kind}-demo")
+                        fixed_id=demo_id(kind))
              for (name, kind), sim in zip(DEMO_DEVICES, sims, strict=True)]
     return sims, specs

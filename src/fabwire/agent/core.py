@@ -3,7 +3,8 @@
 Every event is a JSON-ready dict `{"ts": ISO-8601 UTC, "device": id, "type": T, ...}` where T is
   "state"   — `"state"`: the device's latest state (see `Agent.state`), sent when anything in it changed;
   "online"  — `"info"`: the DeviceInfo as a dict, after a (re)connect;
-  "offline" — `"reason"`: why the link is down, `"retry_in_s"`: when the next attempt is;
+  "offline" — `"reason"`: why the link is down, `"exit_code"`: the CLI's exit code for that failure,
+              `"retry_in_s"`: when the next attempt is;
   "event"   — `"event"`: something the device reported (an MMU progress step, an error it raised …);
   "job"     — `"job"`: a job record (see `fabwire.agent.jobs`), `"stroke"` too while a Line-us draws;
   "error"   — `"message"`, `"exit_code"`: an action or job failed (the CLI's exit-code class).
@@ -87,6 +88,7 @@ _LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?
 
 
 def _slug(text: str) -> str:
+    """Lower-case letters, digits and single inner '-' only: never '_' (the demo's ids have it, see DEVICE_IDS)."""
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "device"
 
 
@@ -94,6 +96,35 @@ MAX_DEVICE_ID = 100
 """The longest device id. An id names the device's folders (`library/ID/`), so it must stay under a file name's
 limit (NAME_MAX, 255 bytes on Linux filesystems) and it is a level of MQTT topics and Home Assistant unique ids;
 a longer one is cut and ends with a hash of the whole, so two long addresses keep two ids."""
+
+
+DEMO_SEPARATOR = "_"
+"""What joins a demo simulator's kind and "demo": a character `_slug` never writes, so no real machine's id (and
+so no real machine's MQTT topics and Home Assistant device) is ever a demo's."""
+
+DEVICE_IDS: tuple[tuple[str, str, str], ...] = (
+    ("a machine that reports a serial number", "KIND-SERIAL", "the machine's serial (XYZ `query=i`, Line-us "
+                                                             "hello `SERIAL:`, MMU none)"),
+    ("a machine on a network address, no serial", "KIND-ADDRESS", "the `--device`/devices.toml address"),
+    ("a machine on a loopback, serial-port or in-process address, no serial", "KIND-HOST-ADDRESS",
+     "the address, qualified with this computer's host name"),
+    ("a simulator of `serve --demo`", f"KIND{DEMO_SEPARATOR}demo", "fixed, the same on every run"),
+)
+"""Every form a device id takes: (whose, form, where its parts come from). Only the demo's contains '_'."""
+
+
+def demo_id(kind: str) -> str:
+    """The id of the `serve --demo` simulator of `kind` (`xyz_demo`, …): the same every run, never a machine's."""
+    return f"{kind}{DEMO_SEPARATOR}demo"
+
+
+FORMER_DEMO_IDS = {f"{kind}-demo": demo_id(kind) for kind in KINDS}
+"""The demo's ids before they took a '_': the HTTP API still finds the demo's machines by them when no machine of
+the agent has that id or name (a script written for them keeps working); MQTT knows the demo's own ids only."""
+
+
+def is_demo_id(device: str) -> bool:
+    return DEMO_SEPARATOR in device
 
 
 def device_id(kind: str, serial: str | None, address: str, host: str | None = None) -> str:
@@ -327,6 +358,9 @@ class Agent:
         for session in self._sessions.values():
             if session.spec.name == device_id:
                 return session
+        former = FORMER_DEMO_IDS.get(device_id)
+        if former in self._sessions:
+            return self._sessions[former]
         known = ", ".join(f"{s.spec.name} ({id_})" if s.spec.name and s.spec.name != id_ else id_
                           for id_, s in self._sessions.items())
         raise UnknownDevice(f"no device {excerpt(device_id, 60)} here (known: {known or 'none'})")

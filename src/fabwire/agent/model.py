@@ -18,6 +18,7 @@ from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 
 from fabwire.agent.core import Subscription
+from fabwire.agent.drivers.base import offline_reason
 from fabwire.agent.history import epoch
 from fabwire.devices import KINDS
 from fabwire.errors import DeviceBusy, InputError
@@ -124,7 +125,7 @@ class MachineView:
         if not self.takes_jobs:
             return f"{name} is {KINDS[self.kind].a_title} and takes no jobs"
         if self.phase == "offline":
-            return f"{name} is offline ({self.message})"
+            return f"{name} is offline ({offline_reason(self.message)})"
         # a Line-us draws: the phases' OctoPrint words (printing, paused …) are said as a drawing's
         phase, work = (self.phase.replace("printing", "drawing"), "drawing") if self.kind == "lineus" else (
             self.phase, "print")

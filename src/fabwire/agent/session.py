@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from sortedcontainers import SortedList
 
-from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, make_event, now_iso
+from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, is_demo_id, make_event, now_iso
 from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
 from fabwire.agent.jobs import note_course
 from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, excerpt
@@ -33,6 +33,8 @@ T = TypeVar("T")
 log = logging.getLogger("fabwire.agent")
 LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
 """What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
+JOB_ACTIONS = ("cancel", "pause", "resume")
+"""Actions on the work in progress: refused as "nothing to cancel" (…) when the machine offers them not."""
 JOB_EVENT_EVERY_S = 0.5
 SWITCH_INTERVAL_S = 0.0005
 DELIVER_EVERY_S = 0.01
@@ -283,6 +285,8 @@ class Session:
         self._background: set[asyncio.Task[None]] = set()
         self._last_job_event = 0.0
         self._reason = "not connected yet"
+        self._reason_code = 8
+        """The CLI's exit code for `_reason` (8 link, 9 timeout, 6 not this kind of machine …)."""
         self._stopping = False
         self._cancelling = False
 
@@ -299,6 +303,8 @@ class Session:
 
     async def start(self) -> None:
         known = self.spec.fixed_id or await self.agent.history.known_id(self.spec.kind, self.spec.address)
+        if known is not None and not self.spec.fixed_id and is_demo_id(known):
+            known = None  # a demo's simulator once sat on this address: a machine never takes a demo's id
         self._task = asyncio.create_task(self._run(), name=f"session-{self.spec.name}")
         if known is None:
             with contextlib.suppress(TimeoutError):
@@ -339,7 +345,7 @@ class Session:
             try:
                 self._identity = await self._links.run(self.driver.connect())
             except LINK_FAILURES as exc:
-                self._reason = str(exc) or type(exc).__name__
+                self._failed(exc)
                 with contextlib.suppress(*LINK_FAILURES):  # a link opened before the handshake failed is shut
                     await self._links.run(self.driver.close())
                 self._first_attempt.set()
@@ -358,17 +364,21 @@ class Session:
             try:
                 await self._monitor()
             except LINK_FAILURES as exc:
-                self._reason = str(exc) or type(exc).__name__
+                self._failed(exc)
             finally:
                 self.online = False
                 await self._links.run(self.driver.close())
             await self._went_offline(delay)
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
 
+    def _failed(self, exc: BaseException) -> None:
+        self._reason = str(exc) or type(exc).__name__
+        self._reason_code = exit_code_of(exc)
+
     async def _went_offline(self, retry_in: float) -> None:
         self.online = False
         log.info("%s offline: %s", self.spec.name, self._reason)
-        self._publish("offline", reason=self._reason, retry_in_s=round(retry_in, 2))
+        self._publish("offline", reason=self._reason, exit_code=self._reason_code, retry_in_s=round(retry_in, 2))
         summary = offline_summary(self._reason)
         self._set_state(online=False, summary=summary)
         self.agent.history.record_sample(self.info.id, time.time(), summary)
@@ -453,12 +463,17 @@ class Session:
         text = summary.get("state_text")
         now = f"{state} ({text})" if text and text != state else state
         can = f"it offers {', '.join(offered)} now" if offered else "it offers no action until that ends"
+        if action in JOB_ACTIONS:
+            raise DeviceBusy(f"{self.spec.name} has nothing to {action}: it is {now}; {can}")
         if summary.get("busy"):
             raise DeviceBusy(f"{self.spec.name} is busy and cannot {action} now: it is {now}; {can}")
         raise DeviceBusy(f"{self.spec.name} cannot {action} now: it is {now}; {can}")
 
     async def act(self, action: str, params: dict[str, Any]) -> dict[str, Any]:
         spec = self.driver.action(action)
+        if spec.confirm and params.get("confirm") is not True and not (action == "cancel" and self._job is not None):
+            self._require_online()  # what cannot happen now is refused as such, never asked to be confirmed
+            await self._require_offered(action)
         checked = checked_params(spec, params)
         self._require_online()
         if action == "cancel" and self._job is not None:  # the print is this agent's job: end the job with it

@@ -27,9 +27,10 @@ import aiomqtt
 from aiomqtt.exceptions import MqttConnectError
 
 from fabwire import __version__
+from fabwire.agent.core import is_demo_id
 from fabwire.errors import FabwireError, LinkError, excerpt
 from fabwire.mqtt.commands import CommandRunner
-from fabwire.mqtt.discovery import discovery_messages, discovery_topics
+from fabwire.mqtt.discovery import DISCOVERY_MODES, discovery_messages, discovery_topics
 from fabwire.mqtt.fleet_view import STALE_CLAIM_S, FleetView
 from fabwire.mqtt.topics import (
     DISCOVERY_PREFIX,
@@ -68,6 +69,8 @@ OVERFLOW_REPLIES = 64
 """"Busy" answers waiting to be published; beyond that a flood's commands are dropped unanswered."""
 FOREIGN_DEVICES = 10_000
 """Devices followed on the broker beyond this agent's own; past it, only this agent's own devices are."""
+SWEEP_AGAIN_S = 60.0
+"""How soon an agent empties again a topic a killed demo left, when the broker kept it (its ACL refused)."""
 PONG_INTERVAL_S = 0.5
 """Pings are answered at most this often: a ping flood costs one heartbeat per interval."""
 
@@ -177,6 +180,9 @@ class Bridge:
         self._client: aiomqtt.Client | None = None
         self._pending: dict[str, dict[str, Any]] = {}
         self._availability: dict[str, str] = {}
+        self._newest: dict[str, str] = {}
+        """Per device: the time (`ts`, ISO 8601 UTC with milliseconds) of the newest state published, or link event
+        followed; an older one that comes after it (an event queued before a snapshot of the state) is dropped."""
         """What this connection last published on each device's availability topic."""
         self._dirty: asyncio.Queue[str] = asyncio.Queue()
         """Devices whose newest state waits in `_pending`, oldest first (each at most once)."""
@@ -201,6 +207,11 @@ class Bridge:
         self.on_connected: Callable[[str], None] | None = None
         """Told each time the broker takes the connection ("publishing to mqtt://… as agent …"): `fabwire serve`
         prints it, as it prints where it listens, since a failed attempt is already shown."""
+        self._swept: dict[str, float] = {}
+        """Topics a killed demo left that this agent emptied, and when (see `_sweep`)."""
+        self.on_trouble: Callable[[str, float], None] | None = None
+        """Told why the connection failed or was lost, and in how many seconds it is tried again: `fabwire serve`
+        says it on the terminal (`fabwire.agent.terminal`); without it, it is logged as a warning."""
 
     # ------------------------------------------------------------------------------------------ connection
 
@@ -211,6 +222,12 @@ class Bridge:
         try:
             while True:
                 try:
+                    wrong = await self.broker.not_a_broker()
+                    if wrong is not None:
+                        self._trouble(wrong, delay)
+                        await asyncio.sleep(delay)
+                        delay = min(delay * 2, self.backoff[1])
+                        continue
                     will = aiomqtt.Will(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
                     async with aiomqtt.Client(**self.broker.client_options(), identifier=f"fabwire-{self.agent_id}",
                                               logger=CLIENT_LOG, will=will, queue_type=FairIncoming) as client:
@@ -223,9 +240,9 @@ class Bridge:
                 except MqttConnectError as exc:
                     raise LinkError(f"MQTT broker {self.broker.url} refused the connection: {exc}") from None
                 except aiomqtt.MqttError as exc:
-                    log.warning("%s; retrying in %.1f s", self.broker.failure(exc), delay)
+                    self._trouble(self.broker.failure(exc), delay)
                 except FabwireError as exc:  # the agent changed under us (a device went away mid-publish)
-                    log.warning("MQTT bridge: %s; reconnecting in %.1f s", exc, delay)
+                    self._trouble(f"MQTT bridge: {exc}", delay)
                 finally:
                     self._client = None
                     self.connected.clear()
@@ -233,6 +250,13 @@ class Bridge:
                 delay = min(delay * 2, self.backoff[1])
         finally:
             events.close()
+
+    def _trouble(self, failure: str, retry_in_s: float) -> None:
+        if self.on_trouble is None:
+            log.warning("%s; retrying in %.1f s", failure, retry_in_s)
+            return
+        log.info("%s; retrying in %.1f s", failure, retry_in_s)
+        self.on_trouble(failure, retry_in_s)
 
     async def _connected(self, client: aiomqtt.Client, events: Any) -> None:
         self._client = client
@@ -244,15 +268,18 @@ class Bridge:
         self._pending.clear()
         self._dirty = asyncio.Queue()
         me = self.agent_id
-        for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/{HEARTBEAT}", f"{PREFIX}/device/+/claim/+",
+        for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/info", f"{PREFIX}/agent/+/{HEARTBEAT}",
+                      f"{PREFIX}/device/+/claim/+",
                       f"{PREFIX}/device/+/info", f"{PREFIX}/device/+/command", HA_STATUS, PING,
                       agent_topic(me, "sync")):
             await client.subscribe(topic, qos=1)
         await client.publish(agent_topic(me, "status"), ONLINE, qos=1, retain=True)
         await self._heartbeat()
         await client.publish(PING, me, qos=1)  # every live agent answers with a heartbeat before we decide
-        await client.publish(agent_topic(me, "info"), _dump({"agent": me, "host": socket.gethostname(),
-                                                             "version": __version__}), qos=1, retain=True)
+        info: dict[str, Any] = {"agent": me, "host": socket.gethostname(), "version": __version__}
+        if self.passing_agent:
+            info["passing"] = True  # another agent may clear this agent's records if it is killed
+        await client.publish(agent_topic(me, "info"), _dump(info), qos=1, retain=True)
         self.known = self._current_devices()
         for device in sorted(self.known):
             await client.publish(claim_topic(device, me), b"1", qos=1, retain=True)
@@ -270,14 +297,13 @@ class Bridge:
             for task in done:
                 task.result()
         except asyncio.CancelledError:
+            # Nothing publishes any more before the goodbye empties topics: a state published after the
+            # emptying would stay retained, online, for a machine that is gone.
+            await _stop(workers + self._command_workers())
             await self._goodbye(client)
             raise
         finally:
-            workers += self._command_workers()
-            for task in workers:
-                task.cancel()
-                task.add_done_callback(_retrieve)
-            await asyncio.wait(workers, timeout=2.0)  # a worker still waiting ends when the client disconnects
+            await _stop(workers + self._command_workers())
 
     async def _goodbye(self, client: aiomqtt.Client) -> None:
         """A clean stop: the devices and the agent show offline (a clean disconnect sends no last will)."""
@@ -291,10 +317,7 @@ class Bridge:
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await asyncio.gather(*(client.publish(topic, b"", qos=1, retain=True)
-                                       for device in sorted(self.owned & self.passing)
-                                       if not self._claimed_by_others(device)
-                                       for topic in (*self._retained_topics(device),
-                                                     claim_topic(device, self.agent_id))))
+                                       for topic in self._passing_topics()))
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await client.publish(agent_topic(self.agent_id, "status"), OFFLINE, qos=1, retain=True)
@@ -303,6 +326,17 @@ class Bridge:
                 async with asyncio.timeout(2.0):
                     await asyncio.gather(*(client.publish(agent_topic(self.agent_id, leaf), b"", qos=1, retain=True)
                                            for leaf in ("status", "info")))
+
+    def _passing_topics(self) -> list[str]:
+        """What a clean stop empties of the devices that exist only while this agent runs (`RETAINED_TOPICS`):
+        this agent's claim on each, even one it only stood by for, and the device's own topics where this agent
+        published them and no other live agent claims the device (that agent then takes it over)."""
+        topics = []
+        for device in sorted(set(self.known) & self.passing):
+            if device in self.owned and not self._claimed_by_others(device):
+                topics += self._retained_topics(device)
+            topics.append(claim_topic(device, self.agent_id))
+        return topics
 
     async def _publish(self, topic: str, payload: str | bytes, *, retain: bool = True, qos: int = 1,
                        properties: Any = None) -> None:
@@ -481,6 +515,42 @@ class Bridge:
                     log.info("MQTT: clearing agent %s's claim on %s: no heartbeat for %.0f s", agent, device,
                              STALE_CLAIM_S)
                     await self._publish(claim_topic(device, agent), b"")
+        await self._sweep_killed_demos()
+
+    async def _sweep_killed_demos(self) -> None:
+        """What a killed demo left (`RETAINED_TOPICS`): its claims on the demo's machines once its status is
+        offline (its last will) or gone, a demo machine's topics once nobody claims it, and the status and info
+        of a killed demo agent that had no state directory (its id is never used again)."""
+        now = time.monotonic()
+        for device, view in list(self.view.devices.items()):
+            if not is_demo_id(device) or device in self.known:
+                continue
+            dead = sorted(a for a in view.claims if not self.view.online(a))
+            for agent in dead:
+                if self._sweep(claim_topic(device, agent), now):
+                    log.info("MQTT: clearing offline agent %s's claim on the demo machine %s", agent, device)
+                    await self._publish(claim_topic(device, agent), b"")
+            if (not view.claims - set(dead) and view.info is not None
+                    and self._sweep(device_topic(device, "info"), now)):
+                log.info("MQTT: clearing the demo machine %s that no agent claims", device)
+                for topic in dict.fromkeys(self._retained_topics(device, every_mode=True)):
+                    await self._publish(topic, b"")
+        for agent, info in list(self.view.agent_info.items()):
+            if (agent != self.agent_id and info.get("passing") is True and not self.view.online(agent)
+                    and self._sweep(agent_topic(agent, "info"), now)):
+                log.info("MQTT: clearing the records of demo agent %s, which was stopped without a goodbye", agent)
+                for leaf in ("status", "info"):
+                    await self._publish(agent_topic(agent, leaf), b"")
+
+    def _sweep(self, topic: str, now: float) -> bool:
+        """Whether to empty `topic` now: at most once per SWEEP_AGAIN_S (a broker whose ACL refuses the emptying
+        leaves it there; this agent must not try again every second)."""
+        if now - self._swept.get(topic, -SWEEP_AGAIN_S) < SWEEP_AGAIN_S:
+            return False
+        if len(self._swept) >= FOREIGN_DEVICES:
+            self._swept.clear()
+        self._swept[topic] = now
+        return True
 
     # ------------------------------------------------------------------------------------------ liveness
 
@@ -525,9 +595,11 @@ class Bridge:
                                                  self.discovery_mode):
             await self._publish(topic, _dump(payload))
 
-    def _retained_topics(self, device: str) -> list[str]:
-        """Every retained topic a device of this agent is published on, its discovery included (its claims aside)."""
-        return [*discovery_topics(device, self.discovery_mode),
+    def _retained_topics(self, device: str, *, every_mode: bool = False) -> list[str]:
+        """Every retained topic a device of this agent is published on, its discovery included (its claims aside);
+        with `every_mode`, the discovery topics of every discovery mode (another agent's device)."""
+        modes = DISCOVERY_MODES if every_mode else (self.discovery_mode,)
+        return [*(topic for mode in modes for topic in discovery_topics(device, mode)),
                 *(device_topic(device, leaf) for leaf in ("state", "info", "availability"))]
 
     def _claimed_by_others(self, device: str) -> bool:
@@ -544,6 +616,7 @@ class Bridge:
         self.owned.discard(device)
         self._pending.pop(device, None)
         self._availability.pop(device, None)
+        self._newest.pop(device, None)
         self.known.pop(device, None)
         await self._publish(claim_topic(device, self.agent_id), b"")
 
@@ -591,6 +664,8 @@ class Bridge:
                     self._dirty.put_nowait(device)
                 self._pending[device] = event["state"]
             elif kind in ("online", "offline"):
+                if not self._newer(device, event.get("ts")):
+                    continue  # older than a state already published: it would flip availability back
                 pending = self._pending.get(device)
                 if pending is not None and bool(pending.get("online")) != (kind == "online"):
                     del self._pending[device]  # older than this event: publishing it would flip availability back
@@ -610,8 +685,20 @@ class Bridge:
             if state is not None and device in self.owned:
                 await self._publish_state(device, state)
 
+    def _newer(self, device: str, ts: Any) -> bool:
+        """Whether what happened at `ts` is not older than what was published of `device`; it is then the newest."""
+        if not isinstance(ts, str):
+            return True
+        if ts < self._newest.get(device, ""):
+            return False
+        self._newest[device] = ts
+        return True
+
     async def _publish_state(self, device: str, state: dict[str, Any]) -> None:
-        """The state, and the availability when the state's `online` flag changed it."""
+        """The state, and the availability when the state's `online` flag changed it; never one older than a state
+        already published."""
+        if not self._newer(device, state.get("ts")):
+            return
         await self._set_availability(device, bool(state.get("online")))
         # QoS 0: TCP delivers it while the connection lasts, a reconnection republishes every state, and a newer
         # state follows within a poll; waiting for an acknowledgement per state would halve a farm's throughput.
@@ -630,6 +717,16 @@ def _answerable(topic: str) -> bool:
     (a reply published on another device's command topic would run there), nor a topic with wildcards."""
     return not (topic.startswith((f"{PREFIX}/", f"{DISCOVERY_PREFIX}/")) or topic in (PREFIX, DISCOVERY_PREFIX)
                 or any(c in topic for c in "+#\0"))
+
+
+async def _stop(tasks: list[asyncio.Task[Any]]) -> None:
+    """Cancel `tasks` and wait a little for them (one still waiting ends when the client disconnects)."""
+    for task in tasks:
+        if not task.done():
+            task.cancel()
+        task.add_done_callback(_retrieve)
+    if tasks:
+        await asyncio.wait(tasks, timeout=2.0)
 
 
 def _retrieve(task: asyncio.Task[Any]) -> None:

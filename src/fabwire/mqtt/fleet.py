@@ -26,6 +26,9 @@ async def read_fleet(broker: Broker, *, settle_s: float = 1.0) -> FleetView:
         raise InputError("MQTT support not installed: pip install 'fabwire[mqtt]'") from None
 
     view = FleetView()
+    wrong = await broker.not_a_broker()
+    if wrong is not None:
+        raise LinkError(wrong)
     try:
         async with aiomqtt.Client(**broker.client_options()) as client:
             for topic in (f"{PREFIX}/agent/+/status", f"{PREFIX}/agent/+/info", f"{PREFIX}/agent/+/{HEARTBEAT}",

@@ -49,6 +49,33 @@ INCOMING_QUEUE = 8192
 """Messages the bridge's MQTT client holds for its reader; a flood beyond it is dropped, not kept."""
 
 
+DEMO_GONE = "a demo's DEVICE (an id with '_', `fabwire.agent.core.is_demo_id`)"
+RETAINED_TOPICS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("fabwire/agent/AGENT/status", "AGENT (online); the broker, AGENT's last will (offline)",
+     ("AGENT at its clean stop, when it is a demo with no state directory (a new id each run)",
+      "any agent, once AGENT (such a demo, its info says `passing`) is offline: it was killed")),
+    ("fabwire/agent/AGENT/info", "AGENT",
+     ("AGENT at its clean stop, when it is a demo with no state directory (a new id each run)",
+      "any agent, once AGENT (such a demo, its info says `passing`) is offline: it was killed")),
+    ("fabwire/device/DEVICE/claim/AGENT", "AGENT, while it monitors DEVICE",
+     ("AGENT when it stops monitoring DEVICE",
+      f"AGENT at its clean stop, for {DEMO_GONE}",
+      "DEVICE's owner, once AGENT has not been alive for `fleet_view.STALE_CLAIM_S`",
+      f"any agent, for {DEMO_GONE}, once AGENT's status is offline or gone")),
+    ("fabwire/device/DEVICE/info, state, availability", "DEVICE's owner",
+     ("the owner when it stops monitoring DEVICE, unless another live agent claims it",
+      f"the owner at its clean stop, for {DEMO_GONE}, unless another live agent claims it",
+      f"any agent, for {DEMO_GONE} that no agent claims any more")),
+    ("homeassistant/device/fabwire_DEVICE/config (or one per entity)", "DEVICE's owner",
+     ("the owner when it stops monitoring DEVICE, unless another live agent claims it",
+      f"the owner at its clean stop, for {DEMO_GONE}, unless another live agent claims it",
+      f"any agent, for {DEMO_GONE} that no agent claims any more")),
+)
+"""Every retained topic an agent publishes: (topic, who publishes it, who empties it and when). A demo's machines
+and a demo agent with no state directory exist for one run, so their records go with it, even when it was killed;
+everything else stays (offline) until its own agent removes it."""
+
+
 def agent_topic(agent: str, leaf: str) -> str:
     return f"{PREFIX}/agent/{agent}/{leaf}"
 
@@ -98,6 +125,8 @@ def default_agent_id(state_dir: object | None = None) -> str:
     return f"{host}-{hashlib.sha256(str(state_dir).encode()).hexdigest()[:6]}"
 
 
+CONNECT_TIMEOUT_S = 10.0
+"""How long a broker has to answer a connection."""
 BROKER_CHECK = "that an MQTT broker listens there (port 1883, 8883 with TLS) on this network"
 """What to check when a broker's address answers nothing a broker says (nothing at all, or another protocol)."""
 
@@ -126,13 +155,28 @@ class Broker:
             return f"MQTT broker {self.url}: {connect_failure(cause, self.host, self.port, peer=BROKER_CHECK)}"
         return f"MQTT broker {self.url}: {exc}"
 
+    async def not_a_broker(self) -> str | None:
+        """What answers at the broker's address when it is no MQTT broker, in words with what to check (see
+        `fabwire.mqtt.probe`); None when a broker answers, or nothing does. Over TLS the handshake tells at once."""
+        if self.tls:
+            return None
+        from fabwire.mqtt.probe import SILENT, not_a_broker
+
+        found = await not_a_broker(self.host, self.port, username=self.username, password=self.password,
+                                   timeout_s=CONNECT_TIMEOUT_S)
+        if found == SILENT:
+            from fabwire.transport.tcp import connect_failure
+
+            return f"MQTT broker {self.url}: {connect_failure(TimeoutError(), self.host, self.port, peer=BROKER_CHECK)}"
+        return None if found is None else f"MQTT broker {self.url}: {found}; check {BROKER_CHECK}"
+
     def client_options(self) -> dict[str, Any]:
         """Keyword arguments for `aiomqtt.Client` (MQTT 5: replies carry the asker's correlation data)."""
         import aiomqtt
 
         options: dict[str, Any] = {"hostname": self.host, "port": self.port, "username": self.username,
                                    "password": self.password, "protocol": aiomqtt.ProtocolVersion.V5,
-                                   "timeout": 10.0, "keepalive": 30,
+                                   "timeout": CONNECT_TIMEOUT_S, "keepalive": 30,
                                    # aiomqtt scans its pending calls on every publish: bounding them keeps a
                                    # burst of states linear, while enough stay in flight per event-loop turn for
                                    # 500 states a second on a loaded machine (see bench_mqtt_fleet).

@@ -8,7 +8,7 @@ import errno
 import socket
 from collections.abc import Awaitable, Callable
 
-from fabwire.errors import LinkError, LinkTimeout
+from fabwire.errors import FabwireError, InputError, LinkError, LinkTimeout
 from fabwire.transport.base import StreamTransport, Transport
 from fabwire.transport.limits import ConnectionLimits, ConnectionPool, Farewell, Watched, plain_line
 
@@ -97,10 +97,25 @@ async def serve_tcp(handler: ConnectionHandler, host: str, port: int, *, limits:
     try:
         return await asyncio.start_server(on_connect, host, port, reuse_address=True)
     except OSError as exc:
-        if exc.errno == errno.EADDRINUSE:
-            raise LinkError(f"cannot listen on {host}:{port}: the address is already in use") from exc
-        if exc.errno == errno.EADDRNOTAVAIL:
-            raise LinkError(f"cannot listen on {host}:{port}: no such local address") from exc
-        if exc.errno == errno.EACCES:
-            raise LinkError(f"cannot listen on {host}:{port}: permission denied (ports below 1024 need root)") from exc
-        raise LinkError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
+        raise listen_failure(exc, host, port) from exc
+
+
+BIND_FAILURES: dict[int, tuple[str, type[FabwireError]]] = {
+    errno.EADDRINUSE: ("the address is already in use", LinkError),
+    errno.EADDRNOTAVAIL: ("no such local address", LinkError),
+    errno.EACCES: ("permission denied (ports below 1024 need root)", LinkError),
+    errno.EAFNOSUPPORT: ("this computer has no IPv6", LinkError),
+    socket.EAI_NONAME: ("no such address or host name", InputError),
+}
+"""Why a listening socket could not be made, by `errno` (POSIX bind(2), socket(2); getaddrinfo(3) for a name), in
+words, and the error it is: a link failure (exit code 8), so a service manager restarts a listener whose port
+another program still holds; an address that is no address at all is bad input (exit code 4)."""
+
+
+def listen_failure(exc: OSError, host: str, port: int) -> FabwireError:
+    """One error for every listener (`sim --listen`, `serve --listen`) that cannot bind, in `BIND_FAILURES`' words,
+    else in the system's."""
+    where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    words, error = BIND_FAILURES.get(exc.errno or 0, (None, LinkError))
+    reason = words or (exc.strerror or str(exc)).split(" (while attempting to bind")[0]
+    return error(f"cannot listen on {where}: {reason}")

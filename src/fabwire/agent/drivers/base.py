@@ -47,8 +47,17 @@ def summary(**values: Any) -> dict[str, Any]:
     return out
 
 
+OFFLINE_TEXT = "offline: "
+"""How an offline machine's `state_text` begins; the reason follows."""
+
+
 def offline_summary(reason: str) -> dict[str, Any]:
-    return summary(state="offline", state_text=f"offline: {reason}")
+    return summary(state="offline", state_text=f"{OFFLINE_TEXT}{reason}")
+
+
+def offline_reason(state_text: str) -> str:
+    """Why a machine is offline, from its `state_text` (for a place that already says "offline")."""
+    return state_text.removeprefix(OFFLINE_TEXT)
 
 
 @dataclass(frozen=True, slots=True)

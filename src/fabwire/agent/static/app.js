@@ -401,7 +401,9 @@ function render(card) {
       el("span", {class: state.online ? "online" : "offline"}, state.online ? "online" : "offline"),
       el("div", {class: "ident"}, [device.model, device.serial && `serial ${device.serial}`,
         device.firmware && `firmware ${device.firmware}`].filter(Boolean).join(" · "))),
-    el("div", {class: `state ${stateClass}`, "data-state": s.state}, s.state_text || s.state),
+    // the header already says "offline": the state line gives the reason alone
+    el("div", {class: `state ${stateClass}`, "data-state": s.state},
+      !state.online && s.state_text ? s.state_text.replace(/^offline: /, "") : s.state_text || s.state),
     s.error ? el("div", {class: "error-box", role: "alert"}, s.error) : null,
     progressSection(card, s),
     ...(state.online ? kindSection(card, s) : []),
