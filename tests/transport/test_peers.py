@@ -5,6 +5,7 @@ every row of `FOREIGN` against each client kind, over real TCP through the real 
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import subprocess
 import sys
@@ -233,6 +234,30 @@ def test_a_long_greeting_without_a_line_end_is_named() -> None:
             assert_named(kind, f"127.0.0.1:{peer.port}", "an SSH server")
         finally:
             peer.close()
+
+
+@pytest.mark.parametrize("kind", CLIENTS)
+def test_a_silent_peer_with_one_connection_slot_is_probed_after_the_link_is_let_go(kind: str) -> None:
+    """A peer that serves one connection at a time (a serial bridge, a small broker) and says nothing until it
+    hears its own protocol: the client lets its link go before it probes, or the probe would wait in the queue."""
+    server = socket.create_server(("127.0.0.1", 0))
+
+    def serve() -> None:
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            with conn, contextlib.suppress(OSError):
+                while chunk := conn.recv(4096):
+                    if chunk.startswith(b"\x10"):  # an MQTT CONNECT
+                        conn.sendall(SAID["mqtt"])
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        assert_named(kind, f"127.0.0.1:{server.getsockname()[1]}", "an MQTT broker")
+    finally:
+        server.close()
 
 
 # -- the real peers --------------------------------------------------------------------------------------------------
