@@ -123,9 +123,18 @@ def test_gathered_bytes_are_bounded() -> None:
     assert undecided(b"SS", "lineus")
 
 
-def test_the_message_names_the_address() -> None:
-    error = wrong_peer(SAID["ssh"], "an XYZv3 printer", "xyz", "10.0.0.7:9100")
-    assert str(error).startswith("10.0.0.7:9100 is not an XYZv3 printer: it is an SSH server (it said 'SSH-2.0-")
+@pytest.mark.parametrize(("name", "quoted"), [
+    ("ssh", "'SSH-2.0-OpenSSH_9.2p1 Debian-2+deb12u3'"),
+    ("http", "'HTTP/1.1 400 Bad Request'"),
+    ("html", "'<!DOCTYPE HTML>'"),
+    ("lineus", "'hello VERSION:\"3.2.0 Nov 17 2019 17:54:57\" NAME:line-us SERI…'"),
+    ("mqtt", "b' \\x02\\x00\\x00'"),
+    ("telnet", repr(SAID["telnet"])),
+])
+def test_the_message_names_the_address_and_quotes_the_first_line(name: str, quoted: str) -> None:
+    """Text as its first line (at most 60 characters), binary words as bytes."""
+    error = wrong_peer(SAID[name], "an XYZv3 printer", "xyz", "10.0.0.7:9100", final=True)
+    assert str(error) == f"10.0.0.7:9100 is not an XYZv3 printer: it is {ROWS[name].what} (it said {quoted})"
 
 
 # -- over real TCP, through the CLI --------------------------------------------------------------------------------
