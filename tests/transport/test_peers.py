@@ -246,6 +246,21 @@ def test_a_long_greeting_without_a_line_end_is_named() -> None:
 
 
 @pytest.mark.parametrize("kind", CLIENTS)
+def test_a_peer_that_never_says_anything_is_a_timeout_at_its_address(kind: str) -> None:
+    """Nothing to name it by, whatever it is asked: the client's own timeout, in one line with the address."""
+    peer = Peer(b"", whole)
+    try:
+        where = f"127.0.0.1:{peer.port}"
+        result = run_cli(*CLIENTS[kind][:1], "-d", where, *CLIENTS[kind][1:])
+    finally:
+        peer.close()
+    assert result.returncode == 9, result.stderr  # a link timeout
+    line, = result.stderr.splitlines()
+    assert where in line, line
+    assert "is not" not in line, line
+
+
+@pytest.mark.parametrize("kind", CLIENTS)
 def test_a_silent_peer_with_one_connection_slot_is_probed_after_the_link_is_let_go(kind: str) -> None:
     """A peer that serves one connection at a time (a serial bridge, a small broker) and says nothing until it
     hears its own protocol: the client lets its link go before it probes, or the probe would wait in the queue."""

@@ -253,7 +253,8 @@ class XYZPrinter(Maintenance):
             meaning = REPLY_ERRORS.get(event.code) or ErrorWord.decode(event.code).meaning
             raise DeviceError(f"E{event.code}", meaning, action=f"while {doing}")
         elif isinstance(event, NoReply) and event.command is command:
-            raise LinkTimeout(f"the printer did not answer {command.body!r} within {self.timeout:g} s")
+            raise LinkTimeout(f"the printer on {self.transport.peer or self.transport.url} did not answer "
+                              f"{command.body!r} within {self.timeout:g} s")
         return None
 
     def _wait_time(self) -> float:
