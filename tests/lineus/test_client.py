@@ -252,6 +252,8 @@ async def impostor(greeting: bytes | None, *, close: bool = False) -> AsyncItera
     (b"ok X:1 Y:2 Z:3\r\n\x00", False, RemoteProtocolError, "not a Line-us"),
     (None, False, LinkTimeout, "no hello"),
     (b"hel", True, LinkClosed, "before greeting"),
+    (b"SS", False, RemoteProtocolError, "not a Line-us: it greeted with b'SS'"),  # the start of SSH, then silence
+    (b"HTTP/1.1 400 Bad Request\r\n", True, RemoteProtocolError, "not a Line-us: it is a web server"),
 ])
 async def test_host_that_is_not_a_lineus(greeting: bytes | None, close: bool, error: type[Exception],
                                          match: str) -> None:

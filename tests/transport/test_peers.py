@@ -5,6 +5,7 @@ every row of `FOREIGN` against each client kind, over real TCP through the real 
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import subprocess
 import sys
@@ -122,9 +123,18 @@ def test_gathered_bytes_are_bounded() -> None:
     assert undecided(b"SS", "lineus")
 
 
-def test_the_message_names_the_address() -> None:
-    error = wrong_peer(SAID["ssh"], "an XYZv3 printer", "xyz", "10.0.0.7:9100")
-    assert str(error).startswith("10.0.0.7:9100 is not an XYZv3 printer: it is an SSH server (it said 'SSH-2.0-")
+@pytest.mark.parametrize(("name", "quoted"), [
+    ("ssh", "'SSH-2.0-OpenSSH_9.2p1 Debian-2+deb12u3'"),
+    ("http", "'HTTP/1.1 400 Bad Request'"),
+    ("html", "'<!DOCTYPE HTML>'"),
+    ("lineus", "'hello VERSION:\"3.2.0 Nov 17 2019 17:54:57\" NAME:line-us SERI…'"),
+    ("mqtt", "b' \\x02\\x00\\x00'"),
+    ("telnet", repr(SAID["telnet"])),
+])
+def test_the_message_names_the_address_and_quotes_the_first_line(name: str, quoted: str) -> None:
+    """Text as its first line (at most 60 characters), binary words as bytes."""
+    error = wrong_peer(SAID[name], "an XYZv3 printer", "xyz", "10.0.0.7:9100", final=True)
+    assert str(error) == f"10.0.0.7:9100 is not an XYZv3 printer: it is {ROWS[name].what} (it said {quoted})"
 
 
 # -- over real TCP, through the CLI --------------------------------------------------------------------------------
@@ -233,6 +243,45 @@ def test_a_long_greeting_without_a_line_end_is_named() -> None:
             assert_named(kind, f"127.0.0.1:{peer.port}", "an SSH server")
         finally:
             peer.close()
+
+
+@pytest.mark.parametrize("kind", CLIENTS)
+def test_a_peer_that_never_says_anything_is_a_timeout_at_its_address(kind: str) -> None:
+    """Nothing to name it by, whatever it is asked: the client's own timeout, in one line with the address."""
+    peer = Peer(b"", whole)
+    try:
+        where = f"127.0.0.1:{peer.port}"
+        result = run_cli(*CLIENTS[kind][:1], "-d", where, *CLIENTS[kind][1:])
+    finally:
+        peer.close()
+    assert result.returncode == 9, result.stderr  # a link timeout
+    line, = result.stderr.splitlines()
+    assert where in line, line
+    assert "is not" not in line, line
+
+
+@pytest.mark.parametrize("kind", CLIENTS)
+def test_a_silent_peer_with_one_connection_slot_is_probed_after_the_link_is_let_go(kind: str) -> None:
+    """A peer that serves one connection at a time (a serial bridge, a small broker) and says nothing until it
+    hears its own protocol: the client lets its link go before it probes, or the probe would wait in the queue."""
+    server = socket.create_server(("127.0.0.1", 0))
+
+    def serve() -> None:
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            with conn, contextlib.suppress(OSError):
+                while chunk := conn.recv(4096):
+                    if chunk.startswith(b"\x10"):  # an MQTT CONNECT
+                        conn.sendall(SAID["mqtt"])
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        assert_named(kind, f"127.0.0.1:{server.getsockname()[1]}", "an MQTT broker")
+    finally:
+        server.close()
 
 
 # -- the real peers --------------------------------------------------------------------------------------------------

@@ -384,12 +384,16 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
                                                server_header=False, headers=[("server", SERVER)],
                                                **CONNECTION_SETTINGS))
         bound_host, bound_port = sock.getsockname()[:2]
-        shown = f"[{bound_host}]" if ":" in bound_host else bound_host
-        sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
-        sys.stdout.flush()
-        reach = open_at(sock)  # the wildcard is no address a browser can open
-        if reach:
-            click.echo(f"fabwire: open it at {', '.join(reach)}", err=True)
+
+        def announce() -> None:
+            shown = f"[{bound_host}]" if ":" in bound_host else bound_host
+            sys.stdout.write(f"{ANNOUNCEMENT}http://{shown}:{bound_port}/\n")
+            sys.stdout.flush()
+            reach = open_at(sock)  # the wildcard is no address a browser can open
+            if reach:
+                click.echo(f"fabwire: open it at {', '.join(reach)}", err=True)
+
+        server.announce = announce
         if bridge is not None:
             bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port), passing,
                                                                  terminal=terminal), server))
@@ -519,6 +523,14 @@ def _server_class() -> Any:
         SIGINT, which the CLI then reports as interrupted (130), from SIGTERM (exit code 0)."""
 
         interrupted = False
+        announce: Callable[[], None] | None = None
+        """Says where the agent listens, once it serves and a SIGTERM ends it gracefully (not before: a service
+        manager that stops it as soon as it is announced gets a clean stop)."""
+
+        async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+            await super().startup(sockets=sockets)
+            if self.started and self.announce is not None:
+                self.announce()
 
         @contextlib.contextmanager
         def capture_signals(self) -> Iterator[None]:

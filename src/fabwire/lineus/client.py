@@ -108,17 +108,26 @@ def parse_file_list(text: str) -> list[StoredDrawing]:
     return out
 
 
-def _greeting_error(said: bytes | bytearray, where: str) -> FabwireError | None:
+def _greeting_error(said: bytes | bytearray, where: str, *, final: bool = False) -> FabwireError | None:
     """The error the first bytes of a greeting (`said`, as gathered so far) already show: another peer they name,
-    or a start that can be neither a hello nor another peer's words; None while they may still be either."""
+    or a start that can be neither a hello nor another peer's words; None while they may still be either (unless
+    `final`: no more will come) or are the start of a hello."""
     if not said or said[:5] == b"hello"[: len(said[:5])]:
         return None
-    if (wrong := refusal(said, where) or wrong_peer(said, NOT_A_LINEUS, LINEUS.name, where)) is not None:
+    if (wrong := refusal(said, where) or wrong_peer(said, NOT_A_LINEUS, LINEUS.name, where, final=final)):
         return wrong
-    if undecided(said, LINEUS.name):
+    if not final and undecided(said, LINEUS.name):
         return None
     return RemoteProtocolError(f"{where} is not {NOT_A_LINEUS}: it greeted with {excerpt(bytes(said), 40)} instead of "
                                "'hello …'")
+
+
+async def _silence_error(first: FirstBytes, url: str, where: str) -> FabwireError | None:
+    """Why no hello came before the wait ended or the peer closed the link: what its first bytes show, or, when it
+    said nothing, what its answer to a probe names; None when nothing does."""
+    if first:
+        return _greeting_error(first.data, where, final=True)
+    return await name_peer(first.data, url, NOT_A_LINEUS, LINEUS.name, where)
 
 
 class LineUs:
@@ -183,14 +192,14 @@ class LineUs:
                     break
         except TimeoutError:
             await transport.close()
-            if (wrong := await name_peer(first.data, transport.url, NOT_A_LINEUS, LINEUS.name, where)) is not None:
+            if (wrong := await _silence_error(first, transport.url, where)) is not None:
                 raise wrong from None
             raise LinkTimeout(
                 f"no hello from {where} within {hello_timeout:g} s: either not a Line-us, or a wedged one "
                 "(accepts TCP but sends no greeting: power-cycle it)") from None
         except LinkClosed:
             await transport.close()
-            if (wrong := await name_peer(first.data, transport.url, NOT_A_LINEUS, LINEUS.name, where)) is not None:
+            if (wrong := await _silence_error(first, transport.url, where)) is not None:
                 raise wrong from None
             raise LinkClosed(f"{where} closed the connection before greeting: not a Line-us?") from None
         except BaseException:

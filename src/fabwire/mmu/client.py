@@ -198,6 +198,8 @@ class MMU:
         bytes, or from its answer to a probe when it said nothing), or None when nothing names it."""
         if self.logic.version is not None:
             return None
+        if not self._first:  # free the peer's connection slot for the probes (a bridge may have only one)
+            await self.transport.close()
         return await name_peer(self._first.data, self.transport.url, NOT_AN_MMU, MMU_KIND.name,
                                self.transport.peer or self.transport.url)
 

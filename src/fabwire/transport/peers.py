@@ -182,7 +182,10 @@ def wrong_peer(data: bytes | bytearray, expected: str, kind: str, where: str, *,
     row = identify(data, kind, final=final)
     if row is None:
         return None
-    said = excerpt(bytes(data[:HEAD_BYTES]).decode("latin-1"), 40)
+    head = bytes(data[:HEAD_BYTES])
+    line = head.lstrip(b"\r\n").split(b"\n", 1)[0].rstrip(b"\r") or head  # its first line, when it has lines
+    text = line.decode("latin-1")
+    said = excerpt(text, 60) if line.isascii() and text.isprintable() else excerpt(line, 60)  # binary as bytes
     return RemoteProtocolError(f"{where} is not {expected}: it is {row.what} (it said {said})")
 
 

@@ -253,7 +253,8 @@ class XYZPrinter(Maintenance):
             meaning = REPLY_ERRORS.get(event.code) or ErrorWord.decode(event.code).meaning
             raise DeviceError(f"E{event.code}", meaning, action=f"while {doing}")
         elif isinstance(event, NoReply) and event.command is command:
-            raise LinkTimeout(f"the printer did not answer {command.body!r} within {self.timeout:g} s")
+            raise LinkTimeout(f"the printer on {self.transport.peer or self.transport.url} did not answer "
+                              f"{command.body!r} within {self.timeout:g} s")
         return None
 
     def _wait_time(self) -> float:
@@ -288,6 +289,10 @@ class XYZPrinter(Maintenance):
         """Why a peer never heard as a printer did not answer: the error naming what it is (from its first bytes,
         or from its answer to a probe when it said nothing), or None when nothing names it."""
         where = self.transport.peer or self.transport.url
+        if not self.reader.first:  # free the peer's connection slot for the probes (a bridge may have only one)
+            await self._stop_pump()
+            await self.transport.close()
+            self._lost = self._lost or LinkClosed(f"the link to {where} was closed to ask what answers there")
         if (named := await name_peer(self.reader.first.data, self.transport.url, NOT_A_PRINTER, XYZ.name, where)):
             return named
         sample = self.reader.noise_sample
