@@ -21,6 +21,9 @@ from .agenttools import RunningAgent, start_agent, wait_for
 
 PRINTER = "p:xyz=sim://xyz?speed=30"
 GCODE = b"G28\n" + b"".join(b"G1 X%d Y%d E%d F600\n" % (i % 100, (i * 7) % 100, i) for i in range(60_000))
+SMALL = GCODE[:GCODE.rfind(b"\n", 0, 20_000) + 1]
+"""A small whole file: its first lines (a file cut inside a line ends in a word without its value, refused)."""
+BEGINNING = GCODE[:GCODE.rfind(b"\n", 0, 100) + 1]
 
 
 def printer_online(agent: RunningAgent) -> str:
@@ -114,7 +117,7 @@ def test_a_disk_that_refuses_the_upload_is_507_and_keeps_nothing(tmp_path: Path)
             assert os.listdir(agent.state_dir / "uploads") == []
             assert client.get("/api/v1/jobs").json() == []
             small = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "s.gcode"},
-                                content=GCODE[:20_000], headers={"content-type": "application/octet-stream"})
+                                content=SMALL, headers={"content-type": "application/octet-stream"})
             assert small.status_code == 201  # the machine was released
     finally:
         _, stderr = agent.stop()
@@ -127,11 +130,11 @@ def test_an_abandoned_upload_is_one_log_line_and_leaves_nothing(agent: RunningAg
             f"Content-Length: {len(GCODE) * 10}\r\n\r\n").encode()
     sock = raw_request(agent, head, GCODE)
     with agent.client() as client:  # the upload holds the machine while it arrives …
-        busy = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "b.gcode"}, content=GCODE[:100])
+        busy = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "b.gcode"}, content=BEGINNING)
         assert busy.status_code == 409
         sock.close()  # … and lets it go when its client does
         wait_for(lambda: client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "b.gcode"},
-                                     content=GCODE[:20_000]).status_code == 201, "the printer free again")
+                                     content=SMALL).status_code == 201, "the printer free again")
     _, stderr = agent.stop()
     lines = [line for line in stderr.splitlines() if "went away" in line]
     assert len(lines) == 1, stderr
@@ -170,7 +173,7 @@ def test_the_state_folder_and_its_files_are_the_owners_alone(tmp_path: Path) -> 
         device = printer_online(agent)
         with agent.client() as client:
             assert client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "s.gcode"},
-                               content=GCODE[:20_000]).status_code == 201
+                               content=SMALL).status_code == 201
     finally:
         agent.stop()
     modes = {str(p.relative_to(agent.state_dir)): stat.S_IMODE(p.stat().st_mode)
@@ -262,7 +265,7 @@ def test_a_trickled_upload_is_408_and_the_machine_is_free_after(tmp_path: Path, 
                 f"Content-Length: {len(body)}\r\n\r\n").encode()
         sock = raw_request(agent, head, first)
         with agent.client() as client:
-            busy = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "b.gcode"}, content=GCODE[:100])
+            busy = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "b.gcode"}, content=BEGINNING)
             assert busy.status_code == 409, busy.text  # the trickle holds the machine …
             answer = b""
             for _ in range(240):  # (a bound against a hang, not a timing check)
@@ -284,7 +287,7 @@ def test_a_trickled_upload_is_408_and_the_machine_is_free_after(tmp_path: Path, 
             assert closed
             assert "arrives too slowly" in json.dumps(json.loads(rest)), rest  # (each door's own error shape)
             mine = client.post(f"/api/v1/devices/{device}/jobs", params={"filename": "mine.gcode"},
-                               content=GCODE[:20_000], headers={"content-type": "application/octet-stream"})
+                               content=SMALL, headers={"content-type": "application/octet-stream"})
             assert mine.status_code == 201, mine.text  # … until it is refused, then the owner's upload is taken
             assert [j["id"] for j in client.get("/api/v1/jobs").json()] == [mine.json()["id"]]
     finally:

@@ -11,14 +11,12 @@ is asked again on a fresh TCP connection with each probe in turn (`probe`).
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import functools
 import re
 from typing import TYPE_CHECKING, NamedTuple
 
 from fabwire.errors import LinkError, RemoteProtocolError, excerpt
-from fabwire.transport.limits import refusal
 
 if TYPE_CHECKING:
     import regex
@@ -218,6 +216,8 @@ def _tcp_address(url: str) -> tuple[str, int] | None:
 async def _answer(host: str, port: int, says: bytes, kind: str, seconds: float) -> bytes:
     """What the peer says on a fresh connection after `says`, until it is conclusive, HEAD_BYTES have come, the
     peer is silent for `seconds` or PROBE_LIMIT has passed."""
+    import asyncio  # here: the first-bytes check is also used by readers that never open a link (`xyz info`)
+
     heard = FirstBytes()
     try:
         async with asyncio.timeout(seconds):
@@ -268,4 +268,6 @@ async def name_peer(said: bytes | bytearray, url: str, expected: str, kind: str,
     nothing, from its answer to a probe; None when nothing names it."""
     if not said:
         return await probe(url, expected, kind, where)
+    from fabwire.transport.limits import refusal
+
     return refusal(said, where) or wrong_peer(said, expected, kind, where, final=True)

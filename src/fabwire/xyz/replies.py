@@ -10,7 +10,6 @@ import re
 import msgspec
 
 from fabwire.errors import LocalProtocolError
-from fabwire.transport.peers import HEAD_BYTES, FirstBytes
 from fabwire.xyz.commands import (
     RAW_REPLIES,
     Command,
@@ -128,6 +127,8 @@ class ReplyReader:
         self.noise = 0
         self.noise_sample: str | None = None
         """The first line that fitted nothing: evidence when the peer is not an XYZv3 printer at all."""
+        from fabwire.transport.peers import FirstBytes  # here: the file commands read the protocol, never a peer
+
         self.first = FirstBytes()
         """The first bytes the peer sent, whatever became of them: what names a peer that is no printer."""
 
@@ -165,8 +166,7 @@ class ReplyReader:
             self._events = [e for e in self._events if isinstance(e, ActionStat)]
 
     def receive(self, data: bytes, now: float) -> None:
-        if len(self.first.data) < HEAD_BYTES:
-            self.first.feed(data)
+        self.first.feed(data)  # up to its bound
         self._buffer += data
         p = self._pending
         if p is not None:
