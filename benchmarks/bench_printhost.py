@@ -29,7 +29,7 @@ SIZE = 20 * 1024 * 1024
 RUNS = 5
 """Runs of each, alternating."""
 SRC = Path(__file__).resolve().parents[1] / "src"
-XYZ = "xyz_demo"
+XYZ = "xyz-demo"
 
 
 def sliced(size: int) -> bytes:

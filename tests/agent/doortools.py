@@ -13,7 +13,7 @@ from PIL import Image
 
 from .agenttools import RunningAgent, summary, wait_for
 
-XYZ = "xyz_demo"
+XYZ = "xyz-demo"
 """The demo da Vinci's id (`fabwire serve --demo`)."""
 
 

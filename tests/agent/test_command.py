@@ -29,7 +29,7 @@ def test_demo_starts_three_simulators_and_stops_them(tmp_path: Path) -> None:
             assert [d["kind"] for d in devices] == ["xyz", "lineus", "mmu"]
             assert [d["name"] for d in devices] == ["printer", "line-us", "mmu"]
             # the simulators' ports change every run; the ids (and so the history and bookmarks) do not
-            assert [d["id"] for d in devices] == ["xyz_demo", "lineus_demo", "mmu_demo"]
+            assert [d["id"] for d in devices] == ["xyz-demo", "lineus-demo", "mmu-demo"]
             page = client.get("/")
             assert page.status_code == 200
             assert "<main id=\"devices\"" in page.text

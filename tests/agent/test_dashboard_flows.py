@@ -322,9 +322,9 @@ def test_demo_uses_a_temporary_state_directory_and_gets_busy_once_looked_at(brow
         with httpx.Client(base_url=url.rstrip("/"), timeout=30) as client:
             assert client.get("/api/v1/jobs").json() == []  # nobody looked yet: nothing started
             assert client.get("/").status_code == 200  # the page, as a browser asks for it
-            wait_for(lambda: {j["device"] for j in client.get("/api/v1/jobs").json()} >= {"xyz_demo", "lineus_demo"},
+            wait_for(lambda: {j["device"] for j in client.get("/api/v1/jobs").json()} >= {"xyz-demo", "lineus-demo"},
                      "the demo's print and drawing")
-            wait_for(lambda: summary(client, "mmu_demo")["state"] == "error", "the demo's MMU stopping on its fault")
+            wait_for(lambda: summary(client, "mmu-demo")["state"] == "error", "the demo's MMU stopping on its fault")
         for name, size in (("serve-demo", DESKTOP), ("serve-phone", PHONE)):
             context = browser.new_context(viewport=size, device_scale_factor=1 if size is DESKTOP else 2)
             opened = context.new_page()

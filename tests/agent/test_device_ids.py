@@ -18,7 +18,8 @@ MAKERS = {
     "KIND-SERIAL": lambda kind, text: device_id(kind, text if text.strip() else "demo", "10.0.0.5:9100"),
     "KIND-ADDRESS": lambda kind, text: device_id(kind, None, f"10.0.0.{len(text)}:{text}"),
     "KIND-HOST-ADDRESS": lambda kind, text: device_id(kind, None, f"127.0.0.1:{text}", host=text or "h"),
-    "KIND_demo": lambda kind, text: demo_id(kind),
+    "KIND-demo-HASH": lambda kind, text: device_id(kind, "demo", f"10.0.0.5:{text}"),
+    "KIND-demo": lambda kind, text: demo_id(kind),
 }
 
 
@@ -27,23 +28,26 @@ MAKERS = {
 def test_only_the_demos_ids_are_demo_ids(whose: str, form: str, source: str, kind: str, text: str) -> None:
     made = MAKERS[form](kind, text)
     assert made.startswith(kind)
-    assert is_demo_id(made) == (form == "KIND_demo"), made
-    assert made not in {demo_id(k) for k in KINDS} or form == "KIND_demo"
+    assert is_demo_id(made) == (form == "KIND-demo"), made
+    assert made not in {demo_id(k) for k in KINDS} or form == "KIND-demo"
 
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_a_machine_whose_serial_is_demo_is_not_the_demo(kind: str) -> None:
-    assert device_id(kind, "demo", "10.0.0.5:9100") == f"{kind}-demo" != demo_id(kind)
+    made = device_id(kind, "demo", "10.0.0.5:9100")
+    assert made.startswith(f"{kind}-demo-")
+    assert made != demo_id(kind) == f"{kind}-demo"
+    assert device_id(kind, "demo", "10.0.0.6:9100") != made  # two such machines keep two ids
 
 
-def test_the_demos_former_ids_still_find_its_machines_in_the_api(tmp_path: Path) -> None:
-    """`/api/v1/devices/xyz-demo/…` (the ids the demo had before) reaches the demo's printer, in a real agent."""
+def test_the_demos_ids_are_the_same_every_run(tmp_path: Path) -> None:
+    """`/api/v1/devices/xyz-demo/…` reaches the demo's printer, in a real agent, as the README and scripts say."""
     agent = start_agent(tmp_path / "state", "--demo", "--speed", "30")
     try:
         with agent.client() as client:
             for kind in KINDS:
                 found = wait_for(lambda k=kind: (r := client.get(f"/api/v1/devices/{k}-demo/state")).status_code
-                                 == 200 and r.json(), f"the demo's {kind} by its former id")
+                                 == 200 and r.json(), f"the demo's {kind} by its id")
                 assert found["device"] == demo_id(kind)
             assert client.get("/api/v1/jobs", params={"device": "xyz-demo"}).status_code == 200
     finally:

@@ -89,7 +89,7 @@ STAR_SVG = (b"<svg xmlns='http://www.w3.org/2000/svg' width='40mm' height='40mm'
 
 
 def test_the_line_us_library_speaks_of_drawings(demo: RunningAgent, page: Page) -> None:
-    machine = page.locator(".library-machine[data-device=lineus_demo]")
+    machine = page.locator(".library-machine[data-device=lineus-demo]")
     expect(machine.locator("p.empty")).to_have_text(
         "No drawings yet: send an SVG or Line-us G-code to this machine's print-host address, "
         f"{demo.url.rstrip('/')}/printers/line-us.")

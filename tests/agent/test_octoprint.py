@@ -282,7 +282,7 @@ def test_a_line_us_takes_a_drawing_through_its_own_prefix(demo: RunningAgent) ->
     svg = (b"<svg xmlns='http://www.w3.org/2000/svg' width='60mm' height='40mm' viewBox='0 0 60 40'>"
            b"<path d='M5 5 L55 5 L55 35 Z' stroke='black' fill='none'/></svg>")
     with demo.client() as client:
-        lineus = "lineus_demo"
+        lineus = "lineus-demo"
         wait_for(lambda: client.get(f"/api/v1/devices/{lineus}/state").json()["summary"]["state"] == "idle",
                  "the Line-us idle")
         response = send(client, "triangle.svg", svg, prefix="/printers/line-us")

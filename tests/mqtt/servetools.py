@@ -107,3 +107,10 @@ def retained(broker: Mosquitto) -> dict[str, bytes]:
         return {t: p for t, p in fresh.latest.items() if p and t != "fabwire/test/marker"}
     finally:
         fresh.close()
+
+
+def of_demo(topic: str) -> bool:
+    """Whether an MQTT topic is one of a demo machine's (its device topics or its Home Assistant discovery)."""
+    from fabwire.agent.core import DEMO_IDS
+
+    return any(part in DEMO_IDS or part.removeprefix("fabwire_") in DEMO_IDS for part in topic.split("/"))

@@ -35,7 +35,7 @@ from fabwire.mqtt.topics import (
 )
 
 pytestmark = pytest.mark.timeout(120)
-DEVICE = "lineus_demo"
+DEVICE = "lineus-demo"
 
 
 # ------------------------------------------------------------------------------------------ the ownership rule

@@ -15,9 +15,9 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mqtttools import Mosquitto
-from servetools import Agents, Watch, retained
+from servetools import Agents, Watch, of_demo, retained
 
-from fabwire.agent.core import KINDS, demo_id
+from fabwire.agent.core import DEMO_IDS, KINDS, demo_id
 from fabwire.mqtt.topics import RETAINED_TOPICS, default_agent_id
 
 pytestmark = pytest.mark.timeout(180)
@@ -48,28 +48,31 @@ def _claimants(watch: Watch, device: str) -> set[str]:
 
 def test_a_demo_never_takes_a_real_machines_topics(broker: Mosquitto, agents: Agents, watch: Watch,
                                                    simulator: Any) -> None:
-    """A Line-us whose serial is `demo` is `lineus-demo`; the demo's Line-us is `lineus_demo`. A demo agent
+    """A Line-us whose serial is `demo` does not get the demo's id `lineus-demo` (`DEVICE_IDS`). A demo agent
     beside the real one leaves the real machine's info, availability and discovery alone, and its clean stop
     leaves no claim of its own on any machine."""
     robot = simulator("lineus", "--listen", "127.0.0.1:0", "--speed", "0", "--serial", "demo")
     agents.start("real", broker, f"real:lineus={robot.url}")
-    watch.until(lambda w: (w.json("fabwire/device/lineus-demo/info") or {}).get("serial") == "demo")
-    watch.until(lambda w: w.latest.get("homeassistant/device/fabwire_lineus-demo/config"))
-    real_agent = _agent_of(watch, "lineus-demo")
+    real = watch.until(lambda w: next((t.split("/")[2] for t in list(w.latest) if t.startswith("fabwire/device/")
+                                       and t.endswith("/info") and (w.json(t) or {}).get("serial") == "demo"), None))
+    assert real.startswith("lineus-demo-")
+    assert real not in DEMO_IDS
+    watch.until(lambda w: w.latest.get(f"homeassistant/device/fabwire_{real}/config"))
+    real_agent = _agent_of(watch, real)
     demo = agents.start("demo", broker, options=("--demo", "--speed", "30"), state_dir=False)
     _published(watch)
     demo_agent = _agent_of(watch, demo_id("lineus"))
     assert demo_agent != real_agent
-    assert _agent_of(watch, "lineus-demo") == real_agent
-    assert _claimants(watch, "lineus-demo") == {real_agent}
+    assert _agent_of(watch, real) == real_agent
+    assert _claimants(watch, real) == {real_agent}
     _stop(demo)
     left = retained(broker)
-    assert json.loads(left["fabwire/device/lineus-demo/info"])["serial"] == "demo"
-    assert left["fabwire/device/lineus-demo/availability"] == b"online"
-    assert left["homeassistant/device/fabwire_lineus-demo/config"]
-    assert not [t for t in left if demo_agent in t or "_demo" in t], left
-    assert not [(t, p) for t, p in watch.log if t.startswith(("fabwire/device/lineus-demo/",
-                                                              "homeassistant/device/fabwire_lineus-demo/"))
+    assert json.loads(left[f"fabwire/device/{real}/info"])["serial"] == "demo"
+    assert left[f"fabwire/device/{real}/availability"] == b"online"
+    assert left[f"homeassistant/device/fabwire_{real}/config"]
+    assert not [t for t in left if demo_agent in t or of_demo(t)], left
+    assert not [(t, p) for t, p in watch.log if t.startswith((f"fabwire/device/{real}/",
+                                                              f"homeassistant/device/fabwire_{real}/"))
                 and not p], "the real machine's topics were emptied"
 
 
@@ -87,11 +90,11 @@ def test_a_demo_stopping_leaves_its_machines_to_another_live_demo(broker: Mosqui
     _stop(first)
     watch.until(lambda w: all(_agent_of(w, d) == standby for d in DEMO))
     assert all(_claimants(watch, d) == {standby} for d in DEMO)
-    emptied = [t for t, p in watch.log if not p and "_demo" in t and "/claim/" not in t]
+    emptied = [t for t, p in watch.log if not p and of_demo(t) and "/claim/" not in t]
     assert emptied == [], "a live demo's machines were emptied"
     _stop(second)
     left = retained(broker)
-    assert not [t for t in left if "_demo" in t], left
+    assert not [t for t in left if of_demo(t)], left
 
 
 def test_what_a_killed_demo_left_is_cleared_by_the_next_agent(broker: Mosquitto, agents: Agents, watch: Watch
@@ -108,10 +111,10 @@ def test_what_a_killed_demo_left_is_cleared_by_the_next_agent(broker: Mosquitto,
     watch.until(lambda w: w.latest.get(f"fabwire/agent/{dead}/status") == b"offline")
     assert retained(broker).get(f"homeassistant/device/fabwire_{DEMO[0]}/config")  # the ghost, before
     agents.start("next", broker)  # an agent with no machines at all
-    watch.until(lambda w: not [t for t, p in w.latest.items() if p and ("_demo" in t or dead in t)
+    watch.until(lambda w: not [t for t, p in w.latest.items() if p and (of_demo(t) or dead in t)
                                and not t.endswith(("/heartbeat", "/sync"))])
     left = retained(broker)
-    assert not [t for t in left if "_demo" in t or dead in t], left
+    assert not [t for t in left if of_demo(t) or dead in t], left
 
 
 def test_a_killed_agent_with_a_state_directory_keeps_its_records(broker: Mosquitto, agents: Agents, watch: Watch,

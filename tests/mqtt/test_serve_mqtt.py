@@ -20,7 +20,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from hatools import check_device_discovery, check_entity_discovery
 from mqtttools import Mosquitto
-from servetools import ANNOUNCEMENT, Agents, Watch, retained
+from servetools import ANNOUNCEMENT, Agents, Watch, of_demo, retained
 
 from clitools import cli_env, run_cli
 from fabwire.mqtt.discovery import discovery_topics
@@ -181,7 +181,7 @@ def test_a_demo_leaves_no_ghost_machines_on_the_broker(broker: Mosquitto, watch:
     try:
         assert process.stdout is not None
         assert process.stdout.readline().startswith(ANNOUNCEMENT)
-        demo = ("xyz_demo", "lineus_demo", "mmu_demo")
+        demo = ("xyz-demo", "lineus-demo", "mmu-demo")
         watch.until(lambda w: all(w.latest.get(f"homeassistant/device/fabwire_{d}/config") for d in demo)
                     and all(w.latest.get(f"fabwire/device/{d}/availability") == b"online" for d in demo))
         agent = watch.until(lambda w: next((t.split("/")[2] for t, p in w.latest.items()
@@ -194,7 +194,7 @@ def test_a_demo_leaves_no_ghost_machines_on_the_broker(broker: Mosquitto, watch:
             process.kill()
             process.communicate()
     left = retained(broker)
-    assert not [t for t in left if "_demo" in t], left
+    assert not [t for t in left if of_demo(t)], left
     kept = sorted(t for t in left if t.startswith(f"fabwire/agent/{agent}/"))
     if state_dir:
         assert kept == [f"fabwire/agent/{agent}/info", f"fabwire/agent/{agent}/status"]

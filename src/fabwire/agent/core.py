@@ -88,7 +88,7 @@ _LOCAL = re.compile(r"^(sim:|serial:|pty:|/|(tcp://)?(127\.[0-9.]+|localhost|\[?
 
 
 def _slug(text: str) -> str:
-    """Lower-case letters, digits and single inner '-' only: never '_' (the demo's ids have it, see DEVICE_IDS)."""
+    """Lower-case letters, digits and single inner '-' only."""
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "device"
 
 
@@ -98,33 +98,30 @@ limit (NAME_MAX, 255 bytes on Linux filesystems) and it is a level of MQTT topic
 a longer one is cut and ends with a hash of the whole, so two long addresses keep two ids."""
 
 
-DEMO_SEPARATOR = "_"
-"""What joins a demo simulator's kind and "demo": a character `_slug` never writes, so no real machine's id (and
-so no real machine's MQTT topics and Home Assistant device) is ever a demo's."""
-
 DEVICE_IDS: tuple[tuple[str, str, str], ...] = (
     ("a machine that reports a serial number", "KIND-SERIAL", "the machine's serial (XYZ `query=i`, Line-us "
                                                              "hello `SERIAL:`, MMU none)"),
     ("a machine on a network address, no serial", "KIND-ADDRESS", "the `--device`/devices.toml address"),
     ("a machine on a loopback, serial-port or in-process address, no serial", "KIND-HOST-ADDRESS",
      "the address, qualified with this computer's host name"),
-    ("a simulator of `serve --demo`", f"KIND{DEMO_SEPARATOR}demo", "fixed, the same on every run"),
+    ("a machine whose id would be a demo's (a serial `demo`)", "KIND-demo-HASH",
+     "the id above and a hash of the address, so a real machine never takes a demo's id"),
+    ("a simulator of `serve --demo`", "KIND-demo", "fixed, the same on every run (the README's and scripts' ids)"),
 )
-"""Every form a device id takes: (whose, form, where its parts come from). Only the demo's contains '_'."""
+"""Every form a device id takes: (whose, form, where its parts come from). The demo's are theirs alone."""
 
 
 def demo_id(kind: str) -> str:
-    """The id of the `serve --demo` simulator of `kind` (`xyz_demo`, …): the same every run, never a machine's."""
-    return f"{kind}{DEMO_SEPARATOR}demo"
+    """The id of the `serve --demo` simulator of `kind` (`xyz-demo`, …): the same every run, never a machine's."""
+    return f"{kind}-demo"
 
 
-FORMER_DEMO_IDS = {f"{kind}-demo": demo_id(kind) for kind in KINDS}
-"""The demo's ids before they took a '_': the HTTP API still finds the demo's machines by them when no machine of
-the agent has that id or name (a script written for them keeps working); MQTT knows the demo's own ids only."""
+DEMO_IDS = frozenset(demo_id(kind) for kind in KINDS)
 
 
 def is_demo_id(device: str) -> bool:
-    return DEMO_SEPARATOR in device
+    """Whether `device` is the id of a `serve --demo` simulator (`device_id` never gives a machine one)."""
+    return device in DEMO_IDS
 
 
 def device_id(kind: str, serial: str | None, address: str, host: str | None = None) -> str:
@@ -134,10 +131,16 @@ def device_id(kind: str, serial: str | None, address: str, host: str | None = No
     A loopback, serial-port or in-process address means something only on this computer, so it is
     qualified with the host name: two agents' `127.0.0.1:9100` are two different machines."""
     if serial and serial.strip():
-        return _bounded(f"{kind}-{_slug(serial)}")
-    if _LOCAL.match(address):
-        return _bounded(f"{kind}-{_slug(host or socket.gethostname())}-{_slug(address)}")
-    return _bounded(f"{kind}-{_slug(address)}")
+        found = _bounded(f"{kind}-{_slug(serial)}")
+    elif _LOCAL.match(address):
+        found = _bounded(f"{kind}-{_slug(host or socket.gethostname())}-{_slug(address)}")
+    else:
+        found = _bounded(f"{kind}-{_slug(address)}")
+    if is_demo_id(found):  # a machine never takes the demo's id, its MQTT topics or its Home Assistant device
+        import hashlib
+
+        found = f"{found}-{hashlib.sha256(address.encode()).hexdigest()[:6]}"
+    return found
 
 
 def _bounded(slug: str) -> str:
@@ -358,9 +361,6 @@ class Agent:
         for session in self._sessions.values():
             if session.spec.name == device_id:
                 return session
-        former = FORMER_DEMO_IDS.get(device_id)
-        if former in self._sessions:
-            return self._sessions[former]
         known = ", ".join(f"{s.spec.name} ({id_})" if s.spec.name and s.spec.name != id_ else id_
                           for id_, s in self._sessions.items())
         raise UnknownDevice(f"no device {excerpt(device_id, 60)} here (known: {known or 'none'})")

@@ -49,7 +49,7 @@ INCOMING_QUEUE = 8192
 """Messages the bridge's MQTT client holds for its reader; a flood beyond it is dropped, not kept."""
 
 
-DEMO_GONE = "a demo's DEVICE (an id with '_', `fabwire.agent.core.is_demo_id`)"
+DEMO_GONE = "a demo's DEVICE (`fabwire.agent.core.is_demo_id`)"
 RETAINED_TOPICS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("fabwire/agent/AGENT/status", "AGENT (online); the broker, AGENT's last will (offline)",
      ("AGENT at its clean stop, when it is a demo with no state directory (a new id each run)",
