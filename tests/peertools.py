@@ -8,15 +8,28 @@ import threading
 from collections.abc import Iterator
 
 SAID: dict[str, bytes] = {
-    "a Line-us drawing robot": b'hello VERSION:"3.2.0 Nov 17 2019 17:54:57" NAME:line-us SERIAL:354003\r\n\0',
-    "an SSH server": b"SSH-2.0-OpenSSH_9.2p1 Debian-2+deb12u3\r\n",
-    "a web server": b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\nContent-Length: 11\r\n\r\nBad Request",
-    "an FTP or mail server": b"220 (vsFTPd 3.0.3)\r\n",
-    "a Telnet server": b"\xff\xfd\x18\xff\xfd\x20\xff\xfd\x23\xff\xfd\x27",
-    "a Marlin or Prusa-firmware 3D printer": b"start\necho:Marlin 2.1.2.1\necho: Last Updated: 2023-05-30\n",
+    "lineus": b'hello VERSION:"3.2.0 Nov 17 2019 17:54:57" NAME:line-us SERIAL:354003\r\n\0',
+    "xyz": b"b:20\nc:{336,374,377,355,373,371,364,377,356}\nd:0,0,0\nj:9511,0\nt:1,22,0\n$\n",
+    "mmu": b"S0 A3*22\n",
+    "agent": b"HTTP/1.1 400 Bad Request\r\ncontent-type: text/plain; charset=utf-8\r\nserver: fabwire/0.1.0\r\n"
+             b"Connection: close\r\n\r\nInvalid HTTP request received.",
+    "http": b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\nContent-Length: 11\r\n\r\nBad Request",
+    "html": b'<!DOCTYPE HTML>\n<html lang="en">\n    <head>\n        <meta charset="utf-8">\n'
+            b"        <title>Error response</title>\n    </head>\n",
+    "ssh": b"SSH-2.0-OpenSSH_9.2p1 Debian-2+deb12u3\r\n",
+    "ftp-smtp": b"220 (vsFTPd 3.0.3)\r\n",
+    "pop3": b"+OK Dovecot ready.\r\n",
+    "imap": b"* OK [CAPABILITY IMAP4rev1 SASL-IR LOGIN-REFERRALS ID ENABLE IDLE LITERAL+] Dovecot ready.\r\n",
+    "telnet": b"\xff\xfd\x18\xff\xfd\x20\xff\xfd\x23\xff\xfd\x27",
+    "vnc": b"RFB 003.008\n",
+    "redis": b"-ERR unknown command 'XYZv3/query=a', with args beginning with: \r\n",
+    "mqtt": b"\x20\x02\x00\x00",
+    "marlin": b"start\necho:Marlin 2.1.2.1\necho: Last Updated: 2023-05-30\n",
 }
-"""What each kind of peer says, as captured from one of its kind (a Line-us 3.2.0, OpenSSH, an HTTP server's
-answer to a line that is no request, vsftpd, a Telnet server's opening negotiation, a Marlin board's reset)."""
+"""What each kind of peer says, as captured from one of its kind (a Line-us 3.2.0, fabwire's XYZ and MMU
+simulators, `fabwire serve` and Python's http.server refusing a line that is no request, OpenSSH, vsftpd, Dovecot
+POP3 and IMAP, a Telnet server's opening negotiation, a VNC server, Redis refusing a line, Mosquitto answering
+CONNECT, a Marlin board's reset)."""
 
 
 @contextlib.contextmanager
