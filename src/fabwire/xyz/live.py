@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from fabwire import units
 from fabwire.console import Output
+from fabwire.errors import InputError
 from fabwire.xyz.status import PAUSED, PRINTING, Status
 
 if TYPE_CHECKING:  # rich is imported when a view is drawn, not when the CLI starts
@@ -160,9 +161,8 @@ class JobKeys:
         self._fd = -1
         self._cancel_asked = -1.0
         self._tasks: set[asyncio.Task[None]] = set()
-        self._sent: str | None = None
-        """The last pause or resume a key sent, and the state the view showed then (a poll may not have come)."""
-        self._sent_from: Any = None
+        self._toggling: asyncio.Lock | None = None
+        """Space presses run one after the other, each deciding from the printer's state after the one before."""
 
     def __enter__(self) -> JobKeys:
         try:
@@ -195,11 +195,7 @@ class JobKeys:
         key = os.read(self._fd, 1)
         now = asyncio.get_running_loop().time()
         if key == b" ":
-            code = self.view.status.state_code
-            caught_up = self._sent is None or code != self._sent_from  # a poll since the last key, or no key yet
-            paused = code == PAUSED if caught_up else self._sent == "pause"
-            self._sent, self._sent_from = ("resume" if paused else "pause"), code
-            self._run(self._sent)
+            self._run("pause/resume")
         elif key in (b"c", b"C"):
             if now - self._cancel_asked <= CANCEL_WINDOW_S:
                 self._cancel_asked = -1.0
@@ -213,13 +209,31 @@ class JobKeys:
             self.view.footer = KEYS_HINT
             self.view.redraw()
 
+    async def _toggle(self) -> None:
+        """Resume a paused print, else pause a running one: the printer's own state decides (the view's may be a
+        poll behind), and `resume` refuses (InputError) before it sends anything unless the print is paused."""
+        if self._toggling is None:
+            self._toggling = asyncio.Lock()
+        async with self._toggling:
+            try:
+                await self.actions["resume"]()
+                done = "resume"
+            except InputError:
+                await self.actions["pause"]()
+                done = "pause"
+        self.view.footer = f"{done} sent · {KEYS_HINT}"
+        self.view.redraw()
+
     def _run(self, action: str) -> None:
         self.view.footer = f"{action} sent · {KEYS_HINT}"
         self.view.redraw()
 
         async def act() -> None:
             try:
-                await self.actions[action]()
+                if action == "pause/resume":
+                    await self._toggle()
+                else:
+                    await self.actions[action]()
             except Exception as exc:  # the print goes on: say why the key did nothing
                 self.view.note(f"{action}: {exc}")
 
