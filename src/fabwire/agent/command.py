@@ -357,6 +357,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
     terminal_task: asyncio.Task[None] | None = None
     show: asyncio.Task[None] | None = None
     advertiser: Advertiser | None = None
+    advertising: asyncio.Task[None] | None = None
     try:
         if demo:
             simulators, demo_specs = await asyncio.to_thread(_start_demo, speed)
@@ -398,11 +399,16 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
             bridge_task = asyncio.create_task(_run_bridge(bridge(agent, dashboard_url(bound_host, bound_port), passing,
                                                                  terminal=terminal), server))
         advertiser = Advertiser(agent, bound_host, bound_port)
-        await advertiser.start()
+        # mDNS announcing probes the network for seconds: the API answers (and says where) meanwhile
+        advertising = asyncio.create_task(advertiser.start(), name="advertise-start")
         _freeze_startup_objects()
         await server.serve(sockets=[sock])
         return bool(server.interrupted)
     finally:
+        if advertising is not None:
+            advertising.cancel()
+            with contextlib.suppress(BaseException):
+                await advertising
         if advertiser is not None:
             await advertiser.stop()
         for task in (show, bridge_task, notify_task, terminal_task):
