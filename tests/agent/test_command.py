@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from clitools import cli_env, run_cli
 
@@ -187,3 +188,31 @@ def test_a_printer_that_never_answers_gets_each_connection_closed_before_the_nex
     assert open_when_next[:2] == [False, False]
     assert "Task was destroyed" not in stderr
     assert code == 0, stderr
+
+
+TWICE = [  # (what is given twice, the devices file, the --device options, what the one line says)
+    ("a name, twice on the command line", "", ["a:xyz=127.0.0.1:19593", "a:xyz=127.0.0.1:19594"],
+     "a device named 'a' is given twice"),
+    ("a name, in the file and on the command line", '[devices.office]\nurl = "127.0.0.1:19595"\nkind = "xyz"\n',
+     ["office:xyz=127.0.0.1:19596"], "a device named 'office' is given twice"),
+    ("a machine, written two ways", "", ["a:xyz=127.0.0.1:19593", "b:xyz=tcp://127.0.0.1:19593"],
+     "is given twice, as 'a' and 'b': one machine is monitored once"),
+    ("a machine, in the file and unnamed on the command line", '[devices.office]\nurl = "127.0.0.1:19595"\n'
+     'kind = "xyz"\n', ["xyz=127.0.0.1:19595"], "is given twice, as 'office' and 'xyz-1'"),
+]
+
+
+@pytest.mark.parametrize(("what", "file", "options", "said"), TWICE, ids=[row[0] for row in TWICE])
+def test_a_name_or_machine_given_twice_is_refused_before_serving(tmp_path: Path, what: str, file: str,
+                                                                 options: list[str], said: str) -> None:
+    config = tmp_path / "devices.toml"
+    config.write_text(file)
+    args = ["serve", "--listen", "127.0.0.1:0", "--state-dir", str(tmp_path / "state"), "--config", str(config)]
+    for option in options:
+        args += ["--device", option]
+    done = run_cli(*args, env=cli_env(tmp_path))
+    assert done.returncode == 4, done.stderr
+    assert done.stderr.startswith("fabwire: error: ")
+    assert said in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "state").exists()

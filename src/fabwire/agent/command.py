@@ -99,6 +99,26 @@ def checked_device(spec: DeviceSpec) -> DeviceSpec:
     return spec
 
 
+def one_each(specs: list[DeviceSpec]) -> None:
+    """Refuse (InputError) a name or a machine given twice among the config file's devices and the `--device`
+    options, in the words the agent uses when one is added twice (`Agent.add_device`): a second name would hide
+    the machine it names, a second session would talk to one machine twice."""
+    from fabwire.devices import KINDS as DEVICE_KINDS
+    from fabwire.transport.urls import parse_url
+
+    names: dict[str, DeviceSpec] = {}
+    machines: dict[tuple[str, str], DeviceSpec] = {}
+    for spec in specs:
+        if spec.name in names:
+            raise InputError(f"a device named {excerpt(spec.name, 60)} is given twice (--device or devices.toml)")
+        names[spec.name] = spec
+        where = (spec.kind, parse_url(spec.address, DEVICE_KINDS[spec.kind]).url)
+        if where in machines:
+            raise InputError(f"{excerpt(spec.address, 60)} is given twice, as {machines[where].name!r} and "
+                             f"{spec.name!r}: one machine is monitored once")
+        machines[where] = spec
+
+
 def parse_device_option(text: str, index: int) -> DeviceSpec:
     """`--device KIND=ADDRESS` or `--device NAME:KIND=ADDRESS`, its name and address checked."""
     return checked_device(device_option_form(text, index))
@@ -285,6 +305,7 @@ def serve(app: App, listen: ListenAddress, allow_hosts: tuple[str, ...], devices
     specs = [checked_device(spec) for spec in devices]  # as `devices add` refuses them: exit 4, one line
     if not demo:
         specs = configured_devices(config) + specs
+    one_each(specs)
     demo_dir = tempfile.TemporaryDirectory(prefix="fabwire-demo-") if demo and state_dir is None else None
     directory = state_dir or (Path(demo_dir.name) if demo_dir else default_state_dir())
     sock = _bind(address.host, address.port)  # a bad address fails before a token is made for it
