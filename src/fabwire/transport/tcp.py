@@ -23,6 +23,11 @@ def _nodelay(writer: asyncio.StreamWriter) -> None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
+def host_port(host: str, port: int) -> str:
+    """`host:port`, an IPv6 address in brackets (RFC 3986 §3.2.2), as an address is written everywhere."""
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
 def _describe(writer: asyncio.StreamWriter) -> str:
     peer = writer.get_extra_info("peername")
     if isinstance(peer, tuple) and len(peer) >= 2:
@@ -36,7 +41,7 @@ def connect_failure(exc: BaseException, host: str, port: int, timeout: float | N
     """A failed TCP connection (a TimeoutError or an OSError; anything else in its words) as the error that
     says what to check: the one wording for every TCP peer, devices and MQTT brokers alike (`peer` says what
     to check of it when nothing answers)."""
-    where = f"{host}:{port}"
+    where = host_port(host, port)
     if isinstance(exc, TimeoutError):
         within = f" within {timeout:g} s" if timeout is not None else ""
         return LinkTimeout(f"no answer from {where}{within}: check {peer}")
@@ -52,7 +57,7 @@ def connect_failure(exc: BaseException, host: str, port: int, timeout: float | N
 
 async def open_tcp(host: str, port: int, *, timeout: float = DEFAULT_CONNECT_TIMEOUT) -> StreamTransport:
     """Connect, turning every way a connection fails into a message that says what to check."""
-    where = f"{host}:{port}"
+    where = host_port(host, port)
     try:
         async with asyncio.timeout(timeout):
             reader, writer = await asyncio.open_connection(host, port)
@@ -115,7 +120,7 @@ another program still holds; an address that is no address at all is bad input (
 def listen_failure(exc: OSError, host: str, port: int) -> FabwireError:
     """One error for every listener (`sim --listen`, `serve --listen`) that cannot bind, in `BIND_FAILURES`' words,
     else in the system's."""
-    where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    where = host_port(host, port)
     words, error = BIND_FAILURES.get(exc.errno or 0, (None, LinkError))
     reason = words or (exc.strerror or str(exc)).split(" (while attempting to bind")[0]
     return error(f"cannot listen on {where}: {reason}")
