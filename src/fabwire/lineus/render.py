@@ -105,15 +105,39 @@ def picture_suffix_problem(out: Path, also: str = "") -> str:
     return f"a picture file ends in .svg or .png{also}, {given}"
 
 
-LIBRARY_PICTURE_DPI = 20.0
-"""The resolution of the picture a file library shows beside a drawing: a thumbnail about 150 pixels high."""
+PICTURE_SIDE = 160
+"""The longer side, in pixels, of the picture a file library shows beside a drawing."""
 
 
-def picture_png(strokes: Iterable[Polyline], travel: Iterable[Polyline] = (), *, dpi: float = LIBRARY_PICTURE_DPI,
-                hidden: Iterable[Polyline] = ()) -> tuple[bytes, tuple[int, int]]:
-    """The drawing as `write_drawing` draws it in a .png, as PNG bytes and their (width, height) in pixels."""
-    image = _png_image([_points(s) for s in strokes], [_points(t) for t in travel], [_points(h) for h in hidden],
-                       title=None, scale=dpi_scale(dpi))
+def picture_png(strokes: Iterable[Polyline], *, side: int = PICTURE_SIDE) -> tuple[bytes, tuple[int, int]]:
+    """What the pen draws, alone (no arm, area or legend: a thumbnail shows the drawing), fitted to `side` pixels
+    on its longer side, as PNG bytes and their (width, height) in pixels."""
+    lines = [_points(s) for s in strokes]
+    drawn = [line for line in lines if len(line)]
+    if not drawn:
+        image = Image.new("RGB", (side, side), BACKGROUND)
+    else:
+        low = np.min([line.min(axis=0) for line in drawn], axis=0)
+        high = np.max([line.max(axis=0) for line in drawn], axis=0)
+        span = np.maximum(high - low, 1.0)
+        margin = 0.05 * float(span.max())
+        scale = (side - 1) / (float(span.max()) + 2 * margin)
+        size = (max(1, round((float(span[0]) + 2 * margin) * scale)), max(1, round((float(span[1]) + 2 * margin)
+                                                                                  * scale)))
+        big = SUPERSAMPLE
+        image = Image.new("RGB", (size[0] * big, size[1] * big), BACKGROUND)
+        draw = ImageDraw.Draw(image)
+        pen = max(1, round(1.5 * big))
+        for line in drawn:  # the arm's y grows upward on the paper, a picture's downward
+            xy = np.column_stack([(line[:, 0] - low[0] + margin) * scale * big,
+                                  (high[1] + margin - line[:, 1]) * scale * big])
+            if len(xy) == 1:
+                (cx, cy), r = xy[0], pen
+                draw.ellipse((cx - r, cy - r, cx + r, cy + r), fill=STROKE_COLOUR)
+                continue
+            for start in range(0, len(xy) - 1, 10_000):  # long strokes in pieces: bounded memory
+                draw.line(xy[start:start + 10_001].ravel().tolist(), fill=STROKE_COLOUR, width=pen)
+        image = image.resize(size, Image.Resampling.BOX)
     out = io.BytesIO()
     image.save(out, format="PNG")
     return out.getvalue(), image.size

@@ -160,7 +160,7 @@ class LineUsDriver(Driver):
         plan = _plan_upload(name, path, PlanOptions(time_budget=PLAN_TIME_BUDGET))
         figures = plan.figures().as_dict()
         return {"print_time_s": figures["estimated_s"], "pen_down_mm": figures["pen_down_length_mm"],
-                "strokes": figures["strokes"], "picture": picture_png(plan.strokes, plan.travel(), hidden=plan.hidden)}
+                "strokes": figures["strokes"], "picture": picture_png(plan.strokes)}
 
     def check_upload(self, name: str, path: Path) -> None:
         """The drawing intake's and the planner's refusal (not SVG, unreadable, nothing to draw, coordinates no
