@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import resource
 import tracemalloc
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from hypothesis import strategies as st
 
 from fabwire.errors import InputError
 from fabwire.lineus.plot import PlanOptions, parse_svg, plan_drawing, plan_file, read_drawing
-from fabwire.lineus.plot.svg import MAX_USE_COPIES
+from fabwire.lineus.plot.svg import MAX_POINTS, MAX_USE_COPIES
 from fabwire.lineus.plot.svgpath import PathBuilder, straight_path_data, straight_paths
 
 DATA = Path(__file__).parent / "data" / "svg"
@@ -501,3 +502,21 @@ def test_a_root_that_is_not_svg_is_named_in_one_short_line(tag: str) -> None:
     with pytest.raises(InputError, match="not <svg>") as caught:
         parse_svg(f"<{tag}/>".encode())
     assert len(str(caught.value)) <= 160
+
+
+CURVE_FLOODS = [  # a few bytes of path data whose curves would flatten into millions of points
+    ("arcs of a huge radius", "A1e9 1e9 0 1 1 {x} {y}"),
+    ("cubic curves with far control points", "C1e9 -1e9 -1e9 1e9 {x} {y}"),
+    ("quadratic curves with a far control point", "Q1e9 1e9 {x} {y}"),
+]
+
+
+@pytest.mark.parametrize(("what", "command"), CURVE_FLOODS, ids=[row[0] for row in CURVE_FLOODS])
+def test_curves_that_flatten_past_the_drawings_points_are_refused_as_they_are_read(what: str, command: str) -> None:
+    """Each curve is held to the points the drawing has left (`MAX_POINTS`) while it is flattened, so memory
+    stays bounded by the bound, not by what the file asks for."""
+    d = "M0 0 " + " ".join(command.format(x=i % 100, y=(i * 7) % 100) for i in range(2_000))
+    started = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(InputError, match=f"its curves make more than {MAX_POINTS:,} points"):
+        parse_svg(svg(f'<path d="{d}" fill="none" stroke="black"/>'))
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - started < 1_000_000  # KiB: far below a GB

@@ -37,6 +37,7 @@ from fabwire.lineus.plot.svgpath import (
     PathBuilder,
     PathDataError,
     Subpath,
+    TooManyPoints,
     ellipse,
     is_straight,
     line,
@@ -81,8 +82,9 @@ RELATIVE_TOLERANCE = 2e-4
 """Chord tolerance as a share of the page diagonal when none is given."""
 MAX_USE_COPIES = 200_000
 """Shapes `<use>` may add by copying: a bound on expansion (a few KB can otherwise ask for 2^30 copies)."""
-MAX_POINTS = 20_000_000
-"""Points in one drawing: days of drawing for a Line-us, and about 320 MB of coordinates."""
+MAX_POINTS = 2_000_000
+"""Points in one drawing: days of drawing for a Line-us, and about 32 MB of coordinates (their working copies a
+few times that); curves are held to it as they are flattened (`PathBuilder.room`)."""
 MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
 MAX_PATTERN_TILES = 20_000
@@ -346,6 +348,9 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         raise InputError(f"{name}: elements nested too deeply to read") from exc
     except TooComplex as exc:
         raise InputError(f"{name}: {exc}") from exc
+    except TooManyPoints:
+        raise InputError(f"{name}: its curves make more than {MAX_POINTS:,} points, more than a drawing may have; "
+                         "refusing it") from None
     except (ValueError, TypeError, ZeroDivisionError, shapely.errors.ShapelyError) as exc:
         raise InputError(f"{name}: malformed SVG geometry ({exc})") from exc
     return SvgDrawing(list(reader.lines), dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
@@ -844,7 +849,7 @@ class _Reader:
                 self._read_ahead.pop(id(el), None)
             placed = affine([sub.points for sub in ahead], matrix)
             return [Subpath(points, sub.closed, sub.segments) for points, sub in zip(placed, ahead, strict=True)]
-        builder = PathBuilder(matrix, self.tolerance)
+        builder = PathBuilder(matrix, self.tolerance, room=MAX_POINTS - self.points)
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)
 

@@ -54,8 +54,11 @@ class PathBuilder:
     `matrix` is the 2x3 user-to-output transform; `tolerance` is the chord error allowed in output units.
     """
 
-    def __init__(self, matrix: FloatArray, tolerance: float) -> None:
+    def __init__(self, matrix: FloatArray, tolerance: float, room: int | None = None) -> None:
         self.matrix = matrix
+        self.room = room
+        """How many more points the curves may add (None: no bound): a curve's points grow with its size, so
+        twenty bytes of path data could otherwise become thousands of points (TooManyPoints past it)."""
         stretch = _largest_stretch(matrix) or 1.0
         self.user_tolerance = tolerance / stretch
         self.subpaths: list[Subpath] = []
@@ -133,6 +136,7 @@ class PathBuilder:
         p0 = self._here()
         self._begin()
         pts = _arc_points(p0, abs(rx), abs(ry), rotation, bool(large), bool(sweep), end, self.user_tolerance)
+        self._spend(len(pts))
         if len(pts) > 1:
             self.curved = True
         self._buf.extend(pts.ravel().tolist())
@@ -176,10 +180,17 @@ class PathBuilder:
         else:
             s = 1 - t
             pts = s * s * ctrl[0] + 2 * s * t * ctrl[1] + t * t * ctrl[2]
+        self._spend(n)
         if n > 1:
             self.curved = True
         self._buf.extend(pts.ravel().tolist())
         self._segments += 1
+
+    def _spend(self, points: int) -> None:
+        if self.room is not None:
+            self.room -= points
+            if self.room < 0:
+                raise TooManyPoints
 
     def _flush(self, *, closed: bool) -> None:
         if self._buf:
@@ -247,6 +258,10 @@ def _arc_points(p0: tuple[float, float], rx: float, ry: float, rotation: float, 
     pts = np.column_stack([cos_p * ex - sin_p * ey + cx, sin_p * ex + cos_p * ey + cy])
     pts[-1] = end  # land exactly on the endpoint the next segment starts from
     return pts
+
+
+class TooManyPoints(Exception):
+    """A path's curves need more points than the drawing has room for (`PathBuilder.room`)."""
 
 
 class PathDataError(ValueError):
