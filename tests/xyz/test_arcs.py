@@ -187,3 +187,25 @@ def test_any_arc_words_give_bounded_segments_or_none(words: dict[bytes, float], 
     if lines is not None:
         assert 1 <= len(lines) <= MOST_SEGMENTS + 1
         assert all("nan" not in line and "inf" not in line for line in lines)
+
+
+def test_full_turns_that_would_blow_a_file_up_are_refused_while_converting(tmp_path: Path) -> None:
+    """Each line may ask for 100 full turns of a large circle (Marlin's most): a few kilobytes of them would be
+    hundreds of megabytes of segments, so the growth is bounded (`arcwork.GROWTH_ALLOWED`) and nothing is kept."""
+    from fabwire.xyz.arcwork import GROWTH_ALLOWED
+
+    lines = ["G28", "G1 Z0.2 F1200", "G1 X75 Y5 F1500"]
+    lines += [f"G2 X75 Y5 I0 J70 P100 E{i + 1}" for i in range(600)]
+    source = tmp_path / "turns.gcode"
+    source.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "turns.3w"
+    done = run_cli("xyz", "convert", str(source), str(out), "--model", "miniMaker", env=cli_env(tmp_path))
+    assert done.returncode == 4, done.stderr
+    assert f"would make it more than {GROWTH_ALLOWED} times its size" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".turns")]  # no temporary file left either
+    kept = run_cli("xyz", "convert", str(source), str(out), "--model", "miniMaker", "--keep-arcs",
+                   env=cli_env(tmp_path))
+    assert kept.returncode == 0, kept.stderr
+    assert out.stat().st_size < 1_000_000

@@ -16,6 +16,7 @@ import re
 
 import numpy as np
 
+from fabwire.errors import InputError
 from fabwire.xyz import motion
 from fabwire.xyz.gcodeinfo import MoveAnalyzer, arc_turns, words_of
 
@@ -91,13 +92,23 @@ def segments(start: tuple[float, float, float, float], words: dict[bytes, float]
     return lines
 
 
+GROWTH_ALLOWED = 8
+"""How many times its own size a G-code may grow by its arcs becoming segments (beyond GROWTH_FREE): slicers' arcs
+grow a file two to three times; full turns (P) of large circles could otherwise make a few kilobytes hundreds of
+megabytes."""
+GROWTH_FREE = 64 * 1024 * 1024
+
+
 class ArcExpander:
     """Rewrites the G2/G3 lines of consecutive line-aligned chunks of a G-code as G1 segments, keeping track of
-    the position and modes the file sets."""
+    the position and modes the file sets. `name` and `size` (bytes) are the file's: its segments may make it at most
+    GROWTH_ALLOWED times that size plus GROWTH_FREE (InputError past it)."""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str = "the G-code", size: int = 0) -> None:
         self.tracker = MoveAnalyzer()
         self.converted = 0
+        self.name = name
+        self.room = GROWTH_ALLOWED * size + GROWTH_FREE
 
     def expand(self, chunk: bytes) -> bytes:
         out = []
@@ -113,7 +124,13 @@ class ArcExpander:
             if lines is None:
                 out.append(b"G1" + found.group(2) + b"\n")
             else:
-                out.append(("\n".join(lines) + "\n").encode())
+                written = ("\n".join(lines) + "\n").encode()
+                self.room -= len(written)
+                if self.room < 0:
+                    raise InputError(f"{self.name}: its G2/G3 arcs as straight moves would make it more than "
+                                     f"{GROWTH_ALLOWED} times its size (past arc {self.converted + 1}): slice it "
+                                     "with arcs off, or convert it with --keep-arcs")
+                out.append(written)
                 self.converted += 1
             t.feed_lines(found.group(0))
             at = found.end()

@@ -754,7 +754,7 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
     leading = True
     from fabwire.xyz import arcwork
 
-    arcs = arcwork.ArcExpander() if prepared.expand_arcs else None
+    arcs = arcwork.ArcExpander(name, prepared.end) if prepared.expand_arcs else None
     checked: list[tuple[int, int]] | None = [] if prepared.analysed else None  # the first read searched every line
     g0_words = prepared.g0_words if arcs is None else None  # the analysis read these very chunks
     for index, chunk in enumerate(gcode_lines(src, name, progress, prepared.end, end=prepared.end,
