@@ -66,8 +66,9 @@ class LineUsSettings(DeviceSettings, tag="lineus"):
 
 
 class MMUSettings(DeviceSettings, tag="mmu"):
-    speed: Annotated[float, msgspec.Meta(gt=0, le=10_000)] = 1.0
-    """The MMU runs this many times faster than real time (a simulator's --speed)."""
+    speed: Annotated[float, msgspec.Meta(ge=0.01, le=10_000)] = 1.0
+    """The MMU runs this many times faster than real time (a simulator's --speed): 0.01 to 10 000, as `--speed`
+    takes it (`fabwire.simspeed`); slower would stretch every timeout past any wait a user makes."""
     accept: list[Annotated[str, msgspec.Meta(pattern=r"^\d{1,3}\.\d{1,3}\.\d{1,3}\Z",
                                              examples=["3.0.3"])]] = []
     """Firmware versions to accept, e.g. ["3.0.3"] (default: every supported one)."""

@@ -70,7 +70,8 @@ SETTING_CASES: dict[str, list[tuple[str, str]]] = {
     "set-unknown": [("xyz", "defualt=true"), ("xyz", f"{LONG}=1"), ("mmu", "sped=5"), ("lineus", "look_ahead=true")],
     "set-control": [("xyz", "model=mini\nw"), ("mmu", "speed=a\x1bb")],
     "set-value": [("xyz", f"link={LONG}"), ("xyz", "reply_timeout=-5"), ("mmu", "accept=3.0"),
-                  ("lineus", "lookahead=maybe"), ("mmu", "speed=1e400")],
+                  ("lineus", "lookahead=maybe"), ("mmu", "speed=1e400"), ("mmu", "speed=1e-300"),
+                  ("mmu", "speed=0.001")],
     "set-model": [("xyz", "model=miniMakr"), ("xyz", f"model={LONG}")],
 }
 ADDRESS_ROWS = [(code, kind, address) for code, cases in ADDRESS_CASES.items() for kind, address in cases]
