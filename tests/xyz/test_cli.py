@@ -470,7 +470,22 @@ DISCOVER_MISSES = [  # (what the named host is, how to make it, what discover sa
      "it is a Line-us drawing robot (it said 'hello "),
     ("an MMU on TCP", lambda sim: _booted_mmu(sim), "it is a Prusa MMU3"),  # silent first: named from a probe
     ("a web server", lambda sim: _web_server(), "it is a web server"),
+    ("a server saying escapes and binary", lambda sim: _junk_server(),
+     "it answered b'\\x1b]0;PWNED\\x07\\x1b[2J\\x00\\x01"),  # shown escaped, never raw
 ]
+
+
+def _junk_server() -> str:
+    """A server that greets every connection with escape sequences and binary bytes, then hangs up."""
+    import socketserver
+
+    class Junk(socketserver.BaseRequestHandler):
+        def handle(self) -> None:
+            self.request.sendall(b"\x1b]0;PWNED\x07\x1b[2J\x00\x01binary junk")
+
+    server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Junk)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return f"127.0.0.1:{server.server_address[1]}"
 
 
 def _booted_mmu(simulator: SimulatorStarter) -> str:

@@ -91,9 +91,11 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0, *, named: boo
     address = f"{host}:{port}"
     heard = FirstBytes()
     event: object = None
+    opened = False
     try:
         async with asyncio.timeout(timeout):
             transport = await open_tcp(host, port, timeout=timeout)
+            opened = True
             try:
                 reader = ReplyReader(Link.WIFI)
                 query = p.Query("a")
@@ -108,7 +110,8 @@ async def probe(host: str, port: int = PORT, timeout: float = 1.0, *, named: boo
     except TimeoutError:
         return await _not_a_printer(host, port, heard, named, f"no answer to 'query=a' within {timeout:g} s")
     except (FabwireError, OSError) as exc:
-        return await _not_a_printer(host, port, heard, named and bool(heard), str(exc) or type(exc).__name__)
+        # a link that opened and then broke (a reset, a close) was ended by a server: a named host is asked what
+        return await _not_a_printer(host, port, heard, named and opened, str(exc) or type(exc).__name__)
     if not isinstance(event, Reply):
         return await _not_a_printer(host, port, heard, False,
                                     f"it answered {excerpt(str(event), 80)}, not an XYZv3 status")
@@ -128,6 +131,8 @@ async def _not_a_printer(host: str, port: int, heard: FirstBytes, ask: bool, oth
         named_peer = await name_peer(heard.data, f"tcp://{host}:{port}", expected, "xyz", address)
         if isinstance(named_peer, RemoteProtocolError):
             return _missed(address, str(named_peer).removeprefix(f"{address} is not {expected}: "))
+    if heard:  # it spoke, in no language a row names: what it said is the evidence
+        return _missed(address, f"it answered {excerpt(bytes(heard.data[:80]))}, which is no XYZv3 status")
     return _missed(address, otherwise)
 
 
