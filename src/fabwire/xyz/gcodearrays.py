@@ -394,11 +394,12 @@ class Scan:
 
 
 def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> None:
-    """Move each offset `at` past the blanks (space, tab) there, in place."""
-    blank = _BLANK[data[at]]
-    while blank.any():
-        at += blank
-        blank = _BLANK[data[at]]
+    """Move each offset `at` past the blanks (space, tab) there, in place: each round only the offsets still on a
+    blank move, so a long run of blanks costs its own length, not that times every word's."""
+    moving = np.flatnonzero(_BLANK[data[at]])
+    while len(moving):
+        at[moving] += 1
+        moving = moving[_BLANK[data[at[moving]]]]
 
 
 def _ends_word(data: NDArray[np.uint8], after: NDArray[np.intp],
