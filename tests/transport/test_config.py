@@ -78,7 +78,7 @@ def test_device_of_another_kind_is_refused(tmp_path: Path) -> None:
         ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefault = 'yes'\n", "'default': expected true or false, not text"),
         ("[devices.x]\nkind = 'mmu'\nurl = '/x'\nspeeds = [1]\n", r"unknown key 'speeds' \(did you mean 'speed'\?\)"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'a'\ndefualt = 1\n", r"unknown key 'defualt' \(did you mean 'default'\?\)"),
-        ("[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nspeed = 0\n", "'speed': expected a number above 0"),
+        ("[devices.x]\nkind = 'mmu'\nurl = '/dev/x'\nspeed = 0\n", "'speed': expected a number at least 0.01"),
         ("[devices.x]\nkind = 'lineus'\nurl = 'a'\nlink = 'wifi'\n", "unknown key 'link'"),
         ("[devices.x]\nkind = 'xyz'\nurl = 'a'\nlink = 'usb'\n", "'link': expected one of 'auto', 'serial', 'wifi'"),
         ("[device.x]\nkind = 'xyz'\n", r"unknown top-level key 'device' \(did you mean 'devices'\?\)"),
