@@ -26,25 +26,24 @@ _AXIS_INDEX[list(_LETTERS)] = _AXIS_INDEX[list(_LETTERS.lower())] = np.arange(le
 _TURNS_INDEX = _LETTERS.index(b"P")
 _PLAIN_AXES = 5
 """X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
-_NOT_CODE = np.zeros(256, dtype=bool)
-_NOT_CODE[list(b"(*")] = True
-_DIGIT_OR_DOT = np.zeros(256, dtype=bool)
-_DIGIT_OR_DOT[list(b"0123456789.")] = True
-_DIGIT = np.zeros(256, dtype=bool)
-_DIGIT[list(b"0123456789")] = True
-_GLUED = np.zeros(256, dtype=bool)
-_GLUED[list(b"EeXx")] = True
+def _byte_class(members: bytes) -> NDArray[np.bool_]:
+    """A lookup table over byte values: True for each of `members`."""
+    table = np.zeros(256, dtype=bool)
+    table[list(members)] = True
+    return table
+
+
+_NOT_CODE = _byte_class(b"(*")
+_DIGIT_OR_DOT = _byte_class(b"0123456789.")
+_DIGIT = _byte_class(b"0123456789")
+_GLUED = _byte_class(b"EeXx")
 """Letters that, right after a number, make it an exponent or a hexadecimal number to strtod (`NUMBER_FORMS`)."""
-_BLANK = np.zeros(256, dtype=bool)
-_BLANK[list(b" \t")] = True
-_WORD_END = np.zeros(256, dtype=bool)
-_WORD_END[list(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz;\n")] = True
+_BLANK = _byte_class(b" \t")
+_WORD_END = _byte_class(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz;\n")
 """Bytes that may follow a word's number or a command word, after blanks (the arrays leave `(` and `*` to the line
 reader)."""
-_MOVE_DIGIT = np.zeros(256, dtype=bool)
-_MOVE_DIGIT[list(b"0123")] = True
-_ODD_FIRST = np.zeros(256, dtype=bool)
-_ODD_FIRST[list(b" \tNngm")] = True
+_MOVE_DIGIT = _byte_class(b"0123")
+_ODD_FIRST = _byte_class(b" \tNngm")
 """First bytes of a line that only the line reader understands: blanks, line numbers, lower-case commands."""
 
 VALUE = rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
