@@ -14,6 +14,10 @@ def _interrupted_while_starting(signum: int, frame: object) -> None:
     os._exit(_EXIT_INTERRUPTED)
 
 
+# numpy's OpenBLAS starts a thread per core when it loads, which costs a command more CPU than reading a 10 MB
+# G-code; fabwire does no linear algebra worth a second thread. A value the user set is kept.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 # Set on import: this module is only ever the entry point, and the CLI's imports come next.
 _catching = signal.getsignal(signal.SIGINT) is signal.default_int_handler  # an ignored Ctrl-C stays ignored
 if _catching:

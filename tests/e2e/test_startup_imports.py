@@ -41,3 +41,19 @@ def test_the_version_needs_no_cli() -> None:
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=cli_env())
     assert result.stdout.startswith("fabwire, version ")
     assert result.stderr.strip() == "False"
+
+
+BLAS_THREADS = ("import os, fabwire.__main__, numpy\n"
+                "print(os.environ['OPENBLAS_NUM_THREADS'], len(os.listdir('/proc/self/task')))\n")
+
+
+def test_the_command_line_loads_numpy_with_one_blas_thread() -> None:
+    env = {k: v for k, v in cli_env().items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    result = subprocess.run([sys.executable, "-c", BLAS_THREADS], capture_output=True, text=True, timeout=60, env=env)
+    assert result.stdout.split() == ["1", "1"]  # the variable, and no thread beside the main one
+
+
+def test_a_blas_thread_count_the_user_set_is_kept() -> None:
+    env = {**cli_env(), "OPENBLAS_NUM_THREADS": "2"}
+    result = subprocess.run([sys.executable, "-c", BLAS_THREADS], capture_output=True, text=True, timeout=60, env=env)
+    assert result.stdout.split()[0] == "2"
