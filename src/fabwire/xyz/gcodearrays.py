@@ -418,6 +418,25 @@ def _ends_word(data: NDArray[np.uint8], after: NDArray[np.intp],
     return ends
 
 
+def _tiled(data: NDArray[np.uint8], letters: NDArray[np.intp], spans: NDArray[np.intp], known: NDArray[np.bool_],
+           starts: NDArray[np.intp], ends: NDArray[np.intp],
+           command: tuple[NDArray[np.uint8], NDArray[np.uint8], NDArray[np.uint8]]) -> bool:
+    """Whether the code of each line (from `starts` to `ends`) is its command word (G and up to three digits, whose
+    bytes after the G are `command`) followed by words, each one blank, its letter (offsets `letters`) and a number
+    of `spans` bytes, and nothing else: then no word holds a form of `NUMBER_FORMS`, which the word-by-word checks
+    would look for. The layout slicers write, checked by counting: the blank-letter-number runs cannot overlap (a
+    number is only a sign, digits and a dot), so when their lengths and the command words' add up to the code's,
+    they cover it and no byte is left over."""
+    if not known.all() or not _BLANK[data[letters - 1]].all():
+        return False
+    first, second, third = (_DIGIT[part] for part in command)
+    second &= first
+    third &= second
+    command_bytes = len(starts) + np.count_nonzero(first) + np.count_nonzero(second) + np.count_nonzero(third)
+    code_bytes = int(np.sum(ends - starts))
+    return bool(int(np.sum(spans)) + 2 * len(letters) + command_bytes == code_bytes)
+
+
 def scan(padded: bytes) -> Scan | None:
     """The words of a piece of G-code (which starts with a newline and ends its last line) followed by PAD zero
     bytes, or None for a layout only the line-by-line reader handles."""
@@ -496,18 +515,19 @@ def scan(padded: bytes) -> Scan | None:
     numbers, spans = parse_words(padded, data, at)
     axis = _AXIS_INDEX[data[where]]
     known = ~np.isnan(numbers)
-    after = at + spans
-    following = data[after]
-    odd = _GLUED[following]  # an exponent or a hexadecimal number
-    odd |= ~_ends_word(data, after, following)  # more after the number than blanks before the next word or the end
-    odd |= ~known  # bare letters are not words (and may be a NaN or an infinity)
     rows = np.flatnonzero(is_row)
-    command_end = starts[rows] + 1
-    while (digits := _DIGIT[data[command_end]]).any():
-        command_end += digits
-    odd_lines = [line_of[odd][:1], rows[~_ends_word(data, command_end)][:1]]  # or more after the command word
-    if any(len(first_odd) for first_odd in odd_lines):
-        suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
+    if not _tiled(data, where, spans, known, starts[rows], code_end[rows], (c1[rows], c2[rows], c3[rows])):
+        after = at + spans
+        following = data[after]
+        odd = _GLUED[following]  # an exponent or a hexadecimal number
+        odd |= ~_ends_word(data, after, following)  # more after the number than blanks before the next word or end
+        odd |= ~known  # bare letters are not words (and may be a NaN or an infinity)
+        command_end = starts[rows] + 1
+        while (digits := _DIGIT[data[command_end]]).any():
+            command_end += digits
+        odd_lines = [line_of[odd][:1], rows[~_ends_word(data, command_end)][:1]]  # or more after the command word
+        if any(len(first_odd) for first_odd in odd_lines):
+            suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
     if not known.all():
         axis, line_of, numbers, where = axis[known], line_of[known], numbers[known], where[known]
     if arcs.any() and arcs[line_of[axis == _TURNS_INDEX]].any():
