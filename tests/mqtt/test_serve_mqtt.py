@@ -246,3 +246,21 @@ def test_a_job_action_on_an_idle_printer_says_there_is_nothing_to_act_on(
     assert reply["ok"] is False, reply
     assert reply["error"].startswith(f"desk has nothing to {action}: it is idle"), reply
     assert "confirm" not in reply["error"].split(";")[0]
+
+
+def test_a_clean_stop_leaves_the_retained_state_offline(broker: Mosquitto, agents: Agents, watch: Watch,
+                                                         simulator: Any) -> None:
+    """Whoever reads only a machine's retained state (not its availability) after the agent's clean stop sees it
+    offline, with the reason, rather than the last "online" state."""
+    sim = simulator("xyz", "--listen", "127.0.0.1:0")
+    agent = agents.start("a", broker, f"jr:xyz={sim.url}")
+    device = watch.until(lambda w: w.device_of_kind("xyz"))
+    watch.until(lambda w: (s := w.json(f"fabwire/device/{device}/state")) and s["online"] and s)
+    agent.send_signal(signal.SIGTERM)
+    assert agent.wait(timeout=30) == 0
+    state = json.loads(retained(broker)[f"fabwire/device/{device}/state"])
+    assert state["online"] is False
+    assert state["summary"]["state"] == "offline"
+    assert state["summary"]["state_text"].endswith("stopped")
+    assert state["kind"] == "xyz"  # the rest of the record stays as it was
+    assert retained(broker)[f"fabwire/device/{device}/availability"] == b"offline"

@@ -27,7 +27,8 @@ import aiomqtt
 from aiomqtt.exceptions import MqttConnectError
 
 from fabwire import __version__
-from fabwire.agent.core import is_demo_id
+from fabwire.agent.core import is_demo_id, now_iso
+from fabwire.agent.drivers.base import offline_summary
 from fabwire.errors import FabwireError, LinkError, excerpt
 from fabwire.mqtt.commands import CommandRunner
 from fabwire.mqtt.discovery import DISCOVERY_MODES, discovery_messages, discovery_topics
@@ -181,6 +182,8 @@ class Bridge:
         self._pending: dict[str, dict[str, Any]] = {}
         self._availability: dict[str, str] = {}
         self._newest: dict[str, str] = {}
+        self._last_state: dict[str, dict[str, Any]] = {}
+        """Per device: the newest state published, which a clean stop publishes again as offline."""
         """Per device: the time (`ts`, ISO 8601 UTC with milliseconds) of the newest state published, or link event
         followed; an older one that comes after it (an event queued before a snapshot of the state) is dropped."""
         """What this connection last published on each device's availability topic."""
@@ -310,10 +313,17 @@ class Bridge:
         # The devices first: another agent takes them over when it sees this agent's status go offline, and its
         # "online" must not be overtaken by this agent's "offline". Each step has its own time limit, so the
         # status (which alone makes every device unavailable in Home Assistant) goes out in any case.
+        stopping = sorted(self.owned - self.passing)
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await asyncio.gather(*(client.publish(device_topic(device, "availability"), OFFLINE, qos=1,
-                                                      retain=True) for device in sorted(self.owned - self.passing)))
+                                                      retain=True) for device in stopping))
+        # The retained state says so too, for whoever reads the state alone: no machine stays "online" there.
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(2.0):
+                await asyncio.gather(*(client.publish(device_topic(device, "state"), _dump(self._stopped(device)),
+                                                      qos=1, retain=True)
+                                       for device in stopping if device in self._last_state))
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await asyncio.gather(*(client.publish(topic, b"", qos=1, retain=True)
@@ -326,6 +336,11 @@ class Bridge:
                 async with asyncio.timeout(2.0):
                     await asyncio.gather(*(client.publish(agent_topic(self.agent_id, leaf), b"", qos=1, retain=True)
                                            for leaf in ("status", "info")))
+
+    def _stopped(self, device: str) -> dict[str, Any]:
+        """The device's newest state as this agent leaves it: offline, saying why, now."""
+        return {**self._last_state[device], "ts": now_iso(), "online": False,
+                "summary": offline_summary(f"agent {self.agent_id} stopped")}
 
     def _passing_topics(self) -> list[str]:
         """What a clean stop empties of the devices that exist only while this agent runs (`RETAINED_TOPICS`):
@@ -617,6 +632,7 @@ class Bridge:
         self._pending.pop(device, None)
         self._availability.pop(device, None)
         self._newest.pop(device, None)
+        self._last_state.pop(device, None)
         self.known.pop(device, None)
         await self._publish(claim_topic(device, self.agent_id), b"")
 
@@ -700,6 +716,7 @@ class Bridge:
         if not self._newer(device, state.get("ts")):
             return
         await self._set_availability(device, bool(state.get("online")))
+        self._last_state[device] = state
         # QoS 0: TCP delivers it while the connection lasts, a reconnection republishes every state, and a newer
         # state follows within a poll; waiting for an acknowledgement per state would halve a farm's throughput.
         await self._publish(device_topic(device, "state"), _dump(state), qos=0)

@@ -7,6 +7,7 @@
     fabwire/device/DEVICE/claim/AGENT   "1"  retained while AGENT monitors DEVICE (empty = released)
     fabwire/device/DEVICE/info          DeviceInfo + {"agent"}  retained, by the device's owner
     fabwire/device/DEVICE/state         the agent's state (`--json` schema, "ts", "online")  retained, by the owner
+                                        (at its clean stop: the last state again, offline, "agent AGENT stopped")
     fabwire/device/DEVICE/availability  "online" | "offline"  retained, by the owner
     fabwire/device/DEVICE/event         each event, job and error as JSON (not retained)
     fabwire/device/DEVICE/command       {"action", "params", "id"} or a bare action name: run by the owner
