@@ -108,6 +108,13 @@ RULES: dict[str, Rule] = {
                          "without ':', '/' or an IP address's form",
                          "fabwire.config.resolve_target: a -d value with ':' or '/' is an address; "
                          "RFC 791 / RFC 4291 §2.2 address forms; Windows serial port names (COM1-COM256)"),
+    "name-host": Rule("name", "a host name of the local network: localhost, or one ending in .local, .lan, .home, "
+                              ".home.arpa, .internal or .localdomain (pr.local)",
+                      "{name} is a host name, so as a name it would hide that host from -d: choose a name that does "
+                      "not end in a local network's domain",
+                      "fabwire.config.resolve_target: a -d value that is no configured name is taken as a host; "
+                      "RFC 6761 §6.3 (localhost), RFC 6762 (.local, mDNS), RFC 8375 (.home.arpa), ICANN's "
+                      "2024 reservation of .internal, and the names home routers give (.lan, .home, .localdomain)"),
     "name-characters": Rule("name", "a name with characters other than letters, digits, '.', '_' and '-', or one "
                                     "starting with '.', '_' or '-'",
                             f"a device name is {NAME_CHARACTERS}, not {{name}}",

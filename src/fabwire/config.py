@@ -362,7 +362,19 @@ def check_device_name(name: str) -> str:
         raise refuse("name-address", name=excerpt(name, 64))
     if not _NAME.fullmatch(name):
         raise refuse("name-characters", name=excerpt(name, 64))
+    if reads_as_host(name):
+        raise refuse("name-host", name=excerpt(name, 64))
     return name
+
+
+LOCAL_DOMAINS = ("local", "lan", "home", "home.arpa", "internal", "localdomain")
+"""The domains of a local network's host names (`checks.RULES["name-host"]`): a name ending in one is a host."""
+_HOST_NAME = re.compile(r"localhost|.+\.(?:" + "|".join(re.escape(d) for d in LOCAL_DOMAINS) + r")", re.IGNORECASE)
+
+
+def reads_as_host(name: str) -> bool:
+    """True for a name that is a local network's host name a user would give -d: localhost, pr.local, x.lan."""
+    return _HOST_NAME.fullmatch(name) is not None
 
 
 def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = None) -> Target:

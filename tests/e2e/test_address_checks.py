@@ -61,6 +61,8 @@ ADDRESS_CASES: dict[str, list[tuple[str, str]]] = {
 NAME_CASES: dict[str, list[str]] = {
     "name-length": ["n" * 65, "x" * 5000],
     "name-address": ["127.0.0.1", "::1", "10.0.0.5:9100", "tcp://office", "/dev/ttyUSB0", "fe80::1", "COM3"],
+    "name-host": ["localhost", "LOCALHOST", "pr.local", "line-us.LOCAL", "printer.lan", "jr.home", "jr.home.arpa",
+                  "mini.internal", "box.localdomain"],
     "name-characters": ["my printer", "tab\there", "bench\u00e9", "_hidden", ".dot", "semi;colon", "a$b", "q'uote",
                         "\U0001f600", "star*"],
 }
@@ -323,3 +325,11 @@ def test_a_device_id_fits_a_file_name_and_a_topic_level(kind: str, serial: str |
         other = device_id(kind, serial + "x", address, host="bench-pc") if serial and serial.strip() else \
             device_id(kind, serial, address + "x", host="bench-pc")
         assert other != made
+
+
+@pytest.mark.parametrize("name", ["jr-2.0", "mini.1", "lab.mini", "localhost2", "my.local.jr", "v1.2.3", "home"])
+def test_a_name_outside_a_local_network_domain_is_a_name(name: str, tmp_path: Path) -> None:
+    env = env_in(tmp_path)
+    added = run_cli("devices", "add", name, "127.0.0.1", "--kind", "xyz", env=env)
+    assert added.returncode == 0, added.stderr
+    assert name in run_cli("devices", "list", env=env).stdout
