@@ -40,6 +40,12 @@ MAX_NAME = 64
 """The longest device name."""
 CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 """C0 and C1 control characters (a line break, a tab, NUL …): no address holds one, written or %-encoded."""
+INVISIBLE = re.compile(r"[^\S \t]|[\u200b-\u200f\u2060\ufeff]")
+"""Blanks other than ASCII space and tab (no-break, ideographic and other spaces, line and paragraph separators)
+and invisible format characters (zero-width space and joiners, word joiner, byte order mark): copied along with an
+address from a web page or a document, they look like nothing and name another host."""
+ASCII_BLANKS = " \t\r\n"
+"""What is taken off an address's ends: the blanks and line end a copy in a terminal brings."""
 NAME_CHARACTERS = "letters, digits, '.', '_' and '-', starting with a letter or digit"
 
 RULES: dict[str, Rule] = {
@@ -52,6 +58,11 @@ RULES: dict[str, Rule] = {
     "control": Rule("address", "a control character (line break, tab, NUL …) in an address",
                     "it holds a control character {char}",
                     "RFC 3986 §2: a URI is printable characters; devices.toml keeps an address on one line"),
+    "invisible": Rule("address", "a blank other than an ASCII space or tab, or an invisible character, anywhere in an "
+                                 "address (U+00A0 no-break space, U+2028, U+200B zero-width space, U+FEFF)",
+                      "it holds {char}, which looks like nothing or a space: type the address again",
+                      "Unicode's White_Space property and format characters (Cf) that render as nothing; RFC 3986 "
+                      "§2: a URI is ASCII"),
     "scheme": Rule("address", "a scheme other than tcp://, serial:// and sim://", "unknown scheme {scheme}",
                    "RFC 3986 §3.1 (scheme); fabwire opens TCP, serial ports and its own simulators"),
     "tcp-path": Rule("address", "a path or options after a tcp:// address", "a tcp:// address takes no path or options",

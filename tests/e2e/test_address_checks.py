@@ -26,6 +26,8 @@ ADDRESS_CASES: dict[str, list[tuple[str, str]]] = {
     "empty": [("xyz", "   ")],
     "path-too-long": [("xyz", "/dev/" + "x" * 5000), ("mmu", "serial:///" + "y" * 4100)],
     "control": [("xyz", "/dev/tty\x01USB0"), ("lineus", "sim://lineus?name=a%0Ab"), ("xyz", "host\x7f:9100")],
+    "invisible": [("xyz", "127.0.0.1\u00a0"), ("lineus", "\u2028line-us.local"), ("xyz", "tcp://pr\u200b.local:9100"),
+                  ("mmu", "\ufeff/dev/ttyACM0"), ("xyz", "printer\u3000"), ("xyz", "sim://xyz?model=mini\u00a0w")],
     "scheme": [("xyz", "ftp://printer"), ("xyz", LONG + "://h")],
     "tcp-path": [("xyz", "tcp://printer/x"), ("lineus", "tcp://h:1?x=1")],
     "no-host": [("xyz", "tcp://"), ("lineus", ":1337")],

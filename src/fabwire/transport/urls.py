@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import ipaddress
 import re
+import unicodedata
 from urllib.parse import quote, urlencode
 
 import msgspec
 
-from fabwire.checks import CONTROL, MAX_PATH, refuse
+from fabwire.checks import ASCII_BLANKS, CONTROL, INVISIBLE, MAX_PATH, refuse
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError, excerpt
 
@@ -97,12 +98,16 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
     sim:// address must simulate. Every refusal is an InputError worded by its row of `fabwire.checks.RULES`: a
     sim:// address's options are checked here, by the simulator's own table (`simaddress.SIMULATORS`), so an
     address accepted here opens."""
-    text = text.strip()
+    text = text.strip(ASCII_BLANKS)
     if not text:
         raise _bad(text, "empty")
     control = CONTROL.search(text)
     if control:
         raise _bad(text, "control", char=repr(control.group()))
+    invisible = INVISIBLE.search(text)
+    if invisible:
+        char = invisible.group()
+        raise _bad(text, "invisible", char=f"U+{ord(char):04X} ({unicodedata.name(char, 'unnamed')})")
     if text.startswith("/") or WINDOWS_PORT.match(text):
         return _serial(text, text)
     if "://" not in text:
