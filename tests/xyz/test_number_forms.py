@@ -135,3 +135,23 @@ def test_a_malformed_last_line_after_many_blocks_is_refused_with_its_own_number(
     assert done.returncode == 4
     assert f"line {len(lines) + 1}: 'X--1000' is not one plain decimal number" in done.stderr
     assert not (tmp_path / "last.3w").exists()
+
+
+@pytest.mark.parametrize(("line", "advice"), [
+    (b"G1 X5 Y10E1 F1200", "with a blank before E1 if it is a word of its own"),
+    (b"G1 X5 Y-1.5E-0.8", "with a blank before E-0.8 if it is a word of its own"),
+    (b"G1 X5 Y10e1", None),  # lower case: an exponent, not a word
+    (b"G1 X1e3 Y10", None),
+])
+def test_two_words_run_together_are_told_apart_from_an_exponent(tmp_path: Path, line: bytes,
+                                                                 advice: str | None) -> None:
+    source = tmp_path / "glued.gcode"
+    source.write_bytes(b"G28\n" + line + b"\n")
+    result = run_cli("xyz", "convert", str(source), str(tmp_path / "glued.3w"), env=cli_env(tmp_path))
+    assert result.returncode == InputError.exit_code
+    assert result.stderr.count("\n") == 1
+    assert "line 2:" in result.stderr
+    if advice is None:
+        assert "if it is a word of its own" not in result.stderr
+    else:
+        assert result.stderr.rstrip().endswith(advice)

@@ -339,7 +339,17 @@ def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int], star
         line = lines_before() + text.count(b"\n", 0, found.start()) + 1
         shown = excerpt(value.decode("utf-8", "replace"), 30)
         raise InputError(f"{name}: line {line}: {shown} is not one plain decimal number ({form.construct}): "
-                         f"{form.reading}; write each value as plain decimals")
+                         f"{form.reading}; write each value as plain decimals{_glued_word(value)}")
+
+
+_GLUED_WORD = re.compile(rb"[A-Z][ \t]*[+-]?[0-9.]+([EX][+-]?[0-9.]+)")
+"""A word followed by an axis word without a blank between them (`Y10E1`), which strtod reads as one number."""
+
+
+def _glued_word(value: bytes) -> str:
+    """The advice for a value that is two words run together (`Y10E1`: put a blank before E1), else ""."""
+    glued = _GLUED_WORD.fullmatch(value)
+    return f", with a blank before {glued.group(1).decode()} if it is a word of its own" if glued else ""
 
 
 def ambiguous_line(name: str, line: int, text: bytes, rule: LineRule) -> InputError:
