@@ -395,16 +395,18 @@ function render(card) {
   const {device, state} = card;
   const s = state.summary;
   const stateClass = !state.online ? "offline" : s.state === "error" ? "error" : "";
+  const said = Boolean(s.error && state.online && (s.state_text || "").includes(s.error));
   const live = [
     el("header", {},
       el("h3", {}, device.name), el("span", {class: "kind"}, {xyz: "da Vinci", lineus: "Line-us", mmu: "MMU3"}[device.kind]),
       el("span", {class: state.online ? "online" : "offline"}, state.online ? "online" : "offline"),
       el("div", {class: "ident"}, [device.model, device.serial && `serial ${device.serial}`,
         device.firmware && `firmware ${device.firmware}`].filter(Boolean).join(" · "))),
-    // the header already says "offline": the state line gives the reason alone
-    el("div", {class: `state ${stateClass}`, "data-state": s.state},
+    // the header already says "offline": the state line gives the reason alone; a state line that already
+    // names the error (the MMU's explained fault) is the alert itself, so the error is not said twice
+    el("div", {class: `state ${stateClass}${said ? " error-box" : ""}`, "data-state": s.state, ...(said ? {role: "alert"} : {})},
       !state.online && s.state_text ? s.state_text.replace(/^offline: /, "") : s.state_text || s.state),
-    s.error ? el("div", {class: "error-box", role: "alert"}, s.error) : null,
+    s.error && !said ? el("div", {class: "error-box", role: "alert"}, s.error) : null,
     progressSection(card, s),
     ...(state.online ? kindSection(card, s) : []),
   ];
