@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -553,3 +554,27 @@ def scan(padded: bytes) -> Scan | None:
 
 
 _NO_WORDS = Words(np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0, dtype=bool))
+
+PIECE = 1 << 20
+"""Bytes read into arrays at once: the per-word arrays of a piece this size stay in the CPU's cache."""
+
+
+def scanned_pieces(chunk: bytes) -> Iterator[tuple[int, int, Scan | None]]:
+    """The pieces of whole lines (about PIECE bytes each) of `chunk`, which starts at a line start, each as
+    (its start offset, its end offset, `scan` of it: None for a layout only the line-by-line reader handles). The
+    last line of `chunk` may lack its newline."""
+    view = memoryview(chunk)
+    start = 0
+    while start < len(chunk):
+        end = chunk.find(b"\n", start + PIECE) + 1 or len(chunk)
+        ended = b"" if chunk[end - 1] == 10 else b"\n"
+        yield start, end, scan(b"".join((b"\n", view[start:end], ended, bytes(PAD))))
+        start = end
+
+
+def odd_from(start: int, found: Scan | None) -> int | None:
+    """Where, in the chunk, the first line of the piece at `start` that may hold a malformed number is (`Scan.odd_at`;
+    the piece's start when the array reader left it to the line reader), or None when no line can."""
+    if found is None:
+        return start
+    return None if found.odd_at is None else start + found.odd_at - 1

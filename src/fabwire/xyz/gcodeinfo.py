@@ -107,8 +107,6 @@ _NO_SUBCODE = {b"G0", b"G1", b"G2", b"G3", b"G92", b"G20", b"G21"}
 """Commands refused with a subcode (`gcodearrays.SUBCODE`): they move, set the position or set units."""
 _WORD = re.compile(rb"([A-Z])[ \t]*(" + VALUE + rb")")
 _PAREN_COMMENT = re.compile(rb"\([^)]*\)?")
-_PIECE = 1 << 20
-"""Bytes analysed at once: the per-word arrays of a piece this size stay in the CPU's cache."""
 
 
 def _ffill(values: NDArray[np.float64], start: float) -> NDArray[np.float64]:
@@ -348,13 +346,9 @@ class MoveAnalyzer:
         `odd` collects the (start, end) offsets of the parts of `chunk`, from a line start to a line end, outside
         which no G line holds a word of `gcodearrays.NUMBER_FORMS` in its code."""
         self._count_markers(chunk)
-        start = 0
-        view = memoryview(chunk)
         g0_words: list[NDArray[np.intp]] | None = []
-        while start < len(chunk):  # bounded pieces keep the per-word arrays small
-            end = chunk.find(b"\n", start + _PIECE) + 1 or len(chunk)
+        for start, end, found in gcodearrays.scanned_pieces(chunk):  # bounded pieces keep the word arrays small
             ended = b"" if chunk[end - 1] == 10 else b"\n"  # the last line of a chunk without its newline
-            found = gcodearrays.scan(b"".join((b"\n", view[start:end], ended, bytes(gcodearrays.PAD))))
             try:
                 if found is None:
                     self._lines(chunk[start:end] + ended)
@@ -363,16 +357,13 @@ class MoveAnalyzer:
             except Ambiguous as exc:  # the line reader, started afresh on the piece, says where
                 raise Ambiguous(exc.rule, start + _ambiguous_at(chunk[start:end] + ended, exc)) from None
             if found is None:
-                odd_at: int | None = start
                 g0_words = None
-            else:
-                odd_at = None if found.odd_at is None else start + found.odd_at - 1
-                if g0_words is not None and found.g0_at is not None:
-                    g0_words.append(found.g0_at + (start - 1))
+            elif g0_words is not None and found.g0_at is not None:
+                g0_words.append(found.g0_at + (start - 1))
+            odd_at = gcodearrays.odd_from(start, found)
             del found  # its arrays are not held while the next piece is read
             if odd is not None and odd_at is not None:
                 odd.append((odd_at, end))
-            start = end
         if self.g0_words is not None:
             self.g0_words.append(None if g0_words is None else np.concatenate(g0_words or [np.zeros(0, np.intp)]))
 
