@@ -332,15 +332,16 @@ def parse_numbers(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp]) 
     return parse_words(padded, data, at)[0]
 
 
-def parse_words(padded: bytes, data: NDArray[np.uint8],
-                at: NDArray[np.intp]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+def parse_words(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp], first: NDArray[np.uint8] | None = None
+                ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """(the numbers starting at offsets `at` of some text followed by PAD zero bytes, as float() reads them, NaN
-    where no number starts; how many bytes each number spans, sign included).
+    where no number starts; how many bytes each number spans, sign included). `first`: the bytes at `at`, when the
+    caller has them.
 
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    sign = data[at]
+    sign = data[at] if first is None else first
     negative = sign == ord("-")
     low, high = _eight_bytes(data, at + (negative | (sign == ord("+"))))  # the digits after any sign
     low ^= _ZEROS
@@ -393,13 +394,18 @@ class Scan:
     than blanks before the next letter, or a `SUSPECT_LINE` among the other G lines (None when no line may)."""
 
 
-def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> None:
-    """Move each offset `at` past the blanks (space, tab) there, in place: each round only the offsets still on a
-    blank move, so a long run of blanks costs its own length, not that times every word's."""
-    moving = np.flatnonzero(_BLANK[data[at]])
+def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.uint8]:
+    """Move each offset `at` past the blanks (space, tab) there, in place, and return the bytes there now: each
+    round only the offsets still on a blank move, so a long run of blanks costs its own length, not that times every
+    word's."""
+    first = data[at]
+    moving = np.flatnonzero(_BLANK[first])
+    if not len(moving):
+        return first
     while len(moving):
         at[moving] += 1
         moving = moving[_BLANK[data[at[moving]]]]
+    return data[at]
 
 
 def _ends_word(data: NDArray[np.uint8], after: NDArray[np.intp],
@@ -492,7 +498,8 @@ def scan(padded: bytes) -> Scan | None:
     inline_comments = False  # a `;` after the code of a move (comment lines are no moves)
     if b";" in padded:
         is_semi = kind == _SEMICOLON
-        semis, semi_lines = where[is_semi], line_of[is_semi]
+        semi_at = np.flatnonzero(is_semi)
+        semis, semi_lines = where[semi_at], line_of[semi_at]
         first = np.diff(semi_lines, prepend=-1) != 0  # the first `;` of each line ends its code
         inline_comments = bool(is_row[semi_lines].any())
         code_end = code_end.copy()
@@ -510,10 +517,11 @@ def scan(padded: bytes) -> Scan | None:
     if np.count_nonzero(keep & (kind == 2)) > np.count_nonzero(is_row):  # each of these lines starts with a G
         return None  # a second command word in a move: the line reader refuses it
     keep &= kind == 1
-    where, line_of = where[keep], line_of[keep]
+    kept = np.flatnonzero(keep)
+    where, line_of = where[kept], line_of[kept]
     at = where + 1
-    after_blanks(data, at)  # blanks between a letter and its number
-    numbers, spans = parse_words(padded, data, at)
+    first = after_blanks(data, at)  # blanks between a letter and its number
+    numbers, spans = parse_words(padded, data, at, first)
     axis = _AXIS_INDEX[data[where]]
     known = ~np.isnan(numbers)
     rows = np.flatnonzero(is_row)
