@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from clitools import cli_env, run_cli
 from fabwire.xyz.gcodeinfo import header_metadata
-from fabwire.xyz.slicerfigures import WORDINGS, read_value, stated_figures
+from fabwire.xyz.slicerfigures import UNREADABLE, WORDINGS, read_value, stated_figures
 
 EXAMPLES: list[tuple[bytes, float]] = [
     (b"; print_time = 2351", 2351),
@@ -194,3 +194,40 @@ def test_info_computes_figures_written_with_exponents(tmp_path: Path, text: byte
     assert shown.returncode == 0, shown.stderr
     assert "(stated)" not in shown.stdout
     assert "exponent" in shown.stdout + shown.stderr
+
+
+UNREADABLE_FORMS = {"a placeholder": [b"{print_time}", b"[used_filament]", b"%TIME%", b"<TIME>", b"$time"],
+                    "a negative figure": [b"-5", b"- 12.5", b"-0.5"],
+                    "digits grouped": [b"1,234", b"12,345.5", "1\u00a0234".encode(), "2\u202f500".encode(), b"1'234"],
+                    "no number": [b"", b"unknown", b"n/a"]}
+
+
+def test_every_unreadable_form_has_examples() -> None:
+    assert {why.split(" (")[0].split(",")[0] for _form, why, _source in UNREADABLE} >= {
+        "a placeholder the slicer never filled in", "a negative figure", "digits grouped by a separator",
+        "a number with an exponent"}
+    assert all(source for _form, _why, source in UNREADABLE)
+
+
+@pytest.mark.parametrize(("row", "example"), list(zip(WORDINGS, EXAMPLES, strict=True)),
+                         ids=[f"{w.slicer}-{w.figure}-{i}" for i, w in enumerate(WORDINGS)])
+@pytest.mark.parametrize(("form", "value"), [(form, value) for form, values in UNREADABLE_FORMS.items()
+                                             for value in values], ids=repr)
+def test_each_wording_with_a_value_that_is_no_figure_is_set_aside_with_a_note(
+        row: object, example: tuple[bytes, float], form: str, value: bytes) -> None:
+    """Placeholders, negative figures, grouped digits and empty values are not read as figures: a wording that
+    still matches says why it is set aside; one that does not (its words need a number) states nothing."""
+    text = example[0].split(b"\n")[0]
+    found = row.pattern.search(text)  # type: ignore[attr-defined]
+    assert found is not None
+    changed = text[:found.start(1)] + value  # the whole value: `2h 3m 4s` is one figure
+    meta = header_metadata(changed + b"\nG28\n")
+    field = {"time": "print_time_s", "filament": "filament_mm", "layers": "layers"}[row.figure]  # type: ignore[attr-defined]
+    assert getattr(meta, field) is None
+    figure = {"time": "print time", "filament": "filament", "layers": "layer count"}[row.figure]  # type: ignore[attr-defined]
+    notes = [note for note in meta.notes if note.startswith(f"the stated {figure} is not believed")]
+    if row.pattern.search(changed) is not None:  # type: ignore[attr-defined]
+        assert len(notes) == 1, (changed, meta.notes)
+        assert form.split()[-1] in notes[0] or form in notes[0], notes
+    else:
+        assert notes == []

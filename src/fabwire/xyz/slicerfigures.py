@@ -195,23 +195,53 @@ class Stated:
     """The row that gave each believed figure."""
 
 
-def _find(wording: Wording, windows: Sequence[bytes]) -> tuple[bytes, float] | None:
-    """(the matched text, its value) for the first window where `wording` matches with a number; NaN for a number
-    with an exponent (`_EXPONENT`)."""
+UNREADABLE: tuple[tuple[re.Pattern[bytes], str, str], ...] = (
+    (_EXPONENT, "a number with an exponent, which no slicer writes and readers take differently",
+     "C strtod(3) reads 3.5e3 as 3500, a reader of plain numbers as 3.5"),
+    (re.compile(rb"[{\[<%$][ \t]*[A-Za-z_]"), "a placeholder the slicer never filled in",
+     "PrusaSlicer/Slic3r [print_time] and {print_time}, Cura {print_time} and %TIME% in start G-code templates"),
+    (re.compile(rb"-[ \t]*[0-9.]"), "a negative figure, which no print has",
+     "a duration, a length or a count is not negative; CuraEngine writes ;TIME:-1 when it has no estimate"),
+    (re.compile(rb"[0-9](?:[,'\xa0]|\xc2\xa0|\xe2\x80\xaf)[0-9]{3}(?![0-9])"),  # U+00A0, U+202F in UTF-8
+     "digits grouped by a separator (1,234), which readers take as 1 or as 1234",
+     "CLDR number formats: ',' and U+00A0 group thousands in some locales, ',' is the decimal mark in others"),
+)
+"""Stated figures that are not read as numbers: (the form, why it is set aside, source). A wording whose text has
+one of these forms, or no number at all, is set aside with that reason and the figure is computed instead."""
+
+
+def _unreadable(text: bytes) -> str | None:
+    """Why the text after a wording is no figure (`UNREADABLE`, or no number in it), None when it reads."""
+    for form, why, _source in UNREADABLE:
+        if form.search(text):
+            return why
+    return None if _ANY_NUMBER.search(text) else "no number"
+
+
+def _find(wording: Wording, windows: Sequence[bytes]) -> tuple[bytes, float | str] | None:
+    """(the matched text, its value, or why it is no figure: `_unreadable`) for the first window where `wording`
+    matches."""
     for window in windows:
-        found = list(wording.pattern.finditer(window)) if wording.every else [wording.pattern.search(window)]
-        read = [(m.group(0), math.nan if _EXPONENT.search(m.group(1)) else read_value(m.group(1), wording.unit))
-                for m in found if m is not None]
-        values = [(text, v) for text, v in read if v is not None]
-        if values:
-            return values[0][0].strip(), sum(v for _t, v in values)
+        found = [m for m in (wording.pattern.finditer(window) if wording.every else [wording.pattern.search(window)])
+                 if m is not None]
+        if not found:
+            continue
+        for match in found:
+            why = _unreadable(match.group(1))
+            if why is not None:
+                return match.group(0).strip(), why
+        values = [(m.group(0), read_value(m.group(1), wording.unit)) for m in found]
+        read = [(text, v) for text, v in values if v is not None]
+        if read:
+            return read[0][0].strip(), sum(v for _t, v in read)
+        return found[0].group(0).strip(), "no number"
     return None
 
 
-def _implausible(figure: Figure, value: float) -> str | None:
+def _implausible(figure: Figure, value: float | str) -> str | None:
     limit = {"time": MAX_PRINT_S, "filament": MAX_FILAMENT_MM, "layers": MAX_COUNT}[figure]
-    if math.isnan(value):
-        return "a number with an exponent, which no slicer writes and readers take differently"
+    if isinstance(value, str):
+        return value
     if value <= 0:
         return "zero"
     if value > limit:
@@ -249,7 +279,7 @@ def stated_figures(windows: Sequence[bytes]) -> Stated:
         if why is not None:
             rejected.append((wording.figure, f"`{shown}` states {why}"))
             continue
-        found[wording.figure] = value
+        found[wording.figure] = float(value)
         rows.append((wording.figure, wording))
     rejected = list(dict.fromkeys((figure, why) for figure, why in rejected if figure not in found))
     time_s = found.get("time")
