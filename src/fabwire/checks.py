@@ -46,6 +46,8 @@ and invisible format characters (zero-width space and joiners, word joiner, byte
 address from a web page or a document, they look like nothing and name another host."""
 ASCII_BLANKS = " \t\r\n"
 """What is taken off an address's ends: the blanks and line end a copy in a terminal brings."""
+NUMERIC_HOST = re.compile(r"(?:0[xX][0-9a-fA-F]*|[0-9]+)(?:\.(?:0[xX][0-9a-fA-F]*|[0-9]+))*\.?")
+"""A host the resolver reads as a number (`RULES["ipv4-form"]`): inet_aton's forms, decimal, octal and hex."""
 NAME_CHARACTERS = "letters, digits, '.', '_' and '-', starting with a letter or digit"
 
 RULES: dict[str, Rule] = {
@@ -73,6 +75,12 @@ RULES: dict[str, Rule] = {
                  "{host} is not a valid host name or IP address",
                  "RFC 1123 §2.1 and RFC 1035 §2.3.4 (labels of letters, digits and '-', 63 each, 253 in all); "
                  "RFC 791 and RFC 4291 §2.2 (IP addresses)"),
+    "ipv4-form": Rule("address", "a host of digits (and 0x hex) that is not four decimal numbers 0-255: 192.168.1, "
+                                 "2130706433, 0x7f000001, 0177.0.0.1, 192.168.1.256",
+                      "{host} is not a whole IPv4 address (four numbers 0 to 255): the resolver would take it for "
+                      "another address or none",
+                      "inet_aton(3): a.b.c and a.b are shortened forms, one number is the whole address, 0x is hex "
+                      "and a leading 0 octal (192.168.1 reaches 192.168.0.1); RFC 3986 §7.4"),
     "bracket": Rule("address", "an IPv6 literal without its closing ']'", "unclosed '[' in IPv6 address",
                     "RFC 3986 §3.2.2: IP-literal = \"[\" IPv6address \"]\""),
     "after-bracket": Rule("address", "text after an IPv6 literal's ']' other than :port", "unexpected text after ']'",

@@ -23,7 +23,7 @@ from typing import Annotated, Any, Literal, get_args, get_type_hints
 
 import msgspec
 
-from fabwire.checks import MAX_NAME, refuse
+from fabwire.checks import MAX_NAME, NUMERIC_HOST, refuse
 from fabwire.devices import KINDS, DeviceKind
 from fabwire.errors import ConfigError, ConfigWarning, InputError, closest, excerpt
 from fabwire.files import read_bounded
@@ -343,7 +343,7 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 
 def reads_as_address(name: str) -> bool:
     """True for a name `-d` would otherwise take as an address: an IP address, host:port, a URL or a path."""
-    if _looks_like_address(name) or WINDOWS_PORT.match(name):
+    if _looks_like_address(name) or WINDOWS_PORT.match(name) or NUMERIC_HOST.fullmatch(name):
         return True
     try:
         ipaddress.ip_address(name)
@@ -374,7 +374,7 @@ _HOST_NAME = re.compile(r"localhost|.+\.(?:" + "|".join(re.escape(d) for d in LO
 
 def reads_as_host(name: str) -> bool:
     """True for a name that is a local network's host name a user would give -d: localhost, pr.local, x.lan."""
-    return _HOST_NAME.fullmatch(name) is not None
+    return _HOST_NAME.fullmatch(name.rstrip(".")) is not None  # `localhost.` is the same host, fully qualified
 
 
 def resolve_target(device: str | None, kind: DeviceKind, path: Path | None = None) -> Target:

@@ -32,6 +32,8 @@ ADDRESS_CASES: dict[str, list[tuple[str, str]]] = {
     "tcp-path": [("xyz", "tcp://printer/x"), ("lineus", "tcp://h:1?x=1")],
     "no-host": [("xyz", "tcp://"), ("lineus", ":1337")],
     "host": [("xyz", "bad host!"), ("xyz", "tcp://" + "h" * 300), ("lineus", "tcp://-x:1337"), ("xyz", WIDE)],
+    "ipv4-form": [("xyz", "192.168.1"), ("xyz", "2130706433"), ("lineus", "0x7f000001:1337"), ("xyz", "0177.0.0.1"),
+                  ("xyz", "192.168.1.256"), ("mmu", "tcp://10.1:5000"), ("xyz", "127.1.")],
     "bracket": [("lineus", "[::1"), ("lineus", "tcp://[::1:1337")],
     "after-bracket": [("lineus", "[::1]x")],
     "empty-port": [("xyz", "printer:")],
@@ -62,9 +64,10 @@ ADDRESS_CASES: dict[str, list[tuple[str, str]]] = {
 }
 NAME_CASES: dict[str, list[str]] = {
     "name-length": ["n" * 65, "x" * 5000],
-    "name-address": ["127.0.0.1", "::1", "10.0.0.5:9100", "tcp://office", "/dev/ttyUSB0", "fe80::1", "COM3"],
+    "name-address": ["127.0.0.1", "::1", "10.0.0.5:9100", "tcp://office", "/dev/ttyUSB0", "fe80::1", "COM3", "127.1",
+                     "2130706433", "0x7f000001", "0177.0.0.1", "10.0.0.5."],
     "name-host": ["localhost", "LOCALHOST", "pr.local", "line-us.LOCAL", "printer.lan", "jr.home", "jr.home.arpa",
-                  "mini.internal", "box.localdomain"],
+                  "mini.internal", "box.localdomain", "localhost.", "printer.local.", "a.local.."],
     "name-characters": ["my printer", "tab\there", "bench\u00e9", "_hidden", ".dot", "semi;colon", "a$b", "q'uote",
                         "\U0001f600", "star*"],
 }

@@ -9,7 +9,7 @@ from urllib.parse import quote, urlencode
 
 import msgspec
 
-from fabwire.checks import ASCII_BLANKS, CONTROL, INVISIBLE, MAX_PATH, refuse
+from fabwire.checks import ASCII_BLANKS, CONTROL, INVISIBLE, MAX_PATH, NUMERIC_HOST, refuse
 from fabwire.devices import DeviceKind
 from fabwire.errors import InputError, excerpt
 
@@ -59,6 +59,8 @@ def _check_host(text: str, host: str) -> str:
     try:
         ipaddress.ip_address(host)
     except ValueError:
+        if NUMERIC_HOST.fullmatch(host):
+            raise _bad(text, "ipv4-form", host=excerpt(host, 40)) from None
         if not _HOSTNAME.match(host):
             raise _bad(text, "host", host=excerpt(host, 40)) from None
     return host
