@@ -17,7 +17,7 @@ from typing import Any, get_origin, get_type_hints
 import click
 import msgspec
 
-from fabwire.checks import refuse
+from fabwire.checks import ASCII_BLANKS, refuse
 from fabwire.cli_options import device_names
 from fabwire.cli_support import App, pass_app
 from fabwire.config import (
@@ -171,7 +171,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     if name in existing:
         raise ConfigError(f"{path} already has a device named {name!r}: remove it first")
     kind = KINDS[kind_name]
-    values: dict[str, Any] = {"kind": kind_name, "url": url}
+    values: dict[str, Any] = {"kind": kind_name, "url": url.strip(ASCII_BLANKS)}  # as parse_url reads it
     if is_default:
         values["default"] = True
     schema = SCHEMAS[kind_name]
@@ -190,7 +190,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
             raise refuse("set-control", key=key, value=excerpt(value, 40))
         values[key] = value
     validate_settings(kind, {k: v for k, v in values.items() if k != "kind"}, what="setting")
-    parse_url(url, kind)  # the address as -d reads it: refused here, before the file is touched
+    machine = parse_url(url, kind).machine  # the address as -d reads it: refused here, before the file is touched
     if kind_name == "xyz" and isinstance(values.get("model"), str):
         from fabwire.xyz.models import find_model
 
@@ -198,6 +198,10 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
             find_model(values["model"])  # a model the printer table does not know would only fail at print time
         except InputError as exc:
             raise refuse("set-model", problem=str(exc)) from None
+    for other in existing.values():  # `fabwire serve` monitors each machine once (`agent.command.one_each`)
+        if other.kind is kind and other.endpoint.machine == machine:
+            raise InputError(f"{excerpt(url, 60)} is the machine {other.name!r} names already "
+                             f"({other.endpoint.url}): one machine has one name")
     section = f"[devices.{_toml_key(name)}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items())
     separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
     _write(path, text + separator + section)

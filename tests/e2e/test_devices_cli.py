@@ -199,3 +199,37 @@ def test_an_entry_that_cannot_work_is_refused_before_the_file_is_touched(args: l
     assert said in refused.stderr
     assert ", line " not in refused.stderr  # the file has no such line: the entry was never written
     assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize(("first", "second"), [
+    ("printer.local", "tcp://printer.local"), ("printer.local", "PRINTER.LOCAL:9100"),
+    ("printer.local", "printer.local."), ("127.0.0.7", "127.0.0.7:9100"), ("127.0.0.7", " 127.0.0.7 "),
+])
+def test_a_machine_already_named_is_not_named_again(tmp_path: Path, first: str, second: str) -> None:
+    """`fabwire serve` monitors each machine once: `devices add` refuses the second name before the file changes."""
+    path = tmp_path / "devices.toml"
+    env = env_for(path)
+    assert run_cli("devices", "add", "office", first, "--kind", "xyz", env=env).returncode == 0
+    before = path.read_text()
+    again = run_cli("devices", "add", "desk", second, "--kind", "xyz", env=env)
+    assert again.returncode == InputError.exit_code, again.stdout
+    assert "'office' names already" in again.stderr
+    assert path.read_text() == before
+    assert run_cli("devices", "add", "arm", second, "--kind", "lineus", env=env).returncode == 0  # another kind
+
+
+@pytest.mark.parametrize(("kind", "address", "stored"), [("xyz", " 127.0.0.7\t", "127.0.0.7"),
+                                                         ("xyz", "127.0.0.7:9100\r\n", "127.0.0.7:9100"),
+                                                         ("mmu", "COM3", "COM3")])
+def test_an_address_is_kept_as_it_is_read_and_serve_takes_it(tmp_path: Path, kind: str, address: str,
+                                                             stored: str) -> None:
+    path = tmp_path / "devices.toml"
+    env = env_for(path)
+    added = run_cli("devices", "add", "bench", address, "--kind", kind, env=env)
+    assert added.returncode == 0, added.stderr
+    assert f'url = "{stored}"' in path.read_text()
+    from fabwire.config import load_devices
+    from fabwire.transport.urls import parse_url
+
+    device = load_devices(path)["bench"]
+    assert parse_url(device.endpoint.url, device.kind) == device.endpoint  # what serve reads back

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import functools
 import gc
 import ipaddress
@@ -24,6 +25,7 @@ from fabwire.agent.auth import TOKEN_FILE, is_loopback, load_or_create_token
 from fabwire.agent.boundary import Policy, normal_host, split_authority
 from fabwire.agent.core import KINDS, Agent, DeviceSpec, demo_id
 from fabwire.agent.terminal import Terminal
+from fabwire.checks import ASCII_BLANKS
 from fabwire.cli_support import App, FiniteRange, pass_app
 from fabwire.errors import FabwireError, InputError, excerpt
 from fabwire.mqtt.options import BrokerURL
@@ -96,7 +98,7 @@ def checked_device(spec: DeviceSpec) -> DeviceSpec:
 
     check_device_name(spec.name)
     parse_url(spec.address, DEVICE_KINDS[spec.kind])
-    return spec
+    return dataclasses.replace(spec, address=spec.address.strip(ASCII_BLANKS))  # as parse_url reads it
 
 
 def one_each(specs: list[DeviceSpec]) -> None:
@@ -107,12 +109,12 @@ def one_each(specs: list[DeviceSpec]) -> None:
     from fabwire.transport.urls import parse_url
 
     names: dict[str, DeviceSpec] = {}
-    machines: dict[tuple[str, str], DeviceSpec] = {}
+    machines: dict[tuple[str, tuple[str, str, int, str]], DeviceSpec] = {}
     for spec in specs:
         if spec.name in names:
             raise InputError(f"a device named {excerpt(spec.name, 60)} is given twice (--device or devices.toml)")
         names[spec.name] = spec
-        where = (spec.kind, parse_url(spec.address, DEVICE_KINDS[spec.kind]).url)
+        where = (spec.kind, parse_url(spec.address, DEVICE_KINDS[spec.kind]).machine)
         if where in machines:
             raise InputError(f"{excerpt(spec.address, 60)} is given twice, as {machines[where].name!r} and "
                              f"{spec.name!r}: one machine is monitored once")

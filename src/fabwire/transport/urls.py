@@ -37,6 +37,13 @@ class Endpoint(msgspec.Struct, frozen=True):
         query = urlencode(self.options, quote_via=quote, safe="/:,@")  # reads back as the same options
         return f"sim://{self.host}" + (f"?{query}" if query else "")
 
+    @property
+    def machine(self) -> tuple[str, str, int, str]:
+        """What names one machine, however the address was spelt: a host name's case and its root dot do not
+        matter (RFC 4343, RFC 1034 §3.1); two addresses with the same `machine` reach the same device."""
+        host = self.host.lower().rstrip(".") if self.scheme == "tcp" else self.host
+        return self.scheme, host, self.port, self.path
+
 
 def _bad(text: str, code: str, **fields: object) -> InputError:
     """Rule `code`'s refusal of address `text` (`fabwire.checks.RULES`)."""
@@ -122,7 +129,7 @@ def parse_url(text: str, kind: DeviceKind | None = None) -> Endpoint:
             raise _bad(text, "tcp-path")
         return _tcp(text, netloc, kind)
     if scheme == "serial":
-        if not rest.startswith("/"):
+        if not rest.startswith("/") and not WINDOWS_PORT.fullmatch(rest):
             raise _bad(text, "serial-path")
         return _serial(text, rest)
     if scheme == "sim":
