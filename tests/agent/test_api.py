@@ -166,6 +166,12 @@ def test_devices_added_and_removed_at_run_time(bench: Bench, simulator: Any) -> 
             refused = _error(client.post("/api/v1/devices", json={"name": "p", "kind": "xyz", "address": path}),
                              400, 4)
             assert "not a serial port" in refused["message"]
+        for address in ("sim://xyz?state=/tmp/agent-state.json", "sim://xyz?store=/tmp/agent-store",
+                        "sim://xyz?speed=5&store=/etc"):
+            refused = _error(client.post("/api/v1/devices", json={"name": "p", "kind": "xyz", "address": address}),
+                             400, 4)
+            assert "takes no file or folder" in refused["message"]
+        assert not Path("/tmp/agent-store").exists()
         _error(client.post("/api/v1/devices", json={"name": "p", "kind": "mmu", "address": second.url,
                                                      "options": {"sped": 3}}), 400, 4)
         assert client.delete(f"/api/v1/devices/{added['id']}").status_code == 204
