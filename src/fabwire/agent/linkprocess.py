@@ -347,5 +347,12 @@ class ProcessLink:
     async def stop_job(self) -> None:
         await self.process.call(self.number, "stop_job", start=False)
 
+    async def check_upload(self, name: str, path: Path) -> None:
+        await self.process.call(self.number, "check_upload", name, path)
+
+    async def describe_upload(self, name: str, path: Path, *, check: bool) -> dict[str, Any]:
+        result: dict[str, Any] = await self.process.call(self.number, "describe_upload", name, path, check)
+        return result
+
     def release(self) -> None:
         self.process.release(self)

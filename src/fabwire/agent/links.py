@@ -25,8 +25,9 @@ if TYPE_CHECKING:
     from fabwire.agent.linkthread import LinkThread
 
 LINK_PROCESS_FROM = 20
-"""Machines from which an agent's links run in a process of their own (measured: with 250 printers polled beside
-the API in one interpreter its p99 is half again that of 25; a typical owner's 1-3 machines pay no process)."""
+"""Machines from which an agent's links run in a process of their own. A typical owner's 1-3 machines pay no
+second interpreter (some 45 MB resident, about a second to start); a bench's polls, sharing the agent's, would make
+its API's p99 latency grow with their number (2.3x from 250 to 1,000 printers on a loaded machine)."""
 LINKS_ENV = "FABWIRE_LINKS"
 LINK_MODES = ("auto", "thread", "process")
 
@@ -75,6 +76,13 @@ class DeviceLink(Protocol):
         """The driver's `run_job`, its reports to `LinkOwner.job_progress` and the like."""
 
     async def stop_job(self) -> None: ...
+
+    async def check_upload(self, name: str, path: Path) -> None:
+        """The driver's `check_upload` of the stored upload at `path`, in a thread beside the link's driver (its
+        checks read what the machine last said: a printer's model); cancelling the wait stops it between stages."""
+
+    async def describe_upload(self, name: str, path: Path, *, check: bool) -> dict[str, Any]:
+        """The driver's `describe_upload`, as `check_upload` runs it."""
 
     def release(self) -> None:
         """This link is no longer used (after its `close`)."""

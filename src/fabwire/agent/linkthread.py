@@ -6,6 +6,7 @@ import asyncio
 import sys
 import threading
 from collections.abc import Callable, Coroutine
+from functools import partial
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -13,6 +14,7 @@ from fabwire.agent.core import DeviceSpec
 from fabwire.agent.drivers.base import Identity
 from fabwire.agent.links import LinkOwner
 from fabwire.agent.linkside import LinkSide, Polled
+from fabwire.agent.offload import in_thread
 
 T = TypeVar("T")
 SWITCH_INTERVAL_S = 0.0005
@@ -126,6 +128,12 @@ class ThreadLink:
 
     async def stop_job(self) -> None:
         await self._links.run(self.driver.stop_job())
+
+    async def check_upload(self, name: str, path: Path) -> None:
+        await in_thread(self.driver.check_upload, name, path)
+
+    async def describe_upload(self, name: str, path: Path, *, check: bool) -> dict[str, Any]:
+        return await in_thread(partial(self.driver.describe_upload, check=check), name, path)
 
     def release(self) -> None:
         links = self._links

@@ -16,11 +16,13 @@ import logging
 import os
 import socket
 import sys
+from functools import partial
 from typing import Any
 
 from fabwire.agent.linkside import LinkSide
 from fabwire.agent.linkthread import DELIVER_EVERY_S
 from fabwire.agent.linkwire import UNCHANGED, Unframer, frame, pack_error
+from fabwire.agent.offload import in_thread
 
 NICENESS = 4
 """How much lower the links' process's scheduling priority is than the agent's (nice(2) steps)."""
@@ -95,6 +97,11 @@ class Worker(asyncio.Protocol):
                 result: Any = await side.driver.run_job(path, job_type, _Handle(self, link), params)
             elif operation in ("poll_forever", "poll_now", "act_then_poll"):
                 result = await getattr(side, operation)(*args)
+            elif operation == "check_upload":
+                result = await in_thread(side.driver.check_upload, *args)
+            elif operation == "describe_upload":
+                name, path, check = args
+                result = await in_thread(partial(side.driver.describe_upload, check=check), name, path)
             elif operation in ("connect", "close", "act", "stop_job"):
                 result = await getattr(side.driver, operation)(*args)
             else:
@@ -104,7 +111,10 @@ class Worker(asyncio.Protocol):
         except Exception as exc:
             self.send(("err", call, pack_error(exc)))
         else:
-            self.send(("ok", call, result))
+            try:
+                self.send(("ok", call, result))
+            except Exception as exc:  # a result that cannot travel: the agent hears why rather than waiting
+                self.send(("err", call, pack_error(exc)))
         finally:
             self._calls.pop(call, None)
 

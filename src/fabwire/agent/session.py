@@ -581,9 +581,7 @@ class JobClaim:
             raise RuntimeError("this claim is already used or released")
         path = await self._upload.finish() if self._upload is not None else None
         if path is not None:
-            from fabwire.agent.offload import in_thread
-
-            await in_thread(session.driver.check_upload, self.filename or path.name, path)
+            await session.link.check_upload(self.filename or path.name, path)
         job = await session.agent.jobs.create(session.info.id, self.job_type, self.filename, self._upload,
                                               params or {}, job_id=self.job_id, file_meta=file_meta)
         self._started = True
