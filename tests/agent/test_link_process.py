@@ -136,3 +136,19 @@ async def test_a_few_machines_stay_on_the_thread(tmp_path: Path, monkeypatch: py
         agent.expected_devices = LINK_PROCESS_FROM
         assert wants_process(agent, tcp, 0)
         assert not wants_process(agent, DeviceSpec("s", "xyz", "sim://xyz"), LINK_PROCESS_FROM * 2)
+
+
+async def test_an_upload_is_checked_against_the_machine_the_child_polls(tmp_path: Path,
+                                                                       printer: RunningSimulator) -> None:
+    from .doortools import prusaslicer_gcode
+
+    wide = prusaslicer_gcode() + b"G1 X200 Y10 E5\n"  # beyond the simulated da Vinci mini w's 150 mm
+    async with Agent(state_dir=tmp_path, links="process") as agent:
+        info = await agent.add_device(DeviceSpec("printer", "xyz", printer.url))
+        subscription = agent.subscribe(info.id)
+        while agent.state(info.id).get("status") is None:  # the model is known from a poll on
+            await _event(subscription, "state")
+        await subscription.aclose()
+        with pytest.raises(InputError, match="moves beyond the da Vinci mini w's build volume"):
+            await agent.start_job(info.id, "wide.gcode", wide)
+        assert await agent.jobs.list() == []  # refused as the answer: no job recorded

@@ -129,9 +129,12 @@ class LinkProcess:
             try:
                 await self._spawn()
             except BaseException as exc:
-                self._starting.set_exception(LinkError(f"the links' process could not start: {exc}"))
-                self._starting.exception()  # retrieved: those waiting get it from here
-                raise LinkError(f"the links' process could not start: {exc}") from exc
+                failed = LinkError(f"the links' process could not start: {exc or type(exc).__name__}")
+                self._starting.set_exception(failed)
+                self._starting.exception()  # retrieved: those waiting get it from there
+                if isinstance(exc, Exception):
+                    raise failed from exc
+                raise  # cancelled (the session stops): that, not a link's failure
             else:
                 self._starting.set_result(None)
             finally:
