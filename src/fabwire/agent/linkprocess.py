@@ -255,7 +255,7 @@ def _spawn_child() -> tuple[socket.socket, subprocess.Popen[bytes]]:
         env = dict(os.environ)
         source = str(Path(fabwire.__file__).resolve().parents[1])  # the child imports the same fabwire
         env["PYTHONPATH"] = os.pathsep.join(p for p in (source, env.get("PYTHONPATH")) if p)
-        level = str(logging.getLogger().getEffectiveLevel())
+        level = str(logging.getLogger("fabwire").getEffectiveLevel())  # -v, -vv: the wire's bytes too
         child = subprocess.Popen([sys.executable, "-m", "fabwire.agent.linkworker", str(theirs.fileno()), level],
                                  pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
     except BaseException:

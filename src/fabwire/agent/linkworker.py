@@ -181,14 +181,14 @@ def yield_to_agent() -> None:
 
 
 async def serve(sock: socket.socket, level: int = logging.INFO) -> None:
-    """Work for the agent at the other end of `sock` until it closes; log records from `level` go to the agent."""
+    """Work for the agent at the other end of `sock` until it closes; fabwire's log records from `level` (the
+    agent's own level for them) go to the agent's log."""
     loop = asyncio.get_running_loop()
     ended: asyncio.Future[None] = loop.create_future()
     worker = Worker(ended)
     await loop.connect_accepted_socket(lambda: worker, sock)
-    root = logging.getLogger()
-    root.addHandler(_ToAgent(worker))
-    root.setLevel(level)
+    logging.getLogger().addHandler(_ToAgent(worker))
+    logging.getLogger("fabwire").setLevel(level)
     await ended
     await worker.wind_down()
 
