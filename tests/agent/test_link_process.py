@@ -122,9 +122,12 @@ async def test_a_killed_links_process_takes_the_machines_offline_and_comes_back(
         assert "the links' process ended (killed by SIGKILL)" in state["summary"]["state_text"]
         await _event(subscription, "online")
         assert agent.state(info.id)["online"] or agent.session(info.id).online
-        assert link.process.pid not in (None, first)
+        second = link.process.pid
+        assert second not in (None, first)
         await subscription.aclose()
     assert _ended(first)
+    assert second is not None
+    await asyncio.to_thread(wait_for, lambda: _ended(second), "the new links' process ended with the agent")
 
 
 async def test_a_few_machines_stay_on_the_thread(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
