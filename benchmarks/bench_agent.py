@@ -108,8 +108,27 @@ def _agent(ports: list[int], where: Path, *extra: str) -> tuple[subprocess.Popen
 
 
 def _cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """CPU seconds of the agent's process and its children (its links' process), from /proc."""
+    parents: dict[int, int] = {}
+    ticks: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        parents[int(entry.name)] = int(fields[1])
+        ticks[int(entry.name)] = int(fields[11]) + int(fields[12])
+    tree = {pid}
+    grew = True  # a child's pid may be lower than its parent's: go round until none joins
+    while grew:
+        grew = False
+        for candidate, parent in parents.items():
+            if parent in tree and candidate not in tree:
+                tree.add(candidate)
+                grew = True
+    return sum(ticks.get(p, 0) for p in tree) / os.sysconf("SC_CLK_TCK")
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -196,7 +215,7 @@ def polling_side_by_side(ports: list[int], rounds: int = POLL_ROUNDS) -> tuple[l
     """CPU per poll (ms) of the agent that only polls and of the bare poller, in turns against the same simulated
     printers (at `ports`) under the same conditions (no burner, no API traffic for either): `rounds` figures of
     each, and once the bare poller with its polls on the agent's grid."""
-    from fabwire.agent.session import POLL_TICK_S
+    from fabwire.agent.linkside import POLL_TICK_S
 
     agent: list[float] = []
     bare: list[float] = []

@@ -18,7 +18,8 @@ from fabwire.agent import session as session_module
 from fabwire.agent.boundary import Boundary, Policy
 from fabwire.agent.core import Agent, DeviceSpec
 from fabwire.agent.drivers.xyz import XYZDriver, printer_summary
-from fabwire.agent.session import LinkThread, RequestsFirst
+from fabwire.agent.linkthread import LinkThread
+from fabwire.agent.session import RequestsFirst
 
 
 async def _collect(subscription: AsyncIterator[dict[str, Any]], events: list[dict[str, Any]]) -> None:
@@ -142,7 +143,7 @@ async def test_health_counts_are_those_of_the_machines_monitored(tmp_path: Path)
         assert health["online"] == 2
         session = agent.session(infos[0].id)
         subscription = agent.subscribe(infos[0].id)
-        await session._links.run(session.driver.close())  # the link is lost under the session
+        await session.link.close()  # the link is lost under the session
         for wanted, online in (("offline", 1), ("online", 2)):
             async with asyncio.timeout(30):
                 async for event in subscription:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fabwire.agent.session import POLL_TICK_S, next_slot, on_poll_grid
+from fabwire.agent.linkside import POLL_TICK_S, next_slot, on_poll_grid
 
 
 @given(when=st.floats(0.0, 1e7, allow_nan=False))

@@ -390,6 +390,7 @@ async def _serve(sock: socket.socket, specs: list[DeviceSpec], state_dir: Path, 
         terminal_task = asyncio.create_task(terminal.run(agent))  # subscribed before the devices come
         if notifier is not None:  # subscribed before the devices come: their first states arm it
             notify_task = asyncio.create_task(notifier.run(agent))
+        agent.expected_devices = len(specs)
         results = await asyncio.gather(*(agent.add_device(s) for s in specs), return_exceptions=True)
         for spec, result in zip(specs, results, strict=True):
             if isinstance(result, BaseException):

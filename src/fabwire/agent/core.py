@@ -203,7 +203,7 @@ class Agent:
 
     def __init__(self, *, state_dir: Path | None = None, retention_s: float = 24 * 3600.0,
                  max_upload_bytes: int = 64 * 1024 * 1024, backoff: tuple[float, float] = (0.5, 30.0),
-                 first_attempt_s: float = 10.0) -> None:
+                 first_attempt_s: float = 10.0, links: Literal["auto", "thread", "process"] = "auto") -> None:
         from fabwire.agent.history import History
         from fabwire.agent.jobs import JobStore
         from fabwire.agent.library import Library
@@ -212,6 +212,10 @@ class Agent:
         self.state_dir = state_dir
         self.backoff = backoff
         self.first_attempt_s = first_attempt_s
+        self.links = links
+        """Where the device links run (see `fabwire.agent.links`): "auto" chooses by the number of machines."""
+        self.expected_devices = 0
+        """How many machines are about to be added (the config's): "auto" links choose by it from the first."""
         self.history = History(state_dir / "history.sqlite3" if state_dir else None, retention_s=retention_s)
         self.jobs = JobStore(self.history, state_dir / "uploads" if state_dir else None, max_upload_bytes)
         self.library = Library(self, state_dir / "library" if state_dir else None)

@@ -39,7 +39,6 @@ from fabwire.thumbnails import read_thumbnails
 
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
-    from fabwire.agent.drivers.base import Driver
     from fabwire.agent.session import JobClaim
 
 log = logging.getLogger("fabwire.agent")
@@ -254,7 +253,8 @@ class Library:
         async with claim if claim is not None else contextlib.nullcontext():
             stored = await asyncio.to_thread(self._copy_in, device_id, name, src)
             try:
-                entry = await in_thread(self._describe, device_id, name, stored, session.driver, claim is None)
+                meta = await session.link.describe_upload(Path(name).name, stored, check=claim is None)
+                entry = await in_thread(self._describe, device_id, name, stored, meta)
                 job = await self._feed(claim, device_id, entry, fed=claim_fed) if claim is not None else None
             except BaseException:
                 with contextlib.suppress(OSError):
@@ -422,10 +422,9 @@ class Library:
             raise
         return path
 
-    def _describe(self, device_id: str, name: str, path: Path, driver: Driver, check: bool) -> dict[str, Any]:
-        """The entry of a copied upload: the driver's check (unless the job about to start checks it) and
-        figures, the previews, the checksum."""
-        meta = driver.describe_upload(Path(name).name, path, check=check)
+    def _describe(self, device_id: str, name: str, path: Path, meta: dict[str, Any]) -> dict[str, Any]:
+        """The entry of a copied upload, given what the driver's `describe_upload` said of it (`meta`): its figures,
+        the previews, the checksum."""
         base = self.root / _safe_dir(device_id)
         digest = hashlib.sha256()
         with path.open("rb") as handle:

@@ -8,156 +8,35 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import random
-import sys
 import threading
 import time
-import weakref
 from collections import deque
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
 from sortedcontainers import SortedList
 
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, is_demo_id, make_event, now_iso
-from fabwire.agent.drivers.base import Driver, Identity, checked_params, offline_summary
+from fabwire.agent.drivers.base import Identity, checked_params, offline_summary
 from fabwire.agent.jobs import note_course
+from fabwire.agent.links import open_link
+from fabwire.agent.linkside import LINK_FAILURES
 from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, excerpt
 
 if TYPE_CHECKING:
     from fabwire.agent.core import Agent
 
-T = TypeVar("T")
 log = logging.getLogger("fabwire.agent")
-LINK_FAILURES = (FabwireError, OSError, TimeoutError, EOFError)
-"""What ends a connection (the clients raise FabwireError subclasses; the OS may still say OSError)."""
 JOB_ACTIONS = ("cancel", "pause", "resume")
 """Actions on the work in progress: refused as "nothing to cancel" (…) when the machine offers them not."""
 JOB_EVENT_EVERY_S = 0.5
-SWITCH_INTERVAL_S = 0.0005
-DELIVER_EVERY_S = 0.01
-"""How long a poll's result may wait on the links' thread for others to go to the agent's loop with it."""
-POLL_TICK_S = 0.05
-"""Polls start on a grid of this step (`on_poll_grid`): the polls of a bench that fall within one step wake the links'
-thread once, together, and their replies are read in the same turns of its loop. A wake-up of the thread, not the
-work of a poll, is most of what a poll costs (measured: a 20 ms step cut the CPU per poll of 250 printers by a
-quarter, 50 ms by a third more). A poll starts at most this much after its slot; at 1 s, the interval, a whole
-number of steps, the slots themselves lie on the grid and a poll starts on time."""
-GRID_SLACK = 1e-6
-"""Steps a slot may lie past a grid point and still count as on it (a float's rounding)."""
 STEP_ASIDE_S = 0.02
 """How long the links' thread waits for the agent's requests in flight before it goes on with its polls; it then
 works at least as long before it steps aside again, so a flood of requests slows the polls to half speed at most."""
 STOP_WAIT_S = 30.0
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
-
-
-def on_poll_grid(when: float) -> float:
-    """The first instant of the poll grid (every POLL_TICK_S of the loop's clock) at or after `when`."""
-    return math.ceil(when / POLL_TICK_S - GRID_SLACK) * POLL_TICK_S
-
-
-def next_slot(slot: float, interval: float) -> float:
-    """The slot `interval` after `slot`; put back on the grid when the interval is a whole number of steps, so that
-    the float sum of many intervals does not drift off it."""
-    later = slot + interval
-    steps = interval / POLL_TICK_S
-    return on_poll_grid(later) if abs(steps - round(steps)) < GRID_SLACK else later
-
-
-def make_driver(spec: DeviceSpec, emit: Any) -> Driver:
-    """Import only the kind in use: a bench of printers never loads the drawing stack."""
-    if spec.kind == "xyz":
-        from fabwire.agent.drivers.xyz import XYZDriver
-
-        return XYZDriver(spec, emit)
-    if spec.kind == "lineus":
-        from fabwire.agent.drivers.lineus import LineUsDriver
-
-        return LineUsDriver(spec, emit)
-    from fabwire.agent.drivers.mmu import MMUDriver
-
-    return MMUDriver(spec, emit)
-
-
-class LinkThread:
-    """A thread with an event loop of its own where an agent's device links live: connecting, polling and
-    parsing a bench of machines, actions and jobs on the wire. The agent's own loop (its HTTP API, the dashboard,
-    the event stream) only receives what each poll found, so a request waits for no machine's poll: its latency
-    does not grow with the number of machines. One per agent, started with its first session, ended with its
-    last; on uvloop where it is installed."""
-
-    def __init__(self, home: asyncio.AbstractEventLoop | None = None) -> None:
-        self.home = home or asyncio.get_running_loop()
-        """The agent's loop, where `deliver` hands results over."""
-        self._results: list[tuple[Callable[..., None], tuple[Any, ...]]] = []
-        try:
-            import uvloop
-        except ImportError:
-            self.loop = asyncio.new_event_loop()
-        else:
-            self.loop = uvloop.new_event_loop()
-        self.users = 0
-        # Hand the interpreter over between the two threads every 0.5 ms rather than 5: an API request waits for
-        # the polling thread at most that long at each step of its handling.
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
-        self._thread = threading.Thread(target=self.loop.run_forever, name="fabwire-links", daemon=True)
-        self._thread.start()
-
-    def deliver(self, callback: Callable[..., None], *args: Any) -> None:
-        """From the links' loop: `callback(*args)` runs on the agent's loop within DELIVER_EVERY_S, after what was
-        delivered before it, together with everything else delivered meanwhile: a bench's polls wake the agent's
-        loop (and hand the interpreter over) about a hundred times a second however many machines there are."""
-        if not self._results:
-            self.loop.call_later(DELIVER_EVERY_S, self._hand_over)
-        self._results.append((callback, args))
-
-    def _hand_over(self) -> None:
-        batch, self._results = self._results, []
-        self.home.call_soon_threadsafe(_run_all, batch)
-
-    async def run(self, work: Coroutine[Any, Any, T]) -> T:
-        """Run `work` on the links' loop and wait for it here; cancelling the wait cancels the work."""
-        return await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(work, self.loop))
-
-    def close(self) -> None:
-        """Stop the loop once what is scheduled on it has run, and wait for the thread."""
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self._thread.join(STOP_WAIT_S)
-        if not self._thread.is_alive():
-            self.loop.close()
-
-
-def _run_all(batch: list[tuple[Callable[..., None], tuple[Any, ...]]]) -> None:
-    """Each callback as if scheduled on its own: one that fails is reported and the rest still run."""
-    for callback, args in batch:
-        try:
-            callback(*args)
-        except Exception as exc:  # as the loop reports a failed callback
-            asyncio.get_running_loop().call_exception_handler(
-                {"message": f"exception in callback {callback!r}", "exception": exc})
-
-
-_LINKS: weakref.WeakKeyDictionary[Agent, LinkThread] = weakref.WeakKeyDictionary()
-
-
-def _links_of(agent: Agent) -> LinkThread:
-    links = _LINKS.get(agent)
-    if links is None:
-        links = _LINKS[agent] = LinkThread()
-    links.users += 1
-    return links
-
-
-def _release_links(agent: Agent) -> None:
-    links = _LINKS.get(agent)
-    if links is not None:
-        links.users -= 1
-        if links.users <= 0:
-            del _LINKS[agent]
-            links.close()
 
 
 class RequestsFirst:
@@ -173,6 +52,19 @@ class RequestsFirst:
         self._in_flight = 0
         self._resume_at = 0.0
         """When the links' thread may step aside again (its own clock, read on that thread only)."""
+        self._when_idle: list[Callable[[], None]] = []
+
+    @property
+    def busy(self) -> bool:
+        """On the agent's loop: whether requests are being answered."""
+        return self._in_flight > 0
+
+    def when_idle(self, callback: Callable[[], None]) -> None:
+        """On the agent's loop: `callback()` soon after no request is in flight any more (at once when none is)."""
+        if self._in_flight <= 0:
+            callback()
+        else:
+            self._when_idle.append(callback)
 
     def begin(self) -> None:
         """On the agent's loop: a request is being answered."""
@@ -185,6 +77,11 @@ class RequestsFirst:
         if self._in_flight <= 0:
             self._in_flight = 0
             self._idle.set()
+            if self._when_idle:
+                waiting, self._when_idle = self._when_idle, []
+                loop = asyncio.get_running_loop()
+                for callback in waiting:
+                    loop.call_soon(callback)
 
     def step_aside(self) -> None:
         """On the links' thread, between polls: while requests are in flight, wait for them (at most STEP_ASIDE_S,
@@ -266,10 +163,10 @@ class Session:
         self.agent = agent
         self.order = order
         self.spec = spec
-        self._home = asyncio.get_running_loop()
-        """The agent's loop: states, events and history are handled there; the links live on `_links`."""
-        self._links = _links_of(agent)
-        self.driver = make_driver(spec, self._device_event_from_link)
+        self.link = open_link(agent, spec, self, order)
+        """The machine's link, on the agent's links' thread or in its links' process (`fabwire.agent.links`);
+        states, events and history are handled here, on the agent's loop."""
+        self.driver = self.link.driver
         self.info = DeviceInfo("", spec.name, spec.kind, None, None, None, spec.address)
         self.stats = PollStats()
         self.state: dict[str, Any] = {}
@@ -326,9 +223,9 @@ class Session:
             with contextlib.suppress(BaseException):
                 await task
         try:
-            await self._links.run(self.driver.close())
+            await self.link.close()
         finally:
-            _release_links(self.agent)
+            self.link.release()
 
     def _set_info(self, id_: str | None = None) -> None:
         ident = self._identity
@@ -343,11 +240,11 @@ class Session:
         delay = low
         while True:
             try:
-                self._identity = await self._links.run(self.driver.connect())
+                self._identity = await self.link.connect()
             except LINK_FAILURES as exc:
                 self._failed(exc)
                 with contextlib.suppress(*LINK_FAILURES):  # a link opened before the handshake failed is shut
-                    await self._links.run(self.driver.close())
+                    await self.link.close()
                 self._first_attempt.set()
                 await self._id_ready.wait()
                 await self._went_offline(delay)
@@ -367,7 +264,7 @@ class Session:
                 self._failed(exc)
             finally:
                 self.online = False
-                await self._links.run(self.driver.close())
+                await self.link.close()
             await self._went_offline(delay)
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
 
@@ -384,27 +281,11 @@ class Session:
         self.agent.history.record_sample(self.info.id, time.time(), summary)
 
     async def _monitor(self) -> None:
-        await self._links.run(self._poll_forever())
+        await self.link.poll_forever()
 
-    async def _poll_forever(self) -> None:
-        """On the links' loop: poll on schedule; each result goes to the agent's loop (see `LinkThread.deliver`)."""
-        loop = asyncio.get_running_loop()
-        interval = self.driver.interval_s
-        slot = on_poll_grid(loop.time() + random.uniform(0, interval))  # spread a bench's polls over the second
-        await asyncio.sleep(slot - loop.time())
-        while True:
-            lag = loop.time() - slot
-            status, summary = await self.driver.poll()
-            self.agent.requests.step_aside()
-            self._links.deliver(self._polled, status, summary, time.time(), lag, interval)
-            slot = next_slot(slot, interval)
-            now = loop.time()
-            if slot < now:
-                slot = on_poll_grid(now)  # fell behind: start again from now rather than firing a burst
-            await asyncio.sleep(on_poll_grid(slot) - now)
-
-    def _polled(self, status: dict[str, Any] | None, summary: dict[str, Any], at: float, lag: float,
-                interval: float) -> None:
+    def polled(self, status: dict[str, Any] | None, summary: dict[str, Any], at: float, lag: float,
+               interval: float) -> None:
+        """A scheduled poll's result, from the link (see `fabwire.agent.links.LinkOwner`)."""
         self.stats.record(lag, interval)
         if self.online:  # a result that arrives after the link went down is not news
             self._set_state(online=True, summary=summary, status=status)
@@ -431,11 +312,9 @@ class Session:
         if self.info.id:
             self.agent.publish(make_event(self.info.id, type_, **payload))
 
-    def _device_event(self, payload: dict[str, Any]) -> None:
+    def device_event(self, payload: dict[str, Any]) -> None:
+        """Something the machine reported on its own, from the link."""
         self._publish("event", event=payload)
-
-    def _device_event_from_link(self, payload: dict[str, Any]) -> None:
-        self._home.call_soon_threadsafe(self._device_event, payload)
 
     # ------------------------------------------------------------------------------------------ actions
 
@@ -488,7 +367,7 @@ class Session:
             self._background.add(task)
             task.add_done_callback(self._background.discard)
             return {"started": action}
-        result, polled = await self._links.run(self._act_then_poll(action, checked))
+        result, polled = await self.link.act_then_poll(action, checked)
         if polled is not None and self.online:
             self._set_state(online=True, summary=polled[1], status=polled[0])
         return result
@@ -498,28 +377,13 @@ class Session:
         ended also sees the state the job left (a finished print on the bed), never a poll from before the job."""
         if not self.online:
             return
-        polled = await self._links.run(self._poll_now())
+        polled = await self.link.poll_now()
         if polled is not None and self.online:
             self._set_state(online=True, summary=polled[1], status=polled[0])
 
-    async def _poll_now(self) -> tuple[dict[str, Any] | None, dict[str, Any]] | None:
-        """On the links' loop: a poll out of turn, or None when it fails (the scheduled polls report that)."""
-        try:
-            return await self.driver.poll()
-        except LINK_FAILURES:
-            return None
-
-    async def _act_then_poll(self, action: str, params: dict[str, Any]
-                             ) -> tuple[dict[str, Any], tuple[dict[str, Any] | None, dict[str, Any]] | None]:
-        """On the links' loop: the action, then a poll, so the state is the one the action left by the time its
-        reply goes out (an upload right after "print removed" finds the printer ready, not the state of the
-        poll before). A poll that fails leaves the state to the next scheduled one: the action itself was done."""
-        result = await self.driver.act(action, params)
-        return result, await self._poll_now()
-
     async def _background_action(self, action: str, params: dict[str, Any]) -> None:
         try:
-            result = await self._links.run(self.driver.act(action, params))
+            result = await self.link.act(action, params)
             self._publish("event", event={"event": "action-done", **result})
         except (*LINK_FAILURES, FabwireError) as exc:
             self._publish("error", message=f"{action}: {exc}", exit_code=exit_code_of(exc), action=action)
@@ -571,8 +435,7 @@ class Session:
         path = self.agent.jobs.path_of(job)
         await self._job_changed(state="running", started=now_iso())
         try:
-            message = await self._links.run(self.driver.run_job(path, job["type"], _Handle(self),
-                                                                 job.get("params") or {}))
+            message = await self.link.run_job(path, job["type"], job.get("params") or {})
         except asyncio.CancelledError:
             if self._stopping:
                 await self._job_changed(state="interrupted", message="the agent stopped while the job ran")
@@ -657,7 +520,7 @@ class Session:
         task = self._job_task
         self._cancelling = True
         try:
-            await self._links.run(self.driver.stop_job())  # the machine stops; the job's loop then winds down
+            await self.link.stop_job()  # the machine stops; the job's loop then winds down
             _, pending = await asyncio.wait({task}, timeout=STOP_WAIT_S)
         except (*LINK_FAILURES, FabwireError) as exc:
             self._publish("error", message=f"stopping job {job_id}: {exc}", exit_code=exit_code_of(exc))
@@ -666,27 +529,8 @@ class Session:
             task.cancel()
             with contextlib.suppress(BaseException):
                 await task
-            await self._links.run(self.driver.close())
+            await self.link.close()
         return await self.agent.jobs.get(job_id)
-
-
-class _Handle:
-    """The JobHandle a driver reports through, from the links' loop: each report runs on the agent's loop."""
-
-    def __init__(self, session: Session) -> None:
-        self._session = session
-
-    def progress(self, percent: float, *, time_left_s: float | None = None, message: str | None = None) -> None:
-        self._session._home.call_soon_threadsafe(self._session.job_progress, percent, time_left_s, message)
-
-    def stroke(self, points: list[tuple[float, float]]) -> None:
-        self._session._home.call_soon_threadsafe(self._session.job_stroke, points)
-
-    def preview(self, strokes: list[list[tuple[float, float]]]) -> None:
-        self._session._home.call_soon_threadsafe(self._session.job_preview, strokes)
-
-    def note(self, text: str) -> None:
-        self._session._home.call_soon_threadsafe(self._session.job_note, text)
 
 
 class JobClaim:
@@ -737,9 +581,7 @@ class JobClaim:
             raise RuntimeError("this claim is already used or released")
         path = await self._upload.finish() if self._upload is not None else None
         if path is not None:
-            from fabwire.agent.offload import in_thread
-
-            await in_thread(session.driver.check_upload, self.filename or path.name, path)
+            await session.link.check_upload(self.filename or path.name, path)
         job = await session.agent.jobs.create(session.info.id, self.job_type, self.filename, self._upload,
                                               params or {}, job_id=self.job_id, file_meta=file_meta)
         self._started = True
