@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -10,7 +12,9 @@ from typing import Any
 import httpx
 import pytest
 
+from clitools import cli_env, run_cli
 from fabwire.samples import SAMPLE_GCODE, sample_path
+from fabwire.xyz.codes import PRINTING
 from fabwire.xyz.models import find_model
 from fabwire.xyz.threew import write_3w
 
@@ -300,3 +304,29 @@ def test_an_action_body_that_is_not_json_is_refused_with_the_fix(bench: Bench) -
             assert "Content-Type: application/json" in message
         assert "no action 'bogus'" in _error(client.post(f"{base}/bogus", json={}), 400, 4)["message"]
         assert "object" in _error(client.post(f"{base}/tool_change", json=[1]), 400, 4)["message"]
+
+
+def test_a_print_cancelled_while_its_file_is_still_sent_never_runs(bench: Bench) -> None:
+    """Cancelled during the upload to the printer, when there is no print to stop yet: the print that file would
+    start is stopped too, and the job says cancelled only when the printer is not printing."""
+    moves = b"".join(b"G1 X%.3f Y%.3f E%.5f\n" % (30 + i % 100 * 0.1, 30 + (i // 100) % 100 * 0.1, i * 0.001)
+                     for i in range(150_000))
+    with bench.agent.client() as client:
+        printer = device_of(client, "xyz")
+        if summary(client, printer["id"])["state"] == "done":
+            assert client.post(f"/api/v1/devices/{printer['id']}/actions/acknowledge", json={}).status_code == 200
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle")
+        job = client.post(f"/api/v1/devices/{printer['id']}/jobs", params={"filename": "long.gcode"},
+                          content=b"G28\nG1 Z0.2 F600\n" + moves).json()
+        cancelled = client.post(f"/api/v1/jobs/{job['id']}/cancel", json={"confirm": True}, timeout=120)
+        assert cancelled.status_code == 200, cancelled.text
+        assert cancelled.json()["state"] == "cancelled"
+        wait_for(lambda: summary(client, printer["id"])["state"] == "idle", "the printer idle after cancelling")
+        states = []
+        for _ in range(6):  # a print started after the cancel would show on the printer itself
+            said = run_cli("--json", "xyz", "-d", bench.xyz.url, "status", env=cli_env())
+            assert said.returncode == 0, said.stderr
+            states.append(json.loads(said.stdout)["state"])
+            time.sleep(0.5)
+        assert PRINTING not in states, states
+        assert not any(9500 <= state <= 9508 for state in states), states

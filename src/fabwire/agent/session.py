@@ -36,6 +36,8 @@ STEP_ASIDE_S = 0.02
 """How long the links' thread waits for the agent's requests in flight before it goes on with its polls; it then
 works at least as long before it steps aside again, so a flood of requests slows the polls to half speed at most."""
 STOP_WAIT_S = 30.0
+STOP_AGAIN_S = 1.0
+"""While a cancelled job still runs, the machine is asked to stop again this often (seconds)."""
 """How long a cancelled job may take to stop on the machine before the agent cuts it off."""
 
 
@@ -519,12 +521,22 @@ class Session:
         job = dict(self._job)
         task = self._job_task
         self._cancelling = True
-        try:
-            await self.link.stop_job()  # the machine stops; the job's loop then winds down
-            _, pending = await asyncio.wait({task}, timeout=STOP_WAIT_S)
-        except (*LINK_FAILURES, FabwireError) as exc:
-            self._publish("error", message=f"stopping job {job_id}: {exc}", exit_code=exit_code_of(exc))
-            pending = {task}
+        # The machine stops and the job's loop then winds down. Asked again while the job runs: a job still
+        # sending its file has nothing to stop yet ("nothing to cancel"), and the print that file then starts
+        # must be stopped too, not left heating and moving under a job that says "cancelled".
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + STOP_WAIT_S
+        pending: set[asyncio.Task[None]] = {task}
+        refused: BaseException | None = None
+        while pending and (left := deadline - loop.time()) > 0:
+            try:
+                await self.link.stop_job()
+                refused = None
+            except (*LINK_FAILURES, FabwireError) as exc:
+                refused = exc
+            _, pending = await asyncio.wait({task}, timeout=min(STOP_AGAIN_S, max(left, 0.0)))
+        if pending and refused is not None:
+            self._publish("error", message=f"stopping job {job_id}: {refused}", exit_code=exit_code_of(refused))
         if pending:  # it would not stop: cut it off, and start the link afresh (a command may be half-answered)
             task.cancel()
             with contextlib.suppress(BaseException):
