@@ -67,10 +67,39 @@ def test_the_cli_refuses_each_rule_in_one_line(tmp_path: Path, rule: LineRule) -
     assert ": line 4: " in refused.stderr
 
 
+SECOND_WORDS = [b"G4 P1 G1 X140 Y140 E5", b"G53 G1 X140 E5", b"M400 G1 X140", b"G90 G1 X140", b"G21 G1 X140",
+                b"M83 G1 X140", b"M106 S255 G1 X140", b"g4 p1 g1 x140", b"G4 (wait) G1 X140", b"G28 M84",
+                b"M104 S200 M109 S200", b"G92 E0 G1 X140"]
+"""A second command word after a command that is not a move, each through every layout and every door."""
+
+
+@pytest.mark.parametrize("layout", ["arrays", "indented", "numbered"])
+@pytest.mark.parametrize("line", SECOND_WORDS, ids=lambda line: line.decode())
+@pytest.mark.parametrize("command", ["convert", "info"])
+def test_a_second_command_word_after_any_command_is_refused(tmp_path: Path, line: bytes, layout: str,
+                                                            command: str) -> None:
+    """RepRapFirmware runs both commands of such a line, Marlin only the first: convert and info refuse it,
+    with its line, whether the line is read into arrays or line by line (and with the slicer's figures stated)."""
+    body = BASE + line + b"\n" + TAIL
+    if layout == "indented":
+        body = b"".join(b"  " + row + b"\n" for row in body.splitlines())
+    elif layout == "numbered":
+        body = b"".join(b"N%d " % (i + 1) + row + b"\n" for i, row in enumerate(body.splitlines()))
+    src = tmp_path / "in.gcode"
+    src.write_bytes(body + b"; estimated printing time (normal mode) = 1h\n"
+                    b"; filament used [mm] = 12.5\n; total layers count = 3\n")
+    args = ["xyz", "convert", str(src), str(tmp_path / "o.3w")] if command == "convert" else ["xyz", "info", str(src)]
+    refused = run_cli(*args, env=cli_env())
+    assert refused.returncode == 4, refused.stdout
+    assert ": line 4: " in refused.stderr
+    assert "second command word" in refused.stderr
+
+
 @pytest.mark.parametrize("line", [b"G21", b"M862.3 P \"MK3S\"", b"M117 Printing G1 layer", b"G1 X10 Y10 ; G1 X1000",
                                   b"G1 X10 Y10 E1 ; X1000 X2000", b"M204 P500 T1000", b"G28 X Y",
                                   b"; a comment with G20 in it", b"G1 X10 ; \xe2\x80\xa8G1 X1000 E5",
-                                  b";\x0c\x0b\xc2\x85 any text"])
+                                  b";\x0c\x0b\xc2\x85 any text", b"M117 Going to G1 X500 next", b"M23 g1x500.gco",
+                                  b"M118 G28 done", b"M0 Press G1 to go on", b"M1117 x"])
 def test_lines_printers_agree_on_are_kept(tmp_path: Path, line: bytes) -> None:
     src = tmp_path / "in.gcode"
     src.write_bytes(BASE + line + b"\n" + TAIL)

@@ -236,6 +236,14 @@ found by the move analysis, `gcodeinfo.MoveAnalyzer`, which raises `Ambiguous`).
 EXPONENT, REPEATED, SECOND_COMMAND, SUBCODE, SEPARATOR, INCHES, CENTRELESS, TURNS = LINE_RULES
 SEPARATORS = (b"\x0b", b"\x0c", b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 """Line breaks some readers see inside what a firmware reads as one line (UTF-8 of U+0085, U+2028, U+2029)."""
+TEXT_COMMANDS = frozenset({b"M0", b"M1", b"M16", b"M23", b"M28", b"M30", b"M32", b"M33", b"M117", b"M118", b"M928"})
+"""Commands whose parameter is text (a message or a file name), where a G or M followed by a number is only text:
+Marlin's G-code index (M0/M1 prompt, M16 printer check, M23/M28/M30/M32/M33 SD file names, M117 LCD message,
+M118 serial print, M928 log file). Any other line holding a second command word is refused (`LINE_RULES`)."""
+_SECOND_COMMAND_LINE = re.compile(
+    rb"\n(?!M0*(?:" + b"|".join(c[1:] for c in sorted(TEXT_COMMANDS)) + rb")(?![0-9.]))[GM][^\n;]*?[GM][ \t]*[-+.0-9]",
+    re.IGNORECASE)
+"""A command line, not a text command, with a second command word in its code (`TEXT_COMMANDS`)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
 """A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
 _NEWLINE, _SEMICOLON = 4, 5
@@ -482,7 +490,8 @@ def scan(padded: bytes) -> Scan | None:
         if line < suspect and padded[newlines[line] + 1] == 71 and SUSPECT_LINE.match(  # G
                 padded, int(newlines[line]) + 1):
             suspect = line
-        if _REFUSED_COMMAND.match(padded, int(newlines[line])):
+        if _REFUSED_COMMAND.match(padded, int(newlines[line])) or _SECOND_COMMAND_LINE.match(
+                padded, int(newlines[line])):
             return None  # the line reader refuses it
         found = _CONTROL.match(padded, int(newlines[line]))
         if found is None:

@@ -23,6 +23,7 @@ from fabwire.xyz.gcodearrays import (
     SEPARATOR,
     SEPARATORS,
     SUBCODE,
+    TEXT_COMMANDS,
     TURNS,
     VALUE,
     Ambiguous,
@@ -401,8 +402,8 @@ class MoveAnalyzer:
                         raise Ambiguous(SUBCODE)
                     if command == b"G20":
                         raise Ambiguous(INCHES)
-                    if _SECOND_COMMAND.search(_code(params)):
-                        raise Ambiguous(SECOND_COMMAND)
+                if command not in TEXT_COMMANDS and _SECOND_COMMAND.search(_code(params)):
+                    raise Ambiguous(SECOND_COMMAND)
                 if subcode is None:
                     self._command(command, params)
         except Ambiguous as exc:

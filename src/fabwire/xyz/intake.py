@@ -720,13 +720,8 @@ def stream_metadata(src: BinaryIO, name: str, *, every_line: bool = True,
     checked anyway."""
     head, total = check_gcode_head(src, name)
     stated, computed = _metadata(src, name, head, total)
-    if computed is None and every_line:  # the comments told everything: the lines are still each checked
-        from fabwire.xyz.gcodearrays import odd_from, scanned_pieces
-
-        odd: list[tuple[int, int]] = []  # the array reader finds the few lines the line-by-line search is for
-        for chunk in gcode_lines(src, name, end=total, odd=odd):
-            odd.extend((at, end) for start, end, found in scanned_pieces(chunk)
-                       if (at := odd_from(start, found)) is not None)
+    if computed is None and every_line:  # the comments told everything: the lines are still each checked, as a
+        _metadata(src, name, head, total, always=True)  # conversion checks them (the moves read, not planned)
     padding = padding_note(name, stream_size(src), total)
     return (replace(stated, notes=(*stated.notes, padding)) if padding else stated), computed
 
