@@ -119,3 +119,18 @@ def test_moves_add_up_as_a_line_by_line_computation_says(text: str) -> None:
     assert analyzer.vase_rise == pytest.approx(rise, rel=1e-9, abs=1e-9)
     assert analyzer.filament == pytest.approx(filament, rel=1e-9, abs=1e-9)
     assert analyzer.layer_heights == heights
+
+
+@pytest.mark.parametrize("run", [1, 7, 8, 9, 10, 50, 300_000])
+def test_a_long_run_of_blanks_reads_as_one_blank(run: int) -> None:
+    """Blanks between a letter and its number and between words, however many, read the same words; past the
+    first few bytes a run is skipped by one match, not a byte at a time."""
+    from fabwire.xyz import gcodearrays
+
+    def words(line: bytes) -> list[tuple[list[int], list[float]]]:
+        found = gcodearrays.scan(b"\n" + line * 3 + bytes(gcodearrays.PAD))
+        assert found is not None
+        return [(axis.lines.tolist(), axis.values.tolist()) for axis in found.axes]
+
+    spaced = b"G1 X" + b" " * run + b"40" + b" " * run + b"Y-4.5" + b"\t" * run + b"E1 F" + b" \t" * run + b"600\n"
+    assert words(spaced) == words(b"G1 X40 Y-4.5 E1 F600\n")

@@ -402,17 +402,27 @@ class Scan:
     than blanks before the next letter, or a `SUSPECT_LINE` among the other G lines (None when no line may)."""
 
 
+BLANK_ROUNDS = 8
+"""Blanks skipped a byte at a time for all offsets at once; the few offsets on longer runs are then each skipped by
+one regular-expression match, so a run of a million blanks costs one scan of it, not a million array rounds."""
+_BLANKS = re.compile(rb"[ \t]*")
+
+
 def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.uint8]:
     """Move each offset `at` past the blanks (space, tab) there, in place, and return the bytes there now: each
-    round only the offsets still on a blank move, so a long run of blanks costs its own length, not that times every
-    word's."""
+    round only the offsets still on a blank move, and after BLANK_ROUNDS the rest are skipped one by one."""
     first = data[at]
     moving = np.flatnonzero(_BLANK[first])
     if not len(moving):
         return first
-    while len(moving):
+    for _ in range(BLANK_ROUNDS):
         at[moving] += 1
         moving = moving[_BLANK[data[at[moving]]]]
+        if not len(moving):
+            return data[at]
+    text = data.data  # the bytes themselves, not a copy
+    for index in moving.tolist():
+        at[index] = _BLANKS.match(text, int(at[index])).end()  # type: ignore[union-attr]  # `*` always matches
     return data[at]
 
 
