@@ -138,8 +138,10 @@ def test_a_malformed_last_line_after_many_blocks_is_refused_with_its_own_number(
 
 
 @pytest.mark.parametrize(("line", "advice"), [
-    (b"G1 X5 Y10E1 F1200", "with a blank before E1 if it is a word of its own"),
-    (b"G1 X5 Y-1.5E-0.8", "with a blank before E-0.8 if it is a word of its own"),
+    (b"G1 X5 Y10E1 F1200", "Marlin reads Y10 and E1, a reader using C's strtod one number (10E1 = 100); "
+                           "write 'Y10 E1'"),
+    (b"G1 X5 Y-1.5E-0.8", "Marlin reads Y-1.5 and E-0.8, a reader that takes E into the number something else; "
+                          "write 'Y-1.5 E-0.8'"),
     (b"G1 X5 Y10e1", None),  # lower case: an exponent, not a word
     (b"G1 X1e3 Y10", None),
 ])
@@ -152,8 +154,9 @@ def test_two_words_run_together_are_told_apart_from_an_exponent(tmp_path: Path, 
     assert result.stderr.count("\n") == 1
     assert "line 2:" in result.stderr
     if advice is None:
-        assert "if it is a word of its own" not in result.stderr
+        assert "runs two words together" not in result.stderr
     else:
+        assert "runs two words together" in result.stderr
         assert result.stderr.rstrip().endswith(advice)
 
 

@@ -338,18 +338,27 @@ def _check_numbers(text: bytes, name: str, lines_before: Callable[[], int], star
         value, form = word
         line = lines_before() + text.count(b"\n", 0, found.start()) + 1
         shown = excerpt(value.decode("utf-8", "replace"), 30)
+        glued = _GLUED_WORD.fullmatch(value)
+        if glued:  # `Y10E1`: most likely a blank left out, said in the file's own words
+            first, second = value[:glued.start(1)].decode(), glued.group(1).decode()
+            raise InputError(f"{name}: line {line}: {shown} runs two words together ({form.construct}): Marlin "
+                             f"reads {first} and {second}, {_as_strtod(value[1:])}; write '{first} {second}'")
         raise InputError(f"{name}: line {line}: {shown} is not one plain decimal number ({form.construct}): "
-                         f"{form.reading}; write each value as plain decimals{_glued_word(value)}")
+                         f"{form.reading}; write each value as plain decimals")
 
 
 _GLUED_WORD = re.compile(rb"[A-Z][ \t]*[+-]?[0-9.]+([EX][+-]?[0-9.]+)")
 """A word followed by an axis word without a blank between them (`Y10E1`), which strtod reads as one number."""
 
 
-def _glued_word(value: bytes) -> str:
-    """The advice for a value that is two words run together (`Y10E1`: put a blank before E1), else ""."""
-    glued = _GLUED_WORD.fullmatch(value)
-    return f", with a blank before {glued.group(1).decode()} if it is a word of its own" if glued else ""
+def _as_strtod(number: bytes) -> str:
+    """How other readers take `number`, in words: C's strtod reads `10E1` as 100 and `0X10` as 16."""
+    text = number.decode().strip()
+    try:
+        value = float.fromhex(text) if "X" in text.upper() else float(text)
+    except ValueError:
+        return f"a reader that takes {text[-len(text.lstrip('+-.0123456789')):][:1]} into the number something else"
+    return f"a reader using C's strtod one number ({text} = {value:g})"
 
 
 def ambiguous_line(name: str, line: int, text: bytes, rule: LineRule) -> InputError:
