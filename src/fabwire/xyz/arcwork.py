@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -99,6 +100,10 @@ megabytes."""
 GROWTH_FREE = 64 * 1024 * 1024
 
 
+OUT_PIECE = 1 << 20
+"""Bytes of converted G-code handed on at a time (`ArcExpander.expand`)."""
+
+
 class ArcExpander:
     """Rewrites the G2/G3 lines of consecutive line-aligned chunks of a G-code as G1 segments, keeping track of
     the position and modes the file sets. `name` and `size` (bytes) are the file's: its segments may make it at most
@@ -110,8 +115,11 @@ class ArcExpander:
         self.name = name
         self.room = GROWTH_ALLOWED * size + GROWTH_FREE
 
-    def expand(self, chunk: bytes) -> bytes:
-        out = []
+    def expand(self, chunk: bytes) -> Iterator[bytes]:
+        """`chunk` (whole lines) with its arcs as G1 lines, in line-aligned pieces of about OUT_PIECE bytes: what
+        a chunk grows into is never held whole."""
+        out: list[bytes] = []
+        held = 0
         at = 0
         for found in _ARC_LINE.finditer(chunk):
             if found.start() > at:
@@ -121,6 +129,7 @@ class ArcExpander:
             lines = segments((t.pos[0], t.pos[1], t.pos[2], t.e), words_of(params), found.group(1) == b"2",
                              absolute=t.absolute, absolute_e=t.absolute_e)
             out.append(chunk[at:found.start()])
+            held += found.start() - at
             if lines is None:
                 out.append(b"G1" + found.group(2) + b"\n")
             else:
@@ -131,13 +140,18 @@ class ArcExpander:
                                      f"{GROWTH_ALLOWED} times its size (past arc {self.converted + 1}): slice it "
                                      "with arcs off, or convert it with --keep-arcs")
                 out.append(written)
+                held += len(written)
                 self.converted += 1
             t.feed_lines(found.group(0))
             at = found.end()
+            if held >= OUT_PIECE:
+                yield b"".join(out)
+                out, held = [], 0
         if at == 0:
             self.tracker.feed_chunk(chunk)
-            return chunk
+            yield chunk
+            return
         if at < len(chunk):
             self.tracker.feed_chunk(chunk[at:])
         out.append(chunk[at:])
-        return b"".join(out)
+        yield b"".join(out)

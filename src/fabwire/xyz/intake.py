@@ -788,7 +788,7 @@ def processed_body(src: BinaryIO, name: str, prepared: Prepared, progress: Progr
             chunk, skipped = chunk[end:], end
         ones = g0_words[index] if g0_words is not None and index < len(g0_words) else None
         if arcs is not None:
-            yield _process(arcs.expand(chunk))
+            yield from (_process(piece) for piece in arcs.expand(chunk))
         elif ones is not None:
             yield _as_g1(chunk, ones - skipped if skipped else ones)
         else:
