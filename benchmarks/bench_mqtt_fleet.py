@@ -29,9 +29,9 @@ from common import Figure  # noqa: E402
 
 PRINTERS = 500
 AGENTS = 2
-SECONDS = 12.0
+SECONDS = 9.0
 WARMUP = 4.0
-COMMANDS = 240
+COMMANDS = 180  # 20 a second, as before
 
 
 def _now() -> str:

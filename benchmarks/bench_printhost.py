@@ -26,7 +26,7 @@ except ImportError:  # imported as benchmarks.bench_printhost
     from benchmarks.common import Figure
 
 SIZE = 20 * 1024 * 1024
-RUNS = 5
+RUNS = 3
 """Runs of each, alternating."""
 SRC = Path(__file__).resolve().parents[1] / "src"
 XYZ = "xyz-demo"

@@ -30,7 +30,7 @@ MINIMOVER = "MINIMOVER"
 """Environment variable naming a miniMover binary (github.com/reality-boy/miniMover, its console program built
 with its Makefile's `_DEBUG`, which converts for the miniMaker without a printer); when set, the conversion is
 also run side by side with `minimover -c` on the same file."""
-RUNS = 7
+RUNS = 5
 LIBRARY_RUNS = 3
 """The library's throughput rows are the median of this many conversions, after a warm-up one: the first
 conversion of a process also loads what conversions use (numpy, the cipher), which the CLI rows count instead."""

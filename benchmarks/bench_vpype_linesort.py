@@ -29,7 +29,7 @@ from fabwire.vpype.passes import document_passes, plan_passes, total_figures
 
 BUDGET = 1.0
 STIPPLE_TARGET = 0.95
-PLUGIN_RUNS = 5
+PLUGIN_RUNS = 4
 """Rounds of the whole-command comparison: one command's CPU time varies by about 10 % from run to run on a
 busy machine: more rounds, a steadier median."""
 T = TypeVar("T")

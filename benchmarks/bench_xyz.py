@@ -26,7 +26,7 @@ from fabwire.xyz.client import XYZPrinter
 
 UPLOAD_BYTES = 50 * 1024 * 1024
 PRINTERS = 500
-POLL_SECONDS = 10.0
+POLL_SECONDS = 6.0
 BASE_PORT = 29100
 
 _SERVE = """
