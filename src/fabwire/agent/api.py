@@ -78,16 +78,14 @@ def checked_address(body: NewDevice) -> str:
     if endpoint.scheme == "serial" and (not SERIAL_PORT.match(endpoint.path) or ".." in endpoint.path):
         raise InputError(f"{excerpt(endpoint.path, 60)} is not a serial port: over the API a device path must "
                          "look like /dev/ttyACM0 or /dev/serial/by-id/…")
+    from fabwire.transport.simaddress import PATH_OPTIONS  # only the agent's owner says where it reads or writes
+
     paths = sorted(set(endpoint.options) & PATH_OPTIONS) if endpoint.scheme == "sim" else []
     if paths:
         raise InputError(f"over the API a simulator takes no file or folder ({', '.join(paths)}): a request must not "
                          "choose where the agent reads or writes; give them on the agent's command line")
     return endpoint.url
 
-
-PATH_OPTIONS = frozenset({"state", "store"})
-"""The sim:// options that name a file or folder (`fabwire.transport.simaddress`: the XYZ simulator's settings
-file and upload folder), which only the agent's owner gives."""
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody}

@@ -181,6 +181,9 @@ MMU_OPTIONS: dict[str, SimOption] = {
 SIMULATORS: dict[str, dict[str, SimOption] | None] = {"xyz": XYZ_OPTIONS, "lineus": LINEUS_OPTIONS,
                                                       "mmu": MMU_OPTIONS}
 """Each simulator's table of options; None for one registered without a table (its options are not checked)."""
+PATH_OPTIONS = frozenset(name for options in SIMULATORS.values() if options for name, option in options.items()
+                         if option.read is _path)
+"""The options that name a file or folder on the machine the simulator runs on."""
 
 
 def check_simulator(text: str, kind: DeviceKind | None) -> tuple[str, dict[str, str]]:

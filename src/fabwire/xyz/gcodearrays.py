@@ -240,9 +240,11 @@ TEXT_COMMANDS = frozenset({b"M0", b"M1", b"M16", b"M23", b"M28", b"M30", b"M32",
 """Commands whose parameter is text (a message or a file name), where a G or M followed by a number is only text:
 Marlin's G-code index (M0/M1 prompt, M16 printer check, M23/M28/M30/M32/M33 SD file names, M117 LCD message,
 M118 serial print, M928 log file). Any other line holding a second command word is refused (`LINE_RULES`)."""
+SECOND_COMMAND_WORD = rb"[GM][ \t]*[-+.0-9]"
+"""A command word in the parameters of another command (`LINE_RULES`' second command word)."""
 _SECOND_COMMAND_LINE = re.compile(
-    rb"\n(?!M0*(?:" + b"|".join(c[1:] for c in sorted(TEXT_COMMANDS)) + rb")(?![0-9.]))[GM][^\n;]*?[GM][ \t]*[-+.0-9]",
-    re.IGNORECASE)
+    rb"\n(?!M0*(?:" + b"|".join(c[1:] for c in sorted(TEXT_COMMANDS)) + rb")(?![0-9.]))[GM][^\n;]*?"
+    + SECOND_COMMAND_WORD, re.IGNORECASE)
 """A command line, not a text command, with a second command word in its code (`TEXT_COMMANDS`)."""
 _REFUSED_COMMAND = re.compile(rb"\nG0*(?:(?:[0-3]|92|2[01])\.|20(?![0-9.]))")
 """A G-code command line the arrays leave to the line reader to refuse: a subcode or G20."""
@@ -598,10 +600,3 @@ def scanned_pieces(chunk: bytes) -> Iterator[tuple[int, int, Scan | None]]:
         yield start, end, scan(b"".join((b"\n", view[start:end], ended, bytes(PAD))))
         start = end
 
-
-def odd_from(start: int, found: Scan | None) -> int | None:
-    """Where, in the chunk, the first line of the piece at `start` that may hold a malformed number is (`Scan.odd_at`;
-    the piece's start when the array reader left it to the line reader), or None when no line can."""
-    if found is None:
-        return start
-    return None if found.odd_at is None else start + found.odd_at - 1

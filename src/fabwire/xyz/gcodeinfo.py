@@ -20,6 +20,7 @@ from fabwire.xyz.gcodearrays import (
     INCHES,
     REPEATED,
     SECOND_COMMAND,
+    SECOND_COMMAND_WORD,
     SEPARATOR,
     SEPARATORS,
     SUBCODE,
@@ -103,7 +104,7 @@ def header_metadata(*windows: bytes) -> GcodeMetadata:
 _COMMAND = re.compile(
     rb"\n[ \t]*(?:[Nn][-+]?[0-9]+[ \t]*)?([GgMm])[ \t]*0*([0-9]+)(\.[0-9]*)?(?![0-9.])([^\n;]*)",
 )
-_SECOND_COMMAND = re.compile(rb"[GM][ \t]*[-+.0-9]")
+_SECOND_COMMAND = re.compile(SECOND_COMMAND_WORD)
 _NO_SUBCODE = {b"G0", b"G1", b"G2", b"G3", b"G92", b"G20", b"G21"}
 """Commands refused with a subcode (`gcodearrays.SUBCODE`): they move, set the position or set units."""
 _WORD = re.compile(rb"([A-Z])[ \t]*(" + VALUE + rb")")
@@ -357,11 +358,13 @@ class MoveAnalyzer:
                     self._feed_arrays(found)
             except Ambiguous as exc:  # the line reader, started afresh on the piece, says where
                 raise Ambiguous(exc.rule, start + _ambiguous_at(chunk[start:end] + ended, exc)) from None
+            odd_at: int | None = start  # where a malformed number may be: the line reader reads the whole piece
             if found is None:
                 g0_words = None
-            elif g0_words is not None and found.g0_at is not None:
-                g0_words.append(found.g0_at + (start - 1))
-            odd_at = gcodearrays.odd_from(start, found)
+            else:
+                odd_at = None if found.odd_at is None else start + found.odd_at - 1
+                if g0_words is not None and found.g0_at is not None:
+                    g0_words.append(found.g0_at + (start - 1))
             del found  # its arrays are not held while the next piece is read
             if odd is not None and odd_at is not None:
                 odd.append((odd_at, end))
