@@ -196,6 +196,7 @@ def test_convert_and_info_read_standard_input_as_they_read_a_file(gcode: Path, t
 @pytest.mark.parametrize(("data", "message"), [
     (b"", "standard input is empty: nothing to print"),
     (b"\x00\x01\x02junk", "standard input is binary data, not G-code or a .3w print file"),
+    (bytes(80) + (2).to_bytes(4, "little") + bytes(100), "standard input is an STL model"),  # told by its size
     (b"G28\n;" + b"x" * (2 << 20) + b"\nG1 X1\n", "has a line of over"),  # the streaming line limit holds
 ])
 def test_standard_input_that_cannot_be_converted_is_one_line_of_error(data: bytes, message: str,
@@ -204,6 +205,39 @@ def test_standard_input_that_cannot_be_converted_is_one_line_of_error(data: byte
     assert done.returncode == 4
     assert message in done.stderr.decode()
     assert len(done.stderr.decode().strip().splitlines()) == 1
+    assert not (tmp_path / "out.3w").exists()
+
+
+ENDLESS = ("import sys\nhead = bytes.fromhex(sys.argv[1])\nout = sys.stdout.buffer\nout.write(head)\n"
+           "while True:\n    out.write(bytes(1 << 20))\n")
+"""A producer that writes its first bytes, then zeros until its reader goes away."""
+
+
+@pytest.mark.parametrize(("head", "what"), [
+    (b"", "binary data"),
+    (b"\x89PNG\r\n\x1a\n", "an image (PNG)"),
+    (b"\x1f\x8b\x08\x00", "gzip-compressed"),
+    (b"PK\x03\x04", "a zip archive"),
+    (b"%PDF-1.7\n", "a PDF document"),
+    (b"G28\nG1 X10\n" + b"\x01\xfe" * 100, "binary data"),  # declares no STL size within the limit
+])
+@pytest.mark.parametrize("command", ["convert", "info"])
+def test_standard_input_that_is_no_print_file_is_refused_from_its_first_block(head: bytes, what: str, command: str,
+                                                                              tmp_path: Path) -> None:
+    producer = subprocess.Popen([sys.executable, "-c", ENDLESS, head.hex()], stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL)
+    try:
+        args = ["xyz", command, "-", *([str(tmp_path / "out.3w")] if command == "convert" else [])]
+        assert producer.stdout is not None
+        done = subprocess.run([sys.executable, "-m", "fabwire", *args], stdin=producer.stdout, capture_output=True,
+                              env=cli_env(), timeout=300)
+    finally:
+        producer.kill()
+        producer.wait()
+    assert done.returncode == 4, done.stderr
+    said = done.stderr.decode().strip().splitlines()
+    assert len(said) == 1, said
+    assert said[0].startswith(f"fabwire: error: standard input is {what}"), said
     assert not (tmp_path / "out.3w").exists()
 
 
