@@ -28,6 +28,7 @@ from fabwire.errors import FabwireError, InputError, excerpt
 
 if TYPE_CHECKING:
     from fabwire.agent.session import JobClaim, Session
+    from fabwire.transport.sameness import Machine
 
 Kind = Literal["xyz", "lineus", "mmu"]
 EventType = Literal["state", "event", "online", "offline", "job", "error"]
@@ -228,6 +229,9 @@ class Agent:
         self._subscribers: set[Subscription] = set()
         self._started = False
         self._added = 0
+        self._reached: dict[str, frozenset[Machine]] = {}
+        """Each monitored (or starting) device's name and the names of the machine it reaches (`machine_keys`),
+        taken before its session starts, so simultaneous adds of one machine cannot both pass."""
 
     async def __aenter__(self) -> Agent:
         await self.start()
@@ -245,6 +249,7 @@ class Agent:
     async def stop(self) -> None:
         sessions = list(self._sessions.values())
         self._sessions.clear()
+        self._reached.clear()
         for session in sessions:
             session.stats.leave()
         await asyncio.gather(*(s.stop() for s in sessions), return_exceptions=True)
@@ -289,18 +294,27 @@ class Agent:
         from fabwire.agent.session import Session
         from fabwire.config import validate_settings
         from fabwire.devices import KINDS as DEVICE_KINDS
+        from fabwire.transport.sameness import machine_keys
+        from fabwire.transport.urls import parse_url
 
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
         validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
-        for session in self._sessions.values():
-            if session.spec.address == spec.address and session.spec.kind == spec.kind:
-                raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
-            if session.spec.name == spec.name:
-                raise InputError(f"a device named {spec.name!r} is already monitored")
-        session = Session(self, spec, order=self._added)
-        self._added += 1
-        await session.start()
+        reached = await asyncio.to_thread(machine_keys, parse_url(spec.address, DEVICE_KINDS[spec.kind]))
+        if spec.name in self._reached:
+            raise InputError(f"a device named {spec.name!r} is already monitored")
+        for name, keys in self._reached.items():
+            if keys & reached:
+                raise InputError(f"{excerpt(spec.address, 60)} reaches the machine already monitored as {name!r}: "
+                                 "one machine is monitored once")
+        self._reached[spec.name] = reached
+        try:
+            session = Session(self, spec, order=self._added)
+            self._added += 1
+            await session.start()
+        except BaseException:
+            del self._reached[spec.name]
+            raise
         self._sessions[session.info.id] = session
         session.stats.join(self._tally)
         await self.history.remember_device(session.info)
@@ -309,6 +323,7 @@ class Agent:
     async def remove_device(self, device_id: str) -> None:
         session = self.session(device_id)
         del self._sessions[session.info.id]
+        self._reached.pop(session.spec.name, None)
         session.stats.leave()
         await session.stop()
 
