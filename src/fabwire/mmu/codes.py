@@ -122,12 +122,9 @@ class Button(enum.IntEnum):
 
 BUTTON_WORDS = {0: "Right", 1: "Middle", 2: "Left"}
 
-BUTTON_ALIASES: dict[str, int] = {
-    "right": 0, "stop": 0,
-    "middle": 1, "retry": 1, "continue": 1,
-    "left": 2,
-}
-"""Printer dialog words for the MMU's buttons: Retry and Continue are both the Middle button."""
+BUTTON_ALIASES: dict[str, int] = {"right": 0, "middle": 1, "left": 2}
+"""The buttons by their place. A dialog's words (Retry, Continue, Stop) are no fixed button: each error's dialog
+says which it sends (`fabwire.mmu.errors`, `MMU.dialog_button`)."""
 
 
 class FilamentState(enum.IntEnum):
