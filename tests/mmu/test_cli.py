@@ -40,7 +40,7 @@ def test_version_status_and_registers(simulator: SimulatorStarter) -> None:
     code, out, _ = mmu(sim.url, "write", "bowden_length", "420")
     assert (code, out.strip()) == (0, "0x22 bowden_length := 420")
     code, out, _ = mmu(sim.url, "read", "0x22", json_mode=True)
-    assert json.loads(out) == {"address": 0x22, "name": "bowden_length", "value": 420}
+    assert json.loads(out) == {"address": 0x22, "name": "bowden_length", "value": 420, "meant": 420}
     code, _, err = mmu(sim.url, "write", "pulley_acceleration", "900")
     assert code == 4  # read-only on 3.0.3, known once the version is
     assert "read-only on this firmware" in err
@@ -134,8 +134,8 @@ def test_reset_erase_needs_yes_and_registers_lists_all(simulator: SimulatorStart
     code, out, err = mmu(sim.url, "registers", json_mode=True)
     rows = json.loads(out)
     assert [r["address"] for r in rows] == list(range(0x24))
-    assert rows[0x22] == {"address": 0x22, "name": "bowden_length", "value": 360, "bits": 16, "access": "read/write",
-                          "meaning": "bowden tube length, mm (341-1000)"}
+    assert rows[0x22] == {"address": 0x22, "name": "bowden_length", "value": 360, "meant": 360, "bits": 16,
+                          "access": "read/write", "meaning": "bowden tube length, mm (341-1000)"}
     assert rows[0x04]["access"] == "read-only"
     code, out, err = mmu(sim.url, "registers")
     assert "0x22 bowden_length" in out

@@ -510,17 +510,18 @@ async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
 async def registers(dctx: DeviceContext, mmu_: MMU) -> None:
     """List every register with its address, name, value, size, access and meaning."""
     version = (await mmu_.version()).triple
-    rows = []
+    rows, lines = [], []
     for reg in codes.REGISTERS:
         value = await mmu_.read_register(reg.address)
         access = "read/write" if reg.writable(version) else "read-only"
-        rows.append({"address": reg.address, "name": reg.name, "value": value, "bits": reg.bits,
-                     "access": access, "meaning": reg.meaning})
+        rows.append({"address": reg.address, "name": reg.name, "value": value, "meant": reg.meant(value),
+                     "bits": reg.bits, "access": access, "meaning": reg.meaning})
+        lines.append(f"0x{reg.address:02x} {reg.name:<30} {reg.shown(value):>6}  {reg.bits:>2}-bit {access:<10}  "
+                     f"{reg.meaning}")
 
     def human() -> None:
-        for row in rows:
-            dctx.output.out.print(f"0x{row['address']:02x} {row['name']:<30} {row['value']:>6}  {row['bits']:>2}-bit "
-                                  f"{row['access']:<10}  {row['meaning']}", highlight=False)
+        for line in lines:
+            dctx.output.out.print(line, highlight=False)
 
     dctx.output.result(rows, human)
 
@@ -532,8 +533,8 @@ async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
     """Read REGISTER (a name such as bowden_length, or an address like 0x22)."""
     reg = resolve_register(register)
     value = await mmu_.read_register(reg.address)
-    dctx.output.result({"address": reg.address, "name": reg.name, "value": value},
-                       f"0x{reg.address:02x} {reg.name} = {value}")
+    dctx.output.result({"address": reg.address, "name": reg.name, "value": value, "meant": reg.meant(value)},
+                       f"0x{reg.address:02x} {reg.name} = {reg.shown(value)}")
 
 
 @mmu.command("write")
