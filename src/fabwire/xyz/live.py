@@ -35,7 +35,7 @@ def job_line(status: Status) -> str:
     if status.bed is not None:
         parts.append(f"bed {units.temperature(status.bed)}")
     if status.progress and status.state_code in (PRINTING, PAUSED):
-        parts.append(f"{status.progress.percent}% ({units.minutes(status.progress.remaining_min)} left)")
+        parts.append(f"{status.progress.percent} % ({units.minutes(status.progress.remaining_min)} left)")
     return ", ".join(parts)
 
 
