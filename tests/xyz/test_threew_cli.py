@@ -354,3 +354,35 @@ def test_a_large_conversion_on_a_terminal_draws_its_bar(tmp_path: Path) -> None:
     assert os.waitstatus_to_exitcode(status) == 0, said[-2000:]
     assert b"encoding big.3w" in said
     assert b"wrote" in said
+
+
+def test_without_dst_the_output_is_named_after_the_source(tmp_path: Path) -> None:
+    """part.gcode → part.3w and part.3w → part.gcode; a file of that name is never replaced unless named (it may
+    be the source itself, a G-code named .3w), and standard input needs DST."""
+    src = tmp_path / "part.gcode"
+    src.write_bytes(TV_INPUT)
+    made = run_cli("xyz", "convert", str(src), env=cli_env())
+    assert made.returncode == 0, made.stderr
+    assert read_3w(tmp_path / "part.3w").gcode  # written beside the source
+    (tmp_path / "back").mkdir()
+    moved = tmp_path / "back" / "part.3w"
+    (tmp_path / "part.3w").rename(moved)
+    back = run_cli("xyz", "convert", str(moved), env=cli_env())
+    assert back.returncode == 0, back.stderr
+    assert (tmp_path / "back" / "part.gcode").read_bytes() == read_3w(moved).gcode
+    original = src.read_bytes()
+    (tmp_path / "part.3w").write_bytes(moved.read_bytes())
+    for source, existing in ((tmp_path / "part.3w", src), (src, tmp_path / "part.3w")):
+        before = existing.read_bytes()
+        refused = run_cli("xyz", "convert", str(source), env=cli_env())
+        assert refused.returncode == 4, refused.stderr
+        assert refused.stderr.strip() == f"fabwire: error: {existing} exists already: name it as DST to replace it, " \
+                                          "or give another DST"
+        assert existing.read_bytes() == before
+    misnamed = tmp_path / "odd.3w"  # G-code under a .3w name: its own name is the output's
+    misnamed.write_bytes(original)
+    assert run_cli("xyz", "convert", str(misnamed), env=cli_env()).returncode == 4
+    assert misnamed.read_bytes() == original
+    piped = _piped("xyz", "convert", "-", data=TV_INPUT)
+    assert piped.returncode == 2
+    assert b"give DST when SRC is standard input" in piped.stderr
