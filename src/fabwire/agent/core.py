@@ -33,6 +33,8 @@ if TYPE_CHECKING:
 Kind = Literal["xyz", "lineus", "mmu"]
 EventType = Literal["state", "event", "online", "offline", "job", "error"]
 KINDS: tuple[Kind, ...] = ("xyz", "lineus", "mmu")
+RESOLVE_WAIT_S = 2.0
+"""How long adding a device waits for its host name's addresses (to tell it is no machine monitored already)."""
 SUBSCRIBER_QUEUE = 2000
 """Events a slow subscriber may lag behind by before the oldest are dropped (it sees a `"dropped"` count)."""
 
@@ -300,7 +302,11 @@ class Agent:
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
         validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
-        reached = await asyncio.to_thread(machine_keys, parse_url(spec.address, DEVICE_KINDS[spec.kind]))
+        endpoint = parse_url(spec.address, DEVICE_KINDS[spec.kind])
+        try:  # a resolver that does not answer must not hold the agent up: the spelt form still counts
+            reached = await asyncio.wait_for(asyncio.to_thread(machine_keys, endpoint), RESOLVE_WAIT_S)
+        except TimeoutError:
+            reached = frozenset({endpoint.machine})
         if spec.name in self._reached:
             raise InputError(f"a device named {spec.name!r} is already monitored")
         for name, keys in self._reached.items():
