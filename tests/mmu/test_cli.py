@@ -354,3 +354,24 @@ def test_which_sensor_step_a_command_will_stop_at(command: str, seen: set[int], 
     from fabwire.mmu.cli import SENSOR_STEPS
 
     assert [s.error for s in SENSOR_STEPS if s.ahead(command, seen, sensor_on, version)] == stops
+
+
+def test_the_simulator_says_where_each_fault_shows(tmp_path: Path) -> None:
+    """A cause present from power-on meets the firmware only where its check runs (finda-stuck at an unload), so
+    the simulator says so for every fault given, before it listens."""
+    from fabwire.mmu.errors import format_error
+    from fabwire.mmu.faults import FAULT_NAMES, FAULTS
+
+    process = subprocess.Popen([sys.executable, "-m", "fabwire", "sim", "mmu", "--listen", "127.0.0.1:0",
+                                *(arg for name in FAULT_NAMES for arg in ("--fault", name))],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    try:
+        assert process.stdout is not None
+        assert " listening on " in process.stdout.readline()
+    finally:
+        process.terminate()
+        _, err = process.communicate(timeout=30)
+    said = dict(line.removeprefix("fault ").split(": ", 1) for line in err.splitlines() if line.startswith("fault "))
+    assert set(said) == set(FAULT_NAMES)
+    for name, kind in FAULTS.items():
+        assert said[name] == f"{kind.where} → {format_error(kind.word)}"

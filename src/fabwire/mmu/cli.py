@@ -32,7 +32,7 @@ from fabwire.errors import EXIT_INTERRUPTED, InputError, LinkClosed, LinkTimeout
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error, reset_line
-from fabwire.mmu.faults import FAULT_NAMES, HANDS, PHYSICAL_BUTTONS, parse_fault
+from fabwire.mmu.faults import FAULT_NAMES, FAULTS, HANDS, PHYSICAL_BUTTONS, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
     ButtonSent,
@@ -691,8 +691,11 @@ def sim_mmu(app: Any, listen: tuple[str, ...], use_pty: bool, link: Any, speed: 
     """Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."""
     from fabwire.mmu.sim import MMUSimulator
 
-    for fault in faults:
-        parse_fault(fault)
+    parsed = [parse_fault(fault) for fault in faults]
+    for fault in parsed:  # when it shows: a cause from power-on meets the firmware only where its check runs
+        kind = FAULTS.get(fault.name)
+        told = f"{kind.where} → {format_error(kind.word)}" if kind else FAULT_NAMES[fault.name]
+        click.echo(f"fault {fault.name}: {told}", err=True)
     hands_at = parse_listen(control, 0) if control is not None else None
     simulator = MMUSimulator(fw_version, speed=speed, faults=faults, arithmetic=arithmetic,
                              phantom_requests=phantom_requests)
