@@ -106,8 +106,9 @@ def test_a_second_drawing_is_refused_naming_the_first(slow_sim: RunningSimulator
     try:
         wait_for(lambda: (tmp_path / "state.json").exists() and current_drawer(_robot(slow_sim)) is not None,
                  "the first drawing to start")
+        elsewhere = env | {"XDG_RUNTIME_DIR": str(tmp_path / "other-session"), "HOME": str(tmp_path / "other-home")}
         second = run_cli("lineus", "-d", address(slow_sim), "text", "Hi", "--state", str(tmp_path / "s2.json"),
-                         env=env)
+                         env=elsewhere)  # another session (or the agent's service) on the same host
         assert second.returncode == 4, second.stderr
         line, = second.stderr.strip().splitlines()  # the refusal alone: no plan of a drawing that will not be made
         assert "is drawing already" in line

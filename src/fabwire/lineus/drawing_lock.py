@@ -2,9 +2,10 @@
 
 The Line-us takes commands from every connection it has and runs them interleaved, so two programs drawing on one
 robot ruin the sheet and both "succeed". Whoever draws holds an exclusive `flock` on a file named after the robot's
-address in the user's runtime directory (the OS drops it when the process ends, however it ends), and writes
-beside it who they are and how far the drawing has got (`Drawer`): a second drawing is refused with those words,
-and the agent shows another program's drawing as the arm's state.
+address in one folder for the whole host (`lock_dir`: every user and the agent's service see it; the OS drops the
+lock when the process ends, however it ends), and writes beside it who they are and how far the drawing has got
+(`Drawer`): a second drawing is refused with those words, and the agent shows another program's drawing as the
+arm's state.
 """
 
 from __future__ import annotations
@@ -14,11 +15,13 @@ import contextlib
 import errno
 import fcntl
 import getpass
+import glob
 import hashlib
 import json
 import os
 import re
 import sys
+import tempfile
 import time
 import warnings
 from collections.abc import AsyncIterator
@@ -27,21 +30,43 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self
 
-from fabwire.errors import DeviceBusy, FabwireError
+from fabwire.errors import DeviceBusy, FabwireError, LinkError
 from fabwire.transport import Transport
 
 if TYPE_CHECKING:
     from fabwire.lineus.client import LineUs
 
 
+SHARED_LOCK_DIRS = (Path("/run/lock"), Path(tempfile.gettempdir()))
+"""Where a lock every process of the host sees can live: /run/lock (FHS 3.0 §3.15.5, "lock files"; a systemd
+service's PrivateTmp hides /tmp from it, not /run/lock), else the temporary directory (macOS)."""
+LOCK_FOLDER = "fabwire-lineus"
+
+
 def lock_dir() -> Path:
-    """`$XDG_RUNTIME_DIR/fabwire/lineus` (platformdirs' user runtime directory; a per-user folder under /tmp where
-    the session has none)."""
+    """`/run/lock/fabwire-lineus`, a folder every user may add to (sticky, as /tmp is), so the owner's shell and the
+    agent's service (another account) see each other's drawings; the user's runtime directory where no shared
+    folder can be written."""
+    for base in SHARED_LOCK_DIRS:
+        if base.is_dir() and os.access(base, os.W_OK | os.X_OK):
+            return base / LOCK_FOLDER
     from platformdirs import user_runtime_path
 
     with warnings.catch_warnings():  # platformdirs warns when it falls back to /tmp/runtime-<uid>
         warnings.simplefilter("ignore")
         return user_runtime_path("fabwire") / "lineus"
+
+
+def _shared_folder() -> Path:
+    """`lock_dir`, made if missing with the sticky bit and room for every user (umask left aside)."""
+    folder = lock_dir()
+    try:
+        folder.mkdir(parents=True)
+    except FileExistsError:
+        return folder
+    with contextlib.suppress(OSError):
+        folder.chmod(0o1777)
+    return folder
 
 
 def robot_address(transport: Transport) -> str:
@@ -78,10 +103,15 @@ class Drawer:
         return f"{self.what} by `{self.command}` (process {self.pid}, user {self.user}, since {since}){done}"
 
 
-def _files(robot: str) -> tuple[Path, Path]:
-    name = re.sub(r"[^A-Za-z0-9.-]+", "_", robot)[:60] + "-" + hashlib.sha256(robot.encode()).hexdigest()[:12]
+def _stem(robot: str) -> str:
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", robot)[:60] + "-" + hashlib.sha256(robot.encode()).hexdigest()[:12]
+
+
+def _files(robot: str, pid: int) -> tuple[Path, Path]:
+    """The robot's lock file, and the words of drawer `pid` (one file per process: in a sticky folder a file is
+    replaced or removed only by its own user, so a drawer never needs another's)."""
     folder = lock_dir()
-    return folder / f"{name}.lock", folder / f"{name}.json"
+    return folder / f"{_stem(robot)}.lock", folder / f"{_stem(robot)}.{pid}.json"
 
 
 def _alive(pid: int) -> bool:
@@ -94,15 +124,36 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def current_drawer(robot: str) -> Drawer | None:
-    """Who is drawing on `robot` now, or None (no holder, or one whose process has gone)."""
-    _, info = _files(robot)
+def _held(robot: str) -> bool:
+    """Whether some process holds `robot`'s lock: taking it for a moment fails then."""
     try:
-        data = json.loads(info.read_text(encoding="utf-8"))
-        drawer = Drawer(**data)
-    except (OSError, ValueError, TypeError):
+        fd = os.open(_files(robot, 0)[0], os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
+    except OSError:
+        return False  # no lock file: nobody has drawn there since the host started
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # (releases the moment's lock with it)
+    return False
+
+
+def current_drawer(robot: str) -> Drawer | None:
+    """Who is drawing on `robot` now, or None (nobody holds its lock; words left by a process that has gone, whose
+    number may belong to another program by now, are not believed)."""
+    if not _held(robot):
         return None
-    return drawer if isinstance(drawer.pid, int) and _alive(drawer.pid) else None
+    found: list[Drawer] = []
+    with contextlib.suppress(OSError):
+        for info in lock_dir().glob(f"{glob.escape(_stem(robot))}.*.json"):
+            try:
+                drawer = Drawer(**json.loads(info.read_text(encoding="utf-8")))
+            except (OSError, ValueError, TypeError):
+                continue
+            if isinstance(drawer.pid, int) and _alive(drawer.pid):
+                found.append(drawer)
+    return max(found, key=lambda d: d.started, default=None)
 
 
 def _command_line() -> str:
@@ -121,11 +172,17 @@ class DrawingLock:
         self.robot = robot
         self.drawer = Drawer(os.getpid(), command or _command_line(), getpass.getuser(), what, time.time())
         self._fd: int | None = None
-        self._lock_path, self._info_path = _files(robot)
+        self._lock_path, self._info_path = _files(robot, os.getpid())
 
     def acquire(self) -> None:
-        self._lock_path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        fd = os.open(self._lock_path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+        _shared_folder()
+        # read-only is enough for flock, so a lock file another user made serves every user (it is 0644)
+        try:
+            fd = os.open(self._lock_path, os.O_RDONLY | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise LinkError(f"cannot open the drawing lock {self._lock_path}: {exc.strerror or exc}") from None
+        with contextlib.suppress(OSError):
+            os.fchmod(fd, 0o644)  # whatever the umask: the owner's (it fails quietly on another user's file)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -144,8 +201,13 @@ class DrawingLock:
         self._write()
 
     def _write(self) -> None:
-        tmp = self._info_path.with_name(f"{self._info_path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(asdict(self.drawer)), encoding="utf-8")
+        tmp = self._info_path.with_name(f"{self._info_path.name}.tmp")
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        # a file of its own, never followed through a link someone else put there
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        with os.fdopen(fd, "w", encoding="utf-8") as out:
+            out.write(json.dumps(asdict(self.drawer)))
         tmp.replace(self._info_path)
 
     def release(self) -> None:
