@@ -203,6 +203,32 @@ CASES: dict[str, tuple[str, str]] = {
                                               "dashes"),
     "dashed fill border stays whole": (doc('<rect x="40" y="40" width="120" height="120" fill="black" '
                                            'stroke="black" stroke-width="2" stroke-dasharray="10 10"/>'), "dashes"),
+    # -- wide strokes --------------------------------------------------------------------------------------------
+    "wide strokes": (doc('<rect x="30" y="30" width="140" height="50" fill="none" stroke="black" stroke-width="16"/>'
+                         '<path d="M30 120 H90 M30 170 H90" fill="none" stroke="#333" stroke-width="14"/>'
+                         '<circle cx="140" cy="145" r="25" fill="none" stroke="black" stroke-width="12"/>'),
+                     "wide strokes"),
+    "wide stroke caps": (doc('<g fill="none" stroke="black" stroke-width="18"><path d="M40 40 H160"/>'
+                             '<path d="M40 100 H160" stroke-linecap="round"/>'
+                             '<path d="M40 160 H160" stroke-linecap="square"/></g>'), "wide strokes"),
+    "wide stroke joins": (doc('<g fill="none" stroke="black" stroke-width="14">'
+                              '<polyline points="20,70 50,20 80,70"/>'
+                              '<polyline points="110,70 140,20 170,70" stroke-linejoin="round"/>'
+                              '<polyline points="20,170 50,120 80,170" stroke-linejoin="bevel"/>'
+                              '<polyline points="110,180 140,110 170,180" stroke-miterlimit="1.5"/></g>'),
+                          "wide strokes"),
+    "wide stroke dashes and dots": (doc('<path d="M20 50 H180" stroke="black" stroke-width="12" '
+                                        'stroke-dasharray="30 15"/><path d="M30 120 H180 M100 170 h0" stroke="black" '
+                                        'stroke-width="16" stroke-linecap="round" stroke-dasharray="0 40"/>'),
+                                    "wide strokes"),
+    "wide stroke over its own fill": (doc('<rect x="50" y="50" width="100" height="100" fill="#222" stroke="#555" '
+                                          'stroke-width="30"/>'), "wide strokes"),
+    "wide stroke scaled": (doc('<g transform="translate(20 20) scale(4 2)"><path d="M5 10 L35 10 L20 70" '
+                               'fill="none" stroke="black" stroke-width="3" stroke-linejoin="round"/></g>'),
+                           "wide strokes"),
+    "wide stroke hides what lies under it": (doc(f'<line x1="20" y1="100" x2="180" y2="100" {S}/>'
+                                                 '<line x1="100" y1="20" x2="100" y2="180" stroke="black" '
+                                                 'stroke-width="40"/>'), "wide strokes"),
     # -- clip paths --------------------------------------------------------------------------------------------
     "clipped fill": (doc('<clipPath id="c"><rect x="0" y="0" width="100" height="200"/></clipPath>'
                          '<circle cx="100" cy="100" r="70" clip-path="url(#c)"/>'), "clipped fill"),

@@ -63,7 +63,8 @@ def test_symbols_nested_in_groups_and_used_under_transforms() -> None:
 
 def test_symbol_viewbox_aspect_and_default_size() -> None:
     # A 2:1 viewBox in a square viewport is centred (xMidYMid meet); without width/height the use is 100 %.
-    text = svg('<symbol id="s" viewBox="0 0 20 10"><line x1="0" y1="5" x2="20" y2="5" stroke="black"/></symbol>'
+    text = svg('<symbol id="s" viewBox="0 0 20 10"><line x1="0" y1="5" x2="20" y2="5" stroke="black" '
+               'stroke-width="0.2"/></symbol>'
                '<use href="#s" width="40" height="40"/><use href="#s" y="50"/>')
     assert boxes(lines_of(text)) == [(0.0, 20.0, 40.0, 20.0), (0.0, 100.0, 100.0, 100.0)]
 
@@ -239,7 +240,7 @@ def test_clipped_lines_stay_inside_the_clip_under_any_transform(dx: float, dy: f
     ("xMidYMid slice", [(0.0, 0.0, 0.0, 100.0), (100.0, 0.0, 100.0, 100.0)]),  # top and bottom overflow the page
 ])
 def test_viewbox_maps_onto_the_viewport(aspect: str, expected: list[tuple[float, ...]]) -> None:
-    text = svg('<rect width="10" height="20" stroke="black" fill="none"/>',
+    text = svg('<rect width="10" height="20" stroke="black" stroke-width="0.1" fill="none"/>',
                f'width="100" height="100" viewBox="0 0 10 20" preserveAspectRatio="{aspect}"')
     assert boxes(lines_of(text)) == expected
 
@@ -248,8 +249,9 @@ def test_viewbox_maps_onto_the_viewport(aspect: str, expected: list[tuple[float,
 def test_chord_error_on_paper_is_at_most_005_mm_for_any_page(tmp_path: Path, page_mm: tuple[int, int]) -> None:
     w, h = page_mm
     path = tmp_path / "small.svg"
-    path.write_text(svg(f'<circle cx="{w / 2}" cy="{h / 2}" r="2" fill="none" stroke="black"/>'
-                        f'<path d="M {w / 2 - 3} {h / 2} q 3 -6 6 0" fill="none" stroke="black"/>',
+    path.write_text(svg(f'<circle cx="{w / 2}" cy="{h / 2}" r="2" fill="none" stroke="black" '
+                        f'stroke-width="0.1"/><path d="M {w / 2 - 3} {h / 2} q 3 -6 6 0" fill="none" '
+                        'stroke="black" stroke-width="0.1"/>',
                         f'width="{w}mm" height="{h}mm" viewBox="0 0 {w} {h}"'))
     plan = plan_file(path, PlanOptions(optimize=False))
     circle = max(plan.strokes, key=len)

@@ -1,6 +1,7 @@
-"""SVG documents to the pen lines a browser shows: every visible stroke along its path (dashed as drawn), every
-solid fill along the border of the part a browser shows, pattern fills as their own lines inside the shape, text
-in single-stroke letters; transforms, viewports and clip paths applied, curves flattened to a chord tolerance.
+"""SVG documents to the pen lines a browser shows: every visible stroke along its path (dashed as drawn; a wide
+one along the border of the band it paints), every solid fill along the border of the part a browser shows,
+pattern fills as their own lines inside the shape, text in single-stroke letters; transforms, viewports and clip
+paths applied, curves flattened to a chord tolerance.
 Output is in CSS px of the page (y down).
 
 What a pen draws for a filled shape is the outline of what a browser shows of it: a fill cut by a clip path or a
@@ -33,6 +34,7 @@ from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
+from fabwire.lineus.plot.stroke import Pen, pen_of, stroke_area
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
     PathDataError,
@@ -96,6 +98,13 @@ MAX_OCCLUSION_CHECKS = 50_000_000
 """Earlier lines that opaque fills are checked against at most; beyond, later fills no longer hide lines."""
 READ_AHEAD_CHARS = 100_000
 """Path data up to this length is read ahead with all the others; longer data is read on its own, in place."""
+WIDE_STROKE_SHARE = 0.02
+"""A stroke wider than this share of the page diagonal (about 2 mm where the page fills a Line-us's drawing area,
+several pen widths) is drawn as the outline of the band it paints, caps and joins included, as a fill is; a thinner
+one along its centre line."""
+MAX_BAND_POINTS = 200_000
+"""Points of the centre lines of wide strokes one drawing may outline at most; past that, wide strokes are drawn
+along their centre lines (outlining costs GEOS buffering and union per stroke)."""
 USER_LANGUAGES = ("en",)
 """The reader's languages for `systemLanguage` (a browser's default English locale), primary subtags."""
 
@@ -124,6 +133,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
     ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
     ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
+    ("strokes wider than 2 % of the page diagonal outlined with their caps, joins and miter limit, as one shape "
+     "with the element's fill", "SVG 2 §13.5, §13.6", "wide stroke joins"),
     ("fill cut by a clip path outlined along the cut", "SVG 1.1 §14.3", "clipped fill"),
     ("clip-path on the root svg", "SVG 1.1 §14.3.5", "root clip-path"),
     ("clip path cycles leave out the looping reference", "SVG 1.1 §14.3.5", "clip cycle"),
@@ -322,6 +333,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
     if tolerance is None:
         tolerance = RELATIVE_TOLERANCE * math.hypot(width, height)
     reader = _Reader(root, name, tolerance, text)
+    reader.wide_stroke = WIDE_STROKE_SHARE * math.hypot(width, height)
     if vb.error:
         reader.unsupported[f"the viewBox {excerpt(root.get('viewBox', ''), 60)} is in error ({vb.error}): ignored, as "
                            "browsers do"] += 1
@@ -397,11 +409,15 @@ def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
         np.fill_diagonal(inside, False)
         if not inside.any():
             return None  # side by side: every ring is a border
-    area = fill.area
-    border = [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
-              if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
+    border = _outline(fill.area)
     drawn = _length(rings)
     return border if abs(_length(border) - drawn) > 1e-6 * drawn else None
+
+
+def _outline(area: BaseGeometry) -> Polylines:
+    """The rings bounding an area: each polygon's exterior and holes."""
+    return [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
+            if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
 
 
 def _namespace(el: ET.Element) -> str:
@@ -450,6 +466,10 @@ class _Reader:
         self.curved = False
         self.points = 0
         self.dashes = 0
+        self.band_points = 0
+        """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
+        self.wide_stroke = math.inf
+        """Strokes wider than this on the page (px) are drawn as the outline of the band they paint."""
         """Dashes stroke-dasharray cut the lines into so far (bounded by MAX_DRAWING_DASHES)."""
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
         self._read_ahead = self._read_straight_paths()
@@ -982,26 +1002,40 @@ class _Reader:
               viewport: tuple[float, float], out: Ink) -> None:
         stroke = self._paint_kind(style, "stroke")[0] != "none"
         fill, pattern = self._paint_kind(style)
-        covers = not self._shaded and bool(self._below) and opaque_fill(style)
+        covers = not self._shaded and bool(self._below) and opaque_fill(style, "fill")
         if style.get("visibility", "visible").strip() != "visible" or (not (stroke or covers) and fill == "none"):
             points = [sub.points for sub in self.subpaths(el, tag, matrix, viewport, self.font(style))]
             if points:
                 out.extent.append(_box(np.concatenate(points)))  # shows nothing, but has a bounding box
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
-        dots = stroke and caps
         if any(style[k].strip() != "none" for k in style.keys() & MARKERS):
             self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
+        subs = self.subpaths(el, tag, matrix, viewport, self.font(style))
+        half = self._stroke_width(style, viewport) / 2 if stroke else 0.0
+        scale = math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
+        wide = stroke and 2 * half * scale > self.wide_stroke and self._band_room(subs)
+        stroke, dots = stroke and not wide, stroke and not wide and caps
+        band: list[tuple[FloatArray, bool]] = []
+        """The centre lines of a wide stroke, in user units, with whether each is closed."""
+        inverse = _invert(matrix) if dashes or wide else matrix
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
-        for sub in self.subpaths(el, tag, matrix, viewport, self.font(style)):
+        for sub in subs:
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
             pts = sub.points
             if not np.isfinite(pts).all():
                 self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
+            if wide:
+                local_pts = affine([pts], inverse)[0]
+                if dashes:
+                    self._count_dashes(el, tag, dash_count(local_pts, dashes))
+                    band.extend((piece, False) for piece in dashed(local_pts, dashes, offset))
+                else:
+                    band.append((local_pts, sub.closed))
             flat = (fill != "none" or covers or not stroke) and _without_area(pts)
             if (fill != "none" or covers) and not flat:
                 rings.append(pts)
@@ -1014,8 +1048,7 @@ class _Reader:
                 continue
             if fill == "solid" and not sub.closed and not flat:
                 pts = np.vstack([pts, pts[:1]])  # the fill's border closes the subpath
-            if dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between the dashes
-                inverse = _invert(matrix)
+            if stroke and dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between dashes
                 local_pts = affine([pts], inverse)[0]
                 self._count_dashes(el, tag, dash_count(local_pts, dashes))
                 pieces = affine(dashed(local_pts, dashes, offset), matrix)
@@ -1026,23 +1059,62 @@ class _Reader:
                 continue
             self._count(len(pts))
             out.append(pts)
-        if not rings:
-            final.take(out)
-            return
-        closed = [np.vstack([r, r[:1]]) for r in rings]
-        rule = style.get("fill-rule", "nonzero").strip()
-        own = _Fill(closed, rule)
-        if fill == "solid" and not stroke and out:
-            border = _border(own, closed)
-            if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
-                out.replace(border)
-        if covers:
-            self.hide_under(own)
-        if fill == "solid":
-            out.fills.append(own)
-        elif pattern is not None:
-            self.pattern(pattern, matrix, closed, rule, viewport, out)
+        if rings:
+            closed = [np.vstack([r, r[:1]]) for r in rings]
+            rule = style.get("fill-rule", "nonzero").strip()
+            own = _Fill(closed, rule)
+            if fill == "solid" and not stroke and out:
+                border = _border(own, closed)
+                if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
+                    out.replace(border)
+            if covers:
+                self.hide_under(own)
+            if fill == "solid":
+                out.fills.append(own)
+            elif pattern is not None:
+                self.pattern(pattern, matrix, closed, rule, viewport, out)
+        if band:
+            self.stroke_band(band, pen_of(style, half, self.tolerance / scale), style, matrix, out,
+                             own if rings and fill == "solid" else None)
         final.take(out)
+
+    def _stroke_width(self, style: dict[str, str], viewport: tuple[float, float]) -> float:
+        """stroke-width in user units (a percentage of the viewport's normalised diagonal); negative or in error
+        is the initial 1."""
+        width = length(style.get("stroke-width"), math.hypot(*viewport) / math.sqrt(2), default=1.0,
+                       font_size=self.font(style))
+        return width if width >= 0 else 1.0
+
+    def _band_room(self, subs: list[Subpath]) -> bool:
+        """Whether the wide strokes of the drawing so far and `subs` stay within MAX_BAND_POINTS (beyond, wide
+        strokes are drawn along their centre lines, with a note)."""
+        self.band_points += sum(len(sub.points) for sub in subs)
+        if self.band_points <= MAX_BAND_POINTS:
+            return True
+        self.unsupported[f"wide strokes past {MAX_BAND_POINTS:,} points are drawn along their centre lines, not "
+                         "as the outline of the band they paint"] += 1
+        return False
+
+    def stroke_band(self, lines: list[tuple[FloatArray, bool]], pen: Pen, style: dict[str, str],
+                    matrix: FloatArray, out: Ink, fill: _Fill | None) -> None:
+        """Draw a wide stroke as a fill is drawn: the outline of the band it paints (`lines` in user units placed
+        by `matrix`), added to the element's own lines `out`; an opaque band hides what lies under it. With the
+        element's solid `fill` (the last of `out.fills`, its border the lines of `out`), the pen draws the border
+        of both together: one element's paint is one shape, whatever the colours of its fill and stroke."""
+        area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
+        if area.is_empty:
+            return
+        band = _Fill([], "nonzero", area)
+        if not self._shaded and self._below and opaque_fill(style, "stroke"):
+            self.hide_under(band)
+        if fill is not None:
+            band = _Fill([], "nonzero", shapely.union(fill.area, area))
+            out.fills.pop()
+            out.replace([])
+        border = _outline(band.area)
+        self._count(sum(len(line) for line in border))
+        out.extend(border)
+        out.fills.append(band)
 
     # -- patterns -----------------------------------------------------------------------------------------------
 
