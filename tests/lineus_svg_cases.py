@@ -229,6 +229,27 @@ CASES: dict[str, tuple[str, str]] = {
     "wide stroke hides what lies under it": (doc(f'<line x1="20" y1="100" x2="180" y2="100" {S}/>'
                                                  '<line x1="100" y1="20" x2="100" y2="180" stroke="black" '
                                                  'stroke-width="40"/>'), "wide strokes"),
+    # -- markers -------------------------------------------------------------------------------------------------
+    "markers": (doc('<marker id="m" viewBox="0 0 10 10" refX="5" refY="5" markerWidth="8" markerHeight="8" '
+                    'orient="auto"><path d="M0 0 L10 5 L0 10 Z"/></marker>'
+                    f'<polyline points="30,170 60,40 120,120 180,30" {S} marker-start="url(#m)" marker-mid="url(#m)" '
+                    'marker-end="url(#m)"/>'), "markers"),
+    "marker units and fixed orient": (doc('<marker id="q" markerUnits="userSpaceOnUse" markerWidth="30" '
+                                          'markerHeight="30" refX="15" refY="15" orient="30deg"><rect x="5" y="5" '
+                                          'width="20" height="20"/></marker>'
+                                          '<path d="M40 50 H160 M40 150 Q100 90 160 150" fill="none" stroke="black" '
+                                          'stroke-width="1" style="marker: url(#q)"/>'), "markers"),
+    "marker clipped to its box unless overflow is visible": (
+        doc('<marker id="c" markerWidth="10" markerHeight="10" refX="0" refY="0" markerUnits="userSpaceOnUse">'
+            '<circle r="30"/></marker><marker id="v" markerWidth="10" markerHeight="10" overflow="visible" '
+            'markerUnits="userSpaceOnUse"><circle r="30"/></marker>'
+            f'<line x1="50" y1="50" x2="50" y2="50" {S} marker-start="url(#c)"/>'
+            f'<line x1="120" y1="130" x2="120" y2="130" {S} marker-end="url(#v)"/>'), "markers"),
+    "auto-start-reverse on a closed path": (doc('<marker id="a" viewBox="0 0 10 10" refX="0" refY="5" '
+                                                'markerWidth="12" markerHeight="12" orient="auto-start-reverse">'
+                                                '<path d="M0 0 L10 5 L0 10 Z"/></marker>'
+                                                f'<path d="M40 40 H160 V160 Z" {S} marker-start="url(#a)" '
+                                                'marker-end="url(#a)"/>'), "markers"),
     # -- clip paths --------------------------------------------------------------------------------------------
     "clipped fill": (doc('<clipPath id="c"><rect x="0" y="0" width="100" height="200"/></clipPath>'
                          '<circle cx="100" cy="100" r="70" clip-path="url(#c)"/>'), "clipped fill"),

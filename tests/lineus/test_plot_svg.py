@@ -303,12 +303,12 @@ def test_broken_compressed_files_are_input_errors(tmp_path: Path) -> None:
 def test_unsupported_features_are_named() -> None:
     drawing = parse_svg(svg('<mask id="m"><rect width="5" height="5" fill="white"/></mask>'
                             '<path d="M0 0 H10" stroke="black" mask="url(#m)"/>'
-                            '<path d="M0 5 H10" stroke="black" marker-end="url(#arrow)"/>'
+                            '<path d="M0 5 H10" stroke="black" filter="url(#blur)"/>'
                             '<style>g &gt;&gt; path { stroke: red }</style>'))
     assert len(drawing.lines) == 2
     text = " ".join(drawing.notes)
     assert "mask" in text
-    assert "marker" in text
+    assert "filter" in text
     assert "g >> path" in text
 
 

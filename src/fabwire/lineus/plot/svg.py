@@ -7,7 +7,7 @@ Output is in CSS px of the page (y down).
 What a pen draws for a filled shape is the outline of what a browser shows of it: a fill cut by a clip path or a
 viewport is outlined along the cut too, an open subpath is closed for its fill, and a fill the colour of the paper
 draws nothing (so matplotlib's white figure background neither frames the plot nor drives fitting). Shapes
-painted over others do not hide what lies under them (a pen cannot unpaint): that, masks, markers, filters and
+painted over others do not hide what lies under them (a pen cannot unpaint): that, masks, filters and
 gradients' colours are what the plan does not show as a browser does, and each is named in `notes`.
 
 FEATURES below lists every class of SVG the reader renders as a browser does, with its source; each row names the
@@ -66,6 +66,7 @@ from fabwire.lineus.plot.svgunits import (
     ROOT_FONT_SIZE,
     Font,
     about,
+    angle,
     beyond_single,
     css_transform,
     flattens,
@@ -113,6 +114,11 @@ CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
 UNDRAWABLE = frozenset({"text", "image", "foreignObject"})
 EFFECTS = frozenset({"clip-path", "mask", "filter"})
 MARKERS = frozenset({"marker", "marker-start", "marker-mid", "marker-end"})
+MARKABLE = frozenset({"path", "line", "polyline", "polygon"})
+"""Shapes markers are drawn on (SVG 2 §13.7: markable elements)."""
+MAX_MARKERS = 50_000
+"""Marker copies one drawing may place at most (each vertex of a long path places one); past that, the rest are
+left out with a note."""
 
 FEATURES: tuple[tuple[str, str, str], ...] = (
     # (feature class, source, browser comparison case)
@@ -133,6 +139,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
     ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
     ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
+    ("markers on path, line, polyline and polygon vertices: orient, markerUnits, viewBox, refX/refY, clip",
+     "SVG 2 §13.7", "markers"),
     ("strokes wider than 2 % of the page diagonal outlined with their caps, joins and miter limit, as one shape "
      "with the element's fill", "SVG 2 §13.5, §13.6", "wide stroke joins"),
     ("fill cut by a clip path outlined along the cut", "SVG 1.1 §14.3", "clipped fill"),
@@ -185,11 +193,14 @@ def _box(points: FloatArray) -> list[float]:
 class _Fill:
     """The area a solid fill covers, in output units, from its closed rings by its fill rule (made on demand)."""
 
-    __slots__ = ("_area", "box", "rings", "rule")
+    __slots__ = ("_area", "box", "opaque", "rings", "rule")
 
-    def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None) -> None:
+    def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None, *,
+                 opaque: bool = False) -> None:
         self.rings = rings
         self.rule = rule
+        self.opaque = opaque
+        """Whether the paint has no transparency, so it hides what lies under it."""
         self._area = area
         self.box = _box(np.concatenate(rings)) if rings else (
             shapely.bounds(area).tolist() if area is not None and not area.is_empty else [0.0, 0.0, -1.0, -1.0])
@@ -414,6 +425,42 @@ def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
     return border if abs(_length(border) - drawn) > 1e-6 * drawn else None
 
 
+def _direction(step: FloatArray) -> float:
+    return math.degrees(math.atan2(float(step[1]), float(step[0])))
+
+
+def _marker_places(subs: list[Subpath], inverse: FloatArray) -> list[tuple[FloatArray, float]]:
+    """Each vertex of the subpaths in user units (`inverse` undoes their placement), in order, with the direction
+    a marker with orient auto takes there, degrees: the mean of the directions in and out (SVG 2 §13.7.3), the
+    one there is at an open end; a closed subpath's first and last vertices take its closing direction in."""
+    places: list[tuple[FloatArray, float]] = []
+    for sub in subs:
+        pts = affine([sub.points], inverse)[0]
+        if not np.isfinite(pts).all():
+            continue
+        steps = np.diff(pts, axis=0)
+        moving = np.flatnonzero(np.hypot(steps[:, 0], steps[:, 1]) > 0)
+        indices = list(sub.vertices) if sub.vertices is not None else list(range(len(pts)))
+        first = steps[moving[0]] if len(moving) else None
+        last = steps[moving[-1]] if len(moving) else None
+        for i in indices:
+            before = moving[moving < i]
+            after = moving[moving >= i]
+            into = steps[before[-1]] if len(before) else (last if sub.closed else None)
+            out = steps[after[0]] if len(after) else (first if sub.closed else None)
+            if into is not None and out is not None:
+                a, b = _direction(into), _direction(out)
+                if abs(b - a) > 180:
+                    b += 360 if b < a else -360
+                turn = (a + b) / 2
+            elif into is not None or out is not None:
+                turn = _direction(into if into is not None else out)  # type: ignore[arg-type]
+            else:
+                turn = 0.0
+            places.append((pts[i], turn))
+    return places
+
+
 def _outline(area: BaseGeometry) -> Polylines:
     """The rings bounding an area: each polygon's exterior and holes."""
     return [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
@@ -483,6 +530,9 @@ class _Reader:
         a clip path, a viewport's clip) takes its content as one picture, so a fill in it hides what the group
         painted before it, but not what lies under the group (SVG 1.1 §14.5, Compositing 1 §3.3 groups)."""
         self._occlusion_checks = 0
+        self._markers: tuple[ET.Element, ...] = ()
+        """Markers being drawn, innermost last: a marker is not drawn inside itself."""
+        self.marker_count = 0
         self.user_viewport = (0.0, 0.0)
         """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
         self.root_font = Font()
@@ -758,7 +808,8 @@ class _Reader:
                 for k in np.flatnonzero(near).tolist():
                     earlier = ink.fills[k]
                     if shapely.intersects(earlier.area, fill.area):
-                        ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area)))
+                        ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area),
+                                              opaque=earlier.opaque))
 
     def clip(self, el: ET.Element, own: dict[str, str], matrix: FloatArray, target: Ink,
              stack: tuple[str, ...]) -> None:
@@ -782,7 +833,7 @@ class _Reader:
             edges, area = cut_edge(fill.area, region)
             kept.extend(edges)
             if not area.is_empty:
-                fills.append(_Fill([], fill.rule, area))
+                fills.append(_Fill([], fill.rule, area, opaque=fill.opaque))
         target.replace(kept)
         target.fills = fills
         self.hidden.extend(hidden)
@@ -868,7 +919,8 @@ class _Reader:
             if not keep:
                 self._read_ahead.pop(id(el), None)
             placed = affine([sub.points for sub in ahead], matrix)
-            return [Subpath(points, sub.closed, sub.segments) for points, sub in zip(placed, ahead, strict=True)]
+            return [Subpath(points, sub.closed, sub.segments, sub.vertices)
+                    for points, sub in zip(placed, ahead, strict=True)]
         builder = PathBuilder(matrix, self.tolerance, room=MAX_POINTS - self.points)
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)
@@ -1000,6 +1052,96 @@ class _Reader:
 
     def shape(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
               viewport: tuple[float, float], out: Ink) -> None:
+        """Draw a shape's fill and stroke, then its markers."""
+        markers = self._marker_refs(style) if tag in MARKABLE else {}
+        if not markers:
+            self._paint(el, tag, style, matrix, viewport, out)
+            return
+        subs = self.subpaths(el, tag, matrix, viewport, self.font(style), keep=True)
+        self._paint(el, tag, style, matrix, viewport, out)
+        places = _marker_places(subs, _invert(matrix))
+        width = self._stroke_width(style, viewport)
+        for k, (point, direction) in enumerate(places):
+            where = "start" if k == 0 else "end" if k == len(places) - 1 else "mid"
+            for which in (where, "end") if len(places) == 1 else (where,):
+                marker = markers.get(which)
+                if marker is not None:
+                    self.marker(marker, which, point, direction, width, matrix, viewport, out)
+
+    def _marker_refs(self, style: dict[str, str]) -> dict[str, ET.Element]:
+        """The `<marker>` elements marker-start, -mid and -end (or the `marker` shorthand) name."""
+        found: dict[str, ET.Element] = {}
+        for where in ("start", "mid", "end"):
+            value = style.get(f"marker-{where}", "").strip() or style.get("marker", "").strip()
+            ref = iri(value) if value.startswith("url(") else None
+            target = self.ids.get(ref) if ref else None
+            if target is not None and local(target.tag) == "marker" and _namespace(target) == SVG_NS:
+                found[where] = target
+        return found
+
+    def marker(self, marker: ET.Element, where: str, point: FloatArray, direction: float, stroke_width: float,
+               matrix: FloatArray, viewport: tuple[float, float], out: Ink) -> None:
+        """Draw one marker at `point` (user units of the shape placed by `matrix`), turned by its orient
+        (`direction`, degrees, for auto), scaled by the stroke width unless markerUnits is userSpaceOnUse, its
+        viewBox mapped onto markerWidth x markerHeight with (refX, refY) on the point, clipped to that box unless
+        its overflow is visible (SVG 2 §13.7.2)."""
+        if marker in self._markers:
+            return
+        self.marker_count += 1
+        if self.marker_count > MAX_MARKERS:
+            self.unsupported[f"markers past {MAX_MARKERS:,} in one drawing are left out"] += 1
+            return
+        vw, vh = viewport
+        style = self.computed_style(marker)
+        font = self.font(style)
+        mw = length(marker.get("markerWidth"), vw, default=3.0, font_size=font)
+        mh = length(marker.get("markerHeight"), vh, default=3.0, font_size=font)
+        vb = read_view_box(marker.get("viewBox"))
+        if mw <= 0 or mh <= 0 or vb.empty:
+            return
+        box = vb.box
+        orient = (marker.get("orient") or "0").strip()
+        if orient == "auto":
+            turn = direction
+        elif orient == "auto-start-reverse":
+            turn = direction + (180.0 if where == "start" else 0.0)
+        else:
+            try:
+                turn = angle(orient)
+            except ValueError:
+                turn = 0.0
+        scale = 1.0 if (marker.get("markerUnits") or "").strip() == "userSpaceOnUse" else stroke_width
+        inner = viewport_matrix(box, 0.0, 0.0, mw, mh, marker.get("preserveAspectRatio"))
+        size = (box[2], box[3]) if box else (mw, mh)
+        ref = affine([np.array([[length(marker.get("refX"), vw, font_size=font),
+                                 length(marker.get("refY"), vh, font_size=font)]])], inner)[0][0]
+        c, s = math.cos(math.radians(turn)), math.sin(math.radians(turn))
+        place = np.array([[c * scale, -s * scale, 0.0], [s * scale, c * scale, 0.0]])
+        place[:, 2] = point - place[:, :2] @ ref
+        placed = then(matrix, place)
+        if flattens(placed):
+            return
+        drawn = Ink()
+        # hidden by the user agent's style sheet; `inherit` with no value above it is the initial visible
+        given = "overflow" in own_style(marker, self.sheet)
+        clips = style.get("overflow", "visible" if given else "hidden").strip() in ("hidden", "scroll")
+        self._markers += (marker,)
+        try:
+            with self.painting(drawn, isolated=clips):  # a clipped marker hides what is under it once clipped
+                self.children(marker, style, then(placed, inner), size, drawn, 0, ())
+        finally:
+            self._markers = self._markers[:-1]
+        if clips and (drawn or drawn.fills):
+            corners = np.array([[0.0, 0.0], [mw, 0.0], [mw, mh], [0.0, mh], [0.0, 0.0]])
+            self.cut_ink(drawn, shapely.Polygon(affine([corners], placed)[0]))
+            if not self._shaded and self._below:  # what shows of its opaque fills hides the shape's lines under it
+                for fill in drawn.fills:
+                    if fill.opaque:
+                        self.hide_under(fill)
+        out.take(drawn)
+
+    def _paint(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
+               viewport: tuple[float, float], out: Ink) -> None:
         stroke = self._paint_kind(style, "stroke")[0] != "none"
         fill, pattern = self._paint_kind(style)
         covers = not self._shaded and bool(self._below) and opaque_fill(style, "fill")
@@ -1009,8 +1151,6 @@ class _Reader:
                 out.extent.append(_box(np.concatenate(points)))  # shows nothing, but has a bounding box
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
-        if any(style[k].strip() != "none" for k in style.keys() & MARKERS):
-            self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
         subs = self.subpaths(el, tag, matrix, viewport, self.font(style))
         half = self._stroke_width(style, viewport) / 2 if stroke else 0.0
@@ -1062,7 +1202,7 @@ class _Reader:
         if rings:
             closed = [np.vstack([r, r[:1]]) for r in rings]
             rule = style.get("fill-rule", "nonzero").strip()
-            own = _Fill(closed, rule)
+            own = _Fill(closed, rule, opaque=opaque_fill(style, "fill"))
             if fill == "solid" and not stroke and out:
                 border = _border(own, closed)
                 if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
@@ -1104,11 +1244,11 @@ class _Reader:
         area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
         if area.is_empty:
             return
-        band = _Fill([], "nonzero", area)
-        if not self._shaded and self._below and opaque_fill(style, "stroke"):
+        band = _Fill([], "nonzero", area, opaque=opaque_fill(style, "stroke"))
+        if not self._shaded and self._below and band.opaque:
             self.hide_under(band)
         if fill is not None:
-            band = _Fill([], "nonzero", shapely.union(fill.area, area))
+            band = _Fill([], "nonzero", shapely.union(fill.area, area), opaque=band.opaque and fill.opaque)
             out.fills.pop()
             out.replace([])
         border = _outline(band.area)

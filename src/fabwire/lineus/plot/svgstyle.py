@@ -42,9 +42,9 @@ GEOMETRY = frozenset({"x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", 
 """Geometry properties (SVG 2 §10.2-10.4): a style sheet or `style` attribute may set them; the attributes of
 the same names are read with the shape."""
 PROPERTIES = INHERITED | NOT_INHERITED | GEOMETRY
-PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform"} - GEOMETRY
+PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform", "marker"} - GEOMETRY
 """Properties that may be given as attributes too; the `transform` attribute has its own (SVG 1.1) grammar and is
-read apart from the CSS property."""
+read apart from the CSS property; the `marker` shorthand is a property only (SVG 2 §13.7.4)."""
 INITIAL = {"fill": "black", "stroke": "none", "fill-opacity": "1", "stroke-opacity": "1", "stroke-width": "1",
            "stroke-linecap": "butt", "stroke-linejoin": "miter", "stroke-miterlimit": "4", "visibility": "visible",
            "clip-rule": "nonzero", "fill-rule": "nonzero",
