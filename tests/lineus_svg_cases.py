@@ -250,6 +250,14 @@ CASES: dict[str, tuple[str, str]] = {
                                                 '<path d="M0 0 L10 5 L0 10 Z"/></marker>'
                                                 f'<path d="M40 40 H160 V160 Z" {S} marker-start="url(#a)" '
                                                 'marker-end="url(#a)"/>'), "markers"),
+    "context paint": (doc('<defs><g id="g"><rect x="20" y="20" width="60" height="60" fill="context-stroke" '
+                          'stroke="context-fill" stroke-width="2"/></g></defs>'
+                          '<use href="#g" fill="none" stroke="black"/>'
+                          '<rect x="120" y="20" width="60" height="60" fill="context-fill"/>'
+                          '<marker id="k" markerUnits="userSpaceOnUse" markerWidth="20" markerHeight="20" refX="10" '
+                          'refY="10"><circle cx="10" cy="10" r="8" fill="context-stroke"/></marker>'
+                          '<path d="M30 150 H170" stroke="#222" stroke-width="2" marker-start="url(#k)" '
+                          'marker-end="url(#k)"/>'), "markers"),
     # -- clip paths --------------------------------------------------------------------------------------------
     "clipped fill": (doc('<clipPath id="c"><rect x="0" y="0" width="100" height="200"/></clipPath>'
                          '<circle cx="100" cy="100" r="70" clip-path="url(#c)"/>'), "clipped fill"),

@@ -73,3 +73,16 @@ def test_an_opaque_marker_hides_the_line_under_it() -> None:
             '<line x1="20" y1="100" x2="180" y2="100" stroke="black" marker-end="url(#b)"/>')
     lines = parse_svg(svg(body)).lines
     assert max(float(line[:, 0].max()) for line in lines if len(line) == 2) == pytest.approx(170)
+
+
+def test_context_paint_comes_from_the_use_or_the_marked_shape_and_is_none_without_one() -> None:
+    used = ('<defs><rect id="r" x="20" y="20" width="40" height="40" fill="context-fill"/></defs>'
+            '<use href="#r" fill="black"/><use href="#r" x="100" fill="none"/>')
+    assert [line.min(axis=0).tolist() for line in parse_svg(svg(used)).lines] == [[20, 20]]
+    alone = '<rect x="20" y="20" width="40" height="40" fill="context-fill" stroke="context-stroke"/>'
+    assert parse_svg(svg(alone)).lines == []
+    marked = ('<marker id="c" markerUnits="userSpaceOnUse" markerWidth="4" markerHeight="4" refX="2" refY="2">'
+              '<rect width="4" height="4" fill="context-stroke"/></marker>'
+              '<line x1="20" y1="20" x2="80" y2="20" stroke="none" marker-end="url(#c)"/>'
+              '<line x1="20" y1="50" x2="80" y2="50" stroke="black" stroke-width="0.5" marker-end="url(#c)"/>')
+    assert centres(svg(marked)) == [(80, 50)]

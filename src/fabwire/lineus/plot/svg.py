@@ -114,6 +114,7 @@ CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
 UNDRAWABLE = frozenset({"text", "image", "foreignObject"})
 EFFECTS = frozenset({"clip-path", "mask", "filter"})
 MARKERS = frozenset({"marker", "marker-start", "marker-mid", "marker-end"})
+CONTEXT_PAINTS = {"context-fill": "fill", "context-stroke": "stroke"}
 MARKABLE = frozenset({"path", "line", "polyline", "polygon"})
 """Shapes markers are drawn on (SVG 2 §13.7: markable elements)."""
 MAX_MARKERS = 50_000
@@ -141,6 +142,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
     ("markers on path, line, polyline and polygon vertices: orient, markerUnits, viewBox, refX/refY, clip",
      "SVG 2 §13.7", "markers"),
+    ("context-fill and context-stroke from the use or the marked shape; none without one", "SVG 2 §13.3",
+     "context paint"),
     ("strokes wider than 2 % of the page diagonal outlined with their caps, joins and miter limit, as one shape "
      "with the element's fill", "SVG 2 §13.5, §13.6", "wide stroke joins"),
     ("fill cut by a clip path outlined along the cut", "SVG 1.1 §14.3", "clipped fill"),
@@ -530,6 +533,9 @@ class _Reader:
         a clip path, a viewport's clip) takes its content as one picture, so a fill in it hides what the group
         painted before it, but not what lies under the group (SVG 1.1 §14.5, Compositing 1 §3.3 groups)."""
         self._occlusion_checks = 0
+        self._context: dict[str, str] | None = None
+        """fill and stroke of the element context-fill and context-stroke take theirs from (the `<use>` or the
+        marked shape being drawn; None outside both: those paints are then none, SVG 2 §13.3)."""
         self._markers: tuple[ET.Element, ...] = ()
         """Markers being drawn, innermost last: a marker is not drawn inside itself."""
         self.marker_count = 0
@@ -847,8 +853,32 @@ class _Reader:
             at = self.parents.get(at)
         return False
 
+    def in_context(self, style: dict[str, str]) -> dict[str, str]:
+        """`style` with context-fill and context-stroke replaced by the context element's paint."""
+        found = {k: v for k in ("fill", "stroke") if (v := style.get(k, "").strip()) in CONTEXT_PAINTS}
+        if not found:
+            return style
+        context = self._context or {}
+        return {**style, **{k: context.get(CONTEXT_PAINTS[v], "none") for k, v in found.items()}}
+
+    @contextmanager
+    def context(self, style: dict[str, str]) -> Iterator[None]:
+        """Draw with the element of (resolved) `style` as the context element."""
+        outer = self._context
+        self._context = {"fill": style.get("fill", "black"), "stroke": style.get("stroke", "none")}
+        try:
+            yield
+        finally:
+            self._context = outer
+
     def use(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
             out: Ink, depth: int, uses: tuple[str, ...]) -> None:
+        style = self.in_context(style)
+        with self.context(style):
+            self._use(el, style, matrix, viewport, out, depth, uses)
+
+    def _use(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
+             out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         ref = self._href(el)
         target = self.ids.get(ref) if ref else None
         if target is None:
@@ -1053,6 +1083,7 @@ class _Reader:
     def shape(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
               viewport: tuple[float, float], out: Ink) -> None:
         """Draw a shape's fill and stroke, then its markers."""
+        style = self.in_context(style)
         markers = self._marker_refs(style) if tag in MARKABLE else {}
         if not markers:
             self._paint(el, tag, style, matrix, viewport, out)
@@ -1061,12 +1092,13 @@ class _Reader:
         self._paint(el, tag, style, matrix, viewport, out)
         places = _marker_places(subs, _invert(matrix))
         width = self._stroke_width(style, viewport)
-        for k, (point, direction) in enumerate(places):
-            where = "start" if k == 0 else "end" if k == len(places) - 1 else "mid"
-            for which in (where, "end") if len(places) == 1 else (where,):
-                marker = markers.get(which)
-                if marker is not None:
-                    self.marker(marker, which, point, direction, width, matrix, viewport, out)
+        with self.context(style):
+            for k, (point, direction) in enumerate(places):
+                where = "start" if k == 0 else "end" if k == len(places) - 1 else "mid"
+                for which in (where, "end") if len(places) == 1 else (where,):
+                    marker = markers.get(which)
+                    if marker is not None:
+                        self.marker(marker, which, point, direction, width, matrix, viewport, out)
 
     def _marker_refs(self, style: dict[str, str]) -> dict[str, ET.Element]:
         """The `<marker>` elements marker-start, -mid and -end (or the `marker` shorthand) name."""
