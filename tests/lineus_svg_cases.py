@@ -229,6 +229,10 @@ CASES: dict[str, tuple[str, str]] = {
     "wide stroke hides what lies under it": (doc(f'<line x1="20" y1="100" x2="180" y2="100" {S}/>'
                                                  '<line x1="100" y1="20" x2="100" y2="180" stroke="black" '
                                                  'stroke-width="40"/>'), "wide strokes"),
+    "wide stroke clipped by its geometry's bounding box": (
+        doc('<clipPath id="b" clipPathUnits="objectBoundingBox"><rect width="0.25" height="1"/></clipPath>'
+            '<rect x="50" y="50" width="100" height="100" fill="none" stroke="black" stroke-width="40" '
+            'clip-path="url(#b)"/>'), "wide strokes"),
     # -- markers -------------------------------------------------------------------------------------------------
     "markers": (doc('<marker id="m" viewBox="0 0 10 10" refX="5" refY="5" markerWidth="8" markerHeight="8" '
                     'orient="auto"><path d="M0 0 L10 5 L0 10 Z"/></marker>'
@@ -286,6 +290,18 @@ CASES: dict[str, tuple[str, str]] = {
     "clip path with a transform": (doc('<clipPath id="c" transform="rotate(45 100 100)"><rect x="50" y="50" '
                                        'width="100" height="100"/></clipPath><rect x="40" y="40" width="120" '
                                        'height="120" clip-path="url(#c)"/>'), "clipped fill"),
+    "clip-path basic shapes": (doc('<rect x="10" y="10" width="80" height="80" clip-path="circle()"/>'
+                                   '<rect x="110" y="10" width="80" height="80" clip-path="ellipse(30% 20px at 40% '
+                                   '60%)"/><rect x="10" y="110" width="80" height="80" clip-path="inset(10px 20%)"/>'
+                                   '<rect x="110" y="110" width="80" height="80" clip-path="polygon(50% 0, 100% 100%, '
+                                   '0 100%)"/>'), "clipped fill"),
+    "clip-path basic shape reference boxes": (doc('<rect x="30" y="30" width="60" height="60" fill="#333" '
+                                                  'stroke="black" stroke-width="16" clip-path="circle(50% at right '
+                                                  'top) fill-box"/><rect x="110" y="110" width="60" height="60" '
+                                                  'stroke="black" stroke-width="16" clip-path="circle()"/>'
+                                                  '<rect x="110" y="20" width="80" height="60" '
+                                                  'clip-path="circle(30px at 150px 50px) view-box"/>'),
+                                              "clipped fill"),
     "root clip-path": (doc('<clipPath id="c"><rect x="0" y="0" width="120" height="120"/></clipPath>'
                            f'<rect x="20" y="20" width="160" height="160" {S}/>', 'clip-path="url(#c)"'),
                        "root clip-path"),

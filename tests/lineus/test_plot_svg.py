@@ -522,3 +522,13 @@ def test_curves_that_flatten_past_the_drawings_points_are_refused_as_they_are_re
     with pytest.raises(InputError, match=f"its curves make more than {MAX_POINTS:,} points"):
         parse_svg(svg(f'<path d="{d}" fill="none" stroke="black"/>'))
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - started < 1_000_000  # KiB: far below a GB
+
+
+def test_a_basic_shape_clips_and_one_in_error_is_named_and_left_out() -> None:
+    square = '<rect width="100" height="100" clip-path="{}"/>'
+    drawing = parse_svg(svg(square.format("circle(20px at 50px 50px)")))
+    points = np.concatenate(drawing.lines)
+    assert np.allclose(np.hypot(points[:, 0] - 50, points[:, 1] - 50), 20, atol=0.01)
+    drawing = parse_svg(svg(square.format("circle(-5px)")))
+    assert boxes(drawing.lines) == [(0.0, 0.0, 100.0, 100.0)]
+    assert any("circle(-5px)" in note and "in error" in note for note in drawing.notes)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator
@@ -114,6 +115,8 @@ CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
 UNDRAWABLE = frozenset({"text", "image", "foreignObject"})
 EFFECTS = frozenset({"clip-path", "mask", "filter"})
 MARKERS = frozenset({"marker", "marker-start", "marker-mid", "marker-end"})
+BASIC_SHAPE = re.compile(r"\s*(circle|ellipse|inset|polygon)\(([^()]*)\)", re.IGNORECASE)
+"""A clip-path that is a CSS basic shape, with its arguments; a reference box may follow."""
 CONTEXT_PAINTS = {"context-fill": "fill", "context-stroke": "stroke"}
 MARKABLE = frozenset({"path", "line", "polyline", "polygon"})
 """Shapes markers are drawn on (SVG 2 §13.7: markable elements)."""
@@ -148,6 +151,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
      "with the element's fill", "SVG 2 §13.5, §13.6", "wide stroke joins"),
     ("fill cut by a clip path outlined along the cut", "SVG 1.1 §14.3", "clipped fill"),
     ("clip-path on the root svg", "SVG 1.1 §14.3.5", "root clip-path"),
+    ("clip-path basic shapes circle(), ellipse(), inset(), polygon() on fill-, stroke- or view-box",
+     "CSS Masking 1 §6.1, CSS Shapes 1 §3.1", "clip-path basic shapes"),
     ("clip path cycles leave out the looping reference", "SVG 1.1 §14.3.5", "clip cycle"),
     ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
     ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
@@ -253,6 +258,9 @@ class Ink(list[FloatArray]):
         self.extent: list[list[float]] = []
         """Boxes (x0, y0, x1, y1) of geometry that shows nothing but counts for the bounding box of the group
         (hidden, fully transparent or unpainted shapes: SVG 2 §8.10 takes every rendered element's geometry)."""
+        self.bands: set[int] = set()
+        """ids of the lines that outline a wide stroke's band: they lie beyond the shape's geometry, so the
+        bounding box leaves them out (its geometry is in `extent`)."""
         self._boxes = _Boxes()
         self._fill_boxes = _Boxes()
 
@@ -260,6 +268,7 @@ class Ink(list[FloatArray]):
         self.extend(other)
         self.fills.extend(other.fills)
         self.extent.extend(other.extent)
+        self.bands |= other.bands
 
     def boxes(self) -> FloatArray:
         """(x0, y0, x1, y1) of every line (lines are never changed in place, only added or replaced)."""
@@ -426,6 +435,107 @@ def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
     border = _outline(fill.area)
     drawn = _length(rings)
     return border if abs(_length(border) - drawn) > 1e-6 * drawn else None
+
+
+def _stretch(matrix: FloatArray) -> float:
+    return math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
+
+
+POSITION_KEYWORDS = {"left": ("x", 0.0), "right": ("x", 1.0), "top": ("y", 0.0), "bottom": ("y", 1.0),
+                     "center": ("", 0.5)}
+
+
+def _position(words: list[str], w: float, h: float) -> tuple[float, float]:
+    """A CSS <position> of one or two parts (keywords, lengths, percentages) in the box of size w x h."""
+    if not words:
+        return w / 2, h / 2
+    if len(words) > 2:
+        raise ValueError("positions of more than two parts are not read")
+    if len(words) == 2 and (POSITION_KEYWORDS.get(words[0], ("",))[0] == "y"
+                            or POSITION_KEYWORDS.get(words[1], ("",))[0] == "x"):
+        words = words[::-1]
+    if len(words) == 1:
+        axis = POSITION_KEYWORDS.get(words[0], ("x",))[0]
+        words = ["center", words[0]] if axis == "y" else [words[0], "center"]
+    values = []
+    for word, size in zip(words, (w, h), strict=True):
+        if word in POSITION_KEYWORDS:
+            values.append(POSITION_KEYWORDS[word][1] * size)
+        else:
+            values.append(_box_length(word, size))
+    return values[0], values[1]
+
+
+def _box_length(word: str, size: float) -> float:
+    value = length(word, size, default=math.nan)
+    if math.isnan(value):
+        raise ValueError(f"{word!r} is not a length")
+    return value
+
+
+def _radius(word: str, near: float, far: float, size: float) -> float:
+    if word == "closest-side":
+        return near
+    if word == "farthest-side":
+        return far
+    value = _box_length(word, size)
+    if value < 0:
+        raise ValueError("a negative radius")
+    return value
+
+
+def _basic_shape(name: str, args: str, box: tuple[float, float, float, float], tolerance: float) -> BaseGeometry:
+    """A basic shape's area in the user units of its reference box (x, y, width, height); ValueError when the
+    arguments are in error."""
+    x, y, w, h = box
+    if name == "polygon":
+        parts = [p.strip() for p in args.split(",")]
+        if parts and parts[0] in ("nonzero", "evenodd"):
+            parts = parts[1:]
+        points = []
+        for part in parts:
+            words = part.split()
+            if len(words) != 2:
+                raise ValueError("a polygon vertex needs two lengths")
+            points.append((x + _box_length(words[0], w), y + _box_length(words[1], h)))
+        if len(points) < 3:
+            return shapely.Polygon()
+        return shapely.make_valid(shapely.Polygon(points))
+    if name == "inset":
+        words = args.split()
+        if "round" in words:
+            words = words[:words.index("round")]
+        if not 1 <= len(words) <= 4:
+            raise ValueError("inset() takes one to four lengths")
+        order = {1: (0, 0, 0, 0), 2: (0, 1, 0, 1), 3: (0, 1, 2, 1), 4: (0, 1, 2, 3)}[len(words)]
+        top, right, bottom, left = (words[k] for k in order)
+        t, b = _box_length(top, h), _box_length(bottom, h)
+        r, left_ = _box_length(right, w), _box_length(left, w)
+        if left_ + r >= w or t + b >= h:
+            return shapely.Polygon()
+        return shapely.box(x + left_, y + t, x + w - r, y + h - b)
+    words = args.split()
+    at = words.index("at") if "at" in words else len(words)
+    cx, cy = _position(words[at + 1:], w, h)
+    radii = words[:at]
+    sides_x = (min(cx, w - cx), max(cx, w - cx))
+    sides_y = (min(cy, h - cy), max(cy, h - cy))
+    if name == "circle":
+        if len(radii) > 1:
+            raise ValueError("circle() takes one radius")
+        word = radii[0] if radii else "closest-side"
+        near, far = min(sides_x[0], sides_y[0]), max(sides_x[1], sides_y[1])
+        rx = ry = _radius(word, near, far, math.hypot(w, h) / math.sqrt(2))
+    else:
+        if len(radii) not in (0, 2):
+            raise ValueError("ellipse() takes two radii")
+        rx = _radius(radii[0] if radii else "closest-side", *sides_x, w)
+        ry = _radius(radii[1] if radii else "closest-side", *sides_y, h)
+    if rx <= 0 or ry <= 0:
+        return shapely.Polygon()
+    steps = max(8, math.ceil(math.pi / math.acos(max(-1.0, 1 - tolerance / max(rx, ry)))))
+    turn = np.linspace(0, 2 * math.pi, steps + 1)
+    return shapely.Polygon(np.column_stack([x + cx + rx * np.cos(turn), y + cy + ry * np.sin(turn)]))
 
 
 def _direction(step: FloatArray) -> float:
@@ -827,7 +937,10 @@ class _Reader:
         value = own.get("clip-path", "none").strip()
         if value == "none" or not (target or target.fills):
             return
-        region = self.clip_region(value, matrix, target, stack)
+        if BASIC_SHAPE.match(value):
+            region = self.basic_shape(el, value, matrix, target)
+        else:
+            region = self.clip_region(value, matrix, target, stack)
         if region is not None:
             self.cut_ink(target, region)
 
@@ -1286,7 +1399,10 @@ class _Reader:
         border = _outline(band.area)
         self._count(sum(len(line) for line in border))
         out.extend(border)
+        out.bands.update(id(line) for line in border)
         out.fills.append(band)
+        centres = np.concatenate([points for points, _ in lines])
+        out.extent.append(_box(affine([centres], matrix)[0]))
 
     # -- patterns -----------------------------------------------------------------------------------------------
 
@@ -1392,6 +1508,45 @@ class _Reader:
 
     # -- clipping ---------------------------------------------------------------------------------------------
 
+    def _geometry_box(self, content: Ink, matrix: FloatArray) -> tuple[float, float, float, float] | None:
+        """The bounding box (x0, y0, x1, y1) of what `content` draws, in the user units `matrix` places."""
+        corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
+        geometry = [line for line in content if id(line) not in content.bands]
+        if not geometry and not corners:
+            return None
+        user = affine([np.concatenate([*geometry, *corners])], _invert(matrix))[0]
+        (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
+        return float(x0), float(y0), float(x1), float(y1)
+
+    def basic_shape(self, el: ET.Element, value: str, matrix: FloatArray, content: Ink) -> BaseGeometry | None:
+        """The area a CSS basic shape lets through (CSS Masking 1 §6.1, CSS Shapes 1 §3.1: circle(), ellipse(),
+        inset(), polygon()) on its reference box: fill-box, stroke-box (the initial one, for border-box and
+        margin-box as well) or view-box; None (and a note) for one in error."""
+        match = BASIC_SHAPE.match(value)
+        assert match is not None
+        name, args, rest = match.group(1).lower(), match.group(2).strip(), value[match.end():].strip().lower()
+        box = self._geometry_box(content, matrix)
+        if box is None:
+            return shapely.Polygon()
+        x0, y0, x1, y1 = box
+        if rest in ("", "border-box", "margin-box", "stroke-box"):
+            style = self.computed_style(el)
+            if self._paint_kind(style, "stroke")[0] != "none":
+                half = self._stroke_width(style, self.user_viewport) / 2
+                x0, y0, x1, y1 = x0 - half, y0 - half, x1 + half, y1 + half
+        elif rest == "view-box":
+            x0, y0, (x1, y1) = 0.0, 0.0, self.user_viewport
+        elif rest not in ("fill-box", "content-box", "padding-box"):
+            self.unsupported[f"clip-path {excerpt(value, 60)!r} is in error: drawn unclipped"] += 1
+            return None
+        w, h = x1 - x0, y1 - y0
+        try:
+            area = _basic_shape(name, args, (x0, y0, w, h), self.tolerance / max(_stretch(matrix), 1e-12))
+        except ValueError:
+            self.unsupported[f"clip-path {excerpt(value, 60)!r} is in error: drawn unclipped"] += 1
+            return None
+        return shapely.transform(area, lambda xy: affine([xy], matrix)[0])
+
     def clip_region(self, value: str, matrix: FloatArray, content: Ink,
                     stack: tuple[str, ...]) -> BaseGeometry | None:
         """The area `clip-path: value` lets through, in output units; None (and a note) when it can't be used."""
@@ -1415,9 +1570,10 @@ class _Reader:
         own_place = self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip), self.user_viewport)
         if by_box:
             corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
-            if not content and not corners:
+            geometry = [line for line in content if id(line) not in content.bands]
+            if not geometry and not corners:
                 return shapely.Polygon()
-            pts = np.concatenate([*content, *corners])
+            pts = np.concatenate([*geometry, *corners])
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(then(matrix, own_place), np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))
