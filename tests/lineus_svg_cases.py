@@ -203,6 +203,14 @@ CASES: dict[str, tuple[str, str]] = {
                                               "dashes"),
     "dashed fill border stays whole": (doc('<rect x="40" y="40" width="120" height="120" fill="black" '
                                            'stroke="black" stroke-width="2" stroke-dasharray="10 10"/>'), "dashes"),
+    "opaque gradient hides what lies under it": (doc(f'<line x1="10" y1="60" x2="190" y2="60" {S}/>'
+                                                     f'<line x1="10" y1="150" x2="190" y2="150" {S}/>'
+                                                     '<linearGradient id="o"><stop offset="0" stop-color="black"/>'
+                                                     '<stop offset="1" style="stop-color: #444"/></linearGradient>'
+                                                     '<radialGradient id="p" href="#o"/>'
+                                                     '<rect x="50" y="30" width="100" height="60" fill="url(#o)"/>'
+                                                     '<rect x="50" y="120" width="100" height="60" fill="url(#p)"/>'),
+                                                 "white box over lines"),
     # -- wide strokes --------------------------------------------------------------------------------------------
     "wide strokes": (doc('<rect x="30" y="30" width="140" height="50" fill="none" stroke="black" stroke-width="16"/>'
                          '<path d="M30 120 H90 M30 170 H90" fill="none" stroke="#333" stroke-width="14"/>'

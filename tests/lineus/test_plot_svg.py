@@ -532,3 +532,16 @@ def test_a_basic_shape_clips_and_one_in_error_is_named_and_left_out() -> None:
     drawing = parse_svg(svg(square.format("circle(-5px)")))
     assert boxes(drawing.lines) == [(0.0, 0.0, 100.0, 100.0)]
     assert any("circle(-5px)" in note and "in error" in note for note in drawing.notes)
+
+
+def test_a_gradient_hides_what_lies_under_it_only_when_all_its_stops_are_opaque() -> None:
+    def drawn(stops: str) -> list[tuple[float, float, float, float]]:
+        body = (f'<linearGradient id="g">{stops}</linearGradient><path d="M0 50 H100" stroke="black"/>'
+                '<rect x="40" y="0" width="20" height="100" fill="url(#g)"/>')
+        return boxes(parse_svg(svg(body)).lines)
+
+    opaque = '<stop offset="0" stop-color="red"/><stop offset="1" style="stop-color: blue"/>'
+    translucent = '<stop offset="0" stop-color="red"/><stop offset="1" stop-color="blue" stop-opacity="0.5"/>'
+    assert (0.0, 50.0, 40.0, 50.0) in drawn(opaque)
+    assert (0.0, 50.0, 100.0, 50.0) not in drawn(opaque)
+    assert (0.0, 50.0, 100.0, 50.0) in drawn(translucent)

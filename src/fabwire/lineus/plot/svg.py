@@ -58,6 +58,7 @@ from fabwire.lineus.plot.svgstyle import (
     local,
     number,
     opaque_fill,
+    opaque_stop,
     own_style,
     paints,
 )
@@ -158,6 +159,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
     ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
+    ("gradients whose stops are all opaque hide what lies under them", "SVG 1.1 §13.2.4, §3.3",
+     "opaque gradient hides what lies under it"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
     ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
      "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
@@ -1165,6 +1168,32 @@ class _Reader:
             at = self.parents.get(at)
         return True
 
+    def _stops(self, gradient: ET.Element) -> list[ET.Element]:
+        """A gradient's stops, or those of the one it takes them from through `href` (SVG 1.1 §13.2.4)."""
+        seen: list[ET.Element] = []
+        at: ET.Element | None = gradient
+        while at is not None and at not in seen:
+            stops = [child for child in at if local(child.tag) == "stop"]
+            if stops:
+                return stops
+            seen.append(at)
+            ref = self._href(at)
+            at = self.ids.get(ref) if ref else None
+        return []
+
+    def opaque(self, style: dict[str, str], which: str) -> bool:
+        """Whether the fill or stroke paints without any transparency, so it hides what lies under it: a solid
+        colour (white too), or a gradient all of whose stops are opaque."""
+        if opaque_fill(style, which):
+            return True
+        ref = iri(style.get(which, ""))
+        server = self.ids.get(ref) if ref else None
+        if (server is None or local(server.tag) not in ("linearGradient", "radialGradient")
+                or self._paint_kind(style, which)[0] != "solid" or number(style.get(f"{which}-opacity"), 1.0) < 1):
+            return False
+        stops = self._stops(server)
+        return bool(stops) and all(opaque_stop(self.computed_style(stop)) for stop in stops)
+
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
         nothing (SVG 1.1 §13.2.4)."""
@@ -1289,7 +1318,7 @@ class _Reader:
                viewport: tuple[float, float], out: Ink) -> None:
         stroke = self._paint_kind(style, "stroke")[0] != "none"
         fill, pattern = self._paint_kind(style)
-        covers = not self._shaded and bool(self._below) and opaque_fill(style, "fill")
+        covers = not self._shaded and bool(self._below) and self.opaque(style, "fill")
         if style.get("visibility", "visible").strip() != "visible" or (not (stroke or covers) and fill == "none"):
             points = [sub.points for sub in self.subpaths(el, tag, matrix, viewport, self.font(style))]
             if points:
@@ -1347,7 +1376,7 @@ class _Reader:
         if rings:
             closed = [np.vstack([r, r[:1]]) for r in rings]
             rule = style.get("fill-rule", "nonzero").strip()
-            own = _Fill(closed, rule, opaque=opaque_fill(style, "fill"))
+            own = _Fill(closed, rule, opaque=covers or self.opaque(style, "fill"))
             if fill == "solid" and not stroke and out:
                 border = _border(own, closed)
                 if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
@@ -1389,7 +1418,7 @@ class _Reader:
         area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
         if area.is_empty:
             return
-        band = _Fill([], "nonzero", area, opaque=opaque_fill(style, "stroke"))
+        band = _Fill([], "nonzero", area, opaque=self.opaque(style, "stroke"))
         if not self._shaded and self._below and band.opaque:
             self.hide_under(band)
         if fill is not None:

@@ -37,7 +37,7 @@ INHERITED = frozenset({
     "letter-spacing", "word-spacing", "stroke-linejoin", "stroke-miterlimit",
 })
 NOT_INHERITED = frozenset({"display", "opacity", "clip-path", "mask", "filter", "overflow", "transform",
-                           "transform-origin", "transform-box"})
+                           "transform-origin", "transform-box", "stop-color", "stop-opacity"})
 GEOMETRY = frozenset({"x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", "d"})
 """Geometry properties (SVG 2 §10.2-10.4): a style sheet or `style` attribute may set them; the attributes of
 the same names are read with the shape."""
@@ -239,6 +239,17 @@ def opaque_fill(style: dict[str, str], which: str = "fill") -> bool:
     if value in ("none", "transparent", "") or value.startswith("url(") or number(style.get(f"{which}-opacity"),
                                                                                   1.0) < 1:
         return False
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    return _alpha(value) >= 1
+
+
+def opaque_stop(style: dict[str, str]) -> bool:
+    """Whether a gradient stop of this computed style has no transparency (stop-color black and stop-opacity 1
+    unless given)."""
+    if number(style.get("stop-opacity"), 1.0) < 1:
+        return False
+    value = style.get("stop-color", "black").strip().lower()
     if value == "currentcolor":
         value = style.get("color", INITIAL["color"]).strip().lower()
     return _alpha(value) >= 1
