@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fabwire.lineus.plot import parse_svg
+from fabwire.lineus.plot.svg import MAX_MARKERS
 
 DOT = ('<marker id="m" markerUnits="userSpaceOnUse" markerWidth="4" markerHeight="4" refX="2" refY="2">'
        '<rect width="4" height="4" fill="none" stroke="black" stroke-width="0.1"/></marker>')
@@ -86,3 +87,12 @@ def test_context_paint_comes_from_the_use_or_the_marked_shape_and_is_none_withou
               '<line x1="20" y1="20" x2="80" y2="20" stroke="none" marker-end="url(#c)"/>'
               '<line x1="20" y1="50" x2="80" y2="50" stroke="black" stroke-width="0.5" marker-end="url(#c)"/>')
     assert centres(svg(marked)) == [(80, 50)]
+
+
+def test_marker_copies_are_bounded_and_the_rest_named() -> None:
+    points = " ".join(f"{i % 200},{(i * 7) % 200}" for i in range(MAX_MARKERS + 50))
+    body = ('<marker id="d" markerUnits="userSpaceOnUse" overflow="visible"><path d="M0 0 h1" stroke="black"/>'
+            f'</marker><polyline points="{points}" fill="none" stroke="black" marker-mid="url(#d)"/>')
+    drawing = parse_svg(svg(body))
+    assert len(drawing.lines) <= MAX_MARKERS // 2 + 1  # each copy draws the marker and its path: two elements
+    assert any(f"markers past {MAX_MARKERS:,}" in note for note in drawing.notes)

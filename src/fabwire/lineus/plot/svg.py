@@ -121,9 +121,9 @@ BASIC_SHAPE = re.compile(r"\s*(circle|ellipse|inset|polygon)\(([^()]*)\)", re.IG
 CONTEXT_PAINTS = {"context-fill": "fill", "context-stroke": "stroke"}
 MARKABLE = frozenset({"path", "line", "polyline", "polygon"})
 """Shapes markers are drawn on (SVG 2 §13.7: markable elements)."""
-MAX_MARKERS = 50_000
-"""Marker copies one drawing may place at most (each vertex of a long path places one); past that, the rest are
-left out with a note."""
+MAX_MARKERS = 10_000
+"""Elements marker copies may draw in one drawing at most (each vertex of a long path places a copy of every
+element in its marker); past that, further markers are left out with a note."""
 
 FEATURES: tuple[tuple[str, str, str], ...] = (
     # (feature class, source, browser comparison case)
@@ -1261,9 +1261,9 @@ class _Reader:
         its overflow is visible (SVG 2 §13.7.2)."""
         if marker in self._markers:
             return
-        self.marker_count += 1
+        self.marker_count += sum(1 for _ in marker.iter())  # each copy draws every element in it again
         if self.marker_count > MAX_MARKERS:
-            self.unsupported[f"markers past {MAX_MARKERS:,} in one drawing are left out"] += 1
+            self.unsupported[f"markers past {MAX_MARKERS:,} copied elements in one drawing are left out"] += 1
             return
         vw, vh = viewport
         style = self.computed_style(marker)
