@@ -237,6 +237,10 @@ CASES: dict[str, tuple[str, str]] = {
     "wide stroke hides what lies under it": (doc(f'<line x1="20" y1="100" x2="180" y2="100" {S}/>'
                                                  '<line x1="100" y1="20" x2="100" y2="180" stroke="black" '
                                                  'stroke-width="40"/>'), "wide strokes"),
+    "wide stroke painted with a pattern": (doc('<pattern id="t" patternUnits="userSpaceOnUse" width="20" '
+                                               'height="20"><rect width="10" height="10"/></pattern>'
+                                               '<rect x="43" y="43" width="114" height="114" fill="none" '
+                                               'stroke="url(#t)" stroke-width="40"/>'), "wide strokes"),
     "wide stroke clipped by its geometry's bounding box": (
         doc('<clipPath id="b" clipPathUnits="objectBoundingBox"><rect width="0.25" height="1"/></clipPath>'
             '<rect x="50" y="50" width="100" height="100" fill="none" stroke="black" stroke-width="40" '

@@ -1316,7 +1316,8 @@ class _Reader:
 
     def _paint(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
                viewport: tuple[float, float], out: Ink) -> None:
-        stroke = self._paint_kind(style, "stroke")[0] != "none"
+        stroke_kind, stroke_pattern = self._paint_kind(style, "stroke")
+        stroke = stroke_kind != "none"
         fill, pattern = self._paint_kind(style)
         covers = not self._shaded and bool(self._below) and self.opaque(style, "fill")
         if style.get("visibility", "visible").strip() != "visible" or (not (stroke or covers) and fill == "none"):
@@ -1387,7 +1388,10 @@ class _Reader:
                 out.fills.append(own)
             elif pattern is not None:
                 self.pattern(pattern, matrix, closed, rule, viewport, out)
-        if band:
+        if band and stroke_pattern is not None:
+            self.pattern_band(band, pen_of(style, half, self.tolerance / scale), stroke_pattern, matrix, viewport,
+                              out)
+        elif band:
             self.stroke_band(band, pen_of(style, half, self.tolerance / scale), style, matrix, out,
                              own if rings and fill == "solid" else None)
         final.take(out)
@@ -1408,6 +1412,14 @@ class _Reader:
         self.unsupported[f"wide strokes past {MAX_BAND_POINTS:,} points are drawn along their centre lines, not "
                          "as the outline of the band they paint"] += 1
         return False
+
+    def pattern_band(self, lines: list[tuple[FloatArray, bool]], pen: Pen, server: ET.Element, matrix: FloatArray,
+                     viewport: tuple[float, float], out: Ink) -> None:
+        """Draw a wide stroke painted with a pattern as a pattern fill is drawn: the pattern's own lines inside
+        the band (`lines` in user units placed by `matrix`)."""
+        area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
+        if not area.is_empty:
+            self.pattern(server, matrix, _outline(area), "nonzero", viewport, out)
 
     def stroke_band(self, lines: list[tuple[FloatArray, bool]], pen: Pen, style: dict[str, str],
                     matrix: FloatArray, out: Ink, fill: _Fill | None) -> None:
