@@ -314,6 +314,10 @@ CASES: dict[str, tuple[str, str]] = {
                                                   '<rect x="110" y="20" width="80" height="60" '
                                                   'clip-path="circle(30px at 150px 50px) view-box"/>'),
                                               "clipped fill"),
+    "clipped opaque fill hides what lies under the group": (
+        doc(f'<line x1="10" y1="100" x2="190" y2="100" {S}/><line x1="100" y1="10" x2="100" y2="190" {S}/>'
+            '<clipPath id="o"><circle cx="100" cy="100" r="50"/></clipPath>'
+            '<g clip-path="url(#o)"><rect x="20" y="20" width="160" height="160" fill="#333"/></g>'), "clipped fill"),
     "root clip-path": (doc('<clipPath id="c"><rect x="0" y="0" width="120" height="120"/></clipPath>'
                            f'<rect x="20" y="20" width="160" height="160" {S}/>', 'clip-path="url(#c)"'),
                        "root clip-path"),

@@ -545,3 +545,11 @@ def test_a_gradient_hides_what_lies_under_it_only_when_all_its_stops_are_opaque(
     assert (0.0, 50.0, 40.0, 50.0) in drawn(opaque)
     assert (0.0, 50.0, 100.0, 50.0) not in drawn(opaque)
     assert (0.0, 50.0, 100.0, 50.0) in drawn(translucent)
+
+
+def test_a_clipped_opaque_fill_hides_only_what_shows_of_it() -> None:
+    body = ('<path d="M0 50 H100" stroke="black"/><clipPath id="c"><rect x="40" y="0" width="20" height="100"/>'
+            '</clipPath><g clip-path="url(#c)"><rect width="100" height="100"/></g>')
+    assert (0.0, 50.0, 40.0, 50.0) in boxes(parse_svg(svg(body)).lines)
+    assert (60.0, 50.0, 100.0, 50.0) in boxes(parse_svg(svg(body)).lines)
+    assert (0.0, 50.0, 100.0, 50.0) not in boxes(parse_svg(svg(body)).lines)

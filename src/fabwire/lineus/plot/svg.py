@@ -173,7 +173,9 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
      "bbox of hidden children"),
     ("a clipPath's transform and transform-origin apply in user space, outside objectBoundingBox units",
      "SVG 1.1 §14.3.5, CSS Transforms 1 §7", "clip path transform by bounding box"),
-    ("fills in a group with opacity or a clip path hide that group's earlier lines only",
+    ("a clipped group's opaque fills, once clipped, hide what lies under the group", "SVG 1.1 §14.3, §3.3",
+     "clipped opaque fill hides what lies under the group"),
+    ("fills in a group with opacity hide that group's earlier lines only (in a clipped group, until clipped)",
      "SVG 1.1 §14.5, Compositing and Blending 1 §3.3", "fill hides lines within a translucent group"),
 )
 
@@ -843,7 +845,18 @@ class _Reader:
                            isolated=bool(effects) or _opacity(own) < 1):
             self.draw(el, tag, style, matrix, viewport, target, depth, uses)
         self.clip(el, own, matrix, target, ())
+        if effects == ["clip-path"] and _opacity(own) >= 1:
+            self.hide_under_clipped(target)
         out.take(target)
+
+    def hide_under_clipped(self, drawn: Ink) -> None:
+        """What shows of the opaque fills of a clipped group, once clipped, hides what lies under the group (they
+        could hide only the group's own lines while it was drawn, before the clip was known)."""
+        if self._shaded or not self._below:
+            return
+        for fill in drawn.fills:
+            if fill.opaque:
+                self.hide_under(fill)
 
     def extent_of(self, el: ET.Element, own: dict[str, str], style: dict[str, str], matrix: FloatArray,
                   viewport: tuple[float, float], out: Ink, depth: int, uses: tuple[str, ...]) -> None:
@@ -1308,10 +1321,7 @@ class _Reader:
         if clips and (drawn or drawn.fills):
             corners = np.array([[0.0, 0.0], [mw, 0.0], [mw, mh], [0.0, mh], [0.0, 0.0]])
             self.cut_ink(drawn, shapely.Polygon(affine([corners], placed)[0]))
-            if not self._shaded and self._below:  # what shows of its opaque fills hides the shape's lines under it
-                for fill in drawn.fills:
-                    if fill.opaque:
-                        self.hide_under(fill)
+            self.hide_under_clipped(drawn)
         out.take(drawn)
 
     def _paint(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
