@@ -1309,7 +1309,7 @@ class _Reader:
         if flattens(placed):
             return
         drawn = Ink()
-        # hidden by the user agent's style sheet; `inherit` with no value above it is the initial visible
+        # hidden by the browsers' default style sheet; `inherit` with no value above it is the initial visible
         given = "overflow" in own_style(marker, self.sheet)
         clips = style.get("overflow", "visible" if given else "hidden").strip() in ("hidden", "scroll")
         self._markers += (marker,)
