@@ -203,6 +203,77 @@ CASES: dict[str, tuple[str, str]] = {
                                               "dashes"),
     "dashed fill border stays whole": (doc('<rect x="40" y="40" width="120" height="120" fill="black" '
                                            'stroke="black" stroke-width="2" stroke-dasharray="10 10"/>'), "dashes"),
+    "opaque gradient hides what lies under it": (doc(f'<line x1="10" y1="60" x2="190" y2="60" {S}/>'
+                                                     f'<line x1="10" y1="150" x2="190" y2="150" {S}/>'
+                                                     '<linearGradient id="o"><stop offset="0" stop-color="black"/>'
+                                                     '<stop offset="1" style="stop-color: #444"/></linearGradient>'
+                                                     '<radialGradient id="p" href="#o"/>'
+                                                     '<rect x="50" y="30" width="100" height="60" fill="url(#o)"/>'
+                                                     '<rect x="50" y="120" width="100" height="60" fill="url(#p)"/>'),
+                                                 "white box over lines"),
+    # -- wide strokes --------------------------------------------------------------------------------------------
+    "wide strokes": (doc('<rect x="30" y="30" width="140" height="50" fill="none" stroke="black" stroke-width="16"/>'
+                         '<path d="M30 120 H90 M30 170 H90" fill="none" stroke="#333" stroke-width="14"/>'
+                         '<circle cx="140" cy="145" r="25" fill="none" stroke="black" stroke-width="12"/>'),
+                     "wide strokes"),
+    "wide stroke caps": (doc('<g fill="none" stroke="black" stroke-width="18"><path d="M40 40 H160"/>'
+                             '<path d="M40 100 H160" stroke-linecap="round"/>'
+                             '<path d="M40 160 H160" stroke-linecap="square"/></g>'), "wide strokes"),
+    "wide stroke joins": (doc('<g fill="none" stroke="black" stroke-width="14">'
+                              '<polyline points="20,70 50,20 80,70"/>'
+                              '<polyline points="110,70 140,20 170,70" stroke-linejoin="round"/>'
+                              '<polyline points="20,170 50,120 80,170" stroke-linejoin="bevel"/>'
+                              '<polyline points="110,180 140,110 170,180" stroke-miterlimit="1.5"/></g>'),
+                          "wide strokes"),
+    "wide stroke dashes and dots": (doc('<path d="M20 50 H180" stroke="black" stroke-width="12" '
+                                        'stroke-dasharray="30 15"/><path d="M30 120 H180 M100 170 h0" stroke="black" '
+                                        'stroke-width="16" stroke-linecap="round" stroke-dasharray="0 40"/>'),
+                                    "wide strokes"),
+    "wide stroke over its own fill": (doc('<rect x="50" y="50" width="100" height="100" fill="#222" stroke="#555" '
+                                          'stroke-width="30"/>'), "wide strokes"),
+    "wide stroke scaled": (doc('<g transform="translate(20 20) scale(4 2)"><path d="M5 10 L35 10 L20 70" '
+                               'fill="none" stroke="black" stroke-width="3" stroke-linejoin="round"/></g>'),
+                           "wide strokes"),
+    "wide stroke hides what lies under it": (doc(f'<line x1="20" y1="100" x2="180" y2="100" {S}/>'
+                                                 '<line x1="100" y1="20" x2="100" y2="180" stroke="black" '
+                                                 'stroke-width="40"/>'), "wide strokes"),
+    "wide stroke painted with a pattern": (doc('<pattern id="t" patternUnits="userSpaceOnUse" width="20" '
+                                               'height="20"><rect width="10" height="10"/></pattern>'
+                                               '<rect x="43" y="43" width="114" height="114" fill="none" '
+                                               'stroke="url(#t)" stroke-width="40"/>'), "wide strokes"),
+    "wide stroke clipped by its geometry's bounding box": (
+        doc('<clipPath id="b" clipPathUnits="objectBoundingBox"><rect width="0.25" height="1"/></clipPath>'
+            '<rect x="50" y="50" width="100" height="100" fill="none" stroke="black" stroke-width="40" '
+            'clip-path="url(#b)"/>'), "wide strokes"),
+    # -- markers -------------------------------------------------------------------------------------------------
+    "markers": (doc('<marker id="m" viewBox="0 0 10 10" refX="5" refY="5" markerWidth="8" markerHeight="8" '
+                    'orient="auto"><path d="M0 0 L10 5 L0 10 Z"/></marker>'
+                    f'<polyline points="30,170 60,40 120,120 180,30" {S} marker-start="url(#m)" marker-mid="url(#m)" '
+                    'marker-end="url(#m)"/>'), "markers"),
+    "marker units and fixed orient": (doc('<marker id="q" markerUnits="userSpaceOnUse" markerWidth="30" '
+                                          'markerHeight="30" refX="15" refY="15" orient="30deg"><rect x="5" y="5" '
+                                          'width="20" height="20"/></marker>'
+                                          '<path d="M40 50 H160 M40 150 Q100 90 160 150" fill="none" stroke="black" '
+                                          'stroke-width="1" style="marker: url(#q)"/>'), "markers"),
+    "marker clipped to its box unless overflow is visible": (
+        doc('<marker id="c" markerWidth="10" markerHeight="10" refX="0" refY="0" markerUnits="userSpaceOnUse">'
+            '<circle r="30"/></marker><marker id="v" markerWidth="10" markerHeight="10" overflow="visible" '
+            'markerUnits="userSpaceOnUse"><circle r="30"/></marker>'
+            f'<line x1="50" y1="50" x2="50" y2="50" {S} marker-start="url(#c)"/>'
+            f'<line x1="120" y1="130" x2="120" y2="130" {S} marker-end="url(#v)"/>'), "markers"),
+    "auto-start-reverse on a closed path": (doc('<marker id="a" viewBox="0 0 10 10" refX="0" refY="5" '
+                                                'markerWidth="12" markerHeight="12" orient="auto-start-reverse">'
+                                                '<path d="M0 0 L10 5 L0 10 Z"/></marker>'
+                                                f'<path d="M40 40 H160 V160 Z" {S} marker-start="url(#a)" '
+                                                'marker-end="url(#a)"/>'), "markers"),
+    "context paint": (doc('<defs><g id="g"><rect x="20" y="20" width="60" height="60" fill="context-stroke" '
+                          'stroke="context-fill" stroke-width="2"/></g></defs>'
+                          '<use href="#g" fill="none" stroke="black"/>'
+                          '<rect x="120" y="20" width="60" height="60" fill="context-fill"/>'
+                          '<marker id="k" markerUnits="userSpaceOnUse" markerWidth="20" markerHeight="20" refX="10" '
+                          'refY="10"><circle cx="10" cy="10" r="8" fill="context-stroke"/></marker>'
+                          '<path d="M30 150 H170" stroke="#222" stroke-width="2" marker-start="url(#k)" '
+                          'marker-end="url(#k)"/>'), "markers"),
     # -- clip paths --------------------------------------------------------------------------------------------
     "clipped fill": (doc('<clipPath id="c"><rect x="0" y="0" width="100" height="200"/></clipPath>'
                          '<circle cx="100" cy="100" r="70" clip-path="url(#c)"/>'), "clipped fill"),
@@ -231,6 +302,22 @@ CASES: dict[str, tuple[str, str]] = {
     "clip path with a transform": (doc('<clipPath id="c" transform="rotate(45 100 100)"><rect x="50" y="50" '
                                        'width="100" height="100"/></clipPath><rect x="40" y="40" width="120" '
                                        'height="120" clip-path="url(#c)"/>'), "clipped fill"),
+    "clip-path basic shapes": (doc('<rect x="10" y="10" width="80" height="80" clip-path="circle()"/>'
+                                   '<rect x="110" y="10" width="80" height="80" clip-path="ellipse(30% 20px at 40% '
+                                   '60%)"/><rect x="10" y="110" width="80" height="80" clip-path="inset(10px 20%)"/>'
+                                   '<rect x="110" y="110" width="80" height="80" clip-path="polygon(50% 0, 100% 100%, '
+                                   '0 100%)"/>'), "clipped fill"),
+    "clip-path basic shape reference boxes": (doc('<rect x="30" y="30" width="60" height="60" fill="#333" '
+                                                  'stroke="black" stroke-width="16" clip-path="circle(50% at right '
+                                                  'top) fill-box"/><rect x="110" y="110" width="60" height="60" '
+                                                  'stroke="black" stroke-width="16" clip-path="circle()"/>'
+                                                  '<rect x="110" y="20" width="80" height="60" '
+                                                  'clip-path="circle(30px at 150px 50px) view-box"/>'),
+                                              "clipped fill"),
+    "clipped opaque fill hides what lies under the group": (
+        doc(f'<line x1="10" y1="100" x2="190" y2="100" {S}/><line x1="100" y1="10" x2="100" y2="190" {S}/>'
+            '<clipPath id="o"><circle cx="100" cy="100" r="50"/></clipPath>'
+            '<g clip-path="url(#o)"><rect x="20" y="20" width="160" height="160" fill="#333"/></g>'), "clipped fill"),
     "root clip-path": (doc('<clipPath id="c"><rect x="0" y="0" width="120" height="120"/></clipPath>'
                            f'<rect x="20" y="20" width="160" height="160" {S}/>', 'clip-path="url(#c)"'),
                        "root clip-path"),

@@ -63,7 +63,8 @@ def test_symbols_nested_in_groups_and_used_under_transforms() -> None:
 
 def test_symbol_viewbox_aspect_and_default_size() -> None:
     # A 2:1 viewBox in a square viewport is centred (xMidYMid meet); without width/height the use is 100 %.
-    text = svg('<symbol id="s" viewBox="0 0 20 10"><line x1="0" y1="5" x2="20" y2="5" stroke="black"/></symbol>'
+    text = svg('<symbol id="s" viewBox="0 0 20 10"><line x1="0" y1="5" x2="20" y2="5" stroke="black" '
+               'stroke-width="0.2"/></symbol>'
                '<use href="#s" width="40" height="40"/><use href="#s" y="50"/>')
     assert boxes(lines_of(text)) == [(0.0, 20.0, 40.0, 20.0), (0.0, 100.0, 100.0, 100.0)]
 
@@ -239,7 +240,7 @@ def test_clipped_lines_stay_inside_the_clip_under_any_transform(dx: float, dy: f
     ("xMidYMid slice", [(0.0, 0.0, 0.0, 100.0), (100.0, 0.0, 100.0, 100.0)]),  # top and bottom overflow the page
 ])
 def test_viewbox_maps_onto_the_viewport(aspect: str, expected: list[tuple[float, ...]]) -> None:
-    text = svg('<rect width="10" height="20" stroke="black" fill="none"/>',
+    text = svg('<rect width="10" height="20" stroke="black" stroke-width="0.1" fill="none"/>',
                f'width="100" height="100" viewBox="0 0 10 20" preserveAspectRatio="{aspect}"')
     assert boxes(lines_of(text)) == expected
 
@@ -248,8 +249,9 @@ def test_viewbox_maps_onto_the_viewport(aspect: str, expected: list[tuple[float,
 def test_chord_error_on_paper_is_at_most_005_mm_for_any_page(tmp_path: Path, page_mm: tuple[int, int]) -> None:
     w, h = page_mm
     path = tmp_path / "small.svg"
-    path.write_text(svg(f'<circle cx="{w / 2}" cy="{h / 2}" r="2" fill="none" stroke="black"/>'
-                        f'<path d="M {w / 2 - 3} {h / 2} q 3 -6 6 0" fill="none" stroke="black"/>',
+    path.write_text(svg(f'<circle cx="{w / 2}" cy="{h / 2}" r="2" fill="none" stroke="black" '
+                        f'stroke-width="0.1"/><path d="M {w / 2 - 3} {h / 2} q 3 -6 6 0" fill="none" '
+                        'stroke="black" stroke-width="0.1"/>',
                         f'width="{w}mm" height="{h}mm" viewBox="0 0 {w} {h}"'))
     plan = plan_file(path, PlanOptions(optimize=False))
     circle = max(plan.strokes, key=len)
@@ -301,12 +303,12 @@ def test_broken_compressed_files_are_input_errors(tmp_path: Path) -> None:
 def test_unsupported_features_are_named() -> None:
     drawing = parse_svg(svg('<mask id="m"><rect width="5" height="5" fill="white"/></mask>'
                             '<path d="M0 0 H10" stroke="black" mask="url(#m)"/>'
-                            '<path d="M0 5 H10" stroke="black" marker-end="url(#arrow)"/>'
+                            '<path d="M0 5 H10" stroke="black" filter="url(#blur)"/>'
                             '<style>g &gt;&gt; path { stroke: red }</style>'))
     assert len(drawing.lines) == 2
     text = " ".join(drawing.notes)
     assert "mask" in text
-    assert "marker" in text
+    assert "filter" in text
     assert "g >> path" in text
 
 
@@ -520,3 +522,34 @@ def test_curves_that_flatten_past_the_drawings_points_are_refused_as_they_are_re
     with pytest.raises(InputError, match=f"its curves make more than {MAX_POINTS:,} points"):
         parse_svg(svg(f'<path d="{d}" fill="none" stroke="black"/>'))
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - started < 1_000_000  # KiB: far below a GB
+
+
+def test_a_basic_shape_clips_and_one_in_error_is_named_and_left_out() -> None:
+    square = '<rect width="100" height="100" clip-path="{}"/>'
+    drawing = parse_svg(svg(square.format("circle(20px at 50px 50px)")))
+    points = np.concatenate(drawing.lines)
+    assert np.allclose(np.hypot(points[:, 0] - 50, points[:, 1] - 50), 20, atol=0.01)
+    drawing = parse_svg(svg(square.format("circle(-5px)")))
+    assert boxes(drawing.lines) == [(0.0, 0.0, 100.0, 100.0)]
+    assert any("circle(-5px)" in note and "in error" in note for note in drawing.notes)
+
+
+def test_a_gradient_hides_what_lies_under_it_only_when_all_its_stops_are_opaque() -> None:
+    def drawn(stops: str) -> list[tuple[float, float, float, float]]:
+        body = (f'<linearGradient id="g">{stops}</linearGradient><path d="M0 50 H100" stroke="black"/>'
+                '<rect x="40" y="0" width="20" height="100" fill="url(#g)"/>')
+        return boxes(parse_svg(svg(body)).lines)
+
+    opaque = '<stop offset="0" stop-color="red"/><stop offset="1" style="stop-color: blue"/>'
+    translucent = '<stop offset="0" stop-color="red"/><stop offset="1" stop-color="blue" stop-opacity="0.5"/>'
+    assert (0.0, 50.0, 40.0, 50.0) in drawn(opaque)
+    assert (0.0, 50.0, 100.0, 50.0) not in drawn(opaque)
+    assert (0.0, 50.0, 100.0, 50.0) in drawn(translucent)
+
+
+def test_a_clipped_opaque_fill_hides_only_what_shows_of_it() -> None:
+    body = ('<path d="M0 50 H100" stroke="black"/><clipPath id="c"><rect x="40" y="0" width="20" height="100"/>'
+            '</clipPath><g clip-path="url(#c)"><rect width="100" height="100"/></g>')
+    assert (0.0, 50.0, 40.0, 50.0) in boxes(parse_svg(svg(body)).lines)
+    assert (60.0, 50.0, 100.0, 50.0) in boxes(parse_svg(svg(body)).lines)
+    assert (0.0, 50.0, 100.0, 50.0) not in boxes(parse_svg(svg(body)).lines)

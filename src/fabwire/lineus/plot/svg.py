@@ -1,12 +1,13 @@
-"""SVG documents to the pen lines a browser shows: every visible stroke along its path (dashed as drawn), every
-solid fill along the border of the part a browser shows, pattern fills as their own lines inside the shape, text
-in single-stroke letters; transforms, viewports and clip paths applied, curves flattened to a chord tolerance.
+"""SVG documents to the pen lines a browser shows: every visible stroke along its path (dashed as drawn; a wide
+one along the border of the band it paints), every solid fill along the border of the part a browser shows,
+pattern fills as their own lines inside the shape, text in single-stroke letters; transforms, viewports and clip
+paths applied, curves flattened to a chord tolerance.
 Output is in CSS px of the page (y down).
 
 What a pen draws for a filled shape is the outline of what a browser shows of it: a fill cut by a clip path or a
 viewport is outlined along the cut too, an open subpath is closed for its fill, and a fill the colour of the paper
 draws nothing (so matplotlib's white figure background neither frames the plot nor drives fitting). Shapes
-painted over others do not hide what lies under them (a pen cannot unpaint): that, masks, markers, filters and
+painted over others do not hide what lies under them (a pen cannot unpaint): that, masks, filters and
 gradients' colours are what the plan does not show as a browser does, and each is named in `notes`.
 
 FEATURES below lists every class of SVG the reader renders as a browser does, with its source; each row names the
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Iterator
@@ -33,6 +35,7 @@ from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
+from fabwire.lineus.plot.stroke import Pen, pen_of, stroke_area
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
     PathDataError,
@@ -55,6 +58,7 @@ from fabwire.lineus.plot.svgstyle import (
     local,
     number,
     opaque_fill,
+    opaque_stop,
     own_style,
     paints,
 )
@@ -64,6 +68,7 @@ from fabwire.lineus.plot.svgunits import (
     ROOT_FONT_SIZE,
     Font,
     about,
+    angle,
     beyond_single,
     css_transform,
     flattens,
@@ -96,6 +101,13 @@ MAX_OCCLUSION_CHECKS = 50_000_000
 """Earlier lines that opaque fills are checked against at most; beyond, later fills no longer hide lines."""
 READ_AHEAD_CHARS = 100_000
 """Path data up to this length is read ahead with all the others; longer data is read on its own, in place."""
+WIDE_STROKE_SHARE = 0.02
+"""A stroke wider than this share of the page diagonal (about 2 mm where the page fills a Line-us's drawing area,
+several pen widths) is drawn as the outline of the band it paints, caps and joins included, as a fill is; a thinner
+one along its centre line."""
+MAX_BAND_POINTS = 200_000
+"""Points of the centre lines of wide strokes one drawing may outline at most; past that, wide strokes are drawn
+along their centre lines (outlining costs GEOS buffering and union per stroke)."""
 USER_LANGUAGES = ("en",)
 """The reader's languages for `systemLanguage` (a browser's default English locale), primary subtags."""
 
@@ -104,6 +116,14 @@ CONTAINERS = frozenset({"svg", "g", "a", "switch", "use"})
 UNDRAWABLE = frozenset({"text", "image", "foreignObject"})
 EFFECTS = frozenset({"clip-path", "mask", "filter"})
 MARKERS = frozenset({"marker", "marker-start", "marker-mid", "marker-end"})
+BASIC_SHAPE = re.compile(r"\s*(circle|ellipse|inset|polygon)\(([^()]*)\)", re.IGNORECASE)
+"""A clip-path that is a CSS basic shape, with its arguments; a reference box may follow."""
+CONTEXT_PAINTS = {"context-fill": "fill", "context-stroke": "stroke"}
+MARKABLE = frozenset({"path", "line", "polyline", "polygon"})
+"""Shapes markers are drawn on (SVG 2 §13.7: markable elements)."""
+MAX_MARKERS = 10_000
+"""Elements marker copies may draw in one drawing at most (each vertex of a long path places a copy of every
+element in its marker); past that, further markers are left out with a note."""
 
 FEATURES: tuple[tuple[str, str, str], ...] = (
     # (feature class, source, browser comparison case)
@@ -124,13 +144,23 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
     ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
     ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
+    ("markers on path, line, polyline and polygon vertices: orient, markerUnits, viewBox, refX/refY, clip",
+     "SVG 2 §13.7", "markers"),
+    ("context-fill and context-stroke from the use or the marked shape; none without one", "SVG 2 §13.3",
+     "context paint"),
+    ("strokes wider than 2 % of the page diagonal outlined with their caps, joins and miter limit, as one shape "
+     "with the element's fill", "SVG 2 §13.5, §13.6", "wide stroke joins"),
     ("fill cut by a clip path outlined along the cut", "SVG 1.1 §14.3", "clipped fill"),
     ("clip-path on the root svg", "SVG 1.1 §14.3.5", "root clip-path"),
+    ("clip-path basic shapes circle(), ellipse(), inset(), polygon() on fill-, stroke- or view-box",
+     "CSS Masking 1 §6.1, CSS Shapes 1 §3.1", "clip-path basic shapes"),
     ("clip path cycles leave out the looping reference", "SVG 1.1 §14.3.5", "clip cycle"),
     ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
     ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
     ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
+    ("gradients whose stops are all opaque hide what lies under them", "SVG 1.1 §13.2.4, §3.3",
+     "opaque gradient hides what lies under it"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
     ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
      "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
@@ -143,7 +173,9 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
      "bbox of hidden children"),
     ("a clipPath's transform and transform-origin apply in user space, outside objectBoundingBox units",
      "SVG 1.1 §14.3.5, CSS Transforms 1 §7", "clip path transform by bounding box"),
-    ("fills in a group with opacity or a clip path hide that group's earlier lines only",
+    ("a clipped group's opaque fills, once clipped, hide what lies under the group", "SVG 1.1 §14.3, §3.3",
+     "clipped opaque fill hides what lies under the group"),
+    ("fills in a group with opacity hide that group's earlier lines only (in a clipped group, until clipped)",
      "SVG 1.1 §14.5, Compositing and Blending 1 §3.3", "fill hides lines within a translucent group"),
 )
 
@@ -174,11 +206,14 @@ def _box(points: FloatArray) -> list[float]:
 class _Fill:
     """The area a solid fill covers, in output units, from its closed rings by its fill rule (made on demand)."""
 
-    __slots__ = ("_area", "box", "rings", "rule")
+    __slots__ = ("_area", "box", "opaque", "rings", "rule")
 
-    def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None) -> None:
+    def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None, *,
+                 opaque: bool = False) -> None:
         self.rings = rings
         self.rule = rule
+        self.opaque = opaque
+        """Whether the paint has no transparency, so it hides what lies under it."""
         self._area = area
         self.box = _box(np.concatenate(rings)) if rings else (
             shapely.bounds(area).tolist() if area is not None and not area.is_empty else [0.0, 0.0, -1.0, -1.0])
@@ -228,6 +263,9 @@ class Ink(list[FloatArray]):
         self.extent: list[list[float]] = []
         """Boxes (x0, y0, x1, y1) of geometry that shows nothing but counts for the bounding box of the group
         (hidden, fully transparent or unpainted shapes: SVG 2 §8.10 takes every rendered element's geometry)."""
+        self.bands: set[int] = set()
+        """ids of the lines that outline a wide stroke's band: they lie beyond the shape's geometry, so the
+        bounding box leaves them out (its geometry is in `extent`)."""
         self._boxes = _Boxes()
         self._fill_boxes = _Boxes()
 
@@ -235,6 +273,7 @@ class Ink(list[FloatArray]):
         self.extend(other)
         self.fills.extend(other.fills)
         self.extent.extend(other.extent)
+        self.bands |= other.bands
 
     def boxes(self) -> FloatArray:
         """(x0, y0, x1, y1) of every line (lines are never changed in place, only added or replaced)."""
@@ -322,6 +361,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
     if tolerance is None:
         tolerance = RELATIVE_TOLERANCE * math.hypot(width, height)
     reader = _Reader(root, name, tolerance, text)
+    reader.wide_stroke = WIDE_STROKE_SHARE * math.hypot(width, height)
     if vb.error:
         reader.unsupported[f"the viewBox {excerpt(root.get('viewBox', ''), 60)} is in error ({vb.error}): ignored, as "
                            "browsers do"] += 1
@@ -397,11 +437,152 @@ def _border(fill: _Fill, rings: Polylines) -> Polylines | None:
         np.fill_diagonal(inside, False)
         if not inside.any():
             return None  # side by side: every ring is a border
-    area = fill.area
-    border = [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
-              if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
+    border = _outline(fill.area)
     drawn = _length(rings)
     return border if abs(_length(border) - drawn) > 1e-6 * drawn else None
+
+
+def _stretch(matrix: FloatArray) -> float:
+    return math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
+
+
+POSITION_KEYWORDS = {"left": ("x", 0.0), "right": ("x", 1.0), "top": ("y", 0.0), "bottom": ("y", 1.0),
+                     "center": ("", 0.5)}
+
+
+def _position(words: list[str], w: float, h: float) -> tuple[float, float]:
+    """A CSS <position> of one or two parts (keywords, lengths, percentages) in the box of size w x h."""
+    if not words:
+        return w / 2, h / 2
+    if len(words) > 2:
+        raise ValueError("positions of more than two parts are not read")
+    if len(words) == 2 and (POSITION_KEYWORDS.get(words[0], ("",))[0] == "y"
+                            or POSITION_KEYWORDS.get(words[1], ("",))[0] == "x"):
+        words = words[::-1]
+    if len(words) == 1:
+        axis = POSITION_KEYWORDS.get(words[0], ("x",))[0]
+        words = ["center", words[0]] if axis == "y" else [words[0], "center"]
+    values = []
+    for word, size in zip(words, (w, h), strict=True):
+        if word in POSITION_KEYWORDS:
+            values.append(POSITION_KEYWORDS[word][1] * size)
+        else:
+            values.append(_box_length(word, size))
+    return values[0], values[1]
+
+
+def _box_length(word: str, size: float) -> float:
+    value = length(word, size, default=math.nan)
+    if math.isnan(value):
+        raise ValueError(f"{word!r} is not a length")
+    return value
+
+
+def _radius(word: str, near: float, far: float, size: float) -> float:
+    if word == "closest-side":
+        return near
+    if word == "farthest-side":
+        return far
+    value = _box_length(word, size)
+    if value < 0:
+        raise ValueError("a negative radius")
+    return value
+
+
+def _basic_shape(name: str, args: str, box: tuple[float, float, float, float], tolerance: float) -> BaseGeometry:
+    """A basic shape's area in the user units of its reference box (x, y, width, height); ValueError when the
+    arguments are in error."""
+    x, y, w, h = box
+    if name == "polygon":
+        parts = [p.strip() for p in args.split(",")]
+        if parts and parts[0] in ("nonzero", "evenodd"):
+            parts = parts[1:]
+        points = []
+        for part in parts:
+            words = part.split()
+            if len(words) != 2:
+                raise ValueError("a polygon vertex needs two lengths")
+            points.append((x + _box_length(words[0], w), y + _box_length(words[1], h)))
+        if len(points) < 3:
+            return shapely.Polygon()
+        return shapely.make_valid(shapely.Polygon(points))
+    if name == "inset":
+        words = args.split()
+        if "round" in words:
+            words = words[:words.index("round")]
+        if not 1 <= len(words) <= 4:
+            raise ValueError("inset() takes one to four lengths")
+        order = {1: (0, 0, 0, 0), 2: (0, 1, 0, 1), 3: (0, 1, 2, 1), 4: (0, 1, 2, 3)}[len(words)]
+        top, right, bottom, left = (words[k] for k in order)
+        t, b = _box_length(top, h), _box_length(bottom, h)
+        r, left_ = _box_length(right, w), _box_length(left, w)
+        if left_ + r >= w or t + b >= h:
+            return shapely.Polygon()
+        return shapely.box(x + left_, y + t, x + w - r, y + h - b)
+    words = args.split()
+    at = words.index("at") if "at" in words else len(words)
+    cx, cy = _position(words[at + 1:], w, h)
+    radii = words[:at]
+    sides_x = (min(cx, w - cx), max(cx, w - cx))
+    sides_y = (min(cy, h - cy), max(cy, h - cy))
+    if name == "circle":
+        if len(radii) > 1:
+            raise ValueError("circle() takes one radius")
+        word = radii[0] if radii else "closest-side"
+        near, far = min(sides_x[0], sides_y[0]), max(sides_x[1], sides_y[1])
+        rx = ry = _radius(word, near, far, math.hypot(w, h) / math.sqrt(2))
+    else:
+        if len(radii) not in (0, 2):
+            raise ValueError("ellipse() takes two radii")
+        rx = _radius(radii[0] if radii else "closest-side", *sides_x, w)
+        ry = _radius(radii[1] if radii else "closest-side", *sides_y, h)
+    if rx <= 0 or ry <= 0:
+        return shapely.Polygon()
+    steps = max(8, math.ceil(math.pi / math.acos(max(-1.0, 1 - tolerance / max(rx, ry)))))
+    turn = np.linspace(0, 2 * math.pi, steps + 1)
+    return shapely.Polygon(np.column_stack([x + cx + rx * np.cos(turn), y + cy + ry * np.sin(turn)]))
+
+
+def _direction(step: FloatArray) -> float:
+    return math.degrees(math.atan2(float(step[1]), float(step[0])))
+
+
+def _marker_places(subs: list[Subpath], inverse: FloatArray) -> list[tuple[FloatArray, float]]:
+    """Each vertex of the subpaths in user units (`inverse` undoes their placement), in order, with the direction
+    a marker with orient auto takes there, degrees: the mean of the directions in and out (SVG 2 §13.7.3), the
+    one there is at an open end; a closed subpath's first and last vertices take its closing direction in."""
+    places: list[tuple[FloatArray, float]] = []
+    for sub in subs:
+        pts = affine([sub.points], inverse)[0]
+        if not np.isfinite(pts).all():
+            continue
+        steps = np.diff(pts, axis=0)
+        moving = np.flatnonzero(np.hypot(steps[:, 0], steps[:, 1]) > 0)
+        indices = list(sub.vertices) if sub.vertices is not None else list(range(len(pts)))
+        first = steps[moving[0]] if len(moving) else None
+        last = steps[moving[-1]] if len(moving) else None
+        for i in indices:
+            before = moving[moving < i]
+            after = moving[moving >= i]
+            into = steps[before[-1]] if len(before) else (last if sub.closed else None)
+            out = steps[after[0]] if len(after) else (first if sub.closed else None)
+            if into is not None and out is not None:
+                a, b = _direction(into), _direction(out)
+                if abs(b - a) > 180:
+                    b += 360 if b < a else -360
+                turn = (a + b) / 2
+            elif into is not None or out is not None:
+                turn = _direction(into if into is not None else out)  # type: ignore[arg-type]
+            else:
+                turn = 0.0
+            places.append((pts[i], turn))
+    return places
+
+
+def _outline(area: BaseGeometry) -> Polylines:
+    """The rings bounding an area: each polygon's exterior and holes."""
+    return [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
+            if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
 
 
 def _namespace(el: ET.Element) -> str:
@@ -450,6 +631,10 @@ class _Reader:
         self.curved = False
         self.points = 0
         self.dashes = 0
+        self.band_points = 0
+        """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
+        self.wide_stroke = math.inf
+        """Strokes wider than this on the page (px) are drawn as the outline of the band they paint."""
         """Dashes stroke-dasharray cut the lines into so far (bounded by MAX_DRAWING_DASHES)."""
         self._clips: dict[tuple[int, bytes], BaseGeometry] = {}
         self._read_ahead = self._read_straight_paths()
@@ -463,6 +648,12 @@ class _Reader:
         a clip path, a viewport's clip) takes its content as one picture, so a fill in it hides what the group
         painted before it, but not what lies under the group (SVG 1.1 §14.5, Compositing 1 §3.3 groups)."""
         self._occlusion_checks = 0
+        self._context: dict[str, str] | None = None
+        """fill and stroke of the element context-fill and context-stroke take theirs from (the `<use>` or the
+        marked shape being drawn; None outside both: those paints are then none, SVG 2 §13.3)."""
+        self._markers: tuple[ET.Element, ...] = ()
+        """Markers being drawn, innermost last: a marker is not drawn inside itself."""
+        self.marker_count = 0
         self.user_viewport = (0.0, 0.0)
         """The root viewport in user units: the reference box of transform-origin where no nearer one is known."""
         self.root_font = Font()
@@ -654,7 +845,18 @@ class _Reader:
                            isolated=bool(effects) or _opacity(own) < 1):
             self.draw(el, tag, style, matrix, viewport, target, depth, uses)
         self.clip(el, own, matrix, target, ())
+        if effects == ["clip-path"] and _opacity(own) >= 1:
+            self.hide_under_clipped(target)
         out.take(target)
+
+    def hide_under_clipped(self, drawn: Ink) -> None:
+        """What shows of the opaque fills of a clipped group, once clipped, hides what lies under the group (they
+        could hide only the group's own lines while it was drawn, before the clip was known)."""
+        if self._shaded or not self._below:
+            return
+        for fill in drawn.fills:
+            if fill.opaque:
+                self.hide_under(fill)
 
     def extent_of(self, el: ET.Element, own: dict[str, str], style: dict[str, str], matrix: FloatArray,
                   viewport: tuple[float, float], out: Ink, depth: int, uses: tuple[str, ...]) -> None:
@@ -738,7 +940,8 @@ class _Reader:
                 for k in np.flatnonzero(near).tolist():
                     earlier = ink.fills[k]
                     if shapely.intersects(earlier.area, fill.area):
-                        ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area)))
+                        ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area),
+                                              opaque=earlier.opaque))
 
     def clip(self, el: ET.Element, own: dict[str, str], matrix: FloatArray, target: Ink,
              stack: tuple[str, ...]) -> None:
@@ -750,7 +953,10 @@ class _Reader:
         value = own.get("clip-path", "none").strip()
         if value == "none" or not (target or target.fills):
             return
-        region = self.clip_region(value, matrix, target, stack)
+        if BASIC_SHAPE.match(value):
+            region = self.basic_shape(el, value, matrix, target)
+        else:
+            region = self.clip_region(value, matrix, target, stack)
         if region is not None:
             self.cut_ink(target, region)
 
@@ -762,7 +968,7 @@ class _Reader:
             edges, area = cut_edge(fill.area, region)
             kept.extend(edges)
             if not area.is_empty:
-                fills.append(_Fill([], fill.rule, area))
+                fills.append(_Fill([], fill.rule, area, opaque=fill.opaque))
         target.replace(kept)
         target.fills = fills
         self.hidden.extend(hidden)
@@ -776,8 +982,32 @@ class _Reader:
             at = self.parents.get(at)
         return False
 
+    def in_context(self, style: dict[str, str]) -> dict[str, str]:
+        """`style` with context-fill and context-stroke replaced by the context element's paint."""
+        found = {k: v for k in ("fill", "stroke") if (v := style.get(k, "").strip()) in CONTEXT_PAINTS}
+        if not found:
+            return style
+        context = self._context or {}
+        return {**style, **{k: context.get(CONTEXT_PAINTS[v], "none") for k, v in found.items()}}
+
+    @contextmanager
+    def context(self, style: dict[str, str]) -> Iterator[None]:
+        """Draw with the element of (resolved) `style` as the context element."""
+        outer = self._context
+        self._context = {"fill": style.get("fill", "black"), "stroke": style.get("stroke", "none")}
+        try:
+            yield
+        finally:
+            self._context = outer
+
     def use(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
             out: Ink, depth: int, uses: tuple[str, ...]) -> None:
+        style = self.in_context(style)
+        with self.context(style):
+            self._use(el, style, matrix, viewport, out, depth, uses)
+
+    def _use(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
+             out: Ink, depth: int, uses: tuple[str, ...]) -> None:
         ref = self._href(el)
         target = self.ids.get(ref) if ref else None
         if target is None:
@@ -848,7 +1078,8 @@ class _Reader:
             if not keep:
                 self._read_ahead.pop(id(el), None)
             placed = affine([sub.points for sub in ahead], matrix)
-            return [Subpath(points, sub.closed, sub.segments) for points, sub in zip(placed, ahead, strict=True)]
+            return [Subpath(points, sub.closed, sub.segments, sub.vertices)
+                    for points, sub in zip(placed, ahead, strict=True)]
         builder = PathBuilder(matrix, self.tolerance, room=MAX_POINTS - self.points)
         vw, vh = viewport
         diag = math.hypot(vw, vh) / math.sqrt(2)
@@ -950,6 +1181,32 @@ class _Reader:
             at = self.parents.get(at)
         return True
 
+    def _stops(self, gradient: ET.Element) -> list[ET.Element]:
+        """A gradient's stops, or those of the one it takes them from through `href` (SVG 1.1 §13.2.4)."""
+        seen: list[ET.Element] = []
+        at: ET.Element | None = gradient
+        while at is not None and at not in seen:
+            stops = [child for child in at if local(child.tag) == "stop"]
+            if stops:
+                return stops
+            seen.append(at)
+            ref = self._href(at)
+            at = self.ids.get(ref) if ref else None
+        return []
+
+    def opaque(self, style: dict[str, str], which: str) -> bool:
+        """Whether the fill or stroke paints without any transparency, so it hides what lies under it: a solid
+        colour (white too), or a gradient all of whose stops are opaque."""
+        if opaque_fill(style, which):
+            return True
+        ref = iri(style.get(which, ""))
+        server = self.ids.get(ref) if ref else None
+        if (server is None or local(server.tag) not in ("linearGradient", "radialGradient")
+                or self._paint_kind(style, which)[0] != "solid" or number(style.get(f"{which}-opacity"), 1.0) < 1):
+            return False
+        stops = self._stops(server)
+        return bool(stops) and all(opaque_stop(self.computed_style(stop)) for stop in stops)
+
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
         nothing (SVG 1.1 §13.2.4)."""
@@ -980,28 +1237,130 @@ class _Reader:
 
     def shape(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
               viewport: tuple[float, float], out: Ink) -> None:
-        stroke = self._paint_kind(style, "stroke")[0] != "none"
+        """Draw a shape's fill and stroke, then its markers."""
+        style = self.in_context(style)
+        markers = self._marker_refs(style) if tag in MARKABLE else {}
+        if not markers:
+            self._paint(el, tag, style, matrix, viewport, out)
+            return
+        subs = self.subpaths(el, tag, matrix, viewport, self.font(style), keep=True)
+        self._paint(el, tag, style, matrix, viewport, out)
+        places = _marker_places(subs, _invert(matrix))
+        width = self._stroke_width(style, viewport)
+        with self.context(style):
+            for k, (point, direction) in enumerate(places):
+                where = "start" if k == 0 else "end" if k == len(places) - 1 else "mid"
+                for which in (where, "end") if len(places) == 1 else (where,):
+                    marker = markers.get(which)
+                    if marker is not None:
+                        self.marker(marker, which, point, direction, width, matrix, viewport, out)
+
+    def _marker_refs(self, style: dict[str, str]) -> dict[str, ET.Element]:
+        """The `<marker>` elements marker-start, -mid and -end (or the `marker` shorthand) name."""
+        found: dict[str, ET.Element] = {}
+        for where in ("start", "mid", "end"):
+            value = style.get(f"marker-{where}", "").strip() or style.get("marker", "").strip()
+            ref = iri(value) if value.startswith("url(") else None
+            target = self.ids.get(ref) if ref else None
+            if target is not None and local(target.tag) == "marker" and _namespace(target) == SVG_NS:
+                found[where] = target
+        return found
+
+    def marker(self, marker: ET.Element, where: str, point: FloatArray, direction: float, stroke_width: float,
+               matrix: FloatArray, viewport: tuple[float, float], out: Ink) -> None:
+        """Draw one marker at `point` (user units of the shape placed by `matrix`), turned by its orient
+        (`direction`, degrees, for auto), scaled by the stroke width unless markerUnits is userSpaceOnUse, its
+        viewBox mapped onto markerWidth x markerHeight with (refX, refY) on the point, clipped to that box unless
+        its overflow is visible (SVG 2 §13.7.2)."""
+        if marker in self._markers:
+            return
+        self.marker_count += sum(1 for _ in marker.iter())  # each copy draws every element in it again
+        if self.marker_count > MAX_MARKERS:
+            self.unsupported[f"markers past {MAX_MARKERS:,} copied elements in one drawing are left out"] += 1
+            return
+        vw, vh = viewport
+        style = self.computed_style(marker)
+        font = self.font(style)
+        mw = length(marker.get("markerWidth"), vw, default=3.0, font_size=font)
+        mh = length(marker.get("markerHeight"), vh, default=3.0, font_size=font)
+        vb = read_view_box(marker.get("viewBox"))
+        if mw <= 0 or mh <= 0 or vb.empty:
+            return
+        box = vb.box
+        orient = (marker.get("orient") or "0").strip()
+        if orient == "auto":
+            turn = direction
+        elif orient == "auto-start-reverse":
+            turn = direction + (180.0 if where == "start" else 0.0)
+        else:
+            try:
+                turn = angle(orient)
+            except ValueError:
+                turn = 0.0
+        scale = 1.0 if (marker.get("markerUnits") or "").strip() == "userSpaceOnUse" else stroke_width
+        inner = viewport_matrix(box, 0.0, 0.0, mw, mh, marker.get("preserveAspectRatio"))
+        size = (box[2], box[3]) if box else (mw, mh)
+        ref = affine([np.array([[length(marker.get("refX"), vw, font_size=font),
+                                 length(marker.get("refY"), vh, font_size=font)]])], inner)[0][0]
+        c, s = math.cos(math.radians(turn)), math.sin(math.radians(turn))
+        place = np.array([[c * scale, -s * scale, 0.0], [s * scale, c * scale, 0.0]])
+        place[:, 2] = point - place[:, :2] @ ref
+        placed = then(matrix, place)
+        if flattens(placed):
+            return
+        drawn = Ink()
+        # hidden by the browsers' default style sheet; `inherit` with no value above it is the initial visible
+        given = "overflow" in own_style(marker, self.sheet)
+        clips = style.get("overflow", "visible" if given else "hidden").strip() in ("hidden", "scroll")
+        self._markers += (marker,)
+        try:
+            with self.painting(drawn, isolated=clips):  # a clipped marker hides what is under it once clipped
+                self.children(marker, style, then(placed, inner), size, drawn, 0, ())
+        finally:
+            self._markers = self._markers[:-1]
+        if clips and (drawn or drawn.fills):
+            corners = np.array([[0.0, 0.0], [mw, 0.0], [mw, mh], [0.0, mh], [0.0, 0.0]])
+            self.cut_ink(drawn, shapely.Polygon(affine([corners], placed)[0]))
+            self.hide_under_clipped(drawn)
+        out.take(drawn)
+
+    def _paint(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
+               viewport: tuple[float, float], out: Ink) -> None:
+        stroke_kind, stroke_pattern = self._paint_kind(style, "stroke")
+        stroke = stroke_kind != "none"
         fill, pattern = self._paint_kind(style)
-        covers = not self._shaded and bool(self._below) and opaque_fill(style)
+        covers = not self._shaded and bool(self._below) and self.opaque(style, "fill")
         if style.get("visibility", "visible").strip() != "visible" or (not (stroke or covers) and fill == "none"):
             points = [sub.points for sub in self.subpaths(el, tag, matrix, viewport, self.font(style))]
             if points:
                 out.extent.append(_box(np.concatenate(points)))  # shows nothing, but has a bounding box
             return
         caps = style.get("stroke-linecap", "butt").strip() in ("round", "square")
-        dots = stroke and caps
-        if any(style[k].strip() != "none" for k in style.keys() & MARKERS):
-            self.unsupported["markers (arrowheads and the like) are not drawn"] += 1
         dashes, offset = self._dash_pattern(style, viewport) if stroke else ([], 0.0)
+        subs = self.subpaths(el, tag, matrix, viewport, self.font(style))
+        half = self._stroke_width(style, viewport) / 2 if stroke else 0.0
+        scale = math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
+        wide = stroke and 2 * half * scale > self.wide_stroke and self._band_room(subs)
+        stroke, dots = stroke and not wide, stroke and not wide and caps
+        band: list[tuple[FloatArray, bool]] = []
+        """The centre lines of a wide stroke, in user units, with whether each is closed."""
+        inverse = _invert(matrix) if dashes or wide else matrix
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
-        for sub in self.subpaths(el, tag, matrix, viewport, self.font(style)):
+        for sub in subs:
             if sub.segments == 0:
                 continue  # a lone moveto is never stroked
             pts = sub.points
             if not np.isfinite(pts).all():
                 self.unsupported["subpaths with coordinates that are not finite numbers are left out"] += 1
                 continue
+            if wide:
+                local_pts = affine([pts], inverse)[0]
+                if dashes:
+                    self._count_dashes(el, tag, dash_count(local_pts, dashes))
+                    band.extend((piece, False) for piece in dashed(local_pts, dashes, offset))
+                else:
+                    band.append((local_pts, sub.closed))
             flat = (fill != "none" or covers or not stroke) and _without_area(pts)
             if (fill != "none" or covers) and not flat:
                 rings.append(pts)
@@ -1014,8 +1373,7 @@ class _Reader:
                 continue
             if fill == "solid" and not sub.closed and not flat:
                 pts = np.vstack([pts, pts[:1]])  # the fill's border closes the subpath
-            if dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between the dashes
-                inverse = _invert(matrix)
+            if stroke and dashes and (fill != "solid" or flat):  # a solid fill's border shows whole between dashes
                 local_pts = affine([pts], inverse)[0]
                 self._count_dashes(el, tag, dash_count(local_pts, dashes))
                 pieces = affine(dashed(local_pts, dashes, offset), matrix)
@@ -1026,23 +1384,76 @@ class _Reader:
                 continue
             self._count(len(pts))
             out.append(pts)
-        if not rings:
-            final.take(out)
-            return
-        closed = [np.vstack([r, r[:1]]) for r in rings]
-        rule = style.get("fill-rule", "nonzero").strip()
-        own = _Fill(closed, rule)
-        if fill == "solid" and not stroke and out:
-            border = _border(own, closed)
-            if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
-                out.replace(border)
-        if covers:
-            self.hide_under(own)
-        if fill == "solid":
-            out.fills.append(own)
-        elif pattern is not None:
-            self.pattern(pattern, matrix, closed, rule, viewport, out)
+        if rings:
+            closed = [np.vstack([r, r[:1]]) for r in rings]
+            rule = style.get("fill-rule", "nonzero").strip()
+            own = _Fill(closed, rule, opaque=covers or self.opaque(style, "fill"))
+            if fill == "solid" and not stroke and out:
+                border = _border(own, closed)
+                if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
+                    out.replace(border)
+            if covers:
+                self.hide_under(own)
+            if fill == "solid":
+                out.fills.append(own)
+            elif pattern is not None:
+                self.pattern(pattern, matrix, closed, rule, viewport, out)
+        if band and stroke_pattern is not None:
+            self.pattern_band(band, pen_of(style, half, self.tolerance / scale), stroke_pattern, matrix, viewport,
+                              out)
+        elif band:
+            self.stroke_band(band, pen_of(style, half, self.tolerance / scale), style, matrix, out,
+                             own if rings and fill == "solid" else None)
         final.take(out)
+
+    def _stroke_width(self, style: dict[str, str], viewport: tuple[float, float]) -> float:
+        """stroke-width in user units (a percentage of the viewport's normalised diagonal); negative or in error
+        is the initial 1."""
+        width = length(style.get("stroke-width"), math.hypot(*viewport) / math.sqrt(2), default=1.0,
+                       font_size=self.font(style))
+        return width if width >= 0 else 1.0
+
+    def _band_room(self, subs: list[Subpath]) -> bool:
+        """Whether the wide strokes of the drawing so far and `subs` stay within MAX_BAND_POINTS (beyond, wide
+        strokes are drawn along their centre lines, with a note)."""
+        self.band_points += sum(len(sub.points) for sub in subs)
+        if self.band_points <= MAX_BAND_POINTS:
+            return True
+        self.unsupported[f"wide strokes past {MAX_BAND_POINTS:,} points are drawn along their centre lines, not "
+                         "as the outline of the band they paint"] += 1
+        return False
+
+    def pattern_band(self, lines: list[tuple[FloatArray, bool]], pen: Pen, server: ET.Element, matrix: FloatArray,
+                     viewport: tuple[float, float], out: Ink) -> None:
+        """Draw a wide stroke painted with a pattern as a pattern fill is drawn: the pattern's own lines inside
+        the band (`lines` in user units placed by `matrix`)."""
+        area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
+        if not area.is_empty:
+            self.pattern(server, matrix, _outline(area), "nonzero", viewport, out)
+
+    def stroke_band(self, lines: list[tuple[FloatArray, bool]], pen: Pen, style: dict[str, str],
+                    matrix: FloatArray, out: Ink, fill: _Fill | None) -> None:
+        """Draw a wide stroke as a fill is drawn: the outline of the band it paints (`lines` in user units placed
+        by `matrix`), added to the element's own lines `out`; an opaque band hides what lies under it. With the
+        element's solid `fill` (the last of `out.fills`, its border the lines of `out`), the pen draws the border
+        of both together: one element's paint is one shape, whatever the colours of its fill and stroke."""
+        area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
+        if area.is_empty:
+            return
+        band = _Fill([], "nonzero", area, opaque=self.opaque(style, "stroke"))
+        if not self._shaded and self._below and band.opaque:
+            self.hide_under(band)
+        if fill is not None:
+            band = _Fill([], "nonzero", shapely.union(fill.area, area), opaque=band.opaque and fill.opaque)
+            out.fills.pop()
+            out.replace([])
+        border = _outline(band.area)
+        self._count(sum(len(line) for line in border))
+        out.extend(border)
+        out.bands.update(id(line) for line in border)
+        out.fills.append(band)
+        centres = np.concatenate([points for points, _ in lines])
+        out.extent.append(_box(affine([centres], matrix)[0]))
 
     # -- patterns -----------------------------------------------------------------------------------------------
 
@@ -1148,6 +1559,45 @@ class _Reader:
 
     # -- clipping ---------------------------------------------------------------------------------------------
 
+    def _geometry_box(self, content: Ink, matrix: FloatArray) -> tuple[float, float, float, float] | None:
+        """The bounding box (x0, y0, x1, y1) of what `content` draws, in the user units `matrix` places."""
+        corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
+        geometry = [line for line in content if id(line) not in content.bands]
+        if not geometry and not corners:
+            return None
+        user = affine([np.concatenate([*geometry, *corners])], _invert(matrix))[0]
+        (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
+        return float(x0), float(y0), float(x1), float(y1)
+
+    def basic_shape(self, el: ET.Element, value: str, matrix: FloatArray, content: Ink) -> BaseGeometry | None:
+        """The area a CSS basic shape lets through (CSS Masking 1 §6.1, CSS Shapes 1 §3.1: circle(), ellipse(),
+        inset(), polygon()) on its reference box: fill-box, stroke-box (the initial one, for border-box and
+        margin-box as well) or view-box; None (and a note) for one in error."""
+        match = BASIC_SHAPE.match(value)
+        assert match is not None
+        name, args, rest = match.group(1).lower(), match.group(2).strip(), value[match.end():].strip().lower()
+        box = self._geometry_box(content, matrix)
+        if box is None:
+            return shapely.Polygon()
+        x0, y0, x1, y1 = box
+        if rest in ("", "border-box", "margin-box", "stroke-box"):
+            style = self.computed_style(el)
+            if self._paint_kind(style, "stroke")[0] != "none":
+                half = self._stroke_width(style, self.user_viewport) / 2
+                x0, y0, x1, y1 = x0 - half, y0 - half, x1 + half, y1 + half
+        elif rest == "view-box":
+            x0, y0, (x1, y1) = 0.0, 0.0, self.user_viewport
+        elif rest not in ("fill-box", "content-box", "padding-box"):
+            self.unsupported[f"clip-path {excerpt(value, 60)!r} is in error: drawn unclipped"] += 1
+            return None
+        w, h = x1 - x0, y1 - y0
+        try:
+            area = _basic_shape(name, args, (x0, y0, w, h), self.tolerance / max(_stretch(matrix), 1e-12))
+        except ValueError:
+            self.unsupported[f"clip-path {excerpt(value, 60)!r} is in error: drawn unclipped"] += 1
+            return None
+        return shapely.transform(area, lambda xy: affine([xy], matrix)[0])
+
     def clip_region(self, value: str, matrix: FloatArray, content: Ink,
                     stack: tuple[str, ...]) -> BaseGeometry | None:
         """The area `clip-path: value` lets through, in output units; None (and a note) when it can't be used."""
@@ -1171,9 +1621,10 @@ class _Reader:
         own_place = self.placement(clip, own_style(clip, self.sheet), self.computed_style(clip), self.user_viewport)
         if by_box:
             corners = [np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, y0, x1, y1 in content.extent]
-            if not content and not corners:
+            geometry = [line for line in content if id(line) not in content.bands]
+            if not geometry and not corners:
                 return shapely.Polygon()
-            pts = np.concatenate([*content, *corners])
+            pts = np.concatenate([*geometry, *corners])
             user = affine([pts], _invert(matrix))[0]
             (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
             matrix = then(then(matrix, own_place), np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]))

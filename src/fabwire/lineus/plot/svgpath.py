@@ -38,6 +38,8 @@ class Subpath:
     points: FloatArray
     closed: bool
     segments: int
+    vertices: tuple[int, ...] | None = None
+    """Indices of the points where segments start and end (markers sit there); None when every point is one."""
 
 
 class _Point:
@@ -67,6 +69,7 @@ class PathBuilder:
         self._start = (0.0, 0.0)
         self._buf = array("d")
         self._segments = 0
+        self._ends: list[int] = []
         self._last_cubic: tuple[float, float] | None = None
         self._last_quad: tuple[float, float] | None = None
 
@@ -89,7 +92,7 @@ class PathBuilder:
         for x, y in points:
             self._begin()
             self._buf.extend((x, y))
-            self._segments += 1
+            self._segment()
             self._at(x, y)
 
     def horizontal(self, *xs: float | None, relative: bool = False) -> None:
@@ -140,7 +143,7 @@ class PathBuilder:
         if len(pts) > 1:
             self.curved = True
         self._buf.extend(pts.ravel().tolist())
-        self._segments += 1
+        self._segment()
         self._at(*end)
 
     def closed(self, relative: bool = False) -> None:
@@ -148,7 +151,7 @@ class PathBuilder:
         here = self._here()
         if here != self._start:
             self._buf.extend(self._start)
-        self._segments += 1
+        self._segment()
         self._flush(closed=True)
         self._at(*self._start)  # a command after Z starts a new subpath at this start point
 
@@ -184,7 +187,11 @@ class PathBuilder:
         if n > 1:
             self.curved = True
         self._buf.extend(pts.ravel().tolist())
+        self._segment()
+
+    def _segment(self) -> None:
         self._segments += 1
+        self._ends.append(len(self._buf) // 2 - 1)
 
     def _spend(self, points: int) -> None:
         if self.room is not None:
@@ -197,9 +204,10 @@ class PathBuilder:
             user = np.frombuffer(self._buf, dtype=float).reshape(-1, 2)
             with np.errstate(invalid="ignore", over="ignore"):  # non-finite points are dropped by the reader
                 out = user @ self.matrix[:, :2].T + self.matrix[:, 2]
-            self.subpaths.append(Subpath(out, closed, self._segments))
+            self.subpaths.append(Subpath(out, closed, self._segments, (0, *self._ends)))
         self._buf = array("d")
         self._segments = 0
+        self._ends = []
 
 
 def _largest_stretch(matrix: FloatArray) -> float:

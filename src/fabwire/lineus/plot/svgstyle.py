@@ -34,19 +34,20 @@ INHERITED = frozenset({
     "fill", "stroke", "fill-opacity", "stroke-opacity", "stroke-width", "stroke-linecap", "visibility",
     "clip-rule", "fill-rule", "marker-start", "marker-mid", "marker-end", "marker", "stroke-dasharray",
     "stroke-dashoffset", "font-size", "font-family", "font-style", "font-weight", "text-anchor", "color",
-    "letter-spacing", "word-spacing",
+    "letter-spacing", "word-spacing", "stroke-linejoin", "stroke-miterlimit",
 })
 NOT_INHERITED = frozenset({"display", "opacity", "clip-path", "mask", "filter", "overflow", "transform",
-                           "transform-origin", "transform-box"})
+                           "transform-origin", "transform-box", "stop-color", "stop-opacity"})
 GEOMETRY = frozenset({"x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", "d"})
 """Geometry properties (SVG 2 §10.2-10.4): a style sheet or `style` attribute may set them; the attributes of
 the same names are read with the shape."""
 PROPERTIES = INHERITED | NOT_INHERITED | GEOMETRY
-PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform"} - GEOMETRY
+PRESENTATION_ATTRIBUTES = PROPERTIES - {"transform", "marker"} - GEOMETRY
 """Properties that may be given as attributes too; the `transform` attribute has its own (SVG 1.1) grammar and is
-read apart from the CSS property."""
+read apart from the CSS property; the `marker` shorthand is a property only (SVG 2 §13.7.4)."""
 INITIAL = {"fill": "black", "stroke": "none", "fill-opacity": "1", "stroke-opacity": "1", "stroke-width": "1",
-           "stroke-linecap": "butt", "visibility": "visible", "clip-rule": "nonzero", "fill-rule": "nonzero",
+           "stroke-linecap": "butt", "stroke-linejoin": "miter", "stroke-miterlimit": "4", "visibility": "visible",
+           "clip-rule": "nonzero", "fill-rule": "nonzero",
            "font-size": "16", "color": "black"}
 FONT_SIZE_KEYWORDS = {"xx-small": 9.0, "x-small": 10.0, "small": 13.0, "medium": 16.0, "large": 18.0,
                       "x-large": 24.0, "xx-large": 32.0, "xxx-large": 48.0}
@@ -231,11 +232,24 @@ def paints(style: dict[str, str], which: str) -> bool:
     return _marks(value, alpha)
 
 
-def opaque_fill(style: dict[str, str]) -> bool:
-    """Whether the fill paints a solid colour without any transparency (white too), so it hides what is under it."""
-    value = style.get("fill", INITIAL["fill"]).strip().lower()
-    if value in ("none", "transparent", "") or value.startswith("url(") or number(style.get("fill-opacity"), 1.0) < 1:
+def opaque_fill(style: dict[str, str], which: str = "fill") -> bool:
+    """Whether the fill (or the stroke, `which`) paints a solid colour without any transparency (white too), so it
+    hides what is under it."""
+    value = style.get(which, INITIAL[which]).strip().lower()
+    if value in ("none", "transparent", "") or value.startswith("url(") or number(style.get(f"{which}-opacity"),
+                                                                                  1.0) < 1:
         return False
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    return _alpha(value) >= 1
+
+
+def opaque_stop(style: dict[str, str]) -> bool:
+    """Whether a gradient stop of this computed style has no transparency (stop-color black and stop-opacity 1
+    unless given)."""
+    if number(style.get("stop-opacity"), 1.0) < 1:
+        return False
+    value = style.get("stop-color", "black").strip().lower()
     if value == "currentcolor":
         value = style.get("color", INITIAL["color"]).strip().lower()
     return _alpha(value) >= 1

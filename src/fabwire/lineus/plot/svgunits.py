@@ -282,7 +282,8 @@ def css_transform(value: str, viewport: tuple[float, float], font_size: float | 
     return np.asarray(out[:2], dtype=float)
 
 
-def _angle(text: str) -> float:
+def angle(text: str) -> float:
+    """A CSS angle (a number with deg, grad, rad or turn, or none for degrees) in degrees; ValueError otherwise."""
     match = _CSS_ARG.fullmatch(text)
     if match is None or match.group(2).lower() not in ANGLE_UNITS:
         raise ValueError(f"{excerpt(text, 40)} is not an angle")
@@ -306,10 +307,10 @@ def _css_function(name: str, args: list[str], viewport: tuple[float, float], fon
                   "scaley": (1.0, factors[0])}[name]
         return np.array([[sx, 0.0, 0.0], [0.0, sy, 0.0]])
     if name == "rotate" and len(args) == 1:
-        return _function_matrix("rotate", [_angle(args[0])])
+        return _function_matrix("rotate", [angle(args[0])])
     if name in ("skew", "skewx", "skewy") and 1 <= len(args) <= (2 if name == "skew" else 1):
-        ax = _angle(args[0]) if name != "skewy" else 0.0
-        ay = _angle(args[-1]) if name == "skewy" or len(args) == 2 else 0.0
+        ax = angle(args[0]) if name != "skewy" else 0.0
+        ay = angle(args[-1]) if name == "skewy" or len(args) == 2 else 0.0
         return np.array([[1.0, math.tan(math.radians(ax)), 0.0], [math.tan(math.radians(ay)), 1.0, 0.0]])
     if name == "matrix" and len(args) == 6:
         return _function_matrix("matrix", [number_or_percent(a) for a in args])
