@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from fabwire.xyz import gcodearrays, motion, slicerfigures
+from fabwire.xyz import arcwork, gcodearrays, motion, slicerfigures
 from fabwire.xyz.gcodearrays import (
     CENTRELESS,
     INCHES,
@@ -298,6 +298,15 @@ def _ambiguous_at(piece: bytes, found: Ambiguous) -> int:
     return found.offset
 
 
+class ArcGrowth(Exception):
+    """The G2/G3 arcs read so far would become more bytes of segments than `MoveAnalyzer`'s `arc_room`; `arc` is
+    the one (counted from 1 among the file's arcs) that went past it."""
+
+    def __init__(self, arc: int) -> None:
+        super().__init__(arc)
+        self.arc = arc
+
+
 class MoveAnalyzer:
     """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
 
@@ -308,10 +317,13 @@ class MoveAnalyzer:
     line-by-line path.
     """
 
-    def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None) -> None:
+    def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None,
+                 arc_room: float = math.inf) -> None:
         """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
         path over feed rate only. `g0_words` collects, per chunk fed, the offsets of the `0` of its G0 and G00
-        command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads."""
+        command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads.
+        `arc_room`: the bytes of G1 segments the arcs may become (`arcwork.lines_size` bounds each arc's); the arc
+        that takes them past it raises ArcGrowth as soon as it is read."""
         self.timing = timing
         self.g0_words = g0_words
         self.pos = [0.0, 0.0, 0.0]
@@ -330,6 +342,12 @@ class MoveAnalyzer:
         """How far extruding moves rose while they moved (mm): spiral vase printing."""
         self.markers = [0] * len(LAYER_MARKERS)
         self.arcs = 0
+        self.arc_room = arc_room
+        self.arc_segments = 0
+        """The G1 segments the arcs read so far become (`motion.arc_segment_counts`, as `arcwork.segments`)."""
+        self.arc_bytes = 0.0
+        """Bytes at most those segments take as G1 lines (`arcwork.lines_size`)."""
+        self._bounded = 0
         self.low = [math.inf] * 3
         self.high = [-math.inf] * 3
         """The extent (mm, per axis) the moves reach, as `REACH` counts it."""
@@ -463,6 +481,9 @@ class MoveAnalyzer:
                 raise Ambiguous(CENTRELESS)
             turns = arc_turns(words) if not malformed else 0
             clockwise = np.array([arc == 2])
+            self._bound_arcs((x0, y0, x1, y1, i, j, r), clockwise, np.array([float(turns)]),
+                             (np.array([z]), np.array([target_z])), (np.array([e]), np.array([target_e])),
+                             np.array([words.get(b"F", nan)]))
             flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, clockwise)[0])
             if any(letter in words for letter in (b"I", b"J", b"R")):  # else its end points, as a straight move
                 self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, clockwise))
@@ -621,20 +642,22 @@ class MoveAnalyzer:
         dx, dy, dz = moves[:3]
         rows = np.flatnonzero(arc)
         ends = []
-        for k in range(2):  # the position after each line
+        for k in range(4):  # the position after each line
             at = np.full(count, np.nan)
             at[axes[k].lines - first] = after[k]
-            ends.append(_ffill(at, self.pos[k]))
-        end_x, end_y = ends
+            ends.append(_ffill(at, self.pos[k] if k < 3 else self.e)[rows])
+        end_x, end_y, end_z, end_e = ends
         offsets = []
-        for words in axes[5:8]:
+        for words in (*axes[5:8], axes[4]):
             value = np.full(count, np.nan)
             value[words.lines - first] = words.values
             offsets.append(value[rows])
-        i, j, r = offsets
-        x0, y0, x1, y1 = end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows]
+        i, j, r, feed = offsets
+        x0, y0, x1, y1 = end_x - dx[rows], end_y - dy[rows], end_x, end_y
         if centreless(x0, y0, x1, y1, i, j, r).any():
             raise Ambiguous(CENTRELESS)
+        self._bound_arcs((x0, y0, x1, y1, i, j, r), arc[rows] == 2, np.zeros(len(rows)),
+                         (end_z - moves[2][rows], end_z), (end_e - moves[3][rows], end_e), feed)
         flat = motion.arc_lengths(x0, y0, x1, y1, i, j, r, arc[rows] == 2)
         boxed = centred[rows]
         if boxed.any():
@@ -643,6 +666,22 @@ class MoveAnalyzer:
         out = length.copy()
         out[rows] = np.sqrt(flat * flat + dz[rows] * dz[rows])
         return out
+
+    def _bound_arcs(self, ends: tuple[NDArray[np.float64], ...], clockwise: NDArray[np.bool_],
+                    turns: NDArray[np.float64], z: tuple[NDArray[np.float64], NDArray[np.float64]],
+                    e: tuple[NDArray[np.float64], NDArray[np.float64]], feed: NDArray[np.float64]) -> None:
+        """Count the segments of arcs with these (x0, y0, x1, y1, I, J, R) `ends`, Z and E (start, end) and F
+        (NaN where not given), and bound their bytes; ArcGrowth when they go past `arc_room`."""
+        x0, y0, x1, y1, i, j, r = ends
+        paths = motion.arc_paths(x0, y0, x1, y1, i, j, r, clockwise, turns)
+        counts = motion.arc_segment_counts(paths[2], paths[4])
+        sizes = np.cumsum(arcwork.lines_size(paths, counts, x1, y1, z, e, feed, absolute=self.absolute,
+                                             absolute_e=self.absolute_e))
+        if self.arc_bytes + sizes[-1] > self.arc_room:
+            raise ArcGrowth(self._bounded + int(np.searchsorted(sizes, self.arc_room - self.arc_bytes, "right")) + 1)
+        self.arc_segments += int(counts.sum())
+        self.arc_bytes += float(sizes[-1])
+        self._bounded += len(counts)
 
     def _widen_arcs(self, box: tuple[NDArray[np.float64], ...]) -> None:
         """Widen the X and Y extent with arcs' bounding boxes (`arc_box`)."""
