@@ -330,3 +330,22 @@ def test_slicer_arcs_growing_a_file_a_few_times_are_converted(tmp_path: Path, mo
     info = convert_gcode_file(source, tmp_path / "fitted.3w", model="miniMaker")
     assert any("600 G2/G3 arcs converted" in note for note in info.notes)
     assert source.stat().st_size < info.gcode_size < 4 * source.stat().st_size
+
+
+def test_full_turns_read_as_arrays_or_line_by_line_give_the_same_figures() -> None:
+    """Arcs with P are read with the other moves' arrays; the line reader (indented lines) gives the same."""
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+    code = (b"G90\nM82\nG1 X50 Y50 Z0.2 F1200\nG2 X60 Y50 I5 J0 P2 E3\nG1 X70 Y70 E4\nG3 X70 Y70 I0 J-8 P1 E6 F900\n"
+            b"G2 X75 Y75 R5 P3 E7\nG91\nG3 X5 Y0 I2.5 J0 P1 E1\nG2 I1 J1 P0\n")
+    figures = []
+    for text in (code, b"".join(b" " + line + b"\n" for line in code.splitlines())):
+        analyzer = MoveAnalyzer()
+        analyzer.feed_chunk(text)
+        figures.append((analyzer.result(), analyzer.arc_segments, analyzer.arc_bytes))
+    (arrays, segments_a, bytes_a), (lines, segments_l, bytes_l) = figures
+    assert arrays.extent == lines.extent
+    assert arrays.print_time_s == lines.print_time_s
+    assert arrays.filament_mm == pytest.approx(lines.filament_mm)
+    assert (segments_a, bytes_a) == (segments_l, bytes_l)
+    assert segments_a == sum(line.startswith(b"G1") for line in b"".join(ArcExpander().expand(code)).splitlines()) - 2
