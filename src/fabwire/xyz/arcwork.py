@@ -136,10 +136,20 @@ def growth_room(size: int) -> int:
     return GROWTH_ALLOWED * size + GROWTH_FREE
 
 
-def too_much_growth(name: str, arc: int) -> InputError:
-    """The refusal of the G-code `name` whose `arc`-th G2/G3 arc takes its segments past `growth_room`."""
-    return InputError(f"{name}: its G2/G3 arcs as straight moves would make it more than {GROWTH_ALLOWED} times its "
-                      f"size (past arc {arc}): slice it with arcs off, or convert it with --keep-arcs")
+class TooMuchGrowth(InputError):
+    """The refusal of a G-code whose arcs would grow it past `growth_room` (`too_much_growth`): `name`, `arc`."""
+
+    def __init__(self, name: str, arc: int, advice: str) -> None:
+        super().__init__(f"{name}: its G2/G3 arcs as straight moves would make it more than {GROWTH_ALLOWED} times "
+                         f"its size (past arc {arc}): {advice}")
+        self.name, self.arc = name, arc
+
+
+def too_much_growth(name: str, arc: int, advice: str = "slice it with arcs off, or convert it with --keep-arcs",
+                    ) -> TooMuchGrowth:
+    """The refusal of the G-code `name` whose `arc`-th G2/G3 arc takes its segments past `growth_room`, with
+    `advice` on what to do (the command line's by default)."""
+    return TooMuchGrowth(name, arc, advice)
 
 
 OUT_PIECE = 1 << 20

@@ -728,16 +728,17 @@ def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
         return stream_metadata(src, str(path))
 
 
-def stream_metadata(src: BinaryIO, name: str, *, every_line: bool = True,
+def stream_metadata(src: BinaryIO, name: str, *, every_line: bool = True, arcs_grow: bool = False,
                     ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has,
     for lines no printer reads and for NUL bytes inside the G-code (NUL padding at its end is dropped, noted).
     `every_line=False`: only the lines read for the figures are checked, when the caller has the whole file
-    checked anyway."""
+    checked anyway. `arcs_grow` (with `every_line`): arcs that would grow the file too much as segments are
+    refused as a conversion refuses them (`arcwork.TooMuchGrowth`)."""
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total)
+    stated, computed = _metadata(src, name, head, total, arcs_grow=arcs_grow)
     if computed is None and every_line:  # the comments told everything: the lines are still each checked, as a
-        _metadata(src, name, head, total, always=True)  # conversion checks them (the moves read, not planned)
+        _metadata(src, name, head, total, always=True, arcs_grow=arcs_grow)  # conversion checks them
     padding = padding_note(name, stream_size(src), total)
     return (replace(stated, notes=(*stated.notes, padding)) if padding else stated), computed
 
