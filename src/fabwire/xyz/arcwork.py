@@ -120,7 +120,7 @@ def lines_size(paths: tuple[Floats, Floats, Floats, Floats, Floats], counts: NDA
         line = len("G1 X Y\n") + wx + wy + np.where(z1 != z0, 2 + wz, 0.0) + np.where(e1 != e0, 2 + we, 0.0)
         first = np.where(np.isfinite(feed), 2 + _widths(feed, feed, 3), 0.0)
         size = counts * line + first
-    result: Floats = np.where(counts > 0, size, 0.0)
+    result: Floats = np.where((counts > 0) & ~np.isnan(size), size, 0.0)  # NaN: an end no float holds, no segments
     return result
 
 

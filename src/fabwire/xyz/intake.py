@@ -603,7 +603,8 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
 
     `repair` drops NUL bytes inside the G-code (noted) instead of refusing the file; extrusions beyond the model's
     build volume are an InputError unless `force` (then noted); G2/G3 arcs become line segments unless
-    `keep_arcs`."""
+    `keep_arcs`, and a G-code whose arcs would become more than `arcwork.growth_room` bytes of segments is refused
+    at the arc that passes it while the moves are read (`arcwork.TooMuchGrowth`), before anything is written."""
     from fabwire.xyz import arcwork
     from fabwire.xyz.gcodeinfo import finish
 
