@@ -162,7 +162,7 @@ class ArcExpander:
     GROWTH_ALLOWED times that size plus GROWTH_FREE (InputError past it)."""
 
     def __init__(self, name: str = "the G-code", size: int = 0) -> None:
-        self.tracker = gcodeinfo.MoveAnalyzer()
+        self.tracker = gcodeinfo.MoveAnalyzer(timing=False, positions_only=True)
         self.converted = 0
         self.name = name
         self.room = growth_room(size)

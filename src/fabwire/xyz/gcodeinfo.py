@@ -323,12 +323,13 @@ class MoveAnalyzer:
     """
 
     def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None,
-                 arc_room: float = math.inf) -> None:
+                 arc_room: float = math.inf, positions_only: bool = False) -> None:
         """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
         path over feed rate only. `g0_words` collects, per chunk fed, the offsets of the `0` of its G0 and G00
         command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads.
         `arc_room`: the bytes of G1 segments the arcs may become (`arcwork.lines_size` bounds each arc's); the arc
-        that takes them past it raises ArcGrowth as soon as it is read."""
+        that takes them past it raises ArcGrowth as soon as it is read. `positions_only`: the line reader follows
+        where G2/G3 arcs end and nothing more (not their length, reach or segments; nor their checks)."""
         self.timing = timing
         self.g0_words = g0_words
         self.pos = [0.0, 0.0, 0.0]
@@ -348,6 +349,7 @@ class MoveAnalyzer:
         self.markers = [0] * len(LAYER_MARKERS)
         self.arcs = 0
         self.arc_room = arc_room
+        self.positions_only = positions_only
         self.arc_segments = 0
         """The G1 segments the arcs read so far become (`motion.arc_segment_counts`, as `arcwork.segments`)."""
         self.arc_bytes = 0.0
@@ -476,7 +478,7 @@ class MoveAnalyzer:
             elif axis == b"F" and number > 0:
                 self.feed = number
         dx, dy, dz, de = target_x - x, target_y - y, target_z - z, target_e - e
-        if arc:
+        if arc and not self.positions_only:
             self.arcs += 1
             nan = math.nan
             x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
