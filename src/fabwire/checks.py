@@ -1,4 +1,4 @@
-"""Every check of a device address, a device name and a device setting, as one table.
+"""Every check of a device address, a device name, a device setting and an uploaded file's name, as one table.
 
 Each door that takes one (`fabwire devices add NAME ADDRESS --set K=V`, `-d ADDRESS` of every device command,
 `fabwire serve --device NAME:KIND=ADDRESS`, devices.toml, the agent API's device list) runs the same code
@@ -19,13 +19,13 @@ import msgspec
 
 from fabwire.errors import InputError
 
-Door = Literal["address", "simulator", "name", "setting"]
+Door = Literal["address", "simulator", "name", "setting", "file"]
 
 
 class Rule(msgspec.Struct, frozen=True):
     door: Door
     """What the rule checks: an address's form, a sim:// address's simulator and options, a device name, a
-    setting given with --set."""
+    setting given with --set, the name an upload is kept under in the agent's file library."""
     refused: str
     why: str
     """The reason as the refusal says it: a str.format template of the check's fields."""
@@ -49,6 +49,18 @@ ASCII_BLANKS = " \t\r\n"
 NUMERIC_HOST = re.compile(r"(?:0[xX][0-9a-fA-F]*|[0-9]+)(?:\.(?:0[xX][0-9a-fA-F]*|[0-9]+))*\.?")
 """A host the resolver reads as a number (`RULES["ipv4-form"]`): inet_aton's forms, decimal, octal and hex."""
 NAME_CHARACTERS = "letters, digits, '.', '_' and '-', starting with a letter or digit"
+FILE_NAME_MAX = 200
+"""The longest library name of an upload (folders included): ext4's 255-byte name limit in UTF-8 with room for the
+library's own suffixes."""
+FILE_RESERVED = re.compile(r"[\x00-\x1f\x7f\\:*?\"<>|]")
+"""Control characters and the characters Windows reserves in a file name (a library is copied off to any system)."""
+FILE_HIDDEN = re.compile(r"[\x80-\x9f\u00ad\u061c\u180e\u200b\u200e\u200f\u2028-\u202e\u2060-\u2064\u2066-\u2069\ufeff"
+                         r"\ud800-\udfff]")
+"""Characters that hide or reorder what a file name shows: C1 controls, the soft hyphen, the bidirectional controls
+(marks, embeddings, overrides, isolates) that make `gcode.exe` read as `exe.gcode`, invisible format characters
+(zero-width space, word joiner, invisible operators, byte order mark), line and paragraph separators, and lone
+surrogates (undecodable bytes). Zero-width (non-)joiners are kept: Persian, Indic scripts and emoji spell words
+with them."""
 
 RULES: dict[str, Rule] = {
     # ------------------------------------------------------------------------------------------ address forms
@@ -140,6 +152,22 @@ RULES: dict[str, Rule] = {
                             "POSIX portable filename character set (IEEE Std 1003.1-2017 §3.282): a name is one "
                             "shell word without quotes (completion inserts it as it is), never read as an option "
                             "(POSIX Utility Syntax Guideline 5), a TOML key"),
+    # ------------------------------------------------------------------------------------------ uploaded file names
+    "file-empty": Rule("file", "an upload without a file name", "the upload has no file name",
+                       "RFC 7578 §4.2: a file part names its file in Content-Disposition's filename"),
+    "file-part": Rule("file", "a '.' or '..' folder, a control or Windows-reserved character (\\ : * ? \" < > |), "
+                              "blanks at either end of a part",
+                      "{part} is not a usable file or folder name",
+                      "POSIX path resolution (IEEE Std 1003.1-2017 §4.13: '.' and '..'); Microsoft, \"Naming Files, "
+                      "Paths, and Namespaces\" (reserved characters, names ending in a space)"),
+    "file-hidden": Rule("file", "a character that hides or reorders what the name shows (U+202E right-to-left "
+                                "override, U+200B zero-width space, U+FEFF)",
+                        "the file name holds {char}, which hides or reorders what the name shows: rename the file",
+                        "Unicode UAX #9 (Bidi_Control characters), CVE-2021-42574 (\"Trojan Source\"), Unicode "
+                        "UTS #39 §3.3 (default-ignorable characters in identifiers)"),
+    "file-length": Rule("file", f"a name longer than {FILE_NAME_MAX} characters with its folders",
+                        f"the file name is {{length}} characters long; at most {FILE_NAME_MAX} are kept",
+                        "ext4 (and most file systems): 255 bytes per name"),
     # ------------------------------------------------------------------------------------------ --set settings
     "set-form": Rule("setting", "a --set without KEY=VALUE", "--set takes KEY=VALUE, not {text}",
                      "fabwire devices add --help"),

@@ -199,6 +199,9 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
         except InputError as exc:
             raise refuse("set-model", problem=str(exc)) from None
     for other in existing.values():  # `fabwire serve` monitors each machine once (`agent.command.one_each`)
+        if is_default and other.kind is kind and other.default:
+            raise ConfigError(f"{other.name!r} is the default {kind.title} already: add {name!r} without --default, "
+                             f"or take `default = true` off {other.name!r} in {path} first")
         if other.kind is kind and other.endpoint.machine == machine:
             raise InputError(f"{excerpt(url, 60)} is the machine {other.name!r} names already "
                              f"({other.endpoint.url}): one machine has one name")

@@ -83,6 +83,26 @@ class LinkTimeout(FabwireError, TimeoutError):
 EXIT_INTERRUPTED = 130
 
 
+class PrintCancelled(DeviceError):
+    """A followed print the printer stopped before it finished (its panel, another client, or this command);
+    `percent`: its last progress shown, when there was one."""
+
+    def __init__(self, percent: int | None) -> None:
+        self.percent = percent
+        super().__init__("", "the print was cancelled before it finished" + self.at)
+
+    @property
+    def at(self) -> str:
+        return f" (at {self.percent} %)" if self.percent is not None else ""
+
+
+class CancelledAsAsked(FabwireError):
+    """A job the command's own user cancelled while following it (a key of the live view): it ended as asked,
+    not by a fault, so it exits as an interrupted command does."""
+
+    exit_code = EXIT_INTERRUPTED
+
+
 class FollowInterrupted(FabwireError):
     """Ctrl-C while following a job the machine has already taken (a print, a tool change): it goes on."""
 

@@ -60,8 +60,11 @@ def heating(celsius: float | None, target: float | None) -> str:
 
 
 def minutes(whole_minutes: int | None) -> str:
-    """A time a machine reports in whole minutes, as a duration: `14m 00s`, `1h 05m`; `—` when unknown."""
-    return duration(None if whole_minutes is None else whole_minutes * 60)
+    """A time a machine reports in whole minutes, without seconds it never gave: `14 min`, `1h 05m`; `—` when
+    unknown."""
+    if whole_minutes is None:
+        return ABSENT
+    return f"{max(0, whole_minutes)} min" if whole_minutes < 60 else duration(whole_minutes * 60)
 
 
 def count(number: int | None, noun: str) -> str:

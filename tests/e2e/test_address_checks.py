@@ -81,15 +81,31 @@ SETTING_CASES: dict[str, list[tuple[str, str]]] = {
                   ("mmu", "speed=0.001")],
     "set-model": [("xyz", "model=miniMakr"), ("xyz", f"model={LONG}")],
 }
+FILE_CASES: dict[str, list[tuple[str, str]]] = {
+    "file-empty": [("", ""), ("  ", "/")],
+    "file-part": [("..", ""), ("a.gcode", "../up"), ("C:\\part.gcode", ""), ("a|b.gcode", ""), ("ok.gcode", "x\x00y"),
+                  ("ok.gcode", "trailing /")],
+    "file-hidden": [("\u202e" + "edocg.exe", ""), ("part\u200b.gcode", ""), ("\ufeffpart.gcode", ""),
+                    ("part.gcode", "\u2066folder\u2069"), ("soft\u00adhyphen.gcode", ""), ("line\u2028break.gcode", ""),
+                    ("c1\x85.gcode", ""), ("mark\u200f.gcode", ""), ("arabic\u061c.gcode", ""),
+                    ("undecoded\udcff.gcode", "")],
+    "file-length": [("x" * 201, ""), ("b.gcode", "f" * 195)],
+}
+"""Upload names (file, folder) each `file-*` rule refuses."""
+PLAIN_NAMES = [("\u0645\u06cc\u200c\u062e\u0648\u0627\u0647\u0645.gcode", ""), ("\U0001f468\u200d\U0001f373.gcode", ""),
+               ("\u6a21\u578b\u3000\uff11.gcode", ""), ("caf\u00e9.gcode", "projects/2026")]
+"""Names kept as they are: Persian and emoji spell with the zero-width (non-)joiner, CJK names hold ideographic
+spaces."""
 ADDRESS_ROWS = [(code, kind, address) for code, cases in ADDRESS_CASES.items() for kind, address in cases]
 MAX_LINE = 300
 """A refusal's line, however long the input: short enough to read on one terminal line or two."""
 
 
 def test_every_rule_has_cases() -> None:
-    assert set(ADDRESS_CASES) | set(NAME_CASES) | set(SETTING_CASES) == set(RULES)
+    assert set(ADDRESS_CASES) | set(NAME_CASES) | set(SETTING_CASES) | set(FILE_CASES) == set(RULES)
     for code, rule in RULES.items():
-        cases = {"address": ADDRESS_CASES, "simulator": ADDRESS_CASES, "name": NAME_CASES, "setting": SETTING_CASES}
+        cases = {"address": ADDRESS_CASES, "simulator": ADDRESS_CASES, "name": NAME_CASES, "setting": SETTING_CASES,
+                 "file": FILE_CASES}
         assert code in cases[rule.door], code
         assert rule.source
         assert rule.refused
@@ -338,3 +354,23 @@ def test_a_name_outside_a_local_network_domain_is_a_name(name: str, tmp_path: Pa
     added = run_cli("devices", "add", name, "127.0.0.1", "--kind", "xyz", env=env)
     assert added.returncode == 0, added.stderr
     assert name in run_cli("devices", "list", env=env).stdout
+
+
+@pytest.mark.parametrize(("code", "name", "folder"),
+                         [(code, name, folder) for code, cases in FILE_CASES.items() for name, folder in cases])
+def test_an_upload_name_is_refused_by_its_rule(code: str, name: str, folder: str) -> None:
+    """The one check every upload door's names pass through (`clean_name`; the agent's doors in
+    tests/agent/test_upload_names.py)."""
+    from fabwire.agent.library import clean_name
+
+    with pytest.raises(InputError) as refused:
+        clean_name(name, folder)
+    assert fixed_words(code) in str(refused.value)
+    assert len(str(refused.value)) < MAX_LINE
+
+
+@pytest.mark.parametrize(("name", "folder"), PLAIN_NAMES)
+def test_names_in_any_script_are_kept_as_written(name: str, folder: str) -> None:
+    from fabwire.agent.library import clean_name
+
+    assert clean_name(name, folder) == f"{folder}/{name}".lstrip("/")

@@ -61,7 +61,9 @@ def test_bad_edits_are_refused_and_leave_the_file_alone(tmp_path: Path) -> None:
     env = env_for(path)
     second = run_cli("devices", "add", "garage", "10.0.0.6", "--kind", "xyz", "--default", env=env)
     assert second.returncode == ConfigError.exit_code
-    assert "both the default" in second.stderr
+    assert second.stderr.strip() == (f"fabwire: error: 'office' is the default XYZprinting da Vinci already: add "
+                                     f"'garage' without --default, or take `default = true` off 'office' in {path} "
+                                     "first")
     typo = run_cli("devices", "add", "bench", "sim://mmu", "--kind", "mmu", "--set", "sped=5", env=env)
     assert typo.returncode == InputError.exit_code
     assert "no setting 'sped' (did you mean 'speed'?)" in typo.stderr

@@ -109,7 +109,7 @@ def test_a_second_drawing_is_refused_naming_the_first(slow_sim: RunningSimulator
         second = run_cli("lineus", "-d", address(slow_sim), "text", "Hi", "--state", str(tmp_path / "s2.json"),
                          env=env)
         assert second.returncode == 4, second.stderr
-        line = second.stderr.strip().splitlines()[-1]
+        line, = second.stderr.strip().splitlines()  # the refusal alone: no plan of a drawing that will not be made
         assert "is drawing already" in line
         assert f"process {first.pid}" in line
         assert "zigzag.svg" in line

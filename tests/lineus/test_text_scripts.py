@@ -214,3 +214,14 @@ def test_cli_a_long_text_no_font_draws_is_quoted_short() -> None:
     line, = done.stderr.splitlines()
     assert line.startswith("fabwire: error: font 'futural' (Latin) has no strokes for '日本日本")
     assert len(line) < 200
+
+
+def test_the_notes_tell_accented_letters_from_spelled_ones() -> None:
+    """A letter drawn with accent strokes and one spelled with other characters are two notes, each naming its
+    characters (and what a spelled one became); what no font draws is a third."""
+    done = run_cli("lineus", "text", "Ça va? naïve — straße 日", "--dry-run", env=cli_env())
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert "drawn as letters with accent strokes: 'Ç' (U+00C7), 'ï' (U+00EF)" in lines
+    assert "spelled with other characters: '—' (U+2014) as '-', 'ß' (U+00DF) as 'ss'" in lines
+    assert any(line.startswith("font 'futural' (Latin) cannot draw '日' (U+65E5)") for line in lines), lines

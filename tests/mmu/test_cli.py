@@ -40,7 +40,7 @@ def test_version_status_and_registers(simulator: SimulatorStarter) -> None:
     code, out, _ = mmu(sim.url, "write", "bowden_length", "420")
     assert (code, out.strip()) == (0, "0x22 bowden_length := 420")
     code, out, _ = mmu(sim.url, "read", "0x22", json_mode=True)
-    assert json.loads(out) == {"address": 0x22, "name": "bowden_length", "value": 420}
+    assert json.loads(out) == {"address": 0x22, "name": "bowden_length", "value": 420, "meant": 420}
     code, _, err = mmu(sim.url, "write", "pulley_acceleration", "900")
     assert code == 4  # read-only on 3.0.3, known once the version is
     assert "read-only on this firmware" in err
@@ -134,8 +134,8 @@ def test_reset_erase_needs_yes_and_registers_lists_all(simulator: SimulatorStart
     code, out, err = mmu(sim.url, "registers", json_mode=True)
     rows = json.loads(out)
     assert [r["address"] for r in rows] == list(range(0x24))
-    assert rows[0x22] == {"address": 0x22, "name": "bowden_length", "value": 360, "bits": 16, "access": "read/write",
-                          "meaning": "bowden tube length, mm (341-1000)"}
+    assert rows[0x22] == {"address": 0x22, "name": "bowden_length", "value": 360, "meant": 360, "bits": 16,
+                          "access": "read/write", "meaning": "bowden tube length, mm (341-1000)"}
     assert rows[0x04]["access"] == "read-only"
     code, out, err = mmu(sim.url, "registers")
     assert "0x22 bowden_length" in out
@@ -354,3 +354,24 @@ def test_which_sensor_step_a_command_will_stop_at(command: str, seen: set[int], 
     from fabwire.mmu.cli import SENSOR_STEPS
 
     assert [s.error for s in SENSOR_STEPS if s.ahead(command, seen, sensor_on, version)] == stops
+
+
+def test_the_simulator_says_where_each_fault_shows(tmp_path: Path) -> None:
+    """A cause present from power-on meets the firmware only where its check runs (finda-stuck at an unload), so
+    the simulator says so for every fault given, before it listens."""
+    from fabwire.mmu.errors import format_error
+    from fabwire.mmu.faults import FAULT_NAMES, FAULTS
+
+    process = subprocess.Popen([sys.executable, "-m", "fabwire", "sim", "mmu", "--listen", "127.0.0.1:0",
+                                *(arg for name in FAULT_NAMES for arg in ("--fault", name))],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
+    try:
+        assert process.stdout is not None
+        assert " listening on " in process.stdout.readline()
+    finally:
+        process.terminate()
+        _, err = process.communicate(timeout=30)
+    said = dict(line.removeprefix("fault ").split(": ", 1) for line in err.splitlines() if line.startswith("fault "))
+    assert set(said) == set(FAULT_NAMES)
+    for name, kind in FAULTS.items():
+        assert said[name] == f"{kind.where} → {format_error(kind.word)}"

@@ -128,7 +128,8 @@ async def stuck_then_retried() -> None:
         assert sim.model.error == 0x8003  # the MMU waits for the user
         finished = asyncio.Event()
         mmu.subscribe(lambda e: finished.set() if isinstance(e, h.CommandFinished) else None)
-        await mmu.press("retry")
+        assert mmu.dialog_button("retry") == 1  # the dialog's Retry is the Middle button
+        await mmu.press("middle")
         await finished.wait()
         assert sim.progress_sequence("T1")[-1] == "F0"
 

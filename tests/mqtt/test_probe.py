@@ -71,6 +71,16 @@ def test_fleet_names_a_real_line_us(simulator: Any, tmp_path: Path) -> None:
     assert "is not an MQTT broker: it is a Line-us drawing robot" in _fleet(port, tmp_path)
 
 
+@pytest.mark.parametrize(("kind", "what"), [("xyz", "an XYZv3 printer"), ("mmu", "a Prusa MMU3")])
+def test_fleet_names_a_real_machine_that_answers_only_its_own_language(kind: str, what: str, simulator: Any,
+                                                                       tmp_path: Path) -> None:
+    """A da Vinci and an MMU ignore a CONNECT and a line end: they are asked in their own languages. (The MMU is
+    sped up: after power-on it hears nothing for its 4 s self-test, and this one has just been switched on.)"""
+    sim = simulator(kind, "--listen", "127.0.0.1:0", *(["--speed", "40"] if kind == "mmu" else []))
+    port = int(sim.url.rsplit(":", 1)[1])
+    assert f"is not an MQTT broker: it is {what}" in _fleet(port, tmp_path)
+
+
 def test_a_silent_server_is_still_no_answer(tmp_path: Path) -> None:
     with saying(None) as port:
         line = _fleet(port, tmp_path)

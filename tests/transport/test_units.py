@@ -38,7 +38,10 @@ def test_lengths_temperatures_and_codes() -> None:
     assert units.temperature(210) == "210 °C"
     assert units.heating(205, 210) == "205 °C → 210 °C"
     assert units.heating(None, None) == "—"
-    assert units.minutes(14) == "14m 00s"
+    assert units.minutes(14) == "14 min"
+    assert units.minutes(65) == "1h 05m"
+    assert units.minutes(0) == "0 min"
+    assert units.minutes(None) == units.ABSENT
     assert (units.count(1, "layer"), units.count(12_000, "layer"), units.count(None, "layer")) == (
         "1 layer", "12,000 layers", "? layers")
     assert units.minutes(65) == "1h 05m"

@@ -100,7 +100,7 @@ def test_settings_commands(simulator: SimulatorStarter) -> None:
     assert data["raw"]["z"] == "-12"
     energy = run_cli("--json", "xyz", "-d", dev, "energy", "6")
     assert json.loads(energy.stdout) == {"energy_saving_s": 360, "confirmed": False}  # Wi-Fi: no reply, no field
-    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == ("energy saving after 6m 00s idle (sent; a printer on "
+    assert run_cli("xyz", "-d", dev, "energy", "6").stdout == ("energy saving after 6 min idle (sent; a printer on "
                                                                "Wi-Fi does not confirm this setting)\n")
     up = run_cli("--json", "xyz", "-d", dev, "zoffset", "up")
     assert json.loads(up.stdout) == {"zoffset_mm": -0.11}

@@ -32,7 +32,7 @@ def test_the_panel_shows_progress_temperatures_with_targets_and_times() -> None:
     console, buffer = _console(False)
     console.print(job_panel(PRINTING, "part.gcode"))
     text = buffer.getvalue()
-    for expected in ("part.gcode", "printing", "42 %", "205 °C → 210 °C", "55 °C → 60 °C", "10m 00s", "14m 00s"):
+    for expected in ("part.gcode", "printing", "42 %", "205 °C → 210 °C", "55 °C → 60 °C", "10 min", "14 min"):
         assert expected in text, expected
     console.print(job_panel(Status.parse(["j:9511"]), "idle"))
     assert f"Time left  {ABSENT}" in buffer.getvalue()
@@ -48,7 +48,7 @@ def test_plain_lines_in_order_when_not_a_terminal() -> None:
             view.show(status)
     lines = buffer.getvalue().splitlines()
     assert lines == ["uploaded 8192 bytes", "printing, extruder 120 °C → 210 °C",
-                     "printing, extruder 205 °C → 210 °C, bed 55 °C, 42% (14m 00s left)"]
+                     "printing, extruder 205 °C → 210 °C, bed 55 °C, 42 % (14 min left)"]
 
 
 def test_a_terminal_gets_one_live_panel_not_a_scrolling_log() -> None:

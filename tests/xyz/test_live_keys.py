@@ -80,8 +80,10 @@ def test_space_pauses_and_resumes_and_c_twice_cancels(simulator: SimulatorStarte
         assert "print" in _state(dev)  # one c alone cancels nothing
         term.press(b"c")
         _wait(lambda: term.process.poll() is not None, "the print ended", 60)
-        term.read()
+        said = term.read().decode(errors="replace")
         assert _state(dev) not in ("printing", "print paused")
+        assert term.process.returncode == 130  # ended as its user asked: an interruption, not a device fault
+        assert "cube.gcode: the print was cancelled as asked" in " ".join(said.split()), said[-400:]
     finally:
         term.close()
 

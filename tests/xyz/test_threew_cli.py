@@ -196,6 +196,7 @@ def test_convert_and_info_read_standard_input_as_they_read_a_file(gcode: Path, t
 @pytest.mark.parametrize(("data", "message"), [
     (b"", "standard input is empty: nothing to print"),
     (b"\x00\x01\x02junk", "standard input is binary data, not G-code or a .3w print file"),
+    (bytes(80) + (2).to_bytes(4, "little") + bytes(100), "standard input is an STL model"),  # told by its size
     (b"G28\n;" + b"x" * (2 << 20) + b"\nG1 X1\n", "has a line of over"),  # the streaming line limit holds
 ])
 def test_standard_input_that_cannot_be_converted_is_one_line_of_error(data: bytes, message: str,
@@ -204,6 +205,39 @@ def test_standard_input_that_cannot_be_converted_is_one_line_of_error(data: byte
     assert done.returncode == 4
     assert message in done.stderr.decode()
     assert len(done.stderr.decode().strip().splitlines()) == 1
+    assert not (tmp_path / "out.3w").exists()
+
+
+ENDLESS = ("import sys\nhead = bytes.fromhex(sys.argv[1])\nout = sys.stdout.buffer\nout.write(head)\n"
+           "while True:\n    out.write(bytes(1 << 20))\n")
+"""A producer that writes its first bytes, then zeros until its reader goes away."""
+
+
+@pytest.mark.parametrize(("head", "what"), [
+    (b"", "binary data"),
+    (b"\x89PNG\r\n\x1a\n", "an image (PNG)"),
+    (b"\x1f\x8b\x08\x00", "gzip-compressed"),
+    (b"PK\x03\x04", "a zip archive"),
+    (b"%PDF-1.7\n", "a PDF document"),
+    (b"G28\nG1 X10\n" + b"\x01\xfe" * 100, "binary data"),  # declares no STL size within the limit
+])
+@pytest.mark.parametrize("command", ["convert", "info"])
+def test_standard_input_that_is_no_print_file_is_refused_from_its_first_block(head: bytes, what: str, command: str,
+                                                                              tmp_path: Path) -> None:
+    producer = subprocess.Popen([sys.executable, "-c", ENDLESS, head.hex()], stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL)
+    try:
+        args = ["xyz", command, "-", *([str(tmp_path / "out.3w")] if command == "convert" else [])]
+        assert producer.stdout is not None
+        done = subprocess.run([sys.executable, "-m", "fabwire", *args], stdin=producer.stdout, capture_output=True,
+                              env=cli_env(), timeout=300)
+    finally:
+        producer.kill()
+        producer.wait()
+    assert done.returncode == 4, done.stderr
+    said = done.stderr.decode().strip().splitlines()
+    assert len(said) == 1, said
+    assert said[0].startswith(f"fabwire: error: standard input is {what}"), said
     assert not (tmp_path / "out.3w").exists()
 
 
@@ -320,6 +354,38 @@ def test_a_large_conversion_on_a_terminal_draws_its_bar(tmp_path: Path) -> None:
     assert os.waitstatus_to_exitcode(status) == 0, said[-2000:]
     assert b"encoding big.3w" in said
     assert b"wrote" in said
+
+
+def test_without_dst_the_output_is_named_after_the_source(tmp_path: Path) -> None:
+    """part.gcode → part.3w and part.3w → part.gcode; a file of that name is never replaced unless named (it may
+    be the source itself, a G-code named .3w), and standard input needs DST."""
+    src = tmp_path / "part.gcode"
+    src.write_bytes(TV_INPUT)
+    made = run_cli("xyz", "convert", str(src), env=cli_env())
+    assert made.returncode == 0, made.stderr
+    assert read_3w(tmp_path / "part.3w").gcode  # written beside the source
+    (tmp_path / "back").mkdir()
+    moved = tmp_path / "back" / "part.3w"
+    (tmp_path / "part.3w").rename(moved)
+    back = run_cli("xyz", "convert", str(moved), env=cli_env())
+    assert back.returncode == 0, back.stderr
+    assert (tmp_path / "back" / "part.gcode").read_bytes() == read_3w(moved).gcode
+    original = src.read_bytes()
+    (tmp_path / "part.3w").write_bytes(moved.read_bytes())
+    for source, existing in ((tmp_path / "part.3w", src), (src, tmp_path / "part.3w")):
+        before = existing.read_bytes()
+        refused = run_cli("xyz", "convert", str(source), env=cli_env())
+        assert refused.returncode == 4, refused.stderr
+        assert refused.stderr.strip() == f"fabwire: error: {existing} exists already: name it as DST to replace it, " \
+                                          "or give another DST"
+        assert existing.read_bytes() == before
+    misnamed = tmp_path / "odd.3w"  # G-code under a .3w name: its own name is the output's
+    misnamed.write_bytes(original)
+    assert run_cli("xyz", "convert", str(misnamed), env=cli_env()).returncode == 4
+    assert misnamed.read_bytes() == original
+    piped = _piped("xyz", "convert", "-", data=TV_INPUT)
+    assert piped.returncode == 2
+    assert b"give DST when SRC is standard input" in piped.stderr
 
 
 @pytest.mark.parametrize(("filament_mm", "shown"), [(3.0, "3.0 mm"), (51.92, "51.9 mm"), (1254.0, "1.25 m")])

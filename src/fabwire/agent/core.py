@@ -28,10 +28,13 @@ from fabwire.errors import FabwireError, InputError, excerpt
 
 if TYPE_CHECKING:
     from fabwire.agent.session import JobClaim, Session
+    from fabwire.transport.sameness import Machine
 
 Kind = Literal["xyz", "lineus", "mmu"]
 EventType = Literal["state", "event", "online", "offline", "job", "error"]
 KINDS: tuple[Kind, ...] = ("xyz", "lineus", "mmu")
+RESOLVE_WAIT_S = 2.0
+"""How long adding a device waits for its host name's addresses (to tell it is no machine monitored already)."""
 SUBSCRIBER_QUEUE = 2000
 """Events a slow subscriber may lag behind by before the oldest are dropped (it sees a `"dropped"` count)."""
 
@@ -228,6 +231,9 @@ class Agent:
         self._subscribers: set[Subscription] = set()
         self._started = False
         self._added = 0
+        self._reached: dict[str, frozenset[Machine]] = {}
+        """Each monitored (or starting) device's name and the names of the machine it reaches (`machine_keys`),
+        taken before its session starts, so simultaneous adds of one machine cannot both pass."""
 
     async def __aenter__(self) -> Agent:
         await self.start()
@@ -245,6 +251,7 @@ class Agent:
     async def stop(self) -> None:
         sessions = list(self._sessions.values())
         self._sessions.clear()
+        self._reached.clear()
         for session in sessions:
             session.stats.leave()
         await asyncio.gather(*(s.stop() for s in sessions), return_exceptions=True)
@@ -289,18 +296,31 @@ class Agent:
         from fabwire.agent.session import Session
         from fabwire.config import validate_settings
         from fabwire.devices import KINDS as DEVICE_KINDS
+        from fabwire.transport.sameness import machine_keys
+        from fabwire.transport.urls import parse_url
 
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
         validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
-        for session in self._sessions.values():
-            if session.spec.address == spec.address and session.spec.kind == spec.kind:
-                raise InputError(f"{spec.address} is already monitored as {session.info.id!r}")
-            if session.spec.name == spec.name:
-                raise InputError(f"a device named {spec.name!r} is already monitored")
-        session = Session(self, spec, order=self._added)
-        self._added += 1
-        await session.start()
+        endpoint = parse_url(spec.address, DEVICE_KINDS[spec.kind])
+        try:  # a resolver that does not answer must not hold the agent up: the spelt form still counts
+            reached = await asyncio.wait_for(asyncio.to_thread(machine_keys, endpoint), RESOLVE_WAIT_S)
+        except TimeoutError:
+            reached = frozenset({endpoint.machine})
+        if spec.name in self._reached:
+            raise InputError(f"a device named {spec.name!r} is already monitored")
+        for name, keys in self._reached.items():
+            if keys & reached:
+                raise InputError(f"{excerpt(spec.address, 60)} reaches the machine already monitored as {name!r}: "
+                                 "one machine is monitored once")
+        self._reached[spec.name] = reached
+        try:
+            session = Session(self, spec, order=self._added)
+            self._added += 1
+            await session.start()
+        except BaseException:
+            del self._reached[spec.name]
+            raise
         self._sessions[session.info.id] = session
         session.stats.join(self._tally)
         await self.history.remember_device(session.info)
@@ -309,6 +329,7 @@ class Agent:
     async def remove_device(self, device_id: str) -> None:
         session = self.session(device_id)
         del self._sessions[session.info.id]
+        self._reached.pop(session.spec.name, None)
         session.stats.leave()
         await session.stop()
 

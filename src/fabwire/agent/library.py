@@ -28,12 +28,14 @@ import secrets
 import shutil
 import tempfile
 import time
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
 from fabwire.agent.model import Machines, MachineView, TakesNoJobs
 from fabwire.agent.offload import in_thread
+from fabwire.checks import FILE_HIDDEN, FILE_NAME_MAX, FILE_RESERVED, refuse
 from fabwire.errors import InputError, excerpt
 from fabwire.thumbnails import read_thumbnails
 
@@ -50,8 +52,7 @@ count."""
 CHUNK = 1 << 20
 """Files kept per machine by default."""
 QUEUE_MAX = 100
-NAME_MAX = 200
-_BAD_NAME = re.compile(r"[\x00-\x1f\x7f\\:*?\"<>|]")
+NAME_MAX = FILE_NAME_MAX
 INDEX = "index.json"
 STAGED = ".upload-"
 """The name prefix of an upload a door is still writing into a machine's files (see `staging`)."""
@@ -83,18 +84,28 @@ class FileNotInLibrary(InputError):
     http_status = 404
 
 
+def require_plain_name(name: str) -> None:
+    """InputError (rule `file-hidden`) when an upload's name holds a character that hides or reorders what it
+    shows; every door's uploads are named to the owner (jobs, history, the dashboard), whether kept or not."""
+    hidden = FILE_HIDDEN.search(name)
+    if hidden:
+        char = hidden.group()
+        raise refuse("file-hidden", char=f"U+{ord(char):04X} ({unicodedata.name(char, 'unnamed')})")
+
+
 def clean_name(name: str, folder: str = "") -> str:
     """The library name of an upload: `folder/name` with `/` separators, no empty, `.` or `..` parts, no
-    control or reserved characters; InputError otherwise."""
+    control, reserved or hidden characters (the `file-*` rows of `fabwire.checks.RULES`); InputError otherwise."""
     parts = [p for p in f"{folder.strip().strip('/')}/{name.strip()}".split("/") if p.strip()]
     if not parts:
-        raise InputError("the upload has no file name")
+        raise refuse("file-empty")
     for part in parts:
-        if part in (".", "..") or _BAD_NAME.search(part) or part != part.strip():
-            raise InputError(f"{excerpt(part, 60)} is not a usable file or folder name")
+        if part in (".", "..") or FILE_RESERVED.search(part) or part != part.strip():
+            raise refuse("file-part", part=excerpt(part, 60))
     joined = "/".join(parts)
+    require_plain_name(joined)
     if len(joined) > NAME_MAX:
-        raise InputError(f"the file name is {len(joined)} characters long; at most {NAME_MAX} are kept")
+        raise refuse("file-length", length=len(joined))
     return joined
 
 

@@ -21,6 +21,7 @@ from sortedcontainers import SortedList
 from fabwire.agent.core import DeviceInfo, DeviceSpec, device_id, exit_code_of, is_demo_id, make_event, now_iso
 from fabwire.agent.drivers.base import Identity, checked_params, offline_summary
 from fabwire.agent.jobs import note_course
+from fabwire.agent.library import require_plain_name
 from fabwire.agent.links import open_link
 from fabwire.agent.linkside import LINK_FAILURES
 from fabwire.errors import DeviceBusy, FabwireError, InputError, LinkError, excerpt
@@ -399,6 +400,7 @@ class Session:
         `filename` is an upload's name (its extension picks the job type, InputError when the kind takes no such
         file); None with `job_type` is a job action (a Line-us text). LinkError when the machine is offline."""
         if filename is not None:
+            require_plain_name(filename)
             suffix = Path(filename).suffix.lower() if "." in filename else ""
             job_type = self.driver.job_types.get(suffix)
             if job_type is None:

@@ -67,7 +67,7 @@ async def _tool_change(ctx: DemoContext, mmu: MMU, slot: int, limit: float) -> N
 
             unsubscribe = mmu.subscribe(watch)
             try:
-                await mmu.press("retry")
+                await mmu.press("middle")  # Retry: the Middle button on every dialog that offers it
                 try:
                     async with asyncio.timeout(limit):
                         await finished.wait()

@@ -242,7 +242,7 @@ def name(dctx: DeviceContext, new: str | None) -> None:
 
 @lineus.group()
 def wifi() -> None:
-    """Wi-Fi networks the machine knows (refused over websockets, fine over TCP)."""
+    """Wi-Fi networks the machine knows."""
 
 
 @wifi.command("list")

@@ -285,7 +285,7 @@ async def send_plan(arm: LineUs, plan: Plan, *, start: int = 0, point: int = 0, 
 
 
 async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: float,
-                what: str) -> tuple[int, float]:
+                what: str, told: list[str]) -> tuple[int, float]:
     """Draw alone on the robot (`DrawingLock`), saving progress per stroke; an interrupt lifts the pen before the
     connection closes."""
     from fabwire.lineus.client import LineUs
@@ -296,6 +296,8 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
     total = len(plan.strokes)
     began = time.monotonic()
     async with dctx.open(LineUs) as arm, drawing_alone(arm, what) as lock:
+        for note in told:
+            dctx.output.note(note)
         with Progress(
             TextColumn("[progress.description]{task.description}"),
             BarColumn(),
@@ -324,9 +326,10 @@ async def _send(dctx: DeviceContext, plan: Plan, progress: DrawProgress, pen_z: 
 
 
 def _draw(dctx: DeviceContext, plan: Plan, existing: DrawProgress | None, path: Path, source: str,
-          choices: dict[str, str], what: dict[str, str], pen_z: float) -> None:
+          choices: dict[str, str], what: dict[str, str], pen_z: float, told: list[str]) -> None:
     """Draw `plan` (or carry on with `existing` progress), saving progress in `path` for --resume; `what` names
-    what is drawn in the JSON result: {"file": path} or {"text": text}."""
+    what is drawn in the JSON result: {"file": path} or {"text": text}; `told` (the planner's notes and figures)
+    is said once the robot is this command's, so a refused second drawing says only who is drawing."""
     name = _name(what)
     progress = existing
     if progress is not None and progress.complete:
@@ -348,12 +351,12 @@ def _draw(dctx: DeviceContext, plan: Plan, existing: DrawProgress | None, path: 
         progress.save()
     first = progress.done
     try:
-        total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z, name))
+        total, elapsed = asyncio.run(_send(dctx, plan, progress, pen_z, name, told))
     except (KeyboardInterrupt, LinkError, TimeoutError):
         if progress.done or progress.point:
             progress.save()  # the last acknowledged vertex, so a resume carries on from exactly there
             dctx.output.note(f"stopped in stroke {progress.done + 1} of {len(plan.strokes)}; "
-                             "run the same command with --resume (instead of --restart, if it had it) to continue")
+                             "to continue, run the same command with --resume (and without --restart)")
         elif first == 0:
             progress.clear()
         raise
@@ -402,10 +405,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
     if dry_run:
         _report(dctx.output, plan, {"file": str(file)})
         return
-    for note in plan.notes:
-        dctx.output.note(note)
-    dctx.output.note(figures_text(plan))
-    _draw(dctx, plan, existing, path, drawing.digest, choices, what, pen_z)
+    _draw(dctx, plan, existing, path, drawing.digest, choices, what, pen_z, [*plan.notes, figures_text(plan)])
 
 
 @click.command("text")
@@ -449,10 +449,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
     if dry_run:
         _report(dctx.output, plan, {"text": text})
         return
-    for note in plan.notes:
-        dctx.output.note(note)
-    dctx.output.note(figures_text(plan))
-    _draw(dctx, plan, existing, path, digest, choices, what, pen_z)
+    _draw(dctx, plan, existing, path, digest, choices, what, pen_z, [*plan.notes, figures_text(plan)])
 
 
 @click.command("preview")

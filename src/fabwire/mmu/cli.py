@@ -32,7 +32,7 @@ from fabwire.errors import EXIT_INTERRUPTED, InputError, LinkClosed, LinkTimeout
 from fabwire.mmu import codes
 from fabwire.mmu.client import MMU, check_slot, resolve_register
 from fabwire.mmu.errors import ErrorInfo, MMUError, describe_error, format_error, reset_line
-from fabwire.mmu.faults import FAULT_NAMES, HANDS, PHYSICAL_BUTTONS, parse_fault
+from fabwire.mmu.faults import FAULT_NAMES, FAULTS, HANDS, PHYSICAL_BUTTONS, parse_fault
 from fabwire.mmu.host import (
     ButtonPushed,
     ButtonSent,
@@ -510,17 +510,18 @@ async def reset(dctx: DeviceContext, mmu_: MMU, erase: bool, yes: bool) -> None:
 async def registers(dctx: DeviceContext, mmu_: MMU) -> None:
     """List every register with its address, name, value, size, access and meaning."""
     version = (await mmu_.version()).triple
-    rows = []
+    rows, lines = [], []
     for reg in codes.REGISTERS:
         value = await mmu_.read_register(reg.address)
         access = "read/write" if reg.writable(version) else "read-only"
-        rows.append({"address": reg.address, "name": reg.name, "value": value, "bits": reg.bits,
-                     "access": access, "meaning": reg.meaning})
+        rows.append({"address": reg.address, "name": reg.name, "value": value, "meant": reg.meant(value),
+                     "bits": reg.bits, "access": access, "meaning": reg.meaning})
+        lines.append(f"0x{reg.address:02x} {reg.name:<30} {reg.shown(value):>6}  {reg.bits:>2}-bit {access:<10}  "
+                     f"{reg.meaning}")
 
     def human() -> None:
-        for row in rows:
-            dctx.output.out.print(f"0x{row['address']:02x} {row['name']:<30} {row['value']:>6}  {row['bits']:>2}-bit "
-                                  f"{row['access']:<10}  {row['meaning']}", highlight=False)
+        for line in lines:
+            dctx.output.out.print(line, highlight=False)
 
     dctx.output.result(rows, human)
 
@@ -532,8 +533,8 @@ async def read(dctx: DeviceContext, mmu_: MMU, register: str) -> None:
     """Read REGISTER (a name such as bowden_length, or an address like 0x22)."""
     reg = resolve_register(register)
     value = await mmu_.read_register(reg.address)
-    dctx.output.result({"address": reg.address, "name": reg.name, "value": value},
-                       f"0x{reg.address:02x} {reg.name} = {value}")
+    dctx.output.result({"address": reg.address, "name": reg.name, "value": value, "meant": reg.meant(value)},
+                       f"0x{reg.address:02x} {reg.name} = {reg.shown(value)}")
 
 
 @mmu.command("write")
@@ -690,8 +691,11 @@ def sim_mmu(app: Any, listen: tuple[str, ...], use_pty: bool, link: Any, speed: 
     """Simulate an MMU3 (no default TCP port: give --listen HOST:PORT or --pty)."""
     from fabwire.mmu.sim import MMUSimulator
 
-    for fault in faults:
-        parse_fault(fault)
+    parsed = [parse_fault(fault) for fault in faults]
+    for fault in parsed:  # when it shows: a cause from power-on meets the firmware only where its check runs
+        kind = FAULTS.get(fault.name)
+        told = f"{kind.where} → {format_error(kind.word)}" if kind else FAULT_NAMES[fault.name]
+        click.echo(f"fault {fault.name}: {told}", err=True)
     hands_at = parse_listen(control, 0) if control is not None else None
     simulator = MMUSimulator(fw_version, speed=speed, faults=faults, arithmetic=arithmetic,
                              phantom_requests=phantom_requests)

@@ -457,11 +457,12 @@ class MMU:
                                                         on_event, timeout)
         return await self._confirmed(request, finished, timeout)
 
-    async def answer(self, choice: str, *, on_event: EventCallback | None = None,
-                     timeout: float | None = None) -> CommandFinished | None:
-        """Answer the MMU's pending error as the printer's dialog does (Retry, Continue, Stop…), then follow the
-        command to its end. None when the choice ends nothing (Stop). Raises DeviceError when no error is
-        pending or the dialog does not offer `choice`."""
+    def dialog_button(self, choice: str) -> int | None:
+        """The button (0 Right, 1 Middle, 2 Left) the printer's dialog sends for `choice` ('Retry', 'Continue',
+        'Stop', …) on the pending error: each error's dialog has its own (Continue is Middle on most, Right on
+        04501 and Left on the TMC warnings: the table `fabwire.mmu.errors`, after the printer firmware's
+        mmu2_error_converter.cpp). None for Stop where the dialog's Stop print is the printer's alone (no button is
+        sent). InputError when no error is pending or its dialog does not offer `choice`."""
         word = self.logic.status.value if self.logic.status.kind == "E" else None
         if word is None:
             status = self.logic.status
@@ -469,13 +470,23 @@ class MMU:
         info = describe_error(word)
         button = info.button_for(choice)
         if button is None and choice.lower() == "stop":
-            self.logic.abandon()
             return None
         if not isinstance(button, int):
             offered = ", ".join(c.label for c in info.choices)
             then = (f"reset the MMU ({reset_line(self.commands)})" if button == "reset"
                     else f"answer with one of: {offered}")
             raise InputError(f"{info} offers {offered}, not {choice}: {then}")
+        return button
+
+    async def answer(self, choice: str, *, on_event: EventCallback | None = None,
+                     timeout: float | None = None) -> CommandFinished | None:
+        """Answer the MMU's pending error as the printer's dialog does (Retry, Continue, Stop…), then follow the
+        command to its end. None when the choice ends nothing (Stop). Raises DeviceError when no error is
+        pending or the dialog does not offer `choice`."""
+        button = self.dialog_button(choice)
+        if button is None:
+            self.logic.abandon()
+            return None
         command = self.logic.status.command
         await self.press(button, timeout=timeout)
         await self.refresh(timeout=timeout)  # this poll may have been under way before the press: take the next
@@ -518,10 +529,12 @@ class MMU:
         return await self.run(Mode(int(stealth)), **kwargs)
 
     async def press(self, button: int | str, timeout: float | None = 10.0) -> None:
-        """Press an MMU button from the printer: 0/right/stop, 1/middle/retry/continue, 2/left."""
+        """Press an MMU button from the printer: 0 or right, 1 or middle, 2 or left. To answer an error as the
+        printer's dialog does (Retry, Continue, Stop), see `answer` and `dialog_button`."""
         if isinstance(button, str):
             if button.lower() not in codes.BUTTON_ALIASES:
-                raise InputError(f"unknown button {button!r}: use retry, continue, stop, left, middle or right")
+                raise InputError(f"unknown button {button!r}: use left, middle or right (or answer the error with "
+                                 "retry, continue or stop)")
             button = codes.BUTTON_ALIASES[button.lower()]
         if button not in (0, 1, 2):
             raise InputError(f"button must be 0, 1 or 2, not {button!r}")

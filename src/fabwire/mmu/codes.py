@@ -122,12 +122,9 @@ class Button(enum.IntEnum):
 
 BUTTON_WORDS = {0: "Right", 1: "Middle", 2: "Left"}
 
-BUTTON_ALIASES: dict[str, int] = {
-    "right": 0, "stop": 0,
-    "middle": 1, "retry": 1, "continue": 1,
-    "left": 2,
-}
-"""Printer dialog words for the MMU's buttons: Retry and Continue are both the Middle button."""
+BUTTON_ALIASES: dict[str, int] = {"right": 0, "middle": 1, "left": 2}
+"""The buttons by their place. A dialog's words (Retry, Continue, Stop) are no fixed button: each error's dialog
+says which it sends (`fabwire.mmu.errors`, `MMU.dialog_button`)."""
 
 
 class FilamentState(enum.IntEnum):
@@ -180,6 +177,18 @@ class Register:
     build, which depends on the version)."""
     source: str
     """The firmware's read and write functions for it (`MMU` = prusa3d/Prusa-Firmware-MMU)."""
+    signed: bool = False
+    """The firmware puts a signed number in it (two's complement, truncated to `bits`): a read of 60902 from the
+    16-bit pulley position means -4634 mm."""
+
+    def meant(self, value: int) -> int:
+        """The number the firmware means by a read of `value` (its two's complement when `signed`)."""
+        return value - (1 << self.bits) if self.signed and value >= 1 << (self.bits - 1) else value
+
+    def shown(self, value: int) -> str:
+        """A read as a person reads it: `60902 (-4634)` for a signed register's negative number, else the number."""
+        meant = self.meant(value)
+        return str(value) if meant == value else f"{value} ({meant})"
 
     def writable(self, version: tuple[int, int, int]) -> bool:
         if self.access is Access.RW:
@@ -247,8 +256,8 @@ REGISTERS: tuple[Register, ...] = (
     Register(0x19, "idler_sg_thrs", 8, Access.RW, 7, "idler StallGuard threshold (EEPROM)", "eeprom-u8", 7,
              f"{_REG} 0x19; globals.cpp StallGuardThreshold / SetStallGuardThreshold; eeprom.cpp ReadByte(addr, "
              "default)"),
-    Register(0x1A, "pulley_position", 16, Access.RO, 0, "pulley position, mm", "none", 0,
-             f"{_REG} 0x1a (pulley.CurrentPosition_mm, int32 → uint16)"),
+    Register(0x1A, "pulley_position", 16, Access.RO, 0, "pulley position, mm (signed)", "none", 0,
+             f"{_REG} 0x1a (pulley.CurrentPosition_mm, int32 → uint16)", signed=True),
     Register(0x1B, "selector_slot", 8, Access.RW, None, "selector slot (5 = park, 255 = unknown)", "selector", 5,
              f"{_REG} 0x1b (selector.Slot / selector.MoveToSlot(uint8_t)); selector.cpp MoveToSlot"),
     Register(0x1C, "idler_slot", 8, Access.RW, None, "idler slot (5 = disengaged, 255 = unknown)", "idler", 5,

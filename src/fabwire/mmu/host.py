@@ -588,8 +588,8 @@ class HostLogic:
     def _status_complete(self) -> None:
         r = self._reads
         pulley = r.get(0x1A)
-        if pulley is not None and pulley >= 0x8000:
-            pulley -= 0x10000  # the firmware's int32 millimetres, truncated to 16 bits
+        if pulley is not None:
+            pulley = codes.REGISTERS[0x1A].meant(pulley)  # the firmware's int32 millimetres, truncated to 16 bits
         self.status = replace(self.status, finda=bool(r.get(0x08)), selector=r.get(0x1B), idler=r.get(0x1C),
                               drive_errors=r.get(0x04), pulley=pulley)
         self.timing.observe(self._now, pulley)

@@ -5,8 +5,9 @@ waits out its whole connection timeout before calling the address silent.
 
 Line-based servers (a web server, a printer) wait for an end of line before they answer; the CONNECT has none, so
 after a short silence the probe sends one. A broker has answered the CONNECT by then, or answers it before it reads
-the extra bytes (it reads packets in order), so a broker is never mistaken for something else; a peer that stays
-silent or closes the connection is left to the MQTT client, whose own message says so.
+the extra bytes (it reads packets in order), so a broker is never mistaken for something else. A peer still silent
+is asked in each other machine's language on fresh connections (a da Vinci answers only XYZv3); one that says
+nothing to any, or closes the connection, is left to the MQTT client, whose own message says so.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import secrets
 import struct
 
 from fabwire.errors import excerpt
-from fabwire.transport.peers import wrong_peer
+from fabwire.transport.peers import probe, wrong_peer
 
 CONNACK = 0x20
 """The first byte of CONNACK: packet type 2, flags 0."""
@@ -25,6 +26,9 @@ DISCONNECT = b"\xe0\x00"
 """MQTT 3.1.1 section 3.14: a clean goodbye, so the broker logs an ordinary disconnection."""
 NUDGE_AFTER_S = 0.5
 """How long the probe waits for an answer to the CONNECT before it sends a line end."""
+ASK_AFTER_S = 1.0
+"""How long the probe waits after the line end before it asks in the other machines' languages
+(`fabwire.transport.peers.PROBES`): a broker has answered long before."""
 SILENT = "silent"
 """`not_a_broker`'s answer for a server that said nothing at all."""
 NUDGE = b"\r\n\r\n"
@@ -85,7 +89,12 @@ async def not_a_broker(host: str, port: int, *, username: str | None = None, pas
         if data is None:
             writer.write(NUDGE)
             await writer.drain()
-            data = await _answer(reader, max(0.0, timeout_s - NUDGE_AFTER_S))
+            data = await _answer(reader, ASK_AFTER_S)
+        if data is None:  # a server that answers only its own language (a da Vinci): ask in each of them
+            asked = await probe(f"tcp://{where}", "an MQTT broker", "mqtt", where)
+            if asked is not None:
+                return str(asked)
+            data = await _answer(reader, max(0.0, timeout_s - NUDGE_AFTER_S - ASK_AFTER_S))
         if data is None:
             return SILENT
         if not data:

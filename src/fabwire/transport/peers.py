@@ -129,7 +129,7 @@ class Probe(NamedTuple):
 
 
 PROBES: tuple[Probe, ...] = (
-    Probe("", b"\x10\x0c\x00\x04MQTT\x04\x02\x00\x3c\x00\x00",
+    Probe("mqtt", b"\x10\x0c\x00\x04MQTT\x04\x02\x00\x3c\x00\x00",
           "MQTT 3.1.1 §3.1: CONNECT, protocol level 4, clean session, 60 s keep-alive, empty client id"),
     Probe("", b"HEAD / HTTP/1.0\r\n\r\n", "RFC 9110 §9.3.2: HEAD, an answer without a body"),
     Probe("xyz", b"XYZv3/query=a\n", "XYZv3 (miniMover xyzv3.cpp): the status query every XYZware session opens with"),

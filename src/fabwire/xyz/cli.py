@@ -25,7 +25,7 @@ from fabwire.cli_support import (
     pass_device,
 )
 from fabwire.devices import XYZ
-from fabwire.errors import FollowInterrupted, InputError, LinkError, LinkTimeout
+from fabwire.errors import CancelledAsAsked, FollowInterrupted, InputError, LinkError, LinkTimeout, PrintCancelled
 from fabwire.files import read_bounded
 from fabwire.simoptions import server_options
 from fabwire.units import ABSENT, known
@@ -244,15 +244,20 @@ def _print(dctx: DeviceContext, file: Path, shown: str, no_wait: bool, model: Pr
         chosen = model or _resolve_model(printer.settings.model)
         # off a terminal the view prints plain lines, which need no rich (PlainLines is the part of Console it uses)
         lines = cast("Console", out.lines_err())
-        with JobView(out, lines, shown) as view, JobKeys(view, printer.pause, printer.resume, printer.cancel):
+        with JobView(out, lines, shown) as view, JobKeys(view, printer.pause, printer.resume, printer.cancel) as keys:
             def uploaded(done: int, total: int) -> None:
                 started[0] = True  # the printer has taken the upload: from here on it has the job
                 view.upload(done, total)
 
-            return await printer.print_file(file, model=chosen, progress=uploaded,
-                                            on_status=lambda st: view.show(st, {"event": "status"}),
-                                            wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
-                                            on_note=view.note, force=force)
+            try:
+                return await printer.print_file(file, model=chosen, progress=uploaded,
+                                                on_status=lambda st: view.show(st, {"event": "status"}),
+                                                wait=not no_wait, name=upload_name, save_to_sd=save_to_sd,
+                                                on_note=view.note, force=force)
+            except PrintCancelled as exc:
+                if not keys.cancel_sent:
+                    raise
+                raise CancelledAsAsked(f"{shown}: the print was cancelled as asked{exc.at}") from None
 
     try:
         final = _with_printer(dctx, run)

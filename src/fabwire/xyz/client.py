@@ -32,6 +32,7 @@ from fabwire.errors import (
     LinkClosed,
     LinkError,
     LinkTimeout,
+    PrintCancelled,
     RemoteProtocolError,
     excerpt,
 )
@@ -614,8 +615,7 @@ class XYZPrinter(Maintenance):
             elif status.state_code == PRINTING and status.progress is not None:
                 percent = status.progress.percent
             if status.state_code == IDLE and (stopped or (percent is not None and percent < FINISHED_PERCENT)):
-                raise DeviceError("", "the print was cancelled before it finished"
-                                  + (f" (at {percent} %)" if percent is not None else ""))
+                raise PrintCancelled(percent)
             if status.state_code in (PRINT_DONE, IDLE):
                 return status
             if end is not None and self.clock() > end:

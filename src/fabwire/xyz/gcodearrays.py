@@ -325,8 +325,12 @@ def _eight_bytes(data: NDArray[np.uint8], at: NDArray[np.intp]) -> tuple[NDArray
     of `data` must be PAD), joined from aligned words: gathering aligned words is several times as fast."""
     aligned = np.frombuffer(data, dtype="<u8", count=len(data) // 8)
     word = at >> 3
-    first, second, third = aligned[word], aligned[word + 1], aligned[word + 2]
-    shift = (at & 7).astype(np.uint64) << _U(3)
+    first = aligned.take(word)
+    word += 1
+    second = aligned.take(word)
+    word += 1
+    third = aligned.take(word)
+    shift = ((at & 7) << 3).view(np.uint64)  # offsets are not negative: the same bits
     rest = _U(64) - shift  # numpy shifts a 64-bit number by 64 to 0
     first >>= shift
     first |= second << rest
@@ -350,7 +354,7 @@ def parse_words(padded: bytes, data: NDArray[np.uint8], at: NDArray[np.intp], fi
     Up to 7 integer and 8 fraction digits make an exact integer over 10^8, which one division rounds as a float
     parser does; longer numbers go to float() itself.
     """
-    sign = data[at] if first is None else first
+    sign = data.take(at) if first is None else first
     negative = sign == ord("-")
     low, high = _eight_bytes(data, at + (negative | (sign == ord("+"))))  # the digits after any sign
     low ^= _ZEROS
@@ -412,19 +416,19 @@ _BLANKS = re.compile(rb"[ \t]*")
 def after_blanks(data: NDArray[np.uint8], at: NDArray[np.intp]) -> NDArray[np.uint8]:
     """Move each offset `at` past the blanks (space, tab) there, in place, and return the bytes there now: each
     round only the offsets still on a blank move, and after BLANK_ROUNDS the rest are skipped one by one."""
-    first = data[at]
-    moving = np.flatnonzero(_BLANK[first])
+    first = data.take(at)
+    moving = np.flatnonzero(_BLANK.take(first))
     if not len(moving):
         return first
     for _ in range(BLANK_ROUNDS):
         at[moving] += 1
-        moving = moving[_BLANK[data[at[moving]]]]
+        moving = moving[_BLANK.take(data.take(at.take(moving)))]
         if not len(moving):
-            return data[at]
+            return data.take(at)
     text = data.data  # the bytes themselves, not a copy
     for index in moving.tolist():
         at[index] = _BLANKS.match(text, int(at[index])).end()  # type: ignore[union-attr]  # `*` always matches
-    return data[at]
+    return data.take(at)
 
 
 def _ends_word(data: NDArray[np.uint8], after: NDArray[np.intp],
@@ -433,14 +437,13 @@ def _ends_word(data: NDArray[np.uint8], after: NDArray[np.intp],
     `first`: the bytes at `after`, when the caller has them. One blank or none is the rule in slicers' output, so
     only the other offsets are walked past their blanks."""
     if first is None:
-        first = data[after]
-    ends = _WORD_END[first]
-    ends |= _BLANK[first] & _WORD_END[data[after + 1]]
+        first = data.take(after)
+    ends = _WORD_END.take(first)
+    ends |= _BLANK.take(first) & _WORD_END.take(data.take(after + 1))
     rest = np.flatnonzero(~ends)
     if len(rest):
-        further = after[rest]
-        after_blanks(data, further)
-        ends[rest] = _WORD_END[data[further]]
+        further = after.take(rest)
+        ends[rest] = _WORD_END.take(after_blanks(data, further))
     return ends
 
 
@@ -453,9 +456,9 @@ def _tiled(data: NDArray[np.uint8], letters: NDArray[np.intp], spans: NDArray[np
     would look for. The layout slicers write, checked by counting: the blank-letter-number runs cannot overlap (a
     number is only a sign, digits and a dot), so when their lengths and the command words' add up to the code's,
     they cover it and no byte is left over."""
-    if not known.all() or not _BLANK[data[letters - 1]].all():
+    if not known.all() or not _BLANK.take(data.take(letters - 1)).all():
         return False
-    first, second, third = (_DIGIT[part] for part in command)
+    first, second, third = (_DIGIT.take(part) for part in command)
     second &= first
     third &= second
     command_bytes = len(starts) + np.count_nonzero(first) + np.count_nonzero(second) + np.count_nonzero(third)
@@ -471,9 +474,9 @@ def scan(padded: bytes) -> Scan | None:
     text = data[:size]
     flags = np.frombuffer(padded.translate(_SCAN_FLAGS), dtype=np.uint8)
     where = np.flatnonzero(flags != 0)  # numpy finds the True of a bool array several times faster than nonzero bytes
-    kind = flags[where]
+    kind = flags.take(where)
     is_newline = kind == _NEWLINE
-    newlines = where[is_newline]
+    newlines = where.take(np.flatnonzero(is_newline))
     starts = newlines[:-1] + 1
     if not len(starts):
         return Scan(tuple(_NO_WORDS for _ in AXES), [], np.zeros(0, dtype=np.int8))
@@ -481,17 +484,18 @@ def scan(padded: bytes) -> Scan | None:
     where, kind, line_of = where[:-1], kind[:-1], np.cumsum(is_newline[:-1]) - 1
     if (kind == 3).any() and any(separator in padded for separator in SEPARATORS):
         return None  # the line reader refuses it (in the code of a line) or reads the comment
-    c0, c1, c2, c3 = (data[starts + i] for i in range(4))
+    c0, c1, c2, c3 = (data.take(starts + i) for i in range(4))
     command = (c0 == ord("G")) | (c0 == ord("M"))
-    if (_ODD_FIRST[c0] | (command & (
+    if (_ODD_FIRST.take(c0) | (command & (
             (c1 == 32) | (c1 == 9) | ((c1 == 48) & (c2 == 48) & (c3 - np.uint8(48) <= 9))))).any():
         return None  # blanks, a number or lower case before the command, blanks inside it, or `G001`
     is_move = (c0 == ord("G")) & (
-        (_MOVE_DIGIT[c1] & ~_DIGIT_OR_DOT[c2]) | ((c1 == ord("0")) & _MOVE_DIGIT[c2] & ~_DIGIT_OR_DOT[c3])
+        (_MOVE_DIGIT.take(c1) & ~_DIGIT_OR_DOT.take(c2))
+        | ((c1 == ord("0")) & _MOVE_DIGIT.take(c2) & ~_DIGIT_OR_DOT.take(c3))
     )
     g0 = (c0 == ord("G")) & (c1 == ord("0"))
-    g0_at = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT[c2]] + 1,
-                            starts[g0 & (c2 == ord("0")) & ~_DIGIT_OR_DOT[c3]] + 2))
+    g0_at = np.concatenate((starts[g0 & ~_DIGIT_OR_DOT.take(c2)] + 1,
+                            starts[g0 & (c2 == ord("0")) & ~_DIGIT_OR_DOT.take(c3)] + 2))
     digit = np.where(c1 == ord("0"), c2, c1)
     arcs = np.where(is_move & ((digit == ord("2")) | (digit == ord("3"))), digit - ord("0"), 0).astype(np.int8)
     controls: list[tuple[int, bytes, bytes]] = []
@@ -519,9 +523,9 @@ def scan(padded: bytes) -> Scan | None:
     if b";" in padded:
         is_semi = kind == _SEMICOLON
         semi_at = np.flatnonzero(is_semi)
-        semis, semi_lines = where[semi_at], line_of[semi_at]
+        semis, semi_lines = where.take(semi_at), line_of.take(semi_at)
         first = np.diff(semi_lines, prepend=-1) != 0  # the first `;` of each line ends its code
-        inline_comments = bool(is_row[semi_lines].any())
+        inline_comments = bool(is_row.take(semi_lines).any())
         code_end = code_end.copy()
         code_end[semi_lines[first]] = semis[first]
     if b"(" in padded or b"*" in padded:
@@ -531,30 +535,31 @@ def scan(padded: bytes) -> Scan | None:
             return None
     read = len(AXES) if arcs.any() else _PLAIN_AXES
     # I, J, R and P words (and the letters no analysis reads) are found and checked everywhere, kept only where arcs are
-    keep = is_row[line_of]
+    keep = is_row.take(line_of)
     if inline_comments:
-        keep &= where < code_end[line_of]
+        keep &= where < code_end.take(line_of)
     if np.count_nonzero(keep & (kind == 2)) > np.count_nonzero(is_row):  # each of these lines starts with a G
         return None  # a second command word in a move: the line reader refuses it
     keep &= kind == 1
     kept = np.flatnonzero(keep)
-    where, line_of = where[kept], line_of[kept]
+    where, line_of = where.take(kept), line_of.take(kept)
     at = where + 1
     first = after_blanks(data, at)  # blanks between a letter and its number
     numbers, spans = parse_words(padded, data, at, first)
-    axis = _AXIS_INDEX[data[where]]
+    axis = _AXIS_INDEX.take(data.take(where))
     known = ~np.isnan(numbers)
     rows = np.flatnonzero(is_row)
-    if not _tiled(data, where, spans, known, starts[rows], code_end[rows], (c1[rows], c2[rows], c3[rows])):
+    if not _tiled(data, where, spans, known, starts.take(rows), code_end.take(rows),
+                  (c1.take(rows), c2.take(rows), c3.take(rows))):
         after = at + spans
-        following = data[after]
-        odd = _GLUED[following]  # an exponent or a hexadecimal number
-        odd |= ~_ends_word(data, after, following)  # more after the number than blanks before the next word or end
-        odd |= ~known  # bare letters are not words (and may be a NaN or an infinity)
-        command_end = starts[rows] + 1
-        while (digits := _DIGIT[data[command_end]]).any():
+        following = data.take(after)
+        malformed = _GLUED.take(following)  # an exponent or a hexadecimal number
+        malformed |= ~_ends_word(data, after, following)  # more than blanks between the number and the next word
+        malformed |= ~known  # bare letters are not words (and may be a NaN or an infinity)
+        command_end = starts.take(rows) + 1
+        while (digits := _DIGIT.take(data.take(command_end))).any():
             command_end += digits
-        odd_lines = [line_of[odd][:1], rows[~_ends_word(data, command_end)][:1]]  # or more after the command word
+        odd_lines = [line_of[malformed][:1], rows[~_ends_word(data, command_end)][:1]]  # or more after the command word
         if any(len(first_odd) for first_odd in odd_lines):
             suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
     if not known.all():
@@ -570,10 +575,10 @@ def scan(padded: bytes) -> Scan | None:
             axes.append(_NO_WORDS)
             continue
         picked = np.flatnonzero(axis == k)
-        lines = line_of[picked]
+        lines = line_of.take(picked)
         if (lines[1:] == lines[:-1]).any():
             return None  # a letter repeats within a line
-        axes.append(Words(lines, numbers[picked], is_set[lines]))
+        axes.append(Words(lines, numbers.take(picked), is_set.take(lines)))
     if suspect < len(starts) and arcs.any():
         return None  # the line reader refuses an arc Marlin refuses after any malformed number in that line
     return Scan(tuple(axes), controls, arcs, g0_at, int(newlines[suspect]) + 1 if suspect < len(starts) else None)

@@ -193,8 +193,9 @@ def open_input(path: Path, name: str | None = None) -> BinaryIO:
 STDIN = "-"
 """The file name that means standard input."""
 STDIN_NAME = "standard input"
-MAX_STDIN = 4 << 30
-"""Most bytes taken from standard input (a pipe may never end; a print file is far smaller)."""
+MAX_STDIN = 1 << 30
+"""Most bytes taken from standard input, spooled to a temporary file: a pipe may never end, and the print files
+slicers write for these machines' build volumes are tens of megabytes (the agent takes 64 MB by default)."""
 
 
 @contextlib.contextmanager
@@ -211,12 +212,26 @@ def input_file(path: Path) -> Iterator[tuple[Path, str]]:
         try:
             with spooled.open("wb") as out:
                 while block := sys.stdin.buffer.read(CHUNK):
+                    if not out.tell():
+                        _judge_first_block(block)
                     if out.tell() + len(block) > MAX_STDIN:
                         raise InputError(f"{STDIN_NAME} is over {MAX_STDIN >> 30} GiB: not a print file that ends")
                     out.write(block)
         except OSError as exc:
             raise InputError(f"cannot read {STDIN_NAME}: {exc.strerror or exc}") from exc
         yield spooled, STDIN_NAME
+
+
+def _judge_first_block(block: bytes) -> None:
+    """Refuse standard input from its first block when that already shows it can be neither G-code nor a .3w, so
+    an endless binary stream is not spooled to its end first. A binary STL is told by its whole size, so data that
+    could be one (its declared size is beyond the block, within the limit) is read on, and the full read names it."""
+    head = block[:SNIFF]
+    kind = identify(head)
+    stl_size = 84 + 50 * int.from_bytes(head[80:84], "little")  # what a binary STL declares
+    could_be_stl = kind is Kind.BINARY and len(head) >= 84 and len(block) <= stl_size <= MAX_STDIN
+    if not kind.printable and kind is not Kind.EMPTY and not could_be_stl:
+        raise refusal(kind, STDIN_NAME, head)
 
 
 def sniff(path: Path, name: str | None = None) -> tuple[Kind, bytes]:

@@ -35,7 +35,7 @@ def job_line(status: Status) -> str:
     if status.bed is not None:
         parts.append(f"bed {units.temperature(status.bed)}")
     if status.progress and status.state_code in (PRINTING, PAUSED):
-        parts.append(f"{status.progress.percent}% ({units.minutes(status.progress.remaining_min)} left)")
+        parts.append(f"{status.progress.percent} % ({units.minutes(status.progress.remaining_min)} left)")
     return ", ".join(parts)
 
 
@@ -160,6 +160,8 @@ class JobKeys:
         self._saved: list[Any] | None = None
         self._fd = -1
         self._cancel_asked = -1.0
+        self.cancel_sent = False
+        """Whether the user cancelled the print with the keys (its end is then the one asked for)."""
         self._tasks: set[asyncio.Task[None]] = set()
         self._toggling: asyncio.Lock | None = None
         """Space presses run one after the other, each deciding from the printer's state after the one before."""
@@ -199,6 +201,7 @@ class JobKeys:
         elif key in (b"c", b"C"):
             if now - self._cancel_asked <= CANCEL_WINDOW_S:
                 self._cancel_asked = -1.0
+                self.cancel_sent = True
                 self._run("cancel")
                 return
             self._cancel_asked = now

@@ -91,7 +91,7 @@ def _size(path: Path) -> int:
 
 @click.command("convert")
 @click.argument("src", type=click.Path(dir_okay=False, path_type=Path, allow_dash=True))
-@click.argument("dst", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("dst", type=click.Path(dir_okay=False, path_type=Path), required=False)
 @click.option("-m", "--model", "model_text", metavar="MODEL",
               help="Target printer for a .3w: model number, name or alias (default: miniMaker, or the source "
                    ".3w's own model when re-targeting).")
@@ -104,19 +104,26 @@ def _size(path: Path) -> int:
 @click.option("--keep-arcs", is_flag=True, help="Pass G2/G3 arcs through (default: line segments within 0.01 mm; "
                                                 "no public source shows da Vinci firmware running arcs).")
 @click.pass_context
-def convert(ctx: click.Context, src: Path, dst: Path, model_text: str | None, file_format: str | None,
+def convert(ctx: click.Context, src: Path, dst: Path | None, model_text: str | None, file_format: str | None,
             zipped: bool | None, repair: bool, force: bool, keep_arcs: bool) -> None:
     """Convert G-code to a .3w print file or back; the direction follows the files' types ('-' reads SRC from
-    standard input).
+    standard input). Without DST, SRC's name with the other type's suffix (part.gcode → part.3w), when no such
+    file exists.
 
     A .3w source with a .3w destination is re-targeted (e.g. for another model or format).
     """
     app = _app(ctx)
     container: Literal[2, 5] | None = None if file_format is None else (5 if file_format == "v5" else 2)
-    writing = dst.suffix.lower() == ".3w"
+    if dst is None and str(src) == intake.STDIN:
+        raise click.UsageError("give DST when SRC is standard input ('-')")
     with intake.input_file(src) as (path, shown):
         kind, head = intake.sniff(path, shown)
         intake.require_printable(kind, shown, head)
+        if dst is None:
+            dst = src.with_suffix(".gcode" if kind.decoded is intake.Kind.THREEW else ".3w")
+            if dst.exists() or dst.is_symlink():  # never replaced unless named: it may be the source itself
+                raise InputError(f"{dst} exists already: name it as DST to replace it, or give another DST")
+        writing = dst.suffix.lower() == ".3w"
         with intake.decoded_path(path, kind) as plain:
             _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped,
                      {"repair": repair, "force": force, "keep_arcs": keep_arcs})

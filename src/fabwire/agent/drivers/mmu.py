@@ -33,6 +33,11 @@ def _position_words(selector: int | None, finda: bool | None) -> str | None:
     return "unloaded" if selector is None else f"unloaded (selector at slot {selector})"
 
 
+DIALOG_ACTIONS = {"Retry": "retry", "Continue": "continue", "Reset MMU": "reset", "Stop print": "stop"}
+"""The error dialog's choices (`fabwire.mmu.errors`) offered as actions; Stop is always offered (the printer can
+always stop its print), the dialog's other choices (Unload, Load, Eject, Tune, Disable MMU) are the printer's."""
+
+
 class MMUDriver(Driver):
     kind = "mmu"
     interval_s = 1.0
@@ -43,9 +48,11 @@ class MMUDriver(Driver):
         Action("eject", "Eject the filament of a slot (E).", (SLOT,), background=True),
         Action("cut", "Cut the filament of a slot (K).", (SLOT,), background=True),
         Action("home", "Home the selector and idler (H).", background=True),
-        Action("retry", "Retry after an error (the Middle button)."),
-        Action("continue", "Continue after an error (the Middle button)."),
-        Action("stop", "Stop after an error (the Right button)."),
+        Action("retry", "Answer an error as the printer's Retry does (the Middle button)."),
+        Action("continue", "Answer an error as the printer's Continue does (the button its dialog gives Continue: "
+               "Middle on most errors, Right on 04501, Left on a TMC warning)."),
+        Action("stop", "Answer an error as the printer's Stop does: stop following the command; the MMU keeps its "
+               "error, and a dialog whose Stop is the printer's sends no button."),
         Action("reset", "Restart the MMU (X0).", confirm=True),
     )
 
@@ -106,7 +113,8 @@ class MMUDriver(Driver):
             text = f"{self._pressed[0]} pressed on: {error.explained(command=status.command)}"
         elif error is not None:
             state, text = "error", error.explained(command=status.command)
-            actions = ["retry" if error.retryable else "continue", "stop"]
+            actions = list(dict.fromkeys([DIALOG_ACTIONS[c.label] for c in error.choices if c.label in DIALOG_ACTIONS]
+                                         + ["stop"]))
         elif busy:
             state, text, actions = "busy", f"{status.command}: {status.words}", []
         else:
@@ -138,7 +146,11 @@ class MMUDriver(Driver):
         elif action == "home":
             finished = await mmu.run(Home(0), timeout=limit)
         elif action in ("retry", "continue", "stop"):
-            await mmu.press(action)
+            button = mmu.dialog_button(action)
+            if button is None:
+                mmu.logic.abandon()
+            else:
+                await mmu.press(button)
             if self._error is not None:
                 self._pressed = (action, self._error, time.monotonic())
             return {"ok": True, "action": action}

@@ -267,6 +267,7 @@ def text_lines(text: str, *, font: str = DEFAULT_FONT, cap_height: float = 1.0,
     tab = TAB_STOP * float(space.char_width if space is not None else cap / 2)  # type: ignore[attr-defined]
     result: Polylines = []
     missing: list[str] = []
+    accented: list[str] = []
     respelled: list[str] = []
     for row, line in enumerate(text.splitlines()):
         x = 0.0
@@ -279,7 +280,10 @@ def text_lines(text: str, *, font: str = DEFAULT_FONT, cap_height: float = 1.0,
                 missing.append(cluster)
                 continue
             if spelled != [(cluster, [])]:
-                respelled.append(cluster)
+                if any(marks for _, marks in spelled):
+                    accented.append(cluster)
+                else:
+                    respelled.append(f"{_listing([cluster])} as {''.join(base for base, _ in spelled)!r}")
             for base, marks in spelled:
                 glyph = _glyph(face, base)
                 shift = np.array([x - glyph.left_offset, 0.0])  # type: ignore[attr-defined]
@@ -304,8 +308,12 @@ def text_lines(text: str, *, font: str = DEFAULT_FONT, cap_height: float = 1.0,
     if notes is not None:
         if script == "symbols":
             notes.append(f"font {font!r} draws signs, not letters: each character typed draws the sign on its key")
+        if accented:
+            notes.append(f"drawn as letters with accent strokes: {_listing(accented)}")
         if respelled:
-            notes.append(f"built from letters and accent strokes, or spelled out: {_listing(respelled)}")
+            unique = list(dict.fromkeys(respelled))
+            more = " …" if len(unique) > 20 else ""
+            notes.append(f"spelled with other characters: {', '.join(unique[:20])}{more}")
         if missing:
             notes.append(f"font {font!r} ({script}) cannot draw {_listing(missing)}: left out{_suggestion(missing)}")
     return result

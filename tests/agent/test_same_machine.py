@@ -1,0 +1,90 @@
+"""One machine is monitored once, however its address is spelt: every spelling of one machine (the rows of
+SPELLINGS, each with its source) is refused by the agent as the second device, through the library and through
+`fabwire serve`; addresses of distinct machines (DISTINCT) are both monitored."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import pytest
+
+from fabwire.agent.core import Agent, DeviceSpec
+from fabwire.errors import InputError
+
+from .agenttools import start_agent, wait_for
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+SPELLINGS: dict[str, tuple[str, str, str]] = {
+    # row: (kind, first address, second address of the same machine), {port} a port nobody listens on
+    "localhost": ("xyz", "127.0.0.1:{port}", "localhost:{port}"),  # RFC 6761 §6.3: localhost is the loopback
+    "scheme": ("xyz", "127.0.0.1:{port}", "tcp://127.0.0.1:{port}"),  # fabwire's address forms: tcp:// optional
+    "ipv4-mapped": ("lineus", "127.0.0.1:{port}", "[::ffff:127.0.0.1]:{port}"),  # RFC 4291 §2.5.5.2
+    "case-and-root-dot": ("xyz", "LocalHost:{port}", "localhost.:{port}"),  # RFC 4343 §3; RFC 1034 §3.1
+    "default-port": ("xyz", "127.0.0.1", "127.0.0.1:9100"),  # the da Vinci's TCP port is 9100 (XYZv3 reference)
+    "same-string": ("mmu", "127.0.0.1:{port}", "127.0.0.1:{port}"),
+    "serial-link": ("mmu", "{tty}", "serial://{link}"),  # udev's /dev/serial/by-id links name the same port
+    "same-simulator": ("xyz", "sim://xyz?model=nano", "sim://xyz?model=nano"),
+}
+DISTINCT: dict[str, tuple[str, str, str]] = {
+    "other-port": ("xyz", "127.0.0.1:{port}", "127.0.0.1:{other}"),
+    "other-simulator": ("xyz", "sim://xyz?model=nano", "sim://xyz?model=nano&serial=OTHER1"),
+    "other-serial-port": ("mmu", "{tty}", "{other_tty}"),
+}
+
+
+def addresses(row: tuple[str, str, str], tmp_path: Path) -> tuple[str, str, str]:
+    kind, first, second = row
+    tty, other_tty = tmp_path / "ttyFAKE0", tmp_path / "ttyFAKE1"
+    tty.touch()
+    other_tty.touch()
+    (tmp_path / "by-id").mkdir(exist_ok=True)
+    link = tmp_path / "by-id" / "usb-Prusa_MMU3-if00"
+    link.symlink_to(tty)
+    fields = {"port": free_port(), "other": free_port(), "tty": tty, "other_tty": other_tty, "link": link}
+    return kind, first.format(**fields), second.format(**fields)
+
+
+@pytest.mark.parametrize("row", SPELLINGS)
+async def test_a_second_spelling_of_a_monitored_machine_is_refused(row: str, tmp_path: Path) -> None:
+    kind, first, second = addresses(SPELLINGS[row], tmp_path)
+    async with Agent(state_dir=tmp_path / "state") as agent:
+        await agent.add_device(DeviceSpec("first", kind, first))
+        with pytest.raises(InputError, match="reaches the machine already monitored as 'first'"):
+            await agent.add_device(DeviceSpec("second", kind, second))
+        assert [s.spec.name for s in agent.sessions()] == ["first"]
+        await agent.remove_device(agent.sessions()[0].info.id)
+        await agent.add_device(DeviceSpec("second", kind, second))  # once the first is gone, the machine is free
+        assert [s.spec.name for s in agent.sessions()] == ["second"]
+
+
+@pytest.mark.parametrize("row", DISTINCT)
+async def test_distinct_machines_are_both_monitored(row: str, tmp_path: Path) -> None:
+    kind, first, second = addresses(DISTINCT[row], tmp_path)
+    async with Agent(state_dir=tmp_path / "state") as agent:
+        await agent.add_device(DeviceSpec("first", kind, first))
+        await agent.add_device(DeviceSpec("second", kind, second))
+        assert sorted(s.spec.name for s in agent.sessions()) == ["first", "second"]
+
+
+def test_serve_given_one_machine_twice_monitors_it_once(tmp_path: Path) -> None:
+    """The devices are added at once at start-up: of two spellings of one machine exactly one is monitored."""
+    port = free_port()
+    agent = start_agent(tmp_path / "state", "--device", f"a:xyz=127.0.0.1:{port}",
+                        "--device", f"b:xyz=localhost:{port}")
+    try:
+        with agent.client() as client:
+            names = wait_for(lambda: [d["name"] for d in client.get("/api/v1/devices").json()] or None, "a device")
+            assert len(names) == 1, names
+    finally:
+        _, stderr = agent.stop()
+    other = "b" if names == ["a"] else "a"
+    assert f"fabwire: not monitoring {other}: " in stderr, stderr
+    assert f"reaches the machine already monitored as '{names[0]}'" in stderr, stderr
+    assert "Traceback" not in stderr
