@@ -1,11 +1,11 @@
 """One style for numbers, units and codes, shared by every command.
 
-People read durations as `45s`, `3m 12s`, `1h 05m`; filament in metres (`0.05 m`); the z-offset in millimetres
-(`2.45 mm`); temperatures as `210 °C`; an absent value as `—`; an MMU error as its printer code, title and MMU code
-(`04101 FINDA DIDN'T TRIGGER (0x8001)`). JSON carries SI values with the unit in the key: `print_time_s`,
-`filament_m`, `zoffset_mm`, `extruder_c`, a Line-us pen at `x_mm`, `y_mm` (`json_key`). A device's own words and
-numbers as it reports them (firmware letters, the Line-us's machine units) appear only under `raw`, `fields` or
-`machine_units`.
+People read durations as `45s`, `3m 12s`, `1h 05m`; filament in metres, millimetres below one (`1.25 m`,
+`51.9 mm`); the z-offset in millimetres (`2.45 mm`); temperatures as `210 °C`; an absent value as `—`; an MMU error
+as its printer code, title and MMU code (`04101 FINDA DIDN'T TRIGGER (0x8001)`). JSON carries SI values with the
+unit in the key: `print_time_s`, `filament_m`, `zoffset_mm`, `extruder_c`, a Line-us pen at `x_mm`, `y_mm`
+(`json_key`). A device's own words and numbers as it reports them (firmware letters, the Line-us's machine units)
+appear only under `raw`, `fields` or `machine_units`.
 """
 
 from __future__ import annotations
@@ -42,8 +42,12 @@ def elapsed(seconds: float | None) -> str:
 
 
 def filament(mm: float | None) -> str:
-    """A filament length given in mm, shown in metres with two decimals: `0.05 m`, `200.00 m`."""
-    return ABSENT if mm is None else f"{mm / 1000:.2f} m"
+    """A filament length given in mm, as slicers show it: in metres with two decimals from a metre up (`1.25 m`,
+    `200.00 m`: PrusaSlicer's "Used Filament (m)", Cura's "1.25m"), in millimetres with one decimal below (`3.0 mm`,
+    `51.9 mm`: PrusaSlicer's `filament used [mm]`), so a small amount never shows as `0.00 m`."""
+    if mm is None:
+        return ABSENT
+    return f"{mm:.1f} mm" if round(mm, 1) < 1000 else f"{mm / 1000:.2f} m"
 
 
 def temperature(celsius: float | None) -> str:

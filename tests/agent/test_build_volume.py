@@ -59,3 +59,23 @@ def test_a_print_beyond_the_build_volume_is_refused_by_the_answer(mini: RunningA
         wait_idle(client, "p")
         _refused(ROUTES[route](client, name), client, name)
 
+
+
+TURNING = prusaslicer_gcode() + b"G1 X75 Y40\n" + b"".join(b"G2 X75 Y40 I0 J35 P100 E0.5\n" for _ in range(400))
+"""Within a mini w, but each arc asks for a hundred full turns: as segments, far more than the growth limit."""
+
+
+def test_arcs_that_would_grow_a_print_too_much_are_refused_by_the_answer(mini: RunningAgent) -> None:
+    """The conversion before printing would refuse it (`arcwork.GROWTH_ALLOWED`): the upload is refused instead,
+    with the advice an API user can follow."""
+    name = "turning.gcode"
+    with mini.client() as client:
+        wait_idle(client, "p")
+        response = client.post("/api/v1/devices/p/jobs", params={"filename": name}, content=TURNING,
+                               headers={"Content-Type": "application/octet-stream"})
+        assert response.status_code == 400, response.text
+        assert "its G2/G3 arcs as straight moves would make it more than 8 times its size" in response.text
+        assert "slice it with arcs off and send it again" in response.text
+        assert "--keep-arcs" not in response.text
+        assert client.get("/api/v1/jobs").json() == []
+        assert name not in client.get("/api/files").text

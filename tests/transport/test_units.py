@@ -26,7 +26,11 @@ def test_measured_times_keep_their_short_digits(seconds: float | None, text: str
 
 
 def test_lengths_temperatures_and_codes() -> None:
-    assert units.filament(51.92) == "0.05 m"
+    assert units.filament(51.92) == "51.9 mm"
+    assert units.filament(3) == "3.0 mm"
+    assert units.filament(999.94) == "999.9 mm"
+    assert units.filament(999.96) == "1.00 m"
+    assert units.filament(1254) == "1.25 m"
     assert units.filament(200_000) == "200.00 m"
     assert units.filament(None) == "—"
     assert units.zoffset(245) == "2.45 mm"

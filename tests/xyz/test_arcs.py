@@ -209,3 +209,143 @@ def test_full_turns_that_would_blow_a_file_up_are_refused_while_converting(tmp_p
                    env=cli_env(tmp_path))
     assert kept.returncode == 0, kept.stderr
     assert out.stat().st_size < 1_000_000
+
+
+def _arc_code(radius: float, start: float, sweep: float, turns: int, clockwise: bool, relative: bool,
+              indented: bool) -> tuple[bytes, bytes]:
+    """(the lines before, an arc line) around (120, 80): X, Y, I and J with six decimals, a Z and an E change."""
+    cx, cy = 120.0, 80.0
+    x0, y0 = cx + radius * math.cos(start), cy + radius * math.sin(start)
+    end = start - sweep if clockwise else start + sweep
+    x1, y1 = cx + radius * math.cos(end), cy + radius * math.sin(end)
+    before = f"G90\nM82\nG1 X{x0:.6f} Y{y0:.6f} Z0.2 E1 F1200\n" + ("G91\nM83\n" if relative else "")
+    x, y = (x1 - x0, y1 - y0) if relative else (x1, y1)
+    arc = (f"G{2 if clockwise else 3} X{x:.6f} Y{y:.6f} I{cx - x0:.6f} J{cy - y0:.6f} Z{0.1 if relative else 0.3}"
+           f" E{2.5 if relative else 3.5}" + (f" P{turns}" if turns else "") + " F1800\n")
+    if indented:  # the line reader's path through the analysis
+        return "".join(f"  {line}\n" for line in before.splitlines()).encode(), f"  {arc}".encode()
+    return before.encode(), arc.encode()
+
+
+@settings(max_examples=120, deadline=None)
+@given(radius=st.one_of(st.floats(1e-4, 0.05), st.floats(0.05, 300), st.floats(300, 60000)),
+       start=st.floats(0, 2 * math.pi), sweep=st.floats(0, 2 * math.pi), turns=st.integers(0, 3),
+       clockwise=st.booleans(), relative=st.booleans(), indented=st.booleans())
+def test_the_analysis_counts_the_segments_the_conversion_writes(radius: float, start: float, sweep: float,
+                                                                turns: int, clockwise: bool, relative: bool,
+                                                                indented: bool) -> None:
+    """The analysis counts as many segments as the conversion writes for each arc (one formula,
+    `motion.arc_segment_counts`), and bounds their bytes from above (`arcwork.lines_size`)."""
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+    before, arc = _arc_code(radius, start, sweep, turns, clockwise, relative, indented)
+    analyzer = MoveAnalyzer(timing=False)
+    analyzer.feed_chunk(before + arc)
+    expander = ArcExpander()
+    written = b"".join(expander.expand(before + arc))
+    assert written.startswith(before)
+    segment_lines = written[len(before):]
+    assert expander.converted == 1
+    assert analyzer.arc_segments == segment_lines.count(b"\n")
+    assert len(segment_lines) <= analyzer.arc_bytes
+
+
+@pytest.mark.parametrize("turns", [1, 100])
+@pytest.mark.parametrize("radius", [0.001, 0.5, 37.0, 4000.0])
+def test_full_turns_are_counted_as_the_conversion_writes_them(radius: float, turns: int) -> None:
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+    before, arc = _arc_code(radius, 0.3, 1.0, turns, True, False, False)
+    analyzer = MoveAnalyzer(timing=False)
+    analyzer.feed_chunk(before + arc)
+    segment_lines = b"".join(ArcExpander().expand(before + arc))[len(before):]
+    assert analyzer.arc_segments == segment_lines.count(b"\n") <= (turns + 1) * MOST_SEGMENTS
+    assert len(segment_lines) <= analyzer.arc_bytes <= 1.3 * len(segment_lines)  # a bound, and a close one
+
+
+def _hostile(shape: str) -> str:
+    """G-code whose arcs would make far more than GROWTH_ALLOWED times its size in segments."""
+    head = "G28\nG1 Z0.2 F1200\nG1 X75 Y75 F1500\n"
+    if shape == "tiny full circles":
+        return head + "G2 I0.001 J0 P100\n" * 3000
+    if shape == "huge radius":  # full circles 60 m across, at most MOST_SEGMENTS segments each
+        return head + "".join(f"G2 X75 Y75 I30000 J0 E{k + 1}\n" for k in range(3000))
+    if shape == "many full turns":
+        return head + "".join(f"G3 X75 Y75 I0 J70 P100 E{k + 1}\n" for k in range(3000))
+    assert shape == "mixed with lines"
+    return head + "".join(f"G1 X{75 + k % 7} Y75 E{k / 10}\nG1 X75 Y{75 + k % 5}\n" + ("  G2 I0.5 J0 P40\n" if k % 3
+                                                                                      else "G3 I0 J0.2 P7\n")
+                          for k in range(3000))
+
+
+@pytest.mark.parametrize("shape", ["tiny full circles", "huge radius", "many full turns", "mixed with lines"])
+def test_arcs_that_would_grow_a_file_too_much_are_refused_before_anything_is_written(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], shape: str) -> None:
+    """The analysis bounds each arc's segments and refuses the file at the arc that takes it past the limit,
+    before the conversion writes anything (here without the free allowance, so a small file shows it)."""
+    from fabwire.cli import main
+    from fabwire.xyz import arcwork
+
+    monkeypatch.setattr(arcwork, "GROWTH_FREE", 0)
+    source = tmp_path / "hostile.gcode"
+    source.write_text(_hostile(shape))
+    out = tmp_path / "hostile.3w"
+    written: list[int] = []
+    expand = arcwork.ArcExpander.expand
+    monkeypatch.setattr(arcwork.ArcExpander, "expand", lambda self, chunk: written.append(1) or expand(self, chunk))
+    code = main(["xyz", "convert", "--force", str(source), str(out), "--model", "miniMaker"])
+    error = capsys.readouterr().err
+    assert code == 4, error
+    assert len(error.strip().splitlines()) == 1
+    found = re.search(r": its G2/G3 arcs as straight moves would make it more than 8 times its size \(past arc "
+                      r"([0-9]+)\): slice it with arcs off, or convert it with --keep-arcs$", error.strip())
+    assert found, error
+    assert 1 <= int(found.group(1)) < 3000  # the arc that went past the limit, long before the file's end
+    assert not written  # refused before any conversion began
+    assert not out.exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["hostile.gcode"]  # no temporary file left either
+
+
+def test_slicer_arcs_growing_a_file_a_few_times_are_converted(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Arcs as slicers fit them over polylines (a few millimetres to a few centimetres, a fraction of a turn,
+    between straight moves) grow a file two to three times: well within the limit, even without its free
+    allowance."""
+    from fabwire.xyz import arcwork
+
+    monkeypatch.setattr(arcwork, "GROWTH_FREE", 0)
+    lines = ["G90", "M82", "G28", "G92 E0", "G1 Z0.2 F1200", "G1 X100 Y100 F3000"]
+    x, y, e = 100.0, 100.0, 0.0
+    for k in range(600):
+        radius, sweep = 3 + k % 17, 0.2 + (k % 5) / 10
+        cx, cy = x - radius, y  # from the circle's rightmost point, counter-clockwise
+        x, y, e = cx + radius * math.cos(sweep), cy + radius * math.sin(sweep), e + radius * sweep * 0.04
+        lines.append(f"G3 X{x:.3f} Y{y:.3f} I{-radius:.3f} J0 E{e:.5f}")
+        x, e = x + 1.5, e + 0.06
+        lines.append(f"G1 X{x:.3f} Y{y:.3f} E{e:.5f}")
+        if k % 8 == 7:
+            x, y = 100.0, 100.0
+            lines.append("G1 X100 Y100 F3000")
+    source = tmp_path / "fitted.gcode"
+    source.write_text("\n".join(lines) + "\n")
+    info = convert_gcode_file(source, tmp_path / "fitted.3w", model="miniMaker")
+    assert any("600 G2/G3 arcs converted" in note for note in info.notes)
+    assert source.stat().st_size < info.gcode_size < 4 * source.stat().st_size
+
+
+def test_full_turns_read_as_arrays_or_line_by_line_give_the_same_figures() -> None:
+    """Arcs with P are read with the other moves' arrays; the line reader (indented lines) gives the same."""
+    from fabwire.xyz.gcodeinfo import MoveAnalyzer
+
+    code = (b"G90\nM82\nG1 X50 Y50 Z0.2 F1200\nG2 X60 Y50 I5 J0 P2 E3\nG1 X70 Y70 E4\nG3 X70 Y70 I0 J-8 P1 E6 F900\n"
+            b"G2 X75 Y75 R5 P3 E7\nG91\nG3 X5 Y0 I2.5 J0 P1 E1\nG2 I1 J1 P0\n")
+    figures = []
+    for text in (code, b"".join(b" " + line + b"\n" for line in code.splitlines())):
+        analyzer = MoveAnalyzer()
+        analyzer.feed_chunk(text)
+        figures.append((analyzer.result(), analyzer.arc_segments, analyzer.arc_bytes))
+    (arrays, segments_a, bytes_a), (lines, segments_l, bytes_l) = figures
+    assert arrays.extent == lines.extent
+    assert arrays.print_time_s == lines.print_time_s
+    assert arrays.filament_mm == pytest.approx(lines.filament_mm)
+    assert (segments_a, bytes_a) == (segments_l, bytes_l)
+    assert segments_a == sum(line.startswith(b"G1") for line in b"".join(ArcExpander().expand(code)).splitlines()) - 2

@@ -96,7 +96,7 @@ def test_convert_refuses_bad_requests(args: list[str], message: str, gcode: Path
 def test_info_human_and_json() -> None:
     result = invoke(info, str(DATA / "tv2_jr_pro_v5.3w"))
     assert result.exit_code == 0, result.output
-    for text in ("v5 TagEJ256", "plaintext", "ok", "da Vinci Jr. 1.0 Pro (dv1JP0A000)", "10m 00s", "250.00 mm"):
+    for text in ("v5 TagEJ256", "plaintext", "ok", "da Vinci Jr. 1.0 Pro (dv1JP0A000)", "10m 00s", "250.0 mm"):
         assert text in result.output
     result = invoke(info, str(DATA / "tv1_minimaker_v2.3w"), json_mode=True)
     data = json.loads(result.stdout)
@@ -386,3 +386,22 @@ def test_without_dst_the_output_is_named_after_the_source(tmp_path: Path) -> Non
     piped = _piped("xyz", "convert", "-", data=TV_INPUT)
     assert piped.returncode == 2
     assert b"give DST when SRC is standard input" in piped.stderr
+
+
+@pytest.mark.parametrize(("filament_mm", "shown"), [(3.0, "3.0 mm"), (51.92, "51.9 mm"), (1254.0, "1.25 m")])
+def test_convert_and_info_show_filament_alike(tmp_path: Path, filament_mm: float, shown: str) -> None:
+    """`convert` and `info` of what it wrote show the filament one way (`units.filament`): millimetres below a metre,
+    so 3 mm is never `0.00 m`; the JSON keeps millimetres in `filament_mm`."""
+    source = tmp_path / "small.gcode"
+    source.write_text(f"; filament used [mm] = {filament_mm}\n; estimated printing time (normal mode) = 1m 0s\n"
+                      "G28\nG1 Z0.2 F600\nG1 X10 Y10 E1 F1200\n")
+    out = tmp_path / "small.3w"
+    converted = run_cli("xyz", "convert", str(source), str(out), env=cli_env(tmp_path))
+    assert converted.returncode == 0, converted.stderr
+    assert f"filament {shown}," in converted.stdout + converted.stderr
+    described = run_cli("xyz", "info", str(out), env=cli_env(tmp_path))
+    assert described.returncode == 0, described.stderr
+    assert any(line.split()[:1] == ["filament"] and line.split()[1:] == shown.split()
+               for line in described.stdout.splitlines())
+    as_json = json.loads(run_cli("xyz", "info", str(out), "--json", env=cli_env(tmp_path)).stdout)
+    assert as_json["filament_mm"] == pytest.approx(filament_mm)

@@ -18,15 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-AXES = b"XYZEFIJR"
-"""The words read: the axes, the feed rate, and the centre offsets and radius of G2/G3 arcs."""
+AXES = b"XYZEFIJRP"
+"""The words read: the axes, the feed rate, and the centre offsets, radius and full turns of G2/G3 arcs."""
 _LETTERS = AXES + bytes(sorted(set(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ") - set(AXES + b"GM")))
 """Every parameter letter: `AXES`, then the others, which are only checked (a letter repeated in a move)."""
 _AXIS_INDEX = np.full(256, -1, dtype=np.int8)
 _AXIS_INDEX[list(_LETTERS)] = _AXIS_INDEX[list(_LETTERS.lower())] = np.arange(len(_LETTERS))
-_TURNS_INDEX = _LETTERS.index(b"P")
 _PLAIN_AXES = 5
-"""X, Y, Z, E, F: the words a piece without arcs needs (I, J and R are kept only where G2/G3 lines are)."""
+"""X, Y, Z, E, F: the words a piece without arcs needs (I, J, R and P are kept only where G2/G3 lines are)."""
 def _byte_class(members: bytes) -> NDArray[np.bool_]:
     """A lookup table over byte values: True for each of `members`."""
     table = np.zeros(256, dtype=bool)
@@ -535,7 +534,7 @@ def scan(padded: bytes) -> Scan | None:
         if (is_row[odd_line] & (odd < code_end[odd_line])).any():  # a comment in parentheses or a checksum
             return None
     read = len(AXES) if arcs.any() else _PLAIN_AXES
-    # I, J and R words (and the letters no analysis reads) are found and checked everywhere, kept only where arcs are
+    # I, J, R and P words (and the letters no analysis reads) are found and checked everywhere, kept only where arcs are
     keep = is_row.take(line_of)
     if inline_comments:
         keep &= where < code_end.take(line_of)
@@ -565,8 +564,6 @@ def scan(padded: bytes) -> Scan | None:
             suspect = min(suspect, *(int(first_odd[0]) for first_odd in odd_lines if len(first_odd)))
     if not known.all():
         axis, line_of, numbers, where = axis[known], line_of[known], numbers[known], where[known]
-    if arcs.any() and arcs[line_of[axis == _TURNS_INDEX]].any():
-        return None  # an arc's full turns (P) are read line by line
     unread = np.flatnonzero(axis >= read)
     if len(unread):  # letters not kept (rare on moves) are only checked: the line reader refuses a repeated one
         named = line_of[unread] * len(_LETTERS) + axis[unread]

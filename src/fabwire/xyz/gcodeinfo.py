@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from fabwire.xyz import gcodearrays, motion, slicerfigures
+from fabwire.xyz import arcwork, gcodearrays, motion, slicerfigures
 from fabwire.xyz.gcodearrays import (
     CENTRELESS,
     INCHES,
@@ -167,13 +167,18 @@ MOST_TURNS = 100
 """Full turns an arc's P may ask for: Marlin's ARC_P_CIRCLES range (G2_G3.cpp, WITHIN(circles_to_do, 0, 100))."""
 
 
-def arc_turns(words: dict[bytes, float]) -> int:
-    """The full turns (P) a G2/G3 makes before its arc, 0 without P; `gcodearrays.Ambiguous` (TURNS) for a P that
-    is not a whole number from 0 to MOST_TURNS."""
-    turns = words.get(b"P", 0.0)
-    if not (0 <= turns <= MOST_TURNS and turns == int(turns)):
+def full_turns(given: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The full turns (P) G2/G3 arcs make before their arcs, 0 where P is not given (NaN); `gcodearrays.Ambiguous`
+    (TURNS) for a P that is not a whole number from 0 to MOST_TURNS."""
+    turns: NDArray[np.float64] = np.where(np.isnan(given), 0.0, given)
+    if not ((turns >= 0) & (turns <= MOST_TURNS) & (turns == np.floor(turns))).all():
         raise Ambiguous(TURNS)
-    return int(turns)
+    return turns
+
+
+def arc_turns(words: dict[bytes, float]) -> int:
+    """`full_turns` of one arc's words."""
+    return int(full_turns(np.array([words.get(b"P", math.nan)]))[0])
 
 
 def centreless(x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.float64], y1: NDArray[np.float64],
@@ -298,6 +303,15 @@ def _ambiguous_at(piece: bytes, found: Ambiguous) -> int:
     return found.offset
 
 
+class ArcGrowth(Exception):
+    """The G2/G3 arcs read so far would become more bytes of segments than `MoveAnalyzer`'s `arc_room`; `arc` is
+    the one (counted from 1 among the file's arcs) that went past it."""
+
+    def __init__(self, arc: int) -> None:
+        super().__init__(arc)
+        self.arc = arc
+
+
 class MoveAnalyzer:
     """Computes print time, net filament and layer count from the moves, fed line-aligned chunks in order.
 
@@ -308,10 +322,14 @@ class MoveAnalyzer:
     line-by-line path.
     """
 
-    def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None) -> None:
+    def __init__(self, *, timing: bool = True, g0_words: list[NDArray[np.intp] | None] | None = None,
+                 arc_room: float = math.inf, positions_only: bool = False) -> None:
         """`timing=False` skips planning the moves' time (when the file states it): `seconds` is then the
         path over feed rate only. `g0_words` collects, per chunk fed, the offsets of the `0` of its G0 and G00
-        command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads."""
+        command words (see `gcodearrays.Scan.g0_at`), or None for a chunk with lines only the line reader reads.
+        `arc_room`: the bytes of G1 segments the arcs may become (`arcwork.lines_size` bounds each arc's); the arc
+        that takes them past it raises ArcGrowth as soon as it is read. `positions_only`: the line reader follows
+        where G2/G3 arcs end and nothing more (not their length, reach or segments; nor their checks)."""
         self.timing = timing
         self.g0_words = g0_words
         self.pos = [0.0, 0.0, 0.0]
@@ -330,6 +348,13 @@ class MoveAnalyzer:
         """How far extruding moves rose while they moved (mm): spiral vase printing."""
         self.markers = [0] * len(LAYER_MARKERS)
         self.arcs = 0
+        self.arc_room = arc_room
+        self.positions_only = positions_only
+        self.arc_segments = 0
+        """The G1 segments the arcs read so far become (`motion.arc_segment_counts`, as `arcwork.segments`)."""
+        self.arc_bytes = 0.0
+        """Bytes at most those segments take as G1 lines (`arcwork.lines_size`)."""
+        self._bounded = 0
         self.low = [math.inf] * 3
         self.high = [-math.inf] * 3
         """The extent (mm, per axis) the moves reach, as `REACH` counts it."""
@@ -453,7 +478,7 @@ class MoveAnalyzer:
             elif axis == b"F" and number > 0:
                 self.feed = number
         dx, dy, dz, de = target_x - x, target_y - y, target_z - z, target_e - e
-        if arc:
+        if arc and not self.positions_only:
             self.arcs += 1
             nan = math.nan
             x0, y0, x1, y1, i, j, r = (np.array([v]) for v in (
@@ -461,16 +486,13 @@ class MoveAnalyzer:
             malformed = gcodearrays.MALFORMED.search(_code(params)) is not None  # the number's refusal comes first
             if centreless(x0, y0, x1, y1, i, j, r)[0] and not malformed:
                 raise Ambiguous(CENTRELESS)
-            turns = arc_turns(words) if not malformed else 0
+            turns = full_turns(np.array([words.get(b"P", nan)])) if not malformed else np.zeros(1)
             clockwise = np.array([arc == 2])
-            flat = float(motion.arc_lengths(x0, y0, x1, y1, i, j, r, clockwise)[0])
-            if any(letter in words for letter in (b"I", b"J", b"R")):  # else its end points, as a straight move
-                self._widen_arcs(arc_box(x0, y0, x1, y1, i, j, r, clockwise))
-                if turns:  # whole circles first: around the start's circle
-                    cx, cy = ((x0 + np.nan_to_num(i), y0 + np.nan_to_num(j)) if b"I" in words or b"J" in words
-                              else motion.radius_centre(x0, y0, x1, y1, r, clockwise))
-                    self._widen_arcs(arc_box(x0, y0, x0, y0, cx - x0, cy - y0, r, clockwise))
-                    flat += turns * 2 * math.pi * float(np.hypot(x0 - cx, y0 - cy)[0])
+            paths = self._bound_arcs((x0, y0, x1, y1, i, j, r), clockwise, turns,
+                                     (np.array([z]), np.array([target_z])), (np.array([e]), np.array([target_e])),
+                                     np.array([words.get(b"F", nan)]))
+            with_centre = np.array([any(letter in words for letter in (b"I", b"J", b"R"))])
+            flat = float(self._arc_path(x0, y0, x1, y1, (i, j, r), clockwise, turns, with_centre, paths)[0])
             length = math.sqrt(flat * flat + dz * dz)
         else:
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -621,28 +643,67 @@ class MoveAnalyzer:
         dx, dy, dz = moves[:3]
         rows = np.flatnonzero(arc)
         ends = []
-        for k in range(2):  # the position after each line
+        for k in range(4):  # the position after each line
             at = np.full(count, np.nan)
             at[axes[k].lines - first] = after[k]
-            ends.append(_ffill(at, self.pos[k]))
-        end_x, end_y = ends
+            ends.append(_ffill(at, self.pos[k] if k < 3 else self.e)[rows])
+        end_x, end_y, end_z, end_e = ends
         offsets = []
-        for words in axes[5:8]:
+        for words in (*axes[5:9], axes[4]):
             value = np.full(count, np.nan)
             value[words.lines - first] = words.values
             offsets.append(value[rows])
-        i, j, r = offsets
-        x0, y0, x1, y1 = end_x[rows] - dx[rows], end_y[rows] - dy[rows], end_x[rows], end_y[rows]
+        i, j, r, given_turns, feed = offsets
+        x0, y0, x1, y1 = end_x - dx[rows], end_y - dy[rows], end_x, end_y
         if centreless(x0, y0, x1, y1, i, j, r).any():
             raise Ambiguous(CENTRELESS)
-        flat = motion.arc_lengths(x0, y0, x1, y1, i, j, r, arc[rows] == 2)
-        boxed = centred[rows]
-        if boxed.any():
-            self._widen_arcs(arc_box(x0[boxed], y0[boxed], x1[boxed], y1[boxed], i[boxed], j[boxed], r[boxed],
-                                     arc[rows][boxed] == 2))
+        turns = full_turns(given_turns)
+        clockwise = arc[rows] == 2
+        paths = self._bound_arcs((x0, y0, x1, y1, i, j, r), clockwise, turns, (end_z - moves[2][rows], end_z),
+                                 (end_e - moves[3][rows], end_e), feed)
+        flat = self._arc_path(x0, y0, x1, y1, (i, j, r), clockwise, turns, centred[rows], paths)
         out = length.copy()
         out[rows] = np.sqrt(flat * flat + dz[rows] * dz[rows])
         return out
+
+    def _arc_path(self, x0: NDArray[np.float64], y0: NDArray[np.float64], x1: NDArray[np.float64],
+                  y1: NDArray[np.float64], centre: tuple[NDArray[np.float64], ...], clockwise: NDArray[np.bool_],
+                  turns: NDArray[np.float64], centred: NDArray[np.bool_],
+                  paths: tuple[NDArray[np.float64], ...]) -> NDArray[np.float64]:
+        """The XY path lengths of arcs with (I, J, R) `centre` words and `turns` (`motion.arc_paths` gave
+        `paths`); the `centred` ones (with I, J or R) widen the extent by their whole arc and, with full turns, by
+        the start's circle (`REACH`), the others count by their end points, as a straight move."""
+        i, j, r = centre
+        flat = motion.arc_lengths(x0, y0, x1, y1, i, j, r, clockwise)
+        if centred.any():
+            self._widen_arcs(arc_box(x0[centred], y0[centred], x1[centred], y1[centred], i[centred], j[centred],
+                                     r[centred], clockwise[centred]))
+            full = centred & (turns > 0)
+            if full.any():  # whole circles first: around the start's circle
+                cx, cy, radius = paths[:3]
+                self._widen_arcs(arc_box(x0[full], y0[full], x0[full], y0[full], cx[full] - x0[full],
+                                         cy[full] - y0[full], r[full], clockwise[full]))
+                flat = np.where(full, flat + turns * 2 * math.pi * radius, flat)
+        return flat
+
+    def _bound_arcs(self, ends: tuple[NDArray[np.float64], ...], clockwise: NDArray[np.bool_],
+                    turns: NDArray[np.float64], z: tuple[NDArray[np.float64], NDArray[np.float64]],
+                    e: tuple[NDArray[np.float64], NDArray[np.float64]],
+                    feed: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """Count the segments of arcs with these (x0, y0, x1, y1, I, J, R) `ends`, Z and E (start, end) and F
+        (NaN where not given), and bound their bytes; ArcGrowth when they go past `arc_room`. Their
+        `motion.arc_paths`."""
+        x0, y0, x1, y1, i, j, r = ends
+        paths = motion.arc_paths(x0, y0, x1, y1, i, j, r, clockwise, turns)
+        counts = motion.arc_segment_counts(paths[2], paths[4])
+        sizes = np.cumsum(arcwork.lines_size(paths, counts, x1, y1, z, e, feed, absolute=self.absolute,
+                                             absolute_e=self.absolute_e))
+        if self.arc_bytes + sizes[-1] > self.arc_room:
+            raise ArcGrowth(self._bounded + int(np.searchsorted(sizes, self.arc_room - self.arc_bytes, "right")) + 1)
+        self.arc_segments += int(counts.sum())
+        self.arc_bytes += float(sizes[-1])
+        self._bounded += len(counts)
+        return paths
 
     def _widen_arcs(self, box: tuple[NDArray[np.float64], ...]) -> None:
         """Widen the X and Y extent with arcs' bounding boxes (`arc_box`)."""

@@ -14,6 +14,7 @@ import binascii
 import contextlib
 import enum
 import functools
+import math
 import os
 import re
 import tempfile
@@ -617,14 +618,15 @@ def prepare(src: BinaryIO, name: str, model: PrinterModel, filename: str, header
 
     `repair` drops NUL bytes inside the G-code (noted) instead of refusing the file; extrusions beyond the model's
     build volume are an InputError unless `force` (then noted); G2/G3 arcs become line segments unless
-    `keep_arcs`."""
+    `keep_arcs`, and a G-code whose arcs would become more than `arcwork.growth_room` bytes of segments is refused
+    at the arc that passes it while the moves are read (`arcwork.TooMuchGrowth`), before anything is written."""
     from fabwire.xyz import arcwork
     from fabwire.xyz.gcodeinfo import finish
 
     head, total = check_gcode_head(src, name)
     g0_words: list[NDArray[np.intp] | None] = []
     stated, computed = _metadata(src, name, head, total, _first_half(progress), repair=repair, always=True,
-                                 g0_words=g0_words)
+                                 g0_words=g0_words, arcs_grow=not keep_arcs)
     outside = check_build_volume(stated.merged(computed) if computed else stated, name, model, force)
     meta = finish(stated, computed)
     safe_name = re.sub(r"[\r\n]", "", filename) or "temp.3w"
@@ -663,17 +665,21 @@ def _tail(src: BinaryIO, total: int) -> bytes:
 
 def _metadata(
     src: BinaryIO, name: str, head: bytes, total: int, progress: Progress | None = None, *, repair: bool = False,
-    always: bool = False, g0_words: list[NDArray[np.intp] | None] | None = None,
+    always: bool = False, g0_words: list[NDArray[np.intp] | None] | None = None, arcs_grow: bool = False,
 ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """(what the slicer's comments state and are believed, what the moves say when the comments leave gaps or
-    `always`); `g0_words` collects where the G0 command words are (see `MoveAnalyzer`) when the moves are read."""
+    `always`); `g0_words` collects where the G0 command words are (see `MoveAnalyzer`) when the moves are read.
+    `arcs_grow`: the arcs will become segments, and the arc whose segments take the file past
+    `arcwork.growth_room` is refused as soon as the moves reach it (`arcwork.too_much_growth`)."""
+    from fabwire.xyz import arcwork
     from fabwire.xyz.gcodearrays import Ambiguous, line_count
-    from fabwire.xyz.gcodeinfo import MoveAnalyzer, header_metadata
+    from fabwire.xyz.gcodeinfo import ArcGrowth, MoveAnalyzer, header_metadata
 
     stated = header_metadata(head[:HEAD_WINDOW], _tail(src, total))
     if stated.complete and not always:
         return stated, None
-    analyzer = MoveAnalyzer(timing=stated.print_time_s is None, g0_words=g0_words)  # a stated time: no planning
+    analyzer = MoveAnalyzer(timing=stated.print_time_s is None, g0_words=g0_words,  # a stated time: no planning
+                            arc_room=arcwork.growth_room(total) if arcs_grow else math.inf)
     odd: list[tuple[int, int]] = []
     lines = 0
     for chunk in gcode_lines(src, name, progress, total, end=total, repaired=[] if repair else None, odd=odd):
@@ -682,6 +688,8 @@ def _metadata(
         except Ambiguous as exc:
             raise ambiguous_line(name, lines + chunk.count(b"\n", 0, exc.offset) + 1,
                                  chunk[exc.offset:chunk.find(b"\n", exc.offset)], exc.rule) from None
+        except ArcGrowth as exc:
+            raise arcwork.too_much_growth(name, exc.arc) from None
         lines += line_count(chunk)
     if analyzer.absurd:
         raise InputError(f"{name}: its moves go further than a number can hold, far beyond any printer's reach; "
@@ -736,16 +744,17 @@ def gcode_metadata(path: Path) -> tuple[GcodeMetadata, GcodeMetadata | None]:
         return stream_metadata(src, str(path))
 
 
-def stream_metadata(src: BinaryIO, name: str, *, every_line: bool = True,
+def stream_metadata(src: BinaryIO, name: str, *, every_line: bool = True, arcs_grow: bool = False,
                     ) -> tuple[GcodeMetadata, GcodeMetadata | None]:
     """`gcode_metadata` for an open G-code stream named `name` in messages; InputError for figures no print has,
     for lines no printer reads and for NUL bytes inside the G-code (NUL padding at its end is dropped, noted).
     `every_line=False`: only the lines read for the figures are checked, when the caller has the whole file
-    checked anyway."""
+    checked anyway. `arcs_grow` (with `every_line`): arcs that would grow the file too much as segments are
+    refused as a conversion refuses them (`arcwork.TooMuchGrowth`)."""
     head, total = check_gcode_head(src, name)
-    stated, computed = _metadata(src, name, head, total)
+    stated, computed = _metadata(src, name, head, total, arcs_grow=arcs_grow)
     if computed is None and every_line:  # the comments told everything: the lines are still each checked, as a
-        _metadata(src, name, head, total, always=True)  # conversion checks them (the moves read, not planned)
+        _metadata(src, name, head, total, always=True, arcs_grow=arcs_grow)  # conversion checks them
     padding = padding_note(name, stream_size(src), total)
     return (replace(stated, notes=(*stated.notes, padding)) if padding else stated), computed
 

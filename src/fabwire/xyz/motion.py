@@ -114,6 +114,46 @@ def radius_centre(x0: Floats, y0: Floats, x1: Floats, y1: Floats, r: Floats,
         return (x0 + x1) / 2 - side * (dy / chord), (y0 + y1) / 2 + side * (dx / chord)
 
 
+ARC_TOLERANCE_MM = 0.01
+"""Largest distance between a straight segment and the arc it stands for (`arc_segment_counts`)."""
+ARC_MOST_SEGMENTS = 4096
+"""Segments of a full circle at most, whatever its radius (within the tolerance up to a radius of 30 m)."""
+
+
+def arc_paths(x0: Floats, y0: Floats, x1: Floats, y1: Floats, i: Floats, j: Floats, r: Floats,
+              clockwise: NDArray[np.bool_], turns: Floats) -> tuple[Floats, Floats, Floats, Floats, Floats]:
+    """(centre X, centre Y, radius in mm, start angle, sweep in radians) of G2 (clockwise) / G3 arcs from (x0, y0)
+    to (x1, y1) with centre offsets I, J from the start or radius R (NaN when not given; I or J wins over R), after
+    `turns` full turns (P), as Marlin's plan_arc runs them: the sweep is from the start's angle to the end's around
+    the centre, a whole turn where the end comes back to the start. NaN where the arc has no centre (none of I, J
+    and R, or an R arc that ends where it starts: `radius_centre`)."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        by_offsets = ~(np.isnan(i) & np.isnan(j))
+        rx, ry = radius_centre(x0, y0, x1, y1, r, clockwise)
+        cx = np.where(by_offsets, x0 + np.where(np.isnan(i), 0.0, i), rx)
+        cy = np.where(by_offsets, y0 + np.where(np.isnan(j), 0.0, j), ry)
+        radius = np.hypot(x0 - cx, y0 - cy)
+        begin, end = np.arctan2(y0 - cy, x0 - cx), np.arctan2(y1 - cy, x1 - cx)
+        sweep = np.where(clockwise, begin - end, end - begin) % (2 * math.pi)
+        sweep = np.where(sweep < 1e-9, 2 * math.pi, sweep) + turns * (2 * math.pi)
+    return cx, cy, radius, begin, sweep
+
+
+def arc_segment_counts(radius: Floats, sweep: Floats) -> NDArray[np.int64]:
+    """How many equal chords cover arcs of `radius` (mm) and `sweep` (radians) with none further than
+    ARC_TOLERANCE_MM from its arc (the chord of angle 2 acos(1 - tolerance / radius); a half turn each for a
+    radius within the tolerance), at most ARC_MOST_SEGMENTS per full turn and at least one; 0 where the radius
+    or sweep is not a finite number (an arc without a centre)."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        step = np.where(radius > ARC_TOLERANCE_MM,
+                        2 * np.arccos(np.maximum(-1.0, 1 - ARC_TOLERANCE_MM / radius)), math.pi)
+        step = np.maximum(step, 2 * math.pi / ARC_MOST_SEGMENTS)
+        count = np.maximum(1.0, np.ceil(sweep / step))
+        finite = np.isfinite(radius) & np.isfinite(sweep)
+    counts: NDArray[np.int64] = np.where(finite, count, 0.0).astype(np.int64)
+    return counts
+
+
 def arc_lengths(x0: Floats, y0: Floats, x1: Floats, y1: Floats, i: Floats, j: Floats, r: Floats,
                 clockwise: NDArray[np.bool_]) -> Floats:
     """Lengths in the XY plane of G2 (clockwise) / G3 arcs from (x0, y0) to (x1, y1), centre at offset (I, J) from

@@ -217,7 +217,7 @@ def info(ctx: click.Context, file: Path) -> None:
         table.add_row("model", f"{model.name} ({model.model_number})" if model
                       else f"unknown (machine {details.machine!r})")
         table.add_row("print time", units.duration(details.print_time_s))
-        table.add_row("filament", "?" if details.filament_mm is None else f"{details.filament_mm:.2f} mm")
+        table.add_row("filament", "?" if details.filament_mm is None else units.filament(details.filament_mm))
         table.add_row("layers", str(details.layers) if details.layers is not None else "?")
         for key, value in details.fields.items():
             if key not in {"print_time", "total_filament", "total_layers", "machine"}:

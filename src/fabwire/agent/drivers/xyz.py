@@ -116,14 +116,22 @@ class XYZDriver(Driver):
     def describe_upload(self, name: str, path: Path, *, check: bool = True) -> dict[str, Any]:
         """`check_upload`, and the figures the intake reads for the .3w header (a G-code's comments, or its
         moves where the comments are silent); with `check` False, only what the figures need is read. With
-        `check`, a G-code that extrudes beyond the connected model's build volume is refused (InputError) as
-        `fabwire xyz print` refuses it, so the refusal is the answer to the upload or to the start."""
+        `check`, a G-code that extrudes beyond the connected model's build volume, or whose arcs would grow it too
+        much as segments, is refused (InputError) as `fabwire xyz print` refuses it, so the refusal is the answer
+        to the upload or to the start."""
         kind, head = intake.sniff(path, name)
         intake.require_printable(kind, name, head)
         if kind is intake.Kind.GCODE:  # every line, and figures no print has, as `xyz print` checks them
             model = self._last[0].model if self._last is not None and check else None
             with intake.open_input(path, name) as source:
-                stated, computed = intake.stream_metadata(source, name, every_line=check)
+                try:  # arcs the print's conversion would refuse are refused now, in words for an API user
+                    stated, computed = intake.stream_metadata(source, name, every_line=check, arcs_grow=check)
+                except InputError as exc:
+                    from fabwire.xyz import arcwork  # (loaded by the reading already: numpy waits for G-code)
+
+                    if not isinstance(exc, arcwork.TooMuchGrowth):
+                        raise
+                    raise arcwork.too_much_growth(name, exc.arc, "slice it with arcs off and send it again") from None
                 meta = stated.merged(computed) if computed is not None else stated
                 if model is not None:  # as `xyz print` refuses it, in words for an API user
                     reach = meta
