@@ -52,15 +52,18 @@ NAME_CHARACTERS = "letters, digits, '.', '_' and '-', starting with a letter or 
 FILE_NAME_MAX = 200
 """The longest library name of an upload (folders included): ext4's 255-byte name limit in UTF-8 with room for the
 library's own suffixes."""
-FILE_RESERVED = re.compile(r"[\x00-\x1f\x7f\\:*?\"<>|]")
-"""Control characters and the characters Windows reserves in a file name (a library is copied off to any system)."""
-FILE_HIDDEN = re.compile(r"[\x80-\x9f\u00ad\u061c\u180e\u200b\u200e\u200f\u2028-\u202e\u2060-\u2064\u2066-\u2069\ufeff"
-                         r"\ud800-\udfff]")
-"""Characters that hide or reorder what a file name shows: C1 controls, the soft hyphen, the bidirectional controls
-(marks, embeddings, overrides, isolates) that make `gcode.exe` read as `exe.gcode`, invisible format characters
-(zero-width space, word joiner, invisible operators, byte order mark), line and paragraph separators, and lone
-surrogates (undecodable bytes). Zero-width (non-)joiners are kept: Persian, Indic scripts and emoji spell words
-with them."""
+FILE_RESERVED = re.compile(r"[\\:*?\"<>|]")
+"""The characters Windows reserves in a file name (a library is copied off to any system)."""
+FILE_HIDDEN = re.compile(r"[\x00-\x1f\x7f-\x9f\u00ad\u034f\u061c\u115f\u1160\u180e\u200b\u200e\u200f\u2028-\u202e"
+                         r"\u2060-\u206f\u2800\u3164\ufeff\uffa0\ufff9-\ufffb\ud800-\udfff\U0001d173-\U0001d17a"
+                         r"\U000e0000-\U000e007f]")
+"""Characters that hide or change what a file name shows: C0 and C1 controls (a terminal's escape sequences, line
+breaks, NUL), the soft hyphen, the combining grapheme joiner, the bidirectional controls (marks, embeddings,
+overrides, isolates) that make `gcode.exe` read as `exe.gcode`, invisible format characters (zero-width space, word
+joiner, invisible operators, the deprecated format characters U+206A-206F, byte order mark, interlinear annotation,
+musical formatting, tags), blanks that look like nothing (Hangul fillers, braille blank), line and paragraph
+separators, and lone surrogates (undecodable bytes). Zero-width (non-)joiners and variation selectors are kept:
+Persian, Indic scripts and emoji are spelt with them."""
 
 RULES: dict[str, Rule] = {
     # ------------------------------------------------------------------------------------------ address forms
@@ -155,14 +158,14 @@ RULES: dict[str, Rule] = {
     # ------------------------------------------------------------------------------------------ uploaded file names
     "file-empty": Rule("file", "an upload without a file name", "the upload has no file name",
                        "RFC 7578 §4.2: a file part names its file in Content-Disposition's filename"),
-    "file-part": Rule("file", "a '.' or '..' folder, a control or Windows-reserved character (\\ : * ? \" < > |), "
-                              "blanks at either end of a part",
+    "file-part": Rule("file", "a '.' or '..' folder, a Windows-reserved character (\\ : * ? \" < > |), blanks at "
+                              "either end of a part",
                       "{part} is not a usable file or folder name",
                       "POSIX path resolution (IEEE Std 1003.1-2017 §4.13: '.' and '..'); Microsoft, \"Naming Files, "
                       "Paths, and Namespaces\" (reserved characters, names ending in a space)"),
-    "file-hidden": Rule("file", "a character that hides or reorders what the name shows (U+202E right-to-left "
-                                "override, U+200B zero-width space, U+FEFF)",
-                        "the file name holds {char}, which hides or reorders what the name shows: rename the file",
+    "file-hidden": Rule("file", "a character that hides or changes what the name shows (a control character, "
+                                "U+202E right-to-left override, U+200B zero-width space, U+FEFF)",
+                        "the file name holds {char}, which hides or changes what the name shows: rename the file",
                         "Unicode UAX #9 (Bidi_Control characters), CVE-2021-42574 (\"Trojan Source\"), Unicode "
                         "UTS #39 §3.3 (default-ignorable characters in identifiers)"),
     "file-length": Rule("file", f"a name longer than {FILE_NAME_MAX} characters with its folders",

@@ -1,4 +1,4 @@
-"""Upload names through every door of a real `fabwire serve`: a name holding a character that hides or reorders
+"""Upload names through every door of a real `fabwire serve`: a name holding a character that hides or changes
 what it shows (rule `file-hidden` of `fabwire.checks.RULES`) is refused with 400 and the rule's words before the
 machine is claimed, whichever door it came in by; names in any script are taken as written."""
 
@@ -17,8 +17,10 @@ from .doortools import multipart
 
 PRINTER = "p:xyz=sim://xyz?speed=30"
 GCODE = b"G28\nG1 X10 Y10 Z0.2 F1200\nG1 X20 Y10 E1\nM84\n"
-HIDDEN = ["part\u202e.gcode", "\u2067part.gcode", "part\u200b.gcode", "\ufeffpart.gcode", "part\u2028.gcode"]
-"""Right-to-left override, right-to-left isolate, zero-width space, byte order mark, line separator."""
+HIDDEN = ["part\u202e.gcode", "\u2067part.gcode", "part\u200b.gcode", "\ufeffpart.gcode", "part\u2028.gcode",
+          "a\x1b[31mred\x07.gcode", "fake\x08\x0bline.gcode", "tag\U000e0041.gcode", "filler\u3164.gcode"]
+"""Right-to-left override, right-to-left isolate, zero-width space, byte order mark, line separator, a terminal's
+escape sequence and bell, a backspace and a vertical tab, a tag character, a Hangul filler."""
 DOORS = ["native", "octoprint", "moonraker"]
 
 
@@ -59,7 +61,7 @@ def test_a_name_that_hides_what_it_shows_is_refused_at_every_door(agent: Running
     with agent.client() as client:
         refused = upload(client, door, device, name)
         assert refused.status_code == 400, refused.text
-        assert "which hides or reorders what the name shows" in words(refused)
+        assert "which hides or changes what the name shows" in words(refused)
         assert RULES["file-hidden"].why.split("{char}")[1].strip() in words(refused)
         listed = client.get("/api/files/local").json()
         assert all(name not in str(entry) for entry in listed.get("files", [])), listed

@@ -83,19 +83,21 @@ SETTING_CASES: dict[str, list[tuple[str, str]]] = {
 }
 FILE_CASES: dict[str, list[tuple[str, str]]] = {
     "file-empty": [("", ""), ("  ", "/")],
-    "file-part": [("..", ""), ("a.gcode", "../up"), ("C:\\part.gcode", ""), ("a|b.gcode", ""), ("ok.gcode", "x\x00y"),
-                  ("ok.gcode", "trailing /")],
+    "file-part": [("..", ""), ("a.gcode", "../up"), ("C:\\part.gcode", ""), ("a|b.gcode", ""), ("ok.gcode", "x:y"),
+                  ("ok.gcode", "trailing /"), ("part.gcode\u00a0", "")],
     "file-hidden": [("\u202e" + "edocg.exe", ""), ("part\u200b.gcode", ""), ("\ufeffpart.gcode", ""),
                     ("part.gcode", "\u2066folder\u2069"), ("soft\u00adhyphen.gcode", ""), ("line\u2028break.gcode", ""),
                     ("c1\x85.gcode", ""), ("mark\u200f.gcode", ""), ("arabic\u061c.gcode", ""),
-                    ("undecoded\udcff.gcode", "")],
+                    ("undecoded\udcff.gcode", ""), ("esc\x1b[2J.gcode", ""), ("nul\x00.gcode", ""),
+                    ("tag\U000e0001.gcode", ""), ("filler\u115f.gcode", ""), ("ok.gcode", "x\x00y")],
     "file-length": [("x" * 201, ""), ("b.gcode", "f" * 195)],
 }
 """Upload names (file, folder) each `file-*` rule refuses."""
 PLAIN_NAMES = [("\u0645\u06cc\u200c\u062e\u0648\u0627\u0647\u0645.gcode", ""), ("\U0001f468\u200d\U0001f373.gcode", ""),
-               ("\u6a21\u578b\u3000\uff11.gcode", ""), ("caf\u00e9.gcode", "projects/2026")]
-"""Names kept as they are: Persian and emoji spell with the zero-width (non-)joiner, CJK names hold ideographic
-spaces."""
+               ("\u6a21\u578b\u3000\uff11.gcode", ""), ("caf\u00e9.gcode", "projects/2026"),
+               ("heart\u2764\ufe0f.gcode", "")]
+"""Names kept as they are: Persian and emoji spell with the zero-width (non-)joiner and variation selectors, CJK
+names hold ideographic spaces."""
 ADDRESS_ROWS = [(code, kind, address) for code, cases in ADDRESS_CASES.items() for kind, address in cases]
 MAX_LINE = 300
 """A refusal's line, however long the input: short enough to read on one terminal line or two."""

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 from fabwire.agent.model import Machines, MachineView, TakesNoJobs
 from fabwire.agent.offload import in_thread
-from fabwire.checks import FILE_HIDDEN, FILE_NAME_MAX, FILE_RESERVED, refuse
+from fabwire.checks import ASCII_BLANKS, FILE_HIDDEN, FILE_NAME_MAX, FILE_RESERVED, refuse
 from fabwire.errors import InputError, excerpt
 from fabwire.thumbnails import read_thumbnails
 
@@ -85,7 +85,7 @@ class FileNotInLibrary(InputError):
 
 
 def require_plain_name(name: str) -> None:
-    """InputError (rule `file-hidden`) when an upload's name holds a character that hides or reorders what it
+    """InputError (rule `file-hidden`) when an upload's name holds a character that hides or changes what it
     shows; every door's uploads are named to the owner (jobs, history, the dashboard), whether kept or not."""
     hidden = FILE_HIDDEN.search(name)
     if hidden:
@@ -96,14 +96,15 @@ def require_plain_name(name: str) -> None:
 def clean_name(name: str, folder: str = "") -> str:
     """The library name of an upload: `folder/name` with `/` separators, no empty, `.` or `..` parts, no
     control, reserved or hidden characters (the `file-*` rows of `fabwire.checks.RULES`); InputError otherwise."""
-    parts = [p for p in f"{folder.strip().strip('/')}/{name.strip()}".split("/") if p.strip()]
+    require_plain_name(f"{folder}/{name}")  # first: a control character is named as such, not as a bad part
+    blanks = ASCII_BLANKS  # only what a terminal's copy brings: other blanks are refused, not taken off
+    parts = [p for p in f"{folder.strip(blanks).strip('/')}/{name.strip(blanks)}".split("/") if p.strip()]
     if not parts:
         raise refuse("file-empty")
     for part in parts:
         if part in (".", "..") or FILE_RESERVED.search(part) or part != part.strip():
             raise refuse("file-part", part=excerpt(part, 60))
     joined = "/".join(parts)
-    require_plain_name(joined)
     if len(joined) > NAME_MAX:
         raise refuse("file-length", length=len(joined))
     return joined
