@@ -405,3 +405,53 @@ def test_convert_and_info_show_filament_alike(tmp_path: Path, filament_mm: float
                for line in described.stdout.splitlines())
     as_json = json.loads(run_cli("xyz", "info", str(out), "--json", env=cli_env(tmp_path)).stdout)
     assert as_json["filament_mm"] == pytest.approx(filament_mm)
+
+
+def test_a_pipe_given_as_a_file_is_read_like_standard_input(tmp_path: Path) -> None:
+    """A named pipe (as a shell's `<(…)` gives) and a /proc file cannot be read twice or sought in: they are copied
+    first, and every message names them, never the copy."""
+    fifo = tmp_path / "piped.gcode"
+    os.mkfifo(fifo)
+    writer = subprocess.Popen([sys.executable, "-c", f"open({str(fifo)!r}, 'wb').write({TV_INPUT!r})"])
+    try:
+        done = run_cli("xyz", "convert", str(fifo), str(tmp_path / "out.3w"), env=cli_env())
+    finally:
+        writer.wait(30)
+    assert done.returncode == 0, done.stderr
+    assert read_3w(tmp_path / "out.3w").gcode
+    proc = run_cli("xyz", "info", "/proc/self/status", env=cli_env())
+    assert proc.returncode == 4
+    assert proc.stderr.startswith("fabwire: error: /proc/self/status is text, not G-code"), proc.stderr
+    made = (tmp_path / "out.3w").read_bytes()
+    for args in (("xyz", "info", "-"), ("xyz", "convert", "-", str(tmp_path / "back.gcode"))):
+        cut = _piped(*args, data=made[:100])
+        assert cut.returncode == 4
+        assert cut.stderr.decode().strip() == ("fabwire: error: standard input is truncated: 100 bytes, a .3w has at "
+                                               "least 8208")
+
+
+def test_an_output_not_named_is_never_put_over_a_file_that_appears_meanwhile(tmp_path: Path) -> None:
+    """Without DST the output is linked into place, so a file that took the name while converting (another run,
+    another program) is kept and the conversion is refused; nothing is left behind."""
+    from fabwire.xyz.threew import convert_3w_to_gcode, convert_gcode_file
+
+    src = tmp_path / "part.gcode"
+    src.write_bytes(TV_INPUT)
+    appeared = tmp_path / "part.3w"
+    appeared.write_bytes(b"someone else's")
+    with pytest.raises(InputError, match="part.3w exists already"):
+        convert_gcode_file(src, appeared, replace=False)
+    assert appeared.read_bytes() == b"someone else's"
+    made = tmp_path / "made.3w"
+    convert_gcode_file(src, made, replace=False)
+    back = tmp_path / "back.gcode"
+    back.write_bytes(b"mine")
+    with pytest.raises(InputError, match="back.gcode exists already"):
+        convert_3w_to_gcode(made, back, replace=False)
+    assert back.read_bytes() == b"mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["back.gcode", "made.3w", "part.3w", "part.gcode"]
+    long_name = tmp_path / ("a" * 253 + ".g")
+    long_name.write_bytes(TV_INPUT)
+    too_long = run_cli("xyz", "convert", str(long_name), env=cli_env())
+    assert too_long.returncode == 4
+    assert too_long.stderr.strip().endswith(".3w: File name too long"), too_long.stderr

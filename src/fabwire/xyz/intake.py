@@ -17,6 +17,7 @@ import functools
 import math
 import os
 import re
+import stat
 import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -25,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
 from fabwire import units
-from fabwire.errors import InputError, excerpt
+from fabwire.errors import FabwireError, InputError, excerpt
 from fabwire.xyz.models import PrinterModel
 
 if TYPE_CHECKING:  # the move analysis (numpy) is loaded when G-code is read, not to decode a .3w
@@ -194,35 +195,54 @@ STDIN = "-"
 """The file name that means standard input."""
 STDIN_NAME = "standard input"
 MAX_STDIN = 1 << 30
-"""Most bytes taken from standard input, spooled to a temporary file: a pipe may never end, and the print files
-slicers write for these machines' build volumes are tens of megabytes (the agent takes 64 MB by default)."""
+"""Most bytes taken from standard input or a pipe, spooled to a temporary file: a pipe may never end, and the print
+files slicers write for these machines' build volumes are tens of megabytes (the agent takes 64 MB by default)."""
 
 
 @contextlib.contextmanager
 def input_file(path: Path) -> Iterator[tuple[Path, str]]:
-    """(a file to read, its name for messages): `path` itself, or for `-` standard input copied in CHUNK pieces to
-    a temporary file, so a piped G-code or .3w is read like any other file with memory bounded by CHUNK."""
-    if str(path) != STDIN:
-        yield path, str(path)
-        return
+    """(a file to read, its name for messages): `path` itself, or for `-` (standard input) and anything that is no
+    file to read twice (a pipe, `<(…)`, a device, /proc) its content copied in CHUNK pieces to a temporary file, so
+    it is read like any other file with memory bounded by CHUNK."""
     import sys
 
+    name = STDIN_NAME if str(path) == STDIN else str(path)
+    if name != STDIN_NAME and _rereadable(path):
+        yield path, name
+        return
     with tempfile.TemporaryDirectory() as scratch:
-        spooled = Path(scratch) / "stdin"
+        spooled = Path(scratch) / ("stdin" if name == STDIN_NAME else path.name or "input")  # a printer's file name
         try:
-            with spooled.open("wb") as out:
-                while block := sys.stdin.buffer.read(CHUNK):
+            with contextlib.ExitStack() as stack:
+                src = sys.stdin.buffer if name == STDIN_NAME else stack.enter_context(open_input(path, name))
+                out = stack.enter_context(spooled.open("wb"))
+                while block := src.read(CHUNK):
                     if not out.tell():
-                        _judge_first_block(block)
+                        _judge_first_block(block, name)
                     if out.tell() + len(block) > MAX_STDIN:
-                        raise InputError(f"{STDIN_NAME} is over {MAX_STDIN >> 30} GiB: not a print file that ends")
+                        raise InputError(f"{name} is over {MAX_STDIN >> 30} GiB: not a print file that ends")
                     out.write(block)
         except OSError as exc:
-            raise InputError(f"cannot read {STDIN_NAME}: {exc.strerror or exc}") from exc
-        yield spooled, STDIN_NAME
+            raise InputError(f"cannot read {name}: {exc.strerror or exc}") from exc
+        try:
+            yield spooled, name
+        except FabwireError as exc:  # readers name the file they were given: the copy is the input's
+            if exc.args and isinstance(exc.args[0], str):
+                exc.args = (exc.args[0].replace(str(spooled), name), *exc.args[1:])
+            raise
 
 
-def _judge_first_block(block: bytes) -> None:
+def _rereadable(path: Path) -> bool:
+    """Whether `path` is a regular file with a size, which the intake may read twice and seek in (a missing one is
+    left to the reader, which names the error)."""
+    try:
+        found = path.stat()
+    except OSError:
+        return True
+    return stat.S_ISREG(found.st_mode) and found.st_size > 0
+
+
+def _judge_first_block(block: bytes, name: str) -> None:
     """Refuse standard input from its first block when that already shows it can be neither G-code nor a .3w, so
     an endless binary stream is not spooled to its end first. A binary STL is told by its whole size, so data that
     could be one (its declared size is beyond the block, within the limit) is read on, and the full read names it."""
@@ -231,7 +251,7 @@ def _judge_first_block(block: bytes) -> None:
     stl_size = 84 + 50 * int.from_bytes(head[80:84], "little")  # what a binary STL declares
     could_be_stl = kind is Kind.BINARY and len(head) >= 84 and len(block) <= stl_size <= MAX_STDIN
     if not kind.printable and kind is not Kind.EMPTY and not could_be_stl:
-        raise refusal(kind, STDIN_NAME, head)
+        raise refusal(kind, name, head)
 
 
 def sniff(path: Path, name: str | None = None) -> tuple[Kind, bytes]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import re
+import shlex
 import tempfile
 import threading
 from collections.abc import Iterator
@@ -113,8 +114,8 @@ def check_3w_suits(path: Path, name: str, model: PrinterModel, *, override: bool
     target = model_for_file_id(machine, model) if machine else None
     if not override and (target is None or target.file_id.lower() != model.file_id.lower()):
         what = f"{target.name} ({machine})" if target else repr(machine or "no machine")
-        raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; "
-                         f"convert the G-code for this printer instead")
+        raise InputError(f"{name} is a .3w for {what}, but the printer is a {model.name}; convert the G-code for "
+                         f"this printer instead (`fabwire xyz convert GCODE --model {shlex.quote(model.name)}`)")
 
 
 def _check_gcode(path: Path, name: str, model: PrinterModel, override: bool) -> None:

@@ -315,9 +315,10 @@ def _sweep_parts(dst: Path) -> None:
 
 
 @contextlib.contextmanager
-def _atomic(dst: Path) -> Iterator[BinaryIO]:
+def _atomic(dst: Path, *, replace: bool = True) -> Iterator[BinaryIO]:
     """A temporary file next to `dst` that replaces it, synced, only if the block succeeds; locked while it is
-    written, so a run killed half-way leaves a temporary the next run removes."""
+    written, so a run killed half-way leaves a temporary the next run removes. Without `replace`, a `dst` that
+    has appeared meanwhile is kept and the result is an InputError (the file is linked in, never renamed over)."""
     dst = Path(dst)
     try:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".part", dir=dst.parent)
@@ -333,27 +334,41 @@ def _atomic(dst: Path) -> Iterator[BinaryIO]:
             handle.flush()
             os.fsync(handle.fileno())  # a power cut after the rename must not leave an empty file
             if os.name == "posix":
-                os.replace(tmp, dst)  # while still locked: no sweeper takes it for a leftover
+                _commit(tmp, dst, replace)  # while still locked: no sweeper takes it for a leftover
         if os.name != "posix":
-            os.replace(tmp, dst)  # Windows renames only closed files (and deletes no open one)
+            _commit(tmp, dst, replace)  # Windows renames only closed files (and deletes no open one)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
 
 
+def _commit(tmp: Path, dst: Path, replace: bool) -> None:
+    if replace:
+        os.replace(tmp, dst)
+        return
+    try:
+        os.link(tmp, dst)  # fails if dst exists, however it came to
+    except FileExistsError:
+        raise InputError(f"{dst} exists already: name it as DST to replace it, or give another DST") from None
+    except OSError as exc:
+        raise InputError(f"cannot write {dst}: {exc.strerror or exc}") from exc
+    tmp.unlink()
+
+
 def convert_gcode_file(
     src: Path, dst: Path, model: PrinterModel | str | None = None, *, container: Literal[2, 5] | None = None,
     zipped: bool | None = None, progress: Progress | None = None, repair: bool = False, force: bool = False,
-    keep_arcs: bool = False,
+    keep_arcs: bool = False, replace: bool = True,
 ) -> ThreeWInfo:
-    """Convert a G-code file to a .3w file; `dst` appears complete or not at all. A NUL byte inside the G-code is
-    an InputError naming its line, or with `repair` dropped and noted in the result's `notes`; so are extrusions
-    beyond the model's build volume, unless `force`. G2/G3 arcs become line segments unless `keep_arcs`."""
+    """Convert a G-code file to a .3w file; `dst` appears complete or not at all (and without `replace` only if
+    no file has that name). A NUL byte inside the G-code is an InputError naming its line, or with `repair`
+    dropped and noted in the result's `notes`; so are extrusions beyond the model's build volume, unless `force`.
+    G2/G3 arcs become line segments unless `keep_arcs`."""
     target = _resolve_model(model)
     kind, head = intake.sniff(src)
     if kind is not intake.Kind.GCODE:
         raise intake.refusal(kind, str(src), head)
-    with intake.open_input(src) as source, _atomic(dst) as out:
+    with intake.open_input(src) as source, _atomic(dst, replace=replace) as out:
         return _write(source, str(src), out, target, container, zipped, Path(dst).name, progress, repair, force,
                       keep_arcs)
 
@@ -641,9 +656,11 @@ def check_3w(data_or_path: bytes | str | Path) -> ThreeWCheck:
     return ThreeWCheck(_fields(header), layout.crc, crc)
 
 
-def convert_3w_to_gcode(src: Path, dst: Path, progress: Progress | None = None) -> ThreeWInfo:
-    """Write the processed G-code a .3w carries (header included); `dst` appears complete or not at all."""
-    with _source(src) as (source, name), _atomic(dst) as out:
+def convert_3w_to_gcode(src: Path, dst: Path, progress: Progress | None = None, *,
+                        replace: bool = True) -> ThreeWInfo:
+    """Write the processed G-code a .3w carries (header included); `dst` appears complete or not at all (and
+    without `replace` only if no file has that name)."""
+    with _source(src) as (source, name), _atomic(dst, replace=replace) as out:
         return _read(source, name, out.write, progress)
 
 

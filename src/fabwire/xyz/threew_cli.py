@@ -119,14 +119,19 @@ def convert(ctx: click.Context, src: Path, dst: Path | None, model_text: str | N
     with intake.input_file(src) as (path, shown):
         kind, head = intake.sniff(path, shown)
         intake.require_printable(kind, shown, head)
+        replace = dst is not None  # an output not named is never put in place of a file (it may be the source)
         if dst is None:
             dst = src.with_suffix(".gcode" if kind.decoded is intake.Kind.THREEW else ".3w")
-            if dst.exists() or dst.is_symlink():  # never replaced unless named: it may be the source itself
+            try:
+                taken = dst.exists() or dst.is_symlink()
+            except OSError as exc:  # a name too long for the file system
+                raise InputError(f"cannot write {dst}: {exc.strerror or exc}") from None
+            if taken:
                 raise InputError(f"{dst} exists already: name it as DST to replace it, or give another DST")
         writing = dst.suffix.lower() == ".3w"
         with intake.decoded_path(path, kind) as plain:
             _convert(app, Path(shown), plain, kind.decoded, dst, writing, model_text, container, zipped,
-                     {"repair": repair, "force": force, "keep_arcs": keep_arcs})
+                     {"repair": repair, "force": force, "keep_arcs": keep_arcs, "replace": replace})
 
 
 def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, writing: bool, model_text: str | None,
@@ -138,7 +143,7 @@ def _convert(app: App, src: Path, plain: Path, kind: intake.Kind, dst: Path, wri
             if model_text or container or zipped is not None:
                 raise InputError("--model, --format and --zip only apply when writing a .3w file")
             with _progress(app, f"decoding {src.name}", size) as progress:
-                info = convert_3w_to_gcode(plain, dst, progress)
+                info = convert_3w_to_gcode(plain, dst, progress, replace=(options or {}).get("replace", True))
             _warn_crc(app, src, info)
             _report(app, "3w-to-gcode", src, dst, info)
             return
