@@ -439,14 +439,14 @@ def test_an_output_not_named_is_never_put_over_a_file_that_appears_meanwhile(tmp
     src.write_bytes(TV_INPUT)
     appeared = tmp_path / "part.3w"
     appeared.write_bytes(b"someone else's")
-    with pytest.raises(InputError, match="part.3w exists already"):
+    with pytest.raises(InputError, match=r"part\.3w exists already"):
         convert_gcode_file(src, appeared, replace=False)
     assert appeared.read_bytes() == b"someone else's"
     made = tmp_path / "made.3w"
     convert_gcode_file(src, made, replace=False)
     back = tmp_path / "back.gcode"
     back.write_bytes(b"mine")
-    with pytest.raises(InputError, match="back.gcode exists already"):
+    with pytest.raises(InputError, match=r"back\.gcode exists already"):
         convert_3w_to_gcode(made, back, replace=False)
     assert back.read_bytes() == b"mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["back.gcode", "made.3w", "part.3w", "part.gcode"]
