@@ -127,3 +127,18 @@ async def test_the_agents_answer_is_the_dialogs(fault: str, choice: str, tmp_pat
             assert (await driver.act(choice, {}))["ok"]
             await mmu.refresh(timeout=5)
     assert buttons_sent(trace, before) == ([] if expected is None else [b"B%d" % expected])
+
+
+async def test_the_agents_stop_leaves_the_error_shown_with_its_choices(tmp_path: Path) -> None:
+    """Stop sends nothing, so the machine is not shown busy afterwards: its error and the dialog's choices stay."""
+    from fabwire.agent.core import DeviceSpec
+    from fabwire.agent.drivers.mmu import MMUDriver
+
+    async with in_error("finda-didnt-trigger", tmp_path / "wire.jsonl") as mmu:
+        driver = MMUDriver(DeviceSpec("m", "mmu", "sim://mmu"), lambda event: None)
+        driver.mmu = mmu
+        await driver.poll()
+        assert (await driver.act("stop", {}))["ok"]
+        _, summary = await driver.poll()
+        assert summary["state"] == "error"
+        assert summary["actions"] == ["retry", "stop"]

@@ -147,12 +147,12 @@ class MMUDriver(Driver):
             finished = await mmu.run(Home(0), timeout=limit)
         elif action in ("retry", "continue", "stop"):
             button = mmu.dialog_button(action)
-            if button is None:
+            if button is None:  # the printer's own Stop: nothing reaches the MMU, which keeps showing its error
                 mmu.logic.abandon()
             else:
                 await mmu.press(button)
-            if self._error is not None:
-                self._pressed = (action, self._error, time.monotonic())
+                if self._error is not None:
+                    self._pressed = (action, self._error, time.monotonic())
             return {"ok": True, "action": action}
         else:
             version = await mmu.reset(timeout=limit)
