@@ -13,6 +13,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -20,6 +21,7 @@ from mqtttools import Mosquitto, free_port
 
 from clitools import cli_env, run_cli
 from fabwire.mqtt.probe import CONNACK, SILENT, connect_packet, not_a_broker
+from fabwire.mqtt.topics import MQTT_OFF
 from fabwire.transport.peers import FOREIGN
 from peertools import SAID, saying
 
@@ -112,12 +114,16 @@ def test_serve_says_what_answers_where_its_broker_should_be(tmp_path: Path) -> N
                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=cli_env(tmp_path))
         try:
             assert process.stderr is not None
+            assert process.stdout is not None
+            url = process.stdout.readline().split(" listening on ", 1)[1].strip()
             line = process.stderr.readline()
             while line and not line.startswith("fabwire: MQTT broker"):
                 line = process.stderr.readline()
+            health = httpx.get(f"{url}api/v1/agent", timeout=30)  # the agent goes on without its bridge
         finally:
             process.terminate()
             process.communicate(timeout=60)
     assert line.startswith(f"fabwire: MQTT broker mqtt://127.0.0.1:{port}: 127.0.0.1:{port} is not an MQTT broker: "
                            "it is a web server"), line
-    assert line.rstrip().endswith("; retrying in 0.5 s"), line
+    assert line.rstrip().endswith(f"; {MQTT_OFF}"), line  # another server there is no reason to ask it again
+    assert health.status_code == 200, health.text

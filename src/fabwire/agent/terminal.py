@@ -56,9 +56,15 @@ class Terminal:
             self.say.warning("%s: online again", name)
 
     def broker_trouble(self, failure: str, retry_in_s: float) -> None:
+        """Why the MQTT bridge is not connected, said once per reason; `retry_in_s` below 0: it has given up."""
         if failure != self._broker:
             self._broker = failure
-            self.say.warning("%s; retrying in %.1f s", failure, retry_in_s)
+            if retry_in_s < 0:
+                from fabwire.mqtt.topics import MQTT_OFF
+
+                self.say.error("%s; %s", failure, MQTT_OFF)
+            else:
+                self.say.warning("%s; retrying in %.1f s", failure, retry_in_s)
 
     def broker_connected(self) -> None:
         self._broker = None

@@ -33,12 +33,15 @@ from fabwire.errors import FabwireError, LinkError, excerpt
 from fabwire.mqtt.commands import CommandRunner
 from fabwire.mqtt.discovery import DISCOVERY_MODES, discovery_messages, discovery_topics
 from fabwire.mqtt.fleet_view import STALE_CLAIM_S, FleetView
+from fabwire.mqtt.probe import SILENT
 from fabwire.mqtt.topics import (
+    BROKER_CHECK,
     DISCOVERY_PREFIX,
     HA_STATUS,
     HEARTBEAT,
     HEARTBEAT_S,
     INCOMING_QUEUE,
+    MQTT_OFF,
     OFFLINE,
     ONLINE,
     OUTGOING_CALLS,
@@ -225,7 +228,11 @@ class Bridge:
         try:
             while True:
                 try:
-                    wrong = await self.broker.not_a_broker()
+                    foreign = await self.broker.foreign_peer()
+                    if foreign is not None and foreign != SILENT:  # another machine: asking again would not mend it
+                        self._give_up(f"MQTT broker {self.broker.url}: {foreign}; check {BROKER_CHECK}")
+                        return
+                    wrong = await self.broker.not_a_broker() if foreign == SILENT else None
                     if wrong is not None:
                         self._trouble(wrong, delay)
                         await asyncio.sleep(delay)
@@ -253,6 +260,14 @@ class Bridge:
                 delay = min(delay * 2, self.backoff[1])
         finally:
             events.close()
+
+    def _give_up(self, failure: str) -> None:
+        """The bridge gives up for good (the address names another kind of server): said once, as an error; the agent
+        goes on serving its machines."""
+        if self.on_trouble is None:
+            log.error("%s; %s", failure, MQTT_OFF)
+            return
+        self.on_trouble(failure, -1.0)
 
     def _trouble(self, failure: str, retry_in_s: float) -> None:
         if self.on_trouble is None:

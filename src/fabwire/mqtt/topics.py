@@ -129,6 +129,8 @@ def default_agent_id(state_dir: object | None = None) -> str:
 CONNECT_TIMEOUT_S = 10.0
 """How long a broker has to answer a connection."""
 BROKER_CHECK = "that an MQTT broker listens there (port 1883, 8883 with TLS) on this network"
+MQTT_OFF = "the MQTT bridge is off until `fabwire serve` is started again with a broker's address"
+"""Said once when the broker's address answers as another kind of server: asking it again would not mend that."""
 """What to check when a broker's address answers nothing a broker says (nothing at all, or another protocol)."""
 
 
@@ -159,17 +161,25 @@ class Broker:
     async def not_a_broker(self) -> str | None:
         """What answers at the broker's address when it is no MQTT broker, in words with what to check (see
         `fabwire.mqtt.probe`); None when a broker answers, or nothing does. Over TLS the handshake tells at once."""
-        if self.tls:
-            return None
-        from fabwire.mqtt.probe import SILENT, not_a_broker
+        from fabwire.mqtt.probe import SILENT
 
-        found = await not_a_broker(self.host, self.port, username=self.username, password=self.password,
-                                   timeout_s=CONNECT_TIMEOUT_S)
+        found = await self.foreign_peer()
         if found == SILENT:
             from fabwire.transport.tcp import connect_failure
 
             return f"MQTT broker {self.url}: {connect_failure(TimeoutError(), self.host, self.port, peer=BROKER_CHECK)}"
         return None if found is None else f"MQTT broker {self.url}: {found}; check {BROKER_CHECK}"
+
+    async def foreign_peer(self) -> str | None:
+        """Why the server at the broker's address is another kind of server (`fabwire.mqtt.probe.not_a_broker`);
+        `fabwire.mqtt.probe.SILENT` when it said nothing; None when a broker answered or nothing was reached (or over
+        TLS)."""
+        if self.tls:
+            return None
+        from fabwire.mqtt.probe import not_a_broker
+
+        return await not_a_broker(self.host, self.port, username=self.username, password=self.password,
+                                  timeout_s=CONNECT_TIMEOUT_S)
 
     def client_options(self) -> dict[str, Any]:
         """Keyword arguments for `aiomqtt.Client` (MQTT 5: replies carry the asker's correlation data)."""
