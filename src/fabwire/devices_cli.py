@@ -33,6 +33,7 @@ from fabwire.config import (
 )
 from fabwire.devices import KINDS
 from fabwire.errors import ConfigError, InputError, closest, excerpt, nearest
+from fabwire.transport.sameness import machines_of, same_machine
 from fabwire.transport.urls import parse_url
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -190,7 +191,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
             raise refuse("set-control", key=key, value=excerpt(value, 40))
         values[key] = value
     validate_settings(kind, {k: v for k, v in values.items() if k != "kind"}, what="setting")
-    machine = parse_url(url, kind).machine  # the address as -d reads it: refused here, before the file is touched
+    endpoint = parse_url(url, kind)  # the address as -d reads it: refused here, before the file is touched
     if kind_name == "xyz" and isinstance(values.get("model"), str):
         from fabwire.xyz.models import find_model
 
@@ -198,13 +199,17 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
             find_model(values["model"])  # a model the printer table does not know would only fail at print time
         except InputError as exc:
             raise refuse("set-model", problem=str(exc)) from None
-    for other in existing.values():  # `fabwire serve` monitors each machine once (`agent.command.one_each`)
-        if is_default and other.kind is kind and other.default:
+    kin = [other for other in existing.values() if other.kind is kind]
+    for other in kin:
+        if is_default and other.default:
             raise ConfigError(f"{other.name!r} is the default {kind.title} already: add {name!r} without --default, "
-                             f"or take `default = true` off {other.name!r} in {path} first")
-        if other.kind is kind and other.endpoint.machine == machine:
-            raise InputError(f"{excerpt(url, 60)} is the machine {other.name!r} names already "
-                             f"({other.endpoint.url}): one machine has one name")
+                              f"or take `default = true` off {other.name!r} in {path} first")
+    # `fabwire serve` monitors each machine once (`agent.command.one_each`), however its address is spelt
+    mine, *theirs = machines_of([endpoint, *(other.endpoint for other in kin)])
+    same = same_machine(mine, [(other.name, keys) for other, keys in zip(kin, theirs, strict=True)])
+    if same is not None:
+        raise InputError(f"{excerpt(url, 60)} is the machine {same!r} names already "
+                         f"({existing[same].endpoint.url}): one machine has one name")
     section = f"[devices.{_toml_key(name)}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items())
     separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
     _write(path, text + separator + section)

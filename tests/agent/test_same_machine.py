@@ -9,10 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from clitools import cli_env, run_cli
 from fabwire.agent.core import Agent, DeviceSpec
 from fabwire.errors import InputError
-
-from .agenttools import start_agent, wait_for
 
 
 def free_port() -> int:
@@ -73,18 +72,18 @@ async def test_distinct_machines_are_both_monitored(row: str, tmp_path: Path) ->
         assert sorted(s.spec.name for s in agent.sessions()) == ["first", "second"]
 
 
-def test_serve_given_one_machine_twice_monitors_it_once(tmp_path: Path) -> None:
-    """The devices are added at once at start-up: of two spellings of one machine exactly one is monitored."""
+def test_serve_and_devices_add_refuse_one_machine_under_two_spellings(tmp_path: Path) -> None:
+    """The same rule at every door: `serve` given a machine twice under two spellings stops before it starts (as
+    for the same spelling twice), and `devices add` refuses to name it twice."""
     port = free_port()
-    agent = start_agent(tmp_path / "state", "--device", f"a:xyz=127.0.0.1:{port}",
-                        "--device", f"b:xyz=localhost:{port}")
-    try:
-        with agent.client() as client:
-            names = wait_for(lambda: [d["name"] for d in client.get("/api/v1/devices").json()] or None, "a device")
-            assert len(names) == 1, names
-    finally:
-        _, stderr = agent.stop()
-    other = "b" if names == ["a"] else "a"
-    assert f"fabwire: not monitoring {other}: " in stderr, stderr
-    assert f"reaches the machine already monitored as '{names[0]}'" in stderr, stderr
-    assert "Traceback" not in stderr
+    env = cli_env(tmp_path) | {"FABWIRE_CONFIG": str(tmp_path / "devices.toml")}
+    twice = run_cli("serve", "--listen", "127.0.0.1:0", "--state-dir", str(tmp_path / "state"),
+                    "--device", f"a:xyz=127.0.0.1:{port}", "--device", f"b:xyz=localhost:{port}", env=env, timeout=60)
+    assert twice.returncode == 4, twice.stderr
+    assert twice.stderr.strip() == (f"fabwire: error: 'localhost:{port}' is given twice, as 'a' and 'b': one machine "
+                                    "is monitored once")
+    assert run_cli("devices", "add", "desk", f"localhost:{port}", "--kind", "xyz", env=env).returncode == 0
+    again = run_cli("devices", "add", "desk2", f"tcp://127.0.0.1:{port}", "--kind", "xyz", env=env)
+    assert again.returncode == 4, again.stderr
+    assert f"is the machine 'desk' names already (tcp://localhost:{port})" in again.stderr
+    assert "desk2" not in (tmp_path / "devices.toml").read_text()

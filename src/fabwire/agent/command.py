@@ -106,19 +106,22 @@ def one_each(specs: list[DeviceSpec]) -> None:
     options, in the words the agent uses when one is added twice (`Agent.add_device`): a second name would hide
     the machine it names, a second session would talk to one machine twice."""
     from fabwire.devices import KINDS as DEVICE_KINDS
+    from fabwire.transport.sameness import Machine, machines_of, same_machine
     from fabwire.transport.urls import parse_url
 
     names: dict[str, DeviceSpec] = {}
-    machines: dict[tuple[str, tuple[str, str, int, str]], DeviceSpec] = {}
     for spec in specs:
         if spec.name in names:
             raise InputError(f"a device named {excerpt(spec.name, 60)} is given twice (--device or devices.toml)")
         names[spec.name] = spec
-        where = (spec.kind, parse_url(spec.address, DEVICE_KINDS[spec.kind]).machine)
-        if where in machines:
-            raise InputError(f"{excerpt(spec.address, 60)} is given twice, as {machines[where].name!r} and "
-                             f"{spec.name!r}: one machine is monitored once")
-        machines[where] = spec
+    reached = machines_of([parse_url(spec.address, DEVICE_KINDS[spec.kind]) for spec in specs])
+    seen: list[tuple[str, frozenset[Machine]]] = []
+    for spec, keys in zip(specs, reached, strict=True):
+        earlier = same_machine(keys, [(name, theirs) for name, theirs in seen if names[name].kind == spec.kind])
+        if earlier is not None:
+            raise InputError(f"{excerpt(spec.address, 60)} is given twice, as {earlier!r} and {spec.name!r}: one "
+                             "machine is monitored once")
+        seen.append((spec.name, keys))
 
 
 def parse_device_option(text: str, index: int) -> DeviceSpec:

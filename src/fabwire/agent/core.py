@@ -33,8 +33,6 @@ if TYPE_CHECKING:
 Kind = Literal["xyz", "lineus", "mmu"]
 EventType = Literal["state", "event", "online", "offline", "job", "error"]
 KINDS: tuple[Kind, ...] = ("xyz", "lineus", "mmu")
-RESOLVE_WAIT_S = 2.0
-"""How long adding a device waits for its host name's addresses (to tell it is no machine monitored already)."""
 SUBSCRIBER_QUEUE = 2000
 """Events a slow subscriber may lag behind by before the oldest are dropped (it sees a `"dropped"` count)."""
 
@@ -296,23 +294,19 @@ class Agent:
         from fabwire.agent.session import Session
         from fabwire.config import validate_settings
         from fabwire.devices import KINDS as DEVICE_KINDS
-        from fabwire.transport.sameness import machine_keys
+        from fabwire.transport.sameness import machines_of, same_machine
         from fabwire.transport.urls import parse_url
 
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
         validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
-        endpoint = parse_url(spec.address, DEVICE_KINDS[spec.kind])
-        try:  # a resolver that does not answer must not hold the agent up: the spelt form still counts
-            reached = await asyncio.wait_for(asyncio.to_thread(machine_keys, endpoint), RESOLVE_WAIT_S)
-        except TimeoutError:
-            reached = frozenset({endpoint.machine})
+        reached, = await asyncio.to_thread(machines_of, [parse_url(spec.address, DEVICE_KINDS[spec.kind])])
         if spec.name in self._reached:
             raise InputError(f"a device named {spec.name!r} is already monitored")
-        for name, keys in self._reached.items():
-            if keys & reached:
-                raise InputError(f"{excerpt(spec.address, 60)} reaches the machine already monitored as {name!r}: "
-                                 "one machine is monitored once")
+        other = same_machine(reached, list(self._reached.items()))
+        if other is not None:
+            raise InputError(f"{excerpt(spec.address, 60)} reaches the machine already monitored as {other!r}: "
+                             "one machine is monitored once")
         self._reached[spec.name] = reached
         try:
             session = Session(self, spec, order=self._added)

@@ -9,9 +9,11 @@ module before it starts a second one.
 
 from __future__ import annotations
 
+import concurrent.futures
 import ipaddress
 import os
 import socket
+import time
 
 from fabwire.transport.urls import Endpoint
 
@@ -47,3 +49,33 @@ def machine_keys(endpoint: Endpoint) -> frozenset[Machine]:
     elif endpoint.scheme == "serial":
         keys.add(("serial", "", 0, os.path.realpath(endpoint.path)))
     return frozenset(keys)
+
+
+RESOLVE_WAIT_S = 2.0
+"""How long a check waits for host names' addresses: a resolver that does not answer must not hold a command or
+the agent up (the spelt forms still count)."""
+
+
+def machines_of(endpoints: list[Endpoint], seconds: float = RESOLVE_WAIT_S) -> list[frozenset[Machine]]:
+    """`machine_keys` of each endpoint, resolved side by side within `seconds` in all; an endpoint whose host has
+    not resolved by then keeps its spelt form only."""
+    if not endpoints:
+        return []
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=min(16, len(endpoints)))
+    try:
+        futures = [pool.submit(machine_keys, endpoint) for endpoint in endpoints]
+        end = time.monotonic() + seconds
+        found = []
+        for endpoint, future in zip(endpoints, futures, strict=True):
+            try:
+                found.append(future.result(timeout=max(0.0, end - time.monotonic())))
+            except concurrent.futures.TimeoutError:
+                found.append(frozenset({endpoint.machine}))
+        return found
+    finally:
+        pool.shutdown(wait=False, cancel_futures=True)  # a lookup still running ends on its own
+
+
+def same_machine(keys: frozenset[Machine], others: list[tuple[str, frozenset[Machine]]]) -> str | None:
+    """The name among `others` (name, keys) whose machine `keys` reaches too, or None."""
+    return next((name for name, theirs in others if theirs & keys), None)
