@@ -176,6 +176,7 @@ def test_a_device_that_never_answers_fails_in_five_seconds() -> None:
     (("tool-change", "5"), "filament slot must be 0 to 4"),
     (("load", "9"), "filament slot must be 0 to 4"),
     (("read", "nosuch"), "unknown MMU register 'nosuch'"),
+    (("read", "Bowden_Lenght"), "unknown MMU register 'Bowden_Lenght' (did you mean 'bowden_length'?)"),
     (("write", "vcc", "1"), "is read-only"),
     (("write", "cut_length", "zz"), "must be a number"),
 ])

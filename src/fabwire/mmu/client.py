@@ -24,6 +24,7 @@ from fabwire.errors import (
     LinkError,
     LinkTimeout,
     RemoteProtocolError,
+    closest,
     excerpt,
 )
 from fabwire.mmu import codes, units
@@ -78,8 +79,10 @@ def resolve_register(register: int | str, *, for_write: bool = False,
     found = codes.find_register(str(register)) if not isinstance(register, int) else (
         codes.REGISTERS[register] if 0 <= register < codes.REGISTER_COUNT else None)
     if found is None:
-        raise InputError(f"unknown MMU register {excerpt(str(register), 40)}: use a name such as 'bowden_length' or an "
-                         f"address from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x}")
+        hint = closest(str(register)[:100].lower(), list(codes.REGISTERS_BY_NAME)) if isinstance(register, str) else ""
+        raise InputError(f"unknown MMU register {excerpt(str(register), 40)}{hint}: use a name such as "
+                         f"'bowden_length' or an address from 0x00 to 0x{codes.REGISTER_COUNT - 1:02x} "
+                         "(`fabwire mmu registers` lists them)")
     if for_write and not found.writable(version):
         raise InputError(f"register 0x{found.address:02x} ({found.name}) is read-only"
                          + (" on this firmware" if found.access is codes.Access.RW_304 else ""))
