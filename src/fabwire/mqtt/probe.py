@@ -82,6 +82,7 @@ async def not_a_broker(host: str, port: int, *, username: str | None = None, pas
             reader, writer = await asyncio.open_connection(host, port)
     except (OSError, TimeoutError):
         return None
+    began = asyncio.get_running_loop().time()
     try:
         writer.write(connect_packet(f"fabwire-probe-{secrets.token_hex(4)}", username, password))
         await writer.drain()
@@ -94,7 +95,7 @@ async def not_a_broker(host: str, port: int, *, username: str | None = None, pas
             asked = await probe(f"tcp://{where}", "an MQTT broker", "mqtt", where)
             if asked is not None:
                 return str(asked)
-            data = await _answer(reader, max(0.0, timeout_s - NUDGE_AFTER_S - ASK_AFTER_S))
+            data = await _answer(reader, max(0.0, timeout_s - (asyncio.get_running_loop().time() - began)))
         if data is None:
             return SILENT
         if not data:
