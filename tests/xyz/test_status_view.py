@@ -63,7 +63,7 @@ def test_json_values_and_units() -> None:
     data = status.to_dict()
     assert (data["state"], data["substate"], data["extruder_c"], data["extruder_target_c"], data["bed_c"]) == \
         (9505, 2, 210, 215, 55)
-    assert (data["progress_percent"], data["elapsed_s"], data["remaining_s"]) == (40, 720, 1800)
+    assert (data["progress_percent"], data["elapsed_s"], data["time_left_s"]) == (40, 720, 1800)
     assert data["zoffset_mm"] == -0.12
     assert data["block_size_bytes"] == 8192
     assert data["raw"]["z"] == "-12"

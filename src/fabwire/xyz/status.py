@@ -698,7 +698,7 @@ def _progress_view(status: Status) -> dict[str, Any]:
     remaining = progress.remaining_min if progress else None
     return {"progress_percent": progress.percent if progress else None,
             "elapsed_s": progress.elapsed_min * 60 if progress else None,
-            "remaining_s": remaining * 60 if remaining is not None else None}
+            "time_left_s": remaining * 60 if remaining is not None else None}
 
 
 def _settings_view(status: Status) -> dict[str, Any]:
