@@ -87,3 +87,13 @@ def test_serve_and_devices_add_refuse_one_machine_under_two_spellings(tmp_path: 
     assert again.returncode == 4, again.stderr
     assert f"is the machine 'desk' names already (tcp://localhost:{port})" in again.stderr
     assert "desk2" not in (tmp_path / "devices.toml").read_text()
+
+
+async def test_devices_added_at_once_keep_the_order_they_were_given_in(tmp_path: Path) -> None:
+    """Each add looks its machine up first; the order of the devices is still the order they were given in."""
+    import asyncio
+
+    specs = [DeviceSpec(f"d{n}", "xyz", f"127.0.0.1:{free_port()}") for n in range(8)]
+    async with Agent(state_dir=tmp_path / "state") as agent:
+        await asyncio.gather(*(agent.add_device(spec) for spec in specs))
+        assert [s.spec.name for s in agent.sessions()] == [spec.name for spec in specs]

@@ -300,6 +300,8 @@ class Agent:
         if spec.kind not in KINDS:
             raise InputError(f"device kind must be one of {', '.join(KINDS)}, not {spec.kind!r}")
         validate_settings(DEVICE_KINDS[spec.kind], dict(spec.options))  # a wrong option fails here, not later
+        order = self._added  # the order devices were given in, whichever start finishes first
+        self._added += 1
         reached, = await asyncio.to_thread(machines_of, [parse_url(spec.address, DEVICE_KINDS[spec.kind])])
         if spec.name in self._reached:
             raise InputError(f"a device named {spec.name!r} is already monitored")
@@ -309,8 +311,7 @@ class Agent:
                              "one machine is monitored once")
         self._reached[spec.name] = reached
         try:
-            session = Session(self, spec, order=self._added)
-            self._added += 1
+            session = Session(self, spec, order=order)
             await session.start()
         except BaseException:
             del self._reached[spec.name]
