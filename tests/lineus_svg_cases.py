@@ -211,6 +211,59 @@ CASES: dict[str, tuple[str, str]] = {
                                                      '<rect x="50" y="30" width="100" height="60" fill="url(#o)"/>'
                                                      '<rect x="50" y="120" width="100" height="60" fill="url(#p)"/>'),
                                                  "white box over lines"),
+    # -- gradients that fade into the paper ---------------------------------------------------------------------
+    "gradient from white": (doc('<linearGradient id="g"><stop offset="0" stop-color="white"/>'
+                                '<stop offset="1" stop-color="black"/></linearGradient>'
+                                '<rect x="20" y="20" width="160" height="160" fill="url(#g)"/>'),
+                            "gradient fades into the paper"),
+    "gradient from transparent, turned, in user space": (
+        doc('<linearGradient id="g" gradientUnits="userSpaceOnUse" x1="20" y1="0" x2="180" y2="0" '
+            'gradientTransform="rotate(30 100 100)"><stop offset="0.2" stop-color="white" stop-opacity="0"/>'
+            '<stop offset="0.7" stop-color="navy"/></linearGradient>'
+            '<circle cx="100" cy="100" r="80" fill="url(#g)"/>'), "gradient fades into the paper"),
+    "gradient white in the middle": (doc('<linearGradient id="g" x2="0" y2="1"><stop offset="0" stop-color="teal"/>'
+                                         '<stop offset="0.5" stop-color="white"/><stop offset="1" '
+                                         'stop-color="purple"/></linearGradient>'
+                                         '<rect x="30" y="20" width="140" height="160" fill="url(#g)"/>'),
+                                     "gradient fades into the paper"),
+    "radial gradient with a white centre": (doc('<radialGradient id="g"><stop offset="0.3" stop-color="white"/>'
+                                                '<stop offset="0.6" stop-color="black"/></radialGradient>'
+                                                '<rect x="20" y="20" width="160" height="160" fill="url(#g)"/>'),
+                                            "gradient fades into the paper"),
+    "radial gradient fading out, off-centre focus": (
+        doc('<radialGradient id="g" fx="0.35" fy="0.4" r="0.45"><stop offset="0" stop-color="maroon"/>'
+            '<stop offset="0.8" stop-color="white"/></radialGradient>'
+            '<rect x="20" y="20" width="160" height="160" fill="url(#g)"/>'), "gradient fades into the paper"),
+    "repeated gradient stripes": (doc('<linearGradient id="g" x2="0.25" spreadMethod="repeat">'
+                                      '<stop offset="0.5" stop-color="black"/><stop offset="0.5" '
+                                      'stop-color="white"/></linearGradient><linearGradient id="h" href="#g" '
+                                      'spreadMethod="reflect" x2="0.5"/>'
+                                      '<rect x="20" y="20" width="160" height="70" fill="url(#g)"/>'
+                                      '<rect x="20" y="110" width="160" height="70" fill="url(#h)"/>'),
+                                  "gradient fades into the paper"),
+    "stroke gradient from white": (doc('<linearGradient id="g"><stop offset="0.3" stop-color="white"/>'
+                                       '<stop offset="0.4" stop-color="black"/></linearGradient>'
+                                       '<rect x="20" y="20" width="160" height="160" fill="none" '
+                                       'stroke="url(#g)" stroke-width="2"/>'
+                                       '<rect x="60" y="60" width="80" height="80" fill="none" '
+                                       'stroke="url(#g)" stroke-width="20"/>'), "gradient fades into the paper"),
+    "gradient fill inside a black border": (doc('<linearGradient id="g"><stop offset="0.2" stop-color="white"/>'
+                                                '<stop offset="0.3" stop-color="black"/></linearGradient>'
+                                                '<rect x="20" y="20" width="160" height="160" fill="url(#g)" '
+                                                'stroke="black" stroke-width="2"/>'),
+                                            "gradient fades into the paper"),
+    "paint in error after a gradient": (doc('<linearGradient id="g"><stop offset="0" stop-color="white"/>'
+                                            '<stop offset="1" stop-color="black"/></linearGradient>'
+                                            '<rect x="20" y="20" width="160" height="160" '
+                                            'fill="url(#g) green icc-color(cmyk, 0.1, 0.5, 0.8, 0)"/>'),
+                                        "gradient fades into the paper"),
+    "pale and translucent paints are ink": (doc('<rect x="20" y="20" width="70" height="70" '
+                                                'fill="rgba(0, 127, 0, 0.5)"/><circle cx="145" cy="55" r="35" '
+                                                'fill="yellow"/><rect x="20" y="110" width="70" height="70" '
+                                                'fill="#eee"/><circle cx="145" cy="145" r="35" fill="navy" '
+                                                'opacity="0.2"/>'), "white fill"),
+    "colours meeting are outlined": (doc('<rect x="20" y="20" width="160" height="160" fill="green"/>'
+                                         '<circle cx="100" cy="100" r="50" fill="orange"/>'), "white fill"),
     # -- wide strokes --------------------------------------------------------------------------------------------
     "wide strokes": (doc('<rect x="30" y="30" width="140" height="50" fill="none" stroke="black" stroke-width="16"/>'
                          '<path d="M30 120 H90 M30 170 H90" fill="none" stroke="#333" stroke-width="14"/>'

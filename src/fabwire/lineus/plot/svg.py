@@ -35,6 +35,7 @@ from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
+from fabwire.lineus.plot.gradient import Stop, shown_region
 from fabwire.lineus.plot.stroke import Pen, pen_of, stroke_area
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
@@ -53,6 +54,7 @@ from fabwire.lineus.plot.svgpath import (
 from fabwire.lineus.plot.svgstyle import (
     GEOMETRY,
     StyleSheet,
+    fallback_in_error,
     inherit,
     iri,
     local,
@@ -61,6 +63,7 @@ from fabwire.lineus.plot.svgstyle import (
     opaque_stop,
     own_style,
     paints,
+    stop_paint,
 )
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
 from fabwire.lineus.plot.svgunits import (
@@ -161,6 +164,9 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
     ("gradients whose stops are all opaque hide what lies under them", "SVG 1.1 §13.2.4, §3.3",
      "opaque gradient hides what lies under it"),
+    ("the stretch of a gradient that fades into the paper draws nothing: linear and radial (focus, fr), "
+     "objectBoundingBox or user space, gradientTransform, pad, repeat and reflect, on fills and strokes",
+     "SVG 1.1 §13.2, SVG 2 §14.3.3", "gradient from white"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
     ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
      "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
@@ -395,6 +401,9 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         raise InputError(f"{name}: malformed SVG geometry ({exc})") from exc
     return SvgDrawing(list(reader.lines), dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
                       tolerance, (width, height))
+
+
+GRADIENTS = ("linearGradient", "radialGradient")
 
 
 def _opacity(style: dict[str, str]) -> float:
@@ -1207,6 +1216,44 @@ class _Reader:
         stops = self._stops(server)
         return bool(stops) and all(opaque_stop(self.computed_style(stop)) for stop in stops)
 
+    def _gradient_chain(self, el: ET.Element) -> list[ET.Element]:
+        """The gradient and those it takes attributes and stops from through `href` (SVG 1.1 §13.2)."""
+        chain = [el]
+        while True:
+            ref = self._href(chain[-1])
+            nxt = self.ids.get(ref) if ref else None
+            if nxt is None or local(nxt.tag) not in GRADIENTS or nxt in chain:
+                return chain
+            chain.append(nxt)
+
+    def shown_area(self, style: dict[str, str], which: str, subs: list[Subpath], matrix: FloatArray,
+                   viewport: tuple[float, float]) -> BaseGeometry | None:
+        """Where the fill's or stroke's gradient leaves a mark on the paper (output units), for an element whose
+        output subpaths are `subs`; None when it leaves one wherever it paints, or the paint is no gradient."""
+        ref = iri(style.get(which, ""))
+        server = self.ids.get(ref) if ref else None
+        if (server is None or local(server.tag) not in GRADIENTS or self._paint_kind(style, which)[0] != "solid"
+                or fallback_in_error(style.get(which, ""))):
+            return None
+        chain = self._gradient_chain(server)
+        stops: list[Stop] = []
+        for stop in self._stops(server):
+            at = min(1.0, max(0.0, number(stop.get("offset"), 0.0), stops[-1].offset if stops else 0.0))
+            rgb, alpha = stop_paint(self.computed_style(stop))
+            stops.append(Stop(at, rgb, alpha))
+        points = [sub.points for sub in subs if len(sub.points) and np.isfinite(sub.points).all()]
+        if not points or flattens(matrix):
+            return None
+        user = affine([np.concatenate(points)], _invert(matrix))[0]
+        (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
+        opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0)))
+        scale = math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
+        region = shown_region(local(server.tag),
+                              lambda name: next((g.get(name) for g in chain if g.get(name) is not None), None),
+                              stops, opacity, (float(x0), float(y0), float(x1), float(y1)), viewport,
+                              self.tolerance / scale)
+        return None if region is None else shapely.transform(region, lambda xy: affine([xy], matrix)[0])
+
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
         nothing (SVG 1.1 §13.2.4)."""
@@ -1384,6 +1431,10 @@ class _Reader:
                 continue
             self._count(len(pts))
             out.append(pts)
+        fill_shown = self.shown_area(style, "fill", subs, matrix, viewport) if fill == "solid" and rings else None
+        stroke_shown = self.shown_area(style, "stroke", subs, matrix, viewport) if stroke or band else None
+        if stroke and stroke_shown is not None and not (fill == "solid" and rings):
+            out.replace(cut(list(out), stroke_shown)[0])  # the stroke's paper-coloured stretches draw nothing
         if rings:
             closed = [np.vstack([r, r[:1]]) for r in rings]
             rule = style.get("fill-rule", "nonzero").strip()
@@ -1394,6 +1445,15 @@ class _Reader:
                     out.replace(border)
             if covers:
                 self.hide_under(own)
+            if fill_shown is not None:  # a gradient's paper-coloured stretch draws nothing: outline what shows
+                own = _Fill([], rule, shapely.intersection(own.area, fill_shown), opaque=own.opaque)
+                border = _outline(own.area)
+                if stroke:
+                    kept = cut(list(out), stroke_shown)[0] if stroke_shown is not None else list(out)
+                    border = cut(border, shapely.MultiLineString(kept).buffer(self.tolerance))[1] + kept \
+                        if kept else border
+                self._count(sum(len(line) for line in border))
+                out.replace(border)
             if fill == "solid":
                 out.fills.append(own)
             elif pattern is not None:
@@ -1403,7 +1463,7 @@ class _Reader:
                               out)
         elif band:
             self.stroke_band(band, pen_of(style, half, self.tolerance / scale), style, matrix, out,
-                             own if rings and fill == "solid" else None)
+                             own if rings and fill == "solid" else None, stroke_shown)
         final.take(out)
 
     def _stroke_width(self, style: dict[str, str], viewport: tuple[float, float]) -> float:
@@ -1432,17 +1492,21 @@ class _Reader:
             self.pattern(server, matrix, _outline(area), "nonzero", viewport, out)
 
     def stroke_band(self, lines: list[tuple[FloatArray, bool]], pen: Pen, style: dict[str, str],
-                    matrix: FloatArray, out: Ink, fill: _Fill | None) -> None:
+                    matrix: FloatArray, out: Ink, fill: _Fill | None, shown: BaseGeometry | None = None) -> None:
         """Draw a wide stroke as a fill is drawn: the outline of the band it paints (`lines` in user units placed
         by `matrix`), added to the element's own lines `out`; an opaque band hides what lies under it. With the
         element's solid `fill` (the last of `out.fills`, its border the lines of `out`), the pen draws the border
-        of both together: one element's paint is one shape, whatever the colours of its fill and stroke."""
+        of both together: one element's paint is one shape, whatever the colours of its fill and stroke. Only the
+        part of the band inside `shown` (where its gradient leaves a mark) is outlined."""
         area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
         if area.is_empty:
             return
         band = _Fill([], "nonzero", area, opaque=self.opaque(style, "stroke"))
         if not self._shaded and self._below and band.opaque:
             self.hide_under(band)
+        if shown is not None:
+            area = shapely.intersection(area, shown)
+            band = _Fill([], "nonzero", area, opaque=band.opaque)
         if fill is not None:
             band = _Fill([], "nonzero", shapely.union(fill.area, area), opaque=band.opaque and fill.opaque)
             out.fills.pop()

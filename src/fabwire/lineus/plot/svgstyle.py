@@ -255,6 +255,21 @@ def opaque_stop(style: dict[str, str]) -> bool:
     return _alpha(value) >= 1
 
 
+def stop_paint(style: dict[str, str]) -> tuple[tuple[float, float, float], float]:
+    """A gradient stop's colour as sRGB channels 0..1 and its alpha 0..1 (the colour's own alpha times
+    stop-opacity) from its computed style; stop-color is black unless given, and one that does not parse is
+    black too (SVG 1.1 §13.2.4)."""
+    value = style.get("stop-color", "black").strip().lower()
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    parsed = tinycss2.color4.parse_color(value)
+    if parsed is None or not hasattr(parsed, "to"):
+        parsed = tinycss2.color4.parse_color("black")
+    r, g, b, own = (float(v) for v in parsed.to("srgb"))
+    opacity = min(1.0, max(0.0, number(style.get("stop-opacity"), 1.0)))
+    return (min(1.0, max(0.0, r)), min(1.0, max(0.0, g)), min(1.0, max(0.0, b))), own * opacity
+
+
 @functools.lru_cache(maxsize=256)
 def _alpha(color: str) -> float:
     """A colour's own alpha (0 for a colour that does not parse)."""
@@ -274,6 +289,16 @@ def _marks(color: str, alpha: float) -> bool:
     share = alpha * float(own_alpha)
     return any(abs(share * 255 * float(c) + (1 - share) * p - p) > PAPER_TOLERANCE
                for c, p in zip(channels, PAPER, strict=True))
+
+
+def fallback_in_error(value: str) -> bool:
+    """Whether what follows `url(...)` in a paint is neither nothing, `none`, `currentColor` nor one colour (so
+    Chromium drops the whole declaration, as for `url(#g) green icc-color(...)`; SVG 2 §13.3, CSS Color 4)."""
+    rest = value[value.find(")") + 1:].strip().lower() if ")" in value else ""
+    if rest in ("", "none", "currentcolor"):
+        return False
+    parsed = tinycss2.color4.parse_color(rest)
+    return parsed is None
 
 
 def iri(value: str | None) -> str | None:

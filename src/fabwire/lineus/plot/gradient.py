@@ -1,0 +1,188 @@
+"""Where a gradient leaves a mark on the paper: the part of its plane whose colour, laid over the paper at its
+opacity, differs from the paper. A pen outlines the part of a shape a browser shows, so the stretch of a gradient
+that fades into the paper (white, or transparent) draws nothing, as a white fill draws nothing.
+
+Sources: SVG 1.1 §13.2 (gradients: `gradientUnits`, `gradientTransform`, `spreadMethod`, the defaults of x1, y1,
+x2, y2, cx, cy, r, fx, fy, and "a gradient vector of zero length paints the last stop's colour", "r = 0 paints
+the last stop's colour"), §13.2.4 (stop offsets clamped to 0..1 and never below an earlier one), SVG 2 §14.3.3
+(`fr`, the focal circle). Colours are interpolated per channel in sRGB, colour and alpha apart, as Chromium
+(Skia) paints SVG gradients.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry.base import BaseGeometry
+
+from fabwire.lineus.plot.geometry import FloatArray
+from fabwire.lineus.plot.svgstyle import PAPER, PAPER_TOLERANCE, number
+from fabwire.lineus.plot.svgunits import IDENTITY, flattens, length, transform
+
+SAMPLES = 2048
+"""Samples of the gradient's colour over 0..1: a band edge lies within 1/SAMPLES of the gradient's length of
+where the colour crosses PAPER_TOLERANCE (under 0.1 px for any gradient shorter than 200 px)."""
+MAX_BANDS = 2_000
+"""Bands a repeated or reflected gradient may make over one shape; beyond, the whole shape is taken as shown."""
+
+
+@dataclass(frozen=True)
+class Stop:
+    """One gradient stop: `offset` 0..1 (already clamped and ordered), `rgb` channels 0..1, `alpha` 0..1 (the
+    colour's own alpha times stop-opacity)."""
+
+    offset: float
+    rgb: tuple[float, float, float]
+    alpha: float
+
+
+def shown_intervals(stops: Sequence[Stop], opacity: float) -> list[tuple[float, float]]:
+    """The stretches of the gradient's 0..1 whose colour, at `opacity` (the paint's fill- or stroke-opacity),
+    differs from the paper by more than PAPER_TOLERANCE in a channel, as (start, end) pairs in order."""
+    if not stops:
+        return []
+    t = np.linspace(0.0, 1.0, SAMPLES + 1)
+    offsets = np.array([s.offset for s in stops])
+    colours = np.array([[*s.rgb, s.alpha] for s in stops])
+    # a stop at the same offset as the one before starts a sharp step: interpolating needs increasing offsets
+    offsets = offsets + np.arange(len(offsets)) * 1e-9
+    values = np.stack([np.interp(t, offsets, colours[:, k]) for k in range(4)], axis=1)
+    share = values[:, 3] * opacity
+    paper = np.array(PAPER, dtype=float)
+    mark = np.abs(share[:, None] * (255 * values[:, :3] - paper)).max(axis=1) > PAPER_TOLERANCE
+    out: list[tuple[float, float]] = []
+    edges = np.flatnonzero(np.diff(mark.astype(np.int8)))
+    starts = ([0] if mark[0] else []) + [int(e) + 1 for e in edges if not mark[e]]
+    ends = [int(e) for e in edges if mark[e]] + ([SAMPLES] if mark[-1] else [])
+    for a, b in zip(starts, ends, strict=True):
+        lo = 0.0 if a == 0 else (t[a - 1] + t[a]) / 2
+        hi = 1.0 if b == SAMPLES else (t[b] + t[b + 1]) / 2
+        out.append((float(lo), float(hi)))
+    return out
+
+
+def _spread(shown: list[tuple[float, float]], method: str, low: float, high: float) -> list[tuple[float, float]] | None:
+    """The shown stretches over `low`..`high` of the gradient's parameter, past 0..1 as `spreadMethod` says
+    (pad, reflect, repeat); None when they would make more than MAX_BANDS bands."""
+    if method in ("reflect", "repeat"):
+        first, last = math.floor(low), math.ceil(high)
+        if (last - first) * len(shown) > MAX_BANDS:
+            return None
+        out = []
+        for k in range(first, last):
+            for a, b in shown:
+                if method == "reflect" and k % 2:
+                    a, b = 1 - b, 1 - a
+                out.append((k + a, k + b))
+        return out
+    out = list(shown)
+    if shown and shown[0][0] <= 0:
+        out[0] = (min(low, 0.0) - 1, out[0][1])
+    if shown and shown[-1][1] >= 1:
+        out[-1] = (out[-1][0], max(high, 1.0) + 1)
+    return out
+
+
+def _matrix_then(a: FloatArray, b: FloatArray) -> FloatArray:
+    return np.asarray((np.vstack([a, [0.0, 0.0, 1.0]]) @ np.vstack([b, [0.0, 0.0, 1.0]]))[:2], dtype=float)
+
+
+def _apply(matrix: FloatArray, points: FloatArray) -> FloatArray:
+    return np.asarray(points @ matrix[:, :2].T + matrix[:, 2], dtype=float)
+
+
+def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[Stop], opacity: float,
+                 box: tuple[float, float, float, float], viewport: tuple[float, float],
+                 tolerance: float) -> BaseGeometry | None:
+    """The part of the user space around `box` (the painted element's bounding box, x0, y0, x1, y1 in user
+    units) where a gradient leaves a mark; None when it leaves one everywhere over the box (the common case).
+
+    `kind` is 'linearGradient' or 'radialGradient'; `attr(name)` reads an attribute along the gradient's `href`
+    chain; `viewport` (width, height) resolves percentages in userSpaceOnUse; `tolerance` is the chord error of
+    the circles of a radial gradient, user units."""
+    shown = shown_intervals(stops, opacity)
+    if len(shown) == 1 and shown[0] == (0.0, 1.0):
+        return None
+    x0, y0, x1, y1 = box
+    if not (x1 > x0 or y1 > y0):
+        return None
+    bounding = (attr("gradientUnits") or "").strip() != "userSpaceOnUse"
+    if bounding and not (x1 > x0 and y1 > y0):
+        return None  # the gradient paints nothing; whatever paints instead is taken as shown
+    try:
+        own = transform(attr("gradientTransform"))
+    except ValueError:
+        own = IDENTITY
+    frame = np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]) if bounding else IDENTITY
+    space = _matrix_then(frame, own)
+    if flattens(space):
+        return None
+    inverse = np.asarray(np.linalg.inv(np.vstack([space, [0.0, 0.0, 1.0]]))[:2], dtype=float)
+    corners = _apply(inverse, np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float))
+    vw, vh = viewport
+
+    def read(name: str, default: str, across: float) -> float:
+        value = attr(name)
+        value = default if value is None else value
+        if bounding:
+            return number(value, number(default, 0.0))
+        return length(value, across, default=length(default, across))
+
+    method = (attr("spreadMethod") or "pad").strip()
+    diagonal = math.hypot(vw, vh) / math.sqrt(2)
+    if kind == "linearGradient":
+        p1 = np.array([read("x1", "0%", vw), read("y1", "0%", vh)])
+        p2 = np.array([read("x2", "100%", vw), read("y2", "0%", vh)])
+        step = p2 - p1
+        reach = float(step @ step)
+        if reach == 0:
+            return None if shown and shown[-1][1] >= 1 else shapely.Polygon()
+        across = np.array([-step[1], step[0]]) / math.sqrt(reach)
+        along = (corners - p1) @ step / reach
+        side = (corners - p1) @ across
+        spans = _spread(shown, method, float(along.min()), float(along.max()))
+        if spans is None:
+            return None
+        s0, s1 = float(side.min()) - 1, float(side.max()) + 1
+        bands = [shapely.Polygon([p1 + a * step + s0 * across, p1 + b * step + s0 * across,
+                                  p1 + b * step + s1 * across, p1 + a * step + s1 * across]) for a, b in spans]
+        region = shapely.union_all(bands) if bands else shapely.Polygon()
+    else:
+        centre = np.array([read("cx", "50%", vw), read("cy", "50%", vh)])
+        radius = read("r", "50%", diagonal)
+        focus = np.array([read("fx", str(attr("cx") or "50%"), vw), read("fy", str(attr("cy") or "50%"), vh)])
+        focal_radius = max(0.0, read("fr", "0%", diagonal))
+        if radius <= 0:
+            return None if shown and shown[-1][1] >= 1 else shapely.Polygon()
+        if float(np.hypot(*(focus - centre))) + focal_radius > radius or focal_radius >= radius:
+            return None  # a cone, not nested circles: taken as shown
+        far = float(np.hypot(*(corners - focus).T).max())
+        high = far / (radius - float(np.hypot(*(focus - centre))) - focal_radius + 1e-12) + 1
+        spans = _spread(shown, method, 0.0, high)
+        if spans is None:
+            return None
+        reach = radius * float(np.sqrt(abs(np.linalg.det(space[:, :2]))))
+        chord = min(1.0, tolerance / reach) if tolerance > 0 else 1e-3
+        quads = max(4, min(128, math.ceil(math.pi / math.acos(1 - chord) / 4)))
+        outer: BaseGeometry = shapely.box(*(np.r_[corners.min(axis=0), corners.max(axis=0)] + [-1, -1, 1, 1]))
+        outer = shapely.union(outer, shapely.Point(*centre).buffer(radius, quad_segs=quads))
+
+        def disc(t: float) -> BaseGeometry:
+            """Where the parameter is below `t`: inside the circle between the focal and the end circle."""
+            if t < 0 or (t == 0 and focal_radius == 0):
+                return shapely.Polygon()
+            if t >= high:
+                return outer
+            at = focus + t * (centre - focus)
+            found: BaseGeometry = shapely.Point(*at).buffer(focal_radius + t * (radius - focal_radius),
+                                                            quad_segs=quads)
+            return found
+
+        region = shapely.union_all([shapely.difference(disc(b), disc(a)) for a, b in spans]) if spans \
+            else shapely.Polygon()
+    placed: BaseGeometry = shapely.transform(region, lambda xy: _apply(space, xy))
+    return placed
