@@ -264,6 +264,19 @@ CASES: dict[str, tuple[str, str]] = {
                                                 'opacity="0.2"/>'), "white fill"),
     "colours meeting are outlined": (doc('<rect x="20" y="20" width="160" height="160" fill="green"/>'
                                          '<circle cx="100" cy="100" r="50" fill="orange"/>'), "white fill"),
+    "stroke of the fill's own colour": (doc('<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z" fill="black" '
+                                            'stroke="#000" stroke-width="2"/>'
+                                            '<g color="navy"><path d="M20 20 H120 V120 H20 Z M60 60 H180 V180 '
+                                            'H60 Z" fill="currentColor" stroke="rgb(0 0 128)"/></g>'),
+                                        "stroke of the fill's own paint"),
+    "stroke of the fill's own gradient": (doc('<linearGradient id="g"><stop offset="0" stop-color="navy"/>'
+                                              '<stop offset="1" stop-color="teal"/></linearGradient>'
+                                              '<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z" '
+                                              'fill="url(#g)" stroke="url(#g)" stroke-width="2"/>'),
+                                          "stroke of the fill's own paint"),
+    "stroke of another colour crosses the fill": (doc('<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z" '
+                                                      'fill="black" stroke="yellow" stroke-width="2"/>'),
+                                                  "stroke of the fill's own paint"),
     # -- wide strokes --------------------------------------------------------------------------------------------
     "wide strokes": (doc('<rect x="30" y="30" width="140" height="50" fill="none" stroke="black" stroke-width="16"/>'
                          '<path d="M30 120 H90 M30 170 H90" fill="none" stroke="#333" stroke-width="14"/>'

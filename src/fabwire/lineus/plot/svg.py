@@ -63,6 +63,7 @@ from fabwire.lineus.plot.svgstyle import (
     opaque_stop,
     own_style,
     paints,
+    same_paint_value,
     stop_paint,
 )
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
@@ -167,6 +168,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("the stretch of a gradient that fades into the paper draws nothing: linear and radial (focus, fr), "
      "objectBoundingBox or user space, gradientTransform, pad, repeat and reflect, on fills and strokes",
      "SVG 1.1 §13.2, SVG 2 §14.3.3", "gradient from white"),
+    ("a stroke of the fill's own opaque paint (equal colours, or the same gradient) shows only the fill's border",
+     "SVG 1.1 §11.3, §3.3 (painter's model)", "stroke of the fill's own colour"),
     ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
     ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
      "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
@@ -1254,6 +1257,11 @@ class _Reader:
                               self.tolerance / scale)
         return None if region is None else shapely.transform(region, lambda xy: affine([xy], matrix)[0])
 
+    def same_paint(self, style: dict[str, str]) -> bool:
+        """Whether the stroke paints exactly what the fill under it paints, both without transparency (the same
+        colour, or the same gradient over the same bounding box): a pen then shows only the fill's border."""
+        return same_paint_value(style) and self.opaque(style, "fill") and self.opaque(style, "stroke")
+
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
         nothing (SVG 1.1 §13.2.4)."""
@@ -1439,6 +1447,8 @@ class _Reader:
             closed = [np.vstack([r, r[:1]]) for r in rings]
             rule = style.get("fill-rule", "nonzero").strip()
             own = _Fill(closed, rule, opaque=covers or self.opaque(style, "fill"))
+            hidden_stroke = stroke and fill == "solid" and len(out) == len(rings) and self.same_paint(style)
+            stroke = stroke and not hidden_stroke  # inside the fill, a stroke of the fill's own paint shows nothing
             if fill == "solid" and not stroke and out:
                 border = _border(own, closed)
                 if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border

@@ -291,6 +291,22 @@ def _marks(color: str, alpha: float) -> bool:
                for c, p in zip(channels, PAPER, strict=True))
 
 
+def same_paint_value(style: dict[str, str]) -> bool:
+    """Whether the fill and stroke of `style` name the same paint: the same paint server, or colours equal in
+    sRGB (`black`, `#000`, `rgb(0 0 0)` alike; `currentColor` as the colour it stands for)."""
+    values = []
+    for which in ("fill", "stroke"):
+        value = style.get(which, INITIAL[which]).strip().lower()
+        if value == "currentcolor":
+            value = style.get("color", INITIAL["color"]).strip().lower()
+        values.append(value)
+    if values[0] == values[1]:
+        return True
+    parsed = [tinycss2.color4.parse_color(v) for v in values]
+    return all(p is not None and hasattr(p, "to") for p in parsed) and \
+        tuple(parsed[0].to("srgb")) == tuple(parsed[1].to("srgb"))
+
+
 def fallback_in_error(value: str) -> bool:
     """Whether what follows `url(...)` in a paint is neither nothing, `none`, `currentColor` nor one colour (so
     Chromium drops the whole declaration, as for `url(#g) green icc-color(...)`; SVG 2 §13.3, CSS Color 4)."""
