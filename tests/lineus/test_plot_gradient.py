@@ -9,7 +9,8 @@ import shapely
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fabwire.lineus.plot import parse_svg
+from fabwire.errors import InputError
+from fabwire.lineus.plot import parse_svg, svg
 from fabwire.lineus.plot.gradient import SAMPLES, Stop, shown_intervals, shown_region
 from fabwire.lineus.plot.svgstyle import PAPER_TOLERANCE
 
@@ -127,3 +128,52 @@ def test_a_fill_fading_into_the_paper_is_outlined_where_it_shows() -> None:
     points = np.concatenate(drawing.lines)
     assert points[:, 0].min() == pytest.approx(100, abs=0.2)
     assert points[:, 0].max() == pytest.approx(200, abs=1e-6)
+
+
+def page(body: str) -> str:
+    return f'<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">{body}</svg>'
+
+
+STEP = '<stop offset="0.5" stop-color="white"/><stop offset="0.5" stop-color="black"/>'
+HOSTILE = {
+    "not-a-number attributes": page('<linearGradient id="g" x1="nan" x2="inf" gradientTransform="matrix(1e38 0 0 '
+                                    '1e-38 0 0)"><stop offset="nan" stop-color="white"/><stop offset="-1e400"/>'
+                                    '</linearGradient><rect width="200" height="60" fill="url(#g)" '
+                                    'stroke="url(#g)" stroke-width="30"/>'),
+    "a hair-thin repeated vector": page(f'<linearGradient id="g" spreadMethod="reflect" x2="0.00001">{STEP}'
+                                        '</linearGradient><rect width="200" height="200" fill="url(#g)"/>'),
+    "a vanishing radius": page(f'<radialGradient id="g" r="1e-30" spreadMethod="repeat">{STEP}</radialGradient>'
+                               '<rect width="200" height="200" fill="url(#g)"/>'),
+    "a huge radius": page(f'<radialGradient id="g" r="1e30">{STEP}</radialGradient>'
+                          '<rect width="200" height="200" fill="url(#g)"/>'),
+    "a focal circle wider than the end circle": page(f'<radialGradient id="g" fr="0.9" r="0.5">{STEP}'
+                                                     '</radialGradient><rect width="200" height="200" '
+                                                     'fill="url(#g)"/>'),
+    "an href cycle": page('<linearGradient id="a" href="#b"/><linearGradient id="b" href="#a"/>'
+                          '<rect width="200" height="200" fill="url(#a)"/>'),
+    "a singular transform": page(f'<linearGradient id="g" gradientTransform="scale(0 1)">{STEP}</linearGradient>'
+                                 '<rect width="200" height="200" fill="url(#g)"/>'),
+    "a flat shape": page(f'<linearGradient id="g">{STEP}</linearGradient>'
+                         '<path d="M0 0 L200 0" fill="url(#g)" stroke="url(#g)"/>'),
+}
+
+
+@pytest.mark.parametrize("name", sorted(HOSTILE))
+def test_hostile_gradients_draw_or_are_refused_cleanly(name: str) -> None:
+    try:
+        drawing = parse_svg(HOSTILE[name])
+    except InputError as exc:
+        assert "\n" not in str(exc) and str(exc)
+        return
+    assert all(len(line) >= 1 and np.isfinite(line).all() for line in drawing.lines)
+
+
+def test_gradients_past_the_drawing_budget_are_outlined_whole(monkeypatch: pytest.MonkeyPatch) -> None:
+    shapes = "".join(f'<rect x="{x}" y="20" width="30" height="160" fill="url(#g)"/>' for x in (20, 70, 120))
+    text = page(f'<linearGradient id="g">{STEP}</linearGradient>{shapes}')
+    cut = parse_svg(text)
+    assert np.concatenate(cut.lines)[:, 0].min() == pytest.approx(35, abs=0.2)  # each shows from its middle
+    monkeypatch.setattr(svg, "MAX_GRADIENT_POINTS", 0)
+    whole = parse_svg(text)
+    assert np.concatenate(whole.lines)[:, 0].min() == pytest.approx(20)
+    assert any("gradients past 0 points are outlined whole" in note for note in whole.notes)

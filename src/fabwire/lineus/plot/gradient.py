@@ -28,6 +28,9 @@ SAMPLES = 2048
 where the colour crosses PAPER_TOLERANCE (under 0.1 px for any gradient shorter than 200 px)."""
 MAX_BANDS = 2_000
 """Bands a repeated or reflected gradient may make over one shape; beyond, the whole shape is taken as shown."""
+MAX_REGION_POINTS = 20_000
+"""Vertices one gradient's shown region may have (bands times their circles' vertices); beyond, the whole shape
+is taken as shown, so a hostile gradient costs bounded time."""
 
 
 @dataclass(frozen=True)
@@ -78,12 +81,23 @@ def _spread(shown: list[tuple[float, float]], method: str, low: float, high: flo
                 if method == "reflect" and k % 2:
                     a, b = 1 - b, 1 - a
                 out.append((k + a, k + b))
-        return out
+        return _merged(out)
     out = list(shown)
     if shown and shown[0][0] <= 0:
         out[0] = (min(low, 0.0) - 1, out[0][1])
     if shown and shown[-1][1] >= 1:
         out[-1] = (out[-1][0], max(high, 1.0) + 1)
+    return out
+
+
+def _merged(spans: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """`spans` in order with those that overlap or touch joined: their bands are then disjoint."""
+    out: list[tuple[float, float]] = []
+    for a, b in sorted(spans):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
     return out
 
 
@@ -123,6 +137,8 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
         return None
     inverse = np.asarray(np.linalg.inv(np.vstack([space, [0.0, 0.0, 1.0]]))[:2], dtype=float)
     corners = _apply(inverse, np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float))
+    if not np.isfinite(corners).all():
+        return None
     vw, vh = viewport
 
     def read(name: str, default: str, across: float) -> float:
@@ -145,12 +161,12 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
         along = (corners - p1) @ step / reach
         side = (corners - p1) @ across
         spans = _spread(shown, method, float(along.min()), float(along.max()))
-        if spans is None:
+        if spans is None or 4 * len(spans) > MAX_REGION_POINTS:
             return None
         s0, s1 = float(side.min()) - 1, float(side.max()) + 1
         bands = [shapely.Polygon([p1 + a * step + s0 * across, p1 + b * step + s0 * across,
                                   p1 + b * step + s1 * across, p1 + a * step + s1 * across]) for a, b in spans]
-        region = shapely.union_all(bands) if bands else shapely.Polygon()
+        region: BaseGeometry = shapely.MultiPolygon(bands)  # disjoint strips: no union needed
     else:
         centre = np.array([read("cx", "50%", vw), read("cy", "50%", vh)])
         radius = read("r", "50%", diagonal)
@@ -162,12 +178,14 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
             return None  # a cone, not nested circles: taken as shown
         far = float(np.hypot(*(corners - focus).T).max())
         high = far / (radius - float(np.hypot(*(focus - centre))) - focal_radius + 1e-12) + 1
-        spans = _spread(shown, method, 0.0, high)
-        if spans is None:
+        if not math.isfinite(high) or high > MAX_BANDS:
             return None
+        spans = _spread(shown, method, 0.0, high)
         reach = radius * float(np.sqrt(abs(np.linalg.det(space[:, :2]))))
-        chord = min(1.0, tolerance / reach) if tolerance > 0 else 1e-3
+        chord = min(1.0, tolerance / reach) if tolerance > 0 and reach > 0 else 1e-3
         quads = max(4, min(128, math.ceil(math.pi / math.acos(1 - chord) / 4)))
+        if spans is None or 2 * 4 * (quads + 1) * len(spans) > MAX_REGION_POINTS:
+            return None
         outer: BaseGeometry = shapely.box(*(np.r_[corners.min(axis=0), corners.max(axis=0)] + [-1, -1, 1, 1]))
         outer = shapely.union(outer, shapely.Point(*centre).buffer(radius, quad_segs=quads))
 
@@ -182,7 +200,8 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
                                                             quad_segs=quads)
             return found
 
-        region = shapely.union_all([shapely.difference(disc(b), disc(a)) for a, b in spans]) if spans \
-            else shapely.Polygon()
+        rings = [shapely.difference(disc(b), disc(a)) for a, b in spans]
+        region = shapely.MultiPolygon([part for ring in rings for part in shapely.get_parts(ring)
+                                       if part.geom_type == "Polygon" and not part.is_empty])  # disjoint rings
     placed: BaseGeometry = shapely.transform(region, lambda xy: _apply(space, xy))
     return placed

@@ -109,6 +109,9 @@ WIDE_STROKE_SHARE = 0.02
 """A stroke wider than this share of the page diagonal (about 2 mm where the page fills a Line-us's drawing area,
 several pen widths) is drawn as the outline of the band it paints, caps and joins included, as a fill is; a thinner
 one along its centre line."""
+MAX_GRADIENT_POINTS = 300_000
+"""Vertices of the shown regions of gradients (gradient.shown_region) a drawing may make; beyond, gradient paints
+are drawn whole, with a note."""
 MAX_BAND_POINTS = 200_000
 """Points of the centre lines of wide strokes one drawing may outline at most; past that, wide strokes are drawn
 along their centre lines (outlining costs GEOS buffering and union per stroke)."""
@@ -594,7 +597,8 @@ def _marker_places(subs: list[Subpath], inverse: FloatArray) -> list[tuple[Float
 def _outline(area: BaseGeometry) -> Polylines:
     """The rings bounding an area: each polygon's exterior and holes."""
     return [np.asarray(ring.coords, dtype=float)[:, :2] for polygon in shapely.get_parts(area)
-            if polygon.geom_type == "Polygon" for ring in (polygon.exterior, *polygon.interiors)]
+            if polygon.geom_type == "Polygon" and not polygon.is_empty
+            for ring in (polygon.exterior, *polygon.interiors)]
 
 
 def _namespace(el: ET.Element) -> str:
@@ -644,6 +648,8 @@ class _Reader:
         self.points = 0
         self.dashes = 0
         self.band_points = 0
+        self.gradient_points = 0
+        """Vertices of the gradients' shown regions so far (bounded by MAX_GRADIENT_POINTS)."""
         """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
         self.wide_stroke = math.inf
         """Strokes wider than this on the page (px) are drawn as the outline of the band they paint."""
@@ -1251,11 +1257,24 @@ class _Reader:
         (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
         opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0)))
         scale = math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
-        region = shown_region(local(server.tag),
-                              lambda name: next((g.get(name) for g in chain if g.get(name) is not None), None),
-                              stops, opacity, (float(x0), float(y0), float(x1), float(y1)), viewport,
-                              self.tolerance / scale)
-        return None if region is None else shapely.transform(region, lambda xy: affine([xy], matrix)[0])
+        if self.gradient_points >= MAX_GRADIENT_POINTS:
+            self.unsupported[f"gradients past {MAX_GRADIENT_POINTS:,} points are outlined whole, their "
+                             "paper-coloured stretches too"] += 1
+            return None
+        try:
+            region = shown_region(local(server.tag),
+                                  lambda name: next((g.get(name) for g in chain if g.get(name) is not None), None),
+                                  stops, opacity, (float(x0), float(y0), float(x1), float(y1)), viewport,
+                                  self.tolerance / scale)
+        except shapely.errors.GEOSException:
+            return None  # geometry the library cannot combine: the whole paint is taken as shown
+        if region is None:
+            return None
+        if not shapely.is_valid(region):
+            region = shapely.make_valid(region)  # bands so close they touch
+        self.gradient_points += int(shapely.get_num_coordinates(region))
+        placed: BaseGeometry = shapely.transform(region, lambda xy: affine([xy], matrix)[0])
+        return placed
 
     def same_paint(self, style: dict[str, str]) -> bool:
         """Whether the stroke paints exactly what the fill under it paints, both without transparency (the same
