@@ -4,9 +4,9 @@ that fades into the paper (white, or transparent) draws nothing, as a white fill
 
 Sources: SVG 1.1 §13.2 (gradients: `gradientUnits`, `gradientTransform`, `spreadMethod`, the defaults of x1, y1,
 x2, y2, cx, cy, r, fx, fy, and "a gradient vector of zero length paints the last stop's colour", "r = 0 paints
-the last stop's colour"), §13.2.4 (stop offsets clamped to 0..1 and never below an earlier one), SVG 2 §14.3.3
-(`fr`, the focal circle). Colours are interpolated per channel in sRGB, colour and alpha apart, as Chromium
-(Skia) paints SVG gradients.
+the last stop's colour"), §7.11 (objectBoundingBox on a box with no width or height: the paint is ignored),
+§13.2.4 (stop offsets clamped to 0..1 and never below an earlier one), SVG 2 §14.3.3 (`fr`, the focal circle).
+Colours are interpolated per channel in sRGB, colour and alpha apart, as Chromium (Skia) paints SVG gradients.
 """
 
 from __future__ import annotations
@@ -61,10 +61,17 @@ def shown_intervals(stops: Sequence[Stop], opacity: float) -> list[tuple[float, 
     edges = np.flatnonzero(np.diff(mark.astype(np.int8)))
     starts = ([0] if mark[0] else []) + [int(e) + 1 for e in edges if not mark[e]]
     ends = [int(e) for e in edges if mark[e]] + ([SAMPLES] if mark[-1] else [])
+    given = np.array([s.offset for s in stops])
+
+    def between(low: float, high: float) -> float:
+        """Where the mark changes between two samples: at a stop there (a sharp step), else halfway."""
+        at = given[(given >= low) & (given <= high)]
+        return float(at[0]) if len(at) else (low + high) / 2
+
     for a, b in zip(starts, ends, strict=True):
-        lo = 0.0 if a == 0 else (t[a - 1] + t[a]) / 2
-        hi = 1.0 if b == SAMPLES else (t[b] + t[b + 1]) / 2
-        out.append((float(lo), float(hi)))
+        lo = 0.0 if a == 0 else between(t[a - 1], t[a])
+        hi = 1.0 if b == SAMPLES else between(t[b], t[b + 1])
+        out.append((lo, hi))
     return out
 
 
@@ -126,7 +133,7 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
         return None
     bounding = (attr("gradientUnits") or "").strip() != "userSpaceOnUse"
     if bounding and not (x1 > x0 and y1 > y0):
-        return None  # the gradient paints nothing; whatever paints instead is taken as shown
+        return shapely.Polygon()  # a box with no width or height: the gradient paints nothing, as in Chromium
     try:
         own = transform(attr("gradientTransform"))
     except ValueError:
@@ -134,7 +141,7 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
     frame = np.array([[x1 - x0, 0.0, x0], [0.0, y1 - y0, y0]]) if bounding else IDENTITY
     space = _matrix_then(frame, own)
     if flattens(space):
-        return None
+        return shapely.Polygon()  # a gradientTransform that flattens the plane paints nothing, as in Chromium
     inverse = np.asarray(np.linalg.inv(np.vstack([space, [0.0, 0.0, 1.0]]))[:2], dtype=float)
     corners = _apply(inverse, np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float))
     if not np.isfinite(corners).all():
@@ -182,7 +189,7 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
             return None
         spans = _spread(shown, method, 0.0, high)
         reach = radius * float(np.sqrt(abs(np.linalg.det(space[:, :2]))))
-        chord = min(1.0, tolerance / reach) if tolerance > 0 and reach > 0 else 1e-3
+        chord = min(1.0, max(1e-6, tolerance / reach)) if tolerance > 0 and reach > 0 else 1e-3
         quads = max(4, min(128, math.ceil(math.pi / math.acos(1 - chord) / 4)))
         if spans is None or 2 * 4 * (quads + 1) * len(spans) > MAX_REGION_POINTS:
             return None
