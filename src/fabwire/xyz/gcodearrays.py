@@ -466,6 +466,33 @@ def _tiled(data: NDArray[np.uint8], letters: NDArray[np.intp], spans: NDArray[np
     return bool(int(np.sum(spans)) + 2 * len(letters) + command_bytes == code_bytes)
 
 
+@dataclass(frozen=True)
+class _Other:
+    """What a command line other than a move holds: whether it is `SUSPECT_LINE`, and the command the analysis
+    follows (`code`, upper-cased `params`; None for one it ignores), or whether it is a G92 that only sets
+    positions (`sets`, read as a row of words)."""
+
+    suspect: bool
+    code: bytes | None
+    params: bytes
+    sets: bool
+
+
+def _other(line: bytes) -> _Other | None:
+    """Read one command line other than a move, from its newline to the next (both included); None when the line
+    reader refuses it (a subcode, G20, a second command word)."""
+    if _REFUSED_COMMAND.match(line) or _SECOND_COMMAND_LINE.match(line):
+        return None
+    suspect = line[1:2] == b"G" and SUSPECT_LINE.match(line, 1) is not None
+    found = _CONTROL.match(line)
+    if found is None:
+        return _Other(suspect, None, b"", False)
+    code = b"G" + found.group(1) if found.group(1) else b"M" + found.group(2)
+    params = found.group(3).upper()
+    sets = code == b"G92" and bool(_WORD.search(params)) and not _SET_ONLY.search(params)
+    return _Other(suspect, code, params, sets)
+
+
 def scan(padded: bytes) -> Scan | None:
     """The words of a piece of G-code (which starts with a newline and ends its last line) followed by PAD zero
     bytes, or None for a layout only the line-by-line reader handles."""
@@ -501,22 +528,25 @@ def scan(padded: bytes) -> Scan | None:
     controls: list[tuple[int, bytes, bytes]] = []
     is_set = np.zeros(len(starts), dtype=bool)
     suspect = len(starts)
-    for line in np.flatnonzero(command & ~is_move).tolist():  # the few other commands
-        if line < suspect and padded[newlines[line] + 1] == 71 and SUSPECT_LINE.match(  # G
-                padded, int(newlines[line]) + 1):
-            suspect = line
-        if _REFUSED_COMMAND.match(padded, int(newlines[line])) or _SECOND_COMMAND_LINE.match(
-                padded, int(newlines[line])):
+    others = np.flatnonzero(command & ~is_move)  # the other commands: each distinct line is read once
+    distinct: dict[bytes, _Other | None] = {}
+    for line, begin, end in zip(others.tolist(), newlines.take(others).tolist(),
+                                newlines.take(others + 1).tolist(), strict=True):
+        text_of = padded[begin:end + 1]
+        if text_of in distinct:
+            other = distinct[text_of]
+        else:
+            other = distinct[text_of] = _other(text_of)
+        if other is None:
             return None  # the line reader refuses it
-        found = _CONTROL.match(padded, int(newlines[line]))
-        if found is None:
+        if line < suspect and other.suspect:
+            suspect = line
+        if other.code is None:
             continue
-        code = b"G" + found.group(1) if found.group(1) else b"M" + found.group(2)
-        params = found.group(3).upper()
-        if code == b"G92" and _WORD.search(params) and not _SET_ONLY.search(params):
+        if other.sets:
             is_set[line] = True
         else:
-            controls.append((line, code, params))
+            controls.append((line, other.code, other.params))
     is_row = is_move | is_set
     code_end = newlines[1:]
     inline_comments = False  # a `;` after the code of a move (comment lines are no moves)

@@ -6,6 +6,7 @@ is missing it is computed from the moves themselves.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
@@ -148,6 +149,13 @@ def _code(params: bytes) -> bytes:
     if b"(" in params:
         params = _PAREN_COMMENT.sub(b" ", params)
     return params.partition(b"*")[0]
+
+
+@functools.lru_cache(maxsize=64)
+def _homed_axes(params: bytes) -> tuple[int, ...]:
+    """The axes (0 X, 1 Y, 2 Z) a G28 with these parameters homes: those it names, else all three (Marlin)."""
+    named = sorted({b"XYZ".index(axis) for axis in re.findall(rb"[XYZ]", _code(params))})
+    return tuple(named) or (0, 1, 2)
 
 
 def words_of(params: bytes) -> dict[bytes, float]:
@@ -536,9 +544,8 @@ class MoveAnalyzer:
                 self.pos[b"XYZ".index(axis)] = number
 
     def _home(self, params: bytes) -> None:
-        axes = set(re.findall(rb"[XYZ]", _code(params))) or {b"X", b"Y", b"Z"}
-        for axis in axes:
-            self.pos[b"XYZ".index(axis)] = 0.0
+        for axis in _homed_axes(params):
+            self.pos[axis] = 0.0
 
     def _dwell(self, params: bytes) -> None:
         words = words_of(params)  # S (seconds) overrides P (milliseconds), as in Marlin
@@ -549,11 +556,16 @@ class MoveAnalyzer:
     def _feed_arrays(self, found: gcodearrays.Scan) -> None:
         """Analyse a piece read into arrays."""
         self.arcs += int(np.count_nonzero(found.arcs))  # `G2` alone too: a line the printer is given as an arc
+        controls = [*found.controls, (len(found.arcs) + 1, b"", b"")]
+        lines = np.array([line for line, _, _ in controls], dtype=np.int64)
+        # where each axis's words stop before each other command, found at once: most commands follow another
+        # command or a move with no words between them, and those need no segment
+        bounds = np.stack([np.searchsorted(words.lines, lines) for words in found.axes], axis=1).tolist()
         start = [0] * len(found.axes)
-        for line, code, params in [*found.controls, (len(found.arcs) + 1, b"", b"")]:
-            ends = [int(np.searchsorted(words.lines, line)) for words in found.axes]
-            self._segment([Words(w.lines[a:b], w.values[a:b], w.sets[a:b])
-                           for w, a, b in zip(found.axes, start, ends, strict=True)], found.arcs)
+        for (_, code, params), ends in zip(controls, bounds, strict=True):
+            if ends != start:
+                self._segment([Words(w.lines[a:b], w.values[a:b], w.sets[a:b])
+                               for w, a, b in zip(found.axes, start, ends, strict=True)], found.arcs)
             if code:
                 self._command(code, params)
             start = ends
