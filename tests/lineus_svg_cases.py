@@ -247,6 +247,13 @@ CASES: dict[str, tuple[str, str]] = {
                                        'stroke="url(#g)" stroke-width="2"/>'
                                        '<rect x="60" y="60" width="80" height="80" fill="none" '
                                        'stroke="url(#g)" stroke-width="20"/>'), "gradient fades into the paper"),
+    "wide strokes fading out in user space": (doc('<linearGradient id="g" gradientUnits="userSpaceOnUse" x1="40" '
+                                                  'x2="160"><stop offset="0.7" stop-color="black"/><stop offset="1" '
+                                                  'stop-color="white"/></linearGradient><rect x="40" y="40" '
+                                                  'width="120" height="60" fill="none" stroke="url(#g)" '
+                                                  'stroke-width="20"/><path d="M20 180 Q100 80 180 180" fill="none" '
+                                                  'stroke="url(#g)" stroke-width="16"/>'),
+                                              "gradient fades into the paper"),
     "gradient fill inside a black border": (doc('<linearGradient id="g"><stop offset="0.2" stop-color="white"/>'
                                                 '<stop offset="0.3" stop-color="black"/></linearGradient>'
                                                 '<rect x="20" y="20" width="160" height="160" fill="url(#g)" '

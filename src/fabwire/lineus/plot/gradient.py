@@ -118,13 +118,14 @@ def _apply(matrix: FloatArray, points: FloatArray) -> FloatArray:
 
 def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[Stop], opacity: float,
                  box: tuple[float, float, float, float], viewport: tuple[float, float],
-                 tolerance: float) -> BaseGeometry | None:
+                 tolerance: float, margin: float = 0.0) -> BaseGeometry | None:
     """The part of the user space around `box` (the painted element's bounding box, x0, y0, x1, y1 in user
     units) where a gradient leaves a mark; None when it leaves one everywhere over the box (the common case).
 
     `kind` is 'linearGradient' or 'radialGradient'; `attr(name)` reads an attribute along the gradient's `href`
     chain; `viewport` (width, height) resolves percentages in userSpaceOnUse; `tolerance` is the chord error of
-    the circles of a radial gradient, user units."""
+    the circles of a radial gradient, user units; `margin` (user units) is how far beyond the box the paint
+    reaches (a stroke's half width and miters), which the region must cover too."""
     shown = shown_intervals(stops, opacity)
     if len(shown) == 1 and shown[0] == (0.0, 1.0):
         return None
@@ -143,7 +144,9 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
     if flattens(space):
         return shapely.Polygon()  # a gradientTransform that flattens the plane paints nothing, as in Chromium
     inverse = np.asarray(np.linalg.inv(np.vstack([space, [0.0, 0.0, 1.0]]))[:2], dtype=float)
-    corners = _apply(inverse, np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float))
+    m = max(0.0, margin)
+    corners = _apply(inverse, np.array([[x0 - m, y0 - m], [x1 + m, y0 - m], [x1 + m, y1 + m], [x0 - m, y1 + m]],
+                                       dtype=float))
     if not np.isfinite(corners).all():
         return None
     vw, vh = viewport

@@ -1236,9 +1236,10 @@ class _Reader:
             chain.append(nxt)
 
     def shown_area(self, style: dict[str, str], which: str, subs: list[Subpath], matrix: FloatArray,
-                   viewport: tuple[float, float]) -> BaseGeometry | None:
+                   viewport: tuple[float, float], reach: float = 0.0) -> BaseGeometry | None:
         """Where the fill's or stroke's gradient leaves a mark on the paper (output units), for an element whose
-        output subpaths are `subs`; None when it leaves one wherever it paints, or the paint is no gradient."""
+        output subpaths are `subs` and whose paint reaches `reach` user units beyond them (a stroke's); None when
+        it leaves one wherever it paints, or the paint is no gradient."""
         ref = iri(style.get(which, ""))
         server = self.ids.get(ref) if ref else None
         if (server is None or local(server.tag) not in GRADIENTS or self._paint_kind(style, which)[0] != "solid"
@@ -1265,7 +1266,7 @@ class _Reader:
             region = shown_region(local(server.tag),
                                   lambda name: next((g.get(name) for g in chain if g.get(name) is not None), None),
                                   stops, opacity, (float(x0), float(y0), float(x1), float(y1)), viewport,
-                                  self.tolerance / scale)
+                                  self.tolerance / scale, reach)
         except shapely.errors.GEOSException:
             return None  # geometry the library cannot combine: the whole paint is taken as shown
         if region is None:
@@ -1459,7 +1460,9 @@ class _Reader:
             self._count(len(pts))
             out.append(pts)
         fill_shown = self.shown_area(style, "fill", subs, matrix, viewport) if fill == "solid" and rings else None
-        stroke_shown = self.shown_area(style, "stroke", subs, matrix, viewport) if stroke or band else None
+        miter = max(1.0, number(style.get("stroke-miterlimit"), 4.0))
+        stroke_shown = self.shown_area(style, "stroke", subs, matrix, viewport, half * miter + 1) \
+            if stroke or band else None
         if stroke and stroke_shown is not None and not (fill == "solid" and rings):
             out.replace(cut(list(out), stroke_shown)[0])  # the stroke's paper-coloured stretches draw nothing
         if rings:
