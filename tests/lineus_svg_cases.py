@@ -533,6 +533,9 @@ TEXT_CASES: dict[str, str] = {
     "text in a styled group": doc('<g font-family="serif" font-size="24" transform="translate(10 0)">'
                                   '<text x="30" y="80">Serif text</text></g>'),
     "text preserving spaces": doc('<text x="20" y="100" font-size="20" xml:space="preserve">a   b</text>'),
+    "unpainted and white text leaves no letters": doc('<text x="10" y="100" font-size="20"><tspan fill="none">ab'
+                                                      '</tspan> <tspan fill="white">cd</tspan> <tspan '
+                                                      'fill-opacity="0">ef</tspan> shown</text>'),
     "text css font size": doc('<style>text { font-size: 2em }</style><text x="20" y="120">Big</text>'),
 }
 """Text cases: the letters differ from the browser's font, so these are compared by the box the ink covers."""

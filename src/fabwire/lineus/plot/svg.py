@@ -173,7 +173,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
      "SVG 1.1 §13.2, SVG 2 §14.3.3", "gradient from white"),
     ("a stroke of the fill's own opaque paint (equal colours, or the same gradient) shows only the fill's border",
      "SVG 1.1 §11.3, §3.3 (painter's model)", "stroke of the fill's own colour"),
-    ("text in single-stroke letters: position, size, anchor", "SVG 1.1 §10.4, §10.9.1", "text"),
+    ("text in single-stroke letters: position, size, anchor; runs without paint, or of the paper's colour, draw "
+     "nothing", "SVG 1.1 §10.4, §10.9.1, §11.2", "text"),
     ("font-relative units ex, ch, cap, ic, lh from the face's metrics; rem, rlh of the root",
      "CSS Values 4 §6.1.1 (FONT_METRICS)", "font-relative units"),
     ("viewport units vw, vh, vi, vb, vmin, vmax of the page", "CSS Values 4 §6.1.2", "viewport units"),

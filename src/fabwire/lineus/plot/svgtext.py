@@ -21,7 +21,7 @@ import numpy as np
 
 from fabwire.errors import InputError
 from fabwire.lineus.plot.geometry import Polylines
-from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, local, number, own_style
+from fabwire.lineus.plot.svgstyle import StyleSheet, inherit, local, number, own_style, paints
 from fabwire.lineus.plot.svgunits import length
 from fabwire.lineus.plot.text import DEFAULT_FONT, text_lines
 
@@ -207,7 +207,8 @@ class TextLayout:
             text = "".join(c.char for c in chunk[index:end])
             size = number(first.style.get("font-size"), 16.0)
             face, width, space = hershey_face(first.style)
-            shown = first.style.get("visibility", "visible").strip() == "visible"
+            shown = first.style.get("visibility", "visible").strip() == "visible" and (
+                paints(first.style, "fill") or paints(first.style, "stroke"))  # white or unpainted text shows nothing
             for word in _WORDS.split(text):
                 if word.startswith(" "):
                     x += len(word) * space * size
