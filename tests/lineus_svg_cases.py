@@ -284,6 +284,24 @@ CASES: dict[str, tuple[str, str]] = {
     "stroke of another colour crosses the fill": (doc('<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z" '
                                                       'fill="black" stroke="yellow" stroke-width="2"/>'),
                                                   "stroke of the fill's own paint"),
+    "fills of one colour meeting show one shape": (doc('<rect x="20" y="20" width="80" height="80" fill="navy"/>'
+                                                       '<rect x="100" y="20" width="80" height="80" '
+                                                       'fill="#000080"/><rect x="20" y="100" width="80" '
+                                                       'height="80" fill="rgb(0,0,128)"/><rect x="100" y="100" '
+                                                       'width="80" height="80" fill="navy" stroke="navy"/>'
+                                                       '<circle cx="100" cy="100" r="30" fill="navy"/>'
+                                                       '<rect x="60" y="150" width="40" height="40" fill="teal"/>'),
+                                                   "fills of one colour"),
+    "bars of one colour side by side": (doc(''.join(f'<rect x="{20 + 20 * k}" y="{100 - 10 * k}" width="20" '
+                                                    f'height="{80 + 10 * k}" style="fill: #ddd; stroke: #ddd"/>'
+                                                    for k in range(8))), "fills of one colour"),
+    "pattern tiles of one colour show no seams": (doc('<pattern id="p" patternUnits="userSpaceOnUse" width="50" '
+                                                      'height="50"><rect width="51" height="51" fill="#aec7e8"/>'
+                                                      '<path d="M0 50 L50 0" stroke="black"/></pattern>'
+                                                      '<pattern id="q" href="#p" width="40" height="40"/>'
+                                                      '<rect x="10" y="10" width="180" height="80" '
+                                                      'fill="url(#p)"/><circle cx="100" cy="145" r="45" '
+                                                      'fill="url(#q)" stroke="black"/>'), "pattern fill"),
     # -- wide strokes --------------------------------------------------------------------------------------------
     "wide strokes": (doc('<rect x="30" y="30" width="140" height="50" fill="none" stroke="black" stroke-width="16"/>'
                          '<path d="M30 120 H90 M30 170 H90" fill="none" stroke="#333" stroke-width="14"/>'

@@ -64,6 +64,7 @@ from fabwire.lineus.plot.svgstyle import (
     own_style,
     paints,
     same_paint_value,
+    solid_colour,
     stop_paint,
 )
 from fabwire.lineus.plot.svgtext import TEXT_MODES, TextLayout
@@ -164,7 +165,10 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("clip path cycles leave out the looping reference", "SVG 1.1 §14.3.5", "clip cycle"),
     ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
     ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
-    ("pattern fills drawn inside the shape", "SVG 1.1 §13.3", "pattern fill"),
+    ("pattern fills drawn inside the shape; tiles an opaque paint covers whole show no seams, and the shape's "
+     "border", "SVG 1.1 §13.3", "pattern fill"),
+    ("opaque fills of one colour that meet or overlap show one shape: no edge between them",
+     "SVG 1.1 §3.3 (painter's model)", "fills of one colour meeting show one shape"),
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
     ("gradients whose stops are all opaque hide what lies under them", "SVG 1.1 §13.2.4, §3.3",
      "opaque gradient hides what lies under it"),
@@ -219,14 +223,16 @@ def _box(points: FloatArray) -> list[float]:
 class _Fill:
     """The area a solid fill covers, in output units, from its closed rings by its fill rule (made on demand)."""
 
-    __slots__ = ("_area", "box", "opaque", "rings", "rule")
+    __slots__ = ("_area", "box", "opaque", "paint", "rings", "rule")
 
     def __init__(self, rings: Polylines, rule: str, area: BaseGeometry | None = None, *,
-                 opaque: bool = False) -> None:
+                 opaque: bool = False, paint: str | None = None) -> None:
         self.rings = rings
         self.rule = rule
         self.opaque = opaque
         """Whether the paint has no transparency, so it hides what lies under it."""
+        self.paint = paint
+        """The solid colour it paints (svgstyle.solid_colour), None for any other paint."""
         self._area = area
         self.box = _box(np.concatenate(rings)) if rings else (
             shapely.bounds(area).tolist() if area is not None and not area.is_empty else [0.0, 0.0, -1.0, -1.0])
@@ -933,9 +939,11 @@ class _Reader:
         else:
             self.children(el, style, matrix, viewport, target, depth, uses)
 
-    def hide_under(self, fill: _Fill) -> None:
+    def hide_under(self, fill: _Fill) -> list[BaseGeometry]:
         """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
-        model), and earlier fills shrink to what still shows."""
+        model), and earlier fills shrink to what still shows. Returns the areas of the earlier opaque fills of
+        its own colour that it meets (before they shrink): no edge shows between them."""
+        same: list[BaseGeometry] = []
         x0, y0, x1, y1 = fill.box
         for ink in self._below[self._floor:]:
             if not ink and not ink.fills:
@@ -944,7 +952,7 @@ class _Reader:
             if self._occlusion_checks > MAX_OCCLUSION_CHECKS:
                 self.unsupported["too many overlapping fills to work out which lines they hide: some lines "
                                  "under fills are drawn"] += 1
-                return
+                return same
             boxes = ink.boxes()
             under = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
             if under.any():
@@ -960,7 +968,10 @@ class _Reader:
                     earlier = ink.fills[k]
                     if shapely.intersects(earlier.area, fill.area):
                         ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area),
-                                              opaque=earlier.opaque))
+                                              opaque=earlier.opaque, paint=earlier.paint))
+                        if fill.paint is not None and earlier.paint == fill.paint and earlier.opaque:
+                            same.append(earlier.area)
+        return same
 
     def clip(self, el: ET.Element, own: dict[str, str], matrix: FloatArray, target: Ink,
              stack: tuple[str, ...]) -> None:
@@ -987,7 +998,7 @@ class _Reader:
             edges, area = cut_edge(fill.area, region)
             kept.extend(edges)
             if not area.is_empty:
-                fills.append(_Fill([], fill.rule, area, opaque=fill.opaque))
+                fills.append(_Fill([], fill.rule, area, opaque=fill.opaque, paint=fill.paint))
         target.replace(kept)
         target.fills = fills
         self.hidden.extend(hidden)
@@ -1469,7 +1480,8 @@ class _Reader:
         if rings:
             closed = [np.vstack([r, r[:1]]) for r in rings]
             rule = style.get("fill-rule", "nonzero").strip()
-            own = _Fill(closed, rule, opaque=covers or self.opaque(style, "fill"))
+            own = _Fill(closed, rule, opaque=covers or self.opaque(style, "fill"),
+                        paint=solid_colour(style, "fill") if fill == "solid" else None)
             hidden_stroke = stroke and fill == "solid" and len(out) == len(rings) and self.same_paint(style)
             stroke = stroke and not hidden_stroke  # inside the fill, a stroke of the fill's own paint shows nothing
             if fill == "solid" and not stroke and out:
@@ -1477,7 +1489,9 @@ class _Reader:
                 if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
                     out.replace(border)
             if covers:
-                self.hide_under(own)
+                same = self.hide_under(own)
+                if same and fill == "solid" and not stroke:  # no edge shows where it meets its own colour
+                    out.replace(cut(list(out), shapely.union_all(same).buffer(self.tolerance))[1])
             if fill_shown is not None:  # a gradient's paper-coloured stretch draws nothing: outline what shows
                 own = _Fill([], rule, shapely.intersection(own.area, fill_shown), opaque=own.opaque)
                 border = _outline(own.area)
@@ -1490,7 +1504,7 @@ class _Reader:
             if fill == "solid":
                 out.fills.append(own)
             elif pattern is not None:
-                self.pattern(pattern, matrix, closed, rule, viewport, out)
+                self.pattern(pattern, matrix, closed, rule, viewport, out, bordered=stroke)
         if band and stroke_pattern is not None:
             self.pattern_band(band, pen_of(style, half, self.tolerance / scale), stroke_pattern, matrix, viewport,
                               out)
@@ -1565,8 +1579,10 @@ class _Reader:
             chain.append(nxt)
 
     def pattern(self, el: ET.Element, matrix: FloatArray, rings: Polylines, rule: str,
-                viewport: tuple[float, float], out: Ink) -> None:
-        """Draw a pattern's tiles over the shape whose output `rings` bound it, cut to the fill's area."""
+                viewport: tuple[float, float], out: Ink, *, bordered: bool = False) -> None:
+        """Draw a pattern's tiles over the shape whose output `rings` bound it, cut to the fill's area. A tile
+        whose opaque paint covers it whole shows one colour across the seams between tiles: the seams draw
+        nothing, and the shape's border is drawn (unless `bordered`: its stroke draws it already)."""
         chain = self._pattern_chain(el)
 
         def attr(name: str) -> str | None:
@@ -1622,12 +1638,22 @@ class _Reader:
         finally:
             self._patterns = self._patterns[:-1]
             self._below, self._floor = outside, floor
+        whole = shapely.box(0.0, 0.0, w, h)
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
-            kept, _ = cut(list(tile), shapely.box(0.0, 0.0, w, h))
+            seamless = any(fill.opaque and fill.area.covers(whole) for fill in tile.fills)
+            kept, _ = cut(list(tile), whole)
+            if seamless:  # one colour across the seams: what lies along the tile's border is no edge
+                kept = cut(kept, whole.exterior.buffer(self.tolerance * 2))[1]
             tile = Ink(kept)
+        else:
+            seamless = False
+        area = area_of_rings(rings, rule)
+        if seamless and not bordered:
+            border = _outline(area)
+            self._count(sum(len(line) for line in border))
+            out.extend(border)
         if not tile:
             return
-        area = area_of_rings(rings, rule)
         shapely.prepare(area)
         placed: Polylines = []
         for i in range(i0, i1):

@@ -291,6 +291,21 @@ def _marks(color: str, alpha: float) -> bool:
                for c, p in zip(channels, PAPER, strict=True))
 
 
+def solid_colour(style: dict[str, str], which: str) -> str | None:
+    """The fill's (or stroke's) colour as `rgb(r g b / a)` in sRGB, spelled one way for every way of writing it;
+    None for a paint server, `none`, or a colour that does not parse."""
+    value = style.get(which, INITIAL[which]).strip().lower()
+    if value == "currentcolor":
+        value = style.get("color", INITIAL["color"]).strip().lower()
+    if value.startswith("url("):
+        return None
+    parsed = tinycss2.color4.parse_color(value)
+    if parsed is None or not hasattr(parsed, "to"):
+        return None
+    r, g, b, a = (round(float(v), 6) for v in parsed.to("srgb"))
+    return f"rgb({r} {g} {b} / {a})"
+
+
 def same_paint_value(style: dict[str, str]) -> bool:
     """Whether the fill and stroke of `style` name the same paint: the same paint server, or colours equal in
     sRGB (`black`, `#000`, `rgb(0 0 0)` alike; `currentColor` as the colour it stands for)."""

@@ -278,7 +278,8 @@ def css_transform(value: str, viewport: tuple[float, float], font_size: float | 
         name = match.group(1).lower()
         args = [a for a in re.split(r"\s*,\s*|\s+", match.group(2).strip()) if a]
         matrix = _css_function(name, args, viewport, font_size)
-        out = out @ np.vstack([matrix, [0.0, 0.0, 1.0]])
+        with np.errstate(invalid="ignore", over="ignore"):  # a product beyond floats flattens: `flattens` says so
+            out = out @ np.vstack([matrix, [0.0, 0.0, 1.0]])
     return np.asarray(out[:2], dtype=float)
 
 
