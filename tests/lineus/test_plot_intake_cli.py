@@ -178,3 +178,14 @@ def test_coordinates_beyond_a_browser_end_the_path_in_one_line_naming_the_file(t
     assert result.stderr == f"fabwire: error: {path}: nothing to draw: no shape in it has a visible stroke or fill " \
                             "(<path> data with an error (a number beyond what a browser can hold) is drawn up to the " \
                             "error, as browsers do)\n"  # no numpy warning before it
+
+
+def test_preview_json_carries_the_plans_notes(tmp_path: Path) -> None:
+    svg = tmp_path / "with-image.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><image href="a.png" '
+                   'width="10" height="10"/><rect x="10" y="10" width="50" height="50"/></svg>')
+    result = run_cli("lineus", "preview", str(svg), "--json", env=cli_env(tmp_path))
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert any("image" in note for note in data["notes"]), data["notes"]
+    assert all(note in result.stderr for note in data["notes"])

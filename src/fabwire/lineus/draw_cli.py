@@ -127,10 +127,10 @@ def figures_text(plan: Plan) -> str:
 
 
 def _report(output: Output, plan: Plan, extra: dict[str, Any] | None = None, written: tuple[Path, ...] = ()) -> None:
-    """The plan's notes and figures, and a line for each file `written`."""
+    """The plan's notes and figures, and a line for each file `written`; JSON carries the notes too."""
     for note in plan.notes:
         output.note(note)
-    data = {**plan.figures().as_dict(), **(extra or {})}
+    data = {**plan.figures().as_dict(), "notes": list(plan.notes), **(extra or {})}
     output.result(data, "\n".join([figures_text(plan), *(f"wrote {path}" for path in written)]))
 
 
