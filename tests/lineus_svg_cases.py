@@ -201,6 +201,9 @@ CASES: dict[str, tuple[str, str]] = {
     "dashes on a polyline with percentages": (doc(f'<polyline points="20,20 180,20 180,180 20,180" '
                                                   f'stroke-dasharray="5% 3%" stroke-dashoffset="2%" {S}/>'),
                                               "dashes"),
+    "dashes along pathLength": (doc(f'<polyline points="20,40 60,80 100,40 140,80 180,40" pathLength="100" '
+                                    f'stroke-dasharray="3 3" {S}/><circle cx="100" cy="140" r="40" '
+                                    f'pathLength="10" stroke-dasharray="1" stroke-dashoffset="0.5" {S}/>'), "dashes"),
     "dashed fill border stays whole": (doc('<rect x="40" y="40" width="120" height="120" fill="black" '
                                            'stroke="black" stroke-width="2" stroke-dasharray="10 10"/>'), "dashes"),
     "opaque gradient hides what lies under it": (doc(f'<line x1="10" y1="60" x2="190" y2="60" {S}/>'

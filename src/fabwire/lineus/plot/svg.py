@@ -151,7 +151,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("em from the inherited font size", "CSS Values 3 §6.1", "em units"),
     ("display, visibility, opacity hide", "SVG 1.1 §14.5, CSS 2.1 §9.2.4", "hidden parts"),
     ("switch with systemLanguage, requiredExtensions", "SVG 1.1 §5.8", "switch language"),
-    ("stroke-dasharray and dashoffset, dots for round caps", "SVG 1.1 §11.4, SVG 2 §13.6", "dashes"),
+    ("stroke-dasharray and dashoffset, dots for round caps, measured along pathLength",
+     "SVG 1.1 §11.4, SVG 2 §13.6, §9.3.3 (pathLength)", "dashes"),
     ("markers on path, line, polyline and polygon vertices: orient, markerUnits, viewBox, refX/refY, clip",
      "SVG 2 §13.7", "markers"),
     ("context-fill and context-stroke from the use or the marked shape; none without one", "SVG 2 §13.3",
@@ -1432,6 +1433,10 @@ class _Reader:
         band: list[tuple[FloatArray, bool]] = []
         """The centre lines of a wide stroke, in user units, with whether each is closed."""
         inverse = _invert(matrix) if dashes or wide else matrix
+        if dashes and (author := number(el.get("pathLength"), 0.0)) > 0:  # dashes measured along pathLength
+            real = _length(affine([sub.points for sub in subs if sub.segments], inverse))
+            if real > 0:
+                dashes, offset = [dash * real / author for dash in dashes], offset * real / author
         rings: Polylines = []
         final, out = out, Ink()  # its own lines, added once its fill has hidden what lies under it
         for sub in subs:
