@@ -272,6 +272,13 @@ CASES: dict[str, tuple[str, str]] = {
                                                 'fill="yellow"/><rect x="20" y="110" width="70" height="70" '
                                                 'fill="#eee"/><circle cx="145" cy="145" r="35" fill="navy" '
                                                 'opacity="0.2"/>'), "white fill"),
+    "paint too faint at its opacity draws nothing": (doc('<rect x="20" y="20" width="70" height="70" '
+                                                         'opacity="0.02"/><g opacity="0.1"><g opacity="0.15">'
+                                                         '<circle cx="145" cy="55" r="35"/></g></g>'
+                                                         '<g opacity="0.5"><rect x="20" y="110" width="70" '
+                                                         'height="70" fill-opacity="0.03"/>'
+                                                         '<circle cx="145" cy="145" r="35" fill="navy"/></g>'),
+                                                     "white fill"),
     "colours meeting are outlined": (doc('<rect x="20" y="20" width="160" height="160" fill="green"/>'
                                          '<circle cx="100" cy="100" r="50" fill="orange"/>'), "white fill"),
     "stroke of the fill's own colour": (doc('<path d="M100 15 l50 160 l-130 -100 h160 l-130 100 z" fill="black" '

@@ -165,7 +165,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
      "CSS Masking 1 §6.1, CSS Shapes 1 §3.1", "clip-path basic shapes"),
     ("clip path cycles leave out the looping reference", "SVG 1.1 §14.3.5", "clip cycle"),
     ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
-    ("fills the colour of the paper draw nothing", "SVG 1.1 §11.2 (paint), CSS Color 4", "white fill"),
+    ("fills the colour of the paper, or too faint at their opacity and their groups', draw nothing",
+     "SVG 1.1 §11.2 (paint), §14.5 (opacity), CSS Color 4", "white fill"),
     ("pattern fills drawn inside the shape; tiles an opaque paint covers whole show no seams, and the shape's "
      "border", "SVG 1.1 §13.3", "pattern fill"),
     ("opaque fills of one colour that meet or overlap show one shape: no edge between them",
@@ -656,6 +657,9 @@ class _Reader:
         self.points = 0
         self.dashes = 0
         self.band_points = 0
+        self.alpha = 1.0
+        """The product of the opacity of the element being drawn and of its ancestors: paint this faint on the
+        paper may leave no mark (svgstyle.paints)."""
         self.gradient_points = 0
         """Vertices of the gradients' shown regions so far (bounded by MAX_GRADIENT_POINTS)."""
         """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
@@ -863,13 +867,18 @@ class _Reader:
         if flattens(matrix):
             return  # scaled to a line or a point: nothing of it shows
         effects = [k for k in own.keys() & EFFECTS if own[k].strip() != "none"]
-        if tag in SHAPES and not effects:
-            self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
-            return
-        target = Ink()
-        with self.painting(target, shaded=bool(set(effects) - {"clip-path"}),
-                           isolated=bool(effects) or _opacity(own) < 1):
-            self.draw(el, tag, style, matrix, viewport, target, depth, uses)
+        outer_alpha = self.alpha
+        self.alpha *= min(1.0, _opacity(own))
+        try:
+            if tag in SHAPES and not effects:
+                self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
+                return
+            target = Ink()
+            with self.painting(target, shaded=bool(set(effects) - {"clip-path"}),
+                               isolated=bool(effects) or _opacity(own) < 1):
+                self.draw(el, tag, style, matrix, viewport, target, depth, uses)
+        finally:
+            self.alpha = outer_alpha
         self.clip(el, own, matrix, target, ())
         if effects == ["clip-path"] and _opacity(own) >= 1:
             self.hide_under_clipped(target)
@@ -1181,7 +1190,7 @@ class _Reader:
         """('none' | 'solid' | 'pattern', the pattern element): how the fill or stroke paints. A `url()` to
         nothing, or to an element that is no paint server, takes its fallback colour, else none (SVG 1.1 §11.2);
         a gradient paints like a solid colour."""
-        if not paints(style, which):
+        if not paints(style, which, self.alpha):
             return "none", None
         value = style.get(which, "").strip()
         ref = iri(value)
@@ -1191,7 +1200,7 @@ class _Reader:
         if (target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient")
                 or not self._server_exists(target)):
             fallback = value[value.find(")") + 1:].strip()
-            if fallback and paints({**style, which: fallback}, which):
+            if fallback and paints({**style, which: fallback}, which, self.alpha):
                 return "solid", None
             return "none", None
         if local(target.tag) == "pattern":
@@ -1269,7 +1278,7 @@ class _Reader:
             return None
         user = affine([np.concatenate(points)], _invert(matrix))[0]
         (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
-        opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0)))
+        opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0))) * self.alpha
         scale = math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
         if self.gradient_points >= MAX_GRADIENT_POINTS:
             self.unsupported[f"gradients past {MAX_GRADIENT_POINTS:,} points are outlined whole, their "
@@ -1674,7 +1683,7 @@ class _Reader:
     def text(self, el: ET.Element, style: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
              out: Ink) -> None:
         """A `<text>` in single-stroke letters (see svgtext)."""
-        layout = TextLayout(viewport, self.sheet, read_before=self.text_chars)
+        layout = TextLayout(viewport, self.sheet, read_before=self.text_chars, opacity=self.alpha)
         drawn = layout.draw(el, style)
         self.text_chars = layout.read
         for lines in drawn:

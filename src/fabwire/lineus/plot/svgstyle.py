@@ -214,13 +214,14 @@ def number(value: str | None, default: float) -> float:
     return result if math.isfinite(result) else default
 
 
-def paints(style: dict[str, str], which: str) -> bool:
+def paints(style: dict[str, str], which: str, opacity: float = 1.0) -> bool:
     """Whether the fill or stroke paint of `style` leaves a mark on the paper: not none, not transparent, not
-    the paper's colour (a white fill on white paper shows nothing)."""
+    the paper's colour (a white fill on white paper shows nothing), nor so faint at its opacity times `opacity`
+    (the element's and its groups') that it comes within PAPER_TOLERANCE of the paper."""
     value = style.get(which, INITIAL[which]).strip().lower()
     if value in ("none", "transparent", ""):
         return False
-    alpha = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0)))
+    alpha = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0))) * min(1.0, max(0.0, opacity))
     if alpha <= 0:
         return False
     if which == "stroke" and length(style.get("stroke-width"), 1.0, default=1.0) == 0:

@@ -101,6 +101,8 @@ class TextLayout:
     sheet: StyleSheet
     read_before: int = 0
     """Characters of text the file had before this element (the bound is on the whole file)."""
+    opacity: float = 1.0
+    """The opacity of the text element and its groups: paint this faint may leave no mark (svgstyle.paints)."""
     notes: list[str] = field(default_factory=list)
     _pen: tuple[float, float] = field(default=(0.0, 0.0), init=False)
     """Where the next chunk without a position of its own starts."""
@@ -207,8 +209,9 @@ class TextLayout:
             text = "".join(c.char for c in chunk[index:end])
             size = number(first.style.get("font-size"), 16.0)
             face, width, space = hershey_face(first.style)
+            # white, unpainted or too faint text shows nothing
             shown = first.style.get("visibility", "visible").strip() == "visible" and (
-                paints(first.style, "fill") or paints(first.style, "stroke"))  # white or unpainted text shows nothing
+                paints(first.style, "fill", self.opacity) or paints(first.style, "stroke", self.opacity))
             for word in _WORDS.split(text):
                 if word.startswith(" "):
                     x += len(word) * space * size
