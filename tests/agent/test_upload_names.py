@@ -77,3 +77,17 @@ def test_names_in_any_script_are_kept_as_written(agent: RunningAgent, door: str)
         assert taken.status_code in (200, 201), taken.text
         names = [entry["name"] for entry in client.get("/api/files/local").json()["files"]]
         assert name in names, names
+
+
+@pytest.mark.parametrize("door", ["octoprint", "moonraker"])
+def test_composed_and_decomposed_accents_name_one_file(agent: RunningAgent, door: str) -> None:
+    device = device_of(agent)
+    composed = f"caf\u00e9-{door}.gcode"
+    decomposed = f"cafe\u0301-{door}.gcode"  # as macOS file names and copies from PDFs spell it
+    with agent.client() as client:
+        for name in (decomposed, composed):
+            taken = upload(client, door, device, name)
+            assert taken.status_code in (200, 201), taken.text
+        names = [entry["name"] for entry in client.get("/api/files/local").json()["files"]]
+        assert names.count(composed) == 1, names
+        assert decomposed not in names, names

@@ -95,7 +95,8 @@ def require_plain_name(name: str) -> None:
 
 def clean_name(name: str, folder: str = "") -> str:
     """The library name of an upload: `folder/name` with `/` separators, no empty, `.` or `..` parts, no
-    control, reserved or hidden characters (the `file-*` rows of `fabwire.checks.RULES`); InputError otherwise."""
+    control, reserved or hidden characters (the `file-*` rows of `fabwire.checks.RULES`), in Unicode NFC (macOS
+    and copies from PDFs spell accents decomposed); InputError otherwise."""
     require_plain_name(f"{folder}/{name}")  # first: a control character is named as such, not as a bad part
     blanks = ASCII_BLANKS  # only what a terminal's copy brings: other blanks are refused, not taken off
     parts = [p for p in f"{folder.strip(blanks).strip('/')}/{name.strip(blanks)}".split("/") if p.strip()]
@@ -104,7 +105,7 @@ def clean_name(name: str, folder: str = "") -> str:
     for part in parts:
         if part in (".", "..") or FILE_RESERVED.search(part) or part != part.strip():
             raise refuse("file-part", part=excerpt(part, 60))
-    joined = "/".join(parts)
+    joined = unicodedata.normalize("NFC", "/".join(parts))  # `é` typed or composed from `e` + U+0301: one file
     if len(joined) > NAME_MAX:
         raise refuse("file-length", length=len(joined))
     return joined
@@ -171,7 +172,7 @@ class Library:
         return sorted(self.index(device_id)["files"].values(), key=lambda e: -e["uploaded"])
 
     def get(self, device_id: str, name: str) -> dict[str, Any]:
-        entry = self.index(device_id)["files"].get(name.strip("/"))
+        entry = self.index(device_id)["files"].get(unicodedata.normalize("NFC", name.strip("/")))
         if entry is None:
             raise FileNotInLibrary(f"no file {excerpt(name, 80)} in the library of {device_id}")
         return dict(entry)
