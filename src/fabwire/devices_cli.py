@@ -203,7 +203,7 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     for other in kin:
         if is_default and other.default:
             raise ConfigError(f"{other.name!r} is the default {kind.title} already: add {name!r} without --default, "
-                              f"or take `default = true` off {other.name!r} in {path} first")
+                              f"then `fabwire devices default {name}`")
     # `fabwire serve` monitors each machine once (`agent.command.one_each`), however its address is spelt
     mine, *theirs = machines_of([endpoint, *(other.endpoint for other in kin)])
     same = same_machine(mine, [(other.name, keys) for other, keys in zip(kin, theirs, strict=True)])
@@ -214,6 +214,60 @@ def add(app: App, name: str, url: str, kind_name: str, is_default: bool, setting
     separator = "" if not text or text.endswith("\n\n") else "\n" if text.endswith("\n") else "\n\n"
     _write(path, text + separator + section)
     app.output.result({"added": name, "file": str(path)}, f"added {name} to {path}")
+
+
+_DEFAULT_LINE = re.compile(r"[ \t]*default[ \t]*=")
+
+
+def _section_span(lines: list[str], header: int) -> range:
+    """The line indexes of the keys of the section whose header is on (1-based) line `header`."""
+    end = header
+    while end < len(lines) and not lines[end].lstrip().startswith("["):
+        end += 1
+    return range(header, end)
+
+
+@devices.command("default")
+@click.argument("name", shell_complete=device_names)
+@pass_app
+def default_cmd(app: App, name: str) -> None:
+    """Make device NAME the one of its kind used when -d is not given (the default it replaces is kept as a named
+    device; the rest of the file stays as it is)."""
+    path = config_path()
+    text = read_config_text(path)
+    found = parse_devices(text, path) if text else {}
+    chosen = _find(found, name, path)
+    before = [other.name for other in found.values() if other.kind is chosen.kind and other.default]
+    if before == [name]:
+        app.output.result({"default": name, "kind": chosen.kind.name, "file": str(path), "changed": False},
+                          f"{name} is the default {chosen.kind.title} already")
+        return
+    headers = section_lines(text)
+    missing = [n for n in {name, *before} if n not in headers]
+    if missing:
+        raise ConfigError(f"{excerpt(missing[0], 64)} is not written as a [devices.NAME] section in {path}: "
+                          "edit the file by hand")
+    lines = text.splitlines(keepends=True)
+    drop = {i for other in before for i in _section_span(lines, headers[other]) if _DEFAULT_LINE.match(lines[i])}
+    own = [i for i in _section_span(lines, headers[name]) if _DEFAULT_LINE.match(lines[i])]
+    edited = []
+    for i, line in enumerate(lines):
+        if i in drop:
+            continue
+        if i in own:
+            line = "default = true\n"
+        edited.append(line)
+        if i == headers[name] - 1 and not own:
+            edited.append("default = true\n")
+    new_text = "".join(edited)
+    after = parse_devices(new_text, path)
+    if [d.name for d in after.values() if d.kind is chosen.kind and d.default] != [name]:
+        raise ConfigError(f"the defaults in {path} are not written as plain `default = …` lines: edit the file "
+                          "by hand")
+    _write(path, new_text)
+    was = f" (was {', '.join(before)})" if before else ""
+    app.output.result({"default": name, "kind": chosen.kind.name, "file": str(path), "changed": True,
+                       "was": before}, f"{name} is now the default {chosen.kind.title}{was}")
 
 
 @devices.command("remove")

@@ -61,9 +61,8 @@ def test_bad_edits_are_refused_and_leave_the_file_alone(tmp_path: Path) -> None:
     env = env_for(path)
     second = run_cli("devices", "add", "garage", "10.0.0.6", "--kind", "xyz", "--default", env=env)
     assert second.returncode == ConfigError.exit_code
-    assert second.stderr.strip() == (f"fabwire: error: 'office' is the default XYZprinting da Vinci already: add "
-                                     f"'garage' without --default, or take `default = true` off 'office' in {path} "
-                                     "first")
+    assert second.stderr.strip() == ("fabwire: error: 'office' is the default XYZprinting da Vinci already: add "
+                                     "'garage' without --default, then `fabwire devices default garage`")
     typo = run_cli("devices", "add", "bench", "sim://mmu", "--kind", "mmu", "--set", "sped=5", env=env)
     assert typo.returncode == InputError.exit_code
     assert "no setting 'sped' (did you mean 'speed'?)" in typo.stderr
@@ -235,3 +234,26 @@ def test_an_address_is_kept_as_it_is_read_and_serve_takes_it(tmp_path: Path, kin
 
     device = load_devices(path)["bench"]
     assert parse_url(device.endpoint.url, device.kind) == device.endpoint  # what serve reads back
+
+
+def test_the_default_moves_to_another_device_of_its_kind_and_comments_stay(tmp_path: Path) -> None:
+    path = tmp_path / "devices.toml"
+    path.write_text('# printers\n[devices.office]  # upstairs\nkind = "xyz"\nurl = "10.0.0.5"\ndefault = true  # old\n'
+                    '\n[devices.garage]\nkind = "xyz"\nurl = "10.0.0.6"\n\n'
+                    '[devices.arm]\nkind = "lineus"\nurl = "10.0.0.7"\ndefault = true\n')
+    env = env_for(path)
+    moved = run_cli("devices", "default", "garage", env=env)
+    assert moved.returncode == 0, moved.stderr
+    assert moved.stdout.strip() == "garage is now the default XYZprinting da Vinci (was office)"
+    rows = {r["name"]: r["default"] for r in json.loads(run_cli("devices", "list", "--json", env=env).stdout)}
+    assert rows == {"office": False, "garage": True, "arm": True}  # the Line-us keeps its own default
+    text = path.read_text()
+    assert text.startswith("# printers\n[devices.office]  # upstairs\n")
+    assert '[devices.garage]\ndefault = true\nkind = "xyz"' in text
+    again = run_cli("devices", "default", "garage", "--json", env=env)
+    assert json.loads(again.stdout)["changed"] is False
+    assert path.read_text() == text
+    unknown = run_cli("devices", "default", "garag", env=env)
+    assert unknown.returncode == ConfigError.exit_code
+    assert "(did you mean 'garage'?)" in unknown.stderr
+    assert path.read_text() == text
