@@ -298,9 +298,13 @@ def solid_colour(style: dict[str, str], which: str) -> str | None:
     value = style.get(which, INITIAL[which]).strip().lower()
     if value == "currentcolor":
         value = style.get("color", INITIAL["color"]).strip().lower()
-    if value.startswith("url("):
-        return None
-    parsed = tinycss2.color4.parse_color(value)
+    return None if value.startswith("url(") else _spelled(value)
+
+
+@functools.lru_cache(maxsize=256)
+def _spelled(colour: str) -> str | None:
+    """A CSS colour spelled `rgb(r g b / a)` in sRGB; None when it does not parse."""
+    parsed = tinycss2.color4.parse_color(colour)
     if parsed is None or not hasattr(parsed, "to"):
         return None
     r, g, b, a = (round(float(v), 6) for v in parsed.to("srgb"))
@@ -318,9 +322,8 @@ def same_paint_value(style: dict[str, str]) -> bool:
         values.append(value)
     if values[0] == values[1]:
         return True
-    parsed = [tinycss2.color4.parse_color(v) for v in values]
-    return all(p is not None and hasattr(p, "to") for p in parsed) and \
-        tuple(parsed[0].to("srgb")) == tuple(parsed[1].to("srgb"))
+    first = _spelled(values[0])
+    return first is not None and first == _spelled(values[1])
 
 
 def fallback_in_error(value: str) -> bool:
