@@ -63,6 +63,7 @@ from fabwire.lineus.plot.svgstyle import (
     opaque_stop,
     own_style,
     paints,
+    same_colour,
     same_paint_value,
     solid_colour,
     stop_paint,
@@ -234,7 +235,7 @@ class _Fill:
         self.opaque = opaque
         """Whether the paint has no transparency, so it hides what lies under it."""
         self.paint = paint
-        """The solid colour it paints (svgstyle.solid_colour), None for any other paint."""
+        """The solid colour it paints as written (svgstyle.solid_colour), None for any other paint."""
         self._area = area
         self.box = _box(np.concatenate(rings)) if rings else (
             shapely.bounds(area).tolist() if area is not None and not area.is_empty else [0.0, 0.0, -1.0, -1.0])
@@ -979,7 +980,7 @@ class _Reader:
                     if shapely.intersects(earlier.area, fill.area):
                         ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area),
                                               opaque=earlier.opaque, paint=earlier.paint))
-                        if fill.paint is not None and earlier.paint == fill.paint and earlier.opaque:
+                        if earlier.opaque and same_colour(earlier.paint, fill.paint):
                             same.append(earlier.area)
         return same
 

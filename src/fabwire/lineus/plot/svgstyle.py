@@ -293,12 +293,22 @@ def _marks(color: str, alpha: float) -> bool:
 
 
 def solid_colour(style: dict[str, str], which: str) -> str | None:
-    """The fill's (or stroke's) colour as `rgb(r g b / a)` in sRGB, spelled one way for every way of writing it;
-    None for a paint server, `none`, or a colour that does not parse."""
+    """The fill's (or stroke's) colour as written (lower case, `currentColor` resolved), None for a paint server;
+    `same_colour` tells whether two such spellings are one colour."""
     value = style.get(which, INITIAL[which]).strip().lower()
     if value == "currentcolor":
         value = style.get("color", INITIAL["color"]).strip().lower()
-    return None if value.startswith("url(") else _spelled(value)
+    return None if value.startswith("url(") else value
+
+
+def same_colour(first: str | None, second: str | None) -> bool:
+    """Whether two colours of `solid_colour` are one colour in sRGB (`navy`, `#000080`, `rgb(0 0 128)` alike)."""
+    if first is None or second is None:
+        return False
+    if first == second:
+        return True
+    spelled = _spelled(first)
+    return spelled is not None and spelled == _spelled(second)
 
 
 @functools.lru_cache(maxsize=256)
