@@ -3,6 +3,7 @@ connection closes, and `--resume` refusing a different plan. Real simulator and 
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -130,6 +131,33 @@ def test_a_second_drawing_is_refused_naming_the_first(slow_sim: RunningSimulator
         first.send_signal(signal.SIGINT)
         first.communicate(timeout=WAIT)
     assert current_drawer(_robot(slow_sim)) is None  # released when the drawing ends
+
+
+def test_status_names_who_is_drawing_and_where_the_pen_is(slow_sim: RunningSimulator, tmp_path: Path) -> None:
+    env = cli_env(tmp_path)
+    idle = run_cli("--json", "lineus", "-d", address(slow_sim), "status", env=env)
+    assert idle.returncode == 0, idle.stderr
+    before = json.loads(idle.stdout)
+    assert before["drawing"] is None
+    assert before["position"]["pen"] == "up"
+    assert before["firmware"]
+    assert "idle: no program of this host is drawing on it" in run_cli(
+        "lineus", "-d", address(slow_sim), "status", env=env).stdout
+    first = start_drawing(slow_sim, zigzag(tmp_path / "zigzag.svg"), tmp_path / "state.json", env)
+    try:
+        wait_for(lambda: current_drawer(_robot(slow_sim)) is not None, "the drawing to start")
+        busy = run_cli("--json", "lineus", "-d", address(slow_sim), "status", env=env)
+        assert busy.returncode == 0, busy.stderr
+        drawing = json.loads(busy.stdout)["drawing"]
+        assert drawing["pid"] == first.pid
+        assert "zigzag.svg" in drawing["what"]
+        assert drawing["command"].startswith("fabwire lineus -d")
+        assert 0 <= drawing["progress_percent"] <= 100
+        told = run_cli("lineus", "-d", address(slow_sim), "status", env=env).stdout
+        assert f"process {first.pid}" in told
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.communicate(timeout=WAIT)
 
 
 def _robot(sim: RunningSimulator) -> str:

@@ -7,6 +7,7 @@ import contextlib
 import math
 import socket
 from collections.abc import Awaitable, Callable
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -108,6 +109,37 @@ def position(dctx: DeviceContext, servos: bool) -> None:
         return
     where = _with_arm(dctx, lambda arm: arm.position())
     dctx.output.result(where.as_dict(), where.text())
+
+
+@lineus.command()
+@pass_device
+def status(dctx: DeviceContext) -> None:
+    """The arm at a glance: name, firmware, where the pen is, and who is drawing on it now (any program of this
+    host: another `fabwire`, `fabwire serve`, vpype's `lineus-draw`)."""
+    from fabwire.lineus.drawing_lock import current_drawer, robot_address
+
+    async def action(arm: LineUs) -> dict[str, Any]:
+        where = await arm.position()
+        drawer = current_drawer(robot_address(arm.transport))
+        drawing = None if drawer is None else {
+            "what": drawer.what, "command": drawer.command, "pid": drawer.pid, "user": drawer.user,
+            "since": datetime.fromtimestamp(drawer.started, tz=UTC).isoformat(timespec="seconds"),
+            json_key("progress", "percent"): round(drawer.progress_percent, 1), "progress": drawer.progress,
+            "words": drawer.words()}
+        return {"name": arm.hello.name, "firmware": arm.hello.version, "position": where.as_dict(),
+                "drawing": drawing}
+
+    data = _with_arm(dctx, action)
+
+    def human() -> None:
+        out = dctx.output.out
+        out.print(f"Line-us {data['name'] or '(no name)'}  firmware {data['firmware'] or '(not given)'}")
+        place = data["position"]
+        out.print(f"pen {place['pen']} at {place['x_mm']:g}, {place['y_mm']:g} mm")
+        out.print(f"drawing {data['drawing']['words']}" if data["drawing"] else
+                  "idle: no program of this host is drawing on it")
+
+    dctx.output.result(data, human)
 
 
 @lineus.command()
