@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -328,6 +329,12 @@ def test_resume_with_the_same_options_carries_on(interrupted: tuple[str, Path], 
                    "--resume", "--margin", "2", env=cli_env(tmp_path))
     assert done.returncode == 0, done.stderr
     assert '"resumed_at"' in done.stdout
+    left = re.search(r"about (.+) left", done.stderr)
+    assert left is not None, done.stderr
+    assert f"estimated drawing time {left.group(1)}\n" in done.stderr  # the figures are those of what is left
+    strokes = re.search(r"resuming .* at stroke (\d+) of (\d+)", done.stderr)
+    assert strokes is not None
+    assert f"strokes {int(strokes.group(2)) - int(strokes.group(1)) + 1}," in done.stderr
 
 
 def test_text_resume_names_a_changed_size_and_font(interrupted: tuple[str, Path], tmp_path: Path) -> None:

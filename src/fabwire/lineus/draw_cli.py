@@ -126,6 +126,11 @@ def figures_text(plan: Plan) -> str:
     return "\n".join(lines)
 
 
+def _figures(plan: Plan, resumed: DrawProgress | None) -> str:
+    """The figures said before drawing: of what is left when a drawing resumes, else of the whole plan."""
+    return figures_text(resumed.remaining()) if resumed is not None and not resumed.complete else figures_text(plan)
+
+
 def _report(output: Output, plan: Plan, extra: dict[str, Any] | None = None, written: tuple[Path, ...] = ()) -> None:
     """The plan's notes and figures, and a line for each file `written`; JSON carries the notes too."""
     for note in plan.notes:
@@ -405,7 +410,7 @@ def draw(dctx: DeviceContext, file: Path, fit: bool | None, margin: float, rotat
     if dry_run:
         _report(dctx.output, plan, {"file": str(file)})
         return
-    _draw(dctx, plan, existing, path, drawing.digest, choices, what, pen_z, [*plan.notes, figures_text(plan)])
+    _draw(dctx, plan, existing, path, drawing.digest, choices, what, pen_z, [*plan.notes, _figures(plan, existing)])
 
 
 @click.command("text")
@@ -449,7 +454,7 @@ def text(dctx: DeviceContext, text: str, size: float | None, font: str, fit: boo
     if dry_run:
         _report(dctx.output, plan, {"text": text})
         return
-    _draw(dctx, plan, existing, path, digest, choices, what, pen_z, [*plan.notes, figures_text(plan)])
+    _draw(dctx, plan, existing, path, digest, choices, what, pen_z, [*plan.notes, _figures(plan, existing)])
 
 
 @click.command("preview")
