@@ -305,6 +305,12 @@ CASES: dict[str, tuple[str, str]] = {
     "bars of one colour side by side": (doc(''.join(f'<rect x="{20 + 20 * k}" y="{100 - 10 * k}" width="20" '
                                                     f'height="{80 + 10 * k}" style="fill: #ddd; stroke: #ddd"/>'
                                                     for k in range(8))), "fills of one colour"),
+    "clipped bars of one colour, as matplotlib writes them": (
+        doc('<clipPath id="axes"><rect x="10" y="10" width="180" height="180"/></clipPath>'
+            + ''.join(f'<path d="M{20 + 20 * k} 180 h20 V{100 - 10 * k} h-20 z" clip-path="url(#axes)" '
+                      f'style="fill: #1f77b4"/>' for k in range(8))
+            + '<g opacity="0.5"><rect x="60" y="20" width="40" height="40" fill="#1f77b4"/></g>'
+            + '<rect x="100" y="20" width="40" height="40" fill="#1f77b4"/>'), "fills of one colour"),
     "pattern tiles of one colour show no seams": (doc('<pattern id="p" patternUnits="userSpaceOnUse" width="50" '
                                                       'height="50"><rect width="51" height="51" fill="#aec7e8"/>'
                                                       '<path d="M0 50 L50 0" stroke="black"/></pattern>'

@@ -239,6 +239,19 @@ def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
         return ImageFont.load_default()
 
 
+def _wrapped(draw: ImageDraw.ImageDraw, font: ImageFont.ImageFont | ImageFont.FreeTypeFont, room: float
+             ) -> list[str]:
+    """The legend's items (` · ` apart) on lines no wider than `room` px where they fit."""
+    lines: list[str] = []
+    for item in LEGEND.split(" · "):
+        joined = f"{lines[-1]} · {item}" if lines else item
+        if lines and draw.textlength(joined, font=font) <= room:
+            lines[-1] = joined
+        else:
+            lines.append(item)
+    return lines
+
+
 def _png_image(strokes: Sequence[FloatArray], travel: Sequence[FloatArray], hidden: Sequence[FloatArray], *,
                title: str | None, scale: float) -> Image.Image:
     fx, fy, _, fh = frame()
@@ -277,10 +290,14 @@ def _png_image(strokes: Sequence[FloatArray], travel: Sequence[FloatArray], hidd
     draw = ImageDraw.Draw(image)
     text_px = max(9, round(size[0] / 60))
     font = _font(text_px)
-    bx, by = 12, size[1] - 3 * text_px - 12
+    bx = 12
+    room = size[0] - 2 * bx
+    legend = [LEGEND] if draw.textlength(LEGEND, font=font) <= room else _wrapped(draw, font, room)
+    by = size[1] - (len(legend) + 1) * (text_px + 4) - 8  # the scale bar above the legend's lines
     draw.rectangle((bx, by, bx + SCALE_BAR * scale, by + max(2, text_px // 4)), fill=(0, 0, 0))
     draw.text((bx, by - text_px - 4), f"{SCALE_BAR / UNITS_PER_MM:g} mm", fill=(0, 0, 0), font=font)
-    draw.text((bx, size[1] - text_px - 8), LEGEND, fill=(60, 60, 60), font=font)
+    for row, words in enumerate(reversed(legend)):  # on as many lines as the picture's width needs
+        draw.text((bx, size[1] - (row + 1) * (text_px + 4) - 4), words, fill=(60, 60, 60), font=font)
     if title:
         draw.text((8, 6), title, fill=(60, 60, 60), font=font)
     return image

@@ -678,6 +678,9 @@ class _Reader:
         """The first of `_below` a fill hides lines in: the innermost group composited on its own (group opacity,
         a clip path, a viewport's clip) takes its content as one picture, so a fill in it hides what the group
         painted before it, but not what lies under the group (SVG 1.1 §14.5, Compositing 1 §3.3 groups)."""
+        self._blend_floor = 0
+        """The first of `_below` whose fills a new fill's colour meets as the same colour: below a group that
+        blends (opacity, filters, masks) colours differ; a clip alone changes no colour."""
         self._occlusion_checks = 0
         self._context: dict[str, str] | None = None
         """fill and stroke of the element context-fill and context-stroke take theirs from (the `<use>` or the
@@ -875,8 +878,9 @@ class _Reader:
                 self.shape(el, tag, style, matrix, viewport, out)  # nothing of its own to apply afterwards
                 return
             target = Ink()
+            blended = bool(set(effects) - {"clip-path"}) or _opacity(own) < 1
             with self.painting(target, shaded=bool(set(effects) - {"clip-path"}),
-                               isolated=bool(effects) or _opacity(own) < 1):
+                               isolated=bool(effects) or _opacity(own) < 1, blended=blended):
                 self.draw(el, tag, style, matrix, viewport, target, depth, uses)
         finally:
             self.alpha = outer_alpha
@@ -912,23 +916,27 @@ class _Reader:
     def below(self, ink: Ink) -> None:
         """Start a drawing whose earlier paint is `ink`."""
         self._below = [ink]
-        self._floor = 0
+        self._floor = self._blend_floor = 0
 
     @contextmanager
-    def painting(self, target: Ink, *, shaded: bool = False, isolated: bool = False) -> Iterator[None]:
+    def painting(self, target: Ink, *, shaded: bool = False, isolated: bool = False,
+                 blended: bool = False) -> Iterator[None]:
         """Draw into `target`, painted over what is below: `isolated` for a group composited on its own (its
-        fills hide only its own earlier lines), `shaded` where fills hide nothing at all."""
-        floor = self._floor
+        fills hide only its own earlier lines), `shaded` where fills hide nothing at all, `blended` for a group
+        whose colours change as it is composited (opacity, effects)."""
+        floor, blend_floor = self._floor, self._blend_floor
         self._below.append(target)
         self._shaded += shaded
         if isolated:
             self._floor = len(self._below) - 1
+        if blended:
+            self._blend_floor = len(self._below) - 1
         try:
             yield
         finally:
             self._below.pop()
             self._shaded -= shaded
-            self._floor = floor
+            self._floor, self._blend_floor = floor, blend_floor
 
     def draw(self, el: ET.Element, tag: str, style: dict[str, str], matrix: FloatArray,
              viewport: tuple[float, float], target: Ink, depth: int, uses: tuple[str, ...]) -> None:
@@ -950,11 +958,31 @@ class _Reader:
         else:
             self.children(el, style, matrix, viewport, target, depth, uses)
 
-    def hide_under(self, fill: _Fill) -> list[BaseGeometry]:
+    def same_colour_areas(self, fill: _Fill) -> list[BaseGeometry]:
+        """What shows of the earlier opaque fills of `fill`'s own colour that it meets, across clips but not
+        across a group that blends: no edge shows between them."""
+        if fill.paint is None:
+            return []
+        x0, y0, x1, y1 = fill.box
+        found: list[BaseGeometry] = []
+        for ink in self._below[self._blend_floor:]:
+            if not ink.fills:
+                continue
+            self._occlusion_checks += len(ink.fills)
+            if self._occlusion_checks > MAX_OCCLUSION_CHECKS:
+                return found
+            boxes = ink.fill_boxes()
+            near = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
+            for k in np.flatnonzero(near).tolist():
+                earlier = ink.fills[k]
+                if earlier.opaque and same_colour(earlier.paint, fill.paint) and shapely.intersects(earlier.area,
+                                                                                                     fill.area):
+                    found.append(earlier.area)
+        return found
+
+    def hide_under(self, fill: _Fill) -> None:
         """An opaque fill covers its area: the parts of earlier lines under it are hidden (SVG 1.1 §3.3 painter's
-        model), and earlier fills shrink to what still shows. Returns the areas of the earlier opaque fills of
-        its own colour that it meets (before they shrink): no edge shows between them."""
-        same: list[BaseGeometry] = []
+        model), and earlier fills shrink to what still shows."""
         x0, y0, x1, y1 = fill.box
         for ink in self._below[self._floor:]:
             if not ink and not ink.fills:
@@ -963,7 +991,7 @@ class _Reader:
             if self._occlusion_checks > MAX_OCCLUSION_CHECKS:
                 self.unsupported["too many overlapping fills to work out which lines they hide: some lines "
                                  "under fills are drawn"] += 1
-                return same
+                return
             boxes = ink.boxes()
             under = (boxes[:, 0] <= x1) & (boxes[:, 2] >= x0) & (boxes[:, 1] <= y1) & (boxes[:, 3] >= y0)
             if under.any():
@@ -980,9 +1008,6 @@ class _Reader:
                     if shapely.intersects(earlier.area, fill.area):
                         ink.set_fill(k, _Fill([], earlier.rule, shapely.difference(earlier.area, fill.area),
                                               opaque=earlier.opaque, paint=earlier.paint))
-                        if earlier.opaque and same_colour(earlier.paint, fill.paint):
-                            same.append(earlier.area)
-        return same
 
     def clip(self, el: ET.Element, own: dict[str, str], matrix: FloatArray, target: Ink,
              stack: tuple[str, ...]) -> None:
@@ -1503,10 +1528,12 @@ class _Reader:
                 border = _border(own, closed)
                 if border is not None:  # subpaths that cross or overlap: the pen draws only the fill's border
                     out.replace(border)
-            if covers:
-                same = self.hide_under(own)
-                if same and fill == "solid" and not stroke:  # no edge shows where it meets its own colour
+            if fill == "solid" and not stroke and own.opaque and not self._shaded:
+                same = self.same_colour_areas(own)  # before hiding: what shows of them now
+                if same:  # no edge shows where it meets its own colour
                     out.replace(cut(list(out), shapely.union_all(same).buffer(self.tolerance))[1])
+            if covers:
+                self.hide_under(own)
             if fill_shown is not None:  # a gradient's paper-coloured stretch draws nothing: outline what shows
                 own = _Fill([], rule, shapely.intersection(own.area, fill_shown), opaque=own.opaque)
                 border = _outline(own.area)
@@ -1646,13 +1673,14 @@ class _Reader:
             inside = IDENTITY
         tile = Ink()
         self._patterns = (*self._patterns, ref)
-        outside, floor, self._below, self._floor = self._below, self._floor, [tile], 0
+        outside, floor, blend_floor = self._below, self._floor, self._blend_floor
+        self._below, self._floor, self._blend_floor = [tile], 0, 0
         try:
             self.children(content, self.computed_style(content), inside,
                           (vb.box[2], vb.box[3]) if vb.box else (w, h), tile, 0, ())
         finally:
             self._patterns = self._patterns[:-1]
-            self._below, self._floor = outside, floor
+            self._below, self._floor, self._blend_floor = outside, floor, blend_floor
         whole = shapely.box(0.0, 0.0, w, h)
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
             seamless = any(fill.opaque and fill.area.covers(whole) for fill in tile.fills)
