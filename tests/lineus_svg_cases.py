@@ -305,6 +305,11 @@ CASES: dict[str, tuple[str, str]] = {
     "bars of one colour side by side": (doc(''.join(f'<rect x="{20 + 20 * k}" y="{100 - 10 * k}" width="20" '
                                                     f'height="{80 + 10 * k}" style="fill: #ddd; stroke: #ddd"/>'
                                                     for k in range(8))), "fills of one colour"),
+    "checkered pattern cut by the shape's edge": (doc('<pattern id="c" patternUnits="userSpaceOnUse" width="40" '
+                                                      'height="40"><rect width="20" height="20" fill="grey"/>'
+                                                      '<rect x="20" y="20" width="20" height="20" fill="green"/>'
+                                                      '</pattern><path d="M100 15 l50 160 l-130 -100 h160 '
+                                                      'l-130 100 z" fill="url(#c)"/>'), "pattern fill"),
     "clipped bars of one colour, as matplotlib writes them": (
         doc('<clipPath id="axes"><rect x="10" y="10" width="180" height="180"/></clipPath>'
             + ''.join(f'<path d="M{20 + 20 * k} 180 h20 V{100 - 10 * k} h-20 z" clip-path="url(#axes)" '

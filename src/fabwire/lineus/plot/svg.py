@@ -100,6 +100,9 @@ MAX_DEPTH = 200
 """Nesting of elements and `<use>` references."""
 MAX_PATTERN_TILES = 20_000
 """Pattern tiles one fill may repeat at most; a finer pattern is drawn as the shape's outline, with a note."""
+MAX_CUT_CELLS = 5_000
+"""Fills of pattern tiles (tiles times the fills of one) outlined where the shape's edge cuts them; beyond, the
+cut edges are left out, with a note."""
 MAX_DRAWING_DASHES = 200_000
 """Dashes stroke-dasharray may cut one drawing's lines into: about half a day of pen strokes for a Line-us, and a
 bound on the time and memory of cutting them (a few bytes of "0.0001 0.0001" otherwise ask for tens of millions)."""
@@ -168,8 +171,8 @@ FEATURES: tuple[tuple[str, str, str], ...] = (
     ("filled open subpaths close for the fill", "SVG 1.1 §11.3", "open fill"),
     ("fills the colour of the paper, or too faint at their opacity and their groups', draw nothing",
      "SVG 1.1 §11.2 (paint), §14.5 (opacity), CSS Color 4", "white fill"),
-    ("pattern fills drawn inside the shape; tiles an opaque paint covers whole show no seams, and the shape's "
-     "border", "SVG 1.1 §13.3", "pattern fill"),
+    ("pattern fills drawn inside the shape, their cells outlined where the shape's edge cuts them; tiles an "
+     "opaque paint covers whole show no seams, and the shape's border", "SVG 1.1 §13.3", "pattern fill"),
     ("opaque fills of one colour that meet or overlap show one shape: no edge between them",
      "SVG 1.1 §3.3 (painter's model)", "fills of one colour meeting show one shape"),
     ("opaque fills hide the lines painted before them", "SVG 1.1 §3.3 (painter's model)", "white box over lines"),
@@ -602,6 +605,12 @@ def _marker_places(subs: list[Subpath], inverse: FloatArray) -> list[tuple[Float
                 turn = 0.0
             places.append((pts[i], turn))
     return places
+
+
+def _placed(area: BaseGeometry, matrix: FloatArray) -> BaseGeometry:
+    """`area` moved by the 2x3 `matrix`."""
+    moved: BaseGeometry = shapely.transform(area, lambda xy: affine([xy], matrix)[0])
+    return moved
 
 
 def _outline(area: BaseGeometry) -> Polylines:
@@ -1322,8 +1331,7 @@ class _Reader:
         if not shapely.is_valid(region):
             region = shapely.make_valid(region)  # bands so close they touch
         self.gradient_points += int(shapely.get_num_coordinates(region))
-        placed: BaseGeometry = shapely.transform(region, lambda xy: affine([xy], matrix)[0])
-        return placed
+        return _placed(region, matrix)
 
     def same_paint(self, style: dict[str, str]) -> bool:
         """Whether the stroke paints exactly what the fill under it paints, both without transparency (the same
@@ -1576,7 +1584,7 @@ class _Reader:
                      viewport: tuple[float, float], out: Ink) -> None:
         """Draw a wide stroke painted with a pattern as a pattern fill is drawn: the pattern's own lines inside
         the band (`lines` in user units placed by `matrix`)."""
-        area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
+        area = _placed(stroke_area(lines, pen), matrix)
         if not area.is_empty:
             self.pattern(server, matrix, _outline(area), "nonzero", viewport, out)
 
@@ -1587,7 +1595,7 @@ class _Reader:
         element's solid `fill` (the last of `out.fills`, its border the lines of `out`), the pen draws the border
         of both together: one element's paint is one shape, whatever the colours of its fill and stroke. Only the
         part of the band inside `shown` (where its gradient leaves a mark) is outlined."""
-        area = shapely.transform(stroke_area(lines, pen), lambda xy: affine([xy], matrix)[0])
+        area = _placed(stroke_area(lines, pen), matrix)
         if area.is_empty:
             return
         band = _Fill([], "nonzero", area, opaque=self.opaque(style, "stroke"))
@@ -1682,12 +1690,14 @@ class _Reader:
             self._patterns = self._patterns[:-1]
             self._below, self._floor, self._blend_floor = outside, floor, blend_floor
         whole = shapely.box(0.0, 0.0, w, h)
+        cells = [fill.area for fill in tile.fills]
         if (self.computed_style(el).get("overflow") or "hidden").strip() in ("hidden", "scroll"):
             seamless = any(fill.opaque and fill.area.covers(whole) for fill in tile.fills)
             kept, _ = cut(list(tile), whole)
             if seamless:  # one colour across the seams: what lies along the tile's border is no edge
                 kept = cut(kept, whole.exterior.buffer(self.tolerance * 2))[1]
             tile = Ink(kept)
+            cells = [shapely.intersection(cell, whole) for cell in cells]
         else:
             seamless = False
         area = area_of_rings(rings, rule)
@@ -1698,12 +1708,18 @@ class _Reader:
         if not tile:
             return
         shapely.prepare(area)
-        placed: Polylines = []
-        for i in range(i0, i1):
-            for j in range(j0, j1):
-                at = then(matrix, then(space, translate(x + i * w, y + j * h)))
-                placed.extend(affine(tile, at))
+        places = [then(matrix, then(space, translate(x + i * w, y + j * h))) for i in range(i0, i1)
+                  for j in range(j0, j1)]
+        placed = [line for at in places for line in affine(tile, at)]
         kept, _ = cut(placed, area)
+        if not seamless and not bordered and cells:  # the tiles' fills the shape's edge cuts show that edge
+            if len(places) * len(cells) <= MAX_CUT_CELLS:
+                for at in places:
+                    for cell in cells:
+                        kept.extend(cut_edge(_placed(cell, at), area)[0])
+            else:
+                self.unsupported[f"pattern fills of more than {MAX_CUT_CELLS:,} cells are not outlined along the "
+                                 "shape's edge"] += 1
         self._count(sum(len(k) for k in kept))
         out.extend(kept)
 
@@ -1762,7 +1778,7 @@ class _Reader:
         except ValueError:
             self.unsupported[f"clip-path {excerpt(value, 60)!r} is in error: drawn unclipped"] += 1
             return None
-        return shapely.transform(area, lambda xy: affine([xy], matrix)[0])
+        return _placed(area, matrix)
 
     def clip_region(self, value: str, matrix: FloatArray, content: Ink,
                     stack: tuple[str, ...]) -> BaseGeometry | None:
