@@ -93,7 +93,7 @@ FADE = [Stop(0, WHITE, 1), Stop(0.5, WHITE, 1), Stop(0.5, BLACK, 1), Stop(1, BLA
     ("reflect", "0.25", [(12.5, 37.5), (62.5, 87.5)]),
 ])
 def test_linear_bands_follow_the_spread_method(method: str, x2: str, expected: list[tuple[float, float]]) -> None:
-    region = shown_region("linearGradient", attrs({"spreadMethod": method, "x2": x2}), FADE, 1.0,
+    region = shown_region("linearGradient", attrs({"spreadMethod": method, "x2": x2}), shown_intervals(FADE, 1.0),
                           (0.0, 0.0, 100.0, 50.0), (200.0, 200.0), 0.1)
     assert region is not None
     cut = shapely.intersection(region, shapely.box(0, 0, 100, 50))
@@ -104,7 +104,7 @@ def test_linear_bands_follow_the_spread_method(method: str, x2: str, expected: l
 def test_radial_shows_a_ring_and_user_space_units() -> None:
     stops = [Stop(0.5, WHITE, 1), Stop(0.5, BLACK, 1)]
     region = shown_region("radialGradient", attrs({"gradientUnits": "userSpaceOnUse", "cx": "100", "cy": "100",
-                                                   "r": "40"}), stops, 1.0, (0.0, 0.0, 200.0, 200.0),
+                                                   "r": "40"}), shown_intervals(stops, 1.0), (0.0, 0.0, 200.0, 200.0),
                           (200.0, 200.0), 0.05)
     assert region is not None
     assert not region.contains(shapely.Point(100, 100))
@@ -115,7 +115,8 @@ def test_radial_shows_a_ring_and_user_space_units() -> None:
 
 
 def test_a_gradient_shown_everywhere_gives_no_region() -> None:
-    assert shown_region("linearGradient", attrs({}), [Stop(0, BLACK, 1), Stop(1, (1.0, 0.0, 0.0), 1)], 1.0,
+    assert shown_region("linearGradient", attrs({}), shown_intervals([Stop(0, BLACK, 1), Stop(1, (1.0, 0.0, 0.0), 1)],
+                                                                     1.0),
                         (0.0, 0.0, 10.0, 10.0), (200.0, 200.0), 0.1) is None
 
 
@@ -156,6 +157,24 @@ HOSTILE: dict[str, tuple[str, tuple[float, float, float, float] | None]] = {
                                   '</linearGradient><rect width="200" height="200" fill="url(#g)"/>'), None),
     "a flat shape": (page(f'<linearGradient id="g">{STEP}</linearGradient>'
                           '<path d="M0 0 L200 0" fill="url(#g)" stroke="url(#g)"/>'), None),
+    "one white stop repeated over a hair-thin vector": (page('<linearGradient id="w" x2="1e-12" spreadMethod="repeat">'
+                                                             '<stop stop-color="white"/></linearGradient><rect x="10" '
+                                                             'y="10" width="180" height="180" fill="url(#w)"/><rect '
+                                                             'x="80" y="80" width="40" height="40"/>'),
+                                                        (80.0, 80.0, 120.0, 120.0)),
+    "a focus on the end circle, reflected": (page('<radialGradient id="w" cy="1" fy="0.5" spreadMethod="reflect">'
+                                                  '<stop stop-color="white"/></radialGradient><rect x="10" y="10" '
+                                                  'width="180" height="180" fill="url(#w)"/>'), None),
+    "a vector beyond floats": (page('<linearGradient id="g" gradientUnits="userSpaceOnUse" x1="-1e308" x2="1e308" '
+                                    'spreadMethod="repeat"><stop offset="0" stop-color="white"/><stop offset="1" '
+                                    'stop-color="black"/></linearGradient><rect x="10" y="10" width="180" '
+                                    'height="180" fill="url(#g)"/>'), (10.0, 10.0, 190.0, 190.0)),
+    "a colour in CIE Lab": (page('<rect x="10" y="10" width="180" height="180" fill="lab(50 20 20)" '
+                                 'stroke="oklch(0.6 0.1 40)"/>'), (10.0, 10.0, 190.0, 190.0)),
+    "a dot inside a gradient fill": (page('<linearGradient id="g"><stop offset="0" stop-color="white"/><stop '
+                                          'offset="1" stop-color="black"/></linearGradient><path d="M10 10 L190 10 '
+                                          'L190 190 L10 190 Z M100 100 L100 100" fill="url(#g)" stroke="black" '
+                                          'stroke-linecap="round"/>'), (10.0, 10.0, 190.0, 190.0)),
 }
 
 
@@ -180,3 +199,15 @@ def test_gradients_past_the_drawing_budget_are_outlined_whole(monkeypatch: pytes
     whole = parse_svg(text)
     assert np.concatenate(whole.lines)[:, 0].min() == pytest.approx(20)
     assert any("gradients past 0 points are outlined whole" in note for note in whole.notes)
+
+
+def test_a_gradient_takes_its_stops_through_a_bounded_href_chain() -> None:
+    chain = "".join(f'<linearGradient id="g{i}" href="#g{i + 1}"/>' for i in range(svg.MAX_HREF_CHAIN + 5))
+    far = page(f'{chain}<linearGradient id="g{svg.MAX_HREF_CHAIN + 5}"><stop offset="0"/></linearGradient>'
+               '<rect x="10" y="10" width="50" height="50" fill="url(#g0)"/><rect x="100" y="100" width="50" '
+               'height="50"/>')
+    drawing = parse_svg(far)
+    assert np.concatenate(drawing.lines).min(axis=0).tolist() == [100.0, 100.0]  # the far stops are not reached
+    assert any(f"more than {svg.MAX_HREF_CHAIN} others" in note for note in drawing.notes)
+    near = far.replace('fill="url(#g0)"', f'fill="url(#g{svg.MAX_HREF_CHAIN + 4})"')  # one link from its stops
+    assert np.concatenate(parse_svg(near).lines).min(axis=0).tolist() == [10.0, 10.0]

@@ -26,8 +26,11 @@ from fabwire.lineus.plot.svgunits import IDENTITY, flattens, length, transform
 SAMPLES = 2048
 """Samples of the gradient's colour over 0..1: a band edge lies within 1/SAMPLES of the gradient's length of
 where the colour crosses PAPER_TOLERANCE (under 0.1 px for any gradient shorter than 200 px)."""
-MAX_BANDS = 2_000
+MAX_BANDS = 500
 """Bands a repeated or reflected gradient may make over one shape; beyond, the whole shape is taken as shown."""
+FINEST_PERIOD = 20
+"""Chord tolerances in the shortest period of a repeated or reflected gradient whose stripes are drawn: a pen
+line is about 20 of them wide (0.5 mm against 0.025 mm), and finer stripes show as one even tone."""
 MAX_REGION_POINTS = 20_000
 """Vertices one gradient's shown region may have (bands times their circles' vertices); beyond, the whole shape
 is taken as shown, so a hostile gradient costs bounded time."""
@@ -78,7 +81,11 @@ def shown_intervals(stops: Sequence[Stop], opacity: float) -> list[tuple[float, 
 def _spread(shown: list[tuple[float, float]], method: str, low: float, high: float) -> list[tuple[float, float]] | None:
     """The shown stretches over `low`..`high` of the gradient's parameter, past 0..1 as `spreadMethod` says
     (pad, reflect, repeat); None when they would make more than MAX_BANDS bands."""
+    if not shown:
+        return []
     if method in ("reflect", "repeat"):
+        if not (math.isfinite(low) and math.isfinite(high)):
+            return None
         first, last = math.floor(low), math.ceil(high)
         if (last - first) * len(shown) > MAX_BANDS:
             return None
@@ -116,17 +123,27 @@ def _apply(matrix: FloatArray, points: FloatArray) -> FloatArray:
     return np.asarray(points @ matrix[:, :2].T + matrix[:, 2], dtype=float)
 
 
-def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[Stop], opacity: float,
+def shown_region(kind: str, attr: Callable[[str], str | None], shown: Sequence[tuple[float, float]],
                  box: tuple[float, float, float, float], viewport: tuple[float, float],
                  tolerance: float, margin: float = 0.0) -> BaseGeometry | None:
     """The part of the user space around `box` (the painted element's bounding box, x0, y0, x1, y1 in user
-    units) where a gradient leaves a mark; None when it leaves one everywhere over the box (the common case).
+    units) where a gradient leaves a mark; None when it leaves one everywhere over the box (the common case), or
+    when its stripes are finer than a pen line or the numbers overflow (the shape is then taken as shown whole).
 
     `kind` is 'linearGradient' or 'radialGradient'; `attr(name)` reads an attribute along the gradient's `href`
-    chain; `viewport` (width, height) resolves percentages in userSpaceOnUse; `tolerance` is the chord error of
-    the circles of a radial gradient, user units; `margin` (user units) is how far beyond the box the paint
-    reaches (a stroke's half width and miters), which the region must cover too."""
-    shown = shown_intervals(stops, opacity)
+    chain; `shown` are its stretches that mark the paper (`shown_intervals`); `viewport` (width, height) resolves
+    percentages in userSpaceOnUse; `tolerance` is the chord error of the circles of a radial gradient, user
+    units; `margin` (user units) is how far beyond the box the paint reaches (a stroke's half width and miters),
+    which the region must cover too."""
+    with np.errstate(all="ignore"):  # numbers beyond floats are caught as not finite, not warned about
+        return _region(kind, attr, list(shown), box, viewport, tolerance, margin)
+
+
+def _region(kind: str, attr: Callable[[str], str | None], shown: list[tuple[float, float]],
+            box: tuple[float, float, float, float], viewport: tuple[float, float],
+            tolerance: float, margin: float) -> BaseGeometry | None:
+    if not shown:
+        return shapely.Polygon()  # no stretch of it marks the paper
     if len(shown) == 1 and shown[0] == (0.0, 1.0):
         return None
     x0, y0, x1, y1 = box
@@ -170,6 +187,11 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
         across = np.array([-step[1], step[0]]) / math.sqrt(reach)
         along = (corners - p1) @ step / reach
         side = (corners - p1) @ across
+        period = float(np.hypot(*(space[:, :2] @ step)))  # the gradient vector's length in user units
+        if not (np.isfinite(along).all() and np.isfinite(side).all() and math.isfinite(period)):
+            return None
+        if method in ("reflect", "repeat") and period < FINEST_PERIOD * tolerance:
+            return None
         spans = _spread(shown, method, float(along.min()), float(along.max()))
         if spans is None or 4 * len(spans) > MAX_REGION_POINTS:
             return None
@@ -188,10 +210,12 @@ def shown_region(kind: str, attr: Callable[[str], str | None], stops: Sequence[S
             return None  # a cone, not nested circles: taken as shown
         far = float(np.hypot(*(corners - focus).T).max())
         high = far / (radius - float(np.hypot(*(focus - centre))) - focal_radius + 1e-12) + 1
-        if not math.isfinite(high) or high > MAX_BANDS:
+        reach = radius * float(np.sqrt(abs(np.linalg.det(space[:, :2]))))
+        if not (math.isfinite(high) and math.isfinite(reach)):
+            return None
+        if method in ("reflect", "repeat") and (high > MAX_BANDS or reach < FINEST_PERIOD * tolerance):
             return None
         spans = _spread(shown, method, 0.0, high)
-        reach = radius * float(np.sqrt(abs(np.linalg.det(space[:, :2]))))
         chord = min(1.0, max(1e-6, tolerance / reach)) if tolerance > 0 and reach > 0 else 1e-3
         quads = max(4, min(128, math.ceil(math.pi / math.acos(1 - chord) / 4)))
         if spans is None or 2 * 4 * (quads + 1) * len(spans) > MAX_REGION_POINTS:

@@ -35,7 +35,7 @@ from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
 from fabwire.lineus.plot.geometry import compose as then
-from fabwire.lineus.plot.gradient import Stop, shown_region
+from fabwire.lineus.plot.gradient import Stop, shown_intervals, shown_region
 from fabwire.lineus.plot.stroke import Pen, pen_of, stroke_area
 from fabwire.lineus.plot.svgpath import (
     PathBuilder,
@@ -114,6 +114,8 @@ WIDE_STROKE_SHARE = 0.02
 """A stroke wider than this share of the page diagonal (about 2 mm where the page fills a Line-us's drawing area,
 several pen widths) is drawn as the outline of the band it paints, caps and joins included, as a fill is; a thinner
 one along its centre line."""
+MAX_HREF_CHAIN = 64
+"""Gradients one gradient may take attributes and stops from through `href`, itself included."""
 MAX_GRADIENT_POINTS = 300_000
 """Vertices of the shown regions of gradients (gradient.shown_region) a drawing may make; beyond, gradient paints
 are drawn whole, with a note."""
@@ -417,7 +419,7 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
         raise InputError(f"{name}: its curves make more than {MAX_POINTS:,} points, more than a drawing may have; "
                          "refusing it") from None
     except (ValueError, TypeError, ZeroDivisionError, shapely.errors.ShapelyError) as exc:
-        raise InputError(f"{name}: malformed SVG geometry ({exc})") from exc
+        raise InputError(f"{name}: malformed SVG geometry ({excerpt(' '.join(str(exc).split()), 120)})") from exc
     return SvgDrawing(list(reader.lines), dict(reader.skipped), reader.report(), reader.hidden, reader.curved,
                       tolerance, (width, height))
 
@@ -671,6 +673,14 @@ class _Reader:
         """The product of the opacity of the element being drawn and of its ancestors: paint this faint on the
         paper may leave no mark (svgstyle.paints)."""
         self.gradient_points = 0
+        self._chains: dict[int, list[ET.Element]] = {}
+        """Each gradient's `href` chain, by the element's id()."""
+        self._stop_elements: dict[int, list[ET.Element]] = {}
+        """Each gradient's stop elements, by the element's id()."""
+        self._shown: dict[tuple[int, float], list[tuple[float, float]]] = {}
+        """Each gradient's stretches that mark the paper at an opacity (gradient.shown_intervals)."""
+        self._opaque_stops: dict[int, bool] = {}
+        """Whether each gradient's stops are all opaque, by the element's id()."""
         """Vertices of the gradients' shown regions so far (bounded by MAX_GRADIENT_POINTS)."""
         """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
         self.wide_stroke = math.inf
@@ -1257,17 +1267,14 @@ class _Reader:
         return True
 
     def _stops(self, gradient: ET.Element) -> list[ET.Element]:
-        """A gradient's stops, or those of the one it takes them from through `href` (SVG 1.1 §13.2.4)."""
-        seen: list[ET.Element] = []
-        at: ET.Element | None = gradient
-        while at is not None and at not in seen:
-            stops = [child for child in at if local(child.tag) == "stop"]
-            if stops:
-                return stops
-            seen.append(at)
-            ref = self._href(at)
-            at = self.ids.get(ref) if ref else None
-        return []
+        """A gradient's stops, or those of the one it takes them from through `href` (SVG 1.1 §13.2.4); read
+        once per gradient."""
+        key = id(gradient)
+        if key not in self._stop_elements:
+            self._stop_elements[key] = next(
+                (found for at in self._gradient_chain(gradient)
+                 if (found := [child for child in at if local(child.tag) == "stop"])), [])
+        return self._stop_elements[key]
 
     def opaque(self, style: dict[str, str], which: str) -> bool:
         """Whether the fill or stroke paints without any transparency, so it hides what lies under it: a solid
@@ -1279,18 +1286,30 @@ class _Reader:
         if (server is None or local(server.tag) not in ("linearGradient", "radialGradient")
                 or self._paint_kind(style, which)[0] != "solid" or number(style.get(f"{which}-opacity"), 1.0) < 1):
             return False
-        stops = self._stops(server)
-        return bool(stops) and all(opaque_stop(self.computed_style(stop)) for stop in stops)
+        key = id(server)
+        if key not in self._opaque_stops:
+            stops = self._stops(server)
+            self._opaque_stops[key] = bool(stops) and all(opaque_stop(self.computed_style(s)) for s in stops)
+        return self._opaque_stops[key]
 
     def _gradient_chain(self, el: ET.Element) -> list[ET.Element]:
-        """The gradient and those it takes attributes and stops from through `href` (SVG 1.1 §13.2)."""
-        chain = [el]
-        while True:
-            ref = self._href(chain[-1])
-            nxt = self.ids.get(ref) if ref else None
-            if nxt is None or local(nxt.tag) not in GRADIENTS or nxt in chain:
-                return chain
-            chain.append(nxt)
+        """The gradient and those it takes attributes and stops from through `href` (SVG 1.1 §13.2), at most
+        MAX_HREF_CHAIN long; read once per gradient."""
+        key = id(el)
+        if key not in self._chains:
+            chain, seen = [el], {key}
+            while len(chain) < MAX_HREF_CHAIN:
+                ref = self._href(chain[-1])
+                nxt = self.ids.get(ref) if ref else None
+                if nxt is None or local(nxt.tag) not in GRADIENTS or id(nxt) in seen:
+                    break
+                chain.append(nxt)
+                seen.add(id(nxt))
+            else:
+                self.unsupported[f"gradients that refer on through more than {MAX_HREF_CHAIN} others take nothing "
+                                 "from those further on"] += 1
+            self._chains[key] = chain
+        return self._chains[key]
 
     def shown_area(self, style: dict[str, str], which: str, subs: list[Subpath], matrix: FloatArray,
                    viewport: tuple[float, float], reach: float = 0.0) -> BaseGeometry | None:
@@ -1303,17 +1322,20 @@ class _Reader:
                 or fallback_in_error(style.get(which, ""))):
             return None
         chain = self._gradient_chain(server)
-        stops: list[Stop] = []
-        for stop in self._stops(server):
-            at = min(1.0, max(0.0, number(stop.get("offset"), 0.0), stops[-1].offset if stops else 0.0))
-            rgb, alpha = stop_paint(self.computed_style(stop))
-            stops.append(Stop(at, rgb, alpha))
+        opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0))) * self.alpha
+        if (id(server), opacity) not in self._shown:
+            stops: list[Stop] = []
+            for stop in self._stops(server):
+                at = min(1.0, max(0.0, number(stop.get("offset"), 0.0), stops[-1].offset if stops else 0.0))
+                rgb, alpha = stop_paint(self.computed_style(stop))
+                stops.append(Stop(at, rgb, alpha))
+            self._shown[id(server), opacity] = shown_intervals(stops, opacity)
+        shown = self._shown[id(server), opacity]
         points = [sub.points for sub in subs if len(sub.points) and np.isfinite(sub.points).all()]
         if not points or flattens(matrix):
             return None
         user = affine([np.concatenate(points)], _invert(matrix))[0]
         (x0, y0), (x1, y1) = user.min(axis=0), user.max(axis=0)
-        opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0))) * self.alpha
         scale = math.sqrt(abs(float(np.linalg.det(matrix[:, :2]))))
         if self.gradient_points >= MAX_GRADIENT_POINTS:
             self.unsupported[f"gradients past {MAX_GRADIENT_POINTS:,} points are outlined whole, their "
@@ -1322,7 +1344,7 @@ class _Reader:
         try:
             region = shown_region(local(server.tag),
                                   lambda name: next((g.get(name) for g in chain if g.get(name) is not None), None),
-                                  stops, opacity, (float(x0), float(y0), float(x1), float(y1)), viewport,
+                                  shown, (float(x0), float(y0), float(x1), float(y1)), viewport,
                                   self.tolerance / scale, reach)
         except shapely.errors.GEOSException:
             return None  # geometry the library cannot combine: the whole paint is taken as shown
@@ -1341,15 +1363,7 @@ class _Reader:
     def _has_stops(self, gradient: ET.Element) -> bool:
         """Whether a gradient, or one it takes its stops from through `href`, has stops: one without paints
         nothing (SVG 1.1 §13.2.4)."""
-        seen: list[ET.Element] = []
-        at: ET.Element | None = gradient
-        while at is not None and at not in seen:
-            if any(local(child.tag) == "stop" for child in at):
-                return True
-            seen.append(at)
-            ref = self._href(at)
-            at = self.ids.get(ref) if ref else None
-        return False
+        return bool(self._stops(gradient))
 
     def _dash_pattern(self, style: dict[str, str], viewport: tuple[float, float]) -> tuple[list[float], float]:
         """(dash and gap lengths, offset) in user units; no lengths for a solid stroke (none, or in error:
@@ -1547,8 +1561,9 @@ class _Reader:
                 border = _outline(own.area)
                 if stroke:
                     kept = cut(list(out), stroke_shown)[0] if stroke_shown is not None else list(out)
-                    border = cut(border, shapely.MultiLineString(kept).buffer(self.tolerance))[1] + kept \
-                        if kept else border
+                    drawn = [line for line in kept if len(line) > 1]  # dots (round caps) cover no border
+                    border = cut(border, shapely.MultiLineString(drawn).buffer(self.tolerance))[1] + kept \
+                        if drawn else border + kept
                 self._count(sum(len(line) for line in border))
                 out.replace(border)
             if fill == "solid":

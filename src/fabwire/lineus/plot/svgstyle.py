@@ -263,32 +263,42 @@ def stop_paint(style: dict[str, str]) -> tuple[tuple[float, float, float], float
     value = style.get("stop-color", "black").strip().lower()
     if value == "currentcolor":
         value = style.get("color", INITIAL["color"]).strip().lower()
-    parsed = tinycss2.color4.parse_color(value)
-    if parsed is None or not hasattr(parsed, "to"):
-        parsed = tinycss2.color4.parse_color("black")
-    r, g, b, own = (float(v) for v in parsed.to("srgb"))
+    r, g, b, own = srgba(value) or (0.0, 0.0, 0.0, 1.0)
     opacity = min(1.0, max(0.0, number(style.get("stop-opacity"), 1.0)))
-    return (min(1.0, max(0.0, r)), min(1.0, max(0.0, g)), min(1.0, max(0.0, b))), own * opacity
+    return (r, g, b), own * opacity
 
 
-@functools.lru_cache(maxsize=256)
+@functools.lru_cache(maxsize=1024)
+def srgba(colour: str) -> tuple[float, float, float, float] | None:
+    """A CSS Color 4 colour as sRGB channels and alpha, each 0..1 (channels clipped to the sRGB gamut); None when
+    it does not parse. A colour in a space the parser cannot convert to sRGB (`lab()`, `oklch()`,
+    `color(display-p3 …)`) counts as black at its alpha: it is ink, drawn like any dark paint."""
+    parsed = tinycss2.color4.parse_color(colour)
+    if parsed is None or not hasattr(parsed, "to"):
+        return None
+    try:
+        r, g, b, a = (float(v) for v in parsed.to("srgb"))
+    except NotImplementedError:
+        r, g, b, a = 0.0, 0.0, 0.0, float(parsed.alpha)
+    r, g, b = (min(1.0, max(0.0, v)) if math.isfinite(v) else 0.0 for v in (r, g, b))
+    return r, g, b, min(1.0, max(0.0, a)) if math.isfinite(a) else 1.0
+
+
 def _alpha(color: str) -> float:
     """A colour's own alpha (0 for a colour that does not parse)."""
-    parsed = tinycss2.color4.parse_color(color)
-    if parsed is None or not hasattr(parsed, "to"):
-        return 0.0
-    return float(parsed.to("srgb")[3])
+    found = srgba(color)
+    return 0.0 if found is None else found[3]
 
 
 @functools.lru_cache(maxsize=256)
 def _marks(color: str, alpha: float) -> bool:
     """Whether a colour (CSS Color 4) at `alpha` leaves a mark on the paper; one that does not parse is ink."""
-    parsed = tinycss2.color4.parse_color(color)
-    if parsed is None or not hasattr(parsed, "to"):
+    found = srgba(color)
+    if found is None:
         return True
-    *channels, own_alpha = parsed.to("srgb")
-    share = alpha * float(own_alpha)
-    return any(abs(share * 255 * float(c) + (1 - share) * p - p) > PAPER_TOLERANCE
+    *channels, own_alpha = found
+    share = alpha * own_alpha
+    return any(abs(share * 255 * c + (1 - share) * p - p) > PAPER_TOLERANCE
                for c, p in zip(channels, PAPER, strict=True))
 
 
@@ -311,14 +321,10 @@ def same_colour(first: str | None, second: str | None) -> bool:
     return spelled is not None and spelled == _spelled(second)
 
 
-@functools.lru_cache(maxsize=256)
 def _spelled(colour: str) -> str | None:
     """A CSS colour spelled `rgb(r g b / a)` in sRGB; None when it does not parse."""
-    parsed = tinycss2.color4.parse_color(colour)
-    if parsed is None or not hasattr(parsed, "to"):
-        return None
-    r, g, b, a = (round(float(v), 6) for v in parsed.to("srgb"))
-    return f"rgb({r} {g} {b} / {a})"
+    found = srgba(colour)
+    return None if found is None else "rgb({} {} {} / {})".format(*(round(v, 6) for v in found))
 
 
 def same_paint_value(style: dict[str, str]) -> bool:
