@@ -24,6 +24,19 @@ if _catching:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
 
 
+def _interrupt_from_finaliser(unraisable: "sys.UnraisableHookArgs") -> None:
+    # A Ctrl-C that lands while a finaliser runs (an event loop's __del__ as a link closes) cannot be raised there,
+    # and Python would print it as a traceback: raise it again in the main thread, where commands handle it, once
+    # this hook has returned (raised from here, it would land in the hook itself).
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        import _thread
+        import threading
+
+        threading.Timer(0.01, _thread.interrupt_main).start()
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def run() -> None:
     from fabwire.console import StdoutClosed, guard_stdout, stdout_closed
 
@@ -41,6 +54,7 @@ def run() -> None:
                 from fabwire.cli import main
             if _catching:  # from here on commands clean up on KeyboardInterrupt (links, partial files)
                 signal.signal(signal.SIGINT, signal.default_int_handler)
+                sys.unraisablehook = _interrupt_from_finaliser
             code = main()
     except KeyboardInterrupt:  # between the handler's return and main's own handling
         sys.stderr.write(_INTERRUPTED.decode())

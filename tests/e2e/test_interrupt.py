@@ -49,3 +49,29 @@ def test_sigint_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path: Pat
     assert process.returncode == 130, text
     assert text.strip().splitlines() == ["fabwire: interrupted"]
     assert stdout == b""
+
+
+FINALISER = """
+import signal, sys, time
+import fabwire.__main__ as entry
+signal.signal(signal.SIGINT, signal.default_int_handler)  # as `run` leaves it once the CLI is imported
+sys.unraisablehook = entry._interrupt_from_finaliser
+class Closing:
+    def __del__(self):
+        raise KeyboardInterrupt
+try:
+    Closing()  # collected at once: its KeyboardInterrupt cannot be raised where it happened
+    for _ in range(10_000):
+        time.sleep(0.001)
+    print("never interrupted")
+except KeyboardInterrupt:
+    print("interrupted in the main thread")
+"""
+
+
+def test_ctrl_c_inside_a_finaliser_reaches_the_command_not_a_traceback(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-c", FINALISER], capture_output=True, text=True, timeout=60,
+                          env=cli_env(tmp_path))
+    assert done.stdout.strip() == "interrupted in the main thread"
+    assert "Traceback" not in done.stderr
+    assert "Exception ignored" not in done.stderr
