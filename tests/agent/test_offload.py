@@ -16,6 +16,7 @@ import pytest
 from clitools import start_simulator
 from fabwire.agent import offload
 from fabwire.agent.offload import WorkCancelled, check_cancelled, in_thread
+from fabwire.errors import InputError
 
 from .agenttools import RunningAgent, start_agent, wait_for
 from .doortools import multipart
@@ -124,6 +125,36 @@ async def test_at_most_workers_run_at_once_even_when_their_callers_leave(monkeyp
         work.go_on.set()
     assert [await waits[1], await waits[2]] == [2, 2]
     assert works[0].ran == ["first", "cancelled"]
+
+
+async def test_a_drawing_being_read_stops_between_its_elements_once_nobody_waits() -> None:
+    """The reader itself checks the flag: a file whose reading is one long stage still stops part way."""
+    from fabwire.lineus.plot import parse_svg
+
+    flag = threading.Event()
+    read: list[str] = []
+    text = _slow_svg(1000).decode()
+
+    def reading() -> None:
+        read.append("started")
+        flag.set()  # as if the uploader left at once: the reader stops at its next element
+        parse_svg(text)
+        read.append("finished")
+
+    with pytest.raises(WorkCancelled):
+        await in_thread(reading, cancel=flag)
+    assert read == ["started"]
+
+
+async def test_a_check_past_its_limit_is_refused_and_told_to_stop(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(offload, "CHECK_LIMIT_S", 0.05)
+    stages = Stages()
+    with pytest.raises(InputError, match=r"^art\.svg: checking it took longer than 0\.05 s; refusing it$"):
+        await offload.check_within(stages, 1, name="art.svg")
+    stages.go_on.set()
+    assert stages.thread is not None
+    await asyncio.to_thread(stages.thread.join, 60)
+    assert stages.ran == ["first", "cancelled"]  # the work was told to stop, as when its caller leaves
 
 
 def test_outside_the_agent_nothing_is_cancelled() -> None:

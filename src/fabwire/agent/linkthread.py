@@ -14,7 +14,7 @@ from fabwire.agent.core import DeviceSpec
 from fabwire.agent.drivers.base import Identity
 from fabwire.agent.links import LinkOwner
 from fabwire.agent.linkside import LinkSide, Polled
-from fabwire.agent.offload import in_thread
+from fabwire.agent.offload import check_within
 
 T = TypeVar("T")
 SWITCH_INTERVAL_S = 0.0005
@@ -130,10 +130,10 @@ class ThreadLink:
         await self._links.run(self.driver.stop_job())
 
     async def check_upload(self, name: str, path: Path) -> None:
-        await in_thread(self.driver.check_upload, name, path)
+        await check_within(self.driver.check_upload, name, path, name=name)
 
     async def describe_upload(self, name: str, path: Path, *, check: bool) -> dict[str, Any]:
-        return await in_thread(partial(self.driver.describe_upload, check=check), name, path)
+        return await check_within(partial(self.driver.describe_upload, check=check), name, path, name=name)
 
     def release(self) -> None:
         links = self._links

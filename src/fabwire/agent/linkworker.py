@@ -22,7 +22,7 @@ from typing import Any
 from fabwire.agent.linkside import LinkSide
 from fabwire.agent.linkthread import DELIVER_EVERY_S
 from fabwire.agent.linkwire import UNCHANGED, Unframer, frame, pack_error
-from fabwire.agent.offload import in_thread
+from fabwire.agent.offload import check_within
 
 NICENESS = 4
 """How much lower the links' process's scheduling priority is than the agent's (nice(2) steps)."""
@@ -98,10 +98,10 @@ class Worker(asyncio.Protocol):
             elif operation in ("poll_forever", "poll_now", "act_then_poll"):
                 result = await getattr(side, operation)(*args)
             elif operation == "check_upload":
-                result = await in_thread(side.driver.check_upload, *args)
+                result = await check_within(side.driver.check_upload, *args, name=args[0])
             elif operation == "describe_upload":
                 name, path, check = args
-                result = await in_thread(partial(side.driver.describe_upload, check=check), name, path)
+                result = await check_within(partial(side.driver.describe_upload, check=check), name, path, name=name)
             elif operation in ("connect", "close", "act", "stop_job"):
                 result = await getattr(side.driver, operation)(*args)
             else:

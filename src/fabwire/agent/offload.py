@@ -19,30 +19,25 @@ import weakref
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from fabwire.cancelling import FLAG as _FLAG
+from fabwire.cancelling import WorkCancelled, check_cancelled
+from fabwire.errors import InputError
+
 if TYPE_CHECKING:
     from starlette.requests import Request
 
 T = TypeVar("T")
 
+__all__ = ["CHECK_LIMIT_S", "WorkCancelled", "check_cancelled", "check_within", "in_thread", "while_connected"]
+
+CHECK_LIMIT_S = 120.0
+"""Longest an upload's check (reading and planning the file) may take; past it the upload is refused and the
+check stops at its next step."""
+
 WORKERS = min(32, (os.cpu_count() or 1) + 4)
 """Works running at once per event loop, as many as asyncio's default executor has threads; a cancelled work keeps
 its place until its thread has ended, so the threads are bounded even when their callers leave."""
 _SLOTS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Semaphore] = weakref.WeakKeyDictionary()
-
-_FLAG: contextvars.ContextVar[threading.Event | None] = contextvars.ContextVar("fabwire_work_cancelled",
-                                                                               default=None)
-
-
-class WorkCancelled(Exception):
-    """The work was stopped between two of its stages: whoever waited for it is gone."""
-
-
-def check_cancelled() -> None:
-    """WorkCancelled when the work running in this thread was cancelled; nothing elsewhere (a CLI command)."""
-    flag = _FLAG.get()
-    if flag is not None and flag.is_set():
-        raise WorkCancelled("stopped: nobody waits for this work any more")
-
 
 async def in_thread(func: Callable[..., T], /, *args: Any, cancel: threading.Event | None = None) -> T:
     """`func(*args)` in a daemon thread, its result or exception returned here; `cancel` (made when not given)
@@ -83,6 +78,19 @@ async def in_thread(func: Callable[..., T], /, *args: Any, cancel: threading.Eve
         return await done
     except asyncio.CancelledError:
         flag.set()
+        raise
+
+
+async def check_within(func: Callable[..., T], /, *args: Any, name: str) -> T:
+    """`in_thread(func, *args)` within CHECK_LIMIT_S; past it InputError naming the upload `name` (the work is
+    told to stop, as when its caller leaves)."""
+    limit = asyncio.timeout(CHECK_LIMIT_S)
+    try:
+        async with limit:
+            return await in_thread(func, *args)
+    except TimeoutError:
+        if limit.expired():
+            raise InputError(f"{name}: checking it took longer than {CHECK_LIMIT_S:g} s; refusing it") from None
         raise
 
 

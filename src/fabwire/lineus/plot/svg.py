@@ -31,6 +31,7 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
+from fabwire.cancelling import check_cancelled
 from fabwire.errors import InputError, excerpt
 from fabwire.lineus.plot.clip import TooComplex, area_of_rings, cut, cut_edge
 from fabwire.lineus.plot.geometry import FloatArray, Polylines, affine, dash_count, dashed
@@ -872,6 +873,7 @@ class _Reader:
 
     def element(self, el: ET.Element, parent: dict[str, str], matrix: FloatArray, viewport: tuple[float, float],
                 out: Ink, depth: int, uses: tuple[str, ...]) -> None:
+        check_cancelled()  # a drawing read for someone who has gone stops here, between two elements
         tag = local(el.tag)
         if _namespace(el) != SVG_NS or not (tag in SHAPES or tag in CONTAINERS or tag in UNDRAWABLE):
             return
