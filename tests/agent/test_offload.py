@@ -215,6 +215,7 @@ def test_an_upload_whose_client_disconnects_while_it_is_checked_is_dropped(agent
     went = [line for line in stderr.splitlines() if "went away" in line]
     assert len(went) == 1, stderr
     assert f"/api/v1/devices/{device}/jobs" in went[0]
+    assert f"while its request ({len(_slow_svg(400)):,} bytes) was handled, before the answer" in went[0]
 
 
 def test_a_slicer_upload_that_hangs_up_while_it_is_checked_keeps_nothing(agent: RunningAgent) -> None:

@@ -472,9 +472,13 @@ class Boundary:
 
             if not isinstance(exc, ClientDisconnect):
                 raise
-            got = f" after {receive.size:,} bytes" if isinstance(receive, _Counted) else ""
-            log.warning("%s %s: the client went away%s, before its request was complete; nothing was kept",
-                        scope.get("method", "GET"), scope.get("path", ""), got)
+            if isinstance(receive, _Counted) and receive.done:  # all of it came: it left while it was checked
+                when = f" while its request ({receive.size:,} bytes) was handled, before the answer"
+            else:
+                when = (f" after {receive.size:,} bytes" if isinstance(receive, _Counted) else "") + \
+                    ", before its request was complete"
+            log.warning("%s %s: the client went away%s; nothing was kept", scope.get("method", "GET"),
+                        scope.get("path", ""), when)
         finally:
             if first is not None:
                 first.end()
