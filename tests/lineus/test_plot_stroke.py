@@ -83,3 +83,11 @@ def test_a_translucent_wide_stroke_hides_nothing() -> None:
     lines = parse_svg(svg('<path d="M0 100 H200" stroke="black"/><path d="M100 20 V180" stroke="black" '
                           'stroke-width="20" stroke-opacity="0.5"/>')).lines
     assert any(line.min(axis=0)[0] == 0 and line.max(axis=0)[0] == 200 for line in lines)
+
+
+def test_a_stroke_scaled_beyond_floats_is_drawn_or_refused_in_one_line() -> None:
+    assert Pen(half=1e300, tolerance=1e-20).quarter_segments >= 1  # the tolerance is lost beside the width
+    drawing = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><path d="M10 10 L90 10 '
+                        'L90 90 Z" fill="none" stroke="red" stroke-width="10" transform="scale(3e38)"/>'
+                        '<rect x="10" y="10" width="20" height="20"/></svg>')
+    assert np.concatenate(drawing.lines).min(axis=0).tolist() == [10.0, 10.0]

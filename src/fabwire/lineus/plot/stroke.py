@@ -39,6 +39,8 @@ class Pen:
         if self.tolerance >= self.half:
             return 1
         step = 2 * math.acos(1 - self.tolerance / self.half)
+        if not step > 0:  # a tolerance lost beside a half width beyond floats: the finest allowed
+            return MAX_QUARTER_SEGMENTS
         return max(1, min(MAX_QUARTER_SEGMENTS, math.ceil(math.pi / 2 / step)))
 
 
