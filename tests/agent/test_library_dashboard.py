@@ -73,7 +73,10 @@ def test_library_and_queue_on_the_dashboard(demo: RunningAgent, page: Page) -> N
         page.locator(".key-request button", has_text="Approve").click()
         expect(page.locator(".key-request")).to_have_count(0)
         assert anyone.get(asked.headers["location"]).json()["api_key"]
-    # reprint from the library
+    # reprint from the library, once the sample print the demo starts when its page is first opened has ended
+    with demo.client() as client:
+        wait_idle(client)
+    expect(row.locator("button", has_text="Print")).to_be_enabled(timeout=30_000)
     row.locator("button", has_text="Print").click()
     with demo.client() as client:
         wait_for(lambda: printing(client), "printing bracket.gcode from the library")
