@@ -285,9 +285,7 @@ def remove(app: App, name: str) -> None:
         raise ConfigError(f"{excerpt(name, 64)} is not written as a [devices.NAME] section in {path}: "
                           "edit the file by hand")
     start = headers[name] - 1
-    end = start + 1
-    while end < len(lines) and not lines[end].lstrip().startswith("["):
-        end += 1
+    end = _section_span(lines, headers[name]).stop
     while end < len(lines) and end > start + 1 and lines[end - 1].lstrip().startswith(("#", "\n")):
         end -= 1  # comments just above the next section belong to it
     _write(path, "".join(lines[:start] + lines[end:]))

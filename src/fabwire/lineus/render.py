@@ -292,7 +292,7 @@ def _png_image(strokes: Sequence[FloatArray], travel: Sequence[FloatArray], hidd
     font = _font(text_px)
     bx = 12
     room = size[0] - 2 * bx
-    legend = [LEGEND] if draw.textlength(LEGEND, font=font) <= room else _wrapped(draw, font, room)
+    legend = _wrapped(draw, font, room)
     by = size[1] - (len(legend) + 1) * (text_px + 4) - 8  # the scale bar above the legend's lines
     draw.rectangle((bx, by, bx + SCALE_BAR * scale, by + max(2, text_px // 4)), fill=(0, 0, 0))
     draw.text((bx, by - text_px - 4), f"{SCALE_BAR / UNITS_PER_MM:g} mm", fill=(0, 0, 0), font=font)

@@ -115,8 +115,10 @@ WIDE_STROKE_SHARE = 0.02
 """A stroke wider than this share of the page diagonal (about 2 mm where the page fills a Line-us's drawing area,
 several pen widths) is drawn as the outline of the band it paints, caps and joins included, as a fill is; a thinner
 one along its centre line."""
+GRADIENTS = ("linearGradient", "radialGradient")
+"""The paint servers whose colours vary over the shape (gradient.py reads where they mark the paper)."""
 MAX_HREF_CHAIN = 64
-"""Gradients one gradient may take attributes and stops from through `href`, itself included."""
+"""Paint servers one pattern or gradient may take attributes and content from through `href`, itself included."""
 MAX_GRADIENT_POINTS = 300_000
 """Vertices of the shown regions of gradients (gradient.shown_region) a drawing may make; beyond, gradient paints
 are drawn whole, with a note."""
@@ -425,9 +427,6 @@ def parse_svg(source: str | Path | bytes, *, tolerance: float | None = None, tex
                       tolerance, (width, height))
 
 
-GRADIENTS = ("linearGradient", "radialGradient")
-
-
 def _opacity(style: dict[str, str]) -> float:
     return number(style.get("opacity"), 1.0)
 
@@ -670,20 +669,20 @@ class _Reader:
         self.points = 0
         self.dashes = 0
         self.band_points = 0
+        """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
         self.alpha = 1.0
         """The product of the opacity of the element being drawn and of its ancestors: paint this faint on the
         paper may leave no mark (svgstyle.paints)."""
         self.gradient_points = 0
+        """Vertices of the gradients' shown regions so far (bounded by MAX_GRADIENT_POINTS)."""
         self._chains: dict[int, list[ET.Element]] = {}
-        """Each gradient's `href` chain, by the element's id()."""
+        """Each paint server's `href` chain, by the element's id()."""
         self._stop_elements: dict[int, list[ET.Element]] = {}
         """Each gradient's stop elements, by the element's id()."""
         self._shown: dict[tuple[int, float], list[tuple[float, float]]] = {}
         """Each gradient's stretches that mark the paper at an opacity (gradient.shown_intervals)."""
         self._opaque_stops: dict[int, bool] = {}
         """Whether each gradient's stops are all opaque, by the element's id()."""
-        """Vertices of the gradients' shown regions so far (bounded by MAX_GRADIENT_POINTS)."""
-        """Points of the centre lines of wide strokes so far (bounded by MAX_BAND_POINTS)."""
         self.wide_stroke = math.inf
         """Strokes wider than this on the page (px) are drawn as the outline of the band they paint."""
         """Dashes stroke-dasharray cut the lines into so far (bounded by MAX_DRAWING_DASHES)."""
@@ -1244,7 +1243,7 @@ class _Reader:
         if ref is None:
             return "solid", None
         target = self.ids.get(ref)
-        if (target is None or local(target.tag) not in ("pattern", "linearGradient", "radialGradient")
+        if (target is None or local(target.tag) not in ("pattern", *GRADIENTS)
                 or not self._server_exists(target)):
             fallback = value[value.find(")") + 1:].strip()
             if fallback and paints({**style, which: fallback}, which, self.alpha):
@@ -1274,7 +1273,7 @@ class _Reader:
         key = id(gradient)
         if key not in self._stop_elements:
             self._stop_elements[key] = next(
-                (found for at in self._gradient_chain(gradient)
+                (found for at in self._server_chain(gradient)
                  if (found := [child for child in at if local(child.tag) == "stop"])), [])
         return self._stop_elements[key]
 
@@ -1285,7 +1284,7 @@ class _Reader:
             return True
         ref = iri(style.get(which, ""))
         server = self.ids.get(ref) if ref else None
-        if (server is None or local(server.tag) not in ("linearGradient", "radialGradient")
+        if (server is None or local(server.tag) not in GRADIENTS
                 or self._paint_kind(style, which)[0] != "solid" or number(style.get(f"{which}-opacity"), 1.0) < 1):
             return False
         key = id(server)
@@ -1294,22 +1293,23 @@ class _Reader:
             self._opaque_stops[key] = bool(stops) and all(opaque_stop(self.computed_style(s)) for s in stops)
         return self._opaque_stops[key]
 
-    def _gradient_chain(self, el: ET.Element) -> list[ET.Element]:
-        """The gradient and those it takes attributes and stops from through `href` (SVG 1.1 §13.2), at most
-        MAX_HREF_CHAIN long; read once per gradient."""
+    def _server_chain(self, el: ET.Element) -> list[ET.Element]:
+        """The paint server and those of its kind (pattern, or either gradient) it takes attributes and content
+        from through `href` (SVG 1.1 §13.2, §13.3), at most MAX_HREF_CHAIN long; read once per server."""
         key = id(el)
         if key not in self._chains:
+            kinds = GRADIENTS if local(el.tag) in GRADIENTS else (local(el.tag),)
             chain, seen = [el], {key}
             while len(chain) < MAX_HREF_CHAIN:
                 ref = self._href(chain[-1])
                 nxt = self.ids.get(ref) if ref else None
-                if nxt is None or local(nxt.tag) not in GRADIENTS or id(nxt) in seen:
+                if nxt is None or local(nxt.tag) not in kinds or id(nxt) in seen:
                     break
                 chain.append(nxt)
                 seen.add(id(nxt))
             else:
-                self.unsupported[f"gradients that refer on through more than {MAX_HREF_CHAIN} others take nothing "
-                                 "from those further on"] += 1
+                self.unsupported[f"paint servers that refer on through more than {MAX_HREF_CHAIN} others take "
+                                 "nothing from those further on"] += 1
             self._chains[key] = chain
         return self._chains[key]
 
@@ -1323,7 +1323,7 @@ class _Reader:
         if (server is None or local(server.tag) not in GRADIENTS or self._paint_kind(style, which)[0] != "solid"
                 or fallback_in_error(style.get(which, ""))):
             return None
-        chain = self._gradient_chain(server)
+        chain = self._server_chain(server)
         opacity = min(1.0, max(0.0, number(style.get(f"{which}-opacity"), 1.0))) * self.alpha
         if (id(server), opacity) not in self._shown:
             stops: list[Stop] = []
@@ -1635,22 +1635,12 @@ class _Reader:
 
     # -- patterns -----------------------------------------------------------------------------------------------
 
-    def _pattern_chain(self, el: ET.Element) -> list[ET.Element]:
-        """The pattern and those it takes attributes and content from through `href` (SVG 1.1 §13.3)."""
-        chain = [el]
-        while True:
-            ref = self._href(chain[-1])
-            nxt = self.ids.get(ref) if ref else None
-            if nxt is None or local(nxt.tag) != "pattern" or nxt in chain:
-                return chain
-            chain.append(nxt)
-
     def pattern(self, el: ET.Element, matrix: FloatArray, rings: Polylines, rule: str,
                 viewport: tuple[float, float], out: Ink, *, bordered: bool = False) -> None:
         """Draw a pattern's tiles over the shape whose output `rings` bound it, cut to the fill's area. A tile
         whose opaque paint covers it whole shows one colour across the seams between tiles: the seams draw
         nothing, and the shape's border is drawn (unless `bordered`: its stroke draws it already)."""
-        chain = self._pattern_chain(el)
+        chain = self._server_chain(el)
 
         def attr(name: str) -> str | None:
             return next((p.get(name) for p in chain if p.get(name) is not None), None)

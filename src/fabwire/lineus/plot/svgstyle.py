@@ -214,6 +214,13 @@ def number(value: str | None, default: float) -> float:
     return result if math.isfinite(result) else default
 
 
+def written(style: dict[str, str], key: str, default: str | None = None) -> str:
+    """A paint or colour property of `style` as written, lower case, with `currentColor` read as the `color` it
+    stands for (CSS Color 4 §4.4); `default` when absent (the property's initial value unless given)."""
+    value = style.get(key, INITIAL[key] if default is None else default).strip().lower()
+    return style.get("color", INITIAL["color"]).strip().lower() if value == "currentcolor" else value
+
+
 def paints(style: dict[str, str], which: str, opacity: float = 1.0) -> bool:
     """Whether the fill or stroke paint of `style` leaves a mark on the paper: not none, not transparent, not
     the paper's colour (a white fill on white paper shows nothing), nor so faint at its opacity times `opacity`
@@ -228,20 +235,16 @@ def paints(style: dict[str, str], which: str, opacity: float = 1.0) -> bool:
         return False  # a negative width is in error: the initial 1 applies
     if value.startswith("url("):
         return True
-    if value == "currentcolor":
-        value = style.get("color", INITIAL["color"]).strip().lower()
-    return _marks(value, alpha)
+    return _marks(written(style, which), alpha)
 
 
 def opaque_fill(style: dict[str, str], which: str = "fill") -> bool:
     """Whether the fill (or the stroke, `which`) paints a solid colour without any transparency (white too), so it
     hides what is under it."""
-    value = style.get(which, INITIAL[which]).strip().lower()
+    value = written(style, which)
     if value in ("none", "transparent", "") or value.startswith("url(") or number(style.get(f"{which}-opacity"),
                                                                                   1.0) < 1:
         return False
-    if value == "currentcolor":
-        value = style.get("color", INITIAL["color"]).strip().lower()
     return _alpha(value) >= 1
 
 
@@ -250,20 +253,14 @@ def opaque_stop(style: dict[str, str]) -> bool:
     unless given)."""
     if number(style.get("stop-opacity"), 1.0) < 1:
         return False
-    value = style.get("stop-color", "black").strip().lower()
-    if value == "currentcolor":
-        value = style.get("color", INITIAL["color"]).strip().lower()
-    return _alpha(value) >= 1
+    return _alpha(written(style, "stop-color", "black")) >= 1
 
 
 def stop_paint(style: dict[str, str]) -> tuple[tuple[float, float, float], float]:
     """A gradient stop's colour as sRGB channels 0..1 and its alpha 0..1 (the colour's own alpha times
     stop-opacity) from its computed style; stop-color is black unless given, and one that does not parse is
     black too (SVG 1.1 §13.2.4)."""
-    value = style.get("stop-color", "black").strip().lower()
-    if value == "currentcolor":
-        value = style.get("color", INITIAL["color"]).strip().lower()
-    r, g, b, own = srgba(value) or (0.0, 0.0, 0.0, 1.0)
+    r, g, b, own = srgba(written(style, "stop-color", "black")) or (0.0, 0.0, 0.0, 1.0)
     opacity = min(1.0, max(0.0, number(style.get("stop-opacity"), 1.0)))
     return (r, g, b), own * opacity
 
@@ -305,9 +302,7 @@ def _marks(color: str, alpha: float) -> bool:
 def solid_colour(style: dict[str, str], which: str) -> str | None:
     """The fill's (or stroke's) colour as written (lower case, `currentColor` resolved), None for a paint server;
     `same_colour` tells whether two such spellings are one colour."""
-    value = style.get(which, INITIAL[which]).strip().lower()
-    if value == "currentcolor":
-        value = style.get("color", INITIAL["color"]).strip().lower()
+    value = written(style, which)
     return None if value.startswith("url(") else value
 
 
@@ -330,16 +325,8 @@ def _spelled(colour: str) -> str | None:
 def same_paint_value(style: dict[str, str]) -> bool:
     """Whether the fill and stroke of `style` name the same paint: the same paint server, or colours equal in
     sRGB (`black`, `#000`, `rgb(0 0 0)` alike; `currentColor` as the colour it stands for)."""
-    values = []
-    for which in ("fill", "stroke"):
-        value = style.get(which, INITIAL[which]).strip().lower()
-        if value == "currentcolor":
-            value = style.get("color", INITIAL["color"]).strip().lower()
-        values.append(value)
-    if values[0] == values[1]:
-        return True
-    first = _spelled(values[0])
-    return first is not None and first == _spelled(values[1])
+    fill, stroke = written(style, "fill"), written(style, "stroke")
+    return fill == stroke or same_colour(fill, stroke)
 
 
 def fallback_in_error(value: str) -> bool:
